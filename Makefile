@@ -1,0 +1,35 @@
+# winder: the two commands of the README, plus the side jobs.
+#   make demo   - create .venv if needed, run the default winding job
+#   make test   - create .venv if needed, run the whole test suite
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.winder-installed
+SETUPS := pyproject.toml src/setup.py winder_interp/setup.py winder_profile/setup.py winder_sim/setup.py
+
+.PHONY: demo test bench figures venv clean
+
+venv: $(STAMP)
+
+$(STAMP): $(SETUPS)
+	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	@echo "winder: installing into $(VENV) (ROS 2 Jazzy wheels, numpy, mcap, rosbags, test tools)"
+	$(BIN)/python -m pip install -q --disable-pip-version-check --upgrade pip
+	$(BIN)/python -m pip install -q --disable-pip-version-check -e '.[ros,test]' \
+		-e ./winder_interp -e ./winder_profile -e ./winder_sim
+	@touch $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/winder interp
+
+test: $(STAMP)
+	$(BIN)/python -m pytest
+
+bench: $(STAMP)
+	$(BIN)/python bench/run_all.py
+
+figures: $(STAMP)
+	$(BIN)/winder figures docs/img
+
+clean:
+	rm -rf build install log .pytest_cache .hypothesis

@@ -1,0 +1,29 @@
+"""Shared helpers of the benchmarks: best-of timing and a plain table."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+
+
+def best_of(fn: Callable[[], object], repeat: int = 5, min_time: float = 0.0) -> float:
+    """Smallest wall time of ``repeat`` calls (the least disturbed by a noisy machine)."""
+    best = float("inf")
+    spent = 0.0
+    runs = 0
+    while runs < repeat or spent < min_time:
+        t0 = time.perf_counter()
+        fn()
+        dt = time.perf_counter() - t0
+        best = min(best, dt)
+        spent += dt
+        runs += 1
+    return best
+
+
+def table(headers: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
+    cells = [[str(h) for h in headers]] + [[str(c) for c in r] for r in rows]
+    widths = [max(len(r[i]) for r in cells) for i in range(len(headers))]
+    lines = ["  ".join(c.rjust(w) for c, w in zip(r, widths, strict=True)) for r in cells]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    return "\n".join(lines)

@@ -1,0 +1,170 @@
+"""The ``winder`` command line.
+
+Every user error ends as one line on stderr and exit status 2; no traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from collections.abc import Callable, Sequence
+
+import numpy as np
+
+from winder.interp import dda, deviation_stats, interpolate, min_deviation, point_by_point
+from winder.job import FIELD_SPECS, Job, JobError
+
+__all__ = ["main"]
+
+
+class UserError(Exception):
+    """An error the user can fix; printed as one line, exit status 2."""
+
+
+def add_job_arguments(parser: argparse.ArgumentParser) -> None:
+    """One ``--field`` option per job field, typed loosely: Job validates."""
+    defaults = Job()
+    group = parser.add_argument_group("winding job (defaults: the RW400 paper set-up)")
+    for name, spec in FIELD_SPECS.items():
+        unit = f" [{spec.unit}]" if spec.unit else ""
+        group.add_argument(
+            f"--{name.replace('_', '-')}",
+            dest=name,
+            default=getattr(defaults, name),
+            metavar=spec.kind.__name__.upper(),
+            help=f"{spec.description}{unit} (default {getattr(defaults, name)!r})",
+        )
+
+
+def job_from_args(args: argparse.Namespace) -> Job:
+    values = {}
+    for name, spec in FIELD_SPECS.items():
+        raw = getattr(args, name)
+        if isinstance(raw, str) and spec.kind is not str:
+            raw = _parse_number(name, raw, spec.kind)
+        values[name] = raw
+    return Job(**values)
+
+
+def _parse_number(name: str, text: str, kind: type) -> float | int:
+    try:
+        return int(text) if kind is int else float(text)
+    except ValueError:
+        spec = FIELD_SPECS[name]
+        word = "an integer" if kind is int else "a number"
+        raise JobError(f"{name}={text!r} is invalid: must be {word} in {spec.range_text()}") from None
+
+
+class Progress:
+    """A one-line progress bar on stderr (only when stderr is a terminal, or forced)."""
+
+    def __init__(self, total: float, label: str, enabled: bool | None = None) -> None:
+        self.total = max(float(total), 1e-300)
+        self.label = label
+        self.enabled = sys.stderr.isatty() if enabled is None else enabled
+        self.t0 = time.monotonic()
+        self._last = -1.0
+
+    def update(self, done: float, extra: str = "") -> None:
+        if not self.enabled:
+            return
+        now = time.monotonic()
+        if now - self._last < 0.1 and done < self.total:
+            return
+        self._last = now
+        frac = min(1.0, done / self.total)
+        bar = "#" * int(30 * frac) + "-" * (30 - int(30 * frac))
+        sys.stderr.write(f"\r{self.label} [{bar}] {100 * frac:5.1f}% {extra}")
+        sys.stderr.flush()
+
+    def close(self) -> None:
+        if self.enabled:
+            sys.stderr.write("\n")
+            sys.stderr.flush()
+
+
+def cmd_interp(args: argparse.Namespace) -> int:
+    """Interpolate a job and print what the interpolation did."""
+    job = job_from_args(args)
+    segments = job.segments()
+    lx, ly, _ = job.step_lengths
+    progress = Progress(job.total_steps, "interpolating")
+    t0 = time.perf_counter()
+    done = 0
+    total_dev = 0.0
+    max_dev = 0.0
+    layer_points = 0
+    position = list(segments[0].start) if segments else [0, 0, 0]
+    for seg in segments:
+        path = interpolate(position, seg.delta)
+        if seg.kind == "layer":
+            rel = path[:, :2] - np.asarray(seg.start[:2])
+            st = deviation_stats(rel, seg.delta[0], seg.delta[1], step_lengths=(lx, ly))
+            total_dev += st.mean * st.points
+            max_dev = max(max_dev, st.max)
+            layer_points += st.points
+        position = path[-1].tolist()
+        done += path.shape[0]
+        progress.update(done)
+    progress.close()
+    elapsed = time.perf_counter() - t0
+    if tuple(position) != segments[-1].end:
+        raise RuntimeError(f"interpolation ended at {position}, job ends at {segments[-1].end}")
+    mean_dev = total_dev / max(layer_points, 1)
+    # one turn with every method, as the paper compares them
+    x1 = round(job.wire_diameter / job.feed_step)
+    y1 = job.fork_steps_per_rev
+    bits = max(10, math.ceil(math.log2(max(x1, y1))))
+    methods = {
+        "min-deviation": min_deviation(x1, y1),
+        f"DDA 2^{bits} half-preloaded": dda(x1, y1, bits),
+        f"DDA 2^{bits} plain": dda(x1, y1, bits, preload=False),
+        "point-by-point": point_by_point(x1, y1),
+    }
+    turn = {k: deviation_stats(p, x1, y1, step_lengths=(lx, ly)).mean for k, p in methods.items()}
+    rate = done / elapsed if elapsed > 0 else float("inf")
+    print(f"job {job.job_id}: {job.poles} poles x {job.layers} layers x {job.turns_per_layer} turns")
+    print(f"  segments           {len(segments)}")
+    print(f"  steps              {done}  ({rate / 1e6:.1f} M steps/s)")
+    print(f"  final position     feed {position[0]}  fork {position[1]}  pole {position[2]} steps")
+    print(f"  mean deviation     {mean_dev * 1e6:.3f} um  (eq. 7, all layers)")
+    print(f"  max deviation      {max_dev * 1e6:.3f} um")
+    print(f"  one turn, {x1} feed x {y1} fork steps, mean deviation (eq. 7):")
+    for name, mean in turn.items():
+        print(f"    {name:26s} {mean * 1e6:8.3f} um  ({mean / turn['min-deviation']:.2f} x)")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="winder", description="winder: coil and rotor winding cell tools"
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    p = sub.add_parser("interp", help="interpolate a winding job and print a summary")
+    add_job_arguments(p)
+    p.set_defaults(func=cmd_interp)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    func: Callable[[argparse.Namespace], int] | None = getattr(args, "func", None)
+    if func is None:
+        parser.print_help()
+        return 2
+    try:
+        return func(args)
+    except (JobError, UserError, ValueError, FileNotFoundError) as exc:
+        print(f"winder {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"winder {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
+

@@ -1,0 +1,238 @@
+"""Winding jobs: what an operator sets, validated, expanded into straight segments.
+
+A job winds ``poles`` coils. Each coil is ``layers`` layers of
+``turns_per_layer`` turns; during a layer the flyer (fork) turns once per turn
+while the feed axis advances the rotor one wire diameter per turn, reversing at
+every layer. Between coils the pole axis indexes the rotor by 360 deg / poles.
+
+Axes, in this order everywhere in winder (``AXES``):
+
+* ``feed`` - linear, ``feed_step`` metres per step;
+* ``fork`` - rotary, ``fork_steps_per_rev`` steps per revolution;
+* ``pole`` - rotary, ``pole_steps_per_rev`` steps per revolution.
+
+Units are SI (metres, radians). Unrolled, a layer is the straight line from its
+start to (feed distance, flyer arc length) in the plane: the segment that
+:func:`winder.interp.interpolate` walks.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, fields
+from typing import Any
+
+import numpy as np
+
+__all__ = ["AXES", "Job", "JobError", "Segment", "FIELD_SPECS"]
+
+AXES = ("feed", "fork", "pole")
+
+
+class JobError(ValueError):
+    """A job field is out of range; the message names field, value and range."""
+
+
+@dataclass(frozen=True)
+class FieldSpec:
+    """Type, range and meaning of one job field (shared by the CLI and the nodes)."""
+
+    kind: type
+    low: float | None
+    high: float | None
+    unit: str
+    description: str
+    low_open: bool = False  # low bound excluded
+
+    def range_text(self) -> str:
+        lo = "(" if self.low_open else "["
+        unit = f" {self.unit}" if self.unit else ""
+        if self.kind is int:
+            return f"{lo}{int(self.low or 0)}, {int(self.high or 0)}]{unit}"
+        return f"{lo}{self.low:g}, {self.high:g}]{unit}"
+
+
+#: Job fields with their allowed ranges. The numbers bound what a physical
+#: winding cell can be (a 10 m flyer or a 10 cm wire is a typing error).
+FIELD_SPECS: dict[str, FieldSpec] = {
+    "job_id": FieldSpec(str, None, None, "", "name of the job; names the bag (letters, digits, _ -)"),
+    "wire_diameter": FieldSpec(float, 0.0, 0.02, "m", "wire diameter", low_open=True),
+    "flyer_radius": FieldSpec(float, 0.0, 5.0, "m", "flyer (fork) radius", low_open=True),
+    "turns_per_layer": FieldSpec(int, 1, 100_000, "", "turns in one layer"),
+    "layers": FieldSpec(int, 1, 1_000, "", "layers per coil; the feed reverses at each layer"),
+    "poles": FieldSpec(int, 1, 360, "", "coils (poles); the pole axis indexes 360/poles deg"),
+    "fork_steps_per_rev": FieldSpec(int, 4, 2**24, "", "fork axis steps per revolution"),
+    "feed_step": FieldSpec(float, 0.0, 1e-3, "m", "feed axis travel per step", low_open=True),
+    "pole_steps_per_rev": FieldSpec(int, 4, 2**24, "", "pole axis steps per revolution"),
+    "coil_length": FieldSpec(float, 0.0, 10.0, "m", "axial room for one layer (0 = unchecked)"),
+}
+
+_JOB_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_\-]{0,63}$")
+
+
+@dataclass(frozen=True)
+class Segment:
+    """One straight move in steps: ``start`` + ``delta`` per axis (AXES order)."""
+
+    index: int
+    kind: str  #: "layer" (feed + fork) or "index" (pole)
+    start: tuple[int, int, int]
+    delta: tuple[int, int, int]
+    pole: int  #: coil being wound (or indexed to)
+    layer: int  #: layer within the coil (-1 for an index move)
+
+    @property
+    def end(self) -> tuple[int, int, int]:
+        return tuple(s + d for s, d in zip(self.start, self.delta, strict=True))  # type: ignore[return-value]
+
+    @property
+    def steps(self) -> int:
+        """Number of interpolation steps: the major axis' step count."""
+        return max(abs(d) for d in self.delta)
+
+
+@dataclass(frozen=True)
+class Job:
+    """A winding job. Defaults: the RW400 set-up of the 2016 paper (flyer radius
+    500 mm, wire 2.50 mm, fork register 2**10), four poles of two layers."""
+
+    job_id: str = "rw400"
+    wire_diameter: float = 2.5e-3
+    flyer_radius: float = 0.5
+    turns_per_layer: int = 20
+    layers: int = 2
+    poles: int = 4
+    fork_steps_per_rev: int = 1024
+    feed_step: float = 1e-5
+    pole_steps_per_rev: int = 1024
+    coil_length: float = 0.0
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            object.__setattr__(self, f.name, check_field(f.name, getattr(self, f.name)))
+        steps_per_turn = self.wire_diameter / self.feed_step
+        if steps_per_turn < 1.0:
+            raise JobError(
+                f"feed_step={self.feed_step:g} m is invalid for wire_diameter="
+                f"{self.wire_diameter:g} m: must be at most the wire diameter "
+                "(the feed must advance at least one step per turn)"
+            )
+        if self.wire_diameter >= 2 * math.pi * self.flyer_radius:
+            raise JobError(
+                f"wire_diameter={self.wire_diameter:g} m is invalid: must be smaller than "
+                f"the flyer circumference {2 * math.pi * self.flyer_radius:g} m"
+            )
+        if self.coil_length > 0 and self.turns_per_layer * self.wire_diameter > self.coil_length:
+            raise JobError(
+                f"turns_per_layer={self.turns_per_layer} is invalid: "
+                f"{self.turns_per_layer} turns of {self.wire_diameter:g} m wire need "
+                f"{self.turns_per_layer * self.wire_diameter:g} m, coil_length is "
+                f"{self.coil_length:g} m (at most {int(self.coil_length / self.wire_diameter)} turns fit)"
+            )
+        if self.layer_feed_steps > 2**31 - 1 or self.layer_fork_steps > 2**31 - 1:
+            raise JobError(
+                f"turns_per_layer={self.turns_per_layer} is invalid: a layer of "
+                f"{self.layer_fork_steps} fork steps exceeds 2**31 - 1 steps"
+            )
+
+    # -- derived quantities ------------------------------------------------
+    @property
+    def layer_feed_steps(self) -> int:
+        """Feed steps of one layer, rounded to the nearest step, halves up. The
+        ratio is nudged by 1e-9 relative so that decimal inputs such as
+        99 um / 6 um, which land a hair below .5 in binary, round as written."""
+        exact = self.turns_per_layer * self.wire_diameter / self.feed_step
+        return math.floor(exact * (1 + 1e-9) + 0.5)
+
+    @property
+    def layer_fork_steps(self) -> int:
+        return self.turns_per_layer * self.fork_steps_per_rev
+
+    @property
+    def step_lengths(self) -> tuple[float, float, float]:
+        """Travel per step of (feed, fork arc at the flyer radius, pole) in m, m, rad."""
+        return (
+            self.feed_step,
+            2 * math.pi * self.flyer_radius / self.fork_steps_per_rev,
+            2 * math.pi / self.pole_steps_per_rev,
+        )
+
+    @property
+    def joint_step(self) -> tuple[float, float, float]:
+        """Joint travel per step: feed in m, fork and pole in rad."""
+        return (
+            self.feed_step,
+            2 * math.pi / self.fork_steps_per_rev,
+            2 * math.pi / self.pole_steps_per_rev,
+        )
+
+    def pole_position(self, pole: int) -> int:
+        """Pole-axis step position of coil ``pole`` (cumulative rounding: the
+        last index lands exactly on a full revolution)."""
+        return round(pole * self.pole_steps_per_rev / self.poles)
+
+    def segments(self) -> list[Segment]:
+        """The ordered straight moves of the job, in steps."""
+        out: list[Segment] = []
+        pos = [0, 0, 0]
+        direction = 1
+        for pole in range(self.poles):
+            if pole > 0:
+                delta = (0, 0, self.pole_position(pole) - self.pole_position(pole - 1))
+                out.append(Segment(len(out), "index", tuple(pos), delta, pole, -1))  # type: ignore[arg-type]
+                pos[2] += delta[2]
+            for layer in range(self.layers):
+                delta = (direction * self.layer_feed_steps, self.layer_fork_steps, 0)
+                out.append(Segment(len(out), "layer", tuple(pos), delta, pole, layer))  # type: ignore[arg-type]
+                pos[0] += delta[0]
+                pos[1] += delta[1]
+                direction = -direction
+        return out
+
+    @property
+    def total_steps(self) -> int:
+        return sum(s.steps for s in self.segments())
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, values: Mapping[str, Any]) -> Job:
+        unknown = sorted(set(values) - set(FIELD_SPECS))
+        if unknown:
+            raise JobError(f"unknown job field {unknown[0]!r}: known fields are {', '.join(FIELD_SPECS)}")
+        return cls(**values)
+
+
+def check_field(name: str, value: Any) -> Any:
+    """Validate one job field; return it converted to its type or raise JobError."""
+    spec = FIELD_SPECS.get(name)
+    if spec is None:
+        raise JobError(f"unknown job field {name!r}: known fields are {', '.join(FIELD_SPECS)}")
+    if spec.kind is str:
+        if not isinstance(value, str) or not _JOB_ID.match(value):
+            raise JobError(
+                f"{name}={value!r} is invalid: must be 1-64 letters, digits, '_' or '-', "
+                "starting with a letter or digit"
+            )
+        return value
+    if spec.kind is int:
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+            if isinstance(value, float) and value.is_integer():
+                value = int(value)
+            else:
+                raise JobError(f"{name}={value!r} is invalid: must be an integer in {spec.range_text()}")
+        v: float = int(value)
+    else:
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+            raise JobError(f"{name}={value!r} is invalid: must be a number in {spec.range_text()}")
+        v = float(value)
+        if not math.isfinite(v):
+            raise JobError(f"{name}={v!r} is invalid: must be a finite number in {spec.range_text()}")
+    assert spec.low is not None and spec.high is not None
+    too_low = v <= spec.low if spec.low_open else v < spec.low
+    if too_low or v > spec.high:
+        raise JobError(f"{name}={value!r} is invalid: must be in {spec.range_text()}")
+    return v

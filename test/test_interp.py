@@ -1,0 +1,212 @@
+"""Interpolation against oracles written here: literal step-by-step loops of
+each method, and the rule checked step by step on large random moves."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from winder.interp import MAX_STEPS, dda, deviation_stats, interpolate, min_deviation, point_by_point
+
+small = st.integers(-600, 600)
+large = st.integers(-3_000_000, 3_000_000)
+
+
+def brute_min_deviation(dx: int, dy: int) -> list[tuple[int, int]]:
+    """The paper's rule, literally: major always steps; minor joins iff |F| shrinks."""
+    sx, sy = (dx > 0) - (dx < 0), (dy > 0) - (dy < 0)
+    x_major = abs(dx) >= abs(dy)
+    x = y = 0
+    out = []
+    for _ in range(max(abs(dx), abs(dy))):
+        if x_major:
+            alone, both = (x + sx, y), (x + sx, y + sy)
+        else:
+            alone, both = (x, y + sy), (x + sx, y + sy)
+        f_alone = abs(dx * alone[1] - alone[0] * dy)
+        f_both = abs(dx * both[1] - both[0] * dy)
+        x, y = both if f_both < f_alone else alone
+        out.append((x, y))
+    return out
+
+
+def brute_dda(dx: int, dy: int, bits: int, preload: bool) -> list[tuple[int, int]]:
+    cap = 2**bits
+    acc_x = acc_y = cap // 2 if preload else 0
+    x = y = 0
+    out = []
+    for _ in range(cap):
+        acc_x += abs(dx)
+        acc_y += abs(dy)
+        moved = False
+        if acc_x >= cap:
+            acc_x -= cap
+            x += 1 if dx > 0 else -1
+            moved = True
+        if acc_y >= cap:
+            acc_y -= cap
+            y += 1 if dy > 0 else -1
+            moved = True
+        if moved:
+            out.append((x, y))
+    return out
+
+
+def brute_point_by_point(dx: int, dy: int) -> list[tuple[int, int]]:
+    sx, sy = (dx > 0) - (dx < 0), (dy > 0) - (dy < 0)
+    a, b = abs(dx), abs(dy)
+    x = y = 0
+    out = []
+    for _ in range(a + b):
+        f = a * y - x * b
+        if (f >= 0 and x < a) or y == b:
+            x += 1
+        else:
+            y += 1
+        out.append((x * sx, y * sy))
+    return out
+
+
+@settings(max_examples=400)
+@given(small, small)
+def test_min_deviation_matches_literal_rule(dx: int, dy: int) -> None:
+    path = min_deviation(dx, dy)
+    assert path.dtype.kind == "i"
+    assert path.shape == (max(abs(dx), abs(dy)), 2)
+    assert [tuple(r) for r in path.tolist()] == brute_min_deviation(dx, dy)
+
+
+def check_rule_every_step(path: np.ndarray, dx: int, dy: int) -> None:
+    """Vectorised restatement of the rule at every step. int64 is exact here:
+    |dx * y| < 2**62 for moves within 2**31 steps."""
+    n = max(abs(dx), abs(dy))
+    assert path.shape == (n, 2)
+    if n == 0:
+        return
+    prev = np.vstack([[0, 0], path[:-1]]).astype(np.int64)
+    major, minor = (0, 1) if abs(dx) >= abs(dy) else (1, 0)
+    sgn = [(dx > 0) - (dx < 0), (dy > 0) - (dy < 0)]
+    alone = prev.copy()
+    alone[:, major] += sgn[major]
+    both = alone.copy()
+    both[:, minor] += sgn[minor]
+
+    def f(p: np.ndarray) -> np.ndarray:
+        return np.abs(dx * p[:, 1] - p[:, 0] * dy)
+
+    want_both = f(both) < f(alone)  # strict: a tie takes the major step alone
+    expected = np.where(want_both[:, None], both, alone)
+    assert np.array_equal(path, expected)
+    assert tuple(path[-1]) == (dx, dy)
+
+
+@settings(max_examples=60, deadline=None)
+@given(large, large)
+def test_min_deviation_rule_on_large_moves(dx: int, dy: int) -> None:
+    check_rule_every_step(min_deviation(dx, dy), dx, dy)
+
+
+@pytest.mark.parametrize(("dx", "dy"), [(4_000_000, 3_999_999), (-1, 4_000_001), (2**22, -(2**21) - 1)])
+def test_min_deviation_rule_on_chosen_large_moves(dx: int, dy: int) -> None:
+    """Nearly diagonal, nearly axial, and a tie at every other step."""
+    check_rule_every_step(min_deviation(dx, dy), dx, dy)
+
+
+def test_min_deviation_zero_and_axis_moves() -> None:
+    assert min_deviation(0, 0).shape == (0, 2)
+    assert min_deviation(5, 0).tolist() == [[1, 0], [2, 0], [3, 0], [4, 0], [5, 0]]
+    assert min_deviation(0, -3).tolist() == [[0, -1], [0, -2], [0, -3]]
+    assert min_deviation(-3, -3).tolist() == [[-1, -1], [-2, -2], [-3, -3]]
+
+
+@settings(max_examples=200)
+@given(small, small)
+def test_max_deviation_is_at_most_half_a_step(dx: int, dy: int) -> None:
+    path = min_deviation(dx, dy)
+    stats = deviation_stats(path, dx, dy)
+    assert stats.max_minor <= 0.5 + 1e-12
+    if path.shape[0]:
+        a = max(abs(dx), abs(dy))
+        f = np.abs(dx * path[:, 1] - path[:, 0] * dy)
+        assert 2 * f.max() <= a  # exact, integer
+
+
+@settings(max_examples=150)
+@given(st.integers(-1000, 1000), st.integers(-1000, 1000), st.integers(10, 12), st.booleans())
+def test_dda_matches_register_loop(dx: int, dy: int, bits: int, preload: bool) -> None:
+    path = dda(dx, dy, bits, preload=preload)
+    assert [tuple(r) for r in path.tolist()] == brute_dda(dx, dy, bits, preload)
+    if dx or dy:
+        assert tuple(path[-1]) == (dx, dy)
+
+
+@settings(max_examples=200)
+@given(small, small)
+def test_point_by_point_matches_loop(dx: int, dy: int) -> None:
+    path = point_by_point(dx, dy)
+    assert path.shape == (abs(dx) + abs(dy), 2)
+    assert [tuple(r) for r in path.tolist()] == brute_point_by_point(dx, dy)
+
+
+@settings(max_examples=100)
+@given(st.integers(-300, 300), st.integers(-300, 300), st.floats(1e-6, 1e-2), st.floats(1e-6, 1e-2))
+def test_deviation_stats_is_perpendicular_distance(dx: int, dy: int, lx: float, ly: float) -> None:
+    path = min_deviation(dx, dy)
+    stats = deviation_stats(path, dx, dy, step_lengths=(lx, ly))
+    if path.shape[0] == 0:
+        assert stats.points == 0
+        return
+    # geometric oracle: distance to the line by projection in physical units
+    p = path * np.array([lx, ly])
+    e = np.array([dx * lx, dy * ly])
+    u = e / np.linalg.norm(e)
+    foot = np.outer(p @ u, u)
+    dist = np.linalg.norm(p - foot, axis=1)
+    assert stats.mean == pytest.approx(dist.mean(), rel=1e-9, abs=1e-15)
+    assert stats.max == pytest.approx(dist.max(), rel=1e-9, abs=1e-15)
+    assert stats.rms == pytest.approx(math.sqrt(np.mean(dist**2)), rel=1e-9, abs=1e-15)
+
+
+@pytest.mark.parametrize("feed_step_um", [5.0, 8.8, 10.0, 12.5, 25.0])
+def test_min_deviation_not_worse_than_dda_on_rw400(feed_step_um: float) -> None:
+    """Paper set-up: flyer radius 500 mm, wire 2.50 mm, register 2**10; one turn."""
+    lx = feed_step_um * 1e-6
+    ly = 2 * math.pi * 0.5 / 1024
+    x, y = round(2.5e-3 / lx), 1024
+    md = deviation_stats(min_deviation(x, y), x, y, step_lengths=(lx, ly)).mean
+    for preload in (True, False):
+        d = deviation_stats(dda(x, y, 10, preload=preload), x, y, step_lengths=(lx, ly)).mean
+        assert md <= d * (1 + 1e-12)
+    pbp = deviation_stats(point_by_point(x, y), x, y, step_lengths=(lx, ly)).mean
+    assert md < pbp
+
+
+def test_interpolate_three_axes() -> None:
+    path = interpolate([10, 20, 30], [-4, 0, 9])
+    assert path.shape == (9, 3)
+    assert path[-1].tolist() == [6, 20, 39]
+    assert np.all(path[:, 1] == 20)
+    assert np.array_equal(path[:, [0, 2]] - [10, 30], min_deviation(-4, 9))
+    assert interpolate([1, 2, 3], [0, 0, 0]).shape == (0, 3)
+    with pytest.raises(ValueError, match="at most 2"):
+        interpolate([0, 0, 0], [1, 1, 1])
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: min_deviation(1.5, 2), r"dx=1\.5 is invalid"),  # type: ignore[arg-type]
+        (lambda: min_deviation(1, MAX_STEPS + 1), r"dy=2147483648 is invalid: must be in"),
+        (lambda: min_deviation(True, 2), r"dx=True is invalid"),
+        (lambda: dda(5, 3, bits=0), r"bits=0 is invalid"),
+        (lambda: dda(2000, 3, bits=10), r"bits=10 is too small"),
+        (lambda: point_by_point("3", 1), r"dx='3' is invalid"),  # type: ignore[arg-type]
+    ],
+)
+def test_bad_input_names_the_parameter(call, match: str) -> None:  # type: ignore[no-untyped-def]
+    with pytest.raises(ValueError, match=match):
+        call()

@@ -1,0 +1,23 @@
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = "winder_interp"
+
+setup(
+    name=package_name,
+    version="0.1.0",
+    packages=find_packages(exclude=["test"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
+        ("share/" + package_name, ["package.xml"]),
+        ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
+    ],
+    install_requires=["setuptools"],
+    zip_safe=True,
+    maintainer="winder developers",
+    maintainer_email="winder-dev@example.com",
+    description="Trajectory node: winding job to minimum-deviation step commands",
+    license="Apache-2.0",
+    entry_points={"console_scripts": ["interp_node = winder_interp.interp_node:main"]},
+)

@@ -1,0 +1,1 @@
+"""Trajectory node: winding job to minimum-deviation step commands."""

@@ -1,0 +1,1 @@
+"""Profile node: S-curve, trapezoid or exponential step timing."""

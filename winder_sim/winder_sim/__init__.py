@@ -1,0 +1,1 @@
+"""Simulated axes: stepper motor model, /clock, MCAP recording."""
