@@ -116,6 +116,18 @@ def test_min_deviation_rule_on_chosen_large_moves(dx: int, dy: int) -> None:
     check_rule_every_step(min_deviation(dx, dy), dx, dy)
 
 
+@settings(max_examples=100)
+@given(large, large, st.data())
+def test_window_equals_rows_of_the_full_path(dx: int, dy: int, data: st.DataObject) -> None:
+    n = max(abs(dx), abs(dy))
+    lo = data.draw(st.integers(0, n))
+    hi = data.draw(st.integers(lo, min(n, lo + 70_000)))
+    window = min_deviation(dx, dy, start=lo, stop=hi)
+    assert np.array_equal(window, min_deviation(dx, dy)[lo:hi])
+    # a window is also what interpolate() hands out
+    assert np.array_equal(interpolate([0, 0], [dx, dy], first=lo, stop=hi), window)
+
+
 def test_min_deviation_zero_and_axis_moves() -> None:
     assert min_deviation(0, 0).shape == (0, 2)
     assert min_deviation(5, 0).tolist() == [[1, 0], [2, 0], [3, 0], [4, 0], [5, 0]]

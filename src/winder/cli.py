@@ -12,6 +12,7 @@ import time
 from collections.abc import Callable, Sequence
 
 import numpy as np
+from pathlib import Path
 
 from winder.interp import dda, deviation_stats, interpolate, min_deviation, point_by_point
 from winder.job import FIELD_SPECS, Job, JobError
@@ -137,6 +138,57 @@ def cmd_interp(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_run(args: argparse.Namespace) -> int:
+    """Run the whole cell: three node processes, progress, summary."""
+    job = job_from_args(args)  # a bad job never starts anything
+    try:
+        from winder_sim.cell import run_cell
+    except ImportError as exc:
+        raise UserError(f"the ROS 2 node packages are not installed ({exc}); run 'make demo'") from None
+    params = {
+        "interp": job.to_dict(),
+        "profile": {
+            "profile": args.profile,
+            "v_max": args.v_max,
+            "a_max": args.a_max,
+            "j_max": args.j_max,
+            "tau": args.tau,
+            "v_start": args.v_start,
+        },
+        "sim": {"model": args.model, "bag_dir": str(Path(args.bag_dir).resolve()), "real_time": args.real_time},
+    }
+    print(
+        f"winder: job {job.job_id}, {job.total_steps} steps, {args.profile} profile, "
+        f"{args.model} motor model"
+    )
+    bar = Progress(1.0, "winding")
+    t0 = time.monotonic()
+    result = run_cell(
+        params,
+        namespace=args.namespace,
+        timeout=args.timeout,
+        progress=lambda frac, sim_t: bar.update(frac, f"sim {float(sim_t):7.2f} s"),
+    )
+    bar.close()
+    s = result.summary
+    if not s:
+        raise UserError(f"the cell did not finish: {result.message} (node logs in {result.log_dir})")
+    wall = time.monotonic() - t0
+    print(f"  state              {s['state']}")
+    print(f"  steps              {s['steps_done']} of {s['steps_total']}  (missing {s['steps_missing']}, gaps {s['gaps']})")
+    print(f"  simulated time     {float(s['sim_time_s']):.3f} s")
+    print(f"  real-time factor   {float(s['real_time_factor']):.1f} x  (simulation), run took {wall:.1f} s")
+    print(f"  mean deviation     command {float(s['mean_deviation_command_m']) * 1e6:.3f} um, "
+          f"axes {float(s['mean_deviation_actual_m']) * 1e6:.3f} um  (eq. 7)")
+    print(f"  max tracking error {float(s['max_tracking_error_steps']):.3f} steps")
+    print(f"  lost steps         {s['lost_steps']}")
+    print(f"  bag                {s['bag']}")
+    if not result.ok or int(s["errors"]):
+        print(f"winder run: {result.message}", file=sys.stderr)
+        return 1
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="winder", description="winder: coil and rotor winding cell tools"
@@ -145,6 +197,23 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("interp", help="interpolate a winding job and print a summary")
     add_job_arguments(p)
     p.set_defaults(func=cmd_interp)
+
+    p = sub.add_parser("run", help="run the whole cell (three node processes) on a job")
+    add_job_arguments(p)
+    g = p.add_argument_group("profile (steps of the segment's major axis)")
+    g.add_argument("--profile", default="scurve", help="scurve | trapezoid | exponential")
+    g.add_argument("--v-max", type=float, default=2048.0, help="peak step rate [steps/s]")
+    g.add_argument("--a-max", type=float, default=8192.0, help="acceleration [steps/s^2]")
+    g.add_argument("--j-max", type=float, default=65536.0, help="jerk [steps/s^3]")
+    g.add_argument("--tau", type=float, default=0.1, help="exponential time constant [s]")
+    g.add_argument("--v-start", type=float, default=0.0, help="start/stop step rate [steps/s]")
+    g = p.add_argument_group("simulation")
+    g.add_argument("--model", default="linear", help="linear | nonlinear motor model")
+    g.add_argument("--bag-dir", default="bags", help="where the bag goes (default bags/)")
+    g.add_argument("--real-time", action="store_true", help="pace the simulation to the wall clock")
+    g.add_argument("--namespace", default="", help="ROS namespace of the cell")
+    g.add_argument("--timeout", type=float, default=3600.0, help="give up after this many seconds")
+    p.set_defaults(func=cmd_run)
     return parser
 
 

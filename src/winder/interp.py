@@ -67,11 +67,13 @@ def _sign(v: int) -> int:
     return (v > 0) - (v < 0)
 
 
-def min_deviation(dx: int, dy: int) -> IntPath:
+def min_deviation(dx: int, dy: int, *, start: int = 0, stop: int | None = None) -> IntPath:
     """Minimum-deviation interpolation of the move (0, 0) -> (dx, dy).
 
     Returns an int64 array of shape (N, 2), N = max(|dx|, |dy|): the absolute
     position after each step; the last row is (dx, dy); (0, 0) gives (0, 2).
+    ``start``/``stop`` select the rows start..stop-1 only (a streaming window
+    over a long move), with the same values as the full path's rows.
     """
     dx = _check_delta("dx", dx)
     dy = _check_delta("dy", dy)
@@ -79,8 +81,12 @@ def min_deviation(dx: int, dy: int) -> IntPath:
     swap = b > a
     if swap:
         a, b = b, a
-    out = np.empty((a, 2), dtype=np.int64)
-    if a == 0:
+    stop = a if stop is None else stop
+    if not (0 <= start <= stop <= a):
+        raise ValueError(f"start={start}, stop={stop} is invalid: need 0 <= start <= stop <= {a}")
+    rows = stop - start
+    out = np.empty((rows, 2), dtype=np.int64)
+    if rows == 0:
         return out
     major_col, minor_col = (1, 0) if swap else (0, 1)
     s_major = _sign(dy if swap else dx)
@@ -88,7 +94,7 @@ def min_deviation(dx: int, dy: int) -> IntPath:
     major = out[:, major_col]
     minor = out[:, minor_col]
 
-    block = min(_BLOCK, a)
+    block = min(_BLOCK, rows)
     k0 = np.arange(1, block + 1, dtype=np.int64)
     if s_major < 0:
         np.negative(k0, out=k0)
@@ -98,17 +104,17 @@ def min_deviation(dx: int, dy: int) -> IntPath:
     num = np.empty(block, dtype=np.uint64)
     div = np.uint64(2 * a)
     num_step = np.uint64(2 * b * block)
-    offset = np.uint64(0)
-    for start in range(0, a, block):
-        stop = min(a, start + block)
-        n = stop - start
-        np.add(k0[:n], s_major * start, out=major[start:stop])
+    offset = np.uint64(2 * b * start)
+    for lo in range(0, rows, block):
+        hi = min(rows, lo + block)
+        n = hi - lo
+        np.add(k0[:n], s_major * (start + lo), out=major[lo:hi])
         np.add(num0[:n], offset, out=num[:n])
         np.floor_divide(num[:n], div, out=num[:n])
         if s_minor < 0:
-            np.negative(num[:n].view(np.int64), out=minor[start:stop])
+            np.negative(num[:n].view(np.int64), out=minor[lo:hi])
         else:
-            minor[start:stop] = num[:n]
+            minor[lo:hi] = num[:n]
         offset += num_step
     return out
 
@@ -173,12 +179,15 @@ def point_by_point(dx: int, dy: int) -> IntPath:
     return out
 
 
-def interpolate(start: npt.ArrayLike, delta: npt.ArrayLike) -> IntPath:
+def interpolate(
+    start: npt.ArrayLike, delta: npt.ArrayLike, *, first: int = 0, stop: int | None = None
+) -> IntPath:
     """Minimum-deviation steps of a straight move in any number of axes.
 
     ``start`` and ``delta`` are integer vectors (steps); at most two axes of
     ``delta`` may be non-zero (a winding layer moves feed and fork, an index
-    move one axis). Returns the absolute positions after each step, (N, axes).
+    move one axis). Returns the absolute positions after each step, (N, axes),
+    or only the rows first..stop-1.
     """
     s = np.asarray(start, dtype=np.int64)
     d = np.asarray(delta, dtype=np.int64)
@@ -191,9 +200,9 @@ def interpolate(start: npt.ArrayLike, delta: npt.ArrayLike) -> IntPath:
     if moving.size == 0:
         return np.empty((0, d.size), dtype=np.int64)
     if len(axes) == 1:  # a one-axis machine
-        plane = min_deviation(int(d[axes[0]]), 0)[:, :1]
+        plane = min_deviation(int(d[axes[0]]), 0, start=first, stop=stop)[:, :1]
     else:
-        plane = min_deviation(int(d[axes[0]]), int(d[axes[1]]))
+        plane = min_deviation(int(d[axes[0]]), int(d[axes[1]]), start=first, stop=stop)
     out = np.empty((plane.shape[0], d.size), dtype=np.int64)
     out[:] = s
     for col, ax in enumerate(axes[: plane.shape[1]]):

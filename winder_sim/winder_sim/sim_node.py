@@ -1,8 +1,499 @@
-"""Placeholder entry point; the node is built in issue 5."""
+"""sim_node: timed step commands -> simulated axes, /clock and an MCAP bag.
 
-import sys
+In:  winder/job (String, latched), winder/path (JointTrajectory, latched),
+     winder/step_times (Int64MultiArray), /diagnostics (recorded),
+     parameters: model, per-axis motor (``<axis>.J`` ...), output rate, pacing.
+Out: /clock, winder/joint_commands and winder/joint_states (JointState at
+     ``publish_rate`` Hz of simulated time), winder/sim_config (String, latched,
+     the motor parameters in force), /diagnostics, and a rosbag2/MCAP
+     directory ``<bag_dir>/<job_id>_<UTC stamp>`` holding all of them.
+
+Each axis is a stepper driven through ``winder.motor``: the linear model is
+exact between steps, the nonlinear one integrates the sine torque and reports
+lost steps. The simulation advances to the time of the last step received and
+never beyond, so /clock never runs ahead of the commands.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections import deque
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.msg import ParameterType
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.serialization import deserialize_message, serialize_message
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Int64MultiArray, String
+from trajectory_msgs.msg import JointTrajectory
+
+from winder.bag import BagRecorder, new_bag_path
+from winder.job import AXES
+from winder.motor import PAPER, StepperAxis
+from winder.stream import TIMED_COLUMNS, JobPlan, StreamChecker, parse_job_description
+from winder_interp.contract import (
+    ERROR,
+    OK,
+    QOS_CLOCK,
+    QOS_DIAGNOSTICS,
+    QOS_LATCHED,
+    QOS_STATE,
+    QOS_STREAM,
+    TOPIC_CLOCK,
+    TOPIC_DIAGNOSTICS,
+    TOPIC_JOB,
+    TOPIC_JOINT_COMMANDS,
+    TOPIC_JOINT_STATES,
+    TOPIC_PATH,
+    TOPIC_SIM_CONFIG,
+    TOPIC_STEP_TIMES,
+    WARN,
+    Diagnostics,
+    declare_all,
+    float_param,
+    plain_param,
+    unpack,
+)
+
+MODELS = ("linear", "nonlinear")
+MOTOR_FIELDS = {
+    "Zr": (float(PAPER["Zr"]), "rotor teeth", 1.0, 1000.0),
+    "L": (float(PAPER["L"]), "phase inductance [H]", 0.0, 10.0),
+    "i_a": (float(PAPER["i_a"]), "phase current [A]", 0.0, 100.0),
+    "J": (float(PAPER["J"]), "rotor + load inertia [kg m^2]", 0.0, 100.0),
+    "D": (float(PAPER["D"]), "viscous damping [N m s/rad]", 0.0, 100.0),
+    "motor_step_angle": (2 * math.pi / 5120, "motor angle per commanded step [rad]", 0.0, 1.0),
+    "load_torque": (0.0, "constant load torque, nonlinear model [N m]", -100.0, 100.0),
+}
+BAG_TYPES = {
+    "job": "std_msgs/msg/String",
+    "path": "trajectory_msgs/msg/JointTrajectory",
+    "step_times": "std_msgs/msg/Int64MultiArray",
+    "joint_states": "sensor_msgs/msg/JointState",
+    "joint_commands": "sensor_msgs/msg/JointState",
+    "sim_config": "std_msgs/msg/String",
+    "clock": "rosgraph_msgs/msg/Clock",
+    "diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
+}
 
 
-def main(args=None):
-    print("sim_node: not implemented yet", file=sys.stderr)
-    return 0
+def make_axis(values: dict[str, Any], axis: str) -> StepperAxis:
+    return StepperAxis(**{k: values[f"{axis}.{k}"] for k in ("Zr", "L", "i_a", "J", "D")})
+
+
+def check_sim(values: dict[str, Any]) -> str | None:
+    if values.get("model") not in MODELS:
+        return f"model={values.get('model')!r} is invalid: must be one of {', '.join(MODELS)}"
+    for axis in AXES:
+        for k, (_, _, low, high) in MOTOR_FIELDS.items():
+            name = f"{axis}.{k}"
+            v = values[name]
+            open_low = k != "load_torque"
+            if not isinstance(v, float) or not math.isfinite(v) or (v <= low if open_low else v < low) or v > high:
+                lo = "(" if open_low else "["
+                return f"{name}={v!r} is invalid: must be a finite number in {lo}{low:g}, {high:g}]"
+        try:
+            make_axis(values, axis)
+        except ValueError as exc:
+            return f"{axis}: {exc}"
+    if not str(values.get("bag_dir", "")).strip():
+        return "bag_dir='' is invalid: must name a directory"
+    return None
+
+
+class AxisSim:
+    """One simulated axis: motor tracker + what is needed to convert units."""
+
+    def __init__(self, motor: StepperAxis, model: str, load: float, step_angle: float, joint_step: float):
+        self.motor = motor
+        self.tracker: Any = motor.linear_tracker() if model == "linear" else motor.nonlinear_tracker(load)
+        self.step_angle = step_angle  # motor rad per step
+        self.joint_step = joint_step  # joint unit per step
+        self.position = 0  # commanded step position after the last step received
+        self.last_step_t = -math.inf  # time of this axis' last step (s)
+        self.last_dir = 0.0  # its direction
+        self.last_dt = math.inf  # and the interval before it (s)
+        self.max_error_steps = 0.0
+
+    @property
+    def lost_steps(self) -> int:
+        return int(getattr(self.tracker, "lost_steps", 0))
+
+
+class SimNode(Node):
+    def __init__(self) -> None:
+        super().__init__("sim_node")
+        specs: dict[str, Any] = {
+            "model": ("linear", plain_param(ParameterType.PARAMETER_STRING, "motor model: linear | nonlinear")),
+            "publish_rate": (200.0, float_param("joint state rate [Hz of simulated time]", 1.0, 1e5)),
+            "real_time": (False, plain_param(ParameterType.PARAMETER_BOOL, "pace simulated time to the wall clock")),
+            "real_time_factor": (1.0, float_param("simulated seconds per wall second when real_time", 1e-3, 1e3)),
+            "bag_dir": ("bags", plain_param(ParameterType.PARAMETER_STRING, "directory for recordings")),
+            "record": (True, plain_param(ParameterType.PARAMETER_BOOL, "record each job into an MCAP bag")),
+            "settle_time": (0.05, float_param("simulated time after the last step [s]", 0.0, 60.0)),
+            "stall_timeout": (2.0, float_param("wall time without steps before a stall is reported [s]", 0.1, 3600.0)),
+        }
+        for axis in AXES:
+            for k, (default, text, low, high) in MOTOR_FIELDS.items():
+                specs[f"{axis}.{k}"] = (default, float_param(f"{axis} axis: {text}", low, high))
+        self.names = list(specs)
+        self.rejected = declare_all(self, specs, check_sim)
+
+        self.pub_clock = self.create_publisher(Clock, TOPIC_CLOCK, QOS_CLOCK)
+        self.pub_state = self.create_publisher(JointState, TOPIC_JOINT_STATES, QOS_STATE)
+        self.pub_cmd = self.create_publisher(JointState, TOPIC_JOINT_COMMANDS, QOS_STATE)
+        self.pub_config = self.create_publisher(String, TOPIC_SIM_CONFIG, QOS_LATCHED)
+        self.diag = Diagnostics(self, "winder_sim")
+        self.create_subscription(String, TOPIC_JOB, self.on_job, QOS_LATCHED, raw=True)
+        self.create_subscription(JointTrajectory, TOPIC_PATH, self.on_path, QOS_LATCHED, raw=True)
+        self.create_subscription(Int64MultiArray, TOPIC_STEP_TIMES, self.on_step_times, QOS_STREAM, raw=True)
+        self.create_subscription(DiagnosticArray, TOPIC_DIAGNOSTICS, self.on_diagnostics, QOS_DIAGNOSTICS, raw=True)
+        self.create_timer(0.005, self.emit)
+        self.create_timer(0.5, self.watch)
+        self.create_timer(1.0, self.report)
+        self.topic = {
+            "job": self.resolve_topic_name(TOPIC_JOB),
+            "path": self.resolve_topic_name(TOPIC_PATH),
+            "step_times": self.resolve_topic_name(TOPIC_STEP_TIMES),
+            "joint_states": self.resolve_topic_name(TOPIC_JOINT_STATES),
+            "joint_commands": self.resolve_topic_name(TOPIC_JOINT_COMMANDS),
+            "sim_config": self.resolve_topic_name(TOPIC_SIM_CONFIG),
+            "clock": TOPIC_CLOCK,
+            "diagnostics": TOPIC_DIAGNOSTICS,
+        }
+        self.reset()
+        self.early: list[bytes] = []
+        self.path_raw: bytes | None = None
+        self.last_summary: dict[str, object] = {}
+        if self.rejected:
+            self.diag.publish("job", ERROR, f"parameters rejected at start: {', '.join(self.rejected)}", {})
+
+    def reset(self) -> None:
+        self.plan: JobPlan | None = None
+        self.checker: StreamChecker | None = None
+        self.bag: BagRecorder | None = None
+        self.axes: list[AxisSim] = []
+        self.rate = 1.0
+        self.next_sample = 0  # index of the next sample, t = k / rate
+        self.t_sim_ns = 0  # simulated time reached (ns)
+        self.out: deque[dict[str, Any]] = deque()  # computed samples waiting to be published
+        self.done_steps = 0
+        self.finishing = False
+        self.last_chunk_wall = time.monotonic()
+        self.start_wall = time.monotonic()
+        self.stalled = False
+        self.errors: list[str] = []
+        self.dev_cmd = [0.0, 0, 0.0]  # sum, count, max of command deviation (m)
+        self.dev_act = [0.0, 0, 0.0]  # same for the simulated axes
+        self.wall_pace0 = 0.0
+
+    # -- in --------------------------------------------------------------
+    def on_job(self, raw: bytes) -> None:
+        msg = deserialize_message(raw, String)
+        try:
+            plan = parse_job_description(msg.data)
+        except ValueError as exc:
+            self.error(f"job description rejected: {exc}")
+            return
+        if self.plan is not None and not self.finishing:
+            self.error(f"job {plan.job_id} arrived while {self.plan.job_id} runs: the running job is closed incomplete")
+            self.finish(complete=False)
+        values = {n: self.get_parameter(n).value for n in self.names}
+        self.reset()
+        self.plan = plan
+        self.checker = StreamChecker(plan)
+        self.rate = float(values["publish_rate"])
+        for i, axis in enumerate(AXES):
+            sim = AxisSim(
+                make_axis(values, axis),
+                values["model"],
+                values[f"{axis}.load_torque"],
+                values[f"{axis}.motor_step_angle"],
+                plan.joint_step[i],
+            )
+            sim.position = plan.segments[0].start[i] if plan.segments else 0
+            self.axes.append(sim)
+        config = String(data=json.dumps({"model": values["model"], "axes": {
+            axis: {k: values[f"{axis}.{k}"] for k in MOTOR_FIELDS} for axis in AXES
+        }, "publish_rate": self.rate, "settle_time": values["settle_time"]}))
+        self.pub_config.publish(config)
+        if values["record"]:
+            path = new_bag_path(Path(values["bag_dir"]), plan.job_id)
+            self.bag = BagRecorder(path, {self.topic[k]: t for k, t in BAG_TYPES.items()})
+            self.bag.write(self.topic["job"], 0, raw)
+            self.bag.write(self.topic["sim_config"], 0, serialize_message(config))
+            if self.path_raw is not None:
+                self.bag.write(self.topic["path"], 0, self.path_raw)
+        self.get_logger().info(
+            f"job {plan.job_id}: {plan.total_steps} steps, {values['model']} model"
+            + (f", recording to {self.bag.path}" if self.bag else "")
+        )
+        early, self.early = self.early, []
+        for chunk in early:
+            self.on_step_times(chunk)
+
+    def on_path(self, raw: bytes) -> None:
+        self.path_raw = raw
+        if self.bag is not None and self.bag.is_open:
+            self.bag.write(self.topic["path"], self.t_sim_ns, raw)
+
+    def on_diagnostics(self, raw: bytes) -> None:
+        if self.bag is not None and self.bag.is_open:
+            self.bag.write(self.topic["diagnostics"], self.t_sim_ns, raw)
+
+    def on_step_times(self, raw: bytes) -> None:
+        if self.plan is None or self.checker is None or self.finishing:
+            self.early.append(raw)
+            return
+        self.last_chunk_wall = time.monotonic()
+        if self.stalled:
+            self.stalled = False
+            self.get_logger().info("step stream resumed")
+        if self.bag is not None:
+            self.bag.write(self.topic["step_times"], self.t_sim_ns, raw)
+        try:
+            rows = unpack(deserialize_message(raw, Int64MultiArray), TIMED_COLUMNS)
+        except ValueError as exc:
+            self.error(f"bad step_times chunk: {exc}")
+            return
+        seg = int(rows[0, 1])
+        pos = rows[:, 2:]
+        verdict = self.checker.check(seg, pos)
+        if verdict.kind != "ok":
+            self.error(verdict.message)
+        if not verdict.accept:
+            return
+        t_s = rows[:, 0] / 1e9
+        if np.any(np.diff(rows[:, 0]) <= 0) or rows[0, 0] < self.t_sim_ns:
+            self.error(f"segment {seg}: step times do not increase; chunk dropped")
+            return
+        self.simulate(rows, t_s, until=float(t_s[-1]))
+        self.done_steps += rows.shape[0]
+        self.deviation_of_commands(seg, pos)
+        if self.checker.complete:
+            settle = self.get_parameter("settle_time").value
+            self.simulate(None, None, until=float(t_s[-1]) + settle)
+            self.finishing = True
+        self.emit()
+
+    # -- work ------------------------------------------------------------
+    def simulate(self, rows: npt.NDArray[np.int64] | None, t_s: npt.NDArray[np.float64] | None, until: float) -> None:
+        """Advance every axis to ``until`` with the steps in ``rows``; queue the samples."""
+        k1 = math.floor(until * self.rate + 1e-9) + 1
+        ks = np.arange(self.next_sample, max(k1, self.next_sample), dtype=np.int64)
+        samples = ks / self.rate
+        self.next_sample = max(k1, self.next_sample)
+        cmd_pos = np.empty((samples.size, len(AXES)))
+        cmd_vel = np.zeros((samples.size, len(AXES)))
+        act_pos = np.empty((samples.size, len(AXES)))
+        act_vel = np.empty((samples.size, len(AXES)))
+        seg_of_sample = None
+        for i, ax in enumerate(self.axes):
+            if rows is not None and t_s is not None:
+                p = rows[:, 2 + i]
+                d = np.diff(np.concatenate([[ax.position], p]))
+                moved = d != 0
+                ev_t, ev_a = t_s[moved], d[moved] * ax.step_angle
+                # commanded step position at each sample (a step at a sample time counts)
+                j = np.searchsorted(t_s, samples, side="right") - 1
+                cmd_steps = np.where(j >= 0, p[np.maximum(j, 0)], ax.position)
+                # commanded velocity: one step per interval since the axis' step
+                # before; once the axis pauses it decays as 1 / (time since the step)
+                at = np.concatenate([[ax.last_step_t], ev_t])
+                dirs = np.concatenate([[ax.last_dir], np.sign(d[moved]).astype(float)])
+                dts = np.concatenate([[ax.last_dt], np.diff(at)])
+                jj = np.maximum(np.searchsorted(at, samples, side="right") - 1, 0)
+                v_steps = dirs[jj] / np.maximum(dts[jj], samples - at[jj])
+                ax.last_step_t, ax.last_dir, ax.last_dt = float(at[-1]), float(dirs[-1]), float(dts[-1])
+                ax.position = int(p[-1])
+                if i == 0:
+                    seg_of_sample = rows[np.maximum(np.searchsorted(t_s, samples, side="right") - 1, 0), 1]
+            else:
+                ev_t, ev_a = np.empty(0), np.empty(0)
+                cmd_steps = np.full(samples.size, ax.position)
+                v_steps = ax.last_dir / np.maximum(ax.last_dt, samples - ax.last_step_t)
+            theta, omega = ax.tracker.advance(ev_t, ev_a, samples)
+            actual_steps = theta / ax.step_angle
+            if samples.size:
+                ax.max_error_steps = max(ax.max_error_steps, float(np.max(np.abs(cmd_steps - actual_steps))))
+            cmd_pos[:, i] = cmd_steps * ax.joint_step
+            cmd_vel[:, i] = v_steps * ax.joint_step
+            act_pos[:, i] = actual_steps * ax.joint_step
+            act_vel[:, i] = omega / ax.step_angle * ax.joint_step
+        if samples.size:
+            if seg_of_sample is not None:
+                self.deviation_of_axes(seg_of_sample, act_pos)
+            self.out.append({"k": ks, "cmd_pos": cmd_pos, "cmd_vel": cmd_vel, "act_pos": act_pos, "act_vel": act_vel})
+
+    def deviation_of_commands(self, seg: int, pos: npt.NDArray[np.int64]) -> None:
+        assert self.plan is not None
+        s = self.plan.segments[seg]
+        if s.kind != "layer":
+            return
+        lx, ly = self.plan.step_lengths[0], self.plan.step_lengths[1]
+        x = (pos[:, 0] - s.start[0]).astype(np.int64)
+        y = (pos[:, 1] - s.start[1]).astype(np.int64)
+        f = np.abs(s.delta[0] * y - x * s.delta[1]).astype(float)
+        dist = f * lx * ly / math.hypot(s.delta[0] * lx, s.delta[1] * ly)
+        self.dev_cmd[0] += float(dist.sum())
+        self.dev_cmd[1] += dist.size
+        self.dev_cmd[2] = max(self.dev_cmd[2], float(dist.max()))
+
+    def deviation_of_axes(self, segs: npt.NDArray[np.int64], act_pos: npt.NDArray[np.float64]) -> None:
+        assert self.plan is not None
+        js = self.plan.joint_step
+        for seg in np.unique(segs):
+            s = self.plan.segments[int(seg)]
+            if s.kind != "layer":
+                continue
+            m = segs == seg
+            x = act_pos[m, 0] / js[0] - s.start[0]
+            y = act_pos[m, 1] / js[1] - s.start[1]
+            lx, ly = self.plan.step_lengths[0], self.plan.step_lengths[1]
+            dist = np.abs(s.delta[0] * y - x * s.delta[1]) * lx * ly / math.hypot(s.delta[0] * lx, s.delta[1] * ly)
+            self.dev_act[0] += float(dist.sum())
+            self.dev_act[1] += dist.size
+            self.dev_act[2] = max(self.dev_act[2], float(dist.max()))
+
+    # -- out -------------------------------------------------------------
+    def emit(self) -> None:
+        """Publish queued samples: all of them, or as far as the wall clock allows."""
+        if not self.out:
+            if self.finishing:
+                self.finish(complete=True)
+            return
+        limit = math.inf
+        if self.get_parameter("real_time").value:
+            if self.wall_pace0 == 0.0:
+                self.wall_pace0 = time.monotonic()
+            limit = (time.monotonic() - self.wall_pace0) * self.get_parameter("real_time_factor").value
+        names = list(AXES)
+        while self.out:
+            block = self.out[0]
+            ks = block["k"]
+            n = int(np.searchsorted(ks / self.rate, limit, side="right")) if math.isfinite(limit) else ks.size
+            for r in range(n):
+                t_ns = round(int(ks[r]) * 1e9 / self.rate)
+                self.publish_sample(t_ns, names, block, r)
+            if n < ks.size:
+                for key in block:
+                    block[key] = block[key][n:]
+                return
+            self.out.popleft()
+        if self.finishing:
+            self.finish(complete=True)
+
+    def publish_sample(self, t_ns: int, names: list[str], block: dict[str, Any], r: int) -> None:
+        self.t_sim_ns = t_ns
+        clock = Clock()
+        clock.clock.sec, clock.clock.nanosec = divmod(t_ns, 1_000_000_000)
+        self.pub_clock.publish(clock)
+        cmd = JointState(name=names, position=block["cmd_pos"][r].tolist(), velocity=block["cmd_vel"][r].tolist())
+        act = JointState(name=names, position=block["act_pos"][r].tolist(), velocity=block["act_vel"][r].tolist())
+        cmd.header.stamp = act.header.stamp = clock.clock
+        cmd.header.frame_id = act.header.frame_id = self.plan.job_id if self.plan else ""
+        self.pub_cmd.publish(cmd)
+        self.pub_state.publish(act)
+        if self.bag is not None:
+            self.bag.write(self.topic["clock"], t_ns, serialize_message(clock))
+            self.bag.write(self.topic["joint_commands"], t_ns, serialize_message(cmd))
+            self.bag.write(self.topic["joint_states"], t_ns, serialize_message(act))
+
+    def summary(self, complete: bool) -> dict[str, object]:
+        assert self.plan is not None and self.checker is not None
+        wall = time.monotonic() - self.start_wall
+        sim_s = self.t_sim_ns / 1e9
+        return {
+            "job_id": self.plan.job_id,
+            "state": "done" if complete else "incomplete",
+            "steps_done": self.done_steps,
+            "steps_total": self.plan.total_steps,
+            "progress": f"{self.done_steps / max(self.plan.total_steps, 1):.4f}",
+            "steps_missing": self.checker.missing,
+            "gaps": self.checker.gaps,
+            "chunks_rejected": self.checker.rejected,
+            "sim_time_s": f"{sim_s:.6f}",
+            "wall_time_s": f"{wall:.3f}",
+            "real_time_factor": f"{sim_s / wall:.3f}" if wall > 0 else "inf",
+            "lost_steps": sum(a.lost_steps for a in self.axes),
+            "max_tracking_error_steps": f"{max((a.max_error_steps for a in self.axes), default=0.0):.4f}",
+            "mean_deviation_command_m": f"{self.dev_cmd[0] / max(self.dev_cmd[1], 1):.6e}",
+            "max_deviation_command_m": f"{self.dev_cmd[2]:.6e}",
+            "mean_deviation_actual_m": f"{self.dev_act[0] / max(self.dev_act[1], 1):.6e}",
+            "max_deviation_actual_m": f"{self.dev_act[2]:.6e}",
+            "bag": str(self.bag.path.resolve()) if self.bag else "",
+            "errors": len(self.errors),
+        }
+
+    def finish(self, complete: bool) -> None:
+        if self.plan is None:
+            return
+        values = self.summary(complete)
+        ok = complete and not self.errors and values["lost_steps"] == 0
+        level = OK if ok else (WARN if complete else ERROR)
+        text = f"job {self.plan.job_id}: {'complete' if complete else 'incomplete'}, {self.done_steps}/{self.plan.total_steps} steps"
+        if self.errors:
+            text += f", {len(self.errors)} stream errors (first: {self.errors[0]})"
+        final = self.diag.status("job", level, text, values)
+        if self.bag is not None:
+            # the final report goes into the bag too, and the bag is closed
+            # before anyone hears "done": whoever stops us then finds it complete
+            self.bag.write(self.topic["diagnostics"], self.t_sim_ns, serialize_message(final))
+            self.bag.close()
+        self.diag.pub.publish(final)
+        self.get_logger().info(text + (f"; bag {self.bag.path}" if self.bag else ""))
+        self.last_summary = values
+        self.plan = None
+        self.finishing = False
+        self.bag = None
+
+    def error(self, why: str) -> None:
+        self.errors.append(why)
+        self.get_logger().error(why)
+        self.diag.publish("stream", ERROR, why, {"job_id": self.plan.job_id if self.plan else ""})
+
+    def watch(self) -> None:
+        if self.plan is None or self.finishing or self.stalled:
+            return
+        idle = time.monotonic() - self.last_chunk_wall
+        if idle > self.get_parameter("stall_timeout").value:
+            self.stalled = True
+            self.error(
+                f"step stream stalled: no steps for {idle:.1f} s at {self.done_steps}/{self.plan.total_steps} steps"
+            )
+
+    def report(self) -> None:
+        if self.plan is None:
+            return
+        values = self.summary(complete=False)
+        values["state"] = "stalled" if self.stalled else "running"
+        self.diag.publish("job", ERROR if self.stalled else OK, f"job {self.plan.job_id}: {values['state']}", values)
+
+    def shutdown(self) -> None:
+        """Close the bag of a running job (Ctrl-C): readable, marked incomplete."""
+        if self.plan is not None and self.bag is not None:
+            self.finish(complete=False)
+
+
+def main(args: list[str] | None = None) -> None:
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = SimNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.shutdown()
+            node.destroy_node()
+        rclpy.try_shutdown()

@@ -1,0 +1,206 @@
+"""The step stream between the nodes, ROS-free: job description, chunk layout
+and integrity checking.
+
+A job travels as a JSON description (:func:`describe_job`) and then as chunks
+of rows. Step rows are ``[segment, feed, fork, pole]`` (int32, absolute step
+positions after the step); timed rows are ``[t_ns, segment, feed, fork, pole]``
+(int64, nanoseconds since the job start). A chunk never spans two segments.
+
+:class:`StreamChecker` follows the positions: every row must be exactly one
+step (each axis by -1, 0 or +1, at least one axis) from the row before it, so
+a dropped, duplicated or reordered chunk shows up at its first row.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from winder.job import AXES, Job
+
+__all__ = [
+    "STEP_COLUMNS",
+    "TIMED_COLUMNS",
+    "ChunkVerdict",
+    "JobPlan",
+    "StreamChecker",
+    "describe_job",
+    "parse_job_description",
+]
+
+STEP_COLUMNS = ("segment", *AXES)
+TIMED_COLUMNS = ("t_ns", "segment", *AXES)
+FORMAT = "winder.job/1"
+
+
+def describe_job(job: Job) -> str:
+    """JSON text of a job as the downstream nodes and the bag need it."""
+    segs = job.segments()
+    doc = {
+        "format": FORMAT,
+        "job": job.to_dict(),
+        "axes": list(AXES),
+        "joint_step": list(job.joint_step),
+        "step_lengths": list(job.step_lengths),
+        "total_steps": sum(s.steps for s in segs),
+        "segments": [
+            {
+                "kind": s.kind,
+                "start": list(s.start),
+                "delta": list(s.delta),
+                "steps": s.steps,
+                "pole": s.pole,
+                "layer": s.layer,
+            }
+            for s in segs
+        ],
+    }
+    return json.dumps(doc, separators=(",", ":"))
+
+
+@dataclass(frozen=True)
+class SegmentPlan:
+    kind: str
+    start: tuple[int, ...]
+    delta: tuple[int, ...]
+    steps: int
+    major: int  #: index of the axis with the most steps
+
+    @property
+    def end(self) -> tuple[int, ...]:
+        return tuple(a + b for a, b in zip(self.start, self.delta, strict=True))
+
+
+@dataclass(frozen=True)
+class JobPlan:
+    """A parsed job description."""
+
+    job: Job
+    joint_step: tuple[float, ...]
+    step_lengths: tuple[float, ...]
+    segments: tuple[SegmentPlan, ...]
+    total_steps: int
+    text: str = field(repr=False)
+
+    @property
+    def job_id(self) -> str:
+        return self.job.job_id
+
+
+def parse_job_description(text: str) -> JobPlan:
+    """Parse and check :func:`describe_job` output; ValueError if it is not one."""
+    try:
+        doc: dict[str, Any] = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"job description is not JSON: {exc}") from None
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise ValueError(f"job description format is {doc.get('format')!r}, expected {FORMAT!r}")
+    job = Job.from_dict(doc["job"])
+    segs = []
+    for s in doc["segments"]:
+        delta = tuple(int(v) for v in s["delta"])
+        major = int(np.argmax(np.abs(delta)))
+        segs.append(SegmentPlan(s["kind"], tuple(int(v) for v in s["start"]), delta, int(s["steps"]), major))
+    expected = job.segments()
+    if len(expected) != len(segs) or any(
+        e.delta != s.delta or e.start != s.start for e, s in zip(expected, segs, strict=True)
+    ):
+        raise ValueError("job description segments do not match its job fields")
+    return JobPlan(
+        job=job,
+        joint_step=tuple(float(v) for v in doc["joint_step"]),
+        step_lengths=tuple(float(v) for v in doc["step_lengths"]),
+        segments=tuple(segs),
+        total_steps=int(doc["total_steps"]),
+        text=text,
+    )
+
+
+@dataclass(frozen=True)
+class ChunkVerdict:
+    """What a chunk did to the stream. ``accept`` tells whether to use it."""
+
+    accept: bool
+    kind: str  #: "ok", "gap", "duplicate", "reorder", "bad"
+    missing: int = 0  #: steps skipped before this chunk (gap)
+    message: str = ""
+
+
+@dataclass
+class StreamChecker:
+    """Follows a job's step stream chunk by chunk (see module doc)."""
+
+    plan: JobPlan
+    position: npt.NDArray[np.int64] = field(init=False)
+    segment: int = field(init=False, default=0)
+    done: int = field(init=False, default=0)  #: steps accepted
+    gaps: int = field(init=False, default=0)
+    missing: int = field(init=False, default=0)
+    rejected: int = field(init=False, default=0)
+
+    def __post_init__(self) -> None:
+        self.position = np.zeros(len(self.plan.segments[0].start) if self.plan.segments else 3, np.int64)
+        if self.plan.segments:
+            self.position[:] = self.plan.segments[0].start
+
+    @property
+    def complete(self) -> bool:
+        return self.done + self.missing >= self.plan.total_steps and self.at_end
+
+    @property
+    def at_end(self) -> bool:
+        segs = self.plan.segments
+        return not segs or tuple(self.position) == segs[-1].end
+
+    def step_index(self, seg: int, pos: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:
+        """1-based index of each row's step within segment ``seg``."""
+        s = self.plan.segments[seg]
+        return np.abs(pos[:, s.major] - s.start[s.major])
+
+    def check(self, segment: int, pos: npt.NDArray[np.int64]) -> ChunkVerdict:
+        """Check one chunk: ``segment`` index and its (n, axes) positions."""
+        segs = self.plan.segments
+        n = pos.shape[0]
+        if n == 0:
+            return self._reject("bad", "empty chunk")
+        if not 0 <= segment < len(segs):
+            return self._reject("bad", f"segment {segment} out of range 0..{len(segs) - 1}")
+        steps = np.diff(pos, axis=0)
+        if n > 1 and (np.any(np.abs(steps) > 1) or np.any(np.all(steps == 0, axis=1))):
+            return self._reject("bad", f"segment {segment}: rows inside the chunk are not single steps")
+        seg = segs[segment]
+        k = self.step_index(segment, pos)
+        here = self.step_index(segment, self.position[None, :])[0] if segment == self.segment else 0
+        if segment < self.segment or (segment == self.segment and k[0] <= here):
+            kind = "duplicate" if segment == self.segment and k[-1] <= here else "reorder"
+            return self._reject(kind, f"segment {segment} steps {k[0]}..{k[-1]} arrived again or late")
+        verdict = ChunkVerdict(True, "ok")
+        expected_first = here + 1 if segment == self.segment else 1
+        # steps skipped: rest of the current segment, whole segments between, head of this one
+        missing = 0
+        if segment != self.segment:
+            missing += segs[self.segment].steps - self.step_index(self.segment, self.position[None, :])[0]
+            missing += sum(s.steps for s in segs[self.segment + 1 : segment])
+        missing += int(k[0]) - expected_first
+        if missing:
+            self.gaps += 1
+            self.missing += missing
+            verdict = ChunkVerdict(
+                True,
+                "gap",
+                missing,
+                f"gap in the step stream: {missing} steps missing before segment {segment} "
+                f"step {k[0]} of {seg.steps}",
+            )
+        self.segment = segment
+        self.position = pos[-1].astype(np.int64).copy()
+        self.done += n
+        return verdict
+
+    def _reject(self, kind: str, message: str) -> ChunkVerdict:
+        self.rejected += 1
+        return ChunkVerdict(False, kind, 0, message)
