@@ -9,8 +9,8 @@ from __future__ import annotations
 import sys
 
 import numpy as np
-
 from _common import best_of, table
+
 from winder.interp import dda, min_deviation, point_by_point
 
 

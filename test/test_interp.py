@@ -10,7 +10,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from winder.interp import MAX_STEPS, dda, deviation_stats, interpolate, min_deviation, point_by_point
+from winder.interp import (
+    MAX_STEPS,
+    dda,
+    deviation_stats,
+    interpolate,
+    min_deviation,
+    point_by_point,
+)
 
 small = st.integers(-600, 600)
 large = st.integers(-3_000_000, 3_000_000)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 import subprocess
 import sys
@@ -62,7 +63,7 @@ def test_segments_walk_the_job(
             assert seg.delta[:2] == (0, 0)
         pos += seg.delta
     # the feed reverses at every layer
-    assert all(a == -b for a, b in zip(feed_dirs, feed_dirs[1:], strict=False))
+    assert all(a == -b for a, b in itertools.pairwise(feed_dirs))
     # the fork only ever turns forward: one revolution per turn
     assert pos[1] == poles * layers * turns * fork
     # indexing: coil p sits at the nearest step to p/poles of a revolution

@@ -21,11 +21,11 @@ from typing import Any
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-__all__ = ["BagRecorder", "new_bag_path"]
+__all__ = ["BagRecorder", "new_bag_path", "signals_held"]
 
 
 @contextlib.contextmanager
-def _signals_held() -> Iterator[None]:
+def signals_held() -> Iterator[None]:
     """Defer SIGINT/SIGTERM (main thread only; elsewhere a no-op)."""
     if threading.current_thread() is not threading.main_thread():
         yield
@@ -36,6 +36,7 @@ def _signals_held() -> Iterator[None]:
         yield
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
 
 _TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 
@@ -98,14 +99,12 @@ class BagRecorder:
         back meanwhile: a Ctrl-C that lands here must not leave half a bag."""
         if self._writer is not None:
             writer, self._writer = self._writer, None
-            with _signals_held():
+            with signals_held():
                 writer.close()
 
     def discard(self) -> None:
         if self._writer is not None:
             writer, self._writer = self._writer, None
-            try:
+            with contextlib.suppress(Exception):  # the directory goes anyway
                 writer.close()
-            except Exception:  # noqa: BLE001 - removing it anyway
-                pass
         shutil.rmtree(self.path, ignore_errors=True)

@@ -10,12 +10,15 @@ import math
 import sys
 import time
 from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
 
 import numpy as np
-from pathlib import Path
 
 from winder.interp import dda, deviation_stats, interpolate, min_deviation, point_by_point
-from winder.job import FIELD_SPECS, Job, JobError
+from winder.job import FIELD_SPECS, Job
+from winder.params import PROFILE_SPECS, SIM_SPECS, check_profile, check_sim
+from winder.spec import Spec, SpecError
 
 __all__ = ["main"]
 
@@ -24,38 +27,47 @@ class UserError(Exception):
     """An error the user can fix; printed as one line, exit status 2."""
 
 
-def add_job_arguments(parser: argparse.ArgumentParser) -> None:
-    """One ``--field`` option per job field, typed loosely: Job validates."""
-    defaults = Job()
-    group = parser.add_argument_group("winding job (defaults: the RW400 paper set-up)")
-    for name, spec in FIELD_SPECS.items():
-        unit = f" [{spec.unit}]" if spec.unit else ""
-        group.add_argument(
-            f"--{name.replace('_', '-')}",
-            dest=name,
-            default=getattr(defaults, name),
-            metavar=spec.kind.__name__.upper(),
-            help=f"{spec.description}{unit} (default {getattr(defaults, name)!r})",
-        )
+def add_spec_arguments(
+    parser: argparse.ArgumentParser, specs: dict[str, Spec], title: str, skip: tuple[str, ...] = ()
+) -> None:
+    """One option per setting. Values stay text here and are checked by their
+    Spec afterwards, so a bad one is a one-line error, not an argparse usage dump."""
+    group = parser.add_argument_group(title)
+    for name, spec in specs.items():
+        if name in skip:
+            continue
+        flag = "--" + name.replace("_", "-")
+        if spec.kind is bool and spec.default is False:
+            group.add_argument(flag, dest=name, action="store_true", help=spec.description)
+        elif spec.kind is bool:
+            group.add_argument(
+                "--no-" + name.replace("_", "-"),
+                dest=name,
+                action="store_false",
+                help=f"do not {spec.description}",
+            )
+        else:
+            group.add_argument(
+                flag, dest=name, default=None, metavar=spec.kind.__name__.upper(), help=spec.help()
+            )
+
+
+def values_from_args(args: argparse.Namespace, specs: dict[str, Spec]) -> dict[str, Any]:
+    """The settings given on the command line (defaults filled in), checked."""
+    out = {}
+    for name, spec in specs.items():
+        raw = getattr(args, name, None)
+        if raw is None:
+            out[name] = spec.default
+        elif isinstance(raw, str):
+            out[name] = spec.parse(raw)
+        else:
+            out[name] = spec.check(raw)
+    return out
 
 
 def job_from_args(args: argparse.Namespace) -> Job:
-    values = {}
-    for name, spec in FIELD_SPECS.items():
-        raw = getattr(args, name)
-        if isinstance(raw, str) and spec.kind is not str:
-            raw = _parse_number(name, raw, spec.kind)
-        values[name] = raw
-    return Job(**values)
-
-
-def _parse_number(name: str, text: str, kind: type) -> float | int:
-    try:
-        return int(text) if kind is int else float(text)
-    except ValueError:
-        spec = FIELD_SPECS[name]
-        word = "an integer" if kind is int else "a number"
-        raise JobError(f"{name}={text!r} is invalid: must be {word} in {spec.range_text()}") from None
+    return Job(**values_from_args(args, FIELD_SPECS))
 
 
 class Progress:
@@ -140,26 +152,21 @@ def cmd_interp(args: argparse.Namespace) -> int:
 
 def cmd_run(args: argparse.Namespace) -> int:
     """Run the whole cell: three node processes, progress, summary."""
-    job = job_from_args(args)  # a bad job never starts anything
+    # everything is checked here first: a bad value never starts a node or a bag
+    job = job_from_args(args)
+    profile = values_from_args(args, PROFILE_SPECS)
+    check_profile(profile)
+    sim = values_from_args(args, SIM_SPECS)
+    check_sim(sim)
     try:
         from winder_sim.cell import run_cell
     except ImportError as exc:
         raise UserError(f"the ROS 2 node packages are not installed ({exc}); run 'make demo'") from None
-    params = {
-        "interp": job.to_dict(),
-        "profile": {
-            "profile": args.profile,
-            "v_max": args.v_max,
-            "a_max": args.a_max,
-            "j_max": args.j_max,
-            "tau": args.tau,
-            "v_start": args.v_start,
-        },
-        "sim": {"model": args.model, "bag_dir": str(Path(args.bag_dir).resolve()), "real_time": args.real_time},
-    }
+    sim["bag_dir"] = str(Path(sim["bag_dir"]).resolve())
+    params = {"interp": job.to_dict(), "profile": profile, "sim": sim}
+    args.profile, args.model = profile["profile"], sim["model"]
     print(
-        f"winder: job {job.job_id}, {job.total_steps} steps, {args.profile} profile, "
-        f"{args.model} motor model"
+        f"winder: job {job.job_id}, {job.total_steps} steps, {args.profile} profile, {args.model} motor model"
     )
     bar = Progress(1.0, "winding")
     t0 = time.monotonic()
@@ -175,11 +182,16 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise UserError(f"the cell did not finish: {result.message} (node logs in {result.log_dir})")
     wall = time.monotonic() - t0
     print(f"  state              {s['state']}")
-    print(f"  steps              {s['steps_done']} of {s['steps_total']}  (missing {s['steps_missing']}, gaps {s['gaps']})")
+    print(
+        f"  steps              {s['steps_done']} of {s['steps_total']}"
+        f"  (missing {s['steps_missing']}, gaps {s['gaps']})"
+    )
     print(f"  simulated time     {float(s['sim_time_s']):.3f} s")
     print(f"  real-time factor   {float(s['real_time_factor']):.1f} x  (simulation), run took {wall:.1f} s")
-    print(f"  mean deviation     command {float(s['mean_deviation_command_m']) * 1e6:.3f} um, "
-          f"axes {float(s['mean_deviation_actual_m']) * 1e6:.3f} um  (eq. 7)")
+    print(
+        f"  mean deviation     command {float(s['mean_deviation_command_m']) * 1e6:.3f} um, "
+        f"axes {float(s['mean_deviation_actual_m']) * 1e6:.3f} um  (eq. 7)"
+    )
     print(f"  max tracking error {float(s['max_tracking_error_steps']):.3f} steps")
     print(f"  lost steps         {s['lost_steps']}")
     print(f"  bag                {s['bag']}")
@@ -190,27 +202,17 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="winder", description="winder: coil and rotor winding cell tools"
-    )
+    parser = argparse.ArgumentParser(prog="winder", description="winder: coil and rotor winding cell tools")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     p = sub.add_parser("interp", help="interpolate a winding job and print a summary")
-    add_job_arguments(p)
+    add_spec_arguments(p, FIELD_SPECS, "winding job (defaults: the RW400 paper set-up)")
     p.set_defaults(func=cmd_interp)
 
     p = sub.add_parser("run", help="run the whole cell (three node processes) on a job")
-    add_job_arguments(p)
-    g = p.add_argument_group("profile (steps of the segment's major axis)")
-    g.add_argument("--profile", default="scurve", help="scurve | trapezoid | exponential")
-    g.add_argument("--v-max", type=float, default=2048.0, help="peak step rate [steps/s]")
-    g.add_argument("--a-max", type=float, default=8192.0, help="acceleration [steps/s^2]")
-    g.add_argument("--j-max", type=float, default=65536.0, help="jerk [steps/s^3]")
-    g.add_argument("--tau", type=float, default=0.1, help="exponential time constant [s]")
-    g.add_argument("--v-start", type=float, default=0.0, help="start/stop step rate [steps/s]")
-    g = p.add_argument_group("simulation")
-    g.add_argument("--model", default="linear", help="linear | nonlinear motor model")
-    g.add_argument("--bag-dir", default="bags", help="where the bag goes (default bags/)")
-    g.add_argument("--real-time", action="store_true", help="pace the simulation to the wall clock")
+    add_spec_arguments(p, FIELD_SPECS, "winding job (defaults: the RW400 paper set-up)")
+    add_spec_arguments(p, PROFILE_SPECS, "profile node (rates in steps of each segment's major axis)")
+    add_spec_arguments(p, SIM_SPECS, "sim node (motor settings per axis: --feed.J, --fork.D, ...)")
+    g = p.add_argument_group("cell")
     g.add_argument("--namespace", default="", help="ROS namespace of the cell")
     g.add_argument("--timeout", type=float, default=3600.0, help="give up after this many seconds")
     p.set_defaults(func=cmd_run)
@@ -226,7 +228,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     try:
         return func(args)
-    except (JobError, UserError, ValueError, FileNotFoundError) as exc:
+    except (SpecError, UserError, ValueError, FileNotFoundError) as exc:
         print(f"winder {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
@@ -236,4 +238,3 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 if __name__ == "__main__":
     sys.exit(main())
-

@@ -54,8 +54,7 @@ IntPath = npt.NDArray[np.int64]
 def _check_delta(name: str, value: object) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
         raise ValueError(
-            f"{name}={value!r} is invalid: must be an integer number of steps "
-            f"in [-{MAX_STEPS}, {MAX_STEPS}]"
+            f"{name}={value!r} is invalid: must be an integer number of steps in [-{MAX_STEPS}, {MAX_STEPS}]"
         )
     v = int(value)
     if abs(v) > MAX_STEPS:

@@ -19,57 +19,57 @@ start to (feed distance, flyer arc length) in the plane: the segment that
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
-import numpy as np
+from winder.spec import Spec, SpecError
 
-__all__ = ["AXES", "Job", "JobError", "Segment", "FIELD_SPECS"]
+__all__ = ["AXES", "FIELD_SPECS", "Job", "JobError", "Segment"]
 
 AXES = ("feed", "fork", "pole")
 
 
-class JobError(ValueError):
+class JobError(SpecError):
     """A job field is out of range; the message names field, value and range."""
 
 
-@dataclass(frozen=True)
-class FieldSpec:
-    """Type, range and meaning of one job field (shared by the CLI and the nodes)."""
+def _f(
+    name: str, low: float, high: float, unit: str, text: str, default: float, *, open_low: bool = True
+) -> Spec:
+    return Spec(name, float, default, text, unit, low, high, low_open=open_low)
 
-    kind: type
-    low: float | None
-    high: float | None
-    unit: str
-    description: str
-    low_open: bool = False  # low bound excluded
 
-    def range_text(self) -> str:
-        lo = "(" if self.low_open else "["
-        unit = f" {self.unit}" if self.unit else ""
-        if self.kind is int:
-            return f"{lo}{int(self.low or 0)}, {int(self.high or 0)}]{unit}"
-        return f"{lo}{self.low:g}, {self.high:g}]{unit}"
+def _i(name: str, low: int, high: int, text: str, default: int) -> Spec:
+    return Spec(name, int, default, text, "", low, high)
 
 
 #: Job fields with their allowed ranges. The numbers bound what a physical
 #: winding cell can be (a 10 m flyer or a 10 cm wire is a typing error).
-FIELD_SPECS: dict[str, FieldSpec] = {
-    "job_id": FieldSpec(str, None, None, "", "name of the job; names the bag (letters, digits, _ -)"),
-    "wire_diameter": FieldSpec(float, 0.0, 0.02, "m", "wire diameter", low_open=True),
-    "flyer_radius": FieldSpec(float, 0.0, 5.0, "m", "flyer (fork) radius", low_open=True),
-    "turns_per_layer": FieldSpec(int, 1, 100_000, "", "turns in one layer"),
-    "layers": FieldSpec(int, 1, 1_000, "", "layers per coil; the feed reverses at each layer"),
-    "poles": FieldSpec(int, 1, 360, "", "coils (poles); the pole axis indexes 360/poles deg"),
-    "fork_steps_per_rev": FieldSpec(int, 4, 2**24, "", "fork axis steps per revolution"),
-    "feed_step": FieldSpec(float, 0.0, 1e-3, "m", "feed axis travel per step", low_open=True),
-    "pole_steps_per_rev": FieldSpec(int, 4, 2**24, "", "pole axis steps per revolution"),
-    "coil_length": FieldSpec(float, 0.0, 10.0, "m", "axial room for one layer (0 = unchecked)"),
+#: Defaults: the RW400 set-up of the 2016 paper (flyer radius 500 mm, wire
+#: 2.50 mm, fork register 2**10), four poles of two layers of 20 turns.
+FIELD_SPECS: dict[str, Spec] = {
+    s.name: s
+    for s in (
+        Spec(
+            "job_id",
+            str,
+            "rw400",
+            "name of the job; names the bag",
+            pattern=r"[A-Za-z0-9][A-Za-z0-9_\-]{0,63}",
+            pattern_text="1-64 letters, digits, '_' or '-', starting with a letter or digit",
+        ),
+        _f("wire_diameter", 0.0, 0.02, "m", "wire diameter", 2.5e-3),
+        _f("flyer_radius", 0.0, 5.0, "m", "flyer (fork) radius", 0.5),
+        _i("turns_per_layer", 1, 100_000, "turns in one layer", 20),
+        _i("layers", 1, 1_000, "layers per coil; the feed reverses at each layer", 2),
+        _i("poles", 1, 360, "coils (poles); the pole axis indexes 360/poles deg between them", 4),
+        _i("fork_steps_per_rev", 4, 2**24, "fork axis steps per revolution", 1024),
+        _f("feed_step", 0.0, 1e-3, "m", "feed axis travel per step", 1e-5),
+        _i("pole_steps_per_rev", 4, 2**24, "pole axis steps per revolution", 1024),
+        _f("coil_length", 0.0, 10.0, "m", "axial room for one layer (0 = unchecked)", 0.0, open_low=False),
+    )
 }
-
-_JOB_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_\-]{0,63}$")
 
 
 @dataclass(frozen=True)
@@ -98,16 +98,16 @@ class Job:
     """A winding job. Defaults: the RW400 set-up of the 2016 paper (flyer radius
     500 mm, wire 2.50 mm, fork register 2**10), four poles of two layers."""
 
-    job_id: str = "rw400"
-    wire_diameter: float = 2.5e-3
-    flyer_radius: float = 0.5
-    turns_per_layer: int = 20
-    layers: int = 2
-    poles: int = 4
-    fork_steps_per_rev: int = 1024
-    feed_step: float = 1e-5
-    pole_steps_per_rev: int = 1024
-    coil_length: float = 0.0
+    job_id: str = FIELD_SPECS["job_id"].default
+    wire_diameter: float = FIELD_SPECS["wire_diameter"].default
+    flyer_radius: float = FIELD_SPECS["flyer_radius"].default
+    turns_per_layer: int = FIELD_SPECS["turns_per_layer"].default
+    layers: int = FIELD_SPECS["layers"].default
+    poles: int = FIELD_SPECS["poles"].default
+    fork_steps_per_rev: int = FIELD_SPECS["fork_steps_per_rev"].default
+    feed_step: float = FIELD_SPECS["feed_step"].default
+    pole_steps_per_rev: int = FIELD_SPECS["pole_steps_per_rev"].default
+    coil_length: float = FIELD_SPECS["coil_length"].default
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -211,28 +211,7 @@ def check_field(name: str, value: Any) -> Any:
     spec = FIELD_SPECS.get(name)
     if spec is None:
         raise JobError(f"unknown job field {name!r}: known fields are {', '.join(FIELD_SPECS)}")
-    if spec.kind is str:
-        if not isinstance(value, str) or not _JOB_ID.match(value):
-            raise JobError(
-                f"{name}={value!r} is invalid: must be 1-64 letters, digits, '_' or '-', "
-                "starting with a letter or digit"
-            )
-        return value
-    if spec.kind is int:
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-            if isinstance(value, float) and value.is_integer():
-                value = int(value)
-            else:
-                raise JobError(f"{name}={value!r} is invalid: must be an integer in {spec.range_text()}")
-        v: float = int(value)
-    else:
-        if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-            raise JobError(f"{name}={value!r} is invalid: must be a number in {spec.range_text()}")
-        v = float(value)
-        if not math.isfinite(v):
-            raise JobError(f"{name}={v!r} is invalid: must be a finite number in {spec.range_text()}")
-    assert spec.low is not None and spec.high is not None
-    too_low = v <= spec.low if spec.low_open else v < spec.low
-    if too_low or v > spec.high:
-        raise JobError(f"{name}={value!r} is invalid: must be in {spec.range_text()}")
-    return v
+    try:
+        return spec.check(value)
+    except SpecError as exc:
+        raise JobError(str(exc)) from None

@@ -30,11 +30,15 @@ from rcl_interfaces.msg import (
     IntegerRange,
     ParameterDescriptor,
     ParameterType,
+    SetParametersResult,
 )
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Int32MultiArray, Int64MultiArray, MultiArrayDimension
 
+from winder.spec import Spec, SpecError
 from winder.stream import STEP_COLUMNS, TIMED_COLUMNS
 
 TOPIC_JOB = "winder/job"
@@ -53,9 +57,7 @@ QOS_LATCHED = QoSProfile(
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
     history=HistoryPolicy.KEEP_LAST,
 )
-QOS_STREAM = QoSProfile(
-    depth=1000, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_ALL
-)
+QOS_STREAM = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_ALL)
 QOS_STATE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 QOS_CLOCK = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
 QOS_DIAGNOSTICS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -132,74 +134,129 @@ WARN = int.from_bytes(DiagnosticStatus.WARN, "little")
 ERROR = int.from_bytes(DiagnosticStatus.ERROR, "little")
 
 
-def float_param(
-    description: str, low: float, high: float, *, read_only: bool = False
-) -> ParameterDescriptor:
-    return ParameterDescriptor(
-        type=ParameterType.PARAMETER_DOUBLE,
-        description=description,
-        floating_point_range=[FloatingPointRange(from_value=low, to_value=high, step=0.0)],
-        read_only=read_only,
-    )
+def descriptor(spec: Spec) -> ParameterDescriptor:
+    """The ROS parameter descriptor of a winder setting. Typing is dynamic so
+    that ``v_max:=3000`` (an integer) is accepted for a double; the checks in
+    the set-parameters callback convert and validate every value."""
+    kind = {
+        bool: ParameterType.PARAMETER_BOOL,
+        int: ParameterType.PARAMETER_INTEGER,
+        float: ParameterType.PARAMETER_DOUBLE,
+        str: ParameterType.PARAMETER_STRING,
+    }[spec.kind]
+    d = ParameterDescriptor(type=kind, description=spec.help(), dynamic_typing=True)
+    if spec.low is not None and spec.high is not None:
+        if spec.kind is float:
+            d.floating_point_range = [
+                FloatingPointRange(from_value=float(spec.low), to_value=float(spec.high), step=0.0)
+            ]
+        elif spec.kind is int:
+            d.integer_range = [IntegerRange(from_value=int(spec.low), to_value=int(spec.high), step=1)]
+    if spec.choices:
+        d.additional_constraints = "one of: " + ", ".join(spec.choices)
+    return d
 
 
-def int_param(description: str, low: int, high: int, *, read_only: bool = False) -> ParameterDescriptor:
-    return ParameterDescriptor(
-        type=ParameterType.PARAMETER_INTEGER,
-        description=description,
-        integer_range=[IntegerRange(from_value=low, to_value=high, step=1)],
-        read_only=read_only,
-    )
+class Settings:
+    """A node's settings declared as ROS parameters from a winder spec table.
 
+    A bad start-up override (``--ros-args -p name:=value``) is not fatal: it is
+    logged with its reason and the default is kept, and :attr:`rejected` lists
+    it; run-time changes go through the same checks and are refused with the
+    reason. :meth:`values` returns the current values converted to their types.
+    """
 
-def plain_param(kind: int, description: str, *, read_only: bool = False) -> ParameterDescriptor:
-    return ParameterDescriptor(type=kind, description=description, read_only=read_only)
-
-
-def declare_all(
-    node: Node,
-    specs: dict[str, tuple[Any, ParameterDescriptor]],
-    check: Callable[[dict[str, Any]], str | None],
-) -> list[str]:
-    """Declare parameters; a bad start-up override (``--ros-args -p``) is not
-    fatal: it is logged with its reason, the default is kept, and the returned
-    list names the parameters that were rejected. ``check`` validates the
-    whole set (None if fine, else a reason) and is also installed as the
-    set-parameters callback, so validation lives in one place."""
-    from rclpy.exceptions import (
-        InvalidParameterTypeException,
-        InvalidParameterValueException,
-    )
-
-    rejected = []
-    overrides = node._parameter_overrides  # noqa: SLF001 - read only, to report the bad value
-    for name, (default, descriptor) in specs.items():
+    def __init__(
+        self,
+        node: Node,
+        specs: dict[str, Spec],
+        check: Callable[[dict[str, Any]], None],
+    ) -> None:
+        self.node = node
+        self.specs = specs
+        self.check = check
+        self.rejected: list[str] = []
+        log = node.get_logger()
+        for name, spec in specs.items():
+            try:
+                node.declare_parameter(name, spec.default, descriptor(spec))
+            except (InvalidParameterValueException, InvalidParameterTypeException) as exc:
+                log.error(f"{self._reason_for_override(name, exc)}; keeping the default {spec.default!r}")
+                node.declare_parameter(name, spec.default, descriptor(spec), ignore_override=True)
+                self.rejected.append(name)
+                continue
+            try:
+                spec.check(node.get_parameter(name).value)
+            except SpecError as exc:
+                log.error(f"{exc}; keeping the default {spec.default!r}")
+                node.set_parameters([Parameter(name, value=spec.default)])
+                self.rejected.append(name)
         try:
-            node.declare_parameter(name, default, descriptor)
-        except (InvalidParameterTypeException, InvalidParameterValueException, TypeError) as exc:
-            bad = overrides.get(name)
-            shown = bad.value if bad is not None else "?"
-            reason = str(exc).splitlines()[0]
-            node.get_logger().error(f"parameter {name}={shown!r} rejected at start: {reason}; keeping {default!r}")
-            node.declare_parameter(name, default, descriptor, ignore_override=True)
-            rejected.append(name)
-    current = {name: node.get_parameter(name).value for name in specs}
-    reason = check(current)
-    if reason is not None:
-        node.get_logger().error(f"parameters rejected at start: {reason}")
-        rejected.append(reason)
+            check(self.values())
+        except SpecError as exc:
+            log.error(f"settings rejected at start: {exc}")
+            self.rejected.append(str(exc))
+        node.add_on_set_parameters_callback(self._on_set)
 
-    from rcl_interfaces.msg import SetParametersResult
+    def _reason_for_override(self, name: str, exc: Exception) -> str:
+        override = self.node._parameter_overrides.get(name)
+        if override is not None:
+            try:
+                self.specs[name].check(override.value)
+            except SpecError as err:
+                return str(err)
+        return f"{name}: {str(exc).splitlines()[0]}"
 
-    def on_set(params: list[Any]) -> SetParametersResult:
-        merged = {name: node.get_parameter(name).value for name in specs}
-        for p in params:
-            merged[p.name] = p.value
-        why = check(merged)
-        if why is not None:
-            node.get_logger().warning(f"parameter change rejected: {why}")
-            return SetParametersResult(successful=False, reason=why)
+    def values(self) -> dict[str, Any]:
+        return {n: s.check(self.node.get_parameter(n).value) for n, s in self.specs.items()}
+
+    def _on_set(self, params: list[Parameter]) -> SetParametersResult:
+        merged = {n: self.node.get_parameter(n).value for n in self.specs}
+        try:
+            for p in params:
+                if p.name in self.specs:
+                    merged[p.name] = self.specs[p.name].check(p.value)
+            self.check({n: self.specs[n].check(v) for n, v in merged.items()})
+        except SpecError as exc:
+            self.node.get_logger().warning(f"parameter change rejected: {exc}")
+            return SetParametersResult(successful=False, reason=str(exc))
+        # a start-up rejection is resolved once that parameter is set validly
+        names = {p.name for p in params}
+        self.rejected = [r for r in self.rejected if r in self.specs and r not in names]
         return SetParametersResult(successful=True)
 
-    node.add_on_set_parameters_callback(on_set)
-    return rejected
+    def blocked(self) -> str | None:
+        """Why the node must not run a job: start-up values it had to refuse."""
+        if self.rejected:
+            return (
+                f"settings rejected at start: {', '.join(self.rejected)}; "
+                "set valid values (ros2 param set) to proceed"
+            )
+        return None
+
+
+def spin(factory: Callable[[], Node], args: list[str] | None = None) -> None:
+    """``main`` of every winder node: init, spin, and on Ctrl-C / SIGTERM /
+    external shutdown run the node's ``shutdown()`` hook (close the bag) with
+    further signals ignored, then destroy the node."""
+    import signal
+
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = factory()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        if node is not None:
+            hook = getattr(node, "shutdown", None)
+            if callable(hook):
+                hook()
+            node.destroy_node()
+        rclpy.try_shutdown()

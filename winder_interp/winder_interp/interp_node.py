@@ -11,22 +11,19 @@ from __future__ import annotations
 
 import time
 from collections.abc import Iterator
-from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-
-import rclpy
 from builtin_interfaces.msg import Duration
-from rcl_interfaces.msg import ParameterType
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from std_msgs.msg import Int32MultiArray, String
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from winder.interp import interpolate
-from winder.job import AXES, FIELD_SPECS, Job, JobError
+from winder.job import AXES, FIELD_SPECS, Job
+from winder.params import INTERP_SPECS, check_interp
+from winder.spec import SpecError
 from winder.stream import describe_job
 from winder_interp.contract import (
     ERROR,
@@ -37,53 +34,16 @@ from winder_interp.contract import (
     TOPIC_PATH,
     TOPIC_STEPS,
     Diagnostics,
-    declare_all,
-    float_param,
-    int_param,
+    Settings,
     pack_steps,
-    plain_param,
+    spin,
 )
-
-
-def job_parameter_specs() -> dict[str, tuple[Any, Any]]:
-    defaults = Job()
-    specs: dict[str, tuple[Any, Any]] = {}
-    for name, spec in FIELD_SPECS.items():
-        unit = f" [{spec.unit}]" if spec.unit else ""
-        text = f"{spec.description}{unit}, allowed {spec.range_text() if spec.kind is not str else 'see job_id rules'}"
-        if spec.kind is str:
-            specs[name] = (getattr(defaults, name), plain_param(ParameterType.PARAMETER_STRING, text))
-        elif spec.kind is int:
-            specs[name] = (getattr(defaults, name), int_param(text, int(spec.low or 0), int(spec.high or 0)))
-        else:
-            specs[name] = (
-                float(getattr(defaults, name)),
-                float_param(text, float(spec.low or 0.0), float(spec.high or 0.0)),
-            )
-    return specs
-
-
-def check_job(values: dict[str, Any]) -> str | None:
-    try:
-        Job(**{k: v for k, v in values.items() if k in FIELD_SPECS})
-    except JobError as exc:
-        return str(exc)
-    chunk = values.get("chunk_steps", 1)
-    if not isinstance(chunk, int) or not 1 <= chunk <= 1 << 20:
-        return f"chunk_steps={chunk!r} is invalid: must be an integer in [1, 1048576]"
-    return None
 
 
 class InterpNode(Node):
     def __init__(self) -> None:
         super().__init__("interp_node")
-        specs = job_parameter_specs()
-        specs["autostart"] = (
-            True,
-            plain_param(ParameterType.PARAMETER_BOOL, "start the job once the step stream has a subscriber"),
-        )
-        specs["chunk_steps"] = (8192, int_param("steps per winder/steps message", 1, 1 << 20))
-        self.rejected = declare_all(self, specs, check_job)
+        self.settings = Settings(self, INTERP_SPECS, check_interp)
 
         self.pub_job = self.create_publisher(String, TOPIC_JOB, QOS_LATCHED)
         self.pub_path = self.create_publisher(JointTrajectory, TOPIC_PATH, QOS_LATCHED)
@@ -99,8 +59,8 @@ class InterpNode(Node):
         self.started_wall = 0.0
         self.autostarted = False
         self.finished = False
-        if self.rejected:
-            self.diag.publish("job", ERROR, f"parameters rejected at start: {', '.join(self.rejected)}", {})
+        if self.settings.blocked():
+            self.diag.publish("job", ERROR, str(self.settings.blocked()), {})
 
     # -- in --------------------------------------------------------------
     def on_start(self, _req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:
@@ -110,7 +70,7 @@ class InterpNode(Node):
     def tick(self) -> None:
         if (
             not self.autostarted
-            and self.get_parameter("autostart").value
+            and self.settings.values()["autostart"]
             and self.pub_steps.get_subscription_count() > 0
         ):
             self.autostarted = True
@@ -123,10 +83,14 @@ class InterpNode(Node):
     def start_job(self) -> tuple[bool, str]:
         if self.pending is not None:
             return False, f"job {self.job.job_id if self.job else '?'} is still being sent"
-        values = {name: self.get_parameter(name).value for name in FIELD_SPECS}
+        blocked = self.settings.blocked()
+        if blocked:
+            self.diag.publish("job", ERROR, blocked, {})
+            return False, blocked
+        values = self.settings.values()
         try:
-            job = Job(**values)
-        except JobError as exc:
+            job = Job(**{k: values[k] for k in FIELD_SPECS})
+        except SpecError as exc:
             self.diag.publish("job", ERROR, f"job rejected: {exc}", {})
             return False, f"job rejected: {exc}"
         self.job = job
@@ -135,7 +99,7 @@ class InterpNode(Node):
         self.started_wall = time.monotonic()
         self.pub_job.publish(String(data=describe_job(job)))
         self.pub_path.publish(self.path_message(job))
-        self.pending = self.chunks(job, self.get_parameter("chunk_steps").value)
+        self.pending = self.chunks(job, values["chunk_steps"])
         self.get_logger().info(f"job {job.job_id}: {job.total_steps} steps in {len(job.segments())} segments")
         return True, f"job {job.job_id} started: {job.total_steps} steps"
 
@@ -165,8 +129,8 @@ class InterpNode(Node):
                 yield rows
 
     def send_some(self) -> None:
-        if self.pending is None:
-            return
+        if self.pending is None or self.pub_steps.get_subscription_count() == 0:
+            return  # nothing to send, or nobody to send it to yet
         deadline = time.monotonic() + 0.015  # stay responsive to services and parameters
         while time.monotonic() < deadline:
             rows = next(self.pending, None)
@@ -199,15 +163,4 @@ class InterpNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = InterpNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-
+    spin(InterpNode, args)

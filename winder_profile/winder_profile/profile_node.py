@@ -18,15 +18,9 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-import rclpy
-from rcl_interfaces.msg import ParameterType
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import Int32MultiArray, Int64MultiArray, String
-
-from winder.profile import plan
-from winder.stream import STEP_COLUMNS, JobPlan, StreamChecker, parse_job_description
 from winder_interp.contract import (
     ERROR,
     OK,
@@ -37,53 +31,20 @@ from winder_interp.contract import (
     TOPIC_STEPS,
     WARN,
     Diagnostics,
-    declare_all,
-    float_param,
+    Settings,
     pack_timed,
-    plain_param,
+    spin,
     unpack,
 )
 
-KINDS = ("scurve", "trapezoid", "exponential")
-
-
-def plan_segment(values: dict[str, Any], steps: int) -> Any:
-    """The profile of one segment of ``steps`` steps with the node's limits."""
-    kind = values["profile"]
-    kw: dict[str, Any] = {"v_max": values["v_max"], "v_start": values["v_start"], "v_end": values["v_start"]}
-    if kind in ("scurve", "trapezoid"):
-        kw["a_max"] = values["a_max"]
-    if kind == "scurve":
-        kw["j_max"] = values["j_max"]
-    if kind == "exponential":
-        kw["tau"] = values["tau"]
-    return plan(kind, float(steps), **kw)
-
-
-def check_limits(values: dict[str, Any]) -> str | None:
-    if values.get("profile") not in KINDS:
-        return f"profile={values.get('profile')!r} is invalid: must be one of {', '.join(KINDS)}"
-    try:
-        plan_segment(values, 1000)
-    except ValueError as exc:
-        return str(exc)
-    return None
+from winder.params import PROFILE_SPECS, check_profile, plan_segment
+from winder.stream import STEP_COLUMNS, JobPlan, StreamChecker, parse_job_description
 
 
 class ProfileNode(Node):
     def __init__(self) -> None:
         super().__init__("profile_node")
-        specs = {
-            "profile": ("scurve", plain_param(ParameterType.PARAMETER_STRING, "scurve | trapezoid | exponential")),
-            "v_max": (5120.0, float_param("peak step rate of the major axis [steps/s]", 0.0, 1e7)),
-            "a_max": (40000.0, float_param("acceleration limit (scurve, trapezoid) [steps/s^2]", 0.0, 1e10)),
-            "j_max": (400000.0, float_param("jerk limit (scurve) [steps/s^3]", 0.0, 1e14)),
-            "tau": (0.05, float_param("time constant of the exponential ramp [s]", 0.0, 100.0)),
-            "v_start": (0.0, float_param("start/stop step rate, each segment starts and ends at it [steps/s]", 0.0, 1e7)),
-            "dwell": (0.0, float_param("pause between segments [s]", 0.0, 3600.0)),
-        }
-        self.rejected = declare_all(self, specs, check_limits)
-        self.names = list(specs)
+        self.settings = Settings(self, PROFILE_SPECS, check_profile)
 
         self.pub = self.create_publisher(Int64MultiArray, TOPIC_STEP_TIMES, QOS_STREAM)
         self.diag = Diagnostics(self, "winder_profile")
@@ -100,8 +61,7 @@ class ProfileNode(Node):
         self.early: list[bytes] = []
         self.timed = 0
         self.error = ""
-        if self.rejected:
-            self.error = f"parameters rejected at start: {', '.join(self.rejected)}"
+        self.error = self.settings.blocked() or ""
 
     def connect(self) -> None:
         if self.sub_steps is None and self.pub.get_subscription_count() > 0:
@@ -116,7 +76,11 @@ class ProfileNode(Node):
         except ValueError as exc:
             self.fail(f"job description rejected: {exc}")
             return
-        values = {n: self.get_parameter(n).value for n in self.names}
+        blocked = self.settings.blocked()
+        if blocked:
+            self.fail(f"job {job.job_id} refused: {blocked}")
+            return
+        values = self.settings.values()
         try:
             profiles = [plan_segment(values, s.steps) for s in job.segments]
         except ValueError as exc:
@@ -155,7 +119,9 @@ class ProfileNode(Node):
         verdict = self.checker.check(seg, pos)
         if verdict.kind != "ok":
             self.get_logger().error(verdict.message)
-            self.diag.publish("stream", ERROR, verdict.message, {"kind": verdict.kind, "missing": verdict.missing})
+            self.diag.publish(
+                "stream", ERROR, verdict.message, {"kind": verdict.kind, "missing": verdict.missing}
+            )
         if not verdict.accept:
             return
         k = self.checker.step_index(seg, pos)
@@ -173,6 +139,9 @@ class ProfileNode(Node):
             assert self.plan is not None
             self.cached = (seg, self.profiles[seg].step_times(self.plan.segments[seg].steps))
         return self.cached[1]
+
+    def job_duration_ns(self) -> int:
+        return int(self.seg_t0_ns[-1]) + round(self.profiles[-1].duration * 1e9) if self.profiles else 0
 
     # -- out -------------------------------------------------------------
     def fail(self, why: str) -> None:
@@ -193,26 +162,15 @@ class ProfileNode(Node):
             self.error or f"job {self.plan.job_id}: timed {self.timed}/{total} steps",
             {
                 "job_id": self.plan.job_id,
-                "profile": self.get_parameter("profile").value,
+                "profile": self.settings.values()["profile"],
                 "steps_timed": self.timed,
                 "steps_total": total,
                 "progress": f"{self.timed / max(total, 1):.4f}",
                 "gaps": self.checker.gaps if self.checker else 0,
-                "job_duration_s": f"{(self.seg_t0_ns[-1] + round(self.profiles[-1].duration * 1e9)) / 1e9:.6f}",
+                "job_duration_s": f"{self.job_duration_ns() / 1e9:.6f}",
             },
         )
 
 
 def main(args: list[str] | None = None) -> None:
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = ProfileNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-
+    spin(ProfileNode, args)

@@ -68,11 +68,15 @@ def run_cell(
     node to report the job done, stop them with SIGINT, return the summary."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.executors import ExternalShutdownException
     from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from std_srvs.srv import Trigger
 
     env = dict(os.environ)
     if domain is None:
-        domain = int(env["ROS_DOMAIN_ID"]) if env.get("ROS_DOMAIN_ID", "").isdigit() else random.randint(100, 199)
+        domain = (
+            int(env["ROS_DOMAIN_ID"]) if env.get("ROS_DOMAIN_ID", "").isdigit() else random.randint(100, 199)
+        )
     env["ROS_DOMAIN_ID"] = str(domain)
     env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     env["PYTHONUNBUFFERED"] = "1"
@@ -98,7 +102,10 @@ def run_cell(
                 state["errors"].append(f"{st.name}: {st.message}")
 
     node.create_subscription(
-        DiagnosticArray, "/diagnostics", on_diag, QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+        DiagnosticArray,
+        "/diagnostics",
+        on_diag,
+        QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE),
     )
     result = CellResult(False, log_dir=log_dir)
     try:
@@ -107,15 +114,30 @@ def run_cell(
         for key in ("sim", "profile", "interp"):
             exe = find_executable(NODES[key])
             log = open(log_dir / f"{NODES[key]}.log", "wb")  # noqa: SIM115 - closed with the process
+            node_params = dict(params.get(key, {}))
+            if key == "interp":
+                node_params["autostart"] = False  # started below, once we listen
             procs[key] = subprocess.Popen(
-                [exe, *ros_args(params.get(key, {}), namespace)],
+                [exe, *ros_args(node_params, namespace)],
                 env=env,
                 stdout=log,
                 stderr=subprocess.STDOUT,
                 stdin=subprocess.DEVNULL,
             )
+        # start the job only when this process hears the sim node's diagnostics
+        # and the interp node's start service is up: no report can be missed
+        start = node.create_client(Trigger, f"{namespace.rstrip('/')}/interp_node/start")
         t_end = time.monotonic() + timeout
+        started = None
         while state["summary"] is None:
+            if started is None and start.service_is_ready() and node.count_publishers("/diagnostics") >= 3:
+                started = start.call_async(Trigger.Request())
+            if started is not None and started.done():
+                reply = started.result()
+                if reply is None or not reply.success:
+                    result.message = f"job refused: {reply.message if reply else 'no reply'}"
+                    break
+
             rclpy.spin_once(node, timeout_sec=0.1)
             if progress is not None:
                 progress(state["progress"], state.get("sim_time", "0"))
@@ -132,6 +154,8 @@ def run_cell(
             result.message = state.get("message", "")
         if state["errors"] and not result.message:
             result.message = state["errors"][0]
+    except ExternalShutdownException:
+        raise KeyboardInterrupt from None  # Ctrl-C: the caller reports it
     finally:
         for p in procs.values():
             if p.poll() is None:

@@ -25,21 +25,13 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
-from rcl_interfaces.msg import ParameterType
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message, serialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Int64MultiArray, String
 from trajectory_msgs.msg import JointTrajectory
-
-from winder.bag import BagRecorder, new_bag_path
-from winder.job import AXES
-from winder.motor import PAPER, StepperAxis
-from winder.stream import TIMED_COLUMNS, JobPlan, StreamChecker, parse_job_description
 from winder_interp.contract import (
     ERROR,
     OK,
@@ -58,22 +50,17 @@ from winder_interp.contract import (
     TOPIC_STEP_TIMES,
     WARN,
     Diagnostics,
-    declare_all,
-    float_param,
-    plain_param,
+    Settings,
+    spin,
     unpack,
 )
 
-MODELS = ("linear", "nonlinear")
-MOTOR_FIELDS = {
-    "Zr": (float(PAPER["Zr"]), "rotor teeth", 1.0, 1000.0),
-    "L": (float(PAPER["L"]), "phase inductance [H]", 0.0, 10.0),
-    "i_a": (float(PAPER["i_a"]), "phase current [A]", 0.0, 100.0),
-    "J": (float(PAPER["J"]), "rotor + load inertia [kg m^2]", 0.0, 100.0),
-    "D": (float(PAPER["D"]), "viscous damping [N m s/rad]", 0.0, 100.0),
-    "motor_step_angle": (2 * math.pi / 5120, "motor angle per commanded step [rad]", 0.0, 1.0),
-    "load_torque": (0.0, "constant load torque, nonlinear model [N m]", -100.0, 100.0),
-}
+from winder.bag import BagRecorder, new_bag_path, signals_held
+from winder.job import AXES
+from winder.motor import StepperAxis
+from winder.params import MOTOR_FIELDS, SIM_SPECS, check_sim
+from winder.stream import TIMED_COLUMNS, JobPlan, StreamChecker, parse_job_description
+
 BAG_TYPES = {
     "job": "std_msgs/msg/String",
     "path": "trajectory_msgs/msg/JointTrajectory",
@@ -88,26 +75,6 @@ BAG_TYPES = {
 
 def make_axis(values: dict[str, Any], axis: str) -> StepperAxis:
     return StepperAxis(**{k: values[f"{axis}.{k}"] for k in ("Zr", "L", "i_a", "J", "D")})
-
-
-def check_sim(values: dict[str, Any]) -> str | None:
-    if values.get("model") not in MODELS:
-        return f"model={values.get('model')!r} is invalid: must be one of {', '.join(MODELS)}"
-    for axis in AXES:
-        for k, (_, _, low, high) in MOTOR_FIELDS.items():
-            name = f"{axis}.{k}"
-            v = values[name]
-            open_low = k != "load_torque"
-            if not isinstance(v, float) or not math.isfinite(v) or (v <= low if open_low else v < low) or v > high:
-                lo = "(" if open_low else "["
-                return f"{name}={v!r} is invalid: must be a finite number in {lo}{low:g}, {high:g}]"
-        try:
-            make_axis(values, axis)
-        except ValueError as exc:
-            return f"{axis}: {exc}"
-    if not str(values.get("bag_dir", "")).strip():
-        return "bag_dir='' is invalid: must name a directory"
-    return None
 
 
 class AxisSim:
@@ -132,21 +99,7 @@ class AxisSim:
 class SimNode(Node):
     def __init__(self) -> None:
         super().__init__("sim_node")
-        specs: dict[str, Any] = {
-            "model": ("linear", plain_param(ParameterType.PARAMETER_STRING, "motor model: linear | nonlinear")),
-            "publish_rate": (200.0, float_param("joint state rate [Hz of simulated time]", 1.0, 1e5)),
-            "real_time": (False, plain_param(ParameterType.PARAMETER_BOOL, "pace simulated time to the wall clock")),
-            "real_time_factor": (1.0, float_param("simulated seconds per wall second when real_time", 1e-3, 1e3)),
-            "bag_dir": ("bags", plain_param(ParameterType.PARAMETER_STRING, "directory for recordings")),
-            "record": (True, plain_param(ParameterType.PARAMETER_BOOL, "record each job into an MCAP bag")),
-            "settle_time": (0.05, float_param("simulated time after the last step [s]", 0.0, 60.0)),
-            "stall_timeout": (2.0, float_param("wall time without steps before a stall is reported [s]", 0.1, 3600.0)),
-        }
-        for axis in AXES:
-            for k, (default, text, low, high) in MOTOR_FIELDS.items():
-                specs[f"{axis}.{k}"] = (default, float_param(f"{axis} axis: {text}", low, high))
-        self.names = list(specs)
-        self.rejected = declare_all(self, specs, check_sim)
+        self.settings = Settings(self, SIM_SPECS, check_sim)
 
         self.pub_clock = self.create_publisher(Clock, TOPIC_CLOCK, QOS_CLOCK)
         self.pub_state = self.create_publisher(JointState, TOPIC_JOINT_STATES, QOS_STATE)
@@ -156,7 +109,9 @@ class SimNode(Node):
         self.create_subscription(String, TOPIC_JOB, self.on_job, QOS_LATCHED, raw=True)
         self.create_subscription(JointTrajectory, TOPIC_PATH, self.on_path, QOS_LATCHED, raw=True)
         self.create_subscription(Int64MultiArray, TOPIC_STEP_TIMES, self.on_step_times, QOS_STREAM, raw=True)
-        self.create_subscription(DiagnosticArray, TOPIC_DIAGNOSTICS, self.on_diagnostics, QOS_DIAGNOSTICS, raw=True)
+        self.create_subscription(
+            DiagnosticArray, TOPIC_DIAGNOSTICS, self.on_diagnostics, QOS_DIAGNOSTICS, raw=True
+        )
         self.create_timer(0.005, self.emit)
         self.create_timer(0.5, self.watch)
         self.create_timer(1.0, self.report)
@@ -174,8 +129,9 @@ class SimNode(Node):
         self.early: list[bytes] = []
         self.path_raw: bytes | None = None
         self.last_summary: dict[str, object] = {}
-        if self.rejected:
-            self.diag.publish("job", ERROR, f"parameters rejected at start: {', '.join(self.rejected)}", {})
+        self.last_level, self.last_text = OK, ""
+        if self.settings.blocked():
+            self.diag.publish("job", ERROR, str(self.settings.blocked()), {})
 
     def reset(self) -> None:
         self.plan: JobPlan | None = None
@@ -205,9 +161,16 @@ class SimNode(Node):
             self.error(f"job description rejected: {exc}")
             return
         if self.plan is not None and not self.finishing:
-            self.error(f"job {plan.job_id} arrived while {self.plan.job_id} runs: the running job is closed incomplete")
+            self.error(
+                f"job {plan.job_id} arrived while {self.plan.job_id} runs: "
+                "the running job is closed incomplete"
+            )
             self.finish(complete=False)
-        values = {n: self.get_parameter(n).value for n in self.names}
+        blocked = self.settings.blocked()
+        if blocked:
+            self.error(f"job {plan.job_id} refused: {blocked}")
+            return
+        values = self.settings.values()
         self.reset()
         self.plan = plan
         self.checker = StreamChecker(plan)
@@ -222,9 +185,16 @@ class SimNode(Node):
             )
             sim.position = plan.segments[0].start[i] if plan.segments else 0
             self.axes.append(sim)
-        config = String(data=json.dumps({"model": values["model"], "axes": {
-            axis: {k: values[f"{axis}.{k}"] for k in MOTOR_FIELDS} for axis in AXES
-        }, "publish_rate": self.rate, "settle_time": values["settle_time"]}))
+        config = String(
+            data=json.dumps(
+                {
+                    "model": values["model"],
+                    "axes": {axis: {k: values[f"{axis}.{k}"] for k in MOTOR_FIELDS} for axis in AXES},
+                    "publish_rate": self.rate,
+                    "settle_time": values["settle_time"],
+                }
+            )
+        )
         self.pub_config.publish(config)
         if values["record"]:
             path = new_bag_path(Path(values["bag_dir"]), plan.job_id)
@@ -280,13 +250,15 @@ class SimNode(Node):
         self.done_steps += rows.shape[0]
         self.deviation_of_commands(seg, pos)
         if self.checker.complete:
-            settle = self.get_parameter("settle_time").value
+            settle = self.settings.values()["settle_time"]
             self.simulate(None, None, until=float(t_s[-1]) + settle)
             self.finishing = True
         self.emit()
 
     # -- work ------------------------------------------------------------
-    def simulate(self, rows: npt.NDArray[np.int64] | None, t_s: npt.NDArray[np.float64] | None, until: float) -> None:
+    def simulate(
+        self, rows: npt.NDArray[np.int64] | None, t_s: npt.NDArray[np.float64] | None, until: float
+    ) -> None:
         """Advance every axis to ``until`` with the steps in ``rows``; queue the samples."""
         k1 = math.floor(until * self.rate + 1e-9) + 1
         ks = np.arange(self.next_sample, max(k1, self.next_sample), dtype=np.int64)
@@ -332,7 +304,9 @@ class SimNode(Node):
         if samples.size:
             if seg_of_sample is not None:
                 self.deviation_of_axes(seg_of_sample, act_pos)
-            self.out.append({"k": ks, "cmd_pos": cmd_pos, "cmd_vel": cmd_vel, "act_pos": act_pos, "act_vel": act_vel})
+            self.out.append(
+                {"k": ks, "cmd_pos": cmd_pos, "cmd_vel": cmd_vel, "act_pos": act_pos, "act_vel": act_vel}
+            )
 
     def deviation_of_commands(self, seg: int, pos: npt.NDArray[np.int64]) -> None:
         assert self.plan is not None
@@ -359,7 +333,12 @@ class SimNode(Node):
             x = act_pos[m, 0] / js[0] - s.start[0]
             y = act_pos[m, 1] / js[1] - s.start[1]
             lx, ly = self.plan.step_lengths[0], self.plan.step_lengths[1]
-            dist = np.abs(s.delta[0] * y - x * s.delta[1]) * lx * ly / math.hypot(s.delta[0] * lx, s.delta[1] * ly)
+            dist = (
+                np.abs(s.delta[0] * y - x * s.delta[1])
+                * lx
+                * ly
+                / math.hypot(s.delta[0] * lx, s.delta[1] * ly)
+            )
             self.dev_act[0] += float(dist.sum())
             self.dev_act[1] += dist.size
             self.dev_act[2] = max(self.dev_act[2], float(dist.max()))
@@ -372,10 +351,11 @@ class SimNode(Node):
                 self.finish(complete=True)
             return
         limit = math.inf
-        if self.get_parameter("real_time").value:
+        settings = self.settings.values()
+        if settings["real_time"]:
             if self.wall_pace0 == 0.0:
                 self.wall_pace0 = time.monotonic()
-            limit = (time.monotonic() - self.wall_pace0) * self.get_parameter("real_time_factor").value
+            limit = (time.monotonic() - self.wall_pace0) * settings["real_time_factor"]
         names = list(AXES)
         while self.out:
             block = self.out[0]
@@ -397,8 +377,12 @@ class SimNode(Node):
         clock = Clock()
         clock.clock.sec, clock.clock.nanosec = divmod(t_ns, 1_000_000_000)
         self.pub_clock.publish(clock)
-        cmd = JointState(name=names, position=block["cmd_pos"][r].tolist(), velocity=block["cmd_vel"][r].tolist())
-        act = JointState(name=names, position=block["act_pos"][r].tolist(), velocity=block["act_vel"][r].tolist())
+        cmd = JointState(
+            name=names, position=block["cmd_pos"][r].tolist(), velocity=block["cmd_vel"][r].tolist()
+        )
+        act = JointState(
+            name=names, position=block["act_pos"][r].tolist(), velocity=block["act_vel"][r].tolist()
+        )
         cmd.header.stamp = act.header.stamp = clock.clock
         cmd.header.frame_id = act.header.frame_id = self.plan.job_id if self.plan else ""
         self.pub_cmd.publish(cmd)
@@ -435,12 +419,20 @@ class SimNode(Node):
         }
 
     def finish(self, complete: bool) -> None:
+        """End the job: final report into the bag, close it, then announce it.
+        Signals wait meanwhile, so a Ctrl-C cannot split the three."""
         if self.plan is None:
             return
+        with signals_held():
+            self._finish(complete)
+
+    def _finish(self, complete: bool) -> None:
+        assert self.plan is not None
         values = self.summary(complete)
         ok = complete and not self.errors and values["lost_steps"] == 0
         level = OK if ok else (WARN if complete else ERROR)
-        text = f"job {self.plan.job_id}: {'complete' if complete else 'incomplete'}, {self.done_steps}/{self.plan.total_steps} steps"
+        state = "complete" if complete else "incomplete"
+        text = f"job {self.plan.job_id}: {state}, {self.done_steps}/{self.plan.total_steps} steps"
         if self.errors:
             text += f", {len(self.errors)} stream errors (first: {self.errors[0]})"
         final = self.diag.status("job", level, text, values)
@@ -449,12 +441,12 @@ class SimNode(Node):
             # before anyone hears "done": whoever stops us then finds it complete
             self.bag.write(self.topic["diagnostics"], self.t_sim_ns, serialize_message(final))
             self.bag.close()
-        self.diag.pub.publish(final)
         self.get_logger().info(text + (f"; bag {self.bag.path}" if self.bag else ""))
-        self.last_summary = values
+        self.last_summary, self.last_level, self.last_text = values, level, text
         self.plan = None
         self.finishing = False
         self.bag = None
+        self.diag.pub.publish(final)
 
     def error(self, why: str) -> None:
         self.errors.append(why)
@@ -465,18 +457,24 @@ class SimNode(Node):
         if self.plan is None or self.finishing or self.stalled:
             return
         idle = time.monotonic() - self.last_chunk_wall
-        if idle > self.get_parameter("stall_timeout").value:
+        if idle > self.settings.values()["stall_timeout"]:
             self.stalled = True
             self.error(
-                f"step stream stalled: no steps for {idle:.1f} s at {self.done_steps}/{self.plan.total_steps} steps"
+                f"step stream stalled: no steps for {idle:.1f} s "
+                f"at {self.done_steps}/{self.plan.total_steps} steps"
             )
 
     def report(self) -> None:
         if self.plan is None:
+            if self.last_summary:  # keep telling how the last job ended, as a status does
+                s = self.last_summary
+                self.diag.publish("job", self.last_level, self.last_text, s)
             return
         values = self.summary(complete=False)
         values["state"] = "stalled" if self.stalled else "running"
-        self.diag.publish("job", ERROR if self.stalled else OK, f"job {self.plan.job_id}: {values['state']}", values)
+        self.diag.publish(
+            "job", ERROR if self.stalled else OK, f"job {self.plan.job_id}: {values['state']}", values
+        )
 
     def shutdown(self) -> None:
         """Close the bag of a running job (Ctrl-C): readable, marked incomplete."""
@@ -485,15 +483,4 @@ class SimNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = SimNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.shutdown()
-            node.destroy_node()
-        rclpy.try_shutdown()
+    spin(SimNode, args)
