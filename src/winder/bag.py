@@ -21,7 +21,7 @@ from typing import Any
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-__all__ = ["BagRecorder", "new_bag_path", "signals_held"]
+__all__ = ["BagRecorder", "cdr_exact", "new_bag_path", "signals_held"]
 
 
 @contextlib.contextmanager
@@ -56,6 +56,22 @@ def new_bag_path(directory: Path, job_id: str) -> Path:
     return path
 
 
+def cdr_exact(data: bytes | memoryview, msgtype: str) -> bytes | memoryview:
+    """``data`` without bytes past the message's end beyond CDR's 4-byte padding.
+
+    Fast CDR (rclpy's serializer) ends a message whose last field is an empty
+    float64 sequence (JointState.effort) with 4 bytes of alignment for the
+    elements that are not there; strict readers (rosbags) reject that. The
+    message is parsed once to find its end; the payload is otherwise untouched.
+    """
+    msgdef = _TYPESTORE.get_msgdef(msgtype)
+    little = bytes(data[1:2]) == b"\x01"
+    func = msgdef.deserialize_cdr_le if little else msgdef.deserialize_cdr_be
+    _, pos = func(bytes(data[4:]), 0, msgdef.cls, _TYPESTORE)
+    end = 4 + ((pos + 3) & ~3)
+    return data[:end] if len(data) > end else data
+
+
 class BagRecorder:
     """Writes serialized messages to a new rosbag2/MCAP directory.
 
@@ -71,12 +87,14 @@ class BagRecorder:
         self._writer: Writer | None = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
         self._writer.open()
         self._conns: dict[str, Any] = {}
+        self._types: dict[str, str] = {}
         self.messages = 0
         self.bytes = 0
         self.last_t = 0
         try:
             for topic, msgtype in topics.items():
                 self._conns[topic] = self._writer.add_connection(topic, msgtype, typestore=_TYPESTORE)
+                self._types[topic] = msgtype
         except Exception:
             self.discard()
             raise
@@ -89,6 +107,7 @@ class BagRecorder:
         if self._writer is None:
             raise RuntimeError(f"bag {self.path} is closed")
         t = max(int(t_ns), self.last_t)  # log time never goes backwards
+        data = cdr_exact(data, self._types[topic])
         self._writer.write(self._conns[topic], t, data)
         self.last_t = t
         self.messages += 1

@@ -143,7 +143,12 @@ class InterpNode(Node):
             self.sent += rows.shape[0]
 
     def report(self) -> None:
+        blocked = self.settings.blocked()
+        if blocked:  # repeated, as a status is: late listeners hear it too
+            self.diag.publish("job", ERROR, blocked, {})
+            return
         if self.job is None:
+            self.diag.publish("job", OK, "idle: no job started", {"state": "idle"})
             return
         total = self.job.total_steps
         state = "sent" if self.finished else "sending"

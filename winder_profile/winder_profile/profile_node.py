@@ -61,7 +61,7 @@ class ProfileNode(Node):
         self.early: list[bytes] = []
         self.timed = 0
         self.error = ""
-        self.error = self.settings.blocked() or ""
+        self.error = ""
 
     def connect(self) -> None:
         if self.sub_steps is None and self.pub.get_subscription_count() > 0:
@@ -151,8 +151,11 @@ class ProfileNode(Node):
 
     def report(self) -> None:
         if self.plan is None:
-            if self.error:
-                self.diag.publish("job", ERROR, self.error, {})
+            why = self.settings.blocked() or self.error
+            if why:
+                self.diag.publish("job", ERROR, why, {})
+            else:
+                self.diag.publish("job", OK, "idle: waiting for a job", {"state": "idle"})
             return
         total = self.plan.total_steps
         level = ERROR if self.error else (WARN if self.checker and self.checker.gaps else OK)

@@ -441,12 +441,14 @@ class SimNode(Node):
             # before anyone hears "done": whoever stops us then finds it complete
             self.bag.write(self.topic["diagnostics"], self.t_sim_ns, serialize_message(final))
             self.bag.close()
-        self.get_logger().info(text + (f"; bag {self.bag.path}" if self.bag else ""))
+        if self.context.ok():
+            self.get_logger().info(text + (f"; bag {self.bag.path}" if self.bag else ""))
         self.last_summary, self.last_level, self.last_text = values, level, text
         self.plan = None
         self.finishing = False
         self.bag = None
-        self.diag.pub.publish(final)
+        if self.context.ok():  # at Ctrl-C the context is already shut down
+            self.diag.pub.publish(final)
 
     def error(self, why: str) -> None:
         self.errors.append(why)

@@ -1,0 +1,126 @@
+"""Fixtures for tests that start the real node processes over DDS.
+
+Each test gets its own ROS domain (and localhost-only discovery), so tests
+never hear each other or another graph on the machine.
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+BIN = Path(sys.executable).parent
+_domains = itertools.count((os.getpid() * 7) % 60)
+
+
+def next_domain() -> int:
+    return 120 + next(_domains) % 100
+
+
+class Procs:
+    """Node processes of one test, stopped (SIGINT, then kill) at teardown."""
+
+    def __init__(self, domain: int, log_dir: Path) -> None:
+        self.domain = domain
+        self.log_dir = log_dir
+        self.env = {
+            **os.environ,
+            "ROS_DOMAIN_ID": str(domain),
+            "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+            "PYTHONUNBUFFERED": "1",
+        }
+        self.procs: list[tuple[subprocess.Popen[bytes], Path]] = []
+
+    def start(self, executable: str, *ros_args: str) -> subprocess.Popen[bytes]:
+        log = self.log_dir / f"{executable}-{len(self.procs)}.log"
+        args = [str(BIN / executable)]
+        if ros_args:
+            args += ["--ros-args", *ros_args]
+        p = subprocess.Popen(
+            args,
+            env=self.env,
+            stdout=log.open("wb"),
+            stderr=subprocess.STDOUT,
+            stdin=subprocess.DEVNULL,
+        )
+        self.procs.append((p, log))
+        return p
+
+    def log(self, p: subprocess.Popen[bytes]) -> str:
+        for q, path in self.procs:
+            if q is p:
+                return path.read_text(errors="replace")
+        raise KeyError(p)
+
+    def stop(self, p: subprocess.Popen[bytes], sig: int = signal.SIGINT, timeout: float = 20.0) -> int:
+        if p.poll() is None:
+            p.send_signal(sig)
+        try:
+            return p.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
+            raise AssertionError(f"{p.args[0]} did not stop within {timeout} s") from None
+
+    def stop_all(self) -> None:
+        for p, _ in self.procs:
+            if p.poll() is None:
+                p.send_signal(signal.SIGINT)
+        for p, _ in self.procs:
+            try:
+                p.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+
+
+@pytest.fixture
+def procs(tmp_path: Path) -> Iterator[Procs]:
+    log_dir = tmp_path / "logs"
+    log_dir.mkdir()
+    ps = Procs(next_domain(), log_dir)
+    try:
+        yield ps
+    finally:
+        ps.stop_all()
+
+
+@pytest.fixture
+def ros(procs: Procs) -> Iterator[object]:
+    """An rclpy context and node in the test's domain, for probing the nodes."""
+    import rclpy
+    from rclpy.context import Context
+
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=procs.domain)
+    node = rclpy.create_node("winder_test_probe", context=ctx)
+    try:
+        yield node
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+
+
+def spin_until(node: object, cond: object, timeout: float, what: str) -> None:
+    """Spin ``node`` until ``cond()`` is true, or fail naming ``what``."""
+    from rclpy.executors import SingleThreadedExecutor
+
+    ex = SingleThreadedExecutor(context=node.context)  # type: ignore[attr-defined]
+    ex.add_node(node)
+    t_end = time.monotonic() + timeout
+    try:
+        while not cond():  # type: ignore[operator]
+            if time.monotonic() > t_end:
+                raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+            ex.spin_once(timeout_sec=0.05)
+    finally:
+        ex.remove_node(node)

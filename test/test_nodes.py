@@ -1,0 +1,352 @@
+"""The three nodes as real processes over DDS, and the bags they write.
+
+Bags are read here with rosbags directly (not through winder's own reader),
+and expected positions are worked out from the job fields in the test.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from conftest import BIN, Procs, spin_until
+from rosbags.highlevel import AnyReader
+
+pytestmark = pytest.mark.ros
+
+SMALL_JOB = {"turns_per_layer": 3, "layers": 3, "poles": 2, "fork_steps_per_rev": 256, "job_id": "small"}
+
+
+def read_bag(path: Path) -> dict[str, list[tuple[int, Any]]]:
+    out: dict[str, list[tuple[int, Any]]] = {}
+    with AnyReader([path]) as reader:
+        for conn, t, raw in reader.messages():
+            out.setdefault(conn.topic, []).append((t, reader.deserialize(raw, conn.msgtype)))
+    return out
+
+
+def timed_rows(bag: dict[str, list[tuple[int, Any]]], topic: str = "/winder/step_times") -> np.ndarray:
+    chunks = []
+    for _, msg in bag[topic]:
+        dims = msg.layout.dim
+        assert dims[1].label == "t_ns,segment,feed,fork,pole"
+        chunks.append(np.asarray(msg.data, dtype=np.int64).reshape(dims[0].size, dims[1].size))
+    return np.vstack(chunks)
+
+
+def expected_end(job: dict[str, Any]) -> tuple[int, int, int]:
+    """Final axis positions worked out by hand from the job fields."""
+    turns, layers, poles = job["turns_per_layer"], job["layers"], job["poles"]
+    fork = job.get("fork_steps_per_rev", 1024)
+    feed_per_layer = round(turns * job.get("wire_diameter", 2.5e-3) / job.get("feed_step", 1e-5))
+    feed_end = 0
+    direction = 1
+    for _ in range(poles * layers):
+        feed_end += direction * feed_per_layer
+        direction = -direction
+    pole_end = round((poles - 1) * job.get("pole_steps_per_rev", 1024) / poles)
+    return feed_end, poles * layers * turns * fork, pole_end
+
+
+def winder_run(
+    tmp_path: Path, domain: int, *args: str, timeout: float = 240
+) -> subprocess.CompletedProcess[str]:
+    env = {"ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "PATH": str(BIN)}
+    import os
+
+    return subprocess.run(
+        [str(BIN / "winder"), "run", "--bag-dir", str(tmp_path / "bags"), *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env={**os.environ, **env},
+        stdin=subprocess.DEVNULL,
+    )
+
+
+def job_args(job: dict[str, Any]) -> list[str]:
+    out = []
+    for k, v in job.items():
+        out += [f"--{k.replace('_', '-')}", str(v)]
+    return out
+
+
+def only_bag(tmp_path: Path) -> Path:
+    bags = sorted((tmp_path / "bags").iterdir())
+    assert len(bags) == 1, bags
+    return bags[0]
+
+
+@pytest.mark.parametrize("profile", ["scurve", "trapezoid", "exponential"])
+def test_cell_records_every_step_once_in_order(tmp_path: Path, procs: Procs, profile: str) -> None:
+    r = winder_run(tmp_path, procs.domain, *job_args(SMALL_JOB), "--profile", profile)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "Traceback" not in r.stderr
+    bag_dir = only_bag(tmp_path)
+    assert bag_dir.name.startswith("small_")
+    assert (bag_dir / "metadata.yaml").exists()
+    bag = read_bag(bag_dir)
+    rows = timed_rows(bag)
+    t, seg, pos = rows[:, 0], rows[:, 1], rows[:, 2:]
+
+    # every step exactly once, in order: each row one step from the last
+    steps = np.diff(np.vstack([[0, 0, 0], pos]), axis=0)
+    assert np.all(np.abs(steps) <= 1)
+    assert np.all(np.any(steps != 0, axis=1))
+    fork = SMALL_JOB["fork_steps_per_rev"]
+    turns, layers, poles = SMALL_JOB["turns_per_layer"], SMALL_JOB["layers"], SMALL_JOB["poles"]
+    feed_layer = round(turns * 2.5e-3 / 1e-5)
+    n_layer = max(feed_layer, turns * fork)
+    assert rows.shape[0] == poles * layers * n_layer + (poles - 1) * round(1024 / poles)
+    assert tuple(pos[-1]) == expected_end(SMALL_JOB)
+    # segments in order, times strictly increasing within and across segments
+    assert np.all(np.diff(seg) >= 0)
+    assert np.all(np.diff(t) > 0)
+    assert t[0] > 0
+
+    # the job, path and motor set-up travel with the recording
+    job = json.loads(bag["/winder/job"][0][1].data)
+    assert job["job"]["job_id"] == "small"
+    path = bag["/winder/path"][0][1]
+    assert path.header.frame_id == "small"
+    assert list(path.joint_names) == ["feed", "fork", "pole"]
+    end = np.array(path.points[-1].positions)
+    assert end == pytest.approx(np.array(expected_end(SMALL_JOB)) * np.array(job["joint_step"]))
+    config = json.loads(bag["/winder/sim_config"][0][1].data)
+    assert config["model"] == "linear"
+
+    # the clock never goes backwards and joint states come with it
+    clock = np.array([m.clock.sec * 10**9 + m.clock.nanosec for _, m in bag["/clock"]])
+    assert np.all(np.diff(clock) > 0)
+    assert len(bag["/winder/joint_states"]) == len(clock) == len(bag["/winder/joint_commands"])
+    assert clock[-1] >= t[-1]
+    last_cmd = bag["/winder/joint_commands"][-1][1]
+    assert np.array(last_cmd.position) == pytest.approx(end)
+    last_state = bag["/winder/joint_states"][-1][1]
+    # after the settle time the axes sit close to the command (well under a step)
+    assert np.abs(np.array(last_state.position) - end) == pytest.approx(0, abs=0.5 * max(job["joint_step"]))
+
+    # diagnostics report completion, in the bag and in the summary printed
+    finals = [
+        s
+        for _, m in bag["/diagnostics"]
+        for s in m.status
+        if s.name == "sim_node: job" and any(kv.key == "state" and kv.value == "done" for kv in s.values)
+    ]
+    assert finals, "no completion report in the bag"
+    values = {kv.key: kv.value for kv in finals[-1].values}
+    assert int(values["steps_done"]) == rows.shape[0]
+    assert int(values["steps_missing"]) == 0 and int(values["gaps"]) == 0
+    assert f"steps              {rows.shape[0]} of {rows.shape[0]}" in r.stdout
+    assert str(bag_dir) in r.stdout
+
+
+def test_bad_job_on_the_command_line_starts_nothing(tmp_path: Path, procs: Procs) -> None:
+    r = winder_run(tmp_path, procs.domain, "--poles", "0")
+    assert r.returncode == 2
+    assert r.stderr.strip() == "winder run: error: poles=0 is invalid: must be in [1, 360]"
+    assert not (tmp_path / "bags").exists() or not any((tmp_path / "bags").iterdir())
+
+
+def set_params(node: Any, target: str, values: dict[str, Any]) -> list[Any]:
+    from rcl_interfaces.srv import SetParameters
+    from rclpy.parameter import Parameter
+
+    client = node.create_client(SetParameters, f"/{target}/set_parameters")
+    spin_until(node, client.service_is_ready, 30, f"{target}/set_parameters")
+    req = SetParameters.Request(
+        parameters=[Parameter(k, value=v).to_parameter_msg() for k, v in values.items()]
+    )
+    fut = client.call_async(req)
+    spin_until(node, fut.done, 30, "set_parameters reply")
+    return list(fut.result().results)
+
+
+@pytest.mark.parametrize(
+    ("executable", "name", "value", "reason"),
+    [
+        ("interp_node", "poles", 0, "Parameter poles out of range. Min: 1, Max: 360, value: 0"),
+        ("interp_node", "poles", 2.5, "poles=2.5 is invalid: must be an integer in [1, 360]"),
+        ("interp_node", "wire_diameter", "thick", "wire_diameter='thick' is invalid: must be a number"),
+        ("interp_node", "coil_length", 0.01, "at most 4 turns fit"),
+        (
+            "profile_node",
+            "profile",
+            "sine",
+            "profile='sine' is invalid: must be one of scurve, trapezoid, exponential",
+        ),
+        ("profile_node", "a_max", -1.0, "out of range"),
+        ("profile_node", "j_max", float("nan"), "j_max"),
+        ("sim_node", "fork.J", 0, "fork.J=0 is invalid: must be in (0, 100] kg m^2"),
+        ("sim_node", "model", "quantum", "model='quantum' is invalid"),
+    ],
+)
+def test_bad_parameter_is_rejected_and_node_keeps_running(
+    tmp_path: Path, procs: Procs, ros: Any, executable: str, name: str, value: Any, reason: str
+) -> None:
+    p = (
+        procs.start(executable, "-p", "autostart:=false")
+        if executable == "interp_node"
+        else procs.start(executable, "-p", f"bag_dir:={tmp_path / 'bags'}")
+        if executable == "sim_node"
+        else procs.start(executable)
+    )
+    [res] = set_params(ros, executable, {name: value})
+    assert not res.successful
+    assert reason in res.reason
+    assert name in res.reason
+    assert p.poll() is None, "node died on a bad parameter"
+    # a good value is still accepted afterwards
+    good = {
+        "poles": 3,
+        "wire_diameter": 0.002,
+        "coil_length": 0.0,
+        "profile": "trapezoid",
+        "a_max": 100.0,
+        "j_max": 1000.0,
+        "fork.J": 2e-4,
+        "model": "nonlinear",
+    }[name]
+    [res] = set_params(ros, executable, {name: good})
+    assert res.successful, res.reason
+    assert p.poll() is None
+    assert "Traceback" not in procs.log(p)
+
+
+@pytest.mark.parametrize(
+    ("executable", "override", "message"),
+    [
+        ("interp_node", "poles:=0", "poles=0 is invalid: must be in [1, 360]"),
+        ("interp_node", "turns_per_layer:=2.5", "turns_per_layer=2.5 is invalid: must be an integer"),
+        ("profile_node", "v_max:=-5.0", "v_max"),
+        ("sim_node", "feed.D:=-1.0", "feed.D"),
+    ],
+)
+def test_bad_override_at_start_is_reported_not_fatal(
+    procs: Procs, executable: str, override: str, message: str
+) -> None:
+    p = procs.start(executable, "-p", override)
+    t_end = time.monotonic() + 30
+    while message not in procs.log(p) and time.monotonic() < t_end and p.poll() is None:
+        time.sleep(0.1)
+    assert p.poll() is None, procs.log(p)
+    assert message in procs.log(p)
+    assert procs.stop(p) == 0
+    assert "Traceback" not in procs.log(p)
+
+
+def test_bad_job_at_start_never_starts_and_leaves_no_bag(tmp_path: Path, procs: Procs, ros: Any) -> None:
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    seen: list[str] = []
+    ros.create_subscription(
+        DiagnosticArray, "/diagnostics", lambda m: seen.extend(s.message for s in m.status), 50
+    )
+    bags = tmp_path / "bags"
+    procs.start("sim_node", "-p", f"bag_dir:={bags}")
+    procs.start("profile_node")
+    interp = procs.start("interp_node", "-p", "poles:=0")
+    spin_until(
+        ros,
+        lambda: any("settings rejected at start" in s for s in seen),
+        30,
+        "the interp node's error report",
+    )
+    time.sleep(1.0)
+    assert interp.poll() is None
+    assert not bags.exists() or not any(bags.iterdir())
+
+
+def test_sigint_mid_job_leaves_a_readable_bag(tmp_path: Path, procs: Procs) -> None:
+    bags = tmp_path / "bags"
+    sim = procs.start(
+        "sim_node", "-p", f"bag_dir:={bags}", "-p", "real_time:=true", "-p", "real_time_factor:=2.0"
+    )
+    procs.start("profile_node")
+    procs.start("interp_node", "-p", "turns_per_layer:=50", "-p", "job_id:=cut")
+    t_end = time.monotonic() + 60
+    while not (bags.exists() and any(bags.iterdir())) and time.monotonic() < t_end:
+        time.sleep(0.1)
+    time.sleep(2.0)  # mid-job: the whole job takes over a minute of simulated time
+    assert procs.stop(sim, signal.SIGINT) == 0
+    bag_dir = only_bag(tmp_path)
+    assert (bag_dir / "metadata.yaml").exists()
+    bag = read_bag(bag_dir)
+    rows = timed_rows(bag)
+    assert rows.shape[0] > 0
+    # the simulation (paced at 2x real time) was cut well before the last step
+    clock = [m.clock.sec + m.clock.nanosec * 1e-9 for _, m in bag["/clock"]]
+    assert 0 < clock[-1] < rows[-1, 0] * 1e-9 / 2
+    finals = [s for _, m in bag["/diagnostics"] for s in m.status if s.name == "sim_node: job"]
+    values = {kv.key: kv.value for kv in finals[-1].values}
+    assert values["state"] == "incomplete"
+    assert "Traceback" not in procs.log(sim)
+
+
+def test_colcon_build_installs_runnable_executables(tmp_path: Path, procs: Procs) -> None:
+    """What `ros2 run <pkg> <exe>` does: ament index -> prefix/lib/pkg/exe."""
+    repo = Path(__file__).resolve().parents[1]
+    ws = tmp_path / "ws"
+    r = subprocess.run(
+        [
+            str(BIN / "colcon"),
+            "--log-base",
+            str(ws / "log"),
+            "build",
+            "--base-paths",
+            str(repo),
+            "--build-base",
+            str(ws / "build"),
+            "--install-base",
+            str(ws / "install"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=ws.parent,
+        stdin=subprocess.DEVNULL,
+    )
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "4 packages finished" in r.stdout
+    import os
+
+    from ament_index_python.packages import get_package_prefix
+
+    os.environ["AMENT_PREFIX_PATH"] = os.pathsep.join(
+        str(ws / "install" / p) for p in ("winder", "winder_interp", "winder_profile", "winder_sim")
+    )
+    for pkg, exe in [
+        ("winder_interp", "interp_node"),
+        ("winder_profile", "profile_node"),
+        ("winder_sim", "sim_node"),
+    ]:
+        prefix = Path(get_package_prefix(pkg))
+        path = prefix / "lib" / pkg / exe
+        assert path.exists(), path
+        env = {
+            **procs.env,
+            "PYTHONPATH": str(
+                ws
+                / "install"
+                / "winder"
+                / "lib"
+                / f"python{sys.version_info.major}.{sys.version_info.minor}"
+                / "site-packages"
+            ),
+        }
+        p = subprocess.Popen(
+            [str(path)], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, cwd=tmp_path
+        )
+        time.sleep(3.0)
+        assert p.poll() is None, p.stdout.read().decode() if p.stdout else ""
+        p.send_signal(signal.SIGINT)
+        out, _ = p.communicate(timeout=20)
+        assert p.returncode == 0, out.decode()
+        assert b"Traceback" not in out
