@@ -466,7 +466,8 @@ class SimNode(Node):
             # with nothing lost does not fail the job, so it is not an error()
             self.stalled = True
             self.stalls += 1
-            why = f"step stream stalled: no steps for {idle:.1f} s at {self.done_steps}/{self.plan.total_steps} steps"
+            done = f"{self.done_steps}/{self.plan.total_steps}"
+            why = f"step stream stalled: no steps for {idle:.1f} s at {done} steps"
             self.get_logger().warning(why)
             self.diag.publish("stream", ERROR, why, {"job_id": self.plan.job_id})
 
