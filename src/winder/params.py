@@ -34,6 +34,15 @@ INTERP_SPECS = {
     **_table(
         Spec("autostart", bool, True, "start the job as soon as the step stream has a reader"),
         Spec("chunk_steps", int, 8192, "steps per winder/steps message", "", 1, 1 << 20),
+        Spec(
+            "max_in_flight",
+            int,
+            1 << 18,
+            "steps sent but not yet simulated, at most (when a sim node reports progress)",
+            "steps",
+            1,
+            1 << 30,
+        ),
     ),
 }
 

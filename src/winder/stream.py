@@ -140,7 +140,8 @@ class StreamChecker:
     done: int = field(init=False, default=0)  #: steps accepted
     gaps: int = field(init=False, default=0)
     missing: int = field(init=False, default=0)
-    rejected: int = field(init=False, default=0)
+    rejected: int = field(init=False, default=0)  #: chunks refused
+    rejected_steps: int = field(init=False, default=0)  #: steps in refused chunks
 
     def __post_init__(self) -> None:
         self.position = np.zeros(len(self.plan.segments[0].start) if self.plan.segments else 3, np.int64)
@@ -202,5 +203,5 @@ class StreamChecker:
         return verdict
 
     def _reject(self, kind: str, message: str) -> ChunkVerdict:
-        self.rejected += 1
+        self.rejected += 1  # the caller adds the chunk's steps to rejected_steps
         return ChunkVerdict(False, kind, 0, message)

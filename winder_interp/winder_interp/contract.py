@@ -12,6 +12,9 @@ QoS, on purpose:
 * steps and step times: reliable, keep-all - every step matters, a slow reader
   holds the writer's history instead of losing samples;
 * joint states / commands: reliable, depth 100;
+* progress (diagnostic_msgs/KeyValue: job id, steps consumed), reliable depth
+  100: the sim node's receipt that lets the interp node keep at most
+  ``max_in_flight`` steps in the pipeline (memory stays bounded);
 * ``/clock``: best-effort, depth 1 (what rclpy's time source subscribes with);
 * ``/diagnostics``: reliable, depth 10 (as diagnostic_updater).
 """
@@ -48,6 +51,7 @@ TOPIC_STEP_TIMES = "winder/step_times"
 TOPIC_JOINT_STATES = "winder/joint_states"
 TOPIC_JOINT_COMMANDS = "winder/joint_commands"
 TOPIC_SIM_CONFIG = "winder/sim_config"
+TOPIC_PROGRESS = "winder/progress"
 TOPIC_CLOCK = "/clock"
 TOPIC_DIAGNOSTICS = "/diagnostics"
 

@@ -15,6 +15,7 @@ from collections.abc import Iterator
 import numpy as np
 import numpy.typing as npt
 from builtin_interfaces.msg import Duration
+from diagnostic_msgs.msg import KeyValue
 from rclpy.node import Node
 from std_msgs.msg import Int32MultiArray, String
 from std_srvs.srv import Trigger
@@ -29,9 +30,11 @@ from winder_interp.contract import (
     ERROR,
     OK,
     QOS_LATCHED,
+    QOS_STATE,
     QOS_STREAM,
     TOPIC_JOB,
     TOPIC_PATH,
+    TOPIC_PROGRESS,
     TOPIC_STEPS,
     Diagnostics,
     Settings,
@@ -50,12 +53,14 @@ class InterpNode(Node):
         self.pub_steps = self.create_publisher(Int32MultiArray, TOPIC_STEPS, QOS_STREAM)
         self.diag = Diagnostics(self, "winder_interp")
         self.create_service(Trigger, "~/start", self.on_start)
+        self.create_subscription(KeyValue, TOPIC_PROGRESS, self.on_progress, QOS_STATE)
         self.create_timer(0.02, self.tick)
         self.create_timer(1.0, self.report)
 
         self.job: Job | None = None
         self.pending: Iterator[npt.NDArray[np.int32]] | None = None  # generator of chunks of the running job
         self.sent = 0
+        self.consumed = 0
         self.started_wall = 0.0
         self.autostarted = False
         self.finished = False
@@ -95,6 +100,7 @@ class InterpNode(Node):
             return False, f"job rejected: {exc}"
         self.job = job
         self.sent = 0
+        self.consumed = 0
         self.finished = False
         self.started_wall = time.monotonic()
         self.pub_job.publish(String(data=describe_job(job)))
@@ -128,11 +134,21 @@ class InterpNode(Node):
                 rows[:, 1:] = pos
                 yield rows
 
+    def on_progress(self, msg: KeyValue) -> None:
+        if self.job is not None and msg.key == self.job.job_id:
+            self.consumed = max(self.consumed, int(msg.value))
+
     def send_some(self) -> None:
         if self.pending is None or self.pub_steps.get_subscription_count() == 0:
             return  # nothing to send, or nobody to send it to yet
+        # flow control: with a sim node reporting progress, keep at most
+        # max_in_flight steps between us and it; without one, send freely
+        window = self.settings.values()["max_in_flight"]
+        paced = self.count_publishers(self.resolve_topic_name(TOPIC_PROGRESS)) > 0
         deadline = time.monotonic() + 0.015  # stay responsive to services and parameters
         while time.monotonic() < deadline:
+            if paced and self.sent - self.consumed >= window:
+                return
             rows = next(self.pending, None)
             if rows is None:
                 self.pending = None

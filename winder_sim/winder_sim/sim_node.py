@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, KeyValue
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message, serialize_message
 from rosgraph_msgs.msg import Clock
@@ -46,6 +46,7 @@ from winder_interp.contract import (
     TOPIC_JOINT_COMMANDS,
     TOPIC_JOINT_STATES,
     TOPIC_PATH,
+    TOPIC_PROGRESS,
     TOPIC_SIM_CONFIG,
     TOPIC_STEP_TIMES,
     WARN,
@@ -105,6 +106,7 @@ class SimNode(Node):
         self.pub_state = self.create_publisher(JointState, TOPIC_JOINT_STATES, QOS_STATE)
         self.pub_cmd = self.create_publisher(JointState, TOPIC_JOINT_COMMANDS, QOS_STATE)
         self.pub_config = self.create_publisher(String, TOPIC_SIM_CONFIG, QOS_LATCHED)
+        self.pub_progress = self.create_publisher(KeyValue, TOPIC_PROGRESS, QOS_STATE)
         self.diag = Diagnostics(self, "winder_sim")
         self.create_subscription(String, TOPIC_JOB, self.on_job, QOS_LATCHED, raw=True)
         self.create_subscription(JointTrajectory, TOPIC_PATH, self.on_path, QOS_LATCHED, raw=True)
@@ -112,7 +114,7 @@ class SimNode(Node):
         self.create_subscription(
             DiagnosticArray, TOPIC_DIAGNOSTICS, self.on_diagnostics, QOS_DIAGNOSTICS, raw=True
         )
-        self.create_timer(0.005, self.emit)
+        self.create_timer(0.005, self.pump)
         self.create_timer(0.5, self.watch)
         self.create_timer(1.0, self.report)
         self.topic = {
@@ -142,6 +144,8 @@ class SimNode(Node):
         self.next_sample = 0  # index of the next sample, t = k / rate
         self.t_sim_ns = 0  # simulated time reached (ns)
         self.out: deque[dict[str, Any]] = deque()  # computed samples waiting to be published
+        self.inbox: deque[bytes] = deque()  # received chunks waiting to be simulated
+        self.last_step_ns = -1
         self.done_steps = 0
         self.finishing = False
         self.last_chunk_wall = time.monotonic()
@@ -229,8 +233,27 @@ class SimNode(Node):
         if self.stalled:
             self.stalled = False
             self.get_logger().info("step stream resumed")
-        if self.bag is not None:
+        if self.bag is not None:  # the bag keeps the stream as it arrived
             self.bag.write(self.topic["step_times"], self.t_sim_ns, raw)
+        self.inbox.append(raw)
+        self.pump()
+
+    def pump(self) -> None:
+        """Simulate queued chunks. In real-time mode one chunk at a time, once
+        the samples of the last one are out: memory stays bounded, and the
+        progress report holds the interp node back (flow control)."""
+        real_time = self.settings.values()["real_time"]
+        while self.inbox and not self.finishing:
+            if real_time and self.out:
+                break
+            self.process(self.inbox.popleft())
+            if self.plan is not None and self.checker is not None:
+                done = self.checker.done + self.checker.missing + self.checker.rejected_steps
+                self.pub_progress.publish(KeyValue(key=self.plan.job_id, value=str(done)))
+        self.emit()
+
+    def process(self, raw: bytes) -> None:
+        assert self.checker is not None
         try:
             rows = unpack(deserialize_message(raw, Int64MultiArray), TIMED_COLUMNS)
         except ValueError as exc:
@@ -238,15 +261,18 @@ class SimNode(Node):
             return
         seg = int(rows[0, 1])
         pos = rows[:, 2:]
+        if np.any(np.diff(rows[:, 0]) <= 0) or rows[0, 0] < self.last_step_ns:
+            self.error(f"segment {seg}: step times do not increase; chunk of {rows.shape[0]} steps dropped")
+            self.checker.rejected_steps += rows.shape[0]
+            return
         verdict = self.checker.check(seg, pos)
         if verdict.kind != "ok":
             self.error(verdict.message)
         if not verdict.accept:
+            self.checker.rejected_steps += rows.shape[0]
             return
+        self.last_step_ns = int(rows[-1, 0])
         t_s = rows[:, 0] / 1e9
-        if np.any(np.diff(rows[:, 0]) <= 0) or rows[0, 0] < self.t_sim_ns:
-            self.error(f"segment {seg}: step times do not increase; chunk dropped")
-            return
         self.simulate(rows, t_s, until=float(t_s[-1]))
         self.done_steps += rows.shape[0]
         self.deviation_of_commands(seg, pos)
@@ -254,7 +280,6 @@ class SimNode(Node):
             settle = self.settings.values()["settle_time"]
             self.simulate(None, None, until=float(t_s[-1]) + settle)
             self.finishing = True
-        self.emit()
 
     # -- work ------------------------------------------------------------
     def simulate(
