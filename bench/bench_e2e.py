@@ -1,0 +1,376 @@
+"""End-to-end steps/s through the three node processes with recording, against
+raw DDS throughput of the same bytes between two plain rclpy processes,
+measured in the same run, size by size.
+
+    .venv/bin/python bench/bench_e2e.py [--quick]
+
+End-to-end: ``winder_sim.cell.run_cell`` (what ``winder run`` does) starts
+interp_node, profile_node and sim_node on a job of N steps (the sim node
+records a bag); the time is from spawning the processes to the sim node's
+"done" summary. Raw DDS: ``bench/_dds.py`` spawns a publisher and a subscriber
+that move the same chunks (ceil(N / 8192) Int32MultiArray of 8192 x 4 int32
+plus as many Int64MultiArray of 8192 x 5 int64) over the same reliable
+keep-all QoS; the time is from spawning to the last chunk received.
+
+Both spawn-to-done times include process start-up and discovery: seconds,
+whatever N is, and on a shared 2-core machine they vary by seconds from run
+to run. The steady-state rates therefore exclude start-up directly: end-to-end
+N / (the sim node's job time: job description in -> bag closed), raw DDS
+N / (first publish -> last chunk in); the headline ratio is the one at the
+largest size. The slope of spawn-to-done time between the smallest and the
+largest size, (N2 - N1) / (T2 - T1), is printed as a cross-check.
+CPU seconds per step (all node processes during the job / the raw pair during
+the transfer) is the figure least disturbed by other load.
+
+Every size runs in its own ROS_DOMAIN_ID (221..232: clear of the tests'
+120..219 and ``winder run``'s 100..199) with ROS_AUTOMATIC_DISCOVERY_RANGE=
+LOCALHOST. Peak resident memory (VmHWM) of every process is read from /proc
+while it runs, the last read within 0.1 s of its exit.
+
+Job: layers of 100 turns (102 400 fork steps each), more layers and poles for
+bigger N; profile scurve with v_max 1e6 steps/s, a_max 1e9, j_max 1e12, so that
+simulated time (and the 200 Hz joint-state output, 3 messages per sample into
+DDS and the bag) stays small next to the step stream; the full run adds one
+job at a realistic 5e4 steps/s (2900 rpm flyer) to show what the samples cost,
+and one 10^7-step job in a single segment (memory of a long segment).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from _common import table
+from _dds import ChildWatch
+
+from winder.job import Job
+
+HERE = Path(__file__).resolve().parent
+NODES = ("interp_node", "profile_node", "sim_node")
+FAST = {"profile": "scurve", "v_max": 1e6, "a_max": 1e9, "j_max": 1e12}
+REAL = {"profile": "scurve", "v_max": 5e4, "a_max": 1e6, "j_max": 1e8}
+PUBLISH_RATE = 200.0
+CHUNK_STEPS = 8192
+
+
+@dataclass
+class Case:
+    label: str
+    job: dict[str, Any]
+    profile: dict[str, Any]
+    domain: int
+
+    @property
+    def steps(self) -> int:
+        return Job(**self.job).total_steps
+
+
+def job(label: str, turns: int, layers: int, poles: int) -> dict[str, Any]:
+    return {"job_id": f"bench_{label}", "turns_per_layer": turns, "layers": layers, "poles": poles}
+
+
+SIZES = [
+    ("1e4", job("1e4", 10, 1, 1)),
+    ("1e5", job("1e5", 100, 1, 1)),
+    ("1e6", job("1e6", 100, 10, 1)),
+    ("1e7", job("1e7", 100, 10, 10)),
+]
+
+
+def mib(kb: int | None) -> str:
+    return "-" if kb is None else f"{kb / 1024:6.0f}"
+
+
+def expected_chunks(job_fields: dict[str, Any]) -> int:
+    return sum(-(-s.steps // CHUNK_STEPS) for s in Job(**job_fields).segments())
+
+
+def bag_step_chunks(bag: Path) -> int:
+    from ruamel.yaml import YAML
+
+    meta = YAML(typ="safe").load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    for t in meta["topics_with_message_count"]:
+        if t["topic_metadata"]["name"].endswith("winder/step_times"):
+            return int(t["message_count"])
+    return 0
+
+
+def run_e2e(case: Case, timeout: float) -> dict[str, Any]:
+    """One job through the three nodes; times, memory, and the checks of 'nothing lost'."""
+    from winder_sim.cell import run_cell
+
+    work = Path(tempfile.mkdtemp(prefix="winder-bench-e2e-"))
+    params = {
+        "interp": {**Job(**case.job).to_dict(), "chunk_steps": CHUNK_STEPS},
+        "profile": dict(case.profile),
+        "sim": {"publish_rate": PUBLISH_RATE, "bag_dir": str(work / "bags"), "record": True},
+    }
+    marks: list[float] = []
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    t0 = time.monotonic()
+    with ChildWatch(NODES) as watch:
+        res = run_cell(
+            params, domain=case.domain, timeout=timeout, progress=lambda *_: marks.append(time.monotonic())
+        )
+    # run_cell calls progress after every spin, the one that brought the summary included
+    t_summary = marks[-1] if marks else time.monotonic()
+    s = res.summary
+    out: dict[str, Any] = {"ok": False, "message": res.message, "total": t_summary - t0}
+    if s:
+        wall = float(s["wall_time_s"])
+        t_job0 = t_summary - wall
+        bag = Path(s["bag"]) if s.get("bag") else None
+        chunks = bag_step_chunks(bag) if bag and bag.exists() else -1
+        out.update(
+            ok=res.ok,
+            job_wall=wall,
+            sim_s=float(s["sim_time_s"]),
+            steps_done=int(s["steps_done"]),
+            steps_total=int(s["steps_total"]),
+            missing=int(s["steps_missing"]),
+            gaps=int(s["gaps"]),
+            rejected=int(s["chunks_rejected"]),
+            errors=int(s["errors"]),
+            bag_chunks=chunks,
+            bag_mb=sum(f.stat().st_size for f in bag.iterdir()) / 1e6 if bag and bag.exists() else 0.0,
+        )
+        out["lossless"] = (
+            s["state"] == "done"
+            and out["steps_done"] == out["steps_total"] == case.steps
+            and out["missing"] == 0
+            and out["gaps"] == 0
+            and out["rejected"] == 0
+            and chunks == expected_chunks(case.job)
+        )
+        for name in NODES:
+            tr = watch.tracks.get(name)
+            out[name] = {
+                "hwm": tr.hwm_kb if tr else None,
+                "rss25": watch.rss_at(name, t_job0 + 0.25 * wall),
+                "rss50": watch.rss_at(name, t_job0 + 0.5 * wall),
+                "rss_end": watch.rss_at(name, t_summary),
+                "cpu_job": watch.cpu_between(name, t_job0, t_summary),
+            }
+    if out["ok"] and out.get("lossless"):
+        shutil.rmtree(work, ignore_errors=True)
+        if res.log_dir is not None:
+            shutil.rmtree(res.log_dir, ignore_errors=True)
+    else:
+        out["kept"] = f"bags in {work}, node logs in {res.log_dir}"
+    return out
+
+
+def run_raw(rows: int, domain: int, timeout: float) -> dict[str, Any]:
+    """The raw DDS pair on ``rows`` rows of each stream."""
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    cmd = [sys.executable, str(HERE / "_dds.py")]
+    t0 = time.monotonic()
+    sub = subprocess.Popen(
+        [*cmd, "sub", "--rows", str(rows), "--timeout", str(timeout)],
+        env=env,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    pub = subprocess.Popen(
+        [*cmd, "pub", "--rows", str(rows), "--timeout", str(timeout)],
+        env=env,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    s_out, _ = sub.communicate(timeout=timeout + 30)
+    p_out, _ = pub.communicate(timeout=timeout + 30)
+    s, p = json.loads(s_out.strip().splitlines()[-1]), json.loads(p_out.strip().splitlines()[-1])
+    return {
+        "total": s["last"] - t0,
+        "transfer": s["last"] - p["t_start"],
+        "lossless": s["chunks"] == s["chunks_expected"] and p["acked"] == 1,
+        "chunks": s["chunks"],
+        "mb": s["bytes"] / 1e6,
+        "cpu": p["cpu_s"] + s["cpu_s"],
+        "pub_hwm": p["hwm_kb"],
+        "sub_hwm": s["hwm_kb"],
+    }
+
+
+def best(runs: list[dict[str, Any]], key: str) -> dict[str, Any]:
+    good = [r for r in runs if key in r]
+    return min(good, key=lambda r: r[key]) if good else runs[0]
+
+
+def main() -> None:
+    quick = "--quick" in sys.argv
+    sizes = SIZES[:3] if quick else SIZES
+    repeat = 1 if quick else 2
+    timeout = 900.0
+    cases = [Case(label, j, FAST, 221 + i) for i, (label, j) in enumerate(sizes)]
+    results: list[tuple[Case, dict[str, Any], dict[str, Any], list[dict[str, Any]]]] = []
+    for i, case in enumerate(cases):
+        e2e_runs, raw_runs = [], []
+        for _ in range(repeat):  # interleaved: the machine's noise hits both alike
+            raw_runs.append(run_raw(case.steps, 225 + i, timeout))
+            e2e_runs.append(run_e2e(case, timeout))
+        # the least disturbed run of each: the shortest job / transfer (the headline figures)
+        results.append((case, best(e2e_runs, "job_wall"), best(raw_runs, "transfer"), e2e_runs))
+        e, r = results[-1][1], results[-1][2]
+        print(
+            f"  [{case.label}: e2e {e['total']:.2f} s {'ok' if e.get('lossless') else 'NOT OK'}, "
+            f"raw DDS {r['total']:.2f} s {'ok' if r['lossless'] else 'NOT OK'}]",
+            file=sys.stderr,
+            flush=True,
+        )
+
+    nan = float("nan")
+    rows = []
+    for case, e, r, _ in results:
+        n = case.steps
+        job_s = e.get("job_wall", nan)
+        cpu_e = sum((e.get(k) or {}).get("cpu_job") or 0.0 for k in NODES)
+        rows.append(
+            [
+                case.label,
+                n,
+                f"{e['total']:6.2f}",
+                f"{job_s:6.2f}",
+                f"{r['total']:6.2f}",
+                f"{r['transfer']:6.2f}",
+                f"{n / job_s / 1e6:5.2f}",
+                f"{n / r['transfer'] / 1e6:5.2f}",
+                f"{r['transfer'] / job_s:5.2f}",
+                f"{cpu_e / n * 1e6:5.2f}",
+                f"{r['cpu'] / n * 1e6:5.2f}",
+                f"{e.get('sim_s', 0):6.2f}",
+                round(e.get("sim_s", 0) * PUBLISH_RATE),
+                "yes" if e.get("lossless") and r["lossless"] else "NO",
+            ]
+        )
+    print(
+        "End-to-end (3 node processes, bag recorded) vs raw DDS of the same chunks "
+        f"(best of {repeat}; publish_rate {PUBLISH_RATE:g} Hz)"
+    )
+    print(
+        table(
+            ["N", "steps", "e2e s", "e2e job s", "raw s", "raw xfer s", "e2e job Msteps/s",
+             "raw xfer Mrows/s", "e2e / raw", "e2e CPU us/step", "raw CPU us/row", "sim s",
+             "200Hz samples", "all steps, 0 lost"],
+            rows,
+        )
+    )  # fmt: skip
+    print(
+        "  e2e s: spawn -> 'done' summary; e2e job s: the sim node's job time (job description in ->\n"
+        "  bag closed); raw s: spawn -> last chunk in; raw xfer s: first publish -> last chunk in;\n"
+        "  CPU: user+system of the 3 nodes during the job / of the raw pair during the transfer"
+    )
+    (c0, e0, r0, _), (c2, e2, r2, _) = results[0], results[-1]
+    n2 = c2.steps
+    rate_e, rate_r = n2 / e2.get("job_wall", nan), n2 / r2["transfer"]
+    print(
+        f"\nsteady state at {c2.label}: end-to-end {rate_e / 1e6:.2f} M steps/s, "
+        f"raw DDS {rate_r / 1e6:.2f} M rows/s, ratio {rate_e / rate_r:.2f}  (target >= 0.5)"
+    )
+    dn = n2 - c0.steps
+    slope_e, slope_r = dn / (e2["total"] - e0["total"]), dn / (r2["total"] - r0["total"])
+    print(
+        f"same by the slope of spawn-to-done time {c0.label} -> {c2.label}: "
+        f"end-to-end {slope_e / 1e6:.2f} M steps/s, raw DDS {slope_r / 1e6:.2f} M rows/s, "
+        f"ratio {slope_e / slope_r:.2f}; start-up (intercept): "
+        f"end-to-end {e2['total'] - n2 / slope_e:.2f} s, raw DDS {r2['total'] - n2 / slope_r:.2f} s"
+    )
+    print(
+        "wall time relative to the smallest size: "
+        + ", ".join(
+            f"{c.label} e2e x{e['total'] / e0['total']:.1f} raw x{r['total'] / r0['total']:.1f}"
+            for c, e, r, _ in results[1:]
+        )
+    )
+    crow = []
+    for case, e, _, _ in results:
+        job_s = e.get("job_wall", nan)
+        cells = [case.label, f"{job_s:6.2f}"]
+        for k in NODES:
+            cpu = (e.get(k) or {}).get("cpu_job")
+            cells.append("-" if cpu is None else f"{cpu:6.2f} ({100 * cpu / job_s:3.0f}%)")
+        crow.append(cells)
+    print("\nCPU seconds of each node during the job (share of the job's wall time; 2 cores, shared)")
+    print(table(["N", "job s", "interp", "profile", "sim"], crow))
+
+    mrows = []
+    for case, e, r, runs in results:
+        peaks = {n: max((x.get(n) or {}).get("hwm") or 0 for x in runs) for n in NODES}
+        mrows.append(
+            [case.label]
+            + [mib(peaks[n]) for n in NODES]
+            + [
+                " / ".join(mib(e["sim_node"][k]) for k in ("rss25", "rss50", "rss_end"))
+                if e.get("sim_node")
+                else "-",
+                f"{e.get('bag_mb', 0):7.1f}",
+                mib(r["pub_hwm"]),
+                mib(r["sub_hwm"]),
+            ]
+        )
+    print("\nPeak resident memory (VmHWM, MiB) of each process, max over the repeats")
+    print(
+        table(
+            ["N", "interp", "profile", "sim", "sim RSS at 25/50/100% of job", "bag MB", "raw pub", "raw sub"],
+            mrows,
+        )
+    )  # fmt: skip
+
+    if not quick:
+        extra = [
+            Case("1e6@5e4", SIZES[2][1] | {"job_id": "bench_real"}, REAL, 229),
+            Case("1e7x1seg", job("1seg", 9766, 1, 1), FAST, 230),
+        ]
+        xrows = []
+        for case in extra:
+            e = run_e2e(case, timeout)
+            xrows.append(
+                [
+                    case.label,
+                    case.steps,
+                    f"{e['total']:6.2f}",
+                    f"{e.get('job_wall', float('nan')):6.2f}",
+                    f"{e.get('sim_s', 0):7.2f}",
+                    round(e.get("sim_s", 0) * PUBLISH_RATE),
+                    *[mib((e.get(n) or {}).get("hwm")) for n in NODES],
+                    "yes" if e.get("lossless") else f"NO {e.get('kept', e.get('message'))}",
+                ]
+            )
+        print(
+            "\nOther jobs: 1e6 steps at v_max 5e4 steps/s (2900 rpm flyer; 200 Hz samples cost), "
+            "1e7 steps in one segment (memory of a long segment)"
+        )
+        print(
+            table(
+                ["job", "steps", "e2e s", "job s", "sim s", "200Hz samples", "interp MiB", "profile MiB",
+                 "sim MiB", "all steps, 0 lost"],
+                xrows,
+            )
+        )  # fmt: skip
+        fast = results[2][1]
+        extra_samples = int(xrows[0][5]) - round(fast["sim_s"] * PUBLISH_RATE)
+        per_sample = (float(xrows[0][3]) - fast["job_wall"]) / max(extra_samples, 1)
+        print(
+            f"  the {extra_samples} extra 200 Hz samples of the 5e4 job cost {per_sample * 1e6:.0f} us each "
+            "(its job time over the 1e6 row above; per sample: /clock + 2 JointState published and recorded)"
+        )
+
+    bad = [c.label for c, e, r, _ in results if not (e.get("lossless") and r["lossless"])]
+    for c, e, _, _ in results:
+        if "kept" in e:
+            print(f"  {c.label}: {e['message']}; {e['kept']}")
+    print("target: end-to-end >= 0.5 x raw DDS; a 1e7-step job completes, nothing lost, bounded memory")
+    if bad:
+        print(f"LOSS OR FAILURE at {', '.join(bad)}")
+
+
+if __name__ == "__main__":
+    main()
