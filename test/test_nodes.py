@@ -164,9 +164,17 @@ def set_params(node: Any, target: str, values: dict[str, Any]) -> list[Any]:
     req = SetParameters.Request(
         parameters=[Parameter(k, value=v).to_parameter_msg() for k, v in values.items()]
     )
-    fut = client.call_async(req)
-    spin_until(node, fut.done, 30, "set_parameters reply")
-    return list(fut.result().results)
+    # DDS services can drop a reply while the response topic is still matching
+    # (service_is_ready() only sees the request side): ask again
+    for _ in range(6):
+        fut = client.call_async(req)
+        try:
+            spin_until(node, fut.done, 5, "set_parameters reply")
+        except AssertionError:
+            client.remove_pending_request(fut)
+            continue
+        return list(fut.result().results)
+    raise AssertionError(f"no reply from {target}/set_parameters in 30 s")
 
 
 @pytest.mark.parametrize(

@@ -109,7 +109,9 @@ def unpack(msg: Int32MultiArray | Int64MultiArray, columns: Sequence[str]) -> np
 
 class Diagnostics:
     """Publishes one node's DiagnosticStatus entries the diagnostic_updater way:
-    names ``"<node>: <task>"``, a hardware id, key/value pairs."""
+    names ``"<node>: <task>"``, a hardware id, key/value pairs. The node name
+    includes its namespace (``cell1/sim_node: job``): /diagnostics is global,
+    and two cells on one graph must stay tellable apart."""
 
     def __init__(self, node: Node, hardware_id: str) -> None:
         self.node = node
@@ -123,7 +125,7 @@ class Diagnostics:
         """The DiagnosticArray that :meth:`publish` would send."""
         status = DiagnosticStatus(
             level=bytes([level]),
-            name=f"{self.node.get_name()}: {task}",
+            name=f"{self.node.get_fully_qualified_name().lstrip('/')}: {task}",
             message=message,
             hardware_id=self.hardware_id,
             values=[KeyValue(key=k, value=str(v)) for k, v in values.items()],
@@ -246,6 +248,7 @@ def spin(factory: Callable[[], Node], args: list[str] | None = None) -> None:
     import signal
 
     import rclpy
+    from rclpy._rclpy_pybind11 import RCLError
     from rclpy.executors import ExternalShutdownException
 
     rclpy.init(args=args)
@@ -255,6 +258,10 @@ def spin(factory: Callable[[], Node], args: list[str] | None = None) -> None:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except RCLError:
+        # a signal shut the context down while a callback was publishing
+        if rclpy.ok():
+            raise
     finally:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)

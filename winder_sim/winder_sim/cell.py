@@ -87,18 +87,32 @@ def run_cell(
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = env["ROS_AUTOMATIC_DISCOVERY_RANGE"]
     rclpy.init(args=[])
     node = rclpy.create_node("winder_cell", namespace=namespace or "/")
-    state: dict[str, Any] = {"summary": None, "progress": 0.0, "errors": []}
+    state: dict[str, Any] = {
+        "summary": None,
+        "progress": 0.0,
+        "errors": [],
+        "heard_sim": False,
+        "job_seen": False,
+    }
+
+    ns = namespace.strip("/")
+    sim_status = f"{ns}/sim_node: job" if ns else "sim_node: job"
+    interp_status = f"{ns}/interp_node: job" if ns else "interp_node: job"
 
     def on_diag(msg: DiagnosticArray) -> None:
         for st in msg.status:
             values = {kv.key: kv.value for kv in st.values}
-            if st.name.endswith("sim_node: job") and values.get("job_id"):
+            if st.name == sim_status:
+                state["heard_sim"] = True
+            if st.name == interp_status and values.get("state") in ("sending", "sent"):
+                state["job_seen"] = True  # the start request got through
+            if st.name == sim_status and values.get("job_id"):
                 state["progress"] = float(values.get("progress", 0.0))
                 state["sim_time"] = values.get("sim_time_s", "0")
                 if values.get("state") in ("done", "incomplete"):
                     state["summary"] = values
                     state["message"] = st.message
-            elif st.level == b"\x02" and st.message not in state["errors"]:
+            elif st.level == b"\x02" and st.name.startswith(ns) and st.message not in state["errors"]:
                 state["errors"].append(f"{st.name}: {st.message}")
 
     node.create_subscription(
@@ -128,15 +142,25 @@ def run_cell(
         # and the interp node's start service is up: no report can be missed
         start = node.create_client(Trigger, f"{namespace.rstrip('/')}/interp_node/start")
         t_end = time.monotonic() + timeout
-        started = None
+        started: Any = None
+        asked = 0.0
+        accepted = False
         while state["summary"] is None:
-            if started is None and start.service_is_ready() and node.count_publishers("/diagnostics") >= 3:
-                started = start.call_async(Trigger.Request())
-            if started is not None and started.done():
-                reply = started.result()
-                if reply is None or not reply.success:
-                    result.message = f"job refused: {reply.message if reply else 'no reply'}"
-                    break
+            accepted = accepted or state["job_seen"]
+            if not accepted and start.service_is_ready() and state["heard_sim"]:
+                if started is None or (not started.done() and time.monotonic() - asked > 5.0):
+                    # a DDS service reply can be lost while its topic is still
+                    # matching: ask again (a job already started is no error)
+                    if started is not None:
+                        start.remove_pending_request(started)
+                    started, asked = start.call_async(Trigger.Request()), time.monotonic()
+                elif started.done():
+                    reply = started.result()
+                    if reply is not None and (reply.success or "still being sent" in reply.message):
+                        accepted = True
+                    else:
+                        result.message = f"job refused: {reply.message if reply else 'no reply'}"
+                        break
 
             rclpy.spin_once(node, timeout_sec=0.1)
             if progress is not None:

@@ -261,15 +261,18 @@ class SimNode(Node):
             return
         seg = int(rows[0, 1])
         pos = rows[:, 2:]
-        if np.any(np.diff(rows[:, 0]) <= 0) or rows[0, 0] < self.last_step_ns:
-            self.error(f"segment {seg}: step times do not increase; chunk of {rows.shape[0]} steps dropped")
-            self.checker.rejected_steps += rows.shape[0]
-            return
-        verdict = self.checker.check(seg, pos)
+        verdict = self.checker.check(seg, pos)  # positions tell gaps, repeats, reordering
         if verdict.kind != "ok":
             self.error(verdict.message)
         if not verdict.accept:
             self.checker.rejected_steps += rows.shape[0]
+            return
+        if np.any(np.diff(rows[:, 0]) <= 0) or rows[0, 0] <= self.last_step_ns:
+            # in sequence by position but not in time: the steps cannot be
+            # simulated; they count as missing, never silently integrated
+            self.error(f"segment {seg}: step times do not increase; {rows.shape[0]} steps dropped")
+            self.checker.done -= rows.shape[0]
+            self.checker.missing += rows.shape[0]
             return
         self.last_step_ns = int(rows[-1, 0])
         t_s = rows[:, 0] / 1e9
@@ -501,6 +504,9 @@ class SimNode(Node):
             if self.last_summary:  # keep telling how the last job ended, as a status does
                 s = self.last_summary
                 self.diag.publish("job", self.last_level, self.last_text, s)
+            else:
+                why = self.settings.blocked()
+                self.diag.publish("job", ERROR if why else OK, why or "idle: waiting for a job", {})
             return
         values = self.summary(complete=False)
         values["state"] = "stalled" if self.stalled else "running"

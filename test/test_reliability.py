@@ -1,0 +1,226 @@
+"""Behaviour under faults: signals, a broken step stream, a dead upstream node,
+two cells on one graph, and a long job. Real processes over DDS throughout."""
+
+from __future__ import annotations
+
+import json
+import signal
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from conftest import Procs, spin_until
+from test_nodes import SMALL_JOB, expected_end, job_args, only_bag, read_bag, timed_rows, winder_run
+
+from winder.interp import interpolate
+from winder.job import Job
+from winder.stream import describe_job
+
+pytestmark = pytest.mark.ros
+
+
+def final_status(bag: dict[str, list[tuple[int, Any]]], prefix: str = "") -> dict[str, str]:
+    finals = [
+        {kv.key: kv.value for kv in s.values}
+        for _, m in bag["/diagnostics"]
+        for s in m.status
+        if s.name == f"{prefix}sim_node: job" and any(kv.key == "state" for kv in s.values)
+    ]
+    assert finals, "no sim_node status in the bag"
+    return finals[-1]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_signal_mid_job_closes_the_bag(tmp_path: Path, procs: Procs, sig: int) -> None:
+    bags = tmp_path / "bags"
+    sim = procs.start(
+        "sim_node", "-p", f"bag_dir:={bags}", "-p", "real_time:=true", "-p", "real_time_factor:=4.0"
+    )
+    procs.start("profile_node")
+    procs.start("interp_node", "-p", "turns_per_layer:=40")
+    t_end = time.monotonic() + 60
+    while not (bags.exists() and any(bags.iterdir())) and time.monotonic() < t_end:
+        time.sleep(0.1)
+    time.sleep(1.5)
+    assert procs.stop(sim, sig) == 0
+    bag_dir = only_bag(tmp_path)
+    assert (bag_dir / "metadata.yaml").exists()
+    bag = read_bag(bag_dir)
+    assert final_status(bag)["state"] == "incomplete"
+    assert "Traceback" not in procs.log(sim)
+
+
+class FakeProfile:
+    """Plays the profile node: sends the job and hand-made timed chunks."""
+
+    def __init__(self, node: Any, job: Job) -> None:
+        from diagnostic_msgs.msg import DiagnosticArray
+        from std_msgs.msg import Int64MultiArray, String
+        from winder_interp.contract import QOS_LATCHED, QOS_STREAM
+
+        self.node = node
+        self.job = job
+        self.pub_job = node.create_publisher(String, "/winder/job", QOS_LATCHED)
+        self.pub = node.create_publisher(Int64MultiArray, "/winder/step_times", QOS_STREAM)
+        self.statuses: list[tuple[int, str, dict[str, str]]] = []
+        node.create_subscription(DiagnosticArray, "/diagnostics", self._diag, 100)
+        self.String = String
+
+    def _diag(self, msg: Any) -> None:
+        for s in msg.status:
+            self.statuses.append(
+                (s.level[0], s.name + " | " + s.message, {kv.key: kv.value for kv in s.values})
+            )
+
+    def chunks(self, size: int) -> list[np.ndarray]:
+        out = []
+        t = 0
+        for seg in self.job.segments():
+            path = interpolate(seg.start, seg.delta)
+            for i in range(0, path.shape[0], size):
+                rows = path[i : i + size]
+                chunk = np.empty((rows.shape[0], 5), np.int64)
+                chunk[:, 0] = t + 1_000_000 * np.arange(1, rows.shape[0] + 1)  # 1 ms per step
+                t = int(chunk[-1, 0])
+                chunk[:, 1] = seg.index
+                chunk[:, 2:] = rows
+                out.append(chunk)
+        return out
+
+    def send(self, chunks: list[np.ndarray]) -> None:
+        from winder_interp.contract import pack_timed
+
+        spin_until(
+            self.node, lambda: self.pub.get_subscription_count() > 0, 30, "the sim node's subscription"
+        )
+        self.pub_job.publish(self.String(data=describe_job(self.job)))
+        time.sleep(0.5)  # the job description first, as the real profile node does
+        for c in chunks:
+            self.pub.publish(pack_timed(c))
+
+
+@pytest.mark.parametrize("fault", ["drop", "duplicate", "reorder"])
+def test_stream_fault_is_detected_and_reported(tmp_path: Path, procs: Procs, ros: Any, fault: str) -> None:
+    job = Job(job_id="faulty", turns_per_layer=2, layers=2, poles=1, fork_steps_per_rev=256)
+    bags = tmp_path / "bags"
+    procs.start("sim_node", "-p", f"bag_dir:={bags}", "-p", "stall_timeout:=60.0")
+    fake = FakeProfile(ros, job)
+    chunks = fake.chunks(100)
+    assert len(chunks) >= 8
+    if fault == "drop":
+        del chunks[3]
+    elif fault == "duplicate":
+        chunks.insert(4, chunks[3])
+    else:
+        chunks[3], chunks[4] = chunks[4], chunks[3]
+    fake.send(chunks)
+    words = {
+        "drop": "gap in the step stream",
+        "duplicate": "arrived again",
+        "reorder": "arrived again or late",
+    }
+    spin_until(
+        ros,
+        lambda: any(words[fault] in text for _, text, _ in fake.statuses),
+        30,
+        f"a report of the {fault}",
+    )
+    level = next(lv for lv, text, _ in fake.statuses if words[fault] in text)
+    assert level == 2  # ERROR
+    if fault == "drop":
+        # the job still completes (the stream continued), and says what it lost
+        spin_until(ros, lambda: any(v.get("state") == "done" for _, _, v in fake.statuses), 30, "the job end")
+        done = [v for _, _, v in fake.statuses if v.get("state") == "done"][-1]
+        assert int(done["steps_missing"]) == 100
+        assert int(done["gaps"]) == 1
+        bag = read_bag(only_bag(tmp_path))
+        assert int(final_status(bag)["steps_missing"]) == 100
+
+
+def test_killed_profile_node_is_reported_as_a_stall(tmp_path: Path, procs: Procs, ros: Any) -> None:
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    seen: list[str] = []
+    ros.create_subscription(
+        DiagnosticArray, "/diagnostics", lambda m: seen.extend(s.message for s in m.status), 100
+    )
+    bags = tmp_path / "bags"
+    procs.start("sim_node", "-p", f"bag_dir:={bags}", "-p", "stall_timeout:=1.0")
+    profile = procs.start("profile_node")
+    # a small window: the interp node waits for the sim node's receipts, so the
+    # profile node dies with most of the job still to come
+    procs.start("interp_node", "-p", "turns_per_layer:=200", "-p", "max_in_flight:=16384")
+    spin_until(ros, lambda: any("running" in s for s in seen), 60, "the job to start")
+    profile.kill()
+    profile.wait()
+    spin_until(ros, lambda: any("step stream stalled" in s for s in seen), 30, "a stall report")
+
+
+def test_two_cells_in_two_namespaces_do_not_interfere(tmp_path: Path, procs: Procs) -> None:
+    import subprocess
+
+    from conftest import BIN
+
+    jobs = {
+        "cell1": {**SMALL_JOB, "job_id": "one", "turns_per_layer": 2},
+        "cell2": {**SMALL_JOB, "job_id": "two", "turns_per_layer": 4, "poles": 3},
+    }
+    runs = {}
+    for ns, job in jobs.items():
+        (tmp_path / ns).mkdir()
+        runs[ns] = subprocess.Popen(
+            [
+                str(BIN / "winder"),
+                "run",
+                "--namespace",
+                f"/{ns}",
+                "--bag-dir",
+                str(tmp_path / ns / "bags"),
+                *job_args(job),
+            ],
+            env=procs.env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+    for ns, p in runs.items():
+        out, err = p.communicate(timeout=300)
+        assert p.returncode == 0, out + err
+        bag = read_bag(only_bag(tmp_path / ns))
+        job = json.loads(bag[f"/{ns}/winder/job"][0][1].data)
+        assert job["job"]["job_id"] == jobs[ns]["job_id"]
+        rows = timed_rows(bag, f"/{ns}/winder/step_times")
+        assert rows.shape[0] == job["total_steps"]  # nothing from the other cell
+        assert tuple(rows[-1, 2:]) == expected_end(jobs[ns])
+        assert int(final_status(bag, f"{ns}/")["steps_missing"]) == 0
+
+
+def test_a_million_step_job_completes_with_nothing_lost(tmp_path: Path, procs: Procs) -> None:
+    job = {"job_id": "long", "turns_per_layer": 123, "layers": 2, "poles": 4}
+    total = Job(**{k: v for k, v in job.items()}).total_steps
+    assert total >= 10**6
+    r = winder_run(
+        tmp_path,
+        procs.domain,
+        *job_args(job),
+        "--v-max",
+        "20000",
+        "--a-max",
+        "200000",
+        "--j-max",
+        "4000000",
+        "--publish-rate",
+        "20",
+        timeout=600,
+    )
+    assert r.returncode == 0, r.stdout + r.stderr
+    bag = read_bag(only_bag(tmp_path))
+    rows = timed_rows(bag)
+    assert rows.shape[0] == total
+    steps = np.diff(np.vstack([[0, 0, 0], rows[:, 2:]]), axis=0)
+    assert np.all(np.abs(steps) <= 1) and np.all(np.any(steps != 0, axis=1))
+    assert np.all(np.diff(rows[:, 0]) > 0)
+    status = final_status(bag)
+    assert status["state"] == "done" and int(status["steps_missing"]) == 0 and int(status["gaps"]) == 0
