@@ -103,8 +103,9 @@ def bag_step_chunks(bag: Path) -> int:
     return 0
 
 
-def run_e2e(case: Case, timeout: float) -> dict[str, Any]:
-    """One job through the three nodes; times, memory, and the checks of 'nothing lost'."""
+def run_e2e(case: Case, timeout: float, keep: Path | None = None) -> dict[str, Any]:
+    """One job through the three nodes; times, memory, and the checks of 'nothing lost'.
+    The bag is removed afterwards, or moved to ``keep`` (for :func:`replay_split`)."""
     from winder_sim.cell import run_cell
 
     work = Path(tempfile.mkdtemp(prefix="winder-bench-e2e-"))
@@ -160,6 +161,8 @@ def run_e2e(case: Case, timeout: float) -> dict[str, Any]:
                 "cpu_job": watch.cpu_between(name, t_job0, t_summary),
             }
     if out["ok"] and out.get("lossless"):
+        if keep is not None and s.get("bag"):
+            shutil.move(s["bag"], keep)
         shutil.rmtree(work, ignore_errors=True)
         if res.log_dir is not None:
             shutil.rmtree(res.log_dir, ignore_errors=True)
@@ -205,18 +208,131 @@ def best(runs: list[dict[str, Any]], key: str) -> dict[str, Any]:
     return min(good, key=lambda r: r[key]) if good else runs[0]
 
 
+SPLIT = {  # sim node parts timed by replay_split, nested as the calls are: (owner, attribute)
+    "on_step_times (all)": ("node", "on_step_times"),
+    "process (per chunk)": ("node", "process"),
+    "process/deserialize_message": ("sim_module", "deserialize_message"),
+    "process/StreamChecker.check": ("checker", "check"),
+    "process/simulate": ("node", "simulate"),
+    "process/simulate/tracker.advance (x3 axes)": ("tracker", "advance"),
+    "process/deviation_of_commands": ("node", "deviation_of_commands"),
+    "process/simulate/deviation_of_axes": ("node", "deviation_of_axes"),
+    "emit (200 Hz samples)": ("node", "emit"),
+    "emit/publish_sample": ("node", "publish_sample"),
+    "emit/publish_sample/serialize_message": ("sim_module", "serialize_message"),
+    "Publisher.publish (all)": ("publisher", "publish"),
+    "BagRecorder.write (all)": ("bag", "write"),
+    "BagRecorder.write/cdr_exact": ("bag_module", "cdr_exact"),
+    "Settings.values (parameters re-checked)": ("settings", "values"),
+}
+
+
+def replay_split(bag: Path) -> None:
+    """Feed a recorded job's step_times chunks, as they arrived, to an in-process
+    SimNode (recording its own bag) and time its parts: where the sim node's
+    time goes, without DDS and without a profiler's overhead (each timed part
+    is wrapped, ~1 us per call). Parts nest, so shares add up to more than 100%."""
+    import rclpy
+    from rclpy.parameter import Parameter
+    from rosbags.highlevel import AnyReader
+
+    import winder.bag as bag_module
+    import winder.stream as stream_module
+
+    with AnyReader([bag]) as reader:
+        raw: dict[str, list[bytes]] = {}
+        for conn, _, data in reader.messages():
+            raw.setdefault(conn.topic, []).append(bytes(data))
+    job_raw = next(v[0] for k, v in raw.items() if k.endswith("winder/job"))
+    chunks = next(v for k, v in raw.items() if k.endswith("winder/step_times"))
+
+    rclpy.init(args=[])
+    import winder_sim.sim_node as sim_module
+    from winder_interp.contract import Settings
+
+    spent: dict[str, list[float]] = {}
+
+    def wrap(owner: Any, attr: str, label: str) -> None:
+        fn = getattr(owner, attr, None)
+        if fn is None:
+            return  # renamed in the node: that part is not shown
+        cell = spent.setdefault(label, [0, 0.0])
+
+        def timed(*a: Any, **k: Any) -> Any:
+            t0 = time.perf_counter()
+            try:
+                return fn(*a, **k)
+            finally:
+                cell[0] += 1
+                cell[1] += time.perf_counter() - t0
+
+        setattr(owner, attr, timed)
+
+    owners: dict[str, Any] = {
+        "node": sim_module.SimNode,
+        "sim_module": sim_module,
+        "checker": stream_module.StreamChecker,
+        "bag": bag_module.BagRecorder,
+        "bag_module": bag_module,
+        "settings": Settings,
+    }
+    for label, (owner, attr) in SPLIT.items():
+        if owner in owners:
+            wrap(owners[owner], attr, label)
+    node = sim_module.SimNode()
+    work = Path(tempfile.mkdtemp(prefix="winder-bench-replay-"))
+    try:
+        node.set_parameters([Parameter("bag_dir", value=str(work))])  # type: ignore[no-untyped-call]
+        node.on_job(job_raw)
+        for label, (owner, attr) in SPLIT.items():  # objects that exist once a job runs
+            if owner == "tracker" and node.axes:
+                wrap(type(node.axes[0].tracker), attr, label)
+            if owner == "publisher":
+                wrap(type(node.pub_state), attr, label)
+        t0 = time.perf_counter()
+        for data in chunks:
+            node.on_step_times(data)
+        for _ in range(100_000):
+            if node.plan is None:
+                break
+            node.pump()
+        total = time.perf_counter() - t0
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()  # type: ignore[attr-defined]
+        shutil.rmtree(work, ignore_errors=True)
+    done = int(str(node.last_summary.get("steps_done", 0)))
+    samples = spent.get("emit/publish_sample", [0, 0.0])[0]
+    print(
+        f"{len(chunks)} chunks, {done} steps, {samples} samples: {total:.2f} s, "
+        f"{total / max(done, 1) * 1e6:.3f} us/step, {total / max(len(chunks), 1) * 1e3:.2f} ms per chunk"
+    )
+    rows = [
+        [label, int(n), f"{t:6.3f}", f"{100 * t / total:5.1f}%", f"{t / max(n, 1) * 1e6:8.1f}"]
+        for label in SPLIT
+        for n, t in [spent.get(label, [0, 0.0])]
+        if n
+    ]
+    print(table(["part", "calls", "s", "share", "us/call"], rows))
+
+
 def main() -> None:
+    if "--replay" in sys.argv:
+        replay_split(Path(sys.argv[sys.argv.index("--replay") + 1]))
+        return
     quick = "--quick" in sys.argv
     sizes = SIZES[:3] if quick else SIZES
     repeat = 1 if quick else 2
     timeout = 900.0
     cases = [Case(label, j, FAST, 221 + i) for i, (label, j) in enumerate(sizes)]
+    scratch = Path(tempfile.mkdtemp(prefix="winder-bench-keep-"))
     results: list[tuple[Case, dict[str, Any], dict[str, Any], list[dict[str, Any]]]] = []
     for i, case in enumerate(cases):
         e2e_runs, raw_runs = [], []
-        for _ in range(repeat):  # interleaved: the machine's noise hits both alike
+        for rep in range(repeat):  # interleaved: the machine's noise hits both alike
             raw_runs.append(run_raw(case.steps, 225 + i, timeout))
-            e2e_runs.append(run_e2e(case, timeout))
+            keep = scratch / "fast" if case.label == "1e6" and rep == 0 else None
+            e2e_runs.append(run_e2e(case, timeout, keep))
         # the least disturbed run of each: the shortest job / transfer (the headline figures)
         results.append((case, best(e2e_runs, "job_wall"), best(raw_runs, "transfer"), e2e_runs))
         e, r = results[-1][1], results[-1][2]
@@ -331,7 +447,7 @@ def main() -> None:
         ]
         xrows = []
         for case in extra:
-            e = run_e2e(case, timeout)
+            e = run_e2e(case, timeout, scratch / "real" if case.profile is REAL else None)
             xrows.append(
                 [
                     case.label,
@@ -362,6 +478,22 @@ def main() -> None:
             f"  the {extra_samples} extra 200 Hz samples of the 5e4 job cost {per_sample * 1e6:.0f} us each "
             "(its job time over the 1e6 row above; per sample: /clock + 2 JointState published and recorded)"
         )
+
+    for name, what in (("fast", "1e6 at v_max 1e6"), ("real", "1e6 at v_max 5e4")):
+        if (scratch / name).exists():
+            print(
+                f"\nWhere the sim node's time goes: the {what} job's chunks replayed into an in-process "
+                "SimNode"
+            )
+            env = {**os.environ, "ROS_DOMAIN_ID": "232", "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+            cmd = [sys.executable, __file__, "--replay", str(scratch / name)]
+            print(subprocess.run(cmd, env=env, capture_output=True, text=True).stdout.rstrip())
+    raw_cpu = results[-1][2]["cpu"] / results[-1][0].steps
+    print(
+        f"  (anchor: the raw DDS pair used {raw_cpu * 1e6:.3f} us CPU per row, "
+        "publisher and subscriber together)"
+    )
+    shutil.rmtree(scratch, ignore_errors=True)
 
     bad = [c.label for c, e, r, _ in results if not (e.get("lossless") and r["lossless"])]
     for c, e, _, _ in results:
