@@ -201,6 +201,21 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
+FIGURES = ("interp", "profile", "motor")
+
+
+def cmd_figures(args: argparse.Namespace) -> int:
+    """Reproduce the papers' figures with this code (PNG files)."""
+    import importlib
+
+    out = Path(args.outdir)
+    for name in FIGURES:
+        module = importlib.import_module(f"winder.figures.{name}")
+        for path in module.make(out):
+            print(path)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="winder", description="winder: coil and rotor winding cell tools")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
@@ -216,6 +231,10 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--namespace", default="", help="ROS namespace of the cell")
     g.add_argument("--timeout", type=float, default=3600.0, help="give up after this many seconds")
     p.set_defaults(func=cmd_run)
+
+    p = sub.add_parser("figures", help="reproduce the source papers' figures as PNG files")
+    p.add_argument("outdir", nargs="?", default="docs/img", help="where the PNG files go (default docs/img)")
+    p.set_defaults(func=cmd_figures)
     return parser
 
 
