@@ -368,6 +368,32 @@ def test_scurve_pure_cruise_and_hill():
     assert math.isclose(q.duration, ruckig_duration(1.0, 7, 7, 8, 0.5, 0.05)[0], rel_tol=1e-12)
 
 
+def test_scurve_valley_below_both_speeds():
+    # 1 -> 0.0625 with a = j = 1: the direct ramp covers 1.0625 * sqrt(0.9375);
+    # a shorter move must dip below 0.0625 first (ruckig, min_velocity 0, agrees)
+    v0, v1, V, A, J = 1.0, 0.0625, 1.0, 1.0, 1.0
+    direct = ramp_ref(v1, v0 - v1, A, J)[1]
+    assert math.isclose(direct, 1.0625 * math.sqrt(0.9375), rel_tol=1e-15)
+    D = 1.020724004450905
+    p = plan("scurve", D, v_max=V, a_max=A, j_max=J, v_start=v0, v_end=v1)
+    T, _ = ruckig_duration(D, v0, v1, V, A, J)
+    assert math.isclose(p.duration, T, rel_tol=1e-9)
+    _, v, _, _ = p.sample(dense_times(p))
+    assert v.min() < 0.01 < v1
+    check_invariants(p, D, v0, v1, V, A, J)
+    check_steps(p, 1000)
+    # round trip: the move dipping u = 0.06 below v1 (on the falling side of d(u))
+    u = 0.06
+    Tu, Du = valley_parts(u, v0, v1, A, J)
+    assert valley_parts(u + 1e-6, v0, v1, A, J)[1] < Du < direct
+    q = plan("scurve", Du, v_max=V, a_max=A, j_max=J, v_start=v0, v_end=v1)
+    assert math.isclose(q.duration, Tu, rel_tol=1e-12)
+    # shorter than dipping to rest: impossible
+    rest = valley_parts(v1, v0, v1, A, J)[1]
+    with pytest.raises(ValueError, match=r"needs distance >= "):
+        plan("scurve", rest * 0.999, v_max=V, a_max=A, j_max=J, v_start=v0, v_end=v1)
+
+
 def test_scurve_million_seconds_ten_million_steps():
     # cruise-dominated: ramps 26 s each (paper limits), cruise (D - 208)/8
     D = 8e6
@@ -410,6 +436,8 @@ def test_trapezoid_closed_form(lv, la, f0, f1, ld):
     assert math.isclose(p.duration, T, rel_tol=1e-10)
     assert math.isclose(p.v_peak, vp, rel_tol=1e-12)
     check_invariants(p, D, v0, v1, V, A, continuous_acc=False)
+    if ld > -4:  # step positions resolvable against the bisection oracle
+        check_steps(p, 200)
 
 
 def test_trapezoid_triangle_from_rest():
@@ -481,6 +509,7 @@ def test_exponential_vs_quadrature(lv, lt, f0, f1, ld):
     assert math.isclose(p.duration, T, rel_tol=1e-9)
     assert math.isclose(p.v_peak, vp, rel_tol=1e-9)
     check_invariants(p, D, v0, v1, V, continuous_acc=False)
+    check_steps(p, 200)
 
 
 def test_exponential_steps():
@@ -489,6 +518,11 @@ def test_exponential_steps():
     check_steps(p, 3000)
     q = plan("exponential", 400.0, v_max=20, tau=1 / 0.85, v_start=2, v_end=5)
     check_steps(q, 3000)
+    # ramps that change the speed by 4e-7 of itself: no digits lost on the way
+    V, v = 748.4765023305584, 748.4762222345018
+    r = plan("exponential", 64.77687029206871, v_max=V, tau=0.019024991263299765, v_start=v, v_end=v)
+    check_invariants(r, r.distance, v, v, V, continuous_acc=False)
+    check_steps(r, 400)
 
 
 # ----------------------------------------------------------------------------- step timing

@@ -12,8 +12,15 @@ Kinds of ramp (papers 002 and 004 of ``/work/shared/papers``):
     cruise, and the mirror for the deceleration); every degenerate case
     (``a_max`` or ``v_max`` not reached, short moves, ``v_start != v_end``,
     boundary velocities at ``v_max``) and time-optimal among monotone
-    (``v >= 0``) motions with zero boundary accelerations. The peak velocity
-    comes from a closed form, see :mod:`winder._scurve`.
+    (``v >= 0``) motions with zero boundary accelerations. Usually a *hill*
+    (up to ``v_peak``, down to ``v_end``); but with a jerk limit a move shorter
+    than the direct ramp ``v_start -> v_end`` can still be possible as a
+    *valley* that first dips below both speeds (then ``v_peak`` is the higher
+    boundary speed and phase 4 is the zero-length bottom). Moves shorter than
+    every monotone motion raise ``ValueError`` naming the minimum distance.
+    The peak (or bottom) velocity comes from a closed form, see
+    :mod:`winder._scurve`; limits of any magnitude (a jerk of 1e9 with
+    ``a_max`` 0.5, or 1e-9) give the exact curve, nothing is discretised.
 ``"trapezoid"``
     Acceleration-limited (T-curve). The jerk is reported as 0: it is infinite
     (a Dirac impulse) at the corners, where the acceleration steps.
@@ -31,13 +38,21 @@ Kinds of ramp (papers 002 and 004 of ``/work/shared/papers``):
     below ``v_end``, reaching ``v_end`` after the same time. A short move
     follows the same two curves but leaves the rising one early, at the
     reduced peak ``vp``, and enters the falling one at ``vp`` - what a
-    controller with one acceleration table does. ``vp`` is the root of the
-    (increasing, transcendental) distance equation, found by bracketed Newton.
-    Jerk is ``-a/tau`` inside the ramps (impulses at the corners not reported).
+    controller with one acceleration table does. The time spent on the
+    flatter of the two curves is the root of the (increasing, transcendental)
+    distance equation, found by bracketed Newton (no closed form exists); all
+    of it in velocity increments, so that ramps changing the speed by 1e-7 of
+    itself lose no digits. Jerk is ``-a/tau`` inside the ramps (impulses at
+    the corners not reported).
+
+Velocity (jog) mode, :func:`jog`: ramp to a target speed and hold; :meth:`Jog.stop`
+gives the time-optimal ramp to rest from whatever state the axis is in then.
 
 Every profile is a list of phases; inside a phase position is a cubic in time
 (or, for the exponential, ``v`` relaxes toward an asymptote), evaluated relative
-to the phase start, so that durations of 1e6 s and more stay exact.
+to the phase start (falling exponentials: to its end), so that durations of
+1e6 s and more stay exact. Positions are non-decreasing everywhere, also
+across phase boundaries where rounding would otherwise leave an ulp of overlap.
 """
 
 from __future__ import annotations
@@ -60,7 +75,8 @@ change the plain exponential would still lack at the cut (``ln(1/EXP_CUT)``
 time constants)."""
 
 _CHUNK = 1 << 15  # elements per pass when inverting steps: stays in L2 cache
-_POLY, _EXP = 0, 1
+_POLY, _EXP_UP, _EXP_DOWN = 0, 1, 2  # phase laws; exponential phases keep in slot 6 the
+# velocity still to go toward the asymptote, at the start (rising) or the end (falling)
 
 F64 = NDArray[np.float64]
 
@@ -208,8 +224,8 @@ class Profile:
         out = []
         for t0, s in zip(self._t0, self._segs, strict=True):
             law: float | str = s[4]
-            if s[5] == _EXP:
-                law = "exp-up" if s[6] > s[2] else "exp-down"
+            if s[5] != _POLY:
+                law = "exp-up" if s[5] == _EXP_UP else "exp-down"
             out.append(Phase(t0, s[0], law))
         return out
 
@@ -232,7 +248,7 @@ class Profile:
             t1 = np.append(t0[1:], self.duration)
             self._arr = {
                 "t0": t0, "t1": t1, "T": a[:, 0], "p0": a[:, 1], "v0": a[:, 2], "a0": a[:, 3],
-                "j": a[:, 4], "exp": a[:, 5] == _EXP, "vinf": a[:, 6], "tau": a[:, 7],
+                "j": a[:, 4], "exp": a[:, 5] != _POLY, "law": a[:, 5], "b": a[:, 6], "tau": a[:, 7],
                 "p1": p1, "v1": v1, "a1": np.append(a[1:, 3], 0.0),
                 "v_hi": max(self.v_peak, self.v_start, self.v_end),
             }  # fmt: skip
@@ -255,6 +271,7 @@ class Profile:
         i = np.searchsorted(A["t0"], tf, side="right") - 1
         np.clip(i, 0, len(self._segs) - 1, out=i)
         tau = tf - A["t0"][i]
+        np.clip(tau, 0.0, A["T"][i], out=tau)  # outside [0, duration]: overwritten below
         v0, a0, j = A["v0"][i], A["a0"][i], A["j"][i]
         p = A["p0"][i] + tau * (v0 + tau * (0.5 * a0 + tau * (j / 6.0)))
         v = v0 + tau * (a0 + 0.5 * tau * j)
@@ -263,14 +280,18 @@ class Profile:
         ex = A["exp"][i]
         if ex.any():
             k = np.flatnonzero(ex)
-            te, ie = tau[k], i[k]
-            tc, vinf, ve = A["tau"][ie], A["vinf"][ie], A["v0"][ie]
-            x = te / tc
-            dv = vinf - ve
-            p[k] = A["p0"][ie] + ve * te + dv * tc * _phi(-x)
-            e = np.exp(-x)
-            v[k] = vinf - dv * e
-            acc[k] = dv / tc * e
+            ie = i[k]
+            tc, b = A["tau"][ie], A["b"][ie]
+            up = A["law"][ie] == _EXP_UP
+            # rising: from the start, v = v0 + b (1 - e^-x); falling: from the end,
+            # v = v1 + b (e^y - 1) with y the time left (units of tau)
+            y = np.where(up, -tau[k], A["T"][ie] - tau[k]) / tc
+            vr = np.where(up, A["v0"][ie], A["v1"][ie])
+            e = np.exp(y)
+            dp = tc * (vr * np.abs(y) + b * _phi(y))
+            p[k] = np.where(up, A["p0"][ie] + dp, A["p1"][ie] - dp)
+            v[k] = vr + b * np.where(up, -np.expm1(y), np.expm1(y))
+            acc[k] = np.where(up, b, -b) / tc * e
             jerk[k] = -acc[k] / tc
         # rounding guards: positions monotone across phases, no limit exceeded by an ulp
         np.clip(p, A["p0"][i], A["p1"][i], out=p)
@@ -366,8 +387,11 @@ def _invert_phase(A: dict[str, Any], i: int, x: F64) -> None:
     t0, t1, T = float(A["t0"][i]), float(A["t1"][i]), float(A["T"][i])
     p0, v0, a0, j = float(A["p0"][i]), float(A["v0"][i]), float(A["a0"][i]), float(A["j"][i])
     p1, v1 = float(A["p1"][i]), float(A["v1"][i])
-    if A["exp"][i]:
-        _invert_exp(x, t0, t1, p0, v0, p1, v1, float(A["vinf"][i]), float(A["tau"][i]))
+    if T == 0.0:  # an ulp of position left between two phases built from either end
+        x.fill(t0)
+    elif A["exp"][i]:
+        up = A["law"][i] == _EXP_UP
+        _invert_exp(x, t0, t1, p0, v0, p1, v1, float(A["b"][i]), float(A["tau"][i]), bool(up))
     elif j == 0.0 and a0 == 0.0:  # cruise
         x -= p0
         x /= v0
@@ -451,20 +475,28 @@ def _odd_cubic(d: F64, vz: float, j: float) -> None:
 
 
 def _invert_exp(
-    x: F64, t0: float, t1: float, p0: float, v0: float, p1: float, v1: float, vinf: float, tc: float
+    x: F64,
+    t0: float,
+    t1: float,
+    p0: float,
+    v0: float,
+    p1: float,
+    v1: float,
+    b: float,
+    tc: float,
+    rising: bool,
 ) -> None:
     """In place: times in an exponential phase. Rising phases are measured from
     the start, falling ones back from the end, so that the distance is an
     increasing convex function ``h(y) = v_r tc y + b tc phi(+-y)`` of the
     reference time ``y`` (units of tau) and Newton converges monotonically
     from above after the first step."""
-    rising = vinf > v0
     if rising:
-        d = x - p0  # h(y) = v0 tc y + b tc (y + expm1(-y)),  b = vinf - v0 > 0
-        vr, b, sgn = v0, vinf - v0, -1.0
+        d = x - p0  # h(y) = v0 tc y + b tc (y + expm1(-y)),  b = v_inf - v0 > 0
+        vr, sgn = v0, -1.0
     else:
-        d = p1 - x  # back from the end: h(y) = v1 tc y + b tc (expm1(y) - y), b = v1 - vinf > 0
-        vr, b, sgn = v1, v1 - vinf, 1.0
+        d = p1 - x  # back from the end: h(y) = v1 tc y + b tc (expm1(y) - y), b = v1 - v_inf > 0
+        vr, sgn = v1, 1.0
     np.maximum(d, 0.0, out=d)
     ymax = (t1 - t0) / tc
     dn = d / tc
@@ -584,71 +616,81 @@ def _phi1(x: float) -> float:
 
 
 def _plan_exponential(D: float, v0: float, v1: float, V: float, tau: float, eps: float) -> Profile:
+    # Everything in velocity *increments* over the boundary velocities (the peak
+    # is v0 + du_v = v1 + dd_v): when the ramps change the speed by little
+    # compared with the speed itself, forming the peak velocity first would lose
+    # those digits.
     K = 1.0 / (1.0 - eps)
-    W = v0 + (V - v0) * K  # asymptote of the rising curve (reaches V at ln(1/eps) tau)
-    U = v1 - (V - v1) * K * eps  # asymptote of the falling curve (reaches v1 likewise)
-
+    bu = (V - v0) * K  # W - v0: the rising curve aims at W, reaches V after `cut` tau
+    bd = (V - v1) * K * eps  # v1 - U: the falling curve aims at U, reaches v1 likewise
+    gap = v1 - v0
     cut = -math.log(eps)  # ramp length in time constants
 
-    # times on the curves in units of tau: y_u rising from v0, y_d falling to v1
-    def yu_of(vp: float) -> float:
-        if vp <= v0:
+    # times on the curves in units of tau, from the increments
+    def yu_of(du_v: float) -> float:
+        if du_v <= 0.0:
             return 0.0
-        return cut if vp >= V else -math.log1p(-(1.0 - eps) * (vp - v0) / (V - v0))
+        return cut if du_v >= V - v0 else -math.log1p(-du_v / bu)
 
-    def yd_of(vp: float) -> float:
-        if vp <= v1:
+    def yd_of(dd_v: float) -> float:
+        if dd_v <= 0.0:
             return 0.0
-        return cut if vp >= V else math.log1p((1.0 - eps) * (vp - v1) / ((V - v1) * eps))
+        return cut if dd_v >= V - v1 else math.log1p(dd_v / bd)
 
     def d_up(y: float) -> float:
-        return tau * (v0 * y + (W - v0) * _phi1(-y))
+        return tau * (v0 * y + bu * _phi1(-y))
 
     def d_dn(y: float) -> float:
-        return tau * (v1 * y + (v1 - U) * _phi1(y))
+        return tau * (v1 * y + bd * _phi1(y))
 
-    h = max(v0, v1)
-    d_min = d_up(yu_of(h)) + d_dn(yd_of(h))
+    h_u, h_d = max(gap, 0.0), max(-gap, 0.0)  # increments at the lowest peak max(v0, v1)
+    d_min = d_up(yu_of(h_u)) + d_dn(yd_of(h_d))
     if not d_min <= D:
         if d_min * (1.0 - _scurve.SNAP) > D:
             raise _scurve.Infeasible(d_min)
-        vp, yu, yd = h, yu_of(h), yd_of(h)  # the shortest move, to rounding
+        vp, yu, yd = max(v0, v1), yu_of(h_u), yd_of(h_d)  # the shortest move, to rounding
         tc = 0.0
-    elif d_up(yu_of(V)) + d_dn(yd_of(V)) <= D:
-        yu, yd = yu_of(V), yd_of(V)
+    elif d_up(yu_of(V - v0)) + d_dn(yd_of(V - v1)) <= D:
+        yu, yd = yu_of(V - v0), yd_of(V - v1)
         vp, tc = V, (D - d_up(yu) - d_dn(yd)) / V
     else:
-        du, dd = d_up(yu_of(V)), d_dn(yd_of(V))
         # Solve for the time on the flatter curve at the junction (the smaller
-        # acceleration): the peak velocity, and the other curve's time, depend
-        # smoothly on it, so the distance is matched to rounding (solving for vp
-        # itself would leave the flat curve's timing ill-conditioned).
-        vp = h + (V - h) * (D - d_min) / (du + dd - d_min)  # secant guess
-        if vp - U < W - vp:
+        # acceleration, tau a = bu - du_v rising, bd + dd_v falling): the
+        # increments, and the other curve's time, depend smoothly on it.
+        dfull = d_up(yu_of(V - v0)) + d_dn(yd_of(V - v1))
+        frac = (D - d_min) / (dfull - d_min)  # secant guess
+        du_g = h_u + (V - max(v0, v1)) * frac
+        if bd + (du_g - gap) < bu - du_g:
 
             def f(y: float) -> tuple[float, float]:
-                v = v1 + (v1 - U) * math.expm1(y)
-                return d_up(yu_of(v)) + d_dn(y) - D, tau * v * (1.0 + (v - U) / (W - v))
+                dd_v = bd * math.expm1(y)
+                du_v = dd_v + gap
+                v = v1 + dd_v
+                return d_up(yu_of(du_v)) + d_dn(y) - D, tau * v * (1.0 + (bd + dd_v) / (bu - du_v))
 
-            yd = _scurve._polish(f, yd_of(vp), yd_of(h), cut)
-            vp = min(v1 + (v1 - U) * math.expm1(yd), V)
-            yu = yu_of(vp)
+            yd = _scurve._polish(f, yd_of(du_g - gap), yd_of(h_d), cut)
+            dd_v = min(bd * math.expm1(yd), V - v1)
+            yu = yu_of(dd_v + gap)
+            vp = min(v1 + dd_v, V)
         else:
 
             def f(y: float) -> tuple[float, float]:
-                v = v0 - (W - v0) * math.expm1(-y)
-                return d_up(y) + d_dn(yd_of(v)) - D, tau * v * (1.0 + (W - v) / (v - U))
+                du_v = -bu * math.expm1(-y)
+                dd_v = du_v - gap
+                v = v0 + du_v
+                return d_up(y) + d_dn(yd_of(dd_v)) - D, tau * v * (1.0 + (bu - du_v) / (bd + dd_v))
 
-            yu = _scurve._polish(f, yu_of(vp), yu_of(h), cut)
-            vp = min(v0 - (W - v0) * math.expm1(-yu), V)
-            yd = yd_of(vp)
+            yu = _scurve._polish(f, yu_of(du_g), yu_of(h_u), cut)
+            du_v = min(-bu * math.expm1(-yu), V - v0)
+            yd = yd_of(du_v - gap)
+            vp = min(v0 + du_v, V)
         tc = max(D - d_up(yu) - d_dn(yd), 0.0) / vp  # the rounding residue, as a cruise
     tu, td = tau * yu, tau * yd
     du, dd = d_up(yu), d_dn(yd)
-    segs: list[tuple[float, ...]] = [(tu, 0.0, v0, (W - v0) / tau, -(W - v0) / tau**2, _EXP, W, tau)]
+    segs: list[tuple[float, ...]] = [(tu, 0.0, v0, bu / tau, -bu / tau**2, _EXP_UP, bu, tau)]
     segs.append((tc, du, vp, 0.0, 0.0, _POLY, 0.0, 0.0))
-    a_dn = (U - vp) / tau
-    segs.append((td, D - dd, vp, a_dn, -a_dn / tau, _EXP, U, tau))
+    a_dn = -(bd + (vp - v1)) / tau  # at the start of the falling curve
+    segs.append((td, D - dd, vp, a_dn, -a_dn / tau, _EXP_DOWN, bd, tau))
     return Profile("exponential", segs, (D, v1), v_max=V, a_max=None, j_max=None, tau=tau, v_peak=vp)
 
 
