@@ -20,7 +20,7 @@ $(STAMP): $(SETUPS)
 	@touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/winder interp
+	$(BIN)/winder run
 
 test: $(STAMP)
 	$(BIN)/python -m pytest

@@ -50,8 +50,7 @@ class Spec:
         return f"{lo}{self.low:g}, {self.high:g}]{unit}"
 
     def help(self) -> str:
-        unit = f" [{self.unit}]" if self.unit else ""
-        return f"{self.description}{unit}; {self.range_text()}; default {self.default!r}"
+        return f"{self.description}; {self.range_text()}; default {self.default!r}"
 
     def check(self, value: Any) -> Any:
         """``value`` converted to this setting's type, or SpecError."""
