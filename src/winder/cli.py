@@ -11,7 +11,7 @@ import sys
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 
@@ -216,9 +216,16 @@ def cmd_figures(args: argparse.Namespace) -> int:
     return 0
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (``--help`` still shows the usage)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="winder", description="winder: coil and rotor winding cell tools")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    parser = _Parser(prog="winder", description="winder: coil and rotor winding cell tools")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     p = sub.add_parser("interp", help="interpolate a winding job and print a summary")
     add_spec_arguments(p, FIELD_SPECS, "winding job (defaults: the RW400 paper set-up)")
     p.set_defaults(func=cmd_interp)
@@ -235,6 +242,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("figures", help="reproduce the source papers' figures as PNG files")
     p.add_argument("outdir", nargs="?", default="docs/img", help="where the PNG files go (default docs/img)")
     p.set_defaults(func=cmd_figures)
+
+    from winder.cli_analysis import register  # analyze, identify, bag recover (issue 6)
+
+    register(sub)
     return parser
 
 
