@@ -1,0 +1,505 @@
+"""How well a recorded job wound, and how the axes moved: ROS-free.
+
+Input is a :class:`winder.reader.Run`; output an :class:`Analysis` that prints
+as a table (:func:`format_table`, several runs side by side) or JSON
+(:func:`to_json`).
+
+Winding accuracy (the 2016 rotor-winding paper, eq. 7)
+------------------------------------------------------
+Unrolled, a layer is the straight line from its start to (feed distance,
+flyer arc) = (x_E, y_E). The deviation of a point is its perpendicular
+(Euclidean) distance to that line, |x_E*y - x*y_E| / |OE| (eq. 5), with x in
+metres of feed and y in metres of flyer arc; eq. 7 is its mean over the
+points of a layer. Two sets of points:
+
+* **command**: the position after every step of the layer (the interpolation
+  error; a quarter of the minor-axis step for minimum deviation);
+* **axes**: every joint-state sample while a layer is wound (dynamics
+  included). A sample is measured against the ideal line of the layer whose
+  fork range holds the sample's fork position, not the layer the command is
+  in: an axis pair that lags along the line is on the line, and at a corner a
+  lagging sample still belongs to the layer it is on.
+
+Per turn: the mean deviation over each turn (fork revolution) of each layer,
+as a percentage of the wire diameter; the paper reports under 0.1 % on a real
+RW400.
+
+Motion quality
+--------------
+* **command** velocity, acceleration and jerk come from the step times of each
+  segment's major axis. Step k happens when the planned motion reaches k steps,
+  so the step times sample the inverse t(k) of the motion exactly at the
+  integers; with the derivatives of t(k) by central differences over a stride
+  of m steps, v = 1/t', a = -t''/t'**3 and j = 3a**2/v - t'''*v**4. The stride
+  is chosen so that it spans at least :data:`STRIDE_TIME` (the ns rounding of
+  the step times would otherwise dominate the jerk). The other axes of the
+  segment move in proportion (their delta / the major delta): the ideal
+  interpolated motion, whose step quantisation is the eq. 7 error above. For
+  a profile with jumps in acceleration (trapezoid, exponential) the jerk is
+  unbounded; the value shown is the jump divided by the stride time.
+* **axes**: the recorded joint velocity, its acceleration and jerk by central
+  differences at the publish rate (so the values depend on the rate: the step
+  ripple of the motor is seen only as far as it is sampled).
+* **tracking error** command - actual position at each sample, in steps and in
+  joint units; the final error in steps, and in tooth pitches (net slips).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from winder.interp import deviation_stats
+from winder.job import AXES
+from winder.reader import Run
+
+__all__ = [
+    "STRIDE_TIME",
+    "Analysis",
+    "AxisMotion",
+    "Deviation",
+    "LayerDeviation",
+    "analyze",
+    "axis_deviation",
+    "command_deviation",
+    "command_kinematics",
+    "format_table",
+    "step_kinematics",
+    "to_json",
+]
+
+FloatArray = npt.NDArray[np.float64]
+
+#: the shortest time the finite-difference stencil of the step-time derivatives spans (s)
+STRIDE_TIME = 0.002
+#: the stencil keeps this many strides away from the start and end of a move
+END_STRIDES = 8
+UNITS = {"feed": "m", "fork": "rad", "pole": "rad"}
+
+
+@dataclass(frozen=True)
+class LayerDeviation:
+    segment: int
+    pole: int
+    layer: int
+    points: int
+    mean: float  #: m, eq. 7
+    max: float  #: m
+
+
+@dataclass(frozen=True)
+class Deviation:
+    """Eq. 7 over all layers: mean and maximum distance (m), per layer, per turn."""
+
+    mean: float
+    max: float
+    rms: float
+    points: int
+    turn_max: float  #: the worst turn's mean deviation (m)
+    turn_max_pct: float  #: ... in % of the wire diameter
+    turn_mean_pct: float  #: mean over turns, in % of the wire diameter
+    layers: list[LayerDeviation] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class AxisMotion:
+    """Peak motion of one axis (joint units: m or rad, per s, s^2, s^3) and its
+    tracking error. NaN where the recording holds nothing to measure."""
+
+    axis: str
+    unit: str
+    steps_moved: int
+    cmd_v: float
+    cmd_a: float
+    cmd_j: float
+    act_v: float
+    act_a: float
+    act_j: float
+    track_max_steps: float
+    track_rms_steps: float
+    track_max: float  #: joint units
+    final_error_steps: float
+    net_slips: int  #: final error in whole tooth pitches (0 without sim_config)
+
+
+@dataclass(frozen=True)
+class Analysis:
+    label: str
+    path: str
+    job_id: str
+    job: str  #: one-line description
+    profile: str
+    model: str
+    state: str  #: the sim node's final state ("" if no report)
+    complete: bool
+    closed: bool
+    recovered: bool
+    steps_recorded: int
+    steps_total: int
+    job_time: float  #: s, time of the last step
+    sim_time: float  #: s, last joint sample
+    wall_time: float  #: s, from the sim node's report (NaN if none)
+    real_time_factor: float
+    lost_steps: int  #: full steps lost, from the sim node's report (-1 if unknown)
+    command: Deviation
+    actual: Deviation | None
+    axes: dict[str, AxisMotion]
+    notes: list[str] = field(default_factory=list)
+
+
+# -- eq. 7 -------------------------------------------------------------------------
+
+
+def _turns(y_rel: FloatArray, per_rev: int, turns: int) -> npt.NDArray[np.int64]:
+    """Turn index (0-based) of points at fork offsets ``y_rel`` (steps) into a layer."""
+    out: npt.NDArray[np.int64] = np.clip(np.ceil(y_rel / per_rev) - 1, 0, turns - 1).astype(np.int64)
+    return out
+
+
+def _summarise(
+    dists: list[FloatArray], turn_ids: list[npt.NDArray[np.int64]], layers: list[LayerDeviation], wire: float
+) -> Deviation:
+    if not dists or sum(d.size for d in dists) == 0:
+        nan = math.nan
+        return Deviation(nan, nan, nan, 0, nan, nan, nan, layers)
+    d = np.concatenate(dists)
+    turn_means = []
+    for dist, tid in zip(dists, turn_ids, strict=True):
+        if dist.size:
+            sums = np.bincount(tid, weights=dist)
+            counts = np.bincount(tid)
+            turn_means.append(sums[counts > 0] / counts[counts > 0])
+    tm = np.concatenate(turn_means)
+    return Deviation(
+        mean=float(d.mean()),
+        max=float(d.max()),
+        rms=float(np.sqrt(np.mean(d * d))),
+        points=int(d.size),
+        turn_max=float(tm.max()),
+        turn_max_pct=float(100 * tm.max() / wire),
+        turn_mean_pct=float(100 * tm.mean() / wire),
+        layers=layers,
+    )
+
+
+def command_deviation(run: Run) -> Deviation:
+    """Eq. 7 of the commanded steps: every step row of every layer segment."""
+    plan = run.plan
+    lx, ly = plan.step_lengths[0], plan.step_lengths[1]
+    spr, turns = plan.job.fork_steps_per_rev, plan.job.turns_per_layer
+    dists, tids, layers = [], [], []
+    seg_col = run.steps[:, 1]
+    segs = plan.job.segments()
+    for i, s in enumerate(plan.segments):
+        if s.kind != "layer":
+            continue
+        rows = run.steps[seg_col == i]
+        if rows.shape[0] == 0:
+            continue
+        rel = rows[:, 2:4] - np.asarray(s.start[:2])
+        st = deviation_stats(rel, s.delta[0], s.delta[1], step_lengths=(lx, ly))
+        f = np.abs(s.delta[0] * rel[:, 1] - rel[:, 0] * s.delta[1]).astype(np.float64)
+        dist = f * (lx * ly / math.hypot(s.delta[0] * lx, s.delta[1] * ly))
+        dists.append(dist)
+        tids.append(_turns(rel[:, 1].astype(np.float64), spr, turns))
+        layers.append(LayerDeviation(i, segs[i].pole, segs[i].layer, st.points, st.mean, st.max))
+    return _summarise(dists, tids, layers, plan.job.wire_diameter)
+
+
+def _segment_at(run: Run, t: FloatArray) -> npt.NDArray[np.int64]:
+    """Segment index the command is in at times ``t`` (s): that of the last step
+    at or before t; -1 before the first step."""
+    ts = run.steps[:, 0]
+    i = np.searchsorted(ts, np.round(t * 1e9).astype(np.int64), side="right") - 1
+    return np.where(i >= 0, run.steps[np.maximum(i, 0), 1], -1)
+
+
+def axis_deviation(run: Run) -> Deviation | None:
+    """Eq. 7 of the simulated axes (see module doc); None without joint states or steps."""
+    if len(run.states) == 0 or run.steps.shape[0] == 0:
+        return None
+    plan = run.plan
+    js = plan.joint_step
+    lx, ly = plan.step_lengths[0], plan.step_lengths[1]
+    spr, turns = plan.job.fork_steps_per_rev, plan.job.turns_per_layer
+    layer_ids = [i for i, s in enumerate(plan.segments) if s.kind == "layer"]
+    if not layer_ids:
+        return None
+    seg_now = _segment_at(run, run.states.t)
+    winding = np.zeros(seg_now.size, dtype=bool)
+    ok = seg_now >= 0
+    kinds = np.array([s.kind == "layer" for s in plan.segments])
+    winding[ok] = kinds[seg_now[ok]]
+    x = run.states.pos[winding, 0] / js[0]  # steps, float
+    y = run.states.pos[winding, 1] / js[1]
+    starts = np.array([plan.segments[i].start[1] for i in layer_ids], dtype=np.float64)
+    which = np.clip(np.searchsorted(starts, y, side="right") - 1, 0, len(layer_ids) - 1)
+    dists, tids, layers = [], [], []
+    segs = plan.job.segments()
+    for w, i in enumerate(layer_ids):
+        m = which == w
+        if not np.any(m):
+            continue
+        s = plan.segments[i]
+        xr = x[m] - s.start[0]
+        yr = y[m] - s.start[1]
+        dist = np.abs(s.delta[0] * yr - xr * s.delta[1]) * (
+            lx * ly / math.hypot(s.delta[0] * lx, s.delta[1] * ly)
+        )
+        dists.append(dist)
+        tids.append(_turns(yr, spr, turns))
+        layers.append(
+            LayerDeviation(
+                i, segs[i].pole, segs[i].layer, int(dist.size), float(dist.mean()), float(dist.max())
+            )
+        )
+    return _summarise(dists, tids, layers, plan.job.wire_diameter)
+
+
+# -- motion -------------------------------------------------------------------------
+
+
+def step_kinematics(t_ns: npt.ArrayLike, stride_time: float = STRIDE_TIME) -> tuple[FloatArray, ...]:
+    """Velocity, acceleration and jerk of a move from its step times.
+
+    ``t_ns[k]`` is the time (ns) at which the move reached k steps (k = 0 may
+    be NaN when the start is unknown; missing steps NaN). Returns (t, v, a, j)
+    at the steps where the central stencil fits, in s and steps/s, /s^2, /s^3
+    (see module doc; v = 1/t'(k), a = -t''/t'^3, j = 3a^2/v - t'''*v^4).
+    """
+    t = np.asarray(t_ns, dtype=np.float64)
+    n = t.size
+    empty = np.zeros(0)
+    if n < 5:
+        return empty, empty, empty, empty
+    k = np.arange(n)
+    local = np.full(n, np.nan)
+    local[1:-1] = (t[2:] - t[:-2]) / 2e9
+    local[0], local[-1] = (t[1] - t[0]) / 1e9, (t[-1] - t[-2]) / 1e9
+    with np.errstate(invalid="ignore", divide="ignore"):
+        m = np.ceil(stride_time / local)
+    m = np.where(np.isfinite(m), np.clip(m, 1, max(1, (n - 1) // 4)), 1).astype(np.int64)
+    # t(k) is singular where the move starts or ends at rest (t ~ k**(1/3) for
+    # an S-curve): the stencil must stay well inside the move
+    fits = (k >= END_STRIDES * m) & (k <= n - 1 - END_STRIDES * m)
+    k, m = k[fits], m[fits]
+    if k.size == 0:
+        return empty, empty, empty, empty
+    mf = m.astype(np.float64)
+    t0, tp, tm, tp2, tm2 = t[k], t[k + m], t[k - m], t[k + 2 * m], t[k - 2 * m]
+    d1 = (tp - tm) / (2 * mf) * 1e-9  # s per step
+    d2 = (tp - 2 * t0 + tm) / mf**2 * 1e-9
+    d3 = (tp2 - 2 * tp + 2 * tm - tm2) / (2 * mf**3) * 1e-9
+    v = 1.0 / d1
+    a = -d2 / d1**3
+    j = 3 * a * a / v - d3 * v**4
+    good = np.isfinite(v) & np.isfinite(a) & np.isfinite(j)
+    return t0[good] * 1e-9, v[good], a[good], j[good]
+
+
+def command_kinematics(run: Run, stride_time: float = STRIDE_TIME) -> dict[str, tuple[FloatArray, ...]]:
+    """Per axis: (t, v, a, j) of the commanded (interpolated) motion in joint
+    units, from the step times of each segment's major axis (module doc)."""
+    out: dict[str, list[list[FloatArray]]] = {a: [[], [], [], []] for a in AXES}
+    js = run.plan.joint_step
+    seg_col = run.steps[:, 1]
+    for i, s in enumerate(run.plan.segments):
+        rows = run.steps[seg_col == i]
+        if rows.shape[0] < 5:
+            continue
+        k = np.abs(rows[:, 2 + s.major] - s.start[s.major])
+        tk = np.full(s.steps + 1, np.nan)
+        inside = (k >= 0) & (k <= s.steps)
+        tk[k[inside]] = rows[inside, 0]
+        t, v, a, j = step_kinematics(tk, stride_time)
+        for ax, name in enumerate(AXES):
+            r = s.delta[ax] / s.steps * js[ax]
+            if r == 0:
+                continue
+            for lst, val in zip(out[name], (t, v * r, a * r, j * r), strict=True):
+                lst.append(val)
+    return {
+        name: tuple(np.concatenate(v) if v else np.zeros(0) for v in lists) for name, lists in out.items()
+    }
+
+
+def _peak(x: FloatArray) -> float:
+    return float(np.max(np.abs(x))) if x.size else math.nan
+
+
+def _axis_motion(run: Run, kin: dict[str, tuple[FloatArray, ...]]) -> dict[str, AxisMotion]:
+    js = run.plan.joint_step
+    st, cm = run.states, run.commands
+    # command and state samples are written in pairs: match them by time
+    ti_s = np.round(st.t * 1e9).astype(np.int64)
+    ti_c = np.round(cm.t * 1e9).astype(np.int64)
+    _, i_s, i_c = np.intersect1d(ti_s, ti_c, assume_unique=False, return_indices=True)
+    if st.t.size >= 3:
+        acc = np.gradient(st.vel, st.t, axis=0)
+        jerk = np.gradient(acc, st.t, axis=0)
+    else:
+        acc = jerk = np.zeros((0, 3))
+    out = {}
+    for ax, name in enumerate(AXES):
+        moved = int(np.abs(np.diff(run.steps[:, 2 + ax])).sum()) if run.steps.shape[0] else 0
+        if run.steps.shape[0]:
+            moved += int(abs(run.steps[0, 2 + ax] - run.plan.segments[0].start[ax]))
+        err = (cm.pos[i_c, ax] - st.pos[i_s, ax]) / js[ax]
+        final = float(err[-1]) if err.size else math.nan
+        slips = 0
+        if run.sim_config is not None and err.size:
+            slips = round(final / run.sim_config.axes[name].pitch_steps)
+        _, v, a, j = kin[name]
+        out[name] = AxisMotion(
+            axis=name,
+            unit=UNITS[name],
+            steps_moved=moved,
+            cmd_v=_peak(v),
+            cmd_a=_peak(a),
+            cmd_j=_peak(j),
+            act_v=_peak(st.vel[:, ax]),
+            act_a=_peak(acc[:, ax]) if acc.size else math.nan,
+            act_j=_peak(jerk[:, ax]) if jerk.size else math.nan,
+            track_max_steps=_peak(err),
+            track_rms_steps=float(np.sqrt(np.mean(err * err))) if err.size else math.nan,
+            track_max=_peak(err) * js[ax] if err.size else math.nan,
+            final_error_steps=final,
+            net_slips=int(slips),
+        )
+    return out
+
+
+def _num(report: dict[str, str], key: str, default: float = math.nan) -> float:
+    try:
+        return float(report[key])
+    except (KeyError, ValueError):
+        return default
+
+
+def analyze(run: Run, stride_time: float = STRIDE_TIME) -> Analysis:
+    """Winding accuracy and motion quality of one recorded run (module doc)."""
+    job = run.plan.job
+    notes = list(run.notes)
+    if run.steps.shape[0] == 0:
+        notes.append("no steps recorded")
+    elif np.any(np.diff(run.steps[:, 0]) <= 0):
+        notes.append(
+            "step times do not increase everywhere: the recording holds repeated or reordered chunks"
+        )
+    if not run.complete:
+        why = (
+            "cut short and recovered" if run.recovered else f"sim state {run.report.get('state', 'unknown')}"
+        )
+        notes.append(f"incomplete recording ({why}): figures cover what was recorded")
+    state = run.report.get("state", "")
+    lost = int(_num(run.report, "lost_steps", -1))
+    sim_time = float(run.states.t[-1]) if len(run.states) else math.nan
+    return Analysis(
+        label=run.label,
+        path=str(run.path),
+        job_id=run.job_id,
+        job=(
+            f"{job.job_id}: {job.poles} poles x {job.layers} layers x {job.turns_per_layer} turns, "
+            f"wire {job.wire_diameter * 1e3:g} mm"
+        ),
+        profile=run.profile or "unknown",
+        model=run.sim_config.model if run.sim_config else "unknown",
+        state=state,
+        complete=run.complete,
+        closed=run.closed,
+        recovered=run.recovered,
+        steps_recorded=int(run.steps.shape[0]),
+        steps_total=run.plan.total_steps,
+        job_time=float(run.steps[-1, 0] / 1e9) if run.steps.shape[0] else math.nan,
+        sim_time=sim_time,
+        wall_time=_num(run.report, "wall_time_s"),
+        real_time_factor=_num(run.report, "real_time_factor"),
+        lost_steps=lost,
+        command=command_deviation(run),
+        actual=axis_deviation(run),
+        axes=_axis_motion(run, command_kinematics(run, stride_time)),
+        notes=notes,
+    )
+
+
+# -- output ---------------------------------------------------------------------------
+
+
+def _clean(x: Any) -> Any:
+    if isinstance(x, float):
+        return None if not math.isfinite(x) else x
+    if isinstance(x, dict):
+        return {k: _clean(v) for k, v in x.items()}
+    if isinstance(x, list):
+        return [_clean(v) for v in x]
+    return x
+
+
+def to_json(analyses: list[Analysis]) -> str:
+    """JSON text: a list with one object per run (NaN written as null)."""
+    return json.dumps([_clean(asdict(a)) for a in analyses], indent=2)
+
+
+def _g(x: float, scale: float = 1.0, digits: int = 4) -> str:
+    return "-" if not math.isfinite(x) else f"{x * scale:.{digits}g}"
+
+
+def _f(x: float, scale: float = 1.0, decimals: int = 3) -> str:
+    return "-" if not math.isfinite(x) else f"{x * scale:.{decimals}f}"
+
+
+def _rows(a: Analysis) -> list[tuple[str, str]]:
+    state = a.state or "no report"
+    state += ", closed" if a.closed else (", cut short (recovered)" if a.recovered else ", not closed")
+    rows = [
+        ("job", a.job),
+        ("profile / motor model", f"{a.profile} / {a.model}"),
+        ("state", state),
+        ("steps", f"{a.steps_recorded} of {a.steps_total}"),
+        ("job time (last step)", f"{_f(a.job_time)} s"),
+        ("simulated / wall time", f"{_f(a.sim_time)} s / {_f(a.wall_time)} s"),
+        ("real-time factor", f"{_f(a.real_time_factor, decimals=1)} x"),
+        ("lost steps (sim node)", str(a.lost_steps) if a.lost_steps >= 0 else "-"),
+        ("eq.7 mean, command", f"{_f(a.command.mean, 1e6)} um"),
+        ("eq.7 max, command", f"{_f(a.command.max, 1e6)} um"),
+        ("worst turn, command", f"{_f(a.command.turn_max_pct, decimals=4)} % of wire"),
+    ]
+    act = a.actual
+    rows += [
+        ("eq.7 mean, axes", f"{_f(act.mean, 1e6)} um" if act else "-"),
+        ("eq.7 max, axes", f"{_f(act.max, 1e6)} um" if act else "-"),
+        ("worst turn, axes", f"{_f(act.turn_max_pct, decimals=4)} % of wire" if act else "-"),
+    ]
+    for name, m in a.axes.items():
+        u = m.unit
+        rows += [
+            (f"{name}: steps moved", str(m.steps_moved)),
+            (f"{name}: peak v cmd | axis", f"{_g(m.cmd_v)} | {_g(m.act_v)} {u}/s"),
+            (f"{name}: peak a cmd | axis", f"{_g(m.cmd_a)} | {_g(m.act_a)} {u}/s^2"),
+            (f"{name}: peak jerk cmd | axis", f"{_g(m.cmd_j)} | {_g(m.act_j)} {u}/s^3"),
+            (f"{name}: tracking max | rms", f"{_f(m.track_max_steps)} | {_f(m.track_rms_steps)} steps"),
+            (f"{name}: final error", f"{_f(m.final_error_steps)} steps ({m.net_slips} pitches)"),
+        ]
+    return rows
+
+
+def format_table(analyses: list[Analysis]) -> str:
+    """One readable table, one column per run."""
+    cols = [_rows(a) for a in analyses]
+    names = [r[0] for r in cols[0]]
+    header = ["", *[a.label for a in analyses]]
+    body = [[n, *[c[i][1] for c in cols]] for i, n in enumerate(names)]
+    widths = [max(len(r[i]) for r in [header, *body]) for i in range(len(header))]
+    lines = ["  ".join(h.ljust(w) for h, w in zip(header, widths, strict=True)).rstrip()]
+    lines.append("  ".join("-" * w for w in widths))
+    for r in body:
+        lines.append("  ".join(v.ljust(w) for v, w in zip(r, widths, strict=True)).rstrip())
+    for a in analyses:
+        for n in a.notes:
+            lines.append(f"note ({a.label}): {n}")
+    return "\n".join(lines)

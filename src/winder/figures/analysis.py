@@ -1,0 +1,422 @@
+"""Figures of a recorded run: motion, tracking, winding accuracy, identification.
+
+PNG files (matplotlib, Agg) written by ``winder analyze`` and ``winder
+identify`` into ``<bag>/plots/`` (a ``plots`` folder inside the bag
+directory, which rosbag2 tools ignore; for a lone ``.mcap`` file
+``<name>_plots/`` beside it):
+
+* ``motion.png`` - velocity, acceleration and jerk of each axis over the run:
+  commanded (from the step times) and simulated (joint states);
+* ``tracking.png`` - commanded and simulated position, a zoom into the start
+  of each axis' first move (the staircase and the rotor following it) and the
+  tracking error in steps;
+* ``winding.png`` - the unrolled winding path, a zoom into one stretch of it
+  with the signed distance of every commanded step and simulated sample to
+  the ideal line, and the per-turn mean deviation (eq. 7) in % of the wire;
+* ``identify.png`` - the MRAS estimates of J and D converging, against the
+  least-squares estimate and the recorded value.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+import numpy.typing as npt
+
+from winder.analysis import Analysis, command_kinematics
+from winder.identify import Identification
+from winder.job import AXES
+from winder.reader import Run
+
+__all__ = ["plot_analysis", "plot_identification", "plots_dir"]
+
+CMD, ACT, IDEAL = "tab:blue", "tab:orange", "k"
+#: joint units and the scale to show them in
+SHOW = {"feed": (1e3, "mm"), "fork": (1.0, "rad"), "pole": (1.0, "rad")}
+MAX_POINTS = 40_000
+#: steps shown in the tracking zoom
+ZOOM_STEPS = 40
+
+
+def plots_dir(run_path: Path) -> Path:
+    """Where the figures of the recording at ``run_path`` go (module doc)."""
+    p = Path(run_path)
+    return p / "plots" if p.is_dir() else p.with_name(p.stem + "_plots")
+
+
+def _thin(*arrays: npt.NDArray[np.float64], n: int = MAX_POINTS) -> list[npt.NDArray[np.float64]]:
+    step = max(1, arrays[0].size // n)
+    return [a[::step] for a in arrays]
+
+
+def _title(run: Run) -> str:
+    j = run.plan.job
+    model = run.sim_config.model if run.sim_config else "?"
+    state = "complete" if run.complete else ("cut short, recovered" if run.recovered else "incomplete")
+    return (
+        f"{run.label}: {j.poles} poles x {j.layers} layers x {j.turns_per_layer} turns, "
+        f"{run.profile or '?'} profile, {model} motor model ({state})"
+    )
+
+
+def _first_ramp(
+    run: Run, c: int, t: npt.NDArray[np.float64], v: npt.NDArray[np.float64]
+) -> tuple[float, float] | None:
+    """Time window around the first acceleration of axis ``c``: from just before
+    its first step until shortly after its commanded speed first levels off."""
+    moves = np.nonzero(np.diff(np.concatenate([[run.plan.segments[0].start[c]], run.steps[:, 2 + c]])))[0]
+    if not moves.size:
+        return None
+    t0 = run.steps[moves[0], 0] / 1e9
+    seg = run.steps[moves[0], 1]
+    in_seg = run.steps[run.steps[:, 1] == seg, 0] / 1e9
+    t_seg_end = float(in_seg[-1]) if in_seg.size else t0 + 1.0
+    m = (t >= t0) & (t <= t_seg_end)
+    if np.any(m):
+        peak = np.max(np.abs(v[m]))
+        reach = t[m][np.nonzero(np.abs(v[m]) >= 0.99 * peak)[0][0]]
+        t1 = min(reach + 0.25 * (reach - t0) + 0.02, t_seg_end + 0.05)
+    else:
+        t1 = t0 + 0.5
+    return t0 - 0.03 * max(t1 - t0, 0.1), t1
+
+
+def _motion(run: Run, out: Path) -> Path:
+    kin = command_kinematics(run)
+    st = run.states
+    acc = np.asarray(np.gradient(st.vel, st.t, axis=0)) if len(st) >= 3 else np.zeros((0, 3))
+    jerk = np.asarray(np.gradient(acc, st.t, axis=0)) if len(st) >= 3 else np.zeros((0, 3))
+    fig, axes = plt.subplots(4, 3, figsize=(15, 12), constrained_layout=True)
+    names = ("velocity", "acceleration", "jerk")
+    rate = run.sim_config.publish_rate if run.sim_config else math.nan
+    for c, axis in enumerate(AXES):
+        scale, unit = SHOW[axis]
+        t, v, a, j = kin[axis]
+        ax = axes[0, c]
+        if len(st):
+            ta, va = _thin(st.t, st.vel[:, c])
+            ax.plot(ta, va * scale, color=ACT, lw=0.6, label="simulated axis")
+        if v.size:
+            tc, vc = _thin(t, v)
+            ax.plot(tc, vc * scale, ".", color=CMD, ms=1.0, label="command")
+        ax.set_title(f"{axis}: whole run", fontsize=10)
+        ax.set_ylabel(f"{axis} velocity ({unit}/s)")
+        ax.set_xlabel("time (s)")
+        window = _first_ramp(run, c, t, v) if v.size else None
+        for r, (cmd, act) in enumerate(((v, st.vel[:, c]), (a, acc[:, c]), (j, jerk[:, c]))):
+            ax = axes[r + 1, c]
+            if window is None:
+                ax.text(0.5, 0.5, f"the {axis} axis does not move", ha="center", transform=ax.transAxes)
+                continue
+            lo, hi = window
+            ms = (st.t >= lo) & (st.t <= hi)
+            mc = (t >= lo) & (t <= hi)
+            ax.plot(
+                st.t[ms],
+                act[ms] * scale,
+                ".-",
+                color=ACT,
+                lw=0.7,
+                ms=2.5,
+                label=f"simulated axis, sampled at {rate:g} Hz",
+            )
+            ax.plot(t[mc], cmd[mc] * scale, "-", color=CMD, lw=1.4, label="command (from the step times)")
+            ax.set_xlim(lo, hi)
+            if r == 2 and np.any(mc):
+                lim = 2.5 * max(float(np.max(np.abs(cmd[mc]))), 1e-12) * scale
+                ax.set_ylim(-lim, lim)
+            power = ("/s", "/s²", "/s³")[r]
+            ax.set_ylabel(f"{axis} {names[r]} ({unit}{power})")
+            if r == 0:
+                ax.set_title(f"{axis}: its first acceleration (zoom)", fontsize=10)
+        axes[3, c].set_xlabel("time (s)")
+    for ax in axes.flat:
+        ax.grid(True, lw=0.3)
+    axes[0, 0].legend(loc="lower left", fontsize=8, markerscale=6)
+    axes[1, 0].legend(loc="lower right", fontsize=8)
+    fig.suptitle(
+        _title(run) + "\ncommand: the ideal interpolated motion from each segment's step times (not "
+        "estimated over the first and last few steps of a move, where the speed is near 0)\n"
+        "axes: the recorded joint velocity and its differences; the rotor rings at every step, so its "
+        "acceleration and jerk show the step ripple as far as it is sampled (jerk axis clipped)",
+        fontsize=10,
+    )
+    path = out / "motion.png"
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def _tracking(run: Run, out: Path) -> Path:
+    cm, st = run.commands, run.states
+    fig, axes = plt.subplots(3, 3, figsize=(15, 9.5), constrained_layout=True)
+    js = run.plan.joint_step
+    ti_s = np.round(st.t * 1e9).astype(np.int64)
+    ti_c = np.round(cm.t * 1e9).astype(np.int64)
+    _, i_s, i_c = np.intersect1d(ti_s, ti_c, return_indices=True)
+    for c, axis in enumerate(AXES):
+        scale, unit = SHOW[axis]
+        ax = axes[0, c]
+        t1, p1 = _thin(cm.t, cm.pos[:, c])
+        t2, p2 = _thin(st.t, st.pos[:, c])
+        ax.plot(t1, p1 * scale, color=CMD, lw=1.2, label="command")
+        ax.plot(t2, p2 * scale, color=ACT, lw=0.8, ls="--", label="simulated axis")
+        ax.set_ylabel(f"{axis} position ({unit})")
+        ax.set_title(axis)
+        # zoom: the start of the axis' first move, from the step rows (exact staircase)
+        ax = axes[1, c]
+        moves = np.nonzero(np.diff(np.concatenate([[run.plan.segments[0].start[c]], run.steps[:, 2 + c]])))[0]
+        if moves.size:
+            t0 = run.steps[moves[0], 0] / 1e9
+            t_end = run.steps[moves[min(ZOOM_STEPS, moves.size - 1)], 0] / 1e9 + 0.01
+            sel_s = (run.steps[:, 0] / 1e9 >= t0 - 0.02) & (run.steps[:, 0] / 1e9 <= t_end)
+            ts = np.concatenate([[t0 - 0.02], run.steps[sel_s, 0] / 1e9, [t_end]])
+            before = run.steps[moves[0] - 1, 2 + c] if moves[0] > 0 else run.plan.segments[0].start[c]
+            ps = np.concatenate([[before], run.steps[sel_s, 2 + c], [run.steps[sel_s, 2 + c][-1]]])
+            ax.step(ts, ps, where="post", color=CMD, lw=1.0, label="command (steps)")
+            m = (st.t >= t0 - 0.02) & (st.t <= t_end)
+            ax.plot(st.t[m], st.pos[m, c] / js[c], ".-", color=ACT, lw=0.8, ms=2.5, label="simulated axis")
+            ax.set_xlim(t0 - 0.02, t_end)
+            ax.set_title(f"the first {ZOOM_STEPS} steps of the first {axis} move (zoom)", fontsize=9)
+        ax.set_ylabel(f"{axis} position (steps)")
+        ax.set_xlabel("time (s)")
+        ax = axes[2, c]
+        err = (cm.pos[i_c, c] - st.pos[i_s, c]) / js[c]
+        te, ee = _thin(st.t[i_s], err)
+        ax.plot(te, ee, color="tab:red", lw=0.6)
+        peak = float(np.max(np.abs(err))) if err.size else math.nan
+        ax.set_title(f"tracking error command - axis: max |e| = {peak:.3f} steps", fontsize=9)
+        ax.set_ylabel("tracking error (steps)")
+        ax.set_xlabel("time (s)")
+        if run.sim_config is not None:
+            half = run.sim_config.axes[axis].pitch_steps / 2
+            if err.size and np.max(np.abs(err)) > 0.4 * half:
+                for s in (-half, half):
+                    ax.axhline(s, color="k", ls=":", lw=0.8)
+                ax.text(0.01, 0.02, "dotted: +-1/2 tooth pitch", transform=ax.transAxes, fontsize=8)
+        for a in axes[:, c]:
+            a.grid(True, lw=0.3)
+    axes[0, 0].legend(fontsize=8)
+    axes[1, 0].legend(fontsize=8)
+    axes[0, 0].set_xlabel("time (s)")
+    fig.suptitle(_title(run), fontsize=10)
+    path = out / "tracking.png"
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def _winding(run: Run, analysis: Analysis, out: Path) -> Path:
+    plan = run.plan
+    lx, ly = plan.step_lengths[0], plan.step_lengths[1]
+    js = plan.joint_step
+    spr = plan.job.fork_steps_per_rev
+    fig = plt.figure(figsize=(15, 9.5), constrained_layout=True)
+    gs = fig.add_gridspec(2, 2)
+    ax0 = fig.add_subplot(gs[0, 0])
+    ax1 = fig.add_subplot(gs[0, 1])
+    ax2 = fig.add_subplot(gs[1, :])
+    layers = [(i, s) for i, s in enumerate(plan.segments) if s.kind == "layer"]
+    seg_col = run.steps[:, 1]
+    # overview: the ideal lines and the commanded path, unrolled
+    for n, (i, s) in enumerate(layers):
+        x = np.array([s.start[0], s.end[0]]) * lx * 1e3
+        y = np.array([s.start[1], s.end[1]]) * ly
+        ax0.plot(y, x, color=IDEAL, lw=0.8, label="ideal lines" if n == 0 else None)
+        rows = run.steps[seg_col == i]
+        if rows.shape[0]:
+            yy, xx = _thin(rows[:, 3] * ly, rows[:, 2] * lx * 1e3, n=4000)
+            ax0.plot(yy, xx, ".", ms=1.0, color=CMD, label="commanded steps" if n == 0 else None)
+    ax0.set_xlabel("flyer arc, unrolled (m)")
+    ax0.set_ylabel("feed (mm)")
+    ax0.set_title("unrolled winding path: every layer a straight line", fontsize=10)
+    ax0.legend(fontsize=8, markerscale=6)
+    ax0.grid(True, lw=0.3)
+    # zoom: a quarter turn in the middle of the first layer, signed distance to the line
+    if layers:
+        i, s = layers[0]
+        norm = math.hypot(s.delta[0] * lx, s.delta[1] * ly)
+        y_mid = s.start[1] + s.delta[1] // 2
+        y_lo, y_hi = y_mid - spr // 16, y_mid + spr // 16
+        rows = run.steps[seg_col == i]
+        if rows.shape[0]:
+            xr = rows[:, 2] - s.start[0]
+            yr = rows[:, 3] - s.start[1]
+            d = (s.delta[0] * yr - xr * s.delta[1]) * lx * ly / norm
+            m = (rows[:, 3] >= y_lo) & (rows[:, 3] <= y_hi)
+            ax1.plot(rows[m, 3] / spr, d[m] * 1e6, ".-", color=CMD, lw=0.5, ms=3, label="commanded steps")
+        st = run.states
+        if len(st):
+            x = st.pos[:, 0] / js[0] - s.start[0]
+            y = st.pos[:, 1] / js[1] - s.start[1]
+            m = (y + s.start[1] >= y_lo) & (y + s.start[1] <= y_hi)
+            d = (s.delta[0] * y[m] - x[m] * s.delta[1]) * lx * ly / norm
+            ax1.plot(
+                (y[m] + s.start[1]) / spr, d * 1e6, "o-", color=ACT, ms=3, lw=0.8, label="simulated axes"
+            )
+        ax1.axhline(0, color=IDEAL, lw=0.8, label="ideal line")
+        ax1.set_xlabel("fork position (turns)")
+        ax1.set_ylabel("signed distance to the ideal line (um)")
+        ax1.set_title(
+            f"zoom: 1/8 turn in the middle of layer 1 (a feed step is {lx * 1e6:g} um)", fontsize=10
+        )
+        ax1.legend(fontsize=8)
+        ax1.grid(True, lw=0.3)
+    # per turn: eq. 7 over each turn, in % of the wire diameter
+    wire = plan.job.wire_diameter
+    for label, color, per_turn in (
+        ("command", CMD, _per_turn_command(run)),
+        ("simulated axes", ACT, _per_turn_axes(run)),
+    ):
+        if per_turn.size:
+            ax2.plot(
+                np.arange(1, per_turn.size + 1),
+                100 * per_turn / wire,
+                ".-",
+                color=color,
+                ms=3,
+                lw=0.8,
+                label=f"{label}: worst {100 * per_turn.max() / wire:.4f} %, "
+                f"mean {100 * per_turn.mean() / wire:.4f} %",
+            )
+    ax2.axhline(0.1, color="k", ls=":", lw=0.8, label="0.1 % (the paper's RW400 measurement)")
+    ax2.set_xlabel("turn (all layers of all coils in winding order)")
+    ax2.set_ylabel("mean deviation of the turn (% of wire diameter)")
+    c = analysis.command
+    a = analysis.actual
+    ax2.set_title(
+        f"eq. 7 per turn; whole job: command mean {c.mean * 1e6:.3f} um, max {c.max * 1e6:.3f} um"
+        + (f"; axes mean {a.mean * 1e6:.3f} um, max {a.max * 1e6:.3f} um" if a else ""),
+        fontsize=10,
+    )
+    ax2.set_ylim(bottom=0)
+    ax2.legend(fontsize=8)
+    ax2.grid(True, lw=0.3)
+    fig.suptitle(_title(run), fontsize=10)
+    path = out / "winding.png"
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def _per_turn(
+    run: Run, seg: npt.NDArray[np.int64], x: npt.NDArray[np.float64], y: npt.NDArray[np.float64]
+) -> npt.NDArray[np.float64]:
+    """Mean distance per turn, in winding order, of points (x, y) in steps
+    measured against the layer ``seg`` of each point."""
+    plan = run.plan
+    lx, ly = plan.step_lengths[0], plan.step_lengths[1]
+    spr, turns = plan.job.fork_steps_per_rev, plan.job.turns_per_layer
+    out = []
+    for i, s in enumerate(plan.segments):
+        if s.kind != "layer":
+            continue
+        m = seg == i
+        if not np.any(m):
+            continue
+        xr, yr = x[m] - s.start[0], y[m] - s.start[1]
+        d = np.abs(s.delta[0] * yr - xr * s.delta[1]) * lx * ly / math.hypot(s.delta[0] * lx, s.delta[1] * ly)
+        tid = np.clip(np.ceil(yr / spr) - 1, 0, turns - 1).astype(np.int64)
+        sums, counts = np.bincount(tid, weights=d), np.bincount(tid)
+        out.append(sums[counts > 0] / counts[counts > 0])
+    return np.concatenate(out) if out else np.zeros(0)
+
+
+def _per_turn_command(run: Run) -> npt.NDArray[np.float64]:
+    return _per_turn(run, run.steps[:, 1], run.steps[:, 2].astype(float), run.steps[:, 3].astype(float))
+
+
+def _per_turn_axes(run: Run) -> npt.NDArray[np.float64]:
+    st, plan = run.states, run.plan
+    if not len(st) or not run.steps.shape[0]:
+        return np.zeros(0)
+    js = plan.joint_step
+    ts = run.steps[:, 0]
+    i = np.searchsorted(ts, np.round(st.t * 1e9).astype(np.int64), side="right") - 1
+    seg_now = np.where(i >= 0, run.steps[np.maximum(i, 0), 1], -1)
+    kinds = np.array([s.kind == "layer" for s in plan.segments])
+    winding = (seg_now >= 0) & kinds[np.maximum(seg_now, 0)]
+    x, y = st.pos[winding, 0] / js[0], st.pos[winding, 1] / js[1]
+    layer_ids = [k for k, s in enumerate(plan.segments) if s.kind == "layer"]
+    starts = np.array([plan.segments[k].start[1] for k in layer_ids], dtype=float)
+    which = np.clip(np.searchsorted(starts, y, side="right") - 1, 0, len(layer_ids) - 1)
+    return _per_turn(run, np.asarray(layer_ids)[which], x, y)
+
+
+def plot_analysis(run: Run, analysis: Analysis, out: Path | None = None) -> list[Path]:
+    """Write motion.png, tracking.png and winding.png; return their paths."""
+    out = plots_dir(run.path) if out is None else Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    return [_motion(run, out), _tracking(run, out), _winding(run, analysis, out)]
+
+
+def plot_identification(run: Run, ident: Identification, out: Path | None = None) -> list[Path]:
+    """Write identify.png: the MRAS convergence of J and D per axis."""
+    out = plots_dir(run.path) if out is None else Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    fig, axes = plt.subplots(2, 3, figsize=(15, 7.5), sharex="col", constrained_layout=True)
+    for c, axis in enumerate(AXES):
+        a = ident.axes[axis]
+        for r, (key, true, ls) in enumerate((("J", a.J_true, a.ls_J), ("D", a.D_true, a.ls_D))):
+            ax = axes[r, c]
+            ax.axhspan(0.99, 1.01, color="0.85", label="+-1 %")
+            ax.axhline(1.0, color="k", lw=0.8)
+            if not a.identifiable:
+                ax.text(
+                    0.5,
+                    0.5,
+                    a.reason.replace(": ", ":\n", 1),
+                    ha="center",
+                    va="center",
+                    transform=ax.transAxes,
+                    fontsize=9,
+                    wrap=True,
+                )
+                ax.set_ylim(0.9, 1.1)
+            else:
+                tr = a.trajectory
+                assert tr is not None
+                est = getattr(tr, key)
+                ax.plot(
+                    tr.t, est / true, color=CMD, lw=1.0, label=f"MRAS (gain {ident.gain:g}): {key} / recorded"
+                )
+                ax.axhline(
+                    ls / true,
+                    color=ACT,
+                    ls="--",
+                    lw=1.2,
+                    label=f"least squares: {100 * (ls / true - 1):+.3f} %",
+                )
+                final = est[-1] / true
+                lo = min(0.9, final - 0.02, ls / true - 0.02)
+                hi = max(1.1, final + 0.02, ls / true + 0.02)
+                ax.set_ylim(lo, hi)
+                if r == 0 and a.mras_time_1pct is not None:
+                    ax.axvline(
+                        a.mras_time_1pct,
+                        color="tab:green",
+                        ls=":",
+                        lw=1.0,
+                        label=f"within 1 % from update {a.mras_iterations_1pct}",
+                    )
+                ax.legend(fontsize=8, loc="lower right")
+            ax.set_ylabel(f"{key} estimate / recorded {key}")
+            ax.grid(True, lw=0.3)
+        axes[0, c].set_title(f"{axis}: J = {a.J_true:.4g} kg m², D = {a.D_true:.4g} N m s/rad", fontsize=10)
+        axes[1, c].set_xlabel("time in the run (s)")
+    fig.suptitle(
+        f"{ident.label}: {ident.model} model, joint states at {ident.publish_rate:g} Hz, "
+        f"window {ident.window * 1e3:.3g} ms - MRAS (thesis 001 §2.4, Landau's law, extended to D) "
+        "from b = 0 vs least squares",
+        fontsize=10,
+    )
+    path = out / "identify.png"
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return [path]

@@ -1,0 +1,545 @@
+"""Inertia and damping of the axes, identified from a recorded run: ROS-free.
+
+The model of every axis, in motor angle (what the sim node simulates, see
+:mod:`winder.motor`)::
+
+    J*theta'' + D*theta' = T_e
+    T_e = K*(theta1 - theta),  K = Z_r**2*L*i_a**2/2           (linear model)
+    T_e = T_m*sin(Z_r*(theta1 - theta)) - T_load, T_m = Z_r*L*i_a**2/2  (nonlinear)
+
+with the command theta1 (a staircase: one ``motor_step_angle`` per step, at
+the recorded step times) and the rotor angle theta and speed omega from the
+joint states (joint = theta / motor_step_angle * joint_step). Z_r, L, i_a and
+the load come from ``winder/sim_config``; J and D are estimated, and compared
+with the values the sim node used.
+
+The equations: the model integrated exactly over each window
+--------------------------------------------------------------
+Integrated from sample t_k to the end of a window t_{k+m} the model is exact,
+with no derivative of the data::
+
+    J*(omega_{k+m} - omega_k) + D*(theta_{k+m} - theta_k) = Q_k = integral of T_e dt.
+
+Q_k is integrated piece by piece between the step times (where theta1 is
+constant), with theta(t) the cubic Hermite interpolant of the samples
+(theta, omega at both ends of each sample interval) and 4-point
+Gauss-Legendre quadrature on each piece: exact for the linear model (the
+integrand is a cubic). The only approximation is the Hermite interpolant of
+the rotor angle between samples, O(h**4) with h the sample period: the
+motor's natural frequency (44.5 Hz for the defaults) must be well sampled.
+Measured on noiseless recordings of the real nodes: J within 2 % (D within
+0.02 %) at the default 200 Hz, within 0.02 % at ``--publish-rate 2000``.
+:data:`WINDOW` sums the equations of several sample intervals (at 2 kHz, 10)
+so that noise in the data is averaged; the integration stays at the sample
+rate.
+
+(b) least squares: Q = J*dw + D*dth over all windows in which the axis moves,
+solved for (J, D). Q is the dependent variable: noise in theta enters Q
+averaged over the window, and the regressors dw, dth are differences of
+measured states, so encoder quantisation does not bias the estimate.
+
+(a) MRAS, the dispensing-machine thesis (paper 001, section 2.4). Its
+reference model, with damping neglected and b = T_s/J::
+
+    omega(k) = 2*omega(k-1) - omega(k-2) + b*dT_e(k-1),
+
+is the difference of two consecutive window equations above with D = 0.
+Extended to damping it reads (p1 = 1/J, p2 = D/J)::
+
+    dw_k - dw_{k-1} = p1*(Q_k - Q_{k-1}) - p2*(dth_k - dth_{k-1}),
+
+and Landau's discrete adaptive law updates the parameter vector p with the
+a-priori error e(k) of the adjustable model::
+
+    p(k) = p(k-1) + beta*phi(k)*e(k) / (1 + beta*phi(k).phi(k)),
+    phi(k) = (dQ(k), -d(dth)(k)) / (their RMS over the record).
+
+With one parameter this is the thesis' law b(k) = b(k-1) + beta*dT_e*e /
+(1 + beta*dT_e**2). The regressors are normalised so that the gain beta is
+dimensionless and one value suits any motor (the thesis' beta = 0.01 is in
+its own torque units); larger beta converges faster and fluctuates more. The
+paper's J-only law (D = 0) is run too, for comparison: with the default
+damping ratio of 0.52 it is far off, which is why D is estimated with J.
+The estimates start from b = 0 (J unknown); ``iterations_1pct`` counts the
+updates until J stays within 1 % of the recorded value.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field, replace
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from winder.job import AXES
+from winder.reader import AxisConfig, Run
+
+__all__ = [
+    "GAIN",
+    "MIN_STEPS",
+    "WINDOW",
+    "AxisIdentification",
+    "AxisRecord",
+    "Equations",
+    "Identification",
+    "Mras",
+    "axis_record",
+    "equations",
+    "format_identification",
+    "identification_json",
+    "identify",
+    "least_squares",
+    "mras",
+    "with_noise",
+]
+
+FloatArray = npt.NDArray[np.float64]
+
+#: default window of the integrated equations (s); at least one sample interval
+WINDOW = 0.005
+#: default MRAS gain beta (dimensionless: the regressors are normalised)
+GAIN = 1.0
+#: an axis that moved fewer commanded steps is not identified
+MIN_STEPS = 32
+#: ... nor one moving in fewer windows
+MIN_WINDOWS = 20
+#: ... nor one whose least-squares J has a larger relative standard error
+MAX_REL_SE = 0.05
+
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(4)
+
+
+@dataclass(frozen=True)
+class AxisRecord:
+    """One axis of a run in motor angle: samples ``t`` (s), ``theta`` (rad),
+    ``omega`` (rad/s); the command as step events ``step_t`` (s) with the
+    command angle ``command`` (rad) after each, ``command0`` before the first."""
+
+    axis: str
+    t: FloatArray
+    theta: FloatArray
+    omega: FloatArray
+    step_t: FloatArray
+    command: FloatArray
+    command0: float
+    motor: AxisConfig
+    model: str
+
+    @property
+    def steps_moved(self) -> int:
+        c = np.concatenate([[self.command0], self.command]) / self.motor.motor_step_angle
+        return round(float(np.abs(np.diff(c)).sum()))
+
+
+def axis_record(run: Run, axis: str) -> AxisRecord:
+    """The signals of ``axis`` (feed, fork or pole) in motor angle."""
+    if run.sim_config is None:
+        raise ValueError(f"{run.path}: no winder/sim_config message: the motor constants are unknown")
+    if axis not in AXES:
+        raise ValueError(f"axis={axis!r} is invalid: must be one of {', '.join(AXES)}")
+    i = AXES.index(axis)
+    motor = run.sim_config.axes[axis]
+    sa = motor.motor_step_angle
+    js = run.plan.joint_step[i]
+    st = run.states
+    start = run.plan.segments[0].start[i] if run.plan.segments else 0
+    pos = run.steps[:, 2 + i]
+    moved = np.diff(np.concatenate([[start], pos])) != 0
+    return AxisRecord(
+        axis=axis,
+        t=st.t.copy(),
+        theta=st.pos[:, i] / js * sa,
+        omega=st.vel[:, i] / js * sa,
+        step_t=run.steps[moved, 0] / 1e9,
+        command=pos[moved] * sa,
+        command0=start * sa,
+        motor=motor,
+        model=run.sim_config.model,
+    )
+
+
+def with_noise(
+    rec: AxisRecord,
+    *,
+    counts_per_rev: int | None = None,
+    omega_sigma: float = 0.0,
+    theta_sigma: float = 0.0,
+    seed: int = 0,
+) -> AxisRecord:
+    """``rec`` as a sensor would give it: theta read by an encoder of
+    ``counts_per_rev`` counts (rounded to the middle of its count), Gaussian
+    noise of ``theta_sigma`` rad and ``omega_sigma`` rad/s added."""
+    rng = np.random.default_rng(seed)
+    theta = rec.theta + rng.normal(0.0, theta_sigma, rec.theta.size) if theta_sigma else rec.theta.copy()
+    if counts_per_rev:
+        r = 2 * math.pi / counts_per_rev
+        theta = (np.floor(theta / r) + 0.5) * r
+    omega = rec.omega + rng.normal(0.0, omega_sigma, rec.omega.size) if omega_sigma else rec.omega.copy()
+    return replace(rec, theta=theta, omega=omega)
+
+
+@dataclass(frozen=True)
+class Equations:
+    """The window equations J*dw + D*dth = q (see module doc), one per window."""
+
+    q: FloatArray  #: torque impulse (N*m*s)
+    dw: FloatArray  #: speed change (rad/s)
+    dth: FloatArray  #: angle change (rad)
+    t: FloatArray  #: end time of each window (s)
+    window: float  #: window length (s)
+    moving: npt.NDArray[np.bool_]  #: the axis moves or is commanded in the window
+
+
+def _torque(rec: AxisRecord, err: FloatArray) -> FloatArray:
+    m = rec.motor
+    if rec.model == "linear":
+        return m.stiffness * err
+    return m.peak_torque * np.sin(m.Zr * err) - m.load_torque
+
+
+def equations(rec: AxisRecord, window: float = WINDOW) -> Equations:
+    """The model integrated over windows of about ``window`` s (module doc)."""
+    t, th, w = rec.t, rec.theta, rec.omega
+    n = t.size
+    if n < 3:
+        z = np.zeros(0)
+        return Equations(z, z, z, z, 0.0, np.zeros(0, dtype=bool))
+    if np.any(np.diff(t) <= 0):
+        raise ValueError(f"{rec.axis}: joint sample times do not increase")
+    h_mean = float(t[-1] - t[0]) / (n - 1)
+    m = max(1, round(window / h_mean))
+    # pieces between consecutive sample and step times; the command is constant on each
+    inside = rec.step_t[(rec.step_t > t[0]) & (rec.step_t < t[-1])]
+    edges = np.union1d(t, inside)
+    a0, a1 = edges[:-1], edges[1:]
+    j = np.searchsorted(rec.step_t, a0, side="right") - 1
+    cmd = np.where(j >= 0, rec.command[np.maximum(j, 0)], rec.command0)
+    k = np.clip(np.searchsorted(t, a0, side="right") - 1, 0, n - 2)
+    h = t[k + 1] - t[k]
+    th0, th1, w0, w1 = th[k], th[k + 1], w[k] * h, w[k + 1] * h
+    q = np.zeros(n - 1)
+    half = 0.5 * (a1 - a0)
+    mid = 0.5 * (a1 + a0)
+    for x, wt in zip(_GL_X, _GL_W, strict=True):
+        s = (mid + half * x - t[k]) / h
+        s2 = s * s
+        s3 = s2 * s
+        theta = (
+            (2 * s3 - 3 * s2 + 1) * th0 + (s3 - 2 * s2 + s) * w0 + (3 * s2 - 2 * s3) * th1 + (s3 - s2) * w1
+        )
+        q += np.bincount(k, weights=wt * half * _torque(rec, cmd - theta), minlength=n - 1)
+    dw = np.diff(w)
+    dth = np.diff(th)
+    # the axis takes part in an interval if it is commanded or moves in it
+    steps_in = np.bincount(np.clip(np.searchsorted(t, inside, side="right") - 1, 0, n - 2), minlength=n - 1)
+    speed = np.maximum(np.abs(w[:-1]), np.abs(w[1:]))
+    moving = (steps_in > 0) | (speed > 1e-9 * max(float(np.max(np.abs(w))), 1e-300))
+    nw = (n - 1) // m
+    cut = nw * m
+
+    def group(v: npt.NDArray[Any]) -> npt.NDArray[Any]:
+        out: npt.NDArray[Any] = v[:cut].reshape(nw, m).sum(axis=1)
+        return out
+
+    return Equations(
+        q=group(q),
+        dw=group(dw),
+        dth=group(dth),
+        t=t[m : cut + 1 : m],
+        window=m * h_mean,
+        moving=group(moving.astype(np.int64)) > 0,
+    )
+
+
+def least_squares(eq: Equations) -> tuple[float, float, float, float]:
+    """(J, D) from the window equations in which the axis moves, and their
+    standard errors from the residuals."""
+    sel = eq.moving
+    X = np.column_stack([eq.dw[sel], eq.dth[sel]])
+    y = eq.q[sel]
+    if y.size < 3:
+        return math.nan, math.nan, math.inf, math.inf
+    scale = np.sqrt(np.mean(X * X, axis=0))
+    scale[scale == 0] = 1.0
+    sol, _, rank, _ = np.linalg.lstsq(X / scale, y, rcond=None)
+    if rank < 2:
+        return math.nan, math.nan, math.inf, math.inf
+    p = sol / scale
+    r = y - X @ p
+    s2 = float(r @ r) / max(y.size - 2, 1)
+    cov = s2 * np.linalg.inv((X / scale).T @ (X / scale)) / np.outer(scale, scale)
+    return float(p[0]), float(p[1]), float(math.sqrt(cov[0, 0])), float(math.sqrt(cov[1, 1]))
+
+
+@dataclass(frozen=True)
+class Mras:
+    """The MRAS estimate after every update (module doc): ``J`` and ``D`` (NaN
+    while 1/J <= 0), the thesis' ``b`` = T_s/J, at the windows' end times ``t``."""
+
+    t: FloatArray
+    J: FloatArray
+    D: FloatArray
+    b: FloatArray
+    gain: float
+
+    @property
+    def final(self) -> tuple[float, float]:
+        return (float(self.J[-1]), float(self.D[-1])) if self.J.size else (math.nan, math.nan)
+
+    def iterations_within(self, value: float, tol: float = 0.01) -> int | None:
+        """Updates until J stays within ``tol`` of ``value`` for good (None: never)."""
+        if self.J.size == 0:
+            return None
+        bad = ~(np.abs(self.J / value - 1) <= tol)
+        if bad[-1]:
+            return None
+        idx = np.nonzero(bad)[0]
+        return int(idx[-1] + 1) if idx.size else 0
+
+
+def mras(eq: Equations, gain: float = GAIN, *, damping: bool = True) -> Mras:
+    """The thesis' MRAS with Landau's discrete law (module doc); ``damping=False``
+    is the thesis' own J-only law (D taken as 0)."""
+    if not (math.isfinite(gain) and gain > 0):
+        raise ValueError(f"gain={gain!r} is invalid: must be a finite number > 0")
+    sel = np.nonzero(eq.moving)[0]
+    sel = sel[sel >= 1]
+    y = eq.dw[sel] - eq.dw[sel - 1]
+    phi = np.column_stack([eq.q[sel] - eq.q[sel - 1], -(eq.dth[sel] - eq.dth[sel - 1])])
+    if not damping:
+        phi = phi[:, :1]
+    z = np.zeros(0)
+    if y.size == 0:
+        return Mras(z, z, z, z, gain)
+    scale = np.sqrt(np.mean(phi * phi, axis=0))
+    scale[scale == 0] = 1.0
+    ph = phi / scale
+    p = np.zeros(ph.shape[1])
+    traj = np.empty_like(ph)
+    for i in range(y.size):  # recursive by nature: one update per window
+        f = ph[i]
+        e = y[i] - float(f @ p)
+        p = p + gain * f * e / (1.0 + gain * float(f @ f))
+        traj[i] = p
+    inv_j = traj[:, 0] / scale[0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        J = np.where(inv_j > 0, 1.0 / inv_j, np.nan)
+        D = traj[:, 1] / scale[1] * J if damping else np.zeros_like(J)
+    return Mras(eq.t[sel], J, D, inv_j * eq.window, gain)
+
+
+@dataclass(frozen=True)
+class AxisIdentification:
+    """J and D of one axis by least squares and by MRAS, against the recorded values."""
+
+    axis: str
+    identifiable: bool
+    reason: str  #: why not, when not
+    steps_moved: int
+    windows: int  #: windows in which the axis moves
+    J_true: float
+    D_true: float
+    ls_J: float
+    ls_D: float
+    ls_J_se: float  #: standard error (kg*m^2)
+    ls_D_se: float
+    mras_J: float
+    mras_D: float
+    mras_iterations: int
+    mras_iterations_1pct: int | None
+    mras_time_1pct: float | None  #: s of the run at which J stays within 1 %
+    paper_mras_J: float  #: the thesis' J-only law (D neglected)
+    trajectory: Mras | None = field(default=None, repr=False)
+
+    ls_J_err: float = math.nan  #: relative error against the recorded value
+    ls_D_err: float = math.nan
+    mras_J_err: float = math.nan
+    mras_D_err: float = math.nan
+    paper_mras_J_err: float = math.nan
+
+
+@dataclass(frozen=True)
+class Identification:
+    label: str
+    path: str
+    model: str
+    publish_rate: float
+    window: float  #: s
+    gain: float
+    complete: bool
+    axes: dict[str, AxisIdentification]
+    notes: list[str] = field(default_factory=list)
+
+
+def identify_axis(rec: AxisRecord, gain: float = GAIN, window: float = WINDOW) -> AxisIdentification:
+    """Identify one axis from its record (module doc)."""
+    eq = equations(rec, window)
+    moved = rec.steps_moved
+    windows = int(np.count_nonzero(eq.moving))
+    nan = math.nan
+    base: dict[str, Any] = dict(axis=rec.axis, steps_moved=moved, windows=windows)
+    base.update(J_true=rec.motor.J, D_true=rec.motor.D)
+    empty: dict[str, Any] = dict(
+        ls_J=nan,
+        ls_D=nan,
+        ls_J_se=nan,
+        ls_D_se=nan,
+        mras_J=nan,
+        mras_D=nan,
+        mras_iterations=0,
+        mras_iterations_1pct=None,
+        mras_time_1pct=None,
+        paper_mras_J=nan,
+    )
+    if moved < MIN_STEPS or windows < MIN_WINDOWS:
+        why = (
+            f"not identifiable: too little excitation (the {rec.axis} axis moved {moved} steps "
+            f"in {windows} windows; at least {MIN_STEPS} steps and {MIN_WINDOWS} windows needed)"
+        )
+        return AxisIdentification(identifiable=False, reason=why, **base, **empty)
+    J, D, J_se, D_se = least_squares(eq)
+    if not (math.isfinite(J) and J > 0 and math.isfinite(D) and J_se / J <= MAX_REL_SE):
+        rel = (
+            f"+-{100 * J_se / abs(J):.0f} %"
+            if math.isfinite(J) and J and math.isfinite(J_se)
+            else "undetermined"
+        )
+        why = f"not identifiable: too little excitation (least-squares J is {rel})"
+        return AxisIdentification(identifiable=False, reason=why, **base, **empty)
+    traj = mras(eq, gain)
+    paper = mras(eq, gain, damping=False)
+    mJ, mD = traj.final
+    it = traj.iterations_within(rec.motor.J)
+
+    def err(x: float, ref: float) -> float:
+        return x / ref - 1 if ref else math.nan
+
+    return AxisIdentification(
+        identifiable=True,
+        reason="",
+        **base,
+        ls_J=J,
+        ls_D=D,
+        ls_J_se=J_se,
+        ls_D_se=D_se,
+        mras_J=mJ,
+        mras_D=mD,
+        mras_iterations=int(traj.J.size),
+        mras_iterations_1pct=it,
+        mras_time_1pct=None if it is None else float(traj.t[max(it - 1, 0)]),
+        paper_mras_J=paper.final[0],
+        trajectory=traj,
+        ls_J_err=err(J, rec.motor.J),
+        ls_D_err=err(D, rec.motor.D),
+        mras_J_err=err(mJ, rec.motor.J),
+        mras_D_err=err(mD, rec.motor.D),
+        paper_mras_J_err=err(paper.final[0], rec.motor.J),
+    )
+
+
+def identify(run: Run, gain: float = GAIN, window: float = WINDOW) -> Identification:
+    """Identify J and D of every axis of a recorded run."""
+    if not (math.isfinite(window) and window > 0):
+        raise ValueError(f"window={window!r} is invalid: must be a finite number of seconds > 0")
+    if not (math.isfinite(gain) and gain > 0):
+        raise ValueError(f"gain={gain!r} is invalid: must be a finite number > 0")
+    if run.sim_config is None:
+        raise ValueError(f"{run.path}: no winder/sim_config message: the motor constants are unknown")
+    if len(run.states) < 3:
+        raise ValueError(f"{run.path}: fewer than 3 joint states recorded: nothing to identify")
+    notes = list(run.notes)
+    rate = run.sim_config.publish_rate
+    if rate < 1000:
+        notes.append(
+            f"joint states at {rate:g} Hz: expect J errors of up to about 2 % from the sampling "
+            "(record with --publish-rate 2000 for 0.1 %)"
+        )
+    axes = {a: identify_axis(axis_record(run, a), gain, window) for a in AXES}
+    h = float(run.states.t[-1] - run.states.t[0]) / (len(run.states) - 1)
+    return Identification(
+        label=run.label,
+        path=str(run.path),
+        model=run.sim_config.model,
+        publish_rate=rate,
+        window=max(1, round(window / h)) * h,
+        gain=gain,
+        complete=run.complete,
+        axes=axes,
+        notes=notes,
+    )
+
+
+# -- output -----------------------------------------------------------------------------
+
+
+def _pct(x: float) -> str:
+    return "-" if not math.isfinite(x) else f"{100 * x:+.3f} %"
+
+
+def _g(x: float) -> str:
+    return "-" if not math.isfinite(x) else f"{x:.5g}"
+
+
+def format_identification(ident: Identification) -> str:
+    """A readable table: per axis, recorded vs estimated J and D."""
+    lines = [
+        f"{ident.label}: {ident.model} model, joint states at {ident.publish_rate:g} Hz, "
+        f"window {ident.window * 1e3:.3g} ms, MRAS gain {ident.gain:g}",
+        f"{'axis':5s} {'':6s} {'recorded':>11s} {'least sq.':>11s} {'error':>10s} "
+        f"{'MRAS':>11s} {'error':>10s}",
+    ]
+    for a in ident.axes.values():
+        if not a.identifiable:
+            lines.append(f"{a.axis:5s} {a.reason}")
+            continue
+        lines.append(
+            f"{a.axis:5s} {'J':6s} {_g(a.J_true):>11s} {_g(a.ls_J):>11s} {_pct(a.ls_J_err):>10s} "
+            f"{_g(a.mras_J):>11s} {_pct(a.mras_J_err):>10s}"
+        )
+        lines.append(
+            f"{'':5s} {'D':6s} {_g(a.D_true):>11s} {_g(a.ls_D):>11s} {_pct(a.ls_D_err):>10s} "
+            f"{_g(a.mras_D):>11s} {_pct(a.mras_D_err):>10s}"
+        )
+        conv = (
+            f"within 1 % after {a.mras_iterations_1pct} of {a.mras_iterations} updates "
+            f"(t = {a.mras_time_1pct:.3f} s)"
+            if a.mras_iterations_1pct is not None
+            else f"not within 1 % at the end of {a.mras_iterations} updates"
+        )
+        lines.append(f"{'':5s} MRAS J {conv}; the thesis' J-only law: {_pct(a.paper_mras_J_err)}")
+    lines += [f"note: {n}" for n in ident.notes]
+    return "\n".join(lines)
+
+
+def identification_json(idents: list[Identification], trajectory_points: int = 200) -> str:
+    """JSON text; each MRAS trajectory thinned to about ``trajectory_points`` points."""
+
+    def clean(x: Any) -> Any:
+        if isinstance(x, float):
+            return x if math.isfinite(x) else None
+        if isinstance(x, dict):
+            return {k: clean(v) for k, v in x.items()}
+        if isinstance(x, list):
+            return [clean(v) for v in x]
+        return x
+
+    out = []
+    for ident in idents:
+        d = asdict(ident)
+        for name, a in ident.axes.items():
+            ax = d["axes"][name]
+            ax.pop("trajectory", None)
+            tr = a.trajectory
+            if tr is not None and tr.J.size:
+                step = max(1, tr.J.size // trajectory_points)
+                ax["mras_trajectory"] = {
+                    "t": tr.t[::step].tolist(),
+                    "J": tr.J[::step].tolist(),
+                    "D": tr.D[::step].tolist(),
+                    "b": tr.b[::step].tolist(),
+                }
+        out.append(clean(d))
+    return json.dumps(out, indent=2)
