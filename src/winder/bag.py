@@ -56,6 +56,19 @@ def new_bag_path(directory: Path, job_id: str) -> Path:
     return path
 
 
+#: Types whose serialized form can end in alignment padding: the last field is
+#: a sequence of 8-byte values that may be empty (Fast CDR aligns it anyway).
+#: Strings, Clock, DiagnosticArray and JointTrajectory cannot.
+PADDABLE = frozenset(
+    {
+        "sensor_msgs/msg/JointState",
+        "std_msgs/msg/Int64MultiArray",
+        "std_msgs/msg/Float64MultiArray",
+        "std_msgs/msg/UInt64MultiArray",
+    }
+)
+
+
 def cdr_exact(data: bytes | memoryview, msgtype: str) -> bytes | memoryview:
     """``data`` without bytes past the message's end beyond CDR's 4-byte padding.
 
@@ -103,11 +116,16 @@ class BagRecorder:
     def is_open(self) -> bool:
         return self._writer is not None
 
-    def write(self, topic: str, t_ns: int, data: bytes | memoryview) -> None:
+    def write(self, topic: str, t_ns: int, data: bytes | memoryview, *, exact: bool = False) -> None:
+        """Record one serialized message. ``exact``: the payload is known to
+        end where the message ends (winder.cdr), so it needs no trimming."""
         if self._writer is None:
             raise RuntimeError(f"bag {self.path} is closed")
         t = max(int(t_ns), self.last_t)  # log time never goes backwards
-        data = cdr_exact(data, self._types[topic])
+        # (only small payloads: a trailing empty sequence means a short message,
+        # and big step chunks end on their 8-byte data)
+        if not exact and self._types[topic] in PADDABLE and len(data) < 65536:
+            data = cdr_exact(data, self._types[topic])
         self._writer.write(self._conns[topic], t, data)
         self.last_t = t
         self.messages += 1

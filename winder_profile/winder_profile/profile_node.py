@@ -57,7 +57,6 @@ class ProfileNode(Node):
         self.checker: StreamChecker | None = None
         self.seg_t0_ns: npt.NDArray[np.int64] = np.zeros(0, np.int64)
         self.profiles: list[Any] = []
-        self.cached: tuple[int, npt.NDArray[np.float64]] | None = None
         self.early: list[bytes] = []
         self.timed = 0
         self.error = ""
@@ -94,7 +93,6 @@ class ProfileNode(Node):
             acc += round(p.duration * 1e9) + dwell_ns
         self.plan, self.profiles, self.seg_t0_ns = job, profiles, t0
         self.checker = StreamChecker(job)
-        self.cached = None
         self.timed = 0
         self.error = ""
         self.get_logger().info(
@@ -124,8 +122,10 @@ class ProfileNode(Node):
             )
         if not verdict.accept:
             return
+        # the times of just these steps: segments are planned over their step
+        # count, so step k sits at position k (memory per chunk, not per segment)
         k = self.checker.step_index(seg, pos)
-        times = self.segment_times(seg)[k - 1]
+        times = self.profiles[seg].times_at(k.astype(np.float64))
         out = np.empty((rows.shape[0], 5), np.int64)
         out[:, 0] = self.seg_t0_ns[seg] + np.rint(times * 1e9).astype(np.int64)
         out[:, 1:] = rows
@@ -133,12 +133,6 @@ class ProfileNode(Node):
         self.timed += rows.shape[0]
         if self.checker.complete:
             self.report()
-
-    def segment_times(self, seg: int) -> npt.NDArray[np.float64]:
-        if self.cached is None or self.cached[0] != seg:
-            assert self.plan is not None
-            self.cached = (seg, self.profiles[seg].step_times(self.plan.segments[seg].steps))
-        return self.cached[1]
 
     def job_duration_ns(self) -> int:
         return int(self.seg_t0_ns[-1]) + round(self.profiles[-1].duration * 1e9) if self.profiles else 0

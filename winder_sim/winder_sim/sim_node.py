@@ -57,11 +57,14 @@ from winder_interp.contract import (
 )
 
 from winder.bag import BagRecorder, new_bag_path, signals_held
+from winder.cdr import JointStateEncoder, encode_clocks
 from winder.job import AXES
 from winder.motor import StepperAxis
 from winder.params import MOTOR_FIELDS, SIM_SPECS, check_sim
 from winder.stream import TIMED_COLUMNS, JobPlan, StreamChecker, parse_job_description
 
+PATH_WAIT = 2.0  # s of wall time the steps wait for the job's path to arrive
+BATCH_STEPS = 1 << 16  # steps simulated per call at most when running ahead of time
 BAG_TYPES = {
     "job": "std_msgs/msg/String",
     "path": "trajectory_msgs/msg/JointTrajectory",
@@ -146,6 +149,8 @@ class SimNode(Node):
         self.out: deque[dict[str, Any]] = deque()  # computed samples waiting to be published
         self.inbox: deque[bytes] = deque()  # received chunks waiting to be simulated
         self.last_step_ns = -1
+        self.path_recorded = False
+        self.job_wall = time.monotonic()
         self.done_steps = 0
         self.finishing = False
         self.last_chunk_wall = time.monotonic()
@@ -180,6 +185,7 @@ class SimNode(Node):
         self.plan = plan
         self.checker = StreamChecker(plan)
         self.rate = float(values["publish_rate"])
+        self.encoder = JointStateEncoder(AXES, plan.job_id)
         for i, axis in enumerate(AXES):
             sim = AxisSim(
                 make_axis(values, axis),
@@ -206,8 +212,9 @@ class SimNode(Node):
             self.bag = BagRecorder(path, {self.topic[k]: t for k, t in BAG_TYPES.items()})
             self.bag.write(self.topic["job"], 0, raw)
             self.bag.write(self.topic["sim_config"], 0, serialize_message(config))
-            if self.path_raw is not None:
-                self.bag.write(self.topic["path"], 0, self.path_raw)
+        self.job_wall = time.monotonic()
+        self.path_recorded = False
+        self.record_path()
         self.get_logger().info(
             f"job {plan.job_id}: {plan.total_steps} steps, {values['model']} model"
             + (f", recording to {self.bag.path}" if self.bag else "")
@@ -218,8 +225,19 @@ class SimNode(Node):
 
     def on_path(self, raw: bytes) -> None:
         self.path_raw = raw
+        self.record_path()
+
+    def record_path(self) -> None:
+        """Record the current job's path once. Job and path travel on two
+        topics that match independently, so either may arrive first."""
+        if self.plan is None or self.path_raw is None or self.path_recorded:
+            return
+        path = deserialize_message(self.path_raw, JointTrajectory)
+        if path.header.frame_id != self.plan.job_id:
+            return  # an earlier job's path; this job's is on its way
+        self.path_recorded = True
         if self.bag is not None and self.bag.is_open:
-            self.bag.write(self.topic["path"], self.t_sim_ns, raw)
+            self.bag.write(self.topic["path"], self.t_sim_ns, self.path_raw)
 
     def on_diagnostics(self, raw: bytes) -> None:
         if self.bag is not None and self.bag.is_open:
@@ -242,23 +260,38 @@ class SimNode(Node):
         """Simulate queued chunks. In real-time mode one chunk at a time, once
         the samples of the last one are out: memory stays bounded, and the
         progress report holds the interp node back (flow control)."""
-        real_time = self.settings.values()["real_time"]
+        settings = self.settings.values()
+        if self.inbox and not self.path_recorded and time.monotonic() - self.job_wall < PATH_WAIT:
+            return  # hold the steps briefly: the bag should have the path before they run
         while self.inbox and not self.finishing:
-            if real_time and self.out:
+            if settings["real_time"] and self.out:
                 break
-            self.process(self.inbox.popleft())
+            # as fast as possible: simulate every chunk waiting, up to
+            # BATCH_STEPS, in one go (the per-call costs are paid once)
+            batch: list[npt.NDArray[np.int64]] = []
+            size = 0
+            while self.inbox and size < BATCH_STEPS:
+                rows = self.accept(self.inbox.popleft())
+                if rows is not None:
+                    batch.append(rows)
+                    size += rows.shape[0]
+                if settings["real_time"]:
+                    break
+            if batch:
+                self.advance(np.concatenate(batch) if len(batch) > 1 else batch[0], settings)
             if self.plan is not None and self.checker is not None:
                 done = self.checker.done + self.checker.missing + self.checker.rejected_steps
                 self.pub_progress.publish(KeyValue(key=self.plan.job_id, value=str(done)))
-        self.emit()
+        self.emit(settings)
 
-    def process(self, raw: bytes) -> None:
+    def accept(self, raw: bytes) -> npt.NDArray[np.int64] | None:
+        """The rows of a chunk that may be simulated, or None (reported)."""
         assert self.checker is not None
         try:
             rows = unpack(deserialize_message(raw, Int64MultiArray), TIMED_COLUMNS)
         except ValueError as exc:
             self.error(f"bad step_times chunk: {exc}")
-            return
+            return None
         seg = int(rows[0, 1])
         pos = rows[:, 2:]
         verdict = self.checker.check(seg, pos)  # positions tell gaps, repeats, reordering
@@ -266,22 +299,26 @@ class SimNode(Node):
             self.error(verdict.message)
         if not verdict.accept:
             self.checker.rejected_steps += rows.shape[0]
-            return
+            return None
         if np.any(np.diff(rows[:, 0]) <= 0) or rows[0, 0] <= self.last_step_ns:
             # in sequence by position but not in time: the steps cannot be
             # simulated; they count as missing, never silently integrated
             self.error(f"segment {seg}: step times do not increase; {rows.shape[0]} steps dropped")
             self.checker.done -= rows.shape[0]
             self.checker.missing += rows.shape[0]
-            return
+            return None
         self.last_step_ns = int(rows[-1, 0])
+        self.deviation_of_commands(seg, pos)
+        return rows
+
+    def advance(self, rows: npt.NDArray[np.int64], settings: dict[str, Any]) -> None:
+        """Simulate accepted rows (possibly of several chunks and segments)."""
+        assert self.checker is not None
         t_s = rows[:, 0] / 1e9
         self.simulate(rows, t_s, until=float(t_s[-1]))
         self.done_steps += rows.shape[0]
-        self.deviation_of_commands(seg, pos)
         if self.checker.complete:
-            settle = self.settings.values()["settle_time"]
-            self.simulate(None, None, until=float(t_s[-1]) + settle)
+            self.simulate(None, None, until=float(t_s[-1]) + settings["settle_time"])
             self.finishing = True
 
     # -- work ------------------------------------------------------------
@@ -373,26 +410,24 @@ class SimNode(Node):
             self.dev_act[2] = max(self.dev_act[2], float(dist.max()))
 
     # -- out -------------------------------------------------------------
-    def emit(self) -> None:
+    def emit(self, settings: dict[str, Any] | None = None) -> None:
         """Publish queued samples: all of them, or as far as the wall clock allows."""
         if not self.out:
             if self.finishing:
                 self.finish(complete=True)
             return
         limit = math.inf
-        settings = self.settings.values()
+        settings = settings or self.settings.values()
         if settings["real_time"]:
             if self.wall_pace0 == 0.0:
                 self.wall_pace0 = time.monotonic()
             limit = (time.monotonic() - self.wall_pace0) * settings["real_time_factor"]
-        names = list(AXES)
         while self.out:
             block = self.out[0]
             ks = block["k"]
             n = int(np.searchsorted(ks / self.rate, limit, side="right")) if math.isfinite(limit) else ks.size
-            for r in range(n):
-                t_ns = round(int(ks[r]) * 1e9 / self.rate)
-                self.publish_sample(t_ns, names, block, r)
+            if n:
+                self.publish_samples(block, n)
             if n < ks.size:
                 for key in block:
                     block[key] = block[key][n:]
@@ -401,25 +436,25 @@ class SimNode(Node):
         if self.finishing:
             self.finish(complete=True)
 
-    def publish_sample(self, t_ns: int, names: list[str], block: dict[str, Any], r: int) -> None:
-        self.t_sim_ns = t_ns
-        clock = Clock()
-        clock.clock.sec, clock.clock.nanosec = divmod(t_ns, 1_000_000_000)
-        self.pub_clock.publish(clock)
-        cmd = JointState(
-            name=names, position=block["cmd_pos"][r].tolist(), velocity=block["cmd_vel"][r].tolist()
-        )
-        act = JointState(
-            name=names, position=block["act_pos"][r].tolist(), velocity=block["act_vel"][r].tolist()
-        )
-        cmd.header.stamp = act.header.stamp = clock.clock
-        cmd.header.frame_id = act.header.frame_id = self.plan.job_id if self.plan else ""
-        self.pub_cmd.publish(cmd)
-        self.pub_state.publish(act)
-        if self.bag is not None:
-            self.bag.write(self.topic["clock"], t_ns, serialize_message(clock))
-            self.bag.write(self.topic["joint_commands"], t_ns, serialize_message(cmd))
-            self.bag.write(self.topic["joint_states"], t_ns, serialize_message(act))
+    def publish_samples(self, block: dict[str, Any], n: int) -> None:
+        """The first ``n`` samples of a block: /clock first, then commands and
+        states, each sample's three messages before the next sample's."""
+        t_ns = np.rint(block["k"][:n] * (1e9 / self.rate)).astype(np.int64)
+        clocks = encode_clocks(t_ns)
+        cmds = self.encoder.encode(t_ns, block["cmd_pos"][:n], block["cmd_vel"][:n])
+        acts = self.encoder.encode(t_ns, block["act_pos"][:n], block["act_vel"][:n])
+        bag = self.bag
+        topics = self.topic["clock"], self.topic["joint_commands"], self.topic["joint_states"]
+        for r in range(n):
+            t = int(t_ns[r])
+            self.t_sim_ns = t
+            self.pub_clock.publish(clocks[r])
+            self.pub_cmd.publish(cmds[r])
+            self.pub_state.publish(acts[r])
+            if bag is not None:
+                bag.write(topics[0], t, clocks[r], exact=True)
+                bag.write(topics[1], t, cmds[r], exact=True)
+                bag.write(topics[2], t, acts[r], exact=True)
 
     def summary(self, complete: bool) -> dict[str, object]:
         assert self.plan is not None and self.checker is not None
