@@ -64,7 +64,12 @@ from winder.params import MOTOR_FIELDS, SIM_SPECS, check_sim
 from winder.stream import TIMED_COLUMNS, JobPlan, StreamChecker, parse_job_description
 
 PATH_WAIT = 2.0  # s of wall time the steps wait for the job's path to arrive
-BATCH_STEPS = 1 << 16  # steps simulated per call at most when running ahead of time
+# Running ahead of time, chunks are gathered and simulated together (one tracker
+# call for many costs much less): up to BATCH_CHUNKS of them, at most
+# BATCH_STEPS steps, waiting at most BATCH_WAIT wall seconds for the first.
+BATCH_STEPS = 1 << 16
+BATCH_CHUNKS = 8
+BATCH_WAIT = 0.01
 BAG_TYPES = {
     "job": "std_msgs/msg/String",
     "path": "trajectory_msgs/msg/JointTrajectory",
@@ -148,6 +153,7 @@ class SimNode(Node):
         self.t_sim_ns = 0  # simulated time reached (ns)
         self.out: deque[dict[str, Any]] = deque()  # computed samples waiting to be published
         self.inbox: deque[bytes] = deque()  # received chunks waiting to be simulated
+        self.inbox_since = time.monotonic()
         self.last_step_ns = -1
         self.path_recorded = False
         self.job_wall = time.monotonic()
@@ -253,6 +259,8 @@ class SimNode(Node):
             self.get_logger().info("step stream resumed")
         if self.bag is not None:  # the bag keeps the stream as it arrived
             self.bag.write(self.topic["step_times"], self.t_sim_ns, raw)
+        if not self.inbox:
+            self.inbox_since = time.monotonic()
         self.inbox.append(raw)
         self.pump()
 
@@ -261,8 +269,15 @@ class SimNode(Node):
         the samples of the last one are out: memory stays bounded, and the
         progress report holds the interp node back (flow control)."""
         settings = self.settings.values()
-        if self.inbox and not self.path_recorded and time.monotonic() - self.job_wall < PATH_WAIT:
+        now = time.monotonic()
+        if self.inbox and not self.path_recorded and now - self.job_wall < PATH_WAIT:
             return  # hold the steps briefly: the bag should have the path before they run
+        if (
+            not settings["real_time"]
+            and 0 < len(self.inbox) < BATCH_CHUNKS
+            and now - self.inbox_since < BATCH_WAIT
+        ):
+            return  # gather a few chunks: one tracker call for many costs less
         while self.inbox and not self.finishing:
             if settings["real_time"] and self.out:
                 break
