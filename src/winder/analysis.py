@@ -275,7 +275,7 @@ def step_kinematics(t_ns: npt.ArrayLike, stride_time: float = STRIDE_TIME) -> tu
     t = np.asarray(t_ns, dtype=np.float64)
     n = t.size
     empty = np.zeros(0)
-    if n < 5:
+    if n < 2 * END_STRIDES + 1:
         return empty, empty, empty, empty
     k = np.arange(n)
     local = np.full(n, np.nan)
@@ -283,7 +283,7 @@ def step_kinematics(t_ns: npt.ArrayLike, stride_time: float = STRIDE_TIME) -> tu
     local[0], local[-1] = (t[1] - t[0]) / 1e9, (t[-1] - t[-2]) / 1e9
     with np.errstate(invalid="ignore", divide="ignore"):
         m = np.ceil(stride_time / local)
-    m = np.where(np.isfinite(m), np.clip(m, 1, max(1, (n - 1) // 4)), 1).astype(np.int64)
+    m = np.where(np.isfinite(m), np.clip(m, 1, max(1, (n - 1) // (2 * END_STRIDES + 1))), 1).astype(np.int64)
     # t(k) is singular where the move starts or ends at rest (t ~ k**(1/3) for
     # an S-curve): the stencil must stay well inside the move
     fits = (k >= END_STRIDES * m) & (k <= n - 1 - END_STRIDES * m)
@@ -291,6 +291,8 @@ def step_kinematics(t_ns: npt.ArrayLike, stride_time: float = STRIDE_TIME) -> tu
     if k.size == 0:
         return empty, empty, empty, empty
     mf = m.astype(np.float64)
+    # second-order central differences of t(k) (t in ns, exact integers in float64); higher
+    # orders overshoot where a profile's acceleration or jerk jumps
     t0, tp, tm, tp2, tm2 = t[k], t[k + m], t[k - m], t[k + 2 * m], t[k - 2 * m]
     d1 = (tp - tm) / (2 * mf) * 1e-9  # s per step
     d2 = (tp - 2 * t0 + tm) / mf**2 * 1e-9

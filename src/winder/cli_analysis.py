@@ -133,7 +133,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "the simulation used. Record with --publish-rate 2000 for 0.1 %% accuracy (200 Hz: about 2 %%).",
     )
     p.add_argument("bag", metavar="BAG", help="bag directory or .mcap file")
-    p.add_argument("--gain", default="1", help="MRAS adaptation gain beta, dimensionless (default 1)")
+    p.add_argument("--gain", default="3", help="MRAS adaptation gain beta, dimensionless (default 3)")
     p.add_argument("--window", default="5", help="equation window in ms (default 5; at least one sample)")
     p.add_argument("--json", action="store_true", help="print JSON instead of the table")
     p.add_argument("--no-plots", action="store_true", help="do not write the convergence figure")

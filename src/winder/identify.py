@@ -101,7 +101,7 @@ FloatArray = npt.NDArray[np.float64]
 #: default window of the integrated equations (s); at least one sample interval
 WINDOW = 0.005
 #: default MRAS gain beta (dimensionless: the regressors are normalised)
-GAIN = 1.0
+GAIN = 3.0
 #: an axis that moved fewer commanded steps is not identified
 MIN_STEPS = 32
 #: ... nor one moving in fewer windows
@@ -216,7 +216,10 @@ def equations(rec: AxisRecord, window: float = WINDOW) -> Equations:
     edges = np.union1d(t, inside)
     a0, a1 = edges[:-1], edges[1:]
     j = np.searchsorted(rec.step_t, a0, side="right") - 1
-    cmd = np.where(j >= 0, rec.command[np.maximum(j, 0)], rec.command0)
+    if rec.command.size:
+        cmd = np.where(j >= 0, rec.command[np.maximum(j, 0)], rec.command0)
+    else:
+        cmd = np.full(a0.size, rec.command0)
     k = np.clip(np.searchsorted(t, a0, side="right") - 1, 0, n - 2)
     h = t[k + 1] - t[k]
     th0, th1, w0, w1 = th[k], th[k + 1], w[k] * h, w[k + 1] * h

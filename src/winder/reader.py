@@ -278,9 +278,13 @@ def _scan(path: Path, data: memoryview, raw: RawBag) -> None:
             damaged = f"damaged record at byte {pos} ({type(exc).__name__})"
             break
         pos = end
-    if footer:
+    if footer and bytes(data[pos : pos + 8]) == MAGIC:
         return
     raw.closed = False
+    if footer:
+        raw.recovered = True
+        raw.notes.append(f"{path.name}: cut short inside its closing magic bytes; every message was read")
+        return
     raw.recovered = True
     if damaged:
         raw.notes.append(f"{path.name}: {damaged}; {n - pos} bytes after it not read")

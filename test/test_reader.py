@@ -1,0 +1,481 @@
+"""winder.reader on bags written by the real nodes, cut-short bags and bad input.
+
+Expected values come from reading the same bags with rosbags directly, and,
+for cut-short files, from the byte offsets of the message records in the
+complete file (found by searching for each record's bytes, built here from the
+MCAP specification).
+
+The bags are shared by test_reader, test_analysis and test_identify: each
+configuration of ``winder run`` runs once per session (a few at a time, each in
+its own ROS domain) - see :func:`bag`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import struct
+import subprocess
+import time
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from conftest import BIN, Procs, next_domain
+from rosbags.highlevel import AnyReader
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
+
+from winder.reader import BagError, read_raw, read_run, recover
+
+pytestmark = pytest.mark.ros
+
+# -- the bags, shared by the three test modules -----------------------------------------
+
+SMALL = ["--turns-per-layer", "3", "--poles", "2"]
+CONFIGS: dict[str, list[str]] = {
+    # linear motor, S-curve, fine sampling: identification and analysis
+    "lin2k": ["--job-id", "lin2k", *SMALL, "--publish-rate", "2000"],
+    # nonlinear motor with non-default J and D, in a namespace
+    "nlns": [
+        "--job-id",
+        "nlns",
+        "--model",
+        "nonlinear",
+        "--turns-per-layer",
+        "2",
+        "--poles",
+        "2",
+        "--fork.J",
+        "2e-4",
+        "--feed.D",
+        "0.01",
+        "--pole.J",
+        "5e-5",
+        "--publish-rate",
+        "2000",
+        "--namespace",
+        "/cell1",
+    ],
+    # the same job as lin2k with the other two ramps, default 200 Hz sampling
+    "trap": ["--job-id", "trap", *SMALL, "--profile", "trapezoid"],
+    "expo": ["--job-id", "expo", *SMALL, "--profile", "exponential"],
+    # too fast for the pole axis: it falls out of step (pull-out speed T_m/D = 6.7 rad/s)
+    "slip": [
+        "--job-id",
+        "slip",
+        "--model",
+        "nonlinear",
+        "--profile",
+        "trapezoid",
+        "--a-max",
+        "4e5",
+        "--v-max",
+        "12000",
+        "--fork.D",
+        "0.003",
+        *SMALL,
+        "--publish-rate",
+        "2000",
+    ],
+    # one coil: the pole axis never moves
+    "pole1": ["--job-id", "pole1", "--turns-per-layer", "2", "--layers", "1", "--poles", "1"],
+}
+PARALLEL = 3
+TIMEOUT = 240.0
+
+
+class _Bags:
+    """Runs ``winder run`` for each configuration, at most PARALLEL at a time."""
+
+    def __init__(self, root: Path) -> None:
+        self.root = root
+        self.pending = list(CONFIGS)
+        self.running: dict[str, tuple[subprocess.Popen[bytes], float]] = {}
+        self.done: dict[str, Path | str] = {}
+
+    def _start(self, name: str) -> None:
+        env = {
+            **os.environ,
+            "ROS_DOMAIN_ID": str(next_domain()),
+            "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+        }
+        log = (self.root / f"{name}.log").open("wb")
+        p = subprocess.Popen(
+            [str(BIN / "winder"), "run", "--bag-dir", str(self.root / name), *CONFIGS[name]],
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            stdin=subprocess.DEVNULL,
+            env=env,
+        )
+        self.running[name] = (p, time.monotonic())
+
+    def _finish(self, name: str, p: subprocess.Popen[bytes]) -> None:
+        log = (self.root / f"{name}.log").read_text(errors="replace")
+        bags = sorted((self.root / name).glob("*")) if (self.root / name).exists() else []
+        if p.returncode != 0 or len(bags) != 1:
+            self.done[name] = f"winder run {name} failed (status {p.returncode}, bags {bags}):\n{log}"
+        else:
+            self.done[name] = bags[0]
+
+    def get(self, name: str) -> Path:
+        if name in self.pending:
+            self.pending.remove(name)
+            self.pending.insert(0, name)
+        while name not in self.done:
+            while self.pending and len(self.running) < PARALLEL:
+                self._start(self.pending.pop(0))
+            for n, (p, t0) in list(self.running.items()):
+                if p.poll() is not None:
+                    del self.running[n]
+                    self._finish(n, p)
+                elif time.monotonic() - t0 > TIMEOUT:
+                    p.kill()
+                    p.wait()
+                    del self.running[n]
+                    self.done[n] = f"winder run {n} did not finish within {TIMEOUT} s"
+            time.sleep(0.05)
+        got = self.done[name]
+        if isinstance(got, str):
+            raise AssertionError(got)
+        return got
+
+    def close(self) -> None:
+        for p, _ in self.running.values():
+            p.send_signal(signal.SIGINT)
+        for p, _ in self.running.values():
+            try:
+                p.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+        self.running.clear()
+
+
+_BAGS: list[_Bags] = []
+
+
+def bags(tmp_path_factory: pytest.TempPathFactory, request: pytest.FixtureRequest) -> _Bags:
+    """The session's bag factory (created by the first module that asks)."""
+    if not _BAGS:
+        _BAGS.append(_Bags(tmp_path_factory.mktemp("winder_bags")))
+        request.session.config.add_cleanup(_BAGS[0].close)
+    return _BAGS[0]
+
+
+@pytest.fixture(scope="session")
+def bag(tmp_path_factory: pytest.TempPathFactory, request: pytest.FixtureRequest) -> Any:
+    """``bag(name)``: the bag directory of configuration ``name`` (see CONFIGS)."""
+    return bags(tmp_path_factory, request).get
+
+
+# -- independent reading with rosbags -------------------------------------------------------
+
+
+def rosbags_read(path: Path) -> dict[str, list[tuple[int, Any]]]:
+    out: dict[str, list[tuple[int, Any]]] = {}
+    with AnyReader([path]) as reader:
+        for conn, t, raw in reader.messages():
+            out.setdefault(conn.topic, []).append((t, reader.deserialize(raw, conn.msgtype)))
+    return out
+
+
+def rosbags_raw(path: Path) -> list[tuple[str, int, bytes]]:
+    with AnyReader([path]) as reader:
+        return [(c.topic, t, bytes(raw)) for c, t, raw in reader.messages()]
+
+
+def joint_arrays(msgs: list[tuple[int, Any]]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    t = np.array([m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for _, m in msgs])
+    order = [list(msgs[0][1].name).index(a) for a in ("feed", "fork", "pole")]
+    pos = np.array([np.asarray(m.position)[order] for _, m in msgs])
+    vel = np.array([np.asarray(m.velocity)[order] for _, m in msgs])
+    return t, pos, vel
+
+
+def step_rows(msgs: list[tuple[int, Any]]) -> np.ndarray:
+    return np.vstack([np.asarray(m.data, dtype=np.int64).reshape(-1, 5) for _, m in msgs])
+
+
+def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [str(BIN / "winder"), *args], capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL
+    )
+
+
+def assert_one_line_error(r: subprocess.CompletedProcess[str], *needles: str) -> None:
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert "Traceback" not in r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1, r.stderr
+    for n in needles:
+        assert n in lines[0], lines[0]
+
+
+# -- whole bags ---------------------------------------------------------------------------
+
+
+def test_run_matches_rosbags(bag: Any) -> None:
+    path = bag("lin2k")
+    run = read_run(path)
+    ref = rosbags_read(path)
+    assert run.complete and run.closed and not run.recovered
+    assert run.job_id == "lin2k" and run.namespace == ""
+    assert run.plan.text == ref["/winder/job"][0][1].data
+    cfg = json.loads(ref["/winder/sim_config"][0][1].data)
+    assert run.sim_config is not None
+    assert run.sim_config.model == cfg["model"] == "linear"
+    assert run.sim_config.publish_rate == cfg["publish_rate"] == 2000.0
+    for axis in ("feed", "fork", "pole"):
+        for key in ("Zr", "L", "i_a", "J", "D", "motor_step_angle", "load_torque"):
+            assert getattr(run.sim_config.axes[axis], key) == cfg["axes"][axis][key]
+    np.testing.assert_array_equal(run.steps, step_rows(ref["/winder/step_times"]))
+    for samples, topic in ((run.states, "/winder/joint_states"), (run.commands, "/winder/joint_commands")):
+        t, pos, vel = joint_arrays(ref[topic])
+        np.testing.assert_array_equal(samples.t, t)
+        np.testing.assert_array_equal(samples.pos, pos)
+        np.testing.assert_array_equal(samples.vel, vel)
+    assert {k: v for k, v in run.counts.items() if v} == {k: len(v) for k, v in ref.items()}
+    final = [
+        {kv.key: kv.value for kv in st.values}
+        for _, arr in ref["/diagnostics"]
+        for st in arr.status
+        if st.name == "sim_node: job"
+    ][-1]
+    assert run.report == final and run.report["state"] == "done"
+    assert run.profile == "scurve"
+    # the .mcap file and metadata.yaml name the same recording
+    mcap = next(path.glob("*.mcap"))
+    for other in (mcap, path / "metadata.yaml"):
+        again = read_run(other)
+        np.testing.assert_array_equal(again.steps, run.steps)
+        assert again.complete
+
+
+def test_namespaced_cell(bag: Any) -> None:
+    path = bag("nlns")
+    run = read_run(path)
+    assert run.namespace == "/cell1"
+    assert "/cell1/winder/job" in run.counts and "/winder/job" not in run.counts
+    assert run.complete and run.report["state"] == "done"
+    assert run.sim_config is not None and run.sim_config.axes["fork"].J == 2e-4
+    assert read_run(path, namespace="cell1").steps.shape == run.steps.shape
+    with pytest.raises(
+        BagError, match=r"no winder job in namespace /other \(namespaces with a job: /cell1\)"
+    ):
+        read_run(path, namespace="/other")
+
+
+def _write_bag(path: Path, messages: list[tuple[str, str, int, Any]], storage: StoragePlugin) -> None:
+    store = get_typestore(Stores.ROS2_JAZZY)
+    with Writer(path, version=9, storage_plugin=storage) as w:
+        conns: dict[str, Any] = {}
+        for topic, msgtype, _, _ in messages:
+            if topic not in conns:
+                conns[topic] = w.add_connection(topic, msgtype, typestore=store)
+        for topic, msgtype, t, msg in messages:
+            w.write(conns[topic], t, store.serialize_cdr(msg, msgtype))
+
+
+def test_two_cells_in_one_bag_need_a_namespace(bag: Any, tmp_path: Path) -> None:
+    store = get_typestore(Stores.ROS2_JAZZY)
+    String = store.types["std_msgs/msg/String"]
+    job = read_run(bag("lin2k")).plan.text
+    path = tmp_path / "two"
+    _write_bag(
+        path,
+        [("/a/winder/job", "std_msgs/msg/String", 0, String(data=job)),
+         ("/b/winder/job", "std_msgs/msg/String", 0, String(data=job))],
+        StoragePlugin.MCAP,
+    )  # fmt: skip
+    with pytest.raises(BagError, match=r"2 winder cells \(/a, /b\): choose one with --namespace"):
+        read_run(path)
+    run = read_run(path, namespace="/b")
+    assert run.namespace == "/b" and run.steps.shape == (0, 5) and not run.complete
+    r = run_cli("analyze", str(path), "--namespace", "/b", "--no-plots")
+    assert r.returncode == 0, r.stderr
+    assert "no steps recorded" in r.stdout
+
+
+# -- cut-short files ------------------------------------------------------------------------
+
+
+def record_ends(data: bytes, messages: list[tuple[str, int, bytes]]) -> list[int]:
+    """Byte offset just past each message's MCAP record in the complete file.
+
+    A message record is opcode 0x05, u64 length, then u16 channel, u32
+    sequence, u64 log time, u64 publish time and the data (the MCAP spec);
+    rosbags writes sequence 0 and publish time = log time."""
+    ends = []
+    used: set[int] = set()
+    last = 0
+    for _, t, payload in messages:
+        body = struct.pack("<IQQ", 0, t, t) + payload
+        # messages come in time order, which is nearly file order: look near the last one first
+        for start in (max(0, last - 100_000), 0):
+            at = data.find(body, start)
+            while at >= 0:
+                rec = at - 2 - 9
+                length = struct.unpack_from("<Q", data, rec + 1)[0]
+                if data[rec] == 0x05 and length == 22 + len(payload) and rec not in used:
+                    break
+                at = data.find(body, at + 1)
+            if at >= 0:
+                break
+        assert at >= 0, "record not found"
+        used.add(rec)
+        ends.append(rec + 9 + length)
+        last = rec
+    return ends
+
+
+def top_level_records(data: bytes) -> list[tuple[int, int, int]]:
+    """(opcode, start, end) of each top-level record: magic, then records of
+    opcode (u8), length (u64), body, up to the footer (opcode 0x02)."""
+    out = []
+    pos = 8
+    while pos + 9 <= len(data):
+        op = data[pos]
+        end = pos + 9 + struct.unpack_from("<Q", data, pos + 1)[0]
+        out.append((op, pos, end))
+        if op == 0x02:
+            break
+        pos = end
+    return out
+
+
+def test_cut_short_files_recover_every_whole_message(bag: Any, tmp_path: Path) -> None:
+    src = bag("lin2k")
+    mcap = next(src.glob("*.mcap"))
+    data = mcap.read_bytes()
+    full = rosbags_raw(src)
+    ends = np.array(record_ends(data, full))
+    order = np.argsort(ends)
+    size = len(data)
+    chunks = [(start, end) for op, start, end in top_level_records(data) if op == 0x06]
+    assert len(chunks) >= 3
+    first_chunk_end = chunks[0][1]
+    cuts = {
+        "inside the first chunk": int(ends[order[50]]) + 7,
+        "inside a later chunk": (chunks[1][0] + chunks[1][1]) // 2,
+        "at the end of the first chunk's data": first_chunk_end,
+        "one byte short of a message": int(ends[order[len(order) // 2]]) - 1,
+        "right after a message": int(ends[order[len(order) // 2]]),
+        "in the summary section": size - 200,
+        "one byte short of the end": size - 1,
+    }
+    for what, cut in cuts.items():
+        d = tmp_path / f"cut_{cut}"
+        d.mkdir()
+        (d / mcap.name).write_bytes(data[:cut])
+        expected = Counter((full[i][0], full[i][1], full[i][2]) for i in np.nonzero(ends <= cut)[0])
+        raw = read_raw(d)
+        got = Counter((raw.connections[c].topic, t, bytes(p)) for c, t, p in raw.messages)
+        assert got == expected, what
+        assert raw.recovered and not raw.closed, what
+        run = read_run(d)
+        assert not run.complete and run.recovered, what
+        rows = run.steps
+        # the step rows that survived are the head of the stream, each one step on
+        assert np.all(np.abs(np.diff(rows[:, 2:], axis=0)) <= 1), what
+        out, saved = recover(d)
+        assert out == d.with_name(d.name + "_recovered")
+        assert saved == sum(expected.values())
+        again = Counter(rosbags_raw(out))
+        assert again == expected, what
+        assert read_run(out).closed
+    with pytest.raises(BagError, match="damaged beyond recovery"):
+        cut = tmp_path / "too_short"
+        cut.mkdir()
+        (cut / "x.mcap").write_bytes(data[:100])
+        read_raw(cut)
+
+
+def test_sigkilled_sim_node_leaves_a_bag_that_reads_and_recovers(procs: Procs, tmp_path: Path) -> None:
+    bag_dir = tmp_path / "bags"
+    sim = procs.start("sim_node", "-p", f"bag_dir:={bag_dir}")
+    procs.start("profile_node")
+    procs.start("interp_node")  # the default job, started as soon as the chain is connected
+    t_end = time.monotonic() + 60
+    mcap: Path | None = None
+    while time.monotonic() < t_end:
+        found = list(bag_dir.glob("*/*.mcap"))
+        # the step stream (6.6 MB) is recorded first, joint states follow; the whole job is 13.5 MB
+        if found and found[0].stat().st_size > 8_500_000:
+            mcap = found[0]
+            break
+        time.sleep(0.002)
+    assert mcap is not None, procs.log(sim)
+    sim.send_signal(signal.SIGKILL)
+    sim.wait(timeout=10)
+    path = mcap.parent
+    assert not (path / "metadata.yaml").exists()
+    with pytest.raises(Exception):  # noqa: B017 - rosbags cannot open it, whatever it raises
+        rosbags_raw(path)
+    run = read_run(path)
+    assert run.recovered and not run.complete and not run.closed
+    assert 0 < run.steps.shape[0] <= run.plan.total_steps
+    assert run.report.get("state") != "done"  # the final report never reached the file
+    steps = np.diff(np.vstack([run.plan.segments[0].start, run.steps[:, 2:]]), axis=0)
+    assert np.all(np.abs(steps) <= 1) and np.all(np.any(steps != 0, axis=1))
+    assert np.all(np.diff(run.states.t) > 0) and len(run.states) > 100
+    r = run_cli("bag", "recover", str(path))
+    assert r.returncode == 0, r.stderr
+    saved = int(r.stdout.split("recovered ")[1].split()[0])
+    out = path.with_name(path.name + "_recovered")
+    assert sum(Counter(t for t, _, _ in rosbags_raw(out)).values()) == saved
+    assert saved == sum(read_run(path).counts.values())
+    a = run_cli("analyze", str(path), "--no-plots")
+    assert a.returncode == 0, a.stderr
+    assert "cut short (recovered)" in a.stdout
+    again = run_cli("bag", "recover", str(path))
+    assert_one_line_error(again, "already exists")
+
+
+# -- bad input ----------------------------------------------------------------------------
+
+
+def test_bad_bags_are_one_line_errors(tmp_path: Path, bag: Any) -> None:
+    store = get_typestore(Stores.ROS2_JAZZY)
+    String = store.types["std_msgs/msg/String"]
+    rng = np.random.default_rng(1)
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    noise_dir = tmp_path / "noise"
+    noise_dir.mkdir()
+    (noise_dir / "noise.mcap").write_bytes(rng.bytes(4096))
+    noise_file = tmp_path / "noise.bin"
+    noise_file.write_bytes(rng.bytes(4096))
+    magic_then_noise = tmp_path / "magic.mcap"
+    magic_then_noise.write_bytes(b"\x89MCAP0\r\n" + rng.bytes(4096))
+    chatter = tmp_path / "chatter"
+    _write_bag(chatter, [("/chatter", "std_msgs/msg/String", i, String(data=f"hi {i}")) for i in range(3)],
+               StoragePlugin.MCAP)  # fmt: skip
+    chatter_db = tmp_path / "chatter_db"
+    _write_bag(chatter_db, [("/chatter", "std_msgs/msg/String", 1, String(data="hi"))], StoragePlugin.SQLITE3)
+    silent = tmp_path / "silent"
+    _write_bag(silent, [], StoragePlugin.MCAP)
+    meta_only = tmp_path / "meta_only"
+    meta_only.mkdir()
+    shutil.copy(bag("lin2k") / "metadata.yaml", meta_only / "metadata.yaml")
+    cases = [
+        (tmp_path / "missing", "no such file or directory"),
+        (empty, "empty directory, not a rosbag2 recording"),
+        (noise_dir, "not an MCAP file"),
+        (noise_file, "not an MCAP file"),
+        (magic_then_noise, "damaged beyond recovery"),
+        (chatter, "not a winder bag: no /winder/job topic"),
+        (chatter_db, "not a winder bag: no /winder/job topic"),
+        (meta_only, "metadata.yaml lists no MCAP file that exists here"),
+    ]
+    for path, why in cases:
+        for command in ("analyze", "identify"):
+            assert_one_line_error(run_cli(command, str(path), "--no-plots"), str(path), why)
+    assert_one_line_error(run_cli("analyze", str(silent), "--no-plots"), "empty recording: no messages")
+    assert_one_line_error(run_cli("bag", "recover", str(noise_file)), "not an MCAP file")
+    ok = run_cli("bag", "recover", str(bag("lin2k")))
+    assert ok.returncode == 0 and "nothing to recover" in ok.stdout
