@@ -58,7 +58,7 @@ def test_recorded_j_and_d_within_1_percent(bag: Any) -> None:
             assert abs(a.mras_D / D - 1) < 0.01, (name, axis, a.mras_D / D)
             assert a.mras_iterations_1pct is not None and a.mras_iterations_1pct <= a.mras_iterations
             tr = a.trajectory
-            assert tr is not None and tr.J[-1] == a.mras_J
+            assert tr is not None and tr.J[-1] == a.mras_J and tr.D[-1] == a.mras_D
             ok = np.isfinite(tr.J)  # J is NaN while the estimate of 1/J = b/T_s is not yet positive
             np.testing.assert_allclose(tr.b[ok], ident.window / tr.J[ok], rtol=1e-12)  # the thesis' b = T_s/J
             assert np.all(tr.b[~ok] <= 0)

@@ -384,7 +384,12 @@ def plot_identification(run: Run, ident: Identification, out: Path | None = None
                 assert tr is not None
                 est = getattr(tr, key)
                 ax.plot(
-                    tr.t, est / true, color=CMD, lw=1.0, label=f"MRAS (gain {ident.gain:g}): {key} / recorded"
+                    tr.t,
+                    est / true,
+                    color=CMD,
+                    lw=1.0,
+                    label=f"MRAS (gain {ident.gain:g}): {key} / recorded, "
+                    f"at the end {100 * (est[-1] / true - 1):+.3f} %",
                 )
                 ax.axhline(
                     ls / true,
