@@ -298,8 +298,9 @@ def _scan(path: Path, data: memoryview, raw: RawBag) -> None:
                     add(rec)
             except Exception:
                 pass
+    where = f"inside the record at byte {pos}" if pos < n else "after a whole record"
     raw.notes.append(
-        f"{path.name}: cut short at byte {n} (inside the record at byte {pos}); "
+        f"{path.name}: cut short at byte {n} ({where}), without summary and footer; "
         "every whole message before the cut was read"
     )
 
