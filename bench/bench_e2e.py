@@ -210,16 +210,17 @@ def best(runs: list[dict[str, Any]], key: str) -> dict[str, Any]:
 
 SPLIT = {  # sim node parts timed by replay_split, nested as the calls are: (owner, attribute)
     "on_step_times (all)": ("node", "on_step_times"),
-    "process (per chunk)": ("node", "process"),
-    "process/deserialize_message": ("sim_module", "deserialize_message"),
-    "process/StreamChecker.check": ("checker", "check"),
-    "process/simulate": ("node", "simulate"),
-    "process/simulate/tracker.advance (x3 axes)": ("tracker", "advance"),
-    "process/deviation_of_commands": ("node", "deviation_of_commands"),
-    "process/simulate/deviation_of_axes": ("node", "deviation_of_axes"),
+    "accept (per chunk)": ("node", "accept"),
+    "accept/deserialize_message": ("sim_module", "deserialize_message"),
+    "accept/StreamChecker.check": ("checker", "check"),
+    "accept/deviation_of_commands": ("node", "deviation_of_commands"),
+    "advance (per batch of chunks)": ("node", "advance"),
+    "advance/simulate": ("node", "simulate"),
+    "advance/simulate/tracker.advance (x3 axes)": ("tracker", "advance"),
+    "advance/simulate/deviation_of_axes": ("node", "deviation_of_axes"),
     "emit (200 Hz samples)": ("node", "emit"),
-    "emit/publish_sample": ("node", "publish_sample"),
-    "emit/publish_sample/serialize_message": ("sim_module", "serialize_message"),
+    "emit/publish_samples (per block)": ("node", "publish_samples"),
+    "emit/publish_samples/encode": ("encoder", "encode"),
     "Publisher.publish (all)": ("publisher", "publish"),
     "BagRecorder.write (all)": ("bag", "write"),
     "BagRecorder.write/cdr_exact": ("bag_module", "cdr_exact"),
@@ -245,10 +246,13 @@ def replay_split(bag: Path) -> None:
             raw.setdefault(conn.topic, []).append(bytes(data))
     job_raw = next(v[0] for k, v in raw.items() if k.endswith("winder/job"))
     chunks = next(v for k, v in raw.items() if k.endswith("winder/step_times"))
+    path_raw = next((v[0] for k, v in raw.items() if k.endswith("winder/path")), None)
 
     rclpy.init(args=[])
     import winder_sim.sim_node as sim_module
     from winder_interp.contract import Settings
+
+    from winder.cdr import JointStateEncoder
 
     spent: dict[str, list[float]] = {}
 
@@ -275,6 +279,7 @@ def replay_split(bag: Path) -> None:
         "bag": bag_module.BagRecorder,
         "bag_module": bag_module,
         "settings": Settings,
+        "encoder": JointStateEncoder,
     }
     for label, (owner, attr) in SPLIT.items():
         if owner in owners:
@@ -284,6 +289,8 @@ def replay_split(bag: Path) -> None:
     try:
         node.set_parameters([Parameter("bag_dir", value=str(work))])  # type: ignore[no-untyped-call]
         node.on_job(job_raw)
+        if path_raw is not None:
+            node.on_path(path_raw)  # else the steps would wait for it
         for label, (owner, attr) in SPLIT.items():  # objects that exist once a job runs
             if owner == "tracker" and node.axes:
                 wrap(type(node.axes[0].tracker), attr, label)
@@ -302,7 +309,7 @@ def replay_split(bag: Path) -> None:
         rclpy.try_shutdown()  # type: ignore[attr-defined]
         shutil.rmtree(work, ignore_errors=True)
     done = int(str(node.last_summary.get("steps_done", 0)))
-    samples = spent.get("emit/publish_sample", [0, 0.0])[0]
+    samples = int(node.next_sample)
     print(
         f"{len(chunks)} chunks, {done} steps, {samples} samples: {total:.2f} s, "
         f"{total / max(done, 1) * 1e6:.3f} us/step, {total / max(len(chunks), 1) * 1e3:.2f} ms per chunk"
