@@ -247,6 +247,7 @@ def replay_split(bag: Path) -> None:
     job_raw = next(v[0] for k, v in raw.items() if k.endswith("winder/job"))
     chunks = next(v for k, v in raw.items() if k.endswith("winder/step_times"))
     path_raw = next((v[0] for k, v in raw.items() if k.endswith("winder/path")), None)
+    ramp_raw = next((v[0] for k, v in raw.items() if k.endswith("winder/profile_config")), None)
 
     rclpy.init(args=[])
     import winder_sim.sim_node as sim_module
@@ -291,6 +292,8 @@ def replay_split(bag: Path) -> None:
         node.on_job(job_raw)
         if path_raw is not None:
             node.on_path(path_raw)  # else the steps would wait for it
+        if ramp_raw is not None:
+            node.on_profile_config(ramp_raw)
         for label, (owner, attr) in SPLIT.items():  # objects that exist once a job runs
             if owner == "tracker" and node.axes:
                 wrap(type(node.axes[0].tracker), attr, label)

@@ -121,6 +121,8 @@ def test_cell_records_every_step_once_in_order(tmp_path: Path, procs: Procs, pro
     assert end == pytest.approx(np.array(expected_end(SMALL_JOB)) * np.array(job["joint_step"]))
     config = json.loads(bag["/winder/sim_config"][0][1].data)
     assert config["model"] == "linear"
+    ramp = json.loads(bag["/winder/profile_config"][0][1].data)
+    assert ramp["profile"] == profile and ramp["job_id"] == "small"
 
     # the clock never goes backwards and joint states come with it
     clock = np.array([m.clock.sec * 10**9 + m.clock.nanosec for _, m in bag["/clock"]])

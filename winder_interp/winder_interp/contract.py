@@ -52,6 +52,7 @@ TOPIC_JOINT_STATES = "winder/joint_states"
 TOPIC_JOINT_COMMANDS = "winder/joint_commands"
 TOPIC_SIM_CONFIG = "winder/sim_config"
 TOPIC_PROGRESS = "winder/progress"
+TOPIC_PROFILE_CONFIG = "winder/profile_config"
 TOPIC_CLOCK = "/clock"
 TOPIC_DIAGNOSTICS = "/diagnostics"
 

@@ -14,6 +14,7 @@ arrives, so a step's time depends only on its index, never on arrival order.
 
 from __future__ import annotations
 
+import json
 from typing import Any
 
 import numpy as np
@@ -27,6 +28,7 @@ from winder_interp.contract import (
     QOS_LATCHED,
     QOS_STREAM,
     TOPIC_JOB,
+    TOPIC_PROFILE_CONFIG,
     TOPIC_STEP_TIMES,
     TOPIC_STEPS,
     WARN,
@@ -47,6 +49,7 @@ class ProfileNode(Node):
         self.settings = Settings(self, PROFILE_SPECS, check_profile)
 
         self.pub = self.create_publisher(Int64MultiArray, TOPIC_STEP_TIMES, QOS_STREAM)
+        self.pub_config = self.create_publisher(String, TOPIC_PROFILE_CONFIG, QOS_LATCHED)
         self.diag = Diagnostics(self, "winder_profile")
         self.create_subscription(String, TOPIC_JOB, self.on_job, QOS_LATCHED)
         self.sub_steps = None  # created once the timed stream has a reader
@@ -92,6 +95,9 @@ class ProfileNode(Node):
             t0[i] = acc
             acc += round(p.duration * 1e9) + dwell_ns
         self.plan, self.profiles, self.seg_t0_ns = job, profiles, t0
+        # the ramp in force for this job, latched: the sim node records it
+        config = {"job_id": job.job_id, **values, "job_duration_s": (acc - dwell_ns) / 1e9}
+        self.pub_config.publish(String(data=json.dumps(config)))
         self.checker = StreamChecker(job)
         self.timed = 0
         self.error = ""

@@ -46,6 +46,7 @@ from winder_interp.contract import (
     TOPIC_JOINT_COMMANDS,
     TOPIC_JOINT_STATES,
     TOPIC_PATH,
+    TOPIC_PROFILE_CONFIG,
     TOPIC_PROGRESS,
     TOPIC_SIM_CONFIG,
     TOPIC_STEP_TIMES,
@@ -63,7 +64,7 @@ from winder.motor import StepperAxis
 from winder.params import MOTOR_FIELDS, SIM_SPECS, check_sim
 from winder.stream import TIMED_COLUMNS, JobPlan, StreamChecker, parse_job_description
 
-PATH_WAIT = 2.0  # s of wall time the steps wait for the job's path to arrive
+PATH_WAIT = 2.0  # s of wall time the steps wait for the job's path and profile config
 # Running ahead of time, chunks are gathered and simulated together (one tracker
 # call for many costs much less): up to BATCH_CHUNKS of them, at most
 # BATCH_STEPS steps, waiting at most BATCH_WAIT wall seconds for the first.
@@ -77,6 +78,7 @@ BAG_TYPES = {
     "joint_states": "sensor_msgs/msg/JointState",
     "joint_commands": "sensor_msgs/msg/JointState",
     "sim_config": "std_msgs/msg/String",
+    "profile_config": "std_msgs/msg/String",
     "clock": "rosgraph_msgs/msg/Clock",
     "diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
 }
@@ -118,6 +120,7 @@ class SimNode(Node):
         self.diag = Diagnostics(self, "winder_sim")
         self.create_subscription(String, TOPIC_JOB, self.on_job, QOS_LATCHED, raw=True)
         self.create_subscription(JointTrajectory, TOPIC_PATH, self.on_path, QOS_LATCHED, raw=True)
+        self.create_subscription(String, TOPIC_PROFILE_CONFIG, self.on_profile_config, QOS_LATCHED, raw=True)
         self.create_subscription(Int64MultiArray, TOPIC_STEP_TIMES, self.on_step_times, QOS_STREAM, raw=True)
         self.create_subscription(
             DiagnosticArray, TOPIC_DIAGNOSTICS, self.on_diagnostics, QOS_DIAGNOSTICS, raw=True
@@ -132,12 +135,14 @@ class SimNode(Node):
             "joint_states": self.resolve_topic_name(TOPIC_JOINT_STATES),
             "joint_commands": self.resolve_topic_name(TOPIC_JOINT_COMMANDS),
             "sim_config": self.resolve_topic_name(TOPIC_SIM_CONFIG),
+            "profile_config": self.resolve_topic_name(TOPIC_PROFILE_CONFIG),
             "clock": TOPIC_CLOCK,
             "diagnostics": TOPIC_DIAGNOSTICS,
         }
         self.reset()
         self.early: list[bytes] = []
         self.path_raw: bytes | None = None
+        self.profile_raw: bytes | None = None
         self.last_summary: dict[str, object] = {}
         self.last_level, self.last_text = OK, ""
         if self.settings.blocked():
@@ -156,6 +161,7 @@ class SimNode(Node):
         self.inbox_since = time.monotonic()
         self.last_step_ns = -1
         self.path_recorded = False
+        self.profile_recorded = False
         self.job_wall = time.monotonic()
         self.done_steps = 0
         self.finishing = False
@@ -220,7 +226,9 @@ class SimNode(Node):
             self.bag.write(self.topic["sim_config"], 0, serialize_message(config))
         self.job_wall = time.monotonic()
         self.path_recorded = False
+        self.profile_recorded = False
         self.record_path()
+        self.record_profile_config()
         self.get_logger().info(
             f"job {plan.job_id}: {plan.total_steps} steps, {values['model']} model"
             + (f", recording to {self.bag.path}" if self.bag else "")
@@ -232,6 +240,24 @@ class SimNode(Node):
     def on_path(self, raw: bytes) -> None:
         self.path_raw = raw
         self.record_path()
+
+    def on_profile_config(self, raw: bytes) -> None:
+        self.profile_raw = raw
+        self.record_profile_config()
+
+    def record_profile_config(self) -> None:
+        """Record the ramp the profile node planned this job with, once."""
+        if self.plan is None or self.profile_raw is None or self.profile_recorded:
+            return
+        try:
+            job_id = json.loads(deserialize_message(self.profile_raw, String).data).get("job_id")
+        except (ValueError, AttributeError):
+            return
+        if job_id != self.plan.job_id:
+            return
+        self.profile_recorded = True
+        if self.bag is not None and self.bag.is_open:
+            self.bag.write(self.topic["profile_config"], self.t_sim_ns, self.profile_raw)
 
     def record_path(self) -> None:
         """Record the current job's path once. Job and path travel on two
@@ -270,8 +296,9 @@ class SimNode(Node):
         progress report holds the interp node back (flow control)."""
         settings = self.settings.values()
         now = time.monotonic()
-        if self.inbox and not self.path_recorded and now - self.job_wall < PATH_WAIT:
-            return  # hold the steps briefly: the bag should have the path before they run
+        waiting = not (self.path_recorded and self.profile_recorded)
+        if self.inbox and waiting and now - self.job_wall < PATH_WAIT:
+            return  # hold the steps briefly: the bag should have path and ramp before they run
         if (
             not settings["real_time"]
             and 0 < len(self.inbox) < BATCH_CHUNKS
