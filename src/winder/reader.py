@@ -128,8 +128,11 @@ def _bag_files(path: Path) -> tuple[Path, list[Path], bool]:
     if meta.exists():
         text = meta.read_text(errors="replace")
         if re.search(r"storage_identifier:\s*sqlite3", text):
-            return path, sorted(path.glob("*.db3")), True
-        listed = re.findall(r"^\s*-\s*path:\s*(\S+)", text, flags=re.M)
+            db3 = sorted(path.glob("*.db3"))
+            if not db3:
+                raise BagError(f"{path}: metadata.yaml names an sqlite3 recording, but there is no .db3 file")
+            return path, db3, True
+        listed = re.findall(r"^\s*(?:-\s*)?path:\s*(\S+)", text, flags=re.M)
         files = [path / name for name in listed if (path / name).exists()]
     if not files:
         files = sorted(p for p in path.glob("*.mcap") if p.is_file())
