@@ -247,15 +247,11 @@ def test_run_matches_rosbags(bag: Any) -> None:
         if st.name == "sim_node: job"
     ][-1]
     assert run.report == final and run.report["state"] == "done"
-    # the profile kind travels only in the profile node's status, which can miss the bag
-    kinds = [
-        {kv.key: kv.value for kv in st.values}.get("profile", "")
-        for _, arr in ref["/diagnostics"]
-        for st in arr.status
-        if st.name == "profile_node: job"
-    ]
-    assert run.profile == ("scurve" if kinds else "")
-    assert set(kinds) <= {"scurve"}
+    # the ramp in force travels latched on winder/profile_config
+    ramp = json.loads(ref["/winder/profile_config"][-1][1].data)
+    assert run.profile_config == ramp
+    assert run.profile == ramp["profile"] == "scurve"
+    assert (ramp["v_max"], ramp["a_max"], ramp["j_max"]) == (2048.0, 8192.0, 65536.0)
     # the .mcap file and metadata.yaml name the same recording
     mcap = next(path.glob("*.mcap"))
     for other in (mcap, path / "metadata.yaml"):

@@ -134,6 +134,7 @@ class Analysis:
     job_id: str
     job: str  #: one-line description
     profile: str
+    ramp: dict[str, float]  #: the recorded ramp limits (steps of the major axis, s); empty if unknown
     model: str
     state: str  #: the sim node's final state ("" if no report)
     complete: bool
@@ -410,6 +411,11 @@ def analyze(run: Run, stride_time: float = STRIDE_TIME) -> Analysis:
             f"wire {job.wire_diameter * 1e3:g} mm"
         ),
         profile=run.profile or "unknown",
+        ramp={
+            k: float(v)
+            for k, v in run.profile_config.items()
+            if k in ("v_max", "a_max", "j_max", "tau", "v_start", "dwell") and isinstance(v, (int, float))
+        },
         model=run.sim_config.model if run.sim_config else "unknown",
         state=state,
         complete=run.complete,
@@ -455,12 +461,27 @@ def _f(x: float, scale: float = 1.0, decimals: int = 3) -> str:
     return "-" if not math.isfinite(x) else f"{x * scale:.{decimals}f}"
 
 
+def _ramp(a: Analysis) -> str:
+    r = a.ramp
+    if not r:
+        return "not recorded"
+    used = {
+        "scurve": ("v_max", "a_max", "j_max"),
+        "trapezoid": ("v_max", "a_max"),
+        "exponential": ("v_max", "tau"),
+    }
+    names = {"v_max": "v", "a_max": "a", "j_max": "j", "tau": "tau"}
+    parts = [f"{names[k]} {r[k]:g}" for k in used.get(a.profile, ("v_max",)) if k in r]
+    return ", ".join(parts) + " (steps/s^n, s)"
+
+
 def _rows(a: Analysis) -> list[tuple[str, str]]:
     state = a.state or "no report"
     state += ", closed" if a.closed else (", cut short (recovered)" if a.recovered else ", not closed")
     rows = [
         ("job", a.job),
         ("profile / motor model", f"{a.profile} / {a.model}"),
+        ("ramp limits (major axis)", _ramp(a)),
         ("state", state),
         ("steps", f"{a.steps_recorded} of {a.steps_total}"),
         ("job time (last step)", f"{_f(a.job_time)} s"),

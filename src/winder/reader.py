@@ -65,6 +65,7 @@ IntArray = npt.NDArray[np.int64]
 #: the winder topics, relative to the cell's namespace
 JOB, SIM_CONFIG, PATH, STEP_TIMES = "winder/job", "winder/sim_config", "winder/path", "winder/step_times"
 JOINT_COMMANDS, JOINT_STATES = "winder/joint_commands", "winder/joint_states"
+PROFILE_CONFIG = "winder/profile_config"
 DIAGNOSTICS = "/diagnostics"
 
 
@@ -441,11 +442,14 @@ class Run:
     commands: Samples
     states: Samples
     report: dict[str, str]
-    profile: str  #: velocity profile kind from the profile node's report ("" if unknown)
+    profile: str  #: velocity profile kind ("" if the recording does not say)
     closed: bool
     recovered: bool
     counts: dict[str, int]
     notes: tuple[str, ...] = ()
+    #: the profile node's ramp settings (winder/profile_config: profile, v_max, a_max,
+    #: j_max, tau, v_start, dwell in steps of the major axis, s), empty in older bags
+    profile_config: dict[str, Any] = field(default_factory=dict)
 
     @property
     def complete(self) -> bool:
@@ -604,7 +608,10 @@ def read_run(path: str | Path, namespace: str | None = None) -> Run:
     else:
         ns = spaces[0]
 
-    topic = {key: f"{ns}/{key}" for key in (JOB, SIM_CONFIG, STEP_TIMES, JOINT_COMMANDS, JOINT_STATES)}
+    topic = {
+        key: f"{ns}/{key}"
+        for key in (JOB, SIM_CONFIG, PROFILE_CONFIG, STEP_TIMES, JOINT_COMMANDS, JOINT_STATES)
+    }
     wanted = {*topic.values(), DIAGNOSTICS}
     joints = {topic[JOINT_COMMANDS], topic[JOINT_STATES]}
     store = _typestore()
@@ -643,6 +650,12 @@ def read_run(path: str | Path, namespace: str | None = None) -> Run:
     chunks = [_unpack_steps(m, topic[STEP_TIMES]) for m in decoded[topic[STEP_TIMES]]]
     steps = np.vstack(chunks) if chunks else np.zeros((0, 5), np.int64)
 
+    profile_config: dict[str, Any] = {}
+    if decoded[topic[PROFILE_CONFIG]]:
+        try:
+            profile_config = dict(json.loads(decoded[topic[PROFILE_CONFIG]][-1].data))
+        except (ValueError, TypeError):
+            notes.append(f"{topic[PROFILE_CONFIG]} is not JSON: ramp settings unknown")
     prefix = f"{ns.strip('/')}/" if ns else ""
     report: dict[str, str] = {}
     profile = ""
@@ -652,7 +665,8 @@ def read_run(path: str | Path, namespace: str | None = None) -> Run:
             if st.name == f"{prefix}sim_node: job" and "state" in values:
                 report = values
             elif st.name == f"{prefix}profile_node: job" and "profile" in values:
-                profile = values["profile"]
+                profile = values["profile"]  # older bags: only the profile node's status says
+    profile = str(profile_config.get("profile", profile))
     return Run(
         path=raw.path,
         namespace=ns,
@@ -667,6 +681,7 @@ def read_run(path: str | Path, namespace: str | None = None) -> Run:
         recovered=raw.recovered,
         counts=counts,
         notes=tuple(notes),
+        profile_config=profile_config,
     )
 
 
