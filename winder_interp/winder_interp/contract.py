@@ -183,6 +183,7 @@ class Settings:
         self.specs = specs
         self.check = check
         self.rejected: list[str] = []
+        self._values: dict[str, Any] | None = None
         log = node.get_logger()
         for name, spec in specs.items():
             try:
@@ -215,7 +216,10 @@ class Settings:
         return f"{name}: {str(exc).splitlines()[0]}"
 
     def values(self) -> dict[str, Any]:
-        return {n: s.check(self.node.get_parameter(n).value) for n, s in self.specs.items()}
+        """Current values, typed; cached until a parameter change is accepted."""
+        if self._values is None:
+            self._values = {n: s.check(self.node.get_parameter(n).value) for n, s in self.specs.items()}
+        return self._values
 
     def _on_set(self, params: list[Parameter]) -> SetParametersResult:
         merged = {n: self.node.get_parameter(n).value for n in self.specs}
@@ -227,6 +231,7 @@ class Settings:
         except SpecError as exc:
             self.node.get_logger().warning(f"parameter change rejected: {exc}")
             return SetParametersResult(successful=False, reason=str(exc))
+        self._values = None  # the new values are in place once this returns
         # a start-up rejection is resolved once that parameter is set validly
         names = {p.name for p in params}
         self.rejected = [r for r in self.rejected if r in self.specs and r not in names]
