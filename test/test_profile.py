@@ -505,6 +505,10 @@ def test_exponential_vs_quadrature(lv, lt, f0, f1, ld):
             plan("exponential", D, v_max=V, tau=tau, v_start=v0, v_end=v1)
         return
     T, vp = ref
+    # the oracle's ramp times come from vp - v0 and vp - v1: with a peak only
+    # a millionth above the boundary speeds they lose the digits it is judged by
+    # (plan() works in velocity increments; such ramps: test_exponential_steps)
+    assume(vp == V or vp - max(v0, v1) > 1e-6 * V)
     p = plan("exponential", D, v_max=V, tau=tau, v_start=v0, v_end=v1)
     assert math.isclose(p.duration, T, rel_tol=1e-9)
     assert math.isclose(p.v_peak, vp, rel_tol=1e-9)

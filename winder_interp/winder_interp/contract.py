@@ -22,6 +22,7 @@ QoS, on purpose:
 from __future__ import annotations
 
 import array
+import contextlib
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -276,4 +277,6 @@ def spin(factory: Callable[[], Node], args: list[str] | None = None) -> None:
             if callable(hook):
                 hook()
             node.destroy_node()
-        rclpy.try_shutdown()
+        # the signal handler may shut the context down at this very moment
+        with contextlib.suppress(RCLError):
+            rclpy.try_shutdown()
