@@ -360,3 +360,55 @@ def test_colcon_build_installs_runnable_executables(tmp_path: Path, procs: Procs
         out, _ = p.communicate(timeout=20)
         assert p.returncode == 0, out.decode()
         assert b"Traceback" not in out
+
+
+def test_launch_file_describes_the_three_nodes() -> None:
+    """launch/launch_ros cannot be installed here (ROS_SETUP.md), so the launch
+    file runs against minimal stand-ins that record what it asks for: the
+    three executables, downstream first, each with its node's parameters."""
+    import importlib.util
+    import types
+
+    made: list[dict[str, Any]] = []
+
+    class Recorder:
+        def __init__(self, *args: Any, **kwargs: Any) -> None:
+            self.args, self.kwargs = args, kwargs
+
+    class NodeStandIn(Recorder):
+        def __init__(self, **kwargs: Any) -> None:
+            super().__init__(**kwargs)
+            made.append(kwargs)
+
+    fakes = {
+        "launch": types.SimpleNamespace(LaunchDescription=Recorder),
+        "launch.actions": types.SimpleNamespace(DeclareLaunchArgument=Recorder),
+        "launch.substitutions": types.SimpleNamespace(LaunchConfiguration=Recorder),
+        "launch_ros.actions": types.SimpleNamespace(Node=NodeStandIn),
+    }
+    saved = {k: sys.modules.get(k) for k in fakes}
+    sys.modules.update(fakes)  # type: ignore[arg-type]
+    try:
+        path = Path(__file__).resolve().parents[1] / "winder_sim" / "launch" / "winder.launch.py"
+        spec = importlib.util.spec_from_file_location("winder_launch", path)
+        assert spec is not None and spec.loader is not None
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        desc = module.generate_launch_description()
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                sys.modules.pop(k, None)
+            else:
+                sys.modules[k] = v
+    from winder.params import INTERP_SPECS, PROFILE_SPECS
+
+    assert [(n["package"], n["executable"]) for n in made] == [
+        ("winder_sim", "sim_node"),
+        ("winder_profile", "profile_node"),
+        ("winder_interp", "interp_node"),
+    ]
+    assert set(made[2]["parameters"][0]) == set(INTERP_SPECS)
+    assert set(made[1]["parameters"][0]) == set(PROFILE_SPECS)
+    declared = {a.args[0] for a in desc.args[0] if isinstance(a, Recorder) and a.args}
+    assert {"namespace", "turns_per_layer", "profile", "model"} <= declared

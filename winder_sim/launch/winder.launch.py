@@ -31,34 +31,27 @@ def _params(specs):
     return [{name: LaunchConfiguration(name) for name in specs if "." not in name}]
 
 
+# downstream first: each node waits for its reader, so the job starts when the
+# whole chain is up
+NODES = (
+    ("winder_sim", "sim_node", SIM_SPECS),
+    ("winder_profile", "profile_node", PROFILE_SPECS),
+    ("winder_interp", "interp_node", INTERP_SPECS),
+)
+
+
 def generate_launch_description():
     ns = LaunchConfiguration("namespace")
-    return LaunchDescription(
-        [
-            DeclareLaunchArgument("namespace", default_value="", description="namespace of the cell"),
-            *_args(INTERP_SPECS),
-            *_args(PROFILE_SPECS),
-            *_args(SIM_SPECS),
+    actions = [DeclareLaunchArgument("namespace", default_value="", description="namespace of the cell")]
+    for package, executable, specs in NODES:
+        actions += _args(specs)
+        actions.append(
             Node(
-                package="winder_sim",
-                executable="sim_node",
+                package=package,
+                executable=executable,
                 namespace=ns,
-                parameters=_params(SIM_SPECS),
+                parameters=_params(specs),
                 output="screen",
-            ),
-            Node(
-                package="winder_profile",
-                executable="profile_node",
-                namespace=ns,
-                parameters=_params(PROFILE_SPECS),
-                output="screen",
-            ),
-            Node(
-                package="winder_interp",
-                executable="interp_node",
-                namespace=ns,
-                parameters=_params(INTERP_SPECS),
-                output="screen",
-            ),
-        ]
-    )
+            )
+        )
+    return LaunchDescription(actions)
