@@ -10,6 +10,7 @@ import argparse
 import math
 import sys
 from pathlib import Path
+from typing import Any
 
 __all__ = ["register"]
 
@@ -111,7 +112,7 @@ def _bag_help(parser: argparse.ArgumentParser) -> int:
     return 2
 
 
-def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+def register(sub: argparse._SubParsersAction[Any]) -> None:
     """Add ``analyze``, ``identify`` and ``bag`` to the ``winder`` subcommands."""
     p = sub.add_parser(
         "analyze",
@@ -142,7 +143,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.set_defaults(func=cmd_identify)
 
     p = sub.add_parser("bag", help="bag tools: recover a recording cut short")
-    bag_sub = p.add_subparsers(dest="bag_command", metavar="BAG_COMMAND")
+    bag_sub = p.add_subparsers(dest="bag_command", metavar="BAG_COMMAND", parser_class=type(p))
     p.set_defaults(func=lambda _args, _p=p: _bag_help(_p))
     r = bag_sub.add_parser(
         "recover",
