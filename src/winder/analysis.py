@@ -54,7 +54,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from winder.interp import deviation_stats
+from winder.interp import line_distance
 from winder.job import AXES
 from winder.reader import Run
 
@@ -203,12 +203,12 @@ def command_deviation(run: Run) -> Deviation:
         if rows.shape[0] == 0:
             continue
         rel = rows[:, 2:4] - np.asarray(s.start[:2])
-        st = deviation_stats(rel, s.delta[0], s.delta[1], step_lengths=(lx, ly))
-        f = np.abs(s.delta[0] * rel[:, 1] - rel[:, 0] * s.delta[1]).astype(np.float64)
-        dist = f * (lx * ly / math.hypot(s.delta[0] * lx, s.delta[1] * ly))
+        dist = line_distance(rel, s.delta[0], s.delta[1], step_lengths=(lx, ly))
         dists.append(dist)
         tids.append(_turns(rel[:, 1].astype(np.float64), spr, turns))
-        layers.append(LayerDeviation(i, segs[i].pole, segs[i].layer, st.points, st.mean, st.max))
+        layers.append(
+            LayerDeviation(i, segs[i].pole, segs[i].layer, dist.size, float(dist.mean()), float(dist.max()))
+        )
     return _summarise(dists, tids, layers, plan.job.wire_diameter)
 
 
@@ -249,9 +249,7 @@ def axis_deviation(run: Run) -> Deviation | None:
         s = plan.segments[i]
         xr = x[m] - s.start[0]
         yr = y[m] - s.start[1]
-        dist = np.abs(s.delta[0] * yr - xr * s.delta[1]) * (
-            lx * ly / math.hypot(s.delta[0] * lx, s.delta[1] * ly)
-        )
+        dist = line_distance(np.column_stack([xr, yr]), s.delta[0], s.delta[1], step_lengths=(lx, ly))
         dists.append(dist)
         tids.append(_turns(yr, spr, turns))
         layers.append(

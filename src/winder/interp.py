@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -38,6 +39,7 @@ __all__ = [
     "dda",
     "deviation_stats",
     "interpolate",
+    "line_distance",
     "min_deviation",
     "point_by_point",
 ]
@@ -209,6 +211,38 @@ def interpolate(
     return out
 
 
+def _abs_f(p: npt.NDArray[Any], dx: int, dy: int) -> npt.NDArray[np.float64]:
+    """|F| = |dx*y - x*dy| of each row (x, y): exact in int64 for step
+    positions (|dx*y| < 2**62 within MAX_STEPS), in float for real ones."""
+    if np.issubdtype(p.dtype, np.integer):
+        pi = p.astype(np.int64, copy=False)
+        f: npt.NDArray[np.float64] = np.abs(int(dx) * pi[:, 1] - pi[:, 0] * int(dy)).astype(np.float64)
+        return f
+    return np.abs(dx * p[:, 1].astype(np.float64) - p[:, 0].astype(np.float64) * dy)
+
+
+def _distance_scale(dx: int, dy: int, step_lengths: tuple[float, float]) -> float:
+    """Factor from |F| (steps squared) to the physical distance |F| / |OE| (eq. 5)."""
+    lx, ly = (float(v) for v in step_lengths)
+    if not (math.isfinite(lx) and math.isfinite(ly) and lx > 0 and ly > 0):
+        raise ValueError(f"step_lengths={step_lengths!r} is invalid: must be two finite numbers > 0")
+    return lx * ly / math.hypot(dx * lx, dy * ly)
+
+
+def line_distance(
+    points: npt.ArrayLike, dx: int, dy: int, *, step_lengths: tuple[float, float] = (1.0, 1.0)
+) -> npt.NDArray[np.float64]:
+    """Perpendicular distance of each point (x, y), in steps relative to the
+    move's start (integers, or real positions of a simulated axis), to the line
+    (0, 0) -> (dx, dy), in the physical units of ``step_lengths`` (eq. 5)."""
+    p = np.asarray(points)
+    if p.ndim != 2 or p.shape[1] != 2:
+        raise ValueError(f"points have shape {p.shape}: must be (N, 2)")
+    if dx == 0 and dy == 0:
+        return np.zeros(p.shape[0])
+    return _abs_f(p, dx, dy) * _distance_scale(dx, dy, step_lengths)
+
+
 @dataclass(frozen=True)
 class DeviationStats:
     """Distance of a stepped path to its ideal line, in step units (or the
@@ -241,14 +275,8 @@ def deviation_stats(
         raise ValueError(f"path has shape {p.shape}: must be (N, 2)")
     if p.shape[0] == 0 or (dx == 0 and dy == 0):
         return DeviationStats(0.0, 0.0, 0.0, 0.0, int(p.shape[0]))
-    lx, ly = (float(v) for v in step_lengths)
-    if not (math.isfinite(lx) and math.isfinite(ly) and lx > 0 and ly > 0):
-        raise ValueError(f"step_lengths={step_lengths!r} is invalid: must be two finite numbers > 0")
-    # F exactly in int64 (|dx*y| < 2**62 for moves within MAX_STEPS), then float
-    pi = p.astype(np.int64, copy=False)
-    f = np.abs(int(dx) * pi[:, 1] - pi[:, 0] * int(dy)).astype(np.float64)
-    norm_phys = math.hypot(dx * lx, dy * ly)
-    dist = f * (lx * ly / norm_phys)
+    f = _abs_f(p, dx, dy)
+    dist = f * _distance_scale(dx, dy, step_lengths)
     return DeviationStats(
         mean=float(dist.mean()),
         max=float(dist.max()),

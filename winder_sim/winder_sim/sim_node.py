@@ -59,6 +59,7 @@ from winder_interp.contract import (
 
 from winder.bag import BagRecorder, new_bag_path, signals_held
 from winder.cdr import JointStateEncoder, encode_clocks
+from winder.interp import line_distance
 from winder.job import AXES
 from winder.motor import StepperAxis
 from winder.params import MOTOR_FIELDS, SIM_SPECS, check_sim
@@ -421,14 +422,8 @@ class SimNode(Node):
         s = self.plan.segments[seg]
         if s.kind != "layer":
             return
-        lx, ly = self.plan.step_lengths[0], self.plan.step_lengths[1]
-        x = (pos[:, 0] - s.start[0]).astype(np.int64)
-        y = (pos[:, 1] - s.start[1]).astype(np.int64)
-        f = np.abs(s.delta[0] * y - x * s.delta[1]).astype(float)
-        dist = f * lx * ly / math.hypot(s.delta[0] * lx, s.delta[1] * ly)
-        self.dev_cmd[0] += float(dist.sum())
-        self.dev_cmd[1] += dist.size
-        self.dev_cmd[2] = max(self.dev_cmd[2], float(dist.max()))
+        rel = pos[:, :2].astype(np.int64) - np.asarray(s.start[:2])
+        self.accumulate(self.dev_cmd, line_distance(rel, s.delta[0], s.delta[1], step_lengths=self.lxly))
 
     def deviation_of_axes(self, segs: npt.NDArray[np.int64], act_pos: npt.NDArray[np.float64]) -> None:
         assert self.plan is not None
@@ -438,18 +433,21 @@ class SimNode(Node):
             if s.kind != "layer":
                 continue
             m = segs == seg
-            x = act_pos[m, 0] / js[0] - s.start[0]
-            y = act_pos[m, 1] / js[1] - s.start[1]
-            lx, ly = self.plan.step_lengths[0], self.plan.step_lengths[1]
-            dist = (
-                np.abs(s.delta[0] * y - x * s.delta[1])
-                * lx
-                * ly
-                / math.hypot(s.delta[0] * lx, s.delta[1] * ly)
-            )
-            self.dev_act[0] += float(dist.sum())
-            self.dev_act[1] += dist.size
-            self.dev_act[2] = max(self.dev_act[2], float(dist.max()))
+            rel = act_pos[m, :2] / np.asarray(js[:2]) - np.asarray(s.start[:2])
+            self.accumulate(self.dev_act, line_distance(rel, s.delta[0], s.delta[1], step_lengths=self.lxly))
+
+    @property
+    def lxly(self) -> tuple[float, float]:
+        """Feed step and fork arc per step (m): the unrolled winding plane."""
+        assert self.plan is not None
+        return self.plan.step_lengths[0], self.plan.step_lengths[1]
+
+    @staticmethod
+    def accumulate(acc: list[float], dist: npt.NDArray[np.float64]) -> None:
+        """Add distances to a [sum, count, max] tally."""
+        acc[0] += float(dist.sum())
+        acc[1] += dist.size
+        acc[2] = max(acc[2], float(dist.max()))
 
     # -- out -------------------------------------------------------------
     def emit(self, settings: dict[str, Any] | None = None) -> None:
