@@ -4,14 +4,17 @@ reference) and rosbags' strict reader."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from rclpy.serialization import deserialize_message, serialize_message
 from rosbags.typesys import Stores, get_typestore
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Int32MultiArray, Int64MultiArray, MultiArrayDimension
 
-from winder.cdr import JointStateEncoder, encode_clocks
+from winder.cdr import JointStateEncoder, MultiArrayCodec, encode_clocks
+from winder.stream import STEP_COLUMNS, TIMED_COLUMNS
 
 TS = get_typestore(Stores.ROS2_JAZZY)
 finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
@@ -54,3 +57,64 @@ def test_clock_bytes_match_rclpy(times: list[int]) -> None:
         ref = Clock()
         ref.clock.sec, ref.clock.nanosec = divmod(t, 10**9)
         assert payload == serialize_message(ref)
+
+
+# -- the step stream's chunks ----------------------------------------------------
+STEPS = MultiArrayCodec(STEP_COLUMNS, np.int32)
+TIMED = MultiArrayCodec(TIMED_COLUMNS, np.int64)
+
+
+def _reference(rows: np.ndarray, columns: tuple[str, ...], msg_type: type) -> bytes:
+    """The chunk as a message object, serialized by rclpy (the reference)."""
+    msg = msg_type()
+    msg.layout.dim = [
+        MultiArrayDimension(label="steps", size=rows.shape[0], stride=rows.size),
+        MultiArrayDimension(label=",".join(columns), size=len(columns), stride=len(columns)),
+    ]
+    msg.data = rows.ravel().tolist()
+    return serialize_message(msg)
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.integers(1, 300), st.booleans(), st.data())
+def test_step_chunks_round_trip_with_rclpy(n: int, timed: bool, data: st.DataObject) -> None:
+    codec, cols, msg_type, bits = (
+        (TIMED, TIMED_COLUMNS, Int64MultiArray, 63) if timed else (STEPS, STEP_COLUMNS, Int32MultiArray, 31)
+    )
+    seed = data.draw(st.integers(0, 2**32 - 1))
+    rows = np.random.default_rng(seed).integers(-(2**bits), 2**bits, size=(n, len(cols)))
+    payload = codec.encode(rows)
+    ref = _reference(rows, cols, msg_type)
+    assert len(payload) == len(ref)  # the same layout; padding bytes may differ
+    back = deserialize_message(payload, msg_type)
+    assert [(d.label, d.size, d.stride) for d in back.layout.dim] == [
+        ("steps", n, n * len(cols)),
+        (",".join(cols), len(cols), len(cols)),
+    ]
+    assert np.array_equal(np.asarray(back.data).reshape(n, len(cols)), rows)
+    assert np.array_equal(codec.decode(ref), rows)  # and rclpy's bytes decode here
+    strict = TS.deserialize_cdr(payload, f"std_msgs/msg/{msg_type.__name__}")
+    assert np.array_equal(strict.data.reshape(n, len(cols)), rows)
+
+
+def test_step_chunk_decode_rejects_other_layouts() -> None:
+    rows = np.arange(12, dtype=np.int64).reshape(3, 4)
+    with pytest.raises(
+        ValueError,
+        match=r"^chunk layout is not \(steps, t_ns,segment,feed,fork,pole\): "
+        r"\[\('steps', 3\), \('segment,feed,fork,pole', 4\)\]",
+    ):
+        TIMED.decode(_reference(rows, STEP_COLUMNS, Int64MultiArray))
+    with pytest.raises(ValueError, match=r"^chunk layout is not"):
+        STEPS.decode(TIMED.encode(np.zeros((2, 5), np.int64)))  # int64 chunk on the int32 topic
+    good = TIMED.encode(np.ones((4, 5), np.int64))
+    with pytest.raises(ValueError, match=r"^chunk is truncated: \d+ bytes for 4 x 5 values"):
+        TIMED.decode(good[:-8])
+    lying = bytearray(good)
+    lying[4 + TIMED._size0 : 4 + TIMED._size0 + 4] = (5).to_bytes(4, "little")
+    with pytest.raises(ValueError, match=r"^chunk holds 20 values, layout says 5 x 5"):
+        TIMED.decode(bytes(lying))
+    with pytest.raises(ValueError, match=r"^chunk layout is not .*: 3 unreadable bytes"):
+        TIMED.decode(b"\x00\x01\x00")
+    with pytest.raises(ValueError, match=r"^rows of shape \(4, 4\) must be \(n, 5\)"):
+        TIMED.encode(np.zeros((4, 4)))

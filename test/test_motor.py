@@ -27,6 +27,8 @@ from scipy.integrate import solve_ivp
 
 from winder.motor import (
     G_CM_S2,
+    MODAL_ZETA,
+    LinearTracker,
     LoadStep,
     StepperAxis,
     measured_velocity,
@@ -384,9 +386,7 @@ def axis_and_train(draw: st.DrawFn) -> tuple[StepperAxis, np.ndarray, np.ndarray
     n = draw(st.integers(1, 120))
     gaps = np.array(draw(st.lists(st.floats(0.0, 5.0), min_size=n, max_size=n)))
     times = (np.cumsum(gaps) - 1.0) / wn  # normalised to the axis' dynamics, some < 0
-    signs = np.array(
-        draw(st.lists(st.sampled_from([-3.0, -1.0, 1.0, 2.0]), min_size=n, max_size=n))
-    )
+    signs = np.array(draw(st.lists(st.sampled_from([-3.0, -1.0, 1.0, 2.0]), min_size=n, max_size=n)))
     step = draw(st.floats(1e-4, 1.0))
     m = draw(st.integers(1, 300))
     t = np.sort(np.array(draw(st.lists(st.floats(-2.0, 2.0 + 6 * n), min_size=m, max_size=m)))) / wn
@@ -466,9 +466,7 @@ def test_linear_tracker_chunked_equals_one_shot(case, steps_early: bool) -> None
 def test_tracker_rejects_out_of_order_input() -> None:
     tr = StepperAxis.paper().linear_tracker()
     tr.advance([0.0, 0.1], FULL_STEP, [0.05, 0.2])
-    with pytest.raises(
-        ValueError, match=r"^step_times\[0\]=0.15 is invalid: must be >= the last sample"
-    ):
+    with pytest.raises(ValueError, match=r"^step_times\[0\]=0.15 is invalid: must be >= the last sample"):
         tr.advance([0.15], FULL_STEP, [0.3])
     with pytest.raises(ValueError, match=r"^t_samples\[0\]=0.1 is invalid"):
         tr.advance([], FULL_STEP, [0.1])
@@ -479,6 +477,78 @@ def test_tracker_rejects_out_of_order_input() -> None:
     # a step at exactly the last returned sample time is applied after it
     th, _ = tr.advance([0.2], FULL_STEP, [0.2, 0.2 + 1e-9])
     assert th[0] == pytest.approx(th[1], abs=1e-6)
+
+
+@pytest.mark.parametrize("zeta", [0.0, 0.05, 0.5213, 0.94])
+def test_modal_sum_over_many_windows_matches_superposition(zeta: float) -> None:
+    """Below MODAL_ZETA the tracker sums modal terms in windows of 30/sigma s
+    (0.21 s for the paper's motor): a 3 s train with pauses longer than a
+    window, fed in uneven chunks, against the textbook superposition."""
+    ax = damped(zeta) if zeta != 0.5213 else StepperAxis.paper()
+    wn, z, _ = params(ax.Zr, ax.L, ax.i_a, ax.J, ax.D)
+    rng = np.random.default_rng(5)
+    bursts = [np.sort(rng.uniform(a, a + 0.15, 120)) for a in (0.0, 0.1, 0.9, 1.0, 2.7)]
+    times = np.concatenate(bursts)
+    times.sort()
+    angles = rng.choice([-1.0, 1.0], times.size) * FULL_STEP
+    t = np.sort(np.concatenate([np.linspace(-0.05, 3.2, 700), times[::37]]))
+    th_ref, om_ref = superpose(wn, z, times, angles, t)
+    tr = ax.linear_tracker()
+    ths, oms = [], []
+    for lo, hi in [(-math.inf, 0.05), (0.05, 0.95), (0.95, 0.951), (0.951, math.inf)]:
+        th, om = tr.advance(
+            times[(times >= lo) & (times < hi)], angles[(times >= lo) & (times < hi)], t[(t >= lo) & (t < hi)]
+        )
+        ths.append(th)
+        oms.append(om)
+    total = np.abs(angles).sum()
+    np.testing.assert_allclose(np.concatenate(ths), th_ref, rtol=0, atol=1e-11 * total)
+    np.testing.assert_allclose(np.concatenate(oms), om_ref, rtol=0, atol=1e-11 * total * wn)
+
+
+@st.composite
+def modal_case(draw: st.DrawFn) -> tuple[StepperAxis, np.ndarray, np.ndarray, np.ndarray, list[float]]:
+    zeta = draw(st.floats(0.0, MODAL_ZETA, exclude_max=True))
+    wn = draw(st.floats(1.0, 1e4))
+    _, _, K = params(**PAPER)
+    J = K / wn**2
+    ax = StepperAxis(PAPER["Zr"], PAPER["L"], PAPER["i_a"], J, 2 * zeta * math.sqrt(K * J))
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    n = draw(st.integers(0, 3000))
+    span = draw(st.floats(1e-3, 200.0)) / wn  # up to ~30 windows at zeta = 0.95
+    times = np.sort(rng.uniform(0, span, n))
+    angles = rng.choice([-1.0, 1.0], n) * draw(st.floats(1e-6, 1.0))
+    t = np.sort(rng.uniform(-0.1 * span, 1.2 * span, draw(st.integers(1, 300))))
+    cuts = sorted(draw(st.lists(st.floats(0.0, 1.0), max_size=5)))
+    return ax, times, angles, t, [c * span for c in cuts]
+
+
+@settings(max_examples=200, deadline=None)
+@given(modal_case())
+def test_modal_and_scan_trackers_agree(case) -> None:
+    """The two exact methods, independent in their arithmetic (complex modal
+    sums vs the real transition-matrix scan), on wide random trains."""
+    ax, times, angles, t, cuts = case
+    out = {}
+    for method in ("modal", "scan"):
+        tr = LinearTracker(ax, method)
+        parts = []
+        edges = [-math.inf, *cuts, math.inf]
+        for lo, hi in itertools.pairwise(edges):
+            m, w = (times >= lo) & (times < hi), (t >= lo) & (t < hi)
+            parts.append(tr.advance(times[m], angles[m], t[w]))
+        out[method] = (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]))
+    total = np.abs(angles).sum() + abs(float(angles[0])) if angles.size else 1.0
+    wn = ax.natural_frequency
+    np.testing.assert_allclose(out["modal"][0], out["scan"][0], rtol=0, atol=1e-11 * total)
+    np.testing.assert_allclose(out["modal"][1], out["scan"][1], rtol=0, atol=1e-11 * total * wn)
+
+
+def test_modal_method_needs_an_under_damped_axis() -> None:
+    with pytest.raises(ValueError, match=r"^method='modal' needs damping ratio < 0.95"):
+        LinearTracker(damped(1.0), "modal")
+    with pytest.raises(ValueError, match=r"^method='fast' is invalid"):
+        LinearTracker(damped(0.5), "fast")  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize("zeta", [0.1, 0.5213, 1.0, 3.0])

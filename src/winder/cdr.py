@@ -11,6 +11,11 @@ header; primitives aligned to their size):
 * ``sensor_msgs/JointState``: header (int32 sec, uint32 nanosec, string
   frame_id), string[] name, float64[] position, float64[] velocity,
   float64[] effort (empty).
+* ``std_msgs/Int32MultiArray`` / ``Int64MultiArray`` (the step stream): layout
+  (MultiArrayDimension[] dim: string label, uint32 size, uint32 stride; uint32
+  data_offset), then int32[] / int64[] data. :class:`MultiArrayCodec` writes
+  and reads the 2-D chunks of the topic contract without message objects: one
+  copy of the rows out, none in (the rows are a view of the payload).
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ from collections.abc import Sequence
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["JointStateEncoder", "encode_clocks"]
+__all__ = ["JointStateEncoder", "MultiArrayCodec", "encode_clocks"]
 
 _HEADER = b"\x00\x01\x00\x00"  # CDR little endian, no options
 
@@ -46,6 +51,7 @@ class _Writer:
 
     def __init__(self) -> None:
         self.buf = bytearray()
+        self.spans: list[tuple[int, int]] = []  #: (start, end) of every field written, padding excluded
 
     def align(self, n: int) -> None:
         self.buf += b"\x00" * (-len(self.buf) % n)
@@ -54,11 +60,13 @@ class _Writer:
         self.align(4)
         at = len(self.buf)
         self.buf += struct.pack("<I", v)
+        self.spans.append((at, at + 4))
         return at
 
     def string(self, s: str) -> None:
         data = s.encode() + b"\x00"
         self.u32(len(data))
+        self.spans.append((len(self.buf), len(self.buf) + len(data)))
         self.buf += data
 
     def doubles(self, n: int) -> int:
@@ -105,3 +113,77 @@ class JointStateEncoder:
         o = 4 + self._vel
         block[:, o : o + 8 * self.n] = vel.view(np.uint8).reshape(m, 8 * self.n)
         return [row.tobytes() for row in block]
+
+
+class MultiArrayCodec:
+    """2-D chunks of ``std_msgs/Int32MultiArray`` (``dtype`` int32) or
+    ``Int64MultiArray`` (int64): dim 0 labelled ``rows_label``, dim 1 labelled
+    with the comma-joined ``columns``, ``data_offset`` 0, row-major data."""
+
+    def __init__(self, columns: Sequence[str], dtype: type[np.integer], rows_label: str = "steps") -> None:
+        self.columns = tuple(columns)
+        self.cols = len(self.columns)
+        self.dtype = np.dtype(dtype).newbyteorder("<")
+        if self.dtype.kind != "i" or self.dtype.itemsize not in (4, 8):
+            raise ValueError(f"dtype={dtype!r} is invalid: must be int32 or int64")
+        self.label = ",".join(self.columns)
+        # body up to dim[0].size: count 2, label of dim 0
+        w = _Writer()
+        w.u32(2)
+        w.string(rows_label)
+        self._size0 = w.u32(0)
+        w.u32(0)  # stride of dim 0
+        w.string(self.label)
+        w.u32(self.cols)
+        w.u32(self.cols)
+        w.u32(0)  # data_offset
+        self._count = w.u32(0)
+        w.align(self.dtype.itemsize)
+        self._expect = _HEADER + bytes(w.buf)  # the header, sizes aside
+        # the bytes a decoded header must match: all but the sizes and the
+        # alignment padding (a serializer may leave padding uninitialised)
+        sizes = (self._size0, self._size0 + 4, self._count)
+        self._fixed = [(0, 2)] + [(a + 4, b + 4) for a, b in w.spans if a not in sizes]
+
+    def encode(self, rows: npt.ArrayLike) -> bytes:
+        """The payload of an (n, columns) array of rows."""
+        a = np.ascontiguousarray(rows, dtype=self.dtype)
+        if a.ndim != 2 or a.shape[1] != self.cols:
+            raise ValueError(f"rows of shape {a.shape} must be (n, {self.cols})")
+        n = a.shape[0]
+        head = bytearray(self._expect)
+        struct.pack_into("<II", head, 4 + self._size0, n, n * self.cols)
+        struct.pack_into("<I", head, 4 + self._count, n * self.cols)
+        return b"".join((head, memoryview(a).cast("B")))
+
+    def decode(self, raw: bytes) -> npt.NDArray[np.integer]:
+        """The (n, columns) rows of a payload, a read-only view of it; ValueError
+        if the payload is not such a chunk (other layout, truncated)."""
+        h = len(self._expect)
+        if len(raw) < h or any(raw[a:b] != self._expect[a:b] for a, b in self._fixed):
+            raise ValueError(f"chunk layout is not (steps, {self.label}): {self._describe(raw)}")
+        n, stride = struct.unpack_from("<II", raw, 4 + self._size0)
+        (count,) = struct.unpack_from("<I", raw, 4 + self._count)
+        if stride != n * self.cols or count != n * self.cols:
+            raise ValueError(f"chunk holds {count} values, layout says {n} x {self.cols}")
+        if len(raw) < h + count * self.dtype.itemsize:
+            raise ValueError(f"chunk is truncated: {len(raw)} bytes for {n} x {self.cols} values")
+        return np.frombuffer(raw, self.dtype, count, h).reshape(n, self.cols)
+
+    @staticmethod
+    def _describe(raw: bytes) -> str:
+        """Best-effort (label, size) list of a payload's dimensions, for messages."""
+        try:
+            (ndim,) = struct.unpack_from("<I", raw, 4)
+            o, dims = 8, []
+            for _ in range(min(ndim, 8)):
+                (ln,) = struct.unpack_from("<I", raw, o)
+                label = raw[o + 4 : o + 3 + ln].decode(errors="replace")
+                o += 4 + ln
+                o += -(o - 4) % 4
+                size, _stride = struct.unpack_from("<II", raw, o)
+                o += 8
+                dims.append((label, size))
+            return str(dims)
+        except (struct.error, ValueError):
+            return f"{len(raw)} unreadable bytes"

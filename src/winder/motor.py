@@ -103,6 +103,13 @@ PAPER: dict[str, float] = {
 }
 
 FloatArray = npt.NDArray[np.float64]
+
+#: Damping ratios below which :class:`LinearTracker` sums modal terms (see
+#: ``LinearTracker._advance_modal``); at and above it, the blocked scan.
+#: kappa = -1 + i*zeta/sqrt(1 - zeta**2) stays below 3.1 in magnitude.
+MODAL_ZETA = 0.95
+#: Largest sigma*(t - b) within one window of the modal sum: terms up to e**30.
+MODAL_WINDOW = 30.0
 ArrayLike = float | Sequence[float] | npt.NDArray[np.floating]
 
 
@@ -135,9 +142,7 @@ def _angles(step_angle: object, n: int) -> FloatArray:
     if a.ndim == 0:
         a = np.full(n, float(a))
     elif a.ndim != 1 or a.size != n:
-        raise ValueError(
-            f"step_angle has shape {a.shape}: must be a scalar or one angle per step ({n})"
-        )
+        raise ValueError(f"step_angle has shape {a.shape}: must be a scalar or one angle per step ({n})")
     if not np.all(np.isfinite(a)):
         raise ValueError("step_angle contains non-finite values: all must be finite (rad)")
     return a
@@ -224,11 +229,27 @@ class LinearTracker:
     a call are kept pending until a sample reaches them.
     """
 
-    def __init__(self, axis: StepperAxis) -> None:
+    def __init__(self, axis: StepperAxis, method: Literal["auto", "modal", "scan"] = "auto") -> None:
         self._axis = axis
         self._t = -math.inf  # time of the held state (last applied step); -inf: at rest
         self._z = (0.0, 0.0)  # error state (theta - theta1, omega) just after that step
         self._cmd = 0.0  # theta1 after the applied steps (rad)
+        zeta = axis.damping_ratio
+        if method not in ("auto", "modal", "scan"):
+            raise ValueError(f"method={method!r} is invalid: must be 'auto', 'modal' or 'scan'")
+        if method == "modal" and not zeta < MODAL_ZETA:
+            raise ValueError(f"method='modal' needs damping ratio < {MODAL_ZETA}, this axis has {zeta!r}")
+        self._modal = method == "modal" or (method == "auto" and zeta < MODAL_ZETA)
+        if self._modal:
+            wn = axis.natural_frequency
+            sig = zeta * wn
+            wd = wn * math.sqrt((1.0 - zeta) * (1.0 + zeta))
+            self._lam = complex(-sig, wd)
+            self._kappa = complex(-1.0, sig / wd)
+            # widest time span over which the modal terms of one window are
+            # summed: e**(sigma*span) stays far from overflow
+            self._span = MODAL_WINDOW / sig if sig > 0 else math.inf
+            self._q = 0j  # modal error state at self._t (see _advance_modal)
         self._pend_t = np.empty(0)
         self._pend_a = np.empty(0)
         self._last_step = -math.inf
@@ -244,13 +265,11 @@ class LinearTracker:
     ) -> tuple[FloatArray, FloatArray]:
         """Add steps (times in s, signed angles in rad, scalar or per step) and return
         (theta, omega) at the non-decreasing ``t_samples`` (rad, rad/s)."""
-        st, sa, ts = _check_chunk(
-            step_times, step_angles, t_samples, self._last_step, self._last_sample
-        )
+        st, sa, ts = _check_chunk(step_times, step_angles, t_samples, self._last_step, self._last_sample)
         if st.size:
             self._last_step = float(st[-1])
-        ev_t = np.concatenate([self._pend_t, st])
-        ev_a = np.concatenate([self._pend_a, sa])
+        ev_t = np.concatenate([self._pend_t, st]) if self._pend_t.size else st
+        ev_a = np.concatenate([self._pend_a, sa]) if self._pend_a.size else sa
         if ts.size == 0:
             self._pend_t, self._pend_a = ev_t, ev_a
             return np.empty(0), np.empty(0)
@@ -259,6 +278,8 @@ class LinearTracker:
         app_t, app_a = ev_t[:n], ev_a[:n]
         self._pend_t, self._pend_a = ev_t[n:], ev_a[n:]
 
+        if self._modal:
+            return self._advance_modal(app_t, app_a, ts)
         if math.isinf(self._t):
             times, b0, b1 = app_t, -app_a, np.zeros(n)
             cmd = _cumulative(app_a)
@@ -284,12 +305,71 @@ class LinearTracker:
         self._cmd = float(cmd[-1])
         return theta, omega
 
+    def _advance_modal(
+        self, app_t: FloatArray, app_a: FloatArray, ts: FloatArray
+    ) -> tuple[FloatArray, FloatArray]:
+        """Below critical damping the error e = theta - theta1 is Re(q) and
+        omega = Re(lambda*q) for the complex modal state q, lambda = -sigma +
+        i*w_d: between steps q(t) = q(t0)*e**(lambda*(t - t0)), and a step of
+        angle d adds kappa*d, kappa = -1 + i*sigma/w_d. The state at a sample
+        is therefore a sum, with no pass over every step's state:
+
+            q(s) = e**(lambda*(s - b)) * (q(b) + kappa * sum_{b <= t_k <= s} d_k*e**(-lambda*(t_k - b)))
+
+        one complex exponential per step and a running sum. The base time b
+        moves to the first step after each window of ``MODAL_WINDOW / sigma``
+        seconds, so no term exceeds e**MODAL_WINDOW. Every term is rounded
+        relative to its own size and the factor e**(lambda*(s - b)) scales it
+        back to its true contribution, so the error is that of summing the
+        contributions directly. The state is held at the last sample time."""
+        lam, kappa = self._lam, self._kappa
+        n = app_t.size
+        base, q = self._t, self._q
+        if math.isinf(base):  # at rest (q = 0): any base up to the first event
+            base = min(float(app_t[0]), float(ts[0])) if n else float(ts[0])
+        cmd_at = self._cmd + np.concatenate([[0.0], _cumulative(app_a)])  # after j steps
+        k_all = np.searchsorted(app_t, ts, side="right")  # steps applied at each sample
+        theta = np.empty(ts.size)
+        omega = np.empty(ts.size)
+        lo = s_lo = 0
+        while True:
+            hi = int(np.searchsorted(app_t, base + self._span, side="right")) if lo < n else n
+            # this window's samples: all those that need no later step
+            s_hi = ts.size if hi == n else int(np.searchsorted(k_all, hi, side="right"))
+            qk = np.empty(hi - lo + 1, np.complex128)  # at b, after 0..hi-lo of the window's steps
+            qk[0] = 0.0
+            if hi > lo:
+                u = np.exp(lam * (base - app_t[lo:hi]))
+                u *= app_a[lo:hi]
+                np.cumsum(u, out=qk[1:])
+                qk *= kappa
+            qk += q
+            if s_hi > s_lo:
+                k = k_all[s_lo:s_hi]
+                qs = qk[k - lo] * np.exp(lam * (ts[s_lo:s_hi] - base))
+                theta[s_lo:s_hi] = cmd_at[k] + qs.real
+                omega[s_lo:s_hi] = (lam * qs).real
+            if hi == n:
+                break
+            nb = float(app_t[hi])
+            q = complex(qk[-1] * np.exp(lam * (nb - base)))
+            base, lo, s_lo = nb, hi, s_hi
+        t_end = float(ts[-1])  # every applied step is <= the last sample
+        self._q = complex(qk[-1] * np.exp(lam * (t_end - base)))
+        self._t = t_end
+        self._cmd = float(cmd_at[-1])
+        return theta, omega
+
 
 def _cumulative(a: FloatArray) -> FloatArray:
     """Running sum of step angles; exact (one rounding per entry) when all have the
     same magnitude, as in a feed of +-step, by counting steps in integers."""
-    if a.size and np.all(np.abs(a) == abs(a[0])):
-        return abs(float(a[0])) * np.cumsum(np.sign(a).astype(np.int64)).astype(np.float64)
+    if a.size:
+        unit = abs(float(a[0]))
+        signs = a / unit if unit else a
+        if unit and np.all(np.abs(signs) == 1.0):
+            # a float running sum of +-1 is exact below 2**53 steps
+            return unit * np.cumsum(signs, out=signs)
     return np.cumsum(a)
 
 
@@ -355,9 +435,7 @@ class NonlinearTracker:
         else:
             v = float(load)
             if not math.isfinite(v):
-                raise ValueError(
-                    f"load={load!r} is invalid: must be a finite torque (N*m) or LoadStep"
-                )
+                raise ValueError(f"load={load!r} is invalid: must be a finite torque (N*m) or LoadStep")
             self._lt, self._l_before, self._l_after = math.inf, v, v
         if not math.isfinite(t0):
             raise ValueError(f"t0={t0!r} is invalid: must be finite (s)")
@@ -411,21 +489,15 @@ class NonlinearTracker:
         self, step_times: ArrayLike, step_angles: ArrayLike, t_samples: ArrayLike
     ) -> tuple[FloatArray, FloatArray]:
         """Add steps and return (theta, omega) at ``t_samples``; see :class:`LinearTracker`."""
-        st, sa, ts = _check_chunk(
-            step_times, step_angles, t_samples, self._last_step, self._last_sample
-        )
+        st, sa, ts = _check_chunk(step_times, step_angles, t_samples, self._last_step, self._last_sample)
         if st.size and st[0] < self._t:
-            raise ValueError(
-                f"step_times[0]={float(st[0])!r} is invalid: must be >= t0={self._t!r} s"
-            )
+            raise ValueError(f"step_times[0]={float(st[0])!r} is invalid: must be >= t0={self._t!r} s")
         if ts.size and ts[0] < self._t:
-            raise ValueError(
-                f"t_samples[0]={float(ts[0])!r} is invalid: must be >= t0={self._t!r} s"
-            )
+            raise ValueError(f"t_samples[0]={float(ts[0])!r} is invalid: must be >= t0={self._t!r} s")
         if st.size:
             self._last_step = float(st[-1])
-        ev_t = np.concatenate([self._pend_t, st])
-        ev_a = np.concatenate([self._pend_a, sa])
+        ev_t = np.concatenate([self._pend_t, st]) if self._pend_t.size else st
+        ev_a = np.concatenate([self._pend_a, sa]) if self._pend_a.size else sa
         theta = np.empty(ts.size)
         omega = np.empty(ts.size)
         if ts.size == 0:
@@ -562,9 +634,7 @@ def _gbs(
             r = (n / (2 * (j - i))) ** 2 - 1.0
             row_e.append(row_e[i] + (row_e[i] - te[i]) / r)
             row_w.append(row_w[i] + (row_w[i] - tw[i]) / r)
-        if j >= 2 and (
-            abs(row_e[j] - row_e[j - 1]) <= tol_e and abs(row_w[j] - row_w[j - 1]) <= tol_w
-        ):
+        if j >= 2 and (abs(row_e[j] - row_e[j - 1]) <= tol_e and abs(row_w[j] - row_w[j - 1]) <= tol_w):
             return row_e[j], row_w[j]
         te, tw = row_e, row_w
     return None
@@ -608,9 +678,7 @@ class StepperAxis:
         """The 2012 paper's motor (:data:`PAPER`), optionally with some values replaced."""
         unknown = sorted(set(overrides) - set(PAPER))
         if unknown:
-            raise ValueError(
-                f"paper({unknown[0]}=...) is invalid: only {list(PAPER)} can be replaced"
-            )
+            raise ValueError(f"paper({unknown[0]}=...) is invalid: only {list(PAPER)} can be replaced")
         p = {**PAPER, **overrides}
         return cls(p["Zr"], p["L"], p["i_a"], p["J"], p["D"])
 
@@ -858,9 +926,7 @@ class StepperAxis:
         )
 
 
-def measured_velocity(
-    theta: ArrayLike, period: float, *, resolution: float | None = None
-) -> FloatArray:
+def measured_velocity(theta: ArrayLike, period: float, *, resolution: float | None = None) -> FloatArray:
     """Velocity as a controller reads it from an encoder (rad/s).
 
     ``theta`` are true angles (rad) sampled every ``period`` s. With

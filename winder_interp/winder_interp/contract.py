@@ -42,6 +42,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Int32MultiArray, Int64MultiArray, MultiArrayDimension
 
+from winder.cdr import MultiArrayCodec
 from winder.spec import Spec, SpecError
 from winder.stream import STEP_COLUMNS, TIMED_COLUMNS
 
@@ -76,6 +77,12 @@ def _layout(msg: Int32MultiArray | Int64MultiArray, rows: int, columns: Sequence
         MultiArrayDimension(label=",".join(columns), size=cols, stride=cols),
     ]
     msg.layout.data_offset = 0
+
+
+#: The chunks of winder/steps and winder/step_times as serialized payloads:
+#: the nodes publish and take these bytes directly (no message objects).
+STEPS_CDR = MultiArrayCodec(STEP_COLUMNS, np.int32)
+TIMED_CDR = MultiArrayCodec(TIMED_COLUMNS, np.int64)
 
 
 def pack_steps(rows: npt.NDArray[np.integer[Any]]) -> Int32MultiArray:

@@ -32,13 +32,13 @@ from winder_interp.contract import (
     QOS_LATCHED,
     QOS_STATE,
     QOS_STREAM,
+    STEPS_CDR,
     TOPIC_JOB,
     TOPIC_PATH,
     TOPIC_PROGRESS,
     TOPIC_STEPS,
     Diagnostics,
     Settings,
-    pack_steps,
     spin,
 )
 
@@ -155,7 +155,7 @@ class InterpNode(Node):
                 self.finished = True
                 self.report()
                 return
-            self.pub_steps.publish(pack_steps(rows))
+            self.pub_steps.publish(STEPS_CDR.encode(rows))
             self.sent += rows.shape[0]
 
     def report(self) -> None:

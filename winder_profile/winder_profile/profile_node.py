@@ -20,13 +20,14 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 from rclpy.node import Node
-from rclpy.serialization import deserialize_message
 from std_msgs.msg import Int32MultiArray, Int64MultiArray, String
 from winder_interp.contract import (
     ERROR,
     OK,
     QOS_LATCHED,
     QOS_STREAM,
+    STEPS_CDR,
+    TIMED_CDR,
     TOPIC_JOB,
     TOPIC_PROFILE_CONFIG,
     TOPIC_STEP_TIMES,
@@ -34,13 +35,11 @@ from winder_interp.contract import (
     WARN,
     Diagnostics,
     Settings,
-    pack_timed,
     spin,
-    unpack,
 )
 
 from winder.params import PROFILE_SPECS, check_profile, plan_segment
-from winder.stream import STEP_COLUMNS, JobPlan, StreamChecker, parse_job_description
+from winder.stream import JobPlan, StreamChecker, parse_job_description
 
 
 class ProfileNode(Node):
@@ -114,7 +113,7 @@ class ProfileNode(Node):
             self.early.append(raw)  # the job description is on its way
             return
         try:
-            rows = unpack(deserialize_message(raw, Int32MultiArray), STEP_COLUMNS)
+            rows = STEPS_CDR.decode(raw)
         except ValueError as exc:
             self.fail(f"bad steps chunk: {exc}")
             return
@@ -135,7 +134,7 @@ class ProfileNode(Node):
         out = np.empty((rows.shape[0], 5), np.int64)
         out[:, 0] = self.seg_t0_ns[seg] + np.rint(times * 1e9).astype(np.int64)
         out[:, 1:] = rows
-        self.pub.publish(pack_timed(out))
+        self.pub.publish(TIMED_CDR.encode(out))
         self.timed += rows.shape[0]
         if self.checker.complete:
             self.report()

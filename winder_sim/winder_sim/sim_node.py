@@ -40,6 +40,7 @@ from winder_interp.contract import (
     QOS_LATCHED,
     QOS_STATE,
     QOS_STREAM,
+    TIMED_CDR,
     TOPIC_CLOCK,
     TOPIC_DIAGNOSTICS,
     TOPIC_JOB,
@@ -54,7 +55,6 @@ from winder_interp.contract import (
     Diagnostics,
     Settings,
     spin,
-    unpack,
 )
 
 from winder.bag import BagRecorder, new_bag_path, signals_held
@@ -63,7 +63,7 @@ from winder.interp import line_distance
 from winder.job import AXES
 from winder.motor import StepperAxis
 from winder.params import MOTOR_FIELDS, SIM_SPECS, check_sim
-from winder.stream import TIMED_COLUMNS, JobPlan, StreamChecker, parse_job_description
+from winder.stream import JobPlan, StreamChecker, parse_job_description
 
 PATH_WAIT = 2.0  # s of wall time the steps wait for the job's path and profile config
 # Running ahead of time, chunks are gathered and simulated together (one tracker
@@ -331,7 +331,7 @@ class SimNode(Node):
         """The rows of a chunk that may be simulated, or None (reported)."""
         assert self.checker is not None
         try:
-            rows = unpack(deserialize_message(raw, Int64MultiArray), TIMED_COLUMNS)
+            rows = TIMED_CDR.decode(raw)
         except ValueError as exc:
             self.error(f"bad step_times chunk: {exc}")
             return None
