@@ -154,7 +154,7 @@ class MultiArrayCodec:
         head = bytearray(self._expect)
         struct.pack_into("<II", head, 4 + self._size0, n, n * self.cols)
         struct.pack_into("<I", head, 4 + self._count, n * self.cols)
-        return b"".join((head, memoryview(a).cast("B")))
+        return b"".join((head, a.data))
 
     def decode(self, raw: bytes) -> npt.NDArray[np.integer]:
         """The (n, columns) rows of a payload, a read-only view of it; ValueError
