@@ -115,7 +115,7 @@ def once_in_dir(fn: Callable[[Path], None]) -> Callable[[], None]:
 
 def write_recorder(topic: str, msgtype: str, msgs: Payloads) -> Callable[[Path], None]:
     def fn(d: Path) -> None:
-        bag = BagRecorder(d / "bag", {topic: msgtype})
+        bag = BagRecorder(d / "bag", {topic: msgtype}, compression="none")  # like the anchors
         for t, data in msgs:
             bag.write(topic, t, data)
         bag.close()

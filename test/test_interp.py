@@ -15,6 +15,7 @@ from winder.interp import (
     dda,
     deviation_stats,
     interpolate,
+    line_distance,
     min_deviation,
     point_by_point,
 )
@@ -231,3 +232,41 @@ def test_interpolate_three_axes() -> None:
 def test_bad_input_names_the_parameter(call, match: str) -> None:  # type: ignore[no-untyped-def]
     with pytest.raises(ValueError, match=match):
         call()
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.integers(-(2**31), 2**31),
+    st.integers(-(2**31), 2**31),
+    st.tuples(st.integers(-(2**30), 2**30), st.integers(-(2**30), 2**30)),
+    st.integers(0, 2**32 - 1),
+    st.floats(1e-7, 1e-2),
+    st.floats(1e-7, 1e-2),
+)
+def test_line_distance_is_the_perpendicular_distance_to_the_moved_line(
+    dx: int, dy: int, origin: tuple[int, int], seed: int, lx: float, ly: float
+) -> None:
+    """eq. 5 in physical units, from any start, against the cross product of
+    the physical vectors computed here in exact rationals."""
+    from fractions import Fraction
+
+    rng = np.random.default_rng(seed)
+    pts = np.column_stack(
+        [origin[0] + rng.integers(-(2**31), 2**31, 20), origin[1] + rng.integers(-(2**31), 2**31, 20)]
+    )
+    got = line_distance(pts, dx, dy, step_lengths=(lx, ly), origin=origin)
+    got_real = line_distance(pts.astype(np.float64), dx, dy, step_lengths=(lx, ly), origin=origin)
+    for (x, y), g, gr in zip(pts.tolist(), got, got_real, strict=True):
+        if dx == 0 and dy == 0:
+            assert g == 0.0
+            continue
+        cross = (
+            abs(Fraction(dx) * (y - origin[1]) - Fraction(x - origin[0]) * dy) * Fraction(lx) * Fraction(ly)
+        )
+        ref = float(cross) / math.hypot(dx * lx, dy * ly)
+        assert g == pytest.approx(ref, rel=1e-12, abs=1e-300)
+        # real positions: float products, rounding relative to their size
+        size = (
+            (abs(dx * (y - origin[1])) + abs((x - origin[0]) * dy)) * lx * ly / math.hypot(dx * lx, dy * ly)
+        )
+        assert abs(gr - ref) <= 1e-15 * size + 1e-12 * ref

@@ -211,14 +211,22 @@ def interpolate(
     return out
 
 
-def _abs_f(p: npt.NDArray[Any], dx: int, dy: int) -> npt.NDArray[np.float64]:
-    """|F| = |dx*y - x*dy| of each row (x, y): exact in int64 for step
-    positions (|dx*y| < 2**62 within MAX_STEPS), in float for real ones."""
+def _abs_f(
+    p: npt.NDArray[Any], dx: int, dy: int, origin: tuple[int, int] = (0, 0)
+) -> npt.NDArray[np.float64]:
+    """|F| = |dx*(y - y0) - (x - x0)*dy| of each row (x, y): exact in int64
+    for step positions (|dx*y| < 2**62 within MAX_STEPS), in float for real
+    ones. Column by column: no copy of a strided (N, 2) view."""
+    x0, y0 = (int(v) for v in origin)
     if np.issubdtype(p.dtype, np.integer):
         pi = p.astype(np.int64, copy=False)
-        f: npt.NDArray[np.float64] = np.abs(int(dx) * pi[:, 1] - pi[:, 0] * int(dy)).astype(np.float64)
+        fi = int(dx) * pi[:, 1]
+        fi -= pi[:, 0] * int(dy)
+        if x0 or y0:
+            fi -= int(dx) * y0 - x0 * int(dy)
+        f: npt.NDArray[np.float64] = np.abs(fi, out=fi).astype(np.float64)
         return f
-    return np.abs(dx * p[:, 1].astype(np.float64) - p[:, 0].astype(np.float64) * dy)
+    return np.abs(dx * (p[:, 1].astype(np.float64) - y0) - (p[:, 0].astype(np.float64) - x0) * dy)
 
 
 def _distance_scale(dx: int, dy: int, step_lengths: tuple[float, float]) -> float:
@@ -230,17 +238,22 @@ def _distance_scale(dx: int, dy: int, step_lengths: tuple[float, float]) -> floa
 
 
 def line_distance(
-    points: npt.ArrayLike, dx: int, dy: int, *, step_lengths: tuple[float, float] = (1.0, 1.0)
+    points: npt.ArrayLike,
+    dx: int,
+    dy: int,
+    *,
+    step_lengths: tuple[float, float] = (1.0, 1.0),
+    origin: tuple[int, int] = (0, 0),
 ) -> npt.NDArray[np.float64]:
-    """Perpendicular distance of each point (x, y), in steps relative to the
-    move's start (integers, or real positions of a simulated axis), to the line
-    (0, 0) -> (dx, dy), in the physical units of ``step_lengths`` (eq. 5)."""
+    """Perpendicular distance of each point (x, y), in steps (integers, or real
+    positions of a simulated axis), to the line from the move's start
+    ``origin`` along (dx, dy), in the physical units of ``step_lengths`` (eq. 5)."""
     p = np.asarray(points)
     if p.ndim != 2 or p.shape[1] != 2:
         raise ValueError(f"points have shape {p.shape}: must be (N, 2)")
     if dx == 0 and dy == 0:
         return np.zeros(p.shape[0])
-    return _abs_f(p, dx, dy) * _distance_scale(dx, dy, step_lengths)
+    return _abs_f(p, dx, dy, origin) * _distance_scale(dx, dy, step_lengths)
 
 
 @dataclass(frozen=True)

@@ -130,10 +130,17 @@ def _vector(name: str, value: object, *, sorted_: bool = False) -> FloatArray:
         a = a.reshape(1)
     if a.ndim != 1:
         raise ValueError(f"{name} has shape {a.shape}: must be a 1-D array of times/angles")
-    if not np.all(np.isfinite(a)):
+    if sorted_ and a.size > 1:
+        # one pass: NaN fails every comparison, so it reads as unsorted unless
+        # the order holds, and then only the ends can be infinite
+        if not np.all(a[1:] >= a[:-1]):
+            if not np.all(np.isfinite(a)):
+                raise ValueError(f"{name} contains non-finite values: all must be finite")
+            raise ValueError(f"{name} is not sorted: must be non-decreasing (s)")
+        if not (math.isfinite(a[0]) and math.isfinite(a[-1])):
+            raise ValueError(f"{name} contains non-finite values: all must be finite")
+    elif not np.all(np.isfinite(a)):
         raise ValueError(f"{name} contains non-finite values: all must be finite")
-    if sorted_ and a.size > 1 and np.any(np.diff(a) < 0):
-        raise ValueError(f"{name} is not sorted: must be non-decreasing (s)")
     return a
 
 

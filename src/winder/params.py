@@ -95,6 +95,9 @@ MOTOR_FIELDS = _table(
     Spec("load_torque", float, 0.0, "constant load torque (nonlinear model)", "N m", -100.0, 100.0),
 )
 
+#: MCAP chunk compressions of the sim node's bags (see winder.bag).
+BAG_COMPRESSIONS = ("zstd", "none")
+
 SIM_SPECS = {
     **_table(
         Spec("model", str, "linear", "motor model", choices=("linear", "nonlinear")),
@@ -107,6 +110,13 @@ SIM_SPECS = {
             "bag_dir", str, "bags", "directory for recordings", pattern=r".+", pattern_text="a directory path"
         ),
         Spec("record", bool, True, "record each job into an MCAP bag"),
+        Spec(
+            "bag_compression",
+            str,
+            "zstd",
+            "MCAP chunk compression of the bag (zstd: about a tenth of the size)",
+            choices=BAG_COMPRESSIONS,
+        ),
         Spec("settle_time", float, 0.05, "simulated time after the last step", "s", 0.0, 60.0),
         Spec(
             "stall_timeout",

@@ -13,6 +13,7 @@ a dropped, duplicated or reordered chunk shows up at its first row.
 
 from __future__ import annotations
 
+import collections
 import json
 from dataclasses import dataclass, field
 from typing import Any
@@ -144,6 +145,10 @@ class StreamChecker:
     rejected_steps: int = field(init=False, default=0)  #: steps in refused chunks
 
     def __post_init__(self) -> None:
+        # step count before each segment, and the recent gaps in that count:
+        # a refused chunk inside one arrived late, anywhere else it is a repeat
+        self._offsets = np.concatenate([[0], np.cumsum([s.steps for s in self.plan.segments])]).tolist()
+        self._gaps: collections.deque[tuple[int, int]] = collections.deque(maxlen=64)
         self.position = np.zeros(len(self.plan.segments[0].start) if self.plan.segments else 3, np.int64)
         if self.plan.segments:
             self.position[:] = self.plan.segments[0].start
@@ -170,15 +175,24 @@ class StreamChecker:
             return self._reject("bad", "empty chunk")
         if not 0 <= segment < len(segs):
             return self._reject("bad", f"segment {segment} out of range 0..{len(segs) - 1}")
-        steps = np.diff(pos, axis=0)
-        if n > 1 and (np.any(np.abs(steps) > 1) or np.any(np.all(steps == 0, axis=1))):
-            return self._reject("bad", f"segment {segment}: rows inside the chunk are not single steps")
         seg = segs[segment]
         k = self.step_index(segment, pos)
+        # single steps: no axis moves by more than one step per row, and the
+        # major axis (which moves on every step) covers n - 1 steps in n - 1
+        # rows, so it moves on every row; column by column (a 1-D pass each is
+        # much cheaper than one over the strided (n, axes) block)
+        if n > 1 and (
+            int(k[-1]) - int(k[0]) != n - 1
+            or any(not -1 <= int(d.min()) <= int(d.max()) <= 1 for d in map(np.diff, pos.T))
+        ):
+            return self._reject("bad", f"segment {segment}: rows inside the chunk are not single steps")
         here = self.step_index(segment, self.position[None, :])[0] if segment == self.segment else 0
         if segment < self.segment or (segment == self.segment and k[0] <= here):
-            kind = "duplicate" if segment == self.segment and k[-1] <= here else "reorder"
-            return self._reject(kind, f"segment {segment} steps {k[0]}..{k[-1]} arrived again or late")
+            # late if it falls into a gap reported before, else a repeat
+            first, last = self._offsets[segment] + int(k[0]), self._offsets[segment] + int(k[-1])
+            late = any(a <= last and first <= b for a, b in self._gaps)
+            kind, why = ("reorder", "arrived late") if late else ("duplicate", "arrived again")
+            return self._reject(kind, f"segment {segment} steps {k[0]}..{k[-1]} {why}")
         verdict = ChunkVerdict(True, "ok")
         expected_first = here + 1 if segment == self.segment else 1
         # steps skipped: rest of the current segment, whole segments between, head of this one
@@ -188,6 +202,10 @@ class StreamChecker:
             missing += sum(s.steps for s in segs[self.segment + 1 : segment])
         missing += int(k[0]) - expected_first
         if missing:
+            here_global = self._offsets[self.segment] + int(
+                self.step_index(self.segment, self.position[None, :])[0]
+            )
+            self._gaps.append((here_global + 1, self._offsets[segment] + int(k[0]) - 1))
             self.gaps += 1
             self.missing += missing
             verdict = ChunkVerdict(

@@ -118,7 +118,7 @@ class ProfileNode(Node):
             self.fail(f"bad steps chunk: {exc}")
             return
         seg = int(rows[0, 0])
-        pos = rows[:, 1:].astype(np.int64)
+        pos = rows[:, 1:]
         verdict = self.checker.check(seg, pos)
         if verdict.kind != "ok":
             self.get_logger().error(verdict.message)

@@ -222,7 +222,9 @@ class SimNode(Node):
         self.pub_config.publish(config)
         if values["record"]:
             path = new_bag_path(Path(values["bag_dir"]), plan.job_id)
-            self.bag = BagRecorder(path, {self.topic[k]: t for k, t in BAG_TYPES.items()})
+            self.bag = BagRecorder(
+                path, {self.topic[k]: t for k, t in BAG_TYPES.items()}, compression=values["bag_compression"]
+            )
             self.bag.write(self.topic["job"], 0, raw)
             self.bag.write(self.topic["sim_config"], 0, serialize_message(config))
         self.job_wall = time.monotonic()
@@ -378,26 +380,28 @@ class SimNode(Node):
         act_pos = np.empty((samples.size, len(AXES)))
         act_vel = np.empty((samples.size, len(AXES)))
         seg_of_sample = None
+        j = np.empty(0, np.int64)
+        if rows is not None and t_s is not None:
+            j = np.searchsorted(t_s, samples, side="right") - 1  # last row at or before each sample
+            seg_of_sample = rows[np.maximum(j, 0), 1]
         for i, ax in enumerate(self.axes):
             if rows is not None and t_s is not None:
                 p = rows[:, 2 + i]
-                d = np.diff(np.concatenate([[ax.position], p]))
-                moved = d != 0
-                ev_t, ev_a = t_s[moved], d[moved] * ax.step_angle
+                d = np.empty(p.size, np.int64)
+                d[0] = p[0] - ax.position
+                np.subtract(p[1:], p[:-1], out=d[1:])
+                if np.count_nonzero(d) == d.size:  # the major axis: every row is its step
+                    ev_t, dm = t_s, d
+                else:
+                    moved = d != 0
+                    ev_t, dm = t_s[moved], d[moved]
+                ev_a = dm * ax.step_angle
                 # commanded step position at each sample (a step at a sample time counts)
-                j = np.searchsorted(t_s, samples, side="right") - 1
                 cmd_steps = np.where(j >= 0, p[np.maximum(j, 0)], ax.position)
                 # commanded velocity: one step per interval since the axis' step
                 # before; once the axis pauses it decays as 1 / (time since the step)
-                at = np.concatenate([[ax.last_step_t], ev_t])
-                dirs = np.concatenate([[ax.last_dir], np.sign(d[moved]).astype(float)])
-                dts = np.concatenate([[ax.last_dt], np.diff(at)])
-                jj = np.maximum(np.searchsorted(at, samples, side="right") - 1, 0)
-                v_steps = dirs[jj] / np.maximum(dts[jj], samples - at[jj])
-                ax.last_step_t, ax.last_dir, ax.last_dt = float(at[-1]), float(dirs[-1]), float(dts[-1])
+                v_steps = self.command_velocity(ax, ev_t, dm, samples)
                 ax.position = int(p[-1])
-                if i == 0:
-                    seg_of_sample = rows[np.maximum(np.searchsorted(t_s, samples, side="right") - 1, 0), 1]
             else:
                 ev_t, ev_a = np.empty(0), np.empty(0)
                 cmd_steps = np.full(samples.size, ax.position)
@@ -417,13 +421,40 @@ class SimNode(Node):
                 {"k": ks, "cmd_pos": cmd_pos, "cmd_vel": cmd_vel, "act_pos": act_pos, "act_vel": act_vel}
             )
 
+    @staticmethod
+    def command_velocity(
+        ax: AxisSim,
+        ev_t: npt.NDArray[np.float64],
+        dm: npt.NDArray[np.int64],
+        samples: npt.NDArray[np.float64],
+    ) -> npt.NDArray[np.float64]:
+        """Commanded velocity (steps/s) at the samples from the axis' steps
+        ``ev_t`` (s) of signs ``dm``: the direction of its last step over the
+        longer of that step's interval and the time since it; updates the
+        axis' last step, direction and interval."""
+        m = ev_t.size
+        if m == 0:
+            return ax.last_dir / np.maximum(ax.last_dt, samples - ax.last_step_t)
+        jj = np.searchsorted(ev_t, samples, side="right")  # this call's steps at or before each sample
+        last = np.maximum(jj - 1, 0)
+        before = np.where(jj >= 2, ev_t[np.maximum(jj - 2, 0)], ax.last_step_t)
+        t_at = np.where(jj >= 1, ev_t[last], ax.last_step_t)
+        dirs = np.where(jj >= 1, np.sign(dm[last]), ax.last_dir)
+        with np.errstate(invalid="ignore"):  # -inf - -inf before an axis' first step, not chosen
+            dts = np.where(jj >= 1, t_at - before, ax.last_dt)
+        v: npt.NDArray[np.float64] = dirs / np.maximum(dts, samples - t_at)
+        prev = float(ev_t[-2]) if m >= 2 else ax.last_step_t
+        ax.last_step_t, ax.last_dir = float(ev_t[-1]), float(np.sign(dm[-1]))
+        ax.last_dt = ax.last_step_t - prev
+        return v
+
     def deviation_of_commands(self, seg: int, pos: npt.NDArray[np.int64]) -> None:
         assert self.plan is not None
         s = self.plan.segments[seg]
         if s.kind != "layer":
             return
-        rel = pos[:, :2].astype(np.int64) - np.asarray(s.start[:2])
-        self.accumulate(self.dev_cmd, line_distance(rel, s.delta[0], s.delta[1], step_lengths=self.lxly))
+        dist = line_distance(pos[:, :2], s.delta[0], s.delta[1], step_lengths=self.lxly, origin=s.start[:2])
+        self.accumulate(self.dev_cmd, dist)
 
     def deviation_of_axes(self, segs: npt.NDArray[np.int64], act_pos: npt.NDArray[np.float64]) -> None:
         assert self.plan is not None

@@ -1,0 +1,67 @@
+"""BagRecorder: what it writes, read back by rosbags and by the mcap library
+(the reference readers), with and without chunk compression, and how its
+writer thread reports a failure."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from rosbags.highlevel import AnyReader
+
+from winder.bag import BagRecorder
+from winder.cdr import MultiArrayCodec
+from winder.stream import TIMED_COLUMNS
+
+TIMED = MultiArrayCodec(TIMED_COLUMNS, np.int64)
+TOPICS = {"/winder/step_times": "std_msgs/msg/Int64MultiArray", "/winder/job": "std_msgs/msg/String"}
+
+
+def string_payload(text: str) -> bytes:
+    data = text.encode() + b"\x00"
+    return b"\x00\x01\x00\x00" + len(data).to_bytes(4, "little") + data
+
+
+@pytest.mark.parametrize("compression", ["zstd", "none"])
+def test_every_message_reads_back_in_order(tmp_path: Path, compression: str) -> None:
+    rng = np.random.default_rng(3)
+    sent = [("/winder/job", 0, string_payload('{"job": "x"}'))]
+    for i in range(40):  # ~13 MB: many 1 MiB chunks, written by the thread
+        rows = np.cumsum(rng.integers(0, 3, size=(8192, 5)), axis=0)
+        sent.append(("/winder/step_times", 1000 * i, TIMED.encode(rows)))
+    rec = BagRecorder(tmp_path / "b", TOPICS, compression=compression)
+    for topic, t, data in sent:
+        rec.write(topic, t, data)
+    rec.close()
+    assert not rec.is_open and rec.messages == len(sent)
+    with AnyReader([tmp_path / "b"]) as reader:
+        got = [(c.topic, t, bytes(d)) for c, t, d in reader.messages()]
+    assert got == sent
+    with next((tmp_path / "b").glob("*.mcap")).open("rb") as f:
+        summary = make_reader(f).get_summary()
+        assert summary is not None
+        kinds = {c.compression for c in summary.chunk_indexes}
+    assert kinds == ({"zstd"} if compression == "zstd" else {""})
+    mcap_size = next((tmp_path / "b").glob("*.mcap")).stat().st_size
+    raw_size = sum(len(d) for _, _, d in sent)
+    assert (mcap_size < raw_size / 3) if compression == "zstd" else (mcap_size > raw_size)
+
+
+def test_a_failure_of_the_writer_thread_is_raised_not_lost(tmp_path: Path) -> None:
+    rec = BagRecorder(tmp_path / "b", TOPICS)
+    rec.write("/winder/job", 0, "not bytes")  # type: ignore[arg-type]  # rosbags fails on it, in the thread
+    with pytest.raises(RuntimeError, match=r"writing failed"):
+        for _ in range(1000):  # the thread takes it up within this loop
+            rec.write("/winder/job", 0, string_payload("after"))
+            rec._thread.join(0.001)
+    with pytest.raises(RuntimeError, match=r"writing failed"):
+        rec.close()
+
+
+def test_unknown_compression_is_a_one_line_error(tmp_path: Path) -> None:
+    expected = r"^compression='lz5' is invalid: must be one of \('zstd', 'none'\)$"
+    with pytest.raises(ValueError, match=expected):
+        BagRecorder(tmp_path / "b", TOPICS, compression="lz5")
+    assert not (tmp_path / "b").exists()
