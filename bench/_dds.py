@@ -7,9 +7,9 @@ watcher of child processes' memory.
 The publisher sends ceil(N / 8192) Int32MultiArray chunks of (8192, 4) int32
 (what winder/steps carries) and as many Int64MultiArray chunks of (8192, 5)
 int64 (winder/step_times), the last chunk partial, through the same reliable
-keep-all QoS as the cell's stream topics, serialized once beforehand and
-published as bytes: the cheapest way to move those bytes, as the nodes move
-them. The subscriber takes them with
+keep-all QoS as the cell's stream topics, either as message objects
+(``--form message``: rclpy serializes them) or serialized once beforehand and
+published as bytes (``--form bytes``, as the nodes publish them). The subscriber takes them with
 ``raw=True`` (serialized bytes, no Python message objects) and counts bytes.
 Each prints one JSON line with its monotonic time stamps (one clock for all
 processes of the machine) and its peak resident memory (VmHWM).
@@ -146,20 +146,23 @@ def chunk_rows(rows: int) -> list[int]:
     return [CHUNK] * full + ([rest] if rest else [])
 
 
-def _messages(n: int) -> tuple[bytes, bytes]:
-    """The two chunks of n rows, serialized once (the nodes publish bytes too)."""
+def _messages(n: int, form: str) -> tuple[object, object]:
+    """The two chunks of n rows: message objects (rclpy serializes them on
+    publish) or bytes serialized once beforehand (what the nodes publish)."""
     import numpy as np
-    from winder_interp.contract import STEPS_CDR, TIMED_CDR
+    from winder_interp.contract import STEPS_CDR, TIMED_CDR, pack_steps, pack_timed
 
     steps = np.zeros((n, 4), np.int32)
     steps[:, 2] = np.arange(1, n + 1)
     timed = np.zeros((n, 5), np.int64)
     timed[:, 0] = np.arange(1, n + 1) * 1000
     timed[:, 1:] = steps
-    return STEPS_CDR.encode(steps), TIMED_CDR.encode(timed)
+    if form == "bytes":
+        return STEPS_CDR.encode(steps), TIMED_CDR.encode(timed)
+    return pack_steps(steps), pack_timed(timed)
 
 
-def run_pub(rows: int, timeout: float) -> dict[str, float | int]:
+def run_pub(rows: int, timeout: float, form: str = "message") -> dict[str, float | int]:
     import rclpy
     from rclpy.duration import Duration
     from std_msgs.msg import Int32MultiArray, Int64MultiArray
@@ -172,7 +175,7 @@ def run_pub(rows: int, timeout: float) -> dict[str, float | int]:
         p32 = node.create_publisher(Int32MultiArray, TOPIC_STEPS, QOS_STREAM)
         p64 = node.create_publisher(Int64MultiArray, TOPIC_TIMED, QOS_STREAM)
         sizes = chunk_rows(rows)
-        built = {n: _messages(n) for n in set(sizes)}  # built once: DDS cost only
+        built = {n: _messages(n, form) for n in set(sizes)}  # built once: DDS cost only
         t_end = time.monotonic() + timeout
         while p32.get_subscription_count() == 0 or p64.get_subscription_count() == 0:
             if time.monotonic() > t_end:
@@ -254,8 +257,12 @@ def main() -> None:
     ap.add_argument("role", choices=("pub", "sub"))
     ap.add_argument("--rows", type=int, required=True)
     ap.add_argument("--timeout", type=float, default=300.0)
+    ap.add_argument("--form", choices=("message", "bytes"), default="message")
     args = ap.parse_args()
-    out = (run_pub if args.role == "pub" else run_sub)(args.rows, args.timeout)
+    if args.role == "pub":
+        out = run_pub(args.rows, args.timeout, args.form)
+    else:
+        out = run_sub(args.rows, args.timeout)
     print(json.dumps(out), flush=True)
     sys.exit(0)
 

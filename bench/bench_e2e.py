@@ -171,8 +171,9 @@ def run_e2e(case: Case, timeout: float, keep: Path | None = None) -> dict[str, A
     return out
 
 
-def run_raw(rows: int, domain: int, timeout: float) -> dict[str, Any]:
-    """The raw DDS pair on ``rows`` rows of each stream."""
+def run_raw(rows: int, domain: int, timeout: float, form: str) -> dict[str, Any]:
+    """The raw DDS pair on ``rows`` rows of each stream, chunks published as
+    ``form`` (message objects or pre-serialized bytes)."""
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
     cmd = [sys.executable, str(HERE / "_dds.py")]
     t0 = time.monotonic()
@@ -183,7 +184,7 @@ def run_raw(rows: int, domain: int, timeout: float) -> dict[str, Any]:
         text=True,
     )
     pub = subprocess.Popen(
-        [*cmd, "pub", "--rows", str(rows), "--timeout", str(timeout)],
+        [*cmd, "pub", "--rows", str(rows), "--timeout", str(timeout), "--form", form],
         env=env,
         stdout=subprocess.PIPE,
         text=True,
@@ -200,6 +201,7 @@ def run_raw(rows: int, domain: int, timeout: float) -> dict[str, Any]:
         "cpu": p["cpu_s"] + s["cpu_s"],
         "pub_hwm": p["hwm_kb"],
         "sub_hwm": s["hwm_kb"],
+        "form": form,
     }
 
 
@@ -341,8 +343,9 @@ def main() -> None:
     for i, case in enumerate(cases):
         e2e_runs, raw_runs = [], []
         for rep in range(max(repeat, raw_repeat)):  # interleaved: the machine's noise hits both alike
-            if rep < raw_repeat:
-                raw_runs.append(run_raw(case.steps, 225 + i, timeout))
+            if rep < raw_repeat:  # both ways of publishing; the faster is the anchor
+                for form in ("message", "bytes"):
+                    raw_runs.append(run_raw(case.steps, 225 + i, timeout, form))
             if rep < repeat:
                 keep = scratch / "fast" if case.label == "1e6" and rep == 0 else None
                 e2e_runs.append(run_e2e(case, timeout, keep))
@@ -350,6 +353,9 @@ def main() -> None:
         raw = best(raw_runs, "transfer")
         xfer = [r["transfer"] for r in raw_runs]
         raw["spread"] = f"{min(xfer):.2f}-{max(xfer):.2f}"
+        for form in ("message", "bytes"):
+            got = [r["transfer"] for r in raw_runs if r["form"] == form]
+            raw[f"best_{form}"] = case.steps / min(got) / 1e6 if got else float("nan")
         results.append((case, best(e2e_runs, "job_wall"), raw, e2e_runs))
         e, r = results[-1][1], results[-1][2]
         print(
@@ -379,6 +385,7 @@ def main() -> None:
                 f"{r['transfer'] / job_s:5.2f}",
                 f"{cpu_e / n * 1e6:5.2f}",
                 f"{r['cpu'] / n * 1e6:5.2f}",
+                f"{r['best_message']:5.2f} / {r['best_bytes']:5.2f}",
                 f"{e.get('sim_s', 0):6.2f}",
                 round(e.get("sim_s", 0) * PUBLISH_RATE),
                 "yes" if e.get("lossless") and r["lossless"] else "NO",
@@ -386,12 +393,14 @@ def main() -> None:
         )
     print(
         "End-to-end (3 node processes, bag recorded) vs raw DDS of the same chunks "
-        f"(best of {repeat} end-to-end, {raw_repeat} raw; publish_rate {PUBLISH_RATE:g} Hz)"
+        f"(best of {repeat} end-to-end, {raw_repeat} raw of each publishing form; "
+        f"publish_rate {PUBLISH_RATE:g} Hz)"
     )
     print(
         table(
             ["N", "steps", "e2e s", "e2e job s", "raw s", "raw xfer s", "raw xfer range", "e2e job Msteps/s",
-             "raw xfer Mrows/s", "e2e / raw", "e2e CPU us/step", "raw CPU us/row", "sim s",
+             "raw xfer Mrows/s", "e2e / raw", "e2e CPU us/step", "raw CPU us/row",
+             "raw Mrows/s: msg / bytes", "sim s",
              "200Hz samples", "all steps, 0 lost"],
             rows,
         )
