@@ -66,6 +66,11 @@ scan one level up, and each step's state is corrected with Phi of its distance
 to the previous block end. Every Phi is evaluated forward in time (contractive),
 so the result is as accurate as the sequential recurrence, in O(N) numpy work
 and O(sqrt(N)) Python iterations.
+
+Below damping ratio ``MODAL_ZETA`` (0.95) :class:`LinearTracker` does not need
+every step's state: the error is the real part of one complex mode, and the
+state at a sample is a running sum of one complex exponential per step (see
+``LinearTracker._advance_modal``); the scan serves the rest.
 """
 
 from __future__ import annotations
