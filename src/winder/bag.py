@@ -101,6 +101,9 @@ COMPRESSIONS = BAG_COMPRESSIONS
 ZSTD_LEVEL = 1
 #: Payload bytes the writer thread may have queued before write() waits for it.
 QUEUE_BYTES = 64 << 20
+#: Messages are handed to the writer thread in batches of this many bytes or messages.
+BATCH_BYTES = 256 << 10
+BATCH_MESSAGES = 512
 
 
 class BagRecorder:
@@ -138,7 +141,11 @@ class BagRecorder:
         self.messages = 0
         self.bytes = 0
         self.last_t = 0
-        self._queue: queue.SimpleQueue[tuple[Any, int, bytes | memoryview] | None] = queue.SimpleQueue()
+        self._queue: queue.SimpleQueue[tuple[list[tuple[Any, int, bytes | memoryview]], int] | None] = (
+            queue.SimpleQueue()
+        )
+        self._batch: list[tuple[Any, int, bytes | memoryview]] = []
+        self._batch_bytes = 0
         self._queued = 0  # payload bytes in the queue
         self._room = threading.Condition()
         self._error: BaseException | None = None
@@ -169,14 +176,25 @@ class BagRecorder:
         if not exact and self._types[topic] in PADDABLE and len(data) < 65536:
             data = cdr_exact(data, self._types[topic])
         n = len(data)
-        with self._room:
-            while self._queued > QUEUE_BYTES and self._error is None:
-                self._room.wait(0.1)
-            self._queued += n
-        self._queue.put((self._conns[topic], t, data))
+        # small messages go to the thread in batches: one hand-over per batch
+        self._batch.append((self._conns[topic], t, data))
+        self._batch_bytes += n
+        if self._batch_bytes >= BATCH_BYTES or len(self._batch) >= BATCH_MESSAGES:
+            self._hand_over()
         self.last_t = t
         self.messages += 1
         self.bytes += n
+
+    def _hand_over(self) -> None:
+        """Queue the batch for the writer thread (waits while the queue is full)."""
+        if not self._batch:
+            return
+        with self._room:
+            while self._queued > QUEUE_BYTES and self._error is None:
+                self._room.wait(0.1)
+            self._queued += self._batch_bytes
+        self._queue.put((self._batch, self._batch_bytes))
+        self._batch, self._batch_bytes = [], 0
 
     def _drain(self) -> None:
         """The writer thread: queued messages into the file, in order."""
@@ -186,17 +204,19 @@ class BagRecorder:
             item = self._queue.get()
             if item is None:
                 return
-            conn, t, data = item
+            batch, size = item
             try:
-                if self._error is None:
-                    writer.write(conn, t, data)
+                for conn, t, data in batch:
+                    if self._error is None:
+                        writer.write(conn, t, data)
             except BaseException as exc:  # reported by write() / close()
                 self._error = exc
             with self._room:
-                self._queued -= len(data)
+                self._queued -= size
                 self._room.notify()
 
     def _stop(self) -> None:
+        self._hand_over()
         if self._thread.is_alive():
             self._queue.put(None)
             self._thread.join()
