@@ -262,10 +262,7 @@ class LinearTracker:
             # summed: e**(sigma*span) stays far from overflow
             self._span = MODAL_WINDOW / sig if sig > 0 else math.inf
             self._q = 0j  # modal error state at self._t (see _advance_modal)
-        self._pend_t = np.empty(0)
-        self._pend_a = np.empty(0)
-        self._last_step = -math.inf
-        self._last_sample = -math.inf
+        self._queue = _StepQueue()
 
     @property
     def command(self) -> float:
@@ -277,18 +274,11 @@ class LinearTracker:
     ) -> tuple[FloatArray, FloatArray]:
         """Add steps (times in s, signed angles in rad, scalar or per step) and return
         (theta, omega) at the non-decreasing ``t_samples`` (rad, rad/s)."""
-        st, sa, ts = _check_chunk(step_times, step_angles, t_samples, self._last_step, self._last_sample)
-        if st.size:
-            self._last_step = float(st[-1])
-        ev_t = np.concatenate([self._pend_t, st]) if self._pend_t.size else st
-        ev_a = np.concatenate([self._pend_a, sa]) if self._pend_a.size else sa
+        st, sa, ts = self._queue.check(step_times, step_angles, t_samples)
+        app_t, app_a = self._queue.due(st, sa, ts)
         if ts.size == 0:
-            self._pend_t, self._pend_a = ev_t, ev_a
             return np.empty(0), np.empty(0)
-        self._last_sample = float(ts[-1])
-        n = int(np.searchsorted(ev_t, ts[-1], side="right"))
-        app_t, app_a = ev_t[:n], ev_a[:n]
-        self._pend_t, self._pend_a = ev_t[n:], ev_a[n:]
+        n = app_t.size
 
         if self._modal:
             return self._advance_modal(app_t, app_a, ts)
@@ -385,6 +375,39 @@ def _cumulative(a: FloatArray) -> FloatArray:
     return np.cumsum(a)
 
 
+class _StepQueue:
+    """The steps a tracker was given that no sample has reached yet, and the
+    order rules of ``advance`` (see :class:`LinearTracker`), shared by both
+    trackers."""
+
+    def __init__(self) -> None:
+        self.t = np.empty(0)  # pending step times (s)
+        self.a = np.empty(0)  # their angles (rad)
+        self.last_step = -math.inf
+        self.last_sample = -math.inf
+
+    def check(
+        self, step_times: object, step_angles: object, t_samples: object
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Validated (step_times, step_angles, t_samples) of one advance() call."""
+        return _check_chunk(step_times, step_angles, t_samples, self.last_step, self.last_sample)
+
+    def due(self, st: FloatArray, sa: FloatArray, ts: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Queue the checked steps; return (times, angles) of those at or before
+        the last sample (all of them to apply now), the rest stay pending."""
+        if st.size:
+            self.last_step = float(st[-1])
+        ev_t = np.concatenate([self.t, st]) if self.t.size else st
+        ev_a = np.concatenate([self.a, sa]) if self.a.size else sa
+        if ts.size == 0:
+            self.t, self.a = ev_t, ev_a
+            return ev_t[:0], ev_a[:0]
+        self.last_sample = float(ts[-1])
+        n = int(np.searchsorted(ev_t, ts[-1], side="right"))
+        self.t, self.a = ev_t[n:], ev_a[n:]
+        return ev_t[:n], ev_a[:n]
+
+
 def _check_chunk(
     step_times: object,
     step_angles: object,
@@ -465,10 +488,7 @@ class NonlinearTracker:
         self._well = 0  # index of the well the rotor is in, relative to the command
         self._half_d = 0  # side (-1, +1) on which the rotor is past half a pitch, 0: not
         self._half_t = math.nan  # when it went past
-        self._pend_t = np.empty(0)
-        self._pend_a = np.empty(0)
-        self._last_step = -math.inf
-        self._last_sample = -math.inf
+        self._queue = _StepQueue()
         self._slip_t: list[float] = []
         self._slip_s: list[int] = []
 
@@ -501,25 +521,17 @@ class NonlinearTracker:
         self, step_times: ArrayLike, step_angles: ArrayLike, t_samples: ArrayLike
     ) -> tuple[FloatArray, FloatArray]:
         """Add steps and return (theta, omega) at ``t_samples``; see :class:`LinearTracker`."""
-        st, sa, ts = _check_chunk(step_times, step_angles, t_samples, self._last_step, self._last_sample)
+        st, sa, ts = self._queue.check(step_times, step_angles, t_samples)
         if st.size and st[0] < self._t:
             raise ValueError(f"step_times[0]={float(st[0])!r} is invalid: must be >= t0={self._t!r} s")
         if ts.size and ts[0] < self._t:
             raise ValueError(f"t_samples[0]={float(ts[0])!r} is invalid: must be >= t0={self._t!r} s")
-        if st.size:
-            self._last_step = float(st[-1])
-        ev_t = np.concatenate([self._pend_t, st]) if self._pend_t.size else st
-        ev_a = np.concatenate([self._pend_a, sa]) if self._pend_a.size else sa
+        app_t, app_a = self._queue.due(st, sa, ts)
         theta = np.empty(ts.size)
         omega = np.empty(ts.size)
-        if ts.size == 0:
-            self._pend_t, self._pend_a = ev_t, ev_a
-            return theta, omega
-        self._last_sample = float(ts[-1])
-        n = int(np.searchsorted(ev_t, ts[-1], side="right"))
-        self._pend_t, self._pend_a = ev_t[n:], ev_a[n:]
-        ev_list = ev_t[:n].tolist()
-        ang_list = ev_a[:n].tolist()
+        n = app_t.size
+        ev_list = app_t.tolist()
+        ang_list = app_a.tolist()
         i = 0
         for j, s in enumerate(ts.tolist()):
             while i < n and ev_list[i] <= s:

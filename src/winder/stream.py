@@ -186,26 +186,21 @@ class StreamChecker:
             or any(not -1 <= int(d.min()) <= int(d.max()) <= 1 for d in map(np.diff, pos.T))
         ):
             return self._reject("bad", f"segment {segment}: rows inside the chunk are not single steps")
-        here = self.step_index(segment, self.position[None, :])[0] if segment == self.segment else 0
-        if segment < self.segment or (segment == self.segment and k[0] <= here):
+        # steps are counted across segments (self._offsets): where the stream
+        # stands, and where this chunk starts
+        at = int(self.step_index(self.segment, self.position[None, :])[0])
+        here, first = self._offsets[self.segment] + at, self._offsets[segment] + int(k[0])
+        if first <= here:
             # late if it falls into a gap reported before, else a repeat
-            first, last = self._offsets[segment] + int(k[0]), self._offsets[segment] + int(k[-1])
+            last = self._offsets[segment] + int(k[-1])
             late = any(a <= last and first <= b for a, b in self._gaps)
             kind, why = ("reorder", "arrived late") if late else ("duplicate", "arrived again")
             return self._reject(kind, f"segment {segment} steps {k[0]}..{k[-1]} {why}")
         verdict = ChunkVerdict(True, "ok")
-        expected_first = here + 1 if segment == self.segment else 1
         # steps skipped: rest of the current segment, whole segments between, head of this one
-        missing = 0
-        if segment != self.segment:
-            missing += segs[self.segment].steps - self.step_index(self.segment, self.position[None, :])[0]
-            missing += sum(s.steps for s in segs[self.segment + 1 : segment])
-        missing += int(k[0]) - expected_first
+        missing = first - here - 1
         if missing:
-            here_global = self._offsets[self.segment] + int(
-                self.step_index(self.segment, self.position[None, :])[0]
-            )
-            self._gaps.append((here_global + 1, self._offsets[segment] + int(k[0]) - 1))
+            self._gaps.append((here + 1, first - 1))
             self.gaps += 1
             self.missing += missing
             verdict = ChunkVerdict(
