@@ -9,7 +9,6 @@ that Foxglove, ``ros2 bag`` and rosbags open the bag without winder installed.
 from __future__ import annotations
 
 import contextlib
-import functools
 import queue
 import re
 import shutil
@@ -18,16 +17,11 @@ import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
-
-try:  # what rosbags compresses its MCAP chunks with
-    from compression import zstd
-except ImportError:  # Python < 3.14
-    from backports import zstd
 
 from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
+from winder.mcap_storage import StreamingMcapStorage
 from winder.params import BAG_COMPRESSIONS
 
 __all__ = ["BagRecorder", "cdr_exact", "new_bag_path", "signals_held"]
@@ -94,11 +88,23 @@ def cdr_exact(data: bytes | memoryview, msgtype: str) -> bytes | memoryview:
     return data[:end] if len(data) > end else data
 
 
-#: Chunk compression of the MCAP file: zstd (level 1, ~0.9 GB/s here and a
-#: tenth of the size on step chunks) or none. Compressed chunks are part of the
-#: MCAP format: Foxglove, ros2 bag (rosbag2_storage_mcap) and rosbags read them.
+#: Chunk compression of the MCAP file: lz4 (~2 GB/s here, a third of the size
+#: of step chunks), zstd (level 1, ~0.7 GB/s, a tenth) or none. Compressed
+#: chunks are part of the MCAP format: Foxglove, ros2 bag
+#: (rosbag2_storage_mcap) and rosbags read them.
 COMPRESSIONS = BAG_COMPRESSIONS
-ZSTD_LEVEL = 1
+
+
+class _Writer(Writer):
+    """rosbags' rosbag2 writer (metadata.yaml, connections) with winder's
+    .mcap storage, which does not copy the messages (winder.mcap_storage)."""
+
+    STORAGE_PLUGINS = {  # noqa: RUF012 - rosbags declares it a plain attribute
+        **Writer.STORAGE_PLUGINS,
+        StoragePlugin.MCAP: StreamingMcapStorage,
+    }
+
+
 #: Payload bytes the writer thread may have queued before write() waits for it.
 QUEUE_BYTES = 64 << 20
 #: Messages are handed to the writer thread in batches of this many bytes or messages.
@@ -122,36 +128,37 @@ class BagRecorder:
     close().
     """
 
-    def __init__(self, path: Path, topics: dict[str, str], *, compression: str = "zstd") -> None:
+    def __init__(self, path: Path, topics: dict[str, str], *, compression: str = "lz4") -> None:
         if compression not in COMPRESSIONS:
             raise ValueError(f"compression={compression!r} is invalid: must be one of {COMPRESSIONS}")
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.compression = compression
-        writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
-        if compression == "zstd":  # chunk compression inside the .mcap
+        writer = _Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
+        if compression != "none":  # chunk compression inside the .mcap
             writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
         writer.open()
-        storage = getattr(writer, "storage", None)
-        if compression == "zstd" and callable(getattr(storage, "compressor", None)):
-            storage.compressor = functools.partial(zstd.compress, level=ZSTD_LEVEL)  # type: ignore[union-attr]
+        assert isinstance(writer.storage, StreamingMcapStorage)
+        if compression != "none":
+            writer.storage.compression = compression
         self._writer: Writer | None = writer
-        self._conns: dict[str, Any] = {}
+        self._storage = writer.storage
+        self._conns: dict[str, int] = {}  # topic -> channel id
         self._types: dict[str, str] = {}
         self.messages = 0
         self.bytes = 0
         self.last_t = 0
-        self._queue: queue.SimpleQueue[tuple[list[tuple[Any, int, bytes | memoryview]], int] | None] = (
+        self._queue: queue.SimpleQueue[tuple[list[tuple[int, int, bytes | memoryview]], int] | None] = (
             queue.SimpleQueue()
         )
-        self._batch: list[tuple[Any, int, bytes | memoryview]] = []
+        self._batch: list[tuple[int, int, bytes | memoryview]] = []
         self._batch_bytes = 0
         self._queued = 0  # payload bytes in the queue
         self._room = threading.Condition()
         self._error: BaseException | None = None
         try:
             for topic, msgtype in topics.items():
-                self._conns[topic] = writer.add_connection(topic, msgtype, typestore=_TYPESTORE)
+                self._conns[topic] = writer.add_connection(topic, msgtype, typestore=_TYPESTORE).id
                 self._types[topic] = msgtype
         except Exception:
             self.discard()
@@ -198,17 +205,16 @@ class BagRecorder:
 
     def _drain(self) -> None:
         """The writer thread: queued messages into the file, in order."""
-        writer = self._writer
-        assert writer is not None
+        write = self._storage.write_id  # past rosbags' Writer.write: counts are synced in close()
         while True:
             item = self._queue.get()
             if item is None:
                 return
             batch, size = item
             try:
-                for conn, t, data in batch:
-                    if self._error is None:
-                        writer.write(conn, t, data)
+                if self._error is None:
+                    for cid, t, data in batch:
+                        write(cid, t, data)
             except BaseException as exc:  # reported by write() / close()
                 self._error = exc
             with self._room:
@@ -228,9 +234,23 @@ class BagRecorder:
             writer, self._writer = self._writer, None
             with signals_held():
                 self._stop()  # everything queued is in the file
-                writer.close()
+                if self._error is None:
+                    self._sync(writer)
+                    writer.close()
+                else:  # what reached the file stays readable
+                    with contextlib.suppress(Exception):
+                        writer.close()
             if self._error is not None:
                 raise RuntimeError(f"bag {self.path}: writing failed: {self._error}") from self._error
+
+    def _sync(self, writer: Writer) -> None:
+        """Message counts and time span for metadata.yaml, from the storage
+        (the thread wrote past Writer.write, which would have kept them)."""
+        storage = self._storage
+        storage.flush()
+        writer.counts.update(storage.counts)
+        if any(storage.counts.values()):
+            writer.min_timestamp, writer.max_timestamp = storage.first_t, storage.last_t
 
     def discard(self) -> None:
         if self._writer is not None:
