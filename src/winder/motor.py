@@ -75,6 +75,7 @@ state at a sample is a running sum of one complex exponential per step (see
 
 from __future__ import annotations
 
+import cmath
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -338,26 +339,32 @@ class LinearTracker:
             hi = int(np.searchsorted(app_t, base + self._span, side="right")) if lo < n else n
             # this window's samples: all those that need no later step
             s_hi = ts.size if hi == n else int(np.searchsorted(k_all, hi, side="right"))
-            qk = np.empty(hi - lo + 1, np.complex128)  # at b, after 0..hi-lo of the window's steps
-            qk[0] = 0.0
+            # sums[j]: sum of d_k*e**(-lambda*(t_k - b)) over the window's first j steps;
+            # the state at b after them is q + kappa*sums[j] (formed at the samples only)
+            sums = np.empty(hi - lo + 1, np.complex128)
+            sums[0] = 0.0
             if hi > lo:
-                u = np.exp(lam * (base - app_t[lo:hi]))
-                u *= app_a[lo:hi]
-                np.cumsum(u, out=qk[1:])
-                qk *= kappa
-            qk += q
+                u = sums[1:]
+                parts = u.view(np.float64).reshape(-1, 2)  # real and imaginary columns
+                d = base - app_t[lo:hi]
+                np.multiply(d, lam.real, out=parts[:, 0])  # lambda*d without a complex cast of d
+                np.multiply(d, lam.imag, out=parts[:, 1])
+                np.exp(u, out=u)
+                parts *= app_a[lo:hi, None]
+                np.cumsum(u, out=u)
             if s_hi > s_lo:
                 k = k_all[s_lo:s_hi]
-                qs = qk[k - lo] * np.exp(lam * (ts[s_lo:s_hi] - base))
+                qs = (q + kappa * sums[k - lo]) * np.exp(lam * (ts[s_lo:s_hi] - base))
                 theta[s_lo:s_hi] = cmd_at[k] + qs.real
                 omega[s_lo:s_hi] = (lam * qs).real
+            q_end = q + kappa * complex(sums[-1])  # at b, after all of the window's steps
             if hi == n:
                 break
             nb = float(app_t[hi])
-            q = complex(qk[-1] * np.exp(lam * (nb - base)))
+            q = q_end * cmath.exp(lam * (nb - base))
             base, lo, s_lo = nb, hi, s_hi
         t_end = float(ts[-1])  # every applied step is <= the last sample
-        self._q = complex(qk[-1] * np.exp(lam * (t_end - base)))
+        self._q = q_end * cmath.exp(lam * (t_end - base))
         self._t = t_end
         self._cmd = float(cmd_at[-1])
         return theta, omega
