@@ -61,6 +61,9 @@ def winder_run(
     env = {"ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "PATH": str(BIN)}
     import os
 
+    (tmp_path / "tmp").mkdir(exist_ok=True)  # where the run keeps its node logs
+    env["TMPDIR"] = str(tmp_path / "tmp")
+
     return subprocess.run(
         [str(BIN / "winder"), "run", "--bag-dir", str(tmp_path / "bags"), *args],
         capture_output=True,
@@ -89,6 +92,7 @@ def test_cell_records_every_step_once_in_order(tmp_path: Path, procs: Procs, pro
     r = winder_run(tmp_path, procs.domain, *job_args(SMALL_JOB), "--profile", profile)
     assert r.returncode == 0, r.stdout + r.stderr
     assert "Traceback" not in r.stderr
+    assert not list((tmp_path / "tmp").iterdir())  # a clean run leaves no node logs behind
     bag_dir = only_bag(tmp_path)
     assert bag_dir.name.startswith("small_")
     assert (bag_dir / "metadata.yaml").exists()

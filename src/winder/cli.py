@@ -196,7 +196,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     print(f"  lost steps         {s['lost_steps']}")
     print(f"  bag                {s['bag']}")
     if not result.ok or int(s["errors"]):
-        print(f"winder run: {result.message}", file=sys.stderr)
+        logs = f" (node logs in {result.log_dir})" if result.log_dir else ""
+        print(f"winder run: {result.message}{logs}", file=sys.stderr)
         return 1
     return 0
 
