@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import array
 import contextlib
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
 import numpy as np
@@ -36,10 +36,11 @@ from rcl_interfaces.msg import (
     ParameterType,
     SetParametersResult,
 )
-from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+from rclpy.exceptions import InvalidHandle, InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.subscription import Subscription
 from std_msgs.msg import Int32MultiArray, Int64MultiArray, MultiArrayDimension
 
 from winder.cdr import MultiArrayCodec
@@ -81,6 +82,30 @@ def _layout(msg: Int32MultiArray | Int64MultiArray, rows: int, columns: Sequence
 
 #: The chunks of winder/steps and winder/step_times as serialized payloads:
 #: the nodes publish and take these bytes directly (no message objects).
+#: Messages a stream callback takes from its subscription's queue by itself.
+WAITING_LIMIT = 16
+
+
+def waiting(sub: Subscription[Any], limit: int = WAITING_LIMIT) -> Iterator[Any]:
+    """Messages already queued on ``sub`` (up to ``limit``), taken the way the
+    executor takes them. A stream callback that handles them in one go spares
+    the executor a round per chunk: rclpy rebuilds its wait set in Python for
+    every message it hands out, ~0.1 ms with a node's dozen entities."""
+    handle = sub.handle
+    take = getattr(handle, "take_message", None)
+    if take is None:  # an rclpy without it: the executor hands them out
+        return
+    for _ in range(limit):
+        try:
+            with handle:
+                got = take(sub.msg_type, sub.raw)
+        except InvalidHandle:  # destroyed meanwhile (shutdown)
+            return
+        if got is None:
+            return
+        yield got[0]
+
+
 STEPS_CDR = MultiArrayCodec(STEP_COLUMNS, np.int32)
 TIMED_CDR = MultiArrayCodec(TIMED_COLUMNS, np.int64)
 

@@ -36,6 +36,7 @@ from winder_interp.contract import (
     Diagnostics,
     Settings,
     spin,
+    waiting,
 )
 
 from winder.params import PROFILE_SPECS, check_profile, plan_segment
@@ -105,10 +106,16 @@ class ProfileNode(Node):
             f"{(acc - dwell_ns) / 1e9:.3f} s"
         )
         early, self.early = self.early, []
-        for raw in early:
-            self.on_steps(raw)
+        for raw in early:  # in order, before any taken from the queue
+            self.time_chunk(raw)
 
     def on_steps(self, raw: bytes) -> None:
+        self.time_chunk(raw)
+        if self.sub_steps is not None:
+            for more in waiting(self.sub_steps):  # the chunks queued behind it, in one go
+                self.time_chunk(more)
+
+    def time_chunk(self, raw: bytes) -> None:
         if self.plan is None or self.checker is None:
             self.early.append(raw)  # the job description is on its way
             return

@@ -55,6 +55,7 @@ from winder_interp.contract import (
     Diagnostics,
     Settings,
     spin,
+    waiting,
 )
 
 from winder.bag import BagRecorder, new_bag_path, signals_held
@@ -122,7 +123,9 @@ class SimNode(Node):
         self.create_subscription(String, TOPIC_JOB, self.on_job, QOS_LATCHED, raw=True)
         self.create_subscription(JointTrajectory, TOPIC_PATH, self.on_path, QOS_LATCHED, raw=True)
         self.create_subscription(String, TOPIC_PROFILE_CONFIG, self.on_profile_config, QOS_LATCHED, raw=True)
-        self.create_subscription(Int64MultiArray, TOPIC_STEP_TIMES, self.on_step_times, QOS_STREAM, raw=True)
+        self.sub_times = self.create_subscription(
+            Int64MultiArray, TOPIC_STEP_TIMES, self.on_step_times, QOS_STREAM, raw=True
+        )
         self.create_subscription(
             DiagnosticArray, TOPIC_DIAGNOSTICS, self.on_diagnostics, QOS_DIAGNOSTICS, raw=True
         )
@@ -237,8 +240,9 @@ class SimNode(Node):
             + (f", recording to {self.bag.path}" if self.bag else "")
         )
         early, self.early = self.early, []
-        for chunk in early:
-            self.on_step_times(chunk)
+        for chunk in early:  # in order, before any taken from the queue
+            self.receive(chunk)
+        self.pump()
 
     def on_path(self, raw: bytes) -> None:
         self.path_raw = raw
@@ -279,6 +283,12 @@ class SimNode(Node):
             self.bag.write(self.topic["diagnostics"], self.t_sim_ns, raw)
 
     def on_step_times(self, raw: bytes) -> None:
+        self.receive(raw)
+        for more in waiting(self.sub_times):  # the chunks queued behind it, in one go
+            self.receive(more)
+        self.pump()
+
+    def receive(self, raw: bytes) -> None:
         if self.plan is None or self.checker is None or self.finishing:
             self.early.append(raw)
             return
@@ -291,7 +301,6 @@ class SimNode(Node):
         if not self.inbox:
             self.inbox_since = time.monotonic()
         self.inbox.append(raw)
-        self.pump()
 
     def pump(self) -> None:
         """Simulate queued chunks. In real-time mode one chunk at a time, once
