@@ -5,8 +5,8 @@ chunk (a record buffer, the chunk buffer, the chunk's bytes) and compresses
 the chunk as one block: for step chunks of 330 kB that is as much work as the
 compression itself. :class:`StreamingMcapStorage` keeps a chunk as a list of
 pieces (record headers and the payloads as they were handed over) and feeds
-them straight to a streaming zstd compressor, or to the file when the bag is
-uncompressed. Small messages are packed into one buffer, so a /clock message
+them straight to a streaming zstd or lz4 compressor, or to the file when the
+bag is uncompressed. Small messages are packed into one buffer, so a /clock message
 costs one struct.pack and two appends.
 
 It is a storage plugin of ``rosbags.rosbag2.Writer`` (which writes
@@ -140,11 +140,10 @@ class StreamingMcapStorage:
         idx = self._index[cid]
         idx.append(t)
         idx.append(self._size)
+        self._small += head
         if n < SMALL:
-            self._small += head
             self._small += data
         else:
-            self._small += head
             self._pieces.append(bytes(self._small))
             self._pieces.append(data)
             self._small.clear()
