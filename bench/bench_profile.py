@@ -43,20 +43,24 @@ def problems(count: int, seed: int = 1) -> list[tuple[float, ...]]:
     return out
 
 
+def ruckig_input(D: float, v0: float, v1: float, V: float, A: float, J: float) -> ruckig.InputParameter:
+    """The 1-DoF ruckig problem of plan("scurve", D, ...): rest acceleration at both
+    ends, no reverse motion."""
+    inp = ruckig.InputParameter(1)
+    inp.current_position, inp.current_velocity, inp.current_acceleration = [0.0], [v0], [0.0]
+    inp.target_position, inp.target_velocity, inp.target_acceleration = [D], [v1], [0.0]
+    inp.max_velocity, inp.max_acceleration, inp.max_jerk = [V], [A], [J]
+    inp.min_velocity = [0.0]
+    return inp
+
+
 def time_plans(probs: list[tuple[float, ...]], repeat: int = 5) -> tuple[list[float], list[float]]:
     """Per-problem best-of-``repeat`` times (s) for winder.profile.plan and ruckig."""
     ours = [math.inf] * len(probs)
     theirs = [math.inf] * len(probs)
     otg = ruckig.Ruckig(1)
     traj = ruckig.Trajectory(1)
-    inputs = []
-    for D, v0, v1, V, A, J in probs:
-        inp = ruckig.InputParameter(1)
-        inp.current_position, inp.current_velocity, inp.current_acceleration = [0.0], [v0], [0.0]
-        inp.target_position, inp.target_velocity, inp.target_acceleration = [D], [v1], [0.0]
-        inp.max_velocity, inp.max_acceleration, inp.max_jerk = [V], [A], [J]
-        inp.min_velocity = [0.0]
-        inputs.append(inp)
+    inputs = [ruckig_input(*p) for p in probs]
     clock = time.perf_counter
     for _ in range(repeat):
         for i, (D, v0, v1, V, A, J) in enumerate(probs):
@@ -77,11 +81,7 @@ def max_duration_difference(probs: list[tuple[float, ...]]) -> tuple[float, int]
     traj = ruckig.Trajectory(1)
     worst, solved = 0.0, 0
     for D, v0, v1, V, A, J in probs:
-        inp = ruckig.InputParameter(1)
-        inp.current_position, inp.current_velocity, inp.current_acceleration = [0.0], [v0], [0.0]
-        inp.target_position, inp.target_velocity, inp.target_acceleration = [D], [v1], [0.0]
-        inp.max_velocity, inp.max_acceleration, inp.max_jerk = [V], [A], [J]
-        inp.min_velocity = [0.0]
+        inp = ruckig_input(D, v0, v1, V, A, J)
         try:
             otg.calculate(inp, traj)
         except ruckig.RuckigError:
