@@ -14,8 +14,10 @@ import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
+from rosbags.highlevel import AnyReader
 
 BIN = Path(sys.executable).parent
 _domains = itertools.count((os.getpid() * 7) % 60)
@@ -124,3 +126,25 @@ def spin_until(node: object, cond: object, timeout: float, what: str) -> None:
             ex.spin_once(timeout_sec=0.05)
     finally:
         ex.remove_node(node)
+
+
+# -- independent reading of the bags the nodes wrote ---------------------------------
+
+
+def rosbags_read(path: Path) -> dict[str, list[tuple[int, Any]]]:
+    """Every message of a bag, decoded by rosbags: topic -> [(log time, message)]."""
+    out: dict[str, list[tuple[int, Any]]] = {}
+    with AnyReader([path]) as reader:
+        for conn, t, raw in reader.messages():
+            out.setdefault(conn.topic, []).append((t, reader.deserialize(raw, conn.msgtype)))
+    return out
+
+
+def final_report(bag: dict[str, list[tuple[int, Any]]]) -> dict[str, str]:
+    """The values of the last "sim_node: job" status recorded on /diagnostics."""
+    return [
+        {kv.key: kv.value for kv in st.values}
+        for _, arr in bag["/diagnostics"]
+        for st in arr.status
+        if st.name == "sim_node: job"
+    ][-1]

@@ -17,7 +17,8 @@ from typing import Any
 import numpy as np
 import pytest
 import test_reader
-from test_reader import joint_arrays, rosbags_read, run_cli, step_rows
+from conftest import final_report, rosbags_read
+from test_reader import joint_arrays, run_cli, step_rows
 
 from winder.analysis import analyze, step_kinematics
 from winder.reader import read_run
@@ -197,12 +198,7 @@ def test_lost_steps(bag: Any) -> None:
     path = bag("slip")
     res = analyze(read_run(path))
     ref = rosbags_read(path)
-    report = [
-        {kv.key: kv.value for kv in st.values}
-        for _, arr in ref["/diagnostics"]
-        for st in arr.status
-        if st.name == "sim_node: job"
-    ][-1]
+    report = final_report(ref)
     cfg = json.loads(ref["/winder/sim_config"][0][1].data)
     js = json.loads(ref["/winder/job"][0][1].data)["joint_step"]
     _, cmd, _ = joint_arrays(ref["/winder/joint_commands"])

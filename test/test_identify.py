@@ -15,7 +15,8 @@ from typing import Any
 import numpy as np
 import pytest
 import test_reader
-from test_reader import assert_one_line_error, rosbags_read, run_cli
+from conftest import rosbags_read
+from test_reader import assert_one_line_error, run_cli
 
 from winder.identify import AxisRecord, identify, identify_axis, with_noise
 from winder.motor import StepperAxis

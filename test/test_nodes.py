@@ -16,20 +16,11 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import BIN, Procs, spin_until
-from rosbags.highlevel import AnyReader
+from conftest import BIN, Procs, rosbags_read, spin_until
 
 pytestmark = pytest.mark.ros
 
 SMALL_JOB = {"turns_per_layer": 3, "layers": 3, "poles": 2, "fork_steps_per_rev": 256, "job_id": "small"}
-
-
-def read_bag(path: Path) -> dict[str, list[tuple[int, Any]]]:
-    out: dict[str, list[tuple[int, Any]]] = {}
-    with AnyReader([path]) as reader:
-        for conn, t, raw in reader.messages():
-            out.setdefault(conn.topic, []).append((t, reader.deserialize(raw, conn.msgtype)))
-    return out
 
 
 def timed_rows(bag: dict[str, list[tuple[int, Any]]], topic: str = "/winder/step_times") -> np.ndarray:
@@ -96,7 +87,7 @@ def test_cell_records_every_step_once_in_order(tmp_path: Path, procs: Procs, pro
     bag_dir = only_bag(tmp_path)
     assert bag_dir.name.startswith("small_")
     assert (bag_dir / "metadata.yaml").exists()
-    bag = read_bag(bag_dir)
+    bag = rosbags_read(bag_dir)
     rows = timed_rows(bag)
     t, seg, pos = rows[:, 0], rows[:, 1], rows[:, 2:]
 
@@ -292,7 +283,7 @@ def test_sigint_mid_job_leaves_a_readable_bag(tmp_path: Path, procs: Procs) -> N
     assert procs.stop(sim, signal.SIGINT) == 0
     bag_dir = only_bag(tmp_path)
     assert (bag_dir / "metadata.yaml").exists()
-    bag = read_bag(bag_dir)
+    bag = rosbags_read(bag_dir)
     rows = timed_rows(bag)
     assert rows.shape[0] > 0
     # the simulation (paced at 2x real time) was cut well before the last step

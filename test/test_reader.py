@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import BIN, Procs, next_domain
+from conftest import BIN, Procs, final_report, next_domain, rosbags_read
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
@@ -177,14 +177,6 @@ def bag(tmp_path_factory: pytest.TempPathFactory, request: pytest.FixtureRequest
 # -- independent reading with rosbags -------------------------------------------------------
 
 
-def rosbags_read(path: Path) -> dict[str, list[tuple[int, Any]]]:
-    out: dict[str, list[tuple[int, Any]]] = {}
-    with AnyReader([path]) as reader:
-        for conn, t, raw in reader.messages():
-            out.setdefault(conn.topic, []).append((t, reader.deserialize(raw, conn.msgtype)))
-    return out
-
-
 def rosbags_raw(path: Path) -> list[tuple[str, int, bytes]]:
     with AnyReader([path]) as reader:
         return [(c.topic, t, bytes(raw)) for c, t, raw in reader.messages()]
@@ -241,12 +233,7 @@ def test_run_matches_rosbags(bag: Any) -> None:
         np.testing.assert_array_equal(samples.pos, pos)
         np.testing.assert_array_equal(samples.vel, vel)
     assert {k: v for k, v in run.counts.items() if v} == {k: len(v) for k, v in ref.items()}
-    final = [
-        {kv.key: kv.value for kv in st.values}
-        for _, arr in ref["/diagnostics"]
-        for st in arr.status
-        if st.name == "sim_node: job"
-    ][-1]
+    final = final_report(ref)
     assert run.report == final and run.report["state"] == "done"
     # the ramp in force travels latched on winder/profile_config
     ramp = json.loads(ref["/winder/profile_config"][-1][1].data)

@@ -11,8 +11,8 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import Procs, spin_until
-from test_nodes import SMALL_JOB, expected_end, job_args, only_bag, read_bag, timed_rows, winder_run
+from conftest import Procs, rosbags_read, spin_until
+from test_nodes import SMALL_JOB, expected_end, job_args, only_bag, timed_rows, winder_run
 
 from winder.interp import interpolate
 from winder.job import Job
@@ -47,7 +47,7 @@ def test_signal_mid_job_closes_the_bag(tmp_path: Path, procs: Procs, sig: int) -
     assert procs.stop(sim, sig) == 0
     bag_dir = only_bag(tmp_path)
     assert (bag_dir / "metadata.yaml").exists()
-    bag = read_bag(bag_dir)
+    bag = rosbags_read(bag_dir)
     assert final_status(bag)["state"] == "incomplete"
     assert "Traceback" not in procs.log(sim)
 
@@ -135,7 +135,7 @@ def test_stream_fault_is_detected_and_reported(tmp_path: Path, procs: Procs, ros
         done = [v for _, _, v in fake.statuses if v.get("state") == "done"][-1]
         assert int(done["steps_missing"]) == 100
         assert int(done["gaps"]) == 1
-        bag = read_bag(only_bag(tmp_path))
+        bag = rosbags_read(only_bag(tmp_path))
         assert int(final_status(bag)["steps_missing"]) == 100
 
 
@@ -188,7 +188,7 @@ def test_two_cells_in_two_namespaces_do_not_interfere(tmp_path: Path, procs: Pro
     for ns, p in runs.items():
         out, err = p.communicate(timeout=300)
         assert p.returncode == 0, out + err
-        bag = read_bag(only_bag(tmp_path / ns))
+        bag = rosbags_read(only_bag(tmp_path / ns))
         job = json.loads(bag[f"/{ns}/winder/job"][0][1].data)
         assert job["job"]["job_id"] == jobs[ns]["job_id"]
         rows = timed_rows(bag, f"/{ns}/winder/step_times")
@@ -216,7 +216,7 @@ def test_a_million_step_job_completes_with_nothing_lost(tmp_path: Path, procs: P
         timeout=600,
     )
     assert r.returncode == 0, r.stdout + r.stderr
-    bag = read_bag(only_bag(tmp_path))
+    bag = rosbags_read(only_bag(tmp_path))
     rows = timed_rows(bag)
     assert rows.shape[0] == total
     steps = np.diff(np.vstack([[0, 0, 0], rows[:, 2:]]), axis=0)
