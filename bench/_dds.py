@@ -150,7 +150,8 @@ def _messages(n: int, form: str) -> tuple[object, object]:
     """The two chunks of n rows: message objects (rclpy serializes them on
     publish) or bytes serialized once beforehand (what the nodes publish)."""
     import numpy as np
-    from winder_interp.contract import STEPS_CDR, TIMED_CDR, pack_steps, pack_timed
+
+    from winder.ros.contract import STEPS_CDR, TIMED_CDR, pack_steps, pack_timed
 
     steps = np.zeros((n, 4), np.int32)
     steps[:, 2] = np.arange(1, n + 1)
@@ -166,7 +167,8 @@ def run_pub(rows: int, timeout: float, form: str = "message") -> dict[str, float
     import rclpy
     from rclpy.duration import Duration
     from std_msgs.msg import Int32MultiArray, Int64MultiArray
-    from winder_interp.contract import QOS_STREAM
+
+    from winder.ros.contract import QOS_STREAM
 
     t_proc = time.monotonic()
     rclpy.init(args=[])
@@ -208,7 +210,8 @@ def run_pub(rows: int, timeout: float, form: str = "message") -> dict[str, float
 def run_sub(rows: int, timeout: float) -> dict[str, float | int]:
     import rclpy
     from std_msgs.msg import Int32MultiArray, Int64MultiArray
-    from winder_interp.contract import QOS_STREAM
+
+    from winder.ros.contract import QOS_STREAM
 
     t_proc = time.monotonic()
     rclpy.init(args=[])

@@ -1,4 +1,4 @@
-"""Bag writing MB/s of ``winder.bag.BagRecorder`` against the mcap library's
+"""Bag writing MB/s of ``winder.record.bag.BagRecorder`` against the mcap library's
 plain writer (``mcap.writer.Writer``, no compression, 1 MiB chunks: the same
 file layout BagRecorder's rosbags writer makes) on the same serialized
 messages, measured in the same run, plus where BagRecorder's time goes.
@@ -40,7 +40,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Int64MultiArray, MultiArrayDimension
 
-from winder.bag import BagRecorder, cdr_exact
+from winder.record.bag import BagRecorder, cdr_exact
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 Payloads = list[tuple[int, bytes]]  # (log time ns, CDR bytes)

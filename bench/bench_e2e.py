@@ -4,7 +4,7 @@ measured in the same run, size by size.
 
     .venv/bin/python bench/bench_e2e.py [--quick]
 
-End-to-end: ``winder_sim.cell.run_cell`` (what ``winder run`` does) starts
+End-to-end: ``winder.ros.cell.run_cell`` (what ``winder run`` does) starts
 interp_node, profile_node and sim_node on a job of N steps (the sim node
 records a bag); the time is from spawning the processes to the sim node's
 "done" summary. Raw DDS: ``bench/_dds.py`` spawns a publisher and a subscriber
@@ -51,7 +51,7 @@ from typing import Any
 from _common import table
 from _dds import ChildWatch
 
-from winder.job import Job
+from winder.motion.job import Job
 
 HERE = Path(__file__).resolve().parent
 NODES = ("interp_node", "profile_node", "sim_node")
@@ -106,7 +106,7 @@ def bag_step_chunks(bag: Path) -> int:
 def run_e2e(case: Case, timeout: float, keep: Path | None = None) -> dict[str, Any]:
     """One job through the three nodes; times, memory, and the checks of 'nothing lost'.
     The bag is removed afterwards, or moved to ``keep`` (for :func:`replay_split`)."""
-    from winder_sim.cell import run_cell
+    from winder.ros.cell import run_cell
 
     work = Path(tempfile.mkdtemp(prefix="winder-bench-e2e-"))
     params = {
@@ -239,8 +239,8 @@ def replay_split(bag: Path) -> None:
     from rclpy.parameter import Parameter
     from rosbags.highlevel import AnyReader
 
-    import winder.bag as bag_module
-    import winder.stream as stream_module
+    import winder.contract.stream as stream_module
+    import winder.record.bag as bag_module
 
     with AnyReader([bag]) as reader:
         raw: dict[str, list[bytes]] = {}
@@ -253,9 +253,9 @@ def replay_split(bag: Path) -> None:
 
     rclpy.init(args=[])
     import winder_sim.sim_node as sim_module
-    from winder_interp.contract import Settings
 
-    from winder.cdr import JointStateEncoder
+    from winder.contract.cdr import JointStateEncoder
+    from winder.ros.contract import Settings
 
     spent: dict[str, list[float]] = {}
 

@@ -11,7 +11,7 @@ import sys
 import numpy as np
 from _common import best_of, table
 
-from winder.interp import dda, min_deviation, point_by_point
+from winder.motion.interp import dda, min_deviation, point_by_point
 
 
 def main() -> None:

@@ -22,7 +22,7 @@ import numpy as np
 from _common import best_of, table
 from scipy import signal
 
-from winder.motor import StepperAxis
+from winder.axis import StepperAxis
 
 AX = StepperAxis.paper()
 STEP = AX.full_step

@@ -22,7 +22,7 @@ import numpy as np
 import ruckig
 from _common import best_of, table
 
-from winder.profile import plan
+from winder.motion.profile import plan
 
 
 def problems(count: int, seed: int = 1) -> list[tuple[float, ...]]:
@@ -55,7 +55,7 @@ def ruckig_input(D: float, v0: float, v1: float, V: float, A: float, J: float) -
 
 
 def time_plans(probs: list[tuple[float, ...]], repeat: int = 5) -> tuple[list[float], list[float]]:
-    """Per-problem best-of-``repeat`` times (s) for winder.profile.plan and ruckig."""
+    """Per-problem best-of-``repeat`` times (s) for winder.motion.profile.plan and ruckig."""
     ours = [math.inf] * len(probs)
     theirs = [math.inf] * len(probs)
     otg = ruckig.Ruckig(1)
@@ -106,9 +106,9 @@ def main() -> None:
         table(
             ["planner", "median us/plan", "ratio to ruckig"],
             [
-                ["winder.profile.plan('scurve')", f"{med_o * 1e6:6.2f}", f"{med_o / med_t:5.2f}"],
+                ["winder.motion.profile.plan('scurve')", f"{med_o * 1e6:6.2f}", f"{med_o / med_t:5.2f}"],
                 ["ruckig.Ruckig.calculate", f"{med_t * 1e6:6.2f}", "1.00"],
-                *[[f"winder.profile.plan('{k}')", f"{t * 1e6:6.2f}", ""] for k, t in kinds],
+                *[[f"winder.motion.profile.plan('{k}')", f"{t * 1e6:6.2f}", ""] for k, t in kinds],
             ],
         )
     )

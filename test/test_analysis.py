@@ -1,4 +1,4 @@
-"""winder.analysis and ``winder analyze`` on bags written by the real nodes.
+"""winder.analysis.metrics and ``winder analyze`` on bags written by the real nodes.
 
 Every expected value is worked out here from the bag as rosbags reads it, or
 from a closed form: eq. 7 with a plain loop over the step rows, the peak
@@ -20,8 +20,8 @@ import test_reader
 from conftest import final_report, rosbags_read
 from test_reader import joint_arrays, run_cli, step_rows
 
-from winder.analysis import analyze, step_kinematics
-from winder.reader import read_run
+from winder.analysis.metrics import analyze, step_kinematics
+from winder.record.reader import read_run
 
 pytestmark = pytest.mark.ros
 

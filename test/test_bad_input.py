@@ -16,8 +16,8 @@ import pytest
 from conftest import Procs
 from test_nodes import set_params
 
-from winder import cli
-from winder.params import INTERP_SPECS, PROFILE_SPECS, SIM_SPECS
+from winder.cli import commands as cli_main
+from winder.contract.params import INTERP_SPECS, PROFILE_SPECS, SIM_SPECS
 from winder.spec import Spec
 
 NODE_SPECS = {"interp_node": INTERP_SPECS, "profile_node": PROFILE_SPECS, "sim_node": SIM_SPECS}
@@ -89,7 +89,7 @@ def test_cli_rejects_bad_value_in_one_line(name: str, value: Any, capsys: pytest
     text = value if isinstance(value, str) else ("true" if value is True else repr(value))
     extra = [] if name == "bag_dir" else ["--bag-dir", "/nonexistent/never-created"]
     # --name=value: how a value that starts with '-' (like -inf) is given
-    code = cli.main(["run", f"--{name.replace('_', '-')}={text}", *extra])
+    code = cli_main.main(["run", f"--{name.replace('_', '-')}={text}", *extra])
     err = capsys.readouterr().err
     assert code == 2
     lines = err.strip().splitlines()

@@ -11,9 +11,9 @@ import pytest
 from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 
-from winder.bag import BagRecorder
-from winder.cdr import MultiArrayCodec
-from winder.stream import TIMED_COLUMNS
+from winder.contract.cdr import MultiArrayCodec
+from winder.contract.stream import TIMED_COLUMNS
+from winder.record.bag import BagRecorder
 
 TIMED = MultiArrayCodec(TIMED_COLUMNS, np.int64)
 TOPICS = {"/winder/step_times": "std_msgs/msg/Int64MultiArray", "/winder/job": "std_msgs/msg/String"}

@@ -13,8 +13,8 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Int32MultiArray, Int64MultiArray, MultiArrayDimension
 
-from winder.cdr import JointStateEncoder, MultiArrayCodec, encode_clocks
-from winder.stream import STEP_COLUMNS, TIMED_COLUMNS
+from winder.contract.cdr import JointStateEncoder, MultiArrayCodec, encode_clocks
+from winder.contract.stream import STEP_COLUMNS, TIMED_COLUMNS
 
 TS = get_typestore(Stores.ROS2_JAZZY)
 finite = st.floats(allow_nan=False, allow_infinity=False, width=64)

@@ -1,8 +1,8 @@
-"""winder.identify: J and D of the axes, against the values the simulation used.
+"""winder.analysis.identify: J and D of the axes, against the values the simulation used.
 
 The reference values are read from the bag's winder/sim_config with json here
-(not through winder.reader), or set by the test for records synthesised with
-winder.motor's exact linear response and its nonlinear integrator.
+(not through winder.record.reader), or set by the test for records synthesised with
+winder.axis's exact linear response and its nonlinear integrator.
 """
 
 from __future__ import annotations
@@ -18,9 +18,9 @@ import test_reader
 from conftest import rosbags_read
 from test_reader import assert_one_line_error, run_cli
 
-from winder.identify import AxisRecord, identify, identify_axis, with_noise
-from winder.motor import StepperAxis
-from winder.reader import AxisConfig, read_run
+from winder.analysis.identify import AxisRecord, identify, identify_axis, with_noise
+from winder.axis import StepperAxis
+from winder.record.reader import AxisConfig, read_run
 
 AXES = ("feed", "fork", "pole")
 
@@ -100,7 +100,7 @@ def test_measurement_noise_bounds(bag: Any) -> None:
     """The bounds stated in docs/ANALYSIS.md, on lin2k (2 kHz, 5 ms windows)."""
     run = read_run(bag("lin2k"))
     truth = recorded(bag("lin2k"))
-    from winder.identify import axis_record
+    from winder.analysis.identify import axis_record
 
     worst: dict[str, np.ndarray] = {}
     for case, kw in {
@@ -159,7 +159,7 @@ def test_cli_rejects_bad_settings(bag: Any) -> None:
     assert_one_line_error(run_cli("identify", path, "--window", "abc"), "window='abc' is invalid")
 
 
-# -- synthetic records: winder.motor's responses, no nodes -----------------------------------
+# -- synthetic records: winder.axis's responses, no nodes -----------------------------------
 
 
 def _record(model: str, J: float, D: float, load: float, rate: float) -> AxisRecord:

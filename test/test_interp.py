@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from winder.interp import (
+from winder.motion.interp import (
     MAX_STEPS,
     dda,
     deviation_stats,

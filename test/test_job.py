@@ -12,8 +12,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from winder.interp import interpolate
-from winder.job import FIELD_SPECS, Job, JobError
+from winder.motion.interp import interpolate
+from winder.motion.job import FIELD_SPECS, Job, JobError
 
 
 def test_default_job_is_the_rw400_setup() -> None:

@@ -1,4 +1,4 @@
-"""winder.mcap_storage, the .mcap writer behind BagRecorder, against the
+"""winder.record.mcap_storage, the .mcap writer behind BagRecorder, against the
 reference readers: the mcap library (indexed and record by record), rosbags,
 and winder's own reader. Messages of random sizes (packed small ones, big ones
 kept as pieces, some bigger than a chunk), random log times and every chunk
@@ -21,9 +21,9 @@ from mcap.stream_reader import StreamReader
 from rosbags.highlevel import AnyReader
 from ruamel.yaml import YAML
 
-from winder.bag import COMPRESSIONS, BagRecorder
-from winder.mcap_storage import CHUNK_BYTES, SMALL
-from winder.reader import read_raw
+from winder.record.bag import COMPRESSIONS, BagRecorder
+from winder.record.mcap_storage import CHUNK_BYTES, SMALL
+from winder.record.reader import read_raw
 
 try:
     from compression import zstd
@@ -184,7 +184,7 @@ def test_chunks_are_compressed_as_named(tmp_path: Path, compression: str) -> Non
 
 
 def test_a_payload_that_is_not_a_buffer_is_refused_before_anything_is_written(tmp_path: Path) -> None:
-    from winder.mcap_storage import StreamingMcapStorage
+    from winder.record.mcap_storage import StreamingMcapStorage
 
     bag = tmp_path / "b"
     bag.mkdir()

@@ -9,7 +9,7 @@
   static equilibrium under load in closed form;
 * the loss of steps: the cases that must and must not slip, with S-curve and
   exponential step times computed here by bisection on their closed-form
-  positions (independent of :mod:`winder.profile`).
+  positions (independent of :mod:`winder.motion.profile`).
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from hypothesis import strategies as st
 from scipy import signal
 from scipy.integrate import solve_ivp
 
-from winder.motor import (
+from winder.axis import (
     G_CM_S2,
     MODAL_ZETA,
     LinearTracker,
@@ -33,7 +33,7 @@ from winder.motor import (
     StepperAxis,
     measured_velocity,
 )
-from winder.profile import plan
+from winder.motion.profile import plan
 
 PAPER = {"Zr": 40.0, "L": 0.01005, "i_a": 1.0, "J": 1.05 * 9.80665e-5, "D": 0.03}
 FULL_STEP = 2 * math.pi / (2 * 2 * 40)  # two-phase, Z_r = 40: 2.25 deg
@@ -153,7 +153,7 @@ def ivp_reference(
     return th, om, float(y[0]), float(angles[times <= t_end].sum())
 
 
-# -- step times of the three starts (computed here, not with winder.profile) ----
+# -- step times of the three starts (computed here, not with winder.motion.profile) ----
 
 
 def invert(position, n: int, step: float, t_hi: float) -> np.ndarray:
@@ -218,7 +218,7 @@ def start_step_times(kind: str, v_max: float, step: float, duration: float) -> n
 
 
 def profile_step_times(kind: str, v_max: float, step: float, duration: float) -> np.ndarray:
-    """Step times of a start to v_max over [0, duration] from :func:`winder.profile.plan`
+    """Step times of a start to v_max over [0, duration] from :func:`winder.motion.profile.plan`
     (a move long enough to cruise past ``duration``), cut at ``duration``."""
     if kind == "none":
         return start_step_times("none", v_max, step, duration)
@@ -233,7 +233,7 @@ def profile_step_times(kind: str, v_max: float, step: float, duration: float) ->
 
 
 def test_profile_s_curve_step_times_agree_with_the_closed_form_here() -> None:
-    """The S-curve start of winder.profile is the paper's (eqs. 18-23)."""
+    """The S-curve start of winder.motion.profile is the paper's (eqs. 18-23)."""
     step = FULL_STEP / 16
     ours = start_step_times("scurve", 20.0, step, 6.5)
     theirs = profile_step_times("scurve", 20.0, step, 6.5)

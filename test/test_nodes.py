@@ -396,7 +396,7 @@ def test_launch_file_describes_the_three_nodes() -> None:
                 sys.modules.pop(k, None)
             else:
                 sys.modules[k] = v
-    from winder.params import INTERP_SPECS, PROFILE_SPECS
+    from winder.contract.params import INTERP_SPECS, PROFILE_SPECS
 
     assert [(n["package"], n["executable"]) for n in made] == [
         ("winder_sim", "sim_node"),

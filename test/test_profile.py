@@ -1,4 +1,4 @@
-"""winder.profile against independent oracles: ruckig's time-optimal trajectories,
+"""winder.motion.profile against independent oracles: ruckig's time-optimal trajectories,
 closed forms derived here by hand, numerical integration (scipy) and brute-force
 bisection written in this file. No expected value is copied from the code under test.
 """
@@ -16,7 +16,7 @@ from hypothesis import HealthCheck, assume, event, given, settings
 from hypothesis import strategies as st
 from scipy import integrate, optimize
 
-from winder.profile import jog, plan
+from winder.motion.profile import jog, plan
 
 EPS = np.finfo(np.float64).eps
 SETTINGS = {"deadline": None, "suppress_health_check": [HealthCheck.too_slow]}

@@ -1,4 +1,4 @@
-"""winder.reader on bags written by the real nodes, cut-short bags and bad input.
+"""winder.record.reader on bags written by the real nodes, cut-short bags and bad input.
 
 Expected values come from reading the same bags with rosbags directly, and,
 for cut-short files, from the byte offsets of the message records in the
@@ -30,7 +30,7 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-from winder.reader import BagError, read_raw, read_run, recover
+from winder.record.reader import BagError, read_raw, read_run, recover
 
 pytestmark = pytest.mark.ros
 

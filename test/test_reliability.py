@@ -14,9 +14,9 @@ import pytest
 from conftest import Procs, rosbags_read, spin_until
 from test_nodes import SMALL_JOB, expected_end, job_args, only_bag, timed_rows, winder_run
 
-from winder.interp import interpolate
-from winder.job import Job
-from winder.stream import describe_job
+from winder.contract.stream import describe_job
+from winder.motion.interp import interpolate
+from winder.motion.job import Job
 
 pytestmark = pytest.mark.ros
 
@@ -58,7 +58,8 @@ class FakeProfile:
     def __init__(self, node: Any, job: Job) -> None:
         from diagnostic_msgs.msg import DiagnosticArray
         from std_msgs.msg import Int64MultiArray, String
-        from winder_interp.contract import QOS_LATCHED, QOS_STREAM
+
+        from winder.ros.contract import QOS_LATCHED, QOS_STREAM
 
         self.node = node
         self.job = job
@@ -90,7 +91,7 @@ class FakeProfile:
         return out
 
     def send(self, chunks: list[np.ndarray]) -> None:
-        from winder_interp.contract import pack_timed
+        from winder.ros.contract import pack_timed
 
         spin_until(
             self.node, lambda: self.pub.get_subscription_count() > 0, 30, "the sim node's subscription"

@@ -13,9 +13,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from winder.interp import interpolate
-from winder.job import Job
-from winder.stream import StreamChecker, describe_job, parse_job_description
+from winder.contract.stream import StreamChecker, describe_job, parse_job_description
+from winder.motion.interp import interpolate
+from winder.motion.job import Job
 
 
 @st.composite

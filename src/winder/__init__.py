@@ -1,8 +1,8 @@
 """winder core library: the ROS-free mathematics of the winding cell.
 
-Modules: :mod:`winder.interp` (minimum-deviation interpolation), :mod:`winder.job`
-(winding jobs), :mod:`winder.profile` (velocity ramping and step timing),
-:mod:`winder.motor` (stepper motor model). All quantities are SI unless a name
+Modules: :mod:`winder.motion.interp` (minimum-deviation interpolation), :mod:`winder.motion.job`
+(winding jobs), :mod:`winder.motion.profile` (velocity ramping and step timing),
+:mod:`winder.axis` (stepper motor model). All quantities are SI unless a name
 says otherwise (``_steps`` for integer step counts).
 """
 

@@ -1,6 +1,6 @@
 """interp_node: winding job (parameters) -> minimum-deviation step commands.
 
-In:  parameters (the fields of winder.job.Job, autostart, chunk_steps),
+In:  parameters (the fields of winder.motion.job.Job, autostart, chunk_steps),
      service ~/start (std_srvs/Trigger).
 Out: winder/job (std_msgs/String, JSON job description, latched),
      winder/path (trajectory_msgs/JointTrajectory, latched),
@@ -21,12 +21,11 @@ from std_msgs.msg import Int32MultiArray, String
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from winder.interp import interpolate
-from winder.job import AXES, FIELD_SPECS, Job
-from winder.params import INTERP_SPECS, check_interp
-from winder.spec import SpecError
-from winder.stream import describe_job
-from winder_interp.contract import (
+from winder.contract.params import INTERP_SPECS, check_interp
+from winder.contract.stream import describe_job
+from winder.motion.interp import interpolate
+from winder.motion.job import AXES, FIELD_SPECS, Job
+from winder.ros.contract import (
     ERROR,
     OK,
     QOS_LATCHED,
@@ -41,6 +40,7 @@ from winder_interp.contract import (
     Settings,
     spin,
 )
+from winder.spec import SpecError
 
 
 class InterpNode(Node):

@@ -21,7 +21,10 @@ import numpy as np
 import numpy.typing as npt
 from rclpy.node import Node
 from std_msgs.msg import Int32MultiArray, Int64MultiArray, String
-from winder_interp.contract import (
+
+from winder.contract.params import PROFILE_SPECS, check_profile, plan_segment
+from winder.contract.stream import JobPlan, StreamChecker, parse_job_description
+from winder.ros.contract import (
     ERROR,
     OK,
     QOS_LATCHED,
@@ -38,9 +41,6 @@ from winder_interp.contract import (
     spin,
     waiting,
 )
-
-from winder.params import PROFILE_SPECS, check_profile, plan_segment
-from winder.stream import JobPlan, StreamChecker, parse_job_description
 
 
 class ProfileNode(Node):

@@ -12,7 +12,7 @@ from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-from winder.params import INTERP_SPECS, PROFILE_SPECS, SIM_SPECS
+from winder.contract.params import INTERP_SPECS, PROFILE_SPECS, SIM_SPECS
 
 
 def _args(specs):

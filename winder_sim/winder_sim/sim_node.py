@@ -8,7 +8,7 @@ Out: /clock, winder/joint_commands and winder/joint_states (JointState at
      the motor parameters in force), /diagnostics, and a rosbag2/MCAP
      directory ``<bag_dir>/<job_id>_<UTC stamp>`` holding all of them.
 
-Each axis is a stepper driven through ``winder.motor``: the linear model is
+Each axis is a stepper driven through ``winder.axis``: the linear model is
 exact between steps, the nonlinear one integrates the sine torque and reports
 lost steps. The simulation advances to the time of the last step received and
 never beyond, so /clock never runs ahead of the commands.
@@ -32,7 +32,15 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Int64MultiArray, String
 from trajectory_msgs.msg import JointTrajectory
-from winder_interp.contract import (
+
+from winder.axis import StepperAxis
+from winder.contract.cdr import JointStateEncoder, encode_clocks
+from winder.contract.params import MOTOR_FIELDS, SIM_SPECS, check_sim
+from winder.contract.stream import JobPlan, StreamChecker, parse_job_description
+from winder.motion.interp import line_distance
+from winder.motion.job import AXES
+from winder.record.bag import BagRecorder, new_bag_path, signals_held
+from winder.ros.contract import (
     ERROR,
     OK,
     QOS_CLOCK,
@@ -57,14 +65,6 @@ from winder_interp.contract import (
     spin,
     waiting,
 )
-
-from winder.bag import BagRecorder, new_bag_path, signals_held
-from winder.cdr import JointStateEncoder, encode_clocks
-from winder.interp import line_distance
-from winder.job import AXES
-from winder.motor import StepperAxis
-from winder.params import MOTOR_FIELDS, SIM_SPECS, check_sim
-from winder.stream import JobPlan, StreamChecker, parse_job_description
 
 PATH_WAIT = 2.0  # s of wall time the steps wait for the job's path and profile config
 # Running ahead of time, chunks are gathered and simulated together (one tracker

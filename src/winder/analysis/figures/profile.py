@@ -1,4 +1,4 @@
-"""Figures: the velocity profiles of papers 002 and 004, from :func:`winder.profile.plan`.
+"""Figures: the velocity profiles of papers 002 and 004, from :func:`winder.motion.profile.plan`.
 
 * ``profile_scurve_240.png`` - paper 002's S-curve: target 240, v 8, a 0.5, j 0.05;
 * ``profile_tcurve_210.png`` - paper 002's T-curve: target 210, v 8, a 0.5;
@@ -8,7 +8,7 @@
 Position, velocity, acceleration and jerk against time, phase boundaries
 shaded; the T-curve's jerk impulses at its corners are drawn as arrows.
 
-    .venv/bin/python -m winder.figures.profile [outdir]
+    .venv/bin/python -m winder.analysis.figures.profile [outdir]
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.axes import Axes
 
-from winder.profile import Profile, plan
+from winder.motion.profile import Profile, plan
 
 ROWS = (("position", ""), ("velocity", "/s"), ("acceleration", "/s²"), ("jerk", "/s³"))
 

@@ -1,7 +1,7 @@
 """Inertia and damping of the axes, identified from a recorded run: ROS-free.
 
 The model of every axis, in motor angle (what the sim node simulates, see
-:mod:`winder.motor`)::
+:mod:`winder.axis`)::
 
     J*theta'' + D*theta' = T_e
     T_e = K*(theta1 - theta),  K = Z_r**2*L*i_a**2/2           (linear model)
@@ -79,8 +79,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from winder.job import AXES
-from winder.reader import AxisConfig, Run
+from winder.motion.job import AXES
+from winder.record.reader import AxisConfig, Run
 
 __all__ = [
     "GAIN",

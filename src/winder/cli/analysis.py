@@ -43,8 +43,8 @@ def _say(lines: list[str], to_stderr: bool) -> None:
 
 def cmd_analyze(args: argparse.Namespace) -> int:
     """Winding accuracy and motion quality of one or more recordings, as one table."""
-    from winder.analysis import analyze, format_table, to_json
-    from winder.reader import read_run
+    from winder.analysis.metrics import analyze, format_table, to_json
+    from winder.record.reader import read_run
 
     runs = []
     try:
@@ -52,7 +52,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         results = [analyze(r) for r in runs]
         print(to_json(results) if args.json else format_table(results))
         if not args.no_plots:
-            from winder.figures.analysis import plot_analysis
+            from winder.analysis.figures.analysis import plot_analysis
 
             written: list[str] = []
             for run, res in zip(runs, results, strict=True):
@@ -66,8 +66,8 @@ def cmd_analyze(args: argparse.Namespace) -> int:
 
 def cmd_identify(args: argparse.Namespace) -> int:
     """J and D of every axis by MRAS and least squares, against the recorded values."""
-    from winder.identify import format_identification, identification_json, identify
-    from winder.reader import read_run
+    from winder.analysis.identify import format_identification, identification_json, identify
+    from winder.record.reader import read_run
 
     gain = _positive("gain", args.gain)
     window = _positive("window", args.window) / 1e3
@@ -76,7 +76,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
         ident = identify(run, gain=gain, window=window)
         print(identification_json([ident]) if args.json else format_identification(ident))
         if not args.no_plots:
-            from winder.figures.analysis import plot_identification
+            from winder.analysis.figures.analysis import plot_identification
 
             out = _plots_for(run.path, args.plots_dir, False)
             _say([f"plot: {p}" for p in plot_identification(run, ident, out)], args.json)
@@ -87,7 +87,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
 
 def cmd_bag_recover(args: argparse.Namespace) -> int:
     """Write the readable part of a cut-short recording as a complete bag."""
-    from winder.reader import read_raw, recover
+    from winder.record.reader import read_raw, recover
 
     try:
         raw = read_raw(args.bag)

@@ -3,7 +3,7 @@
 Three starts to w_max = 20 rad/s in 1/16 microsteps of the paper's Z_r = 40
 two-phase motor: no ramp (steps at the full rate from t = 0), the exponential
 ramp (1/tau = 0.85) and the S-curve (jerk 4, a_max 4), step times from
-:func:`winder.profile.plan`.
+:func:`winder.motion.profile.plan`.
 
 * rows 1-2, the paper's own analysis (linear G(s), its parameters): rotor
   velocity, and the tracking error against half a tooth pitch, past which the
@@ -14,7 +14,7 @@ ramp (1/tau = 0.85) and the S-curve (jerk 4, a_max 4), step times from
 * row 4, a lightly damped rotor (D = 0.003, zeta = 0.05) with the sine
   torque: the start without ramp slips, the ramps do not.
 
-    .venv/bin/python -m winder.figures.motor [outdir]
+    .venv/bin/python -m winder.analysis.figures.motor [outdir]
 """
 
 from __future__ import annotations
@@ -29,8 +29,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from winder.motor import SimResult, StepperAxis, measured_velocity
-from winder.profile import Profile, plan
+from winder.axis import SimResult, StepperAxis, measured_velocity
+from winder.motion.profile import Profile, plan
 
 W_MAX = 20.0  # rad/s, the paper's target
 TAU = 1 / 0.85  # s, the paper's exponential time constant

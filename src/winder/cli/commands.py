@@ -15,9 +15,9 @@ from typing import Any, NoReturn
 
 import numpy as np
 
-from winder.interp import dda, deviation_stats, interpolate, min_deviation, point_by_point
-from winder.job import FIELD_SPECS, Job
-from winder.params import PROFILE_SPECS, SIM_SPECS, check_profile, check_sim
+from winder.contract.params import PROFILE_SPECS, SIM_SPECS, check_profile, check_sim
+from winder.motion.interp import dda, deviation_stats, interpolate, min_deviation, point_by_point
+from winder.motion.job import FIELD_SPECS, Job
 from winder.spec import Spec, SpecError
 
 __all__ = ["main"]
@@ -159,7 +159,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     sim = values_from_args(args, SIM_SPECS)
     check_sim(sim)
     try:
-        from winder_sim.cell import run_cell
+        from winder.ros.cell import run_cell
     except ImportError as exc:
         raise UserError(f"the ROS 2 node packages are not installed ({exc}); run 'make demo'") from None
     sim["bag_dir"] = str(Path(sim["bag_dir"]).resolve())
@@ -211,7 +211,7 @@ def cmd_figures(args: argparse.Namespace) -> int:
 
     out = Path(args.outdir)
     for name in FIGURES:
-        module = importlib.import_module(f"winder.figures.{name}")
+        module = importlib.import_module(f"winder.analysis.figures.{name}")
         for path in module.make(out):
             print(path)
     return 0
@@ -244,7 +244,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("outdir", nargs="?", default="docs/img", help="where the PNG files go (default docs/img)")
     p.set_defaults(func=cmd_figures)
 
-    from winder.cli_analysis import register  # analyze, identify, bag recover (issue 6)
+    from winder.cli.analysis import register  # analyze, identify, bag recover (issue 6)
 
     register(sub)
     return parser

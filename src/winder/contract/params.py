@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from winder.job import AXES, FIELD_SPECS, Job
+from winder.motion.job import AXES, FIELD_SPECS, Job
 from winder.spec import Spec, SpecError
 
 __all__ = [
@@ -95,7 +95,7 @@ MOTOR_FIELDS = _table(
     Spec("load_torque", float, 0.0, "constant load torque (nonlinear model)", "N m", -100.0, 100.0),
 )
 
-#: MCAP chunk compressions of the sim node's bags (see winder.bag).
+#: MCAP chunk compressions of the sim node's bags (see winder.record.bag).
 BAG_COMPRESSIONS = ("zstd", "lz4", "none")
 
 SIM_SPECS = {
@@ -153,7 +153,7 @@ def check_interp(values: dict[str, Any]) -> None:
 
 def plan_segment(values: dict[str, Any], steps: int) -> Any:
     """The profile of one segment of ``steps`` steps with the profile settings."""
-    from winder.profile import plan
+    from winder.motion.profile import plan
 
     kind = values["profile"]
     kw: dict[str, Any] = {"v_max": values["v_max"], "v_start": values["v_start"], "v_end": values["v_start"]}
@@ -176,7 +176,7 @@ def check_profile(values: dict[str, Any]) -> None:
 
 def check_sim(values: dict[str, Any]) -> None:
     """Cross-field check: each axis must be a valid motor."""
-    from winder.motor import StepperAxis
+    from winder.axis import StepperAxis
 
     for axis in AXES:
         try:

@@ -64,7 +64,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from winder import _scurve
+from winder.motion import _scurve
 
 __all__ = ["EXP_CUT", "KINDS", "Jog", "Phase", "Profile", "jog", "plan"]
 

@@ -1,6 +1,6 @@
 """How well a recorded job wound, and how the axes moved: ROS-free.
 
-Input is a :class:`winder.reader.Run`; output an :class:`Analysis` that prints
+Input is a :class:`winder.record.reader.Run`; output an :class:`Analysis` that prints
 as a table (:func:`format_table`, several runs side by side) or JSON
 (:func:`to_json`).
 
@@ -54,9 +54,9 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from winder.interp import line_distance
-from winder.job import AXES
-from winder.reader import Run
+from winder.motion.interp import line_distance
+from winder.motion.job import AXES
+from winder.record.reader import Run
 
 __all__ = [
     "STRIDE_TIME",

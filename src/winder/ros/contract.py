@@ -43,9 +43,9 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.subscription import Subscription
 from std_msgs.msg import Int32MultiArray, Int64MultiArray, MultiArrayDimension
 
-from winder.cdr import MultiArrayCodec
+from winder.contract.cdr import MultiArrayCodec
+from winder.contract.stream import STEP_COLUMNS, TIMED_COLUMNS
 from winder.spec import Spec, SpecError
-from winder.stream import STEP_COLUMNS, TIMED_COLUMNS
 
 TOPIC_JOB = "winder/job"
 TOPIC_PATH = "winder/path"

@@ -7,7 +7,7 @@ stepped path to the ideal line (eq. 5) for minimum deviation, the DDA (plain
 and half-preloaded 2**10 register) and point-by-point comparison, with the
 eq. 7 means in the legend; and a zoom on the first steps of the unrolled path.
 
-    .venv/bin/python -m winder.figures.interp [outdir]
+    .venv/bin/python -m winder.analysis.figures.interp [outdir]
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from winder.interp import dda, deviation_stats, min_deviation, point_by_point
+from winder.motion.interp import dda, deviation_stats, min_deviation, point_by_point
 
 FEED_STEP = 8.8e-6  # m
 FORK_STEPS = 1024

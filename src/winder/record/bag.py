@@ -21,8 +21,8 @@ from pathlib import Path
 from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-from winder.mcap_storage import StreamingMcapStorage
-from winder.params import BAG_COMPRESSIONS
+from winder.contract.params import BAG_COMPRESSIONS
+from winder.record.mcap_storage import StreamingMcapStorage
 
 __all__ = ["BagRecorder", "cdr_exact", "new_bag_path", "signals_held"]
 
@@ -97,7 +97,7 @@ COMPRESSIONS = BAG_COMPRESSIONS
 
 class _Writer(Writer):
     """rosbags' rosbag2 writer (metadata.yaml, connections) with winder's
-    .mcap storage, which does not copy the messages (winder.mcap_storage)."""
+    .mcap storage, which does not copy the messages (winder.record.mcap_storage)."""
 
     STORAGE_PLUGINS = {  # noqa: RUF012 - rosbags declares it a plain attribute
         **Writer.STORAGE_PLUGINS,
@@ -172,7 +172,7 @@ class BagRecorder:
 
     def write(self, topic: str, t_ns: int, data: bytes | memoryview, *, exact: bool = False) -> None:
         """Record one serialized message. ``exact``: the payload is known to
-        end where the message ends (winder.cdr), so it needs no trimming."""
+        end where the message ends (winder.contract.cdr), so it needs no trimming."""
         if self._writer is None:
             raise RuntimeError(f"bag {self.path} is closed")
         if self._error is not None:

@@ -1,7 +1,7 @@
 """Reading winder recordings back, ROS-free: a bag directory (or its .mcap)
 in, numpy arrays out.
 
-A recording is what the sim node writes (:mod:`winder.bag`): a rosbag2
+A recording is what the sim node writes (:mod:`winder.record.bag`): a rosbag2
 directory ``<job_id>_<UTC stamp>/`` with ``metadata.yaml`` and one MCAP file.
 :func:`read_run` returns a :class:`Run`: the job plan, the motor set-up the
 simulation used, the timed step rows, the commanded and simulated joint
@@ -43,8 +43,8 @@ from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
 from mcap.records import Channel, Chunk, Message, Schema
 
-from winder.job import AXES
-from winder.stream import TIMED_COLUMNS, JobPlan, parse_job_description
+from winder.contract.stream import TIMED_COLUMNS, JobPlan, parse_job_description
+from winder.motion.job import AXES
 
 __all__ = [
     "AxisConfig",

@@ -1,6 +1,6 @@
 """Peak-velocity solve of S-curve and trapezoid moves, in closed form (scalar ``math``).
 
-Internal to :mod:`winder.profile`. All S-curve work is done in the units of
+Internal to :mod:`winder.motion.profile`. All S-curve work is done in the units of
 the limits themselves: time ``A/J``, velocity ``A**2/J``, distance ``A**3/J**2``.
 There ``a_max = j_max = 1``, so a jerk of 1e9 with ``a_max`` 0.5 and a jerk of
 1e-9 give the same well-scaled polynomials: the published "too large a jerk

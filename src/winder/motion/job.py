@@ -13,7 +13,7 @@ Axes, in this order everywhere in winder (``AXES``):
 
 Units are SI (metres, radians). Unrolled, a layer is the straight line from its
 start to (feed distance, flyer arc length) in the plane: the segment that
-:func:`winder.interp.interpolate` walks.
+:func:`winder.motion.interp.interpolate` walks.
 """
 
 from __future__ import annotations

@@ -29,10 +29,10 @@ import matplotlib.pyplot as plt
 import numpy as np
 import numpy.typing as npt
 
-from winder.analysis import Analysis, command_kinematics
-from winder.identify import Identification
-from winder.job import AXES
-from winder.reader import Run
+from winder.analysis.identify import Identification
+from winder.analysis.metrics import Analysis, command_kinematics
+from winder.motion.job import AXES
+from winder.record.reader import Run
 
 __all__ = ["plot_analysis", "plot_identification", "plots_dir"]
 

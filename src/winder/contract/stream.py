@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from winder.job import AXES, Job
+from winder.motion.job import AXES, Job
 
 __all__ = [
     "STEP_COLUMNS",
@@ -35,7 +35,7 @@ __all__ = [
 
 STEP_COLUMNS = ("segment", *AXES)
 TIMED_COLUMNS = ("t_ns", "segment", *AXES)
-FORMAT = "winder.job/1"
+FORMAT = "winder.motion.job/1"
 
 
 def describe_job(job: Job) -> str:

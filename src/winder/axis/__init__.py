@@ -1,0 +1,27 @@
+"""The simulated axis: the stepper motor's second-order model (exact linear
+response, nonlinear model that loses steps) and the encoder that reads it.
+Plain numpy; nothing here knows about ROS, bags or plots."""
+
+from winder.axis.model import (
+    G_CM_S2,
+    MODAL_ZETA,
+    PAPER,
+    LinearTracker,
+    LoadStep,
+    NonlinearTracker,
+    SimResult,
+    StepperAxis,
+    measured_velocity,
+)
+
+__all__ = [
+    "G_CM_S2",
+    "MODAL_ZETA",
+    "PAPER",
+    "LinearTracker",
+    "LoadStep",
+    "NonlinearTracker",
+    "SimResult",
+    "StepperAxis",
+    "measured_velocity",
+]
