@@ -1,3 +1,3 @@
 """Recording: the MCAP bag writer (:mod:`~winder.record.bag`,
-:mod:`~winder.record.mcap_storage`) and reader (:mod:`~winder.record.reader`).
-ROS-free (rosbags, mcap, numpy)."""
+:mod:`~winder.record.mcap_storage`) and reader (:mod:`~winder.record.raw` walks
+the files, :mod:`~winder.record.reader` decodes them). ROS-free (rosbags, mcap, numpy)."""

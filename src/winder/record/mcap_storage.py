@@ -277,5 +277,5 @@ class StreamingMcapStorage:
 
     def abort(self) -> None:
         """Stop without a summary: the chunks written so far stay readable
-        (winder.record.reader recovers them)."""
+        (winder.record.raw recovers them)."""
         self.bio.close()

@@ -7,17 +7,12 @@ directory ``<job_id>_<UTC stamp>/`` with ``metadata.yaml`` and one MCAP file.
 simulation used, the timed step rows, the commanded and simulated joint
 samples and the sim node's final report.
 
-Cut-short recordings
---------------------
-When the sim node dies mid-job (SIGKILL, power loss) the directory holds an
-MCAP file without its summary and footer, and no metadata.yaml; rosbags and
-``ros2 bag`` refuse it. The file is read here record by record with the
-``mcap`` library's record parsers: every record that reached the file whole is
-kept, and reading stops cleanly at the first incomplete one. Inside the last,
-incomplete chunk (rosbags writes uncompressed chunks of about 1 MiB by
-default) the messages that are whole are recovered too. Such a run is
-``recovered`` and never ``complete``; :func:`recover` writes it out again as a
-closed rosbag2 directory.
+The steps: :mod:`winder.record.raw` walks the file(s) into a :class:`RawBag`
+of undecoded messages (cut-short and damaged recordings too, see there); here
+the messages of the chosen cell are decoded, per topic family, and assembled
+into the :class:`Run`. A run read from a cut-short recording is ``recovered``
+and never ``complete``; :func:`recover` writes such a recording out again as
+a closed rosbag2 directory.
 
 Everything here is ROS-free: messages are decoded with the ``rosbags``
 typestore of ROS 2 Jazzy.
@@ -25,26 +20,29 @@ typestore of ROS 2 Jazzy.
 
 from __future__ import annotations
 
-import io
 import json
 import math
-import mmap
-import re
-import shutil
 import struct
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from mcap.data_stream import ReadDataStream
-from mcap.opcode import Opcode
-from mcap.records import Channel, Chunk, Message, Schema
 
 from winder.contract.stream import TIMED_COLUMNS, JobPlan, parse_job_description
+from winder.contract.topics import (
+    TOPIC_DIAGNOSTICS,
+    TOPIC_JOB,
+    TOPIC_JOINT_COMMANDS,
+    TOPIC_JOINT_STATES,
+    TOPIC_PROFILE_CONFIG,
+    TOPIC_SIM_CONFIG,
+    TOPIC_STEP_TIMES,
+    status_name,
+)
 from winder.motion.job import AXES
+from winder.record.raw import BagError, RawBag, _typestore, read_raw, recover
 
 __all__ = [
     "AxisConfig",
@@ -58,302 +56,16 @@ __all__ = [
     "recover",
 ]
 
-MAGIC = b"\x89MCAP0\r\n"
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 
 #: the winder topics, relative to the cell's namespace
-JOB, SIM_CONFIG, PATH, STEP_TIMES = "winder/job", "winder/sim_config", "winder/path", "winder/step_times"
-JOINT_COMMANDS, JOINT_STATES = "winder/joint_commands", "winder/joint_states"
-PROFILE_CONFIG = "winder/profile_config"
-DIAGNOSTICS = "/diagnostics"
-
-
-class BagError(ValueError):
-    """A recording cannot be read; the message says which file and why, in one line."""
-
-
-# -- raw MCAP -------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Connection:
-    """One MCAP channel: topic, ROS type and the type's definition text."""
-
-    id: int
-    topic: str
-    msgtype: str
-    encoding: str  #: message encoding, "cdr" for ROS 2
-    schema_encoding: str  #: "ros2msg" or "ros2idl"
-    schema: str  #: message definition text
-
-
-@dataclass
-class RawBag:
-    """The messages of a recording, undecoded, in file order.
-
-    ``closed``: every file ended with its MCAP footer. ``recovered``: some file
-    was cut short (or damaged) and was read up to its first incomplete record.
-    """
-
-    path: Path
-    files: list[Path]
-    connections: dict[int, Connection]
-    messages: list[tuple[int, int, bytes]]  #: (connection id, log time ns, CDR bytes)
-    closed: bool
-    recovered: bool
-    metadata: bool = False  #: metadata.yaml present
-    notes: list[str] = field(default_factory=list)
-
-    def topics(self) -> dict[str, int]:
-        """Message count per topic."""
-        counts = {c.topic: 0 for c in self.connections.values()}
-        for cid, _, _ in self.messages:
-            topic = self.connections[cid].topic
-            counts[topic] = counts.get(topic, 0) + 1
-        return counts
-
-
-def _bag_files(path: Path) -> tuple[Path, list[Path], bool]:
-    """(bag directory or file, the MCAP files to read, metadata.yaml present)."""
-    if not path.exists():
-        raise BagError(f"{path}: no such file or directory")
-    if path.is_file():
-        if path.name == "metadata.yaml":
-            return _bag_files(path.parent)
-        return path, [path], (path.parent / "metadata.yaml").exists()
-    if not path.is_dir():
-        raise BagError(f"{path}: not a directory or a regular file")
-    meta = path / "metadata.yaml"
-    files: list[Path] = []
-    if meta.exists():
-        text = meta.read_text(errors="replace")
-        if re.search(r"storage_identifier:\s*sqlite3", text):
-            db3 = sorted(path.glob("*.db3"))
-            if not db3:
-                raise BagError(f"{path}: metadata.yaml names an sqlite3 recording, but there is no .db3 file")
-            return path, db3, True
-        listed = re.findall(r"^\s*(?:-\s*)?path:\s*(\S+)", text, flags=re.M)
-        files = [path / name for name in listed if (path / name).exists()]
-    if not files:
-        files = sorted(p for p in path.glob("*.mcap") if p.is_file())
-    if not files:
-        entries = [p.name for p in path.iterdir()]
-        if not entries:
-            raise BagError(f"{path}: empty directory, not a rosbag2 recording (no metadata.yaml, no .mcap)")
-        if meta.exists():
-            raise BagError(f"{path}: metadata.yaml lists no MCAP file that exists here")
-        raise BagError(f"{path}: not a rosbag2 recording (no metadata.yaml and no .mcap file)")
-    return path, files, meta.exists()
-
-
-def _parse_chunk_partial(body: bytes | memoryview) -> tuple[str, bytes] | None:
-    """Compression and the records of a chunk record cut short (its body up to
-    the cut): as much of the chunk's record data as can be had, or None."""
-    if len(body) < 8 + 8 + 8 + 4 + 4:
-        return None
-    clen = int.from_bytes(body[28:32], "little")
-    start = 32 + clen + 8
-    if len(body) < start:
-        return None
-    compression = bytes(body[32 : 32 + clen]).decode("utf-8", "replace")
-    data = bytes(body[start:])
-    if compression == "":
-        return compression, data
-    if compression == "zstd":
-        try:
-            import zstandard
-
-            return compression, zstandard.ZstdDecompressor().decompressobj().decompress(data)
-        except Exception:  # a cut inside a frame: nothing usable
-            return None
-    return None  # lz4 frames cannot be read before their end
-
-
-_MSG_HEAD = struct.Struct("<HIQQ")  # channel id, sequence, log time, publish time
-
-
-def _inner_records(data: bytes | memoryview) -> Iterator[Schema | Channel | tuple[int, int, bytes]]:
-    """The whole records inside (part of) a chunk's record data, in order:
-    Schema and Channel records (parsed by ``mcap``), messages as (channel id,
-    log time, bytes). Stops at the first incomplete record."""
-    pos, n = 0, len(data)
-    while pos + 9 <= n:
-        op = data[pos]
-        length = int.from_bytes(data[pos + 1 : pos + 9], "little")
-        end = pos + 9 + length
-        if end > n:
-            return
-        if op == Opcode.MESSAGE:
-            cid, _, log_time, _ = _MSG_HEAD.unpack_from(data, pos + 9)
-            yield cid, log_time, bytes(data[pos + 9 + _MSG_HEAD.size : end])
-        elif op == Opcode.SCHEMA:
-            yield Schema.read(ReadDataStream(io.BytesIO(data[pos + 9 : end])))
-        elif op == Opcode.CHANNEL:
-            yield Channel.read(ReadDataStream(io.BytesIO(data[pos + 9 : end])))
-        pos = end
-
-
-def _chunk_data(chunk: Chunk) -> bytes:
-    if chunk.compression == "":
-        return chunk.data
-    if chunk.compression == "zstd":
-        import zstandard
-
-        return zstandard.ZstdDecompressor().decompress(chunk.data, max_output_size=chunk.uncompressed_size)
-    if chunk.compression == "lz4":
-        import lz4.frame
-
-        return lz4.frame.decompress(chunk.data)  # type: ignore[no-any-return]
-    raise ValueError(f"unsupported chunk compression {chunk.compression!r}")
-
-
-def _read_mcap(path: Path, raw: RawBag) -> None:
-    """Append the records of one MCAP file to ``raw``, stopping cleanly at the
-    first incomplete or damaged record."""
-    size = path.stat().st_size
-    if size == 0:
-        raise BagError(f"{path}: empty file (0 bytes)")
-    with path.open("rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as mm:
-        data = memoryview(mm)
-        try:
-            _scan(path, data, raw)
-        finally:
-            data.release()
-
-
-def _scan(path: Path, data: memoryview, raw: RawBag) -> None:
-    n = len(data)
-    if bytes(data[:8]) != MAGIC:
-        if bytes(data[:8]) == MAGIC[: min(8, n)] and n < 8:
-            raise BagError(f"{path}: MCAP file cut short inside its header, damaged beyond recovery")
-        raise BagError(f"{path}: not an MCAP file (it does not start with the MCAP magic bytes)")
-    schemas: dict[int, Schema] = {}
-    offset = max(raw.connections, default=0)  # ids of later split files follow on
-    ids: dict[int, int] = {}
-    footer = False
-    pos = 8
-    damaged = ""
-
-    def add(rec: Schema | Channel | Message | tuple[int, int, bytes]) -> None:
-        if isinstance(rec, tuple):
-            if rec[0] in ids:
-                raw.messages.append((ids[rec[0]], rec[1], rec[2]))
-        elif isinstance(rec, Schema):
-            schemas[rec.id] = rec
-        elif isinstance(rec, Channel):
-            if rec.id not in ids:
-                sch = schemas.get(rec.schema_id)
-                cid = offset + rec.id
-                ids[rec.id] = cid
-                raw.connections[cid] = Connection(
-                    cid,
-                    rec.topic,
-                    sch.name if sch else "",
-                    rec.message_encoding,
-                    sch.encoding if sch else "",
-                    bytes(sch.data).decode("utf-8", "replace") if sch else "",
-                )
-        elif rec.channel_id in ids:
-            raw.messages.append((ids[rec.channel_id], rec.log_time, rec.data))
-
-    while pos + 9 <= n:
-        op = data[pos]
-        length = int.from_bytes(data[pos + 1 : pos + 9], "little")
-        end = pos + 9 + length
-        if end > n:
-            break
-        body = data[pos + 9 : end]
-        try:
-            if op == Opcode.FOOTER:
-                footer = True
-                pos = end
-                break
-            if op == Opcode.CHUNK:
-                chunk = Chunk.read(ReadDataStream(io.BytesIO(body)))
-                for rec in _inner_records(_chunk_data(chunk)):
-                    add(rec)
-            elif op in (Opcode.SCHEMA, Opcode.CHANNEL):
-                stream = ReadDataStream(io.BytesIO(body))
-                add(Schema.read(stream) if op == Opcode.SCHEMA else Channel.read(stream))
-            elif op == Opcode.MESSAGE:
-                add(Message.read(ReadDataStream(io.BytesIO(body)), length))
-        except Exception as exc:  # a damaged record: keep what came before it
-            damaged = f"damaged record at byte {pos} ({type(exc).__name__})"
-            break
-        pos = end
-    if footer and bytes(data[pos : pos + 8]) == MAGIC:
-        return
-    raw.closed = False
-    if footer:
-        raw.recovered = True
-        raw.notes.append(f"{path.name}: cut short inside its closing magic bytes; every message was read")
-        return
-    raw.recovered = True
-    if damaged:
-        raw.notes.append(f"{path.name}: {damaged}; {n - pos} bytes after it not read")
-        return
-    # the record the file was cut in: a chunk may still hold whole messages
-    if pos + 9 <= n and data[pos] == Opcode.CHUNK:
-        part = _parse_chunk_partial(data[pos + 9 :])
-        if part is not None:
-            try:
-                for rec in _inner_records(part[1]):
-                    add(rec)
-            except Exception:
-                pass
-    where = f"inside the record at byte {pos}" if pos < n else "after a whole record"
-    raw.notes.append(
-        f"{path.name}: cut short at byte {n} ({where}), without summary and footer; "
-        "every whole message before the cut was read"
-    )
-
-
-def _read_sqlite(path: Path, files: list[Path], raw: RawBag) -> None:
-    from rosbags.rosbag2 import Reader
-
-    try:
-        with Reader(path) as reader:
-            for c in reader.connections:
-                raw.connections[c.id] = Connection(
-                    c.id, c.topic, c.msgtype, "cdr", "ros2msg", c.msgdef.data if c.msgdef else ""
-                )
-            for conn, t, data in reader.messages():
-                raw.messages.append((conn.id, t, bytes(data)))
-    except Exception as exc:
-        raise BagError(f"{path}: rosbag2 (sqlite3) recording cannot be read: {exc}") from None
-
-
-def read_raw(path: str | Path) -> RawBag:
-    """Every readable message of a recording (directory, metadata.yaml or .mcap file)."""
-    bag, files, meta = _bag_files(Path(path))
-    raw = RawBag(bag, files, {}, [], closed=True, recovered=False, metadata=meta)
-    if files and files[0].suffix == ".db3":
-        _read_sqlite(bag, files, raw)
-        return raw
-    for f in files:
-        try:
-            _read_mcap(f, raw)
-        except OSError as exc:
-            raise BagError(f"{f}: cannot be read: {exc.strerror or exc}") from None
-    if raw.closed and bag.is_dir() and not meta:
-        raw.notes.append("metadata.yaml missing (the MCAP file itself is complete)")
-    if not raw.messages:
-        if raw.recovered:
-            raise BagError(
-                f"{bag}: damaged beyond recovery: the MCAP file is cut short before its first whole message"
-            )
-        raise BagError(f"{bag}: empty recording: no messages")
-    return raw
+JOB, SIM_CONFIG, STEP_TIMES = TOPIC_JOB, TOPIC_SIM_CONFIG, TOPIC_STEP_TIMES
+JOINT_COMMANDS, JOINT_STATES = TOPIC_JOINT_COMMANDS, TOPIC_JOINT_STATES
+PROFILE_CONFIG, DIAGNOSTICS = TOPIC_PROFILE_CONFIG, TOPIC_DIAGNOSTICS
 
 
 # -- decoding ---------------------------------------------------------------------
-
-
-def _typestore() -> Any:
-    from rosbags.typesys import Stores, get_typestore
-
-    return get_typestore(Stores.ROS2_JAZZY)
 
 
 @dataclass(frozen=True)
@@ -555,8 +267,8 @@ def _joint_samples_slow(datas: list[bytes], topic: str) -> Samples:
     store = _typestore()
     n = len(datas)
     t = np.empty(n)
-    pos = np.empty((n, 3))
-    vel = np.zeros((n, 3))
+    pos = np.empty((n, len(AXES)))
+    vel = np.zeros((n, len(AXES)))
     order: list[int] | None = None
     names0: list[str] | None = None
     for i, data in enumerate(datas):
@@ -589,29 +301,39 @@ def read_run(path: str | Path, namespace: str | None = None) -> Run:
     """
     raw = read_raw(path)
     counts = raw.topics()
-    with_job = {t for t, c in counts.items() if c > 0}
-    spaces = _namespaces(with_job)
-    if namespace is not None:
-        ns = "/" + namespace.strip("/") if namespace.strip("/") else ""
-        if ns not in spaces:
-            have = ", ".join(s or "/" for s in spaces) or "none"
-            raise BagError(
-                f"{raw.path}: no winder job in namespace {ns or '/'} (namespaces with a job: {have})"
-            )
-    elif not spaces:
-        raise BagError(f"{raw.path}: not a winder bag: no /winder/job topic")
-    elif len(spaces) > 1:
-        raise BagError(
-            f"{raw.path}: the bag holds {len(spaces)} winder cells ({', '.join(s or '/' for s in spaces)}): "
-            "choose one with --namespace"
-        )
-    else:
-        ns = spaces[0]
-
+    ns = _pick_namespace(raw.path, counts, namespace)
     topic = {
         key: f"{ns}/{key}"
         for key in (JOB, SIM_CONFIG, PROFILE_CONFIG, STEP_TIMES, JOINT_COMMANDS, JOINT_STATES)
     }
+    decoded = _decode(raw, topic)
+    return _assemble(raw, ns, counts, topic, decoded)
+
+
+def _pick_namespace(bag: Path, counts: dict[str, int], namespace: str | None) -> str:
+    """The namespace of the cell to read: ``namespace`` if given, else the only
+    one whose job topic has a message."""
+    spaces = _namespaces({t for t, c in counts.items() if c > 0})
+    if namespace is not None:
+        ns = "/" + namespace.strip("/") if namespace.strip("/") else ""
+        if ns not in spaces:
+            have = ", ".join(s or "/" for s in spaces) or "none"
+            raise BagError(f"{bag}: no winder job in namespace {ns or '/'} (namespaces with a job: {have})")
+        return ns
+    if not spaces:
+        raise BagError(f"{bag}: not a winder bag: no /winder/job topic")
+    if len(spaces) > 1:
+        raise BagError(
+            f"{bag}: the bag holds {len(spaces)} winder cells ({', '.join(s or '/' for s in spaces)}): "
+            "choose one with --namespace"
+        )
+    return spaces[0]
+
+
+def _decode(raw: RawBag, topic: dict[str, str]) -> dict[str, list[Any]]:
+    """The messages of the cell's topics and of /diagnostics, per topic, in
+    file order: decoded, but joint states kept as CDR bytes (decoded together
+    by :func:`_joint_samples`)."""
     wanted = {*topic.values(), DIAGNOSTICS}
     joints = {topic[JOINT_COMMANDS], topic[JOINT_STATES]}
     store = _typestore()
@@ -633,40 +355,19 @@ def read_run(path: str | Path, namespace: str | None = None) -> Run:
             raise BagError(
                 f"{raw.path}: a {conn.topic} message ({conn.msgtype}) cannot be decoded: {exc}"
             ) from None
+    return decoded
 
-    try:
-        plan = parse_job_description(decoded[topic[JOB]][0].data)
-    except (ValueError, KeyError, TypeError) as exc:
-        raise BagError(f"{raw.path}: {topic[JOB]}: {exc}") from None
+
+def _assemble(
+    raw: RawBag, ns: str, counts: dict[str, int], topic: dict[str, str], decoded: dict[str, list[Any]]
+) -> Run:
+    """The :class:`Run` of the cell in namespace ``ns`` from its decoded messages."""
+    plan = _decode_plan(raw.path, decoded[topic[JOB]], topic[JOB])
     notes = list(raw.notes)
-    sim_config = None
-    if decoded[topic[SIM_CONFIG]]:
-        try:
-            sim_config = SimConfig.from_json(decoded[topic[SIM_CONFIG]][0].data)
-        except (ValueError, KeyError, TypeError) as exc:
-            raise BagError(f"{raw.path}: {topic[SIM_CONFIG]} is not a sim configuration: {exc}") from None
-    else:
-        notes.append(f"no {topic[SIM_CONFIG]} message: motor parameters unknown")
-    chunks = [_unpack_steps(m, topic[STEP_TIMES]) for m in decoded[topic[STEP_TIMES]]]
-    steps = np.vstack(chunks) if chunks else np.zeros((0, 5), np.int64)
-
-    profile_config: dict[str, Any] = {}
-    if decoded[topic[PROFILE_CONFIG]]:
-        try:
-            profile_config = dict(json.loads(decoded[topic[PROFILE_CONFIG]][-1].data))
-        except (ValueError, TypeError):
-            notes.append(f"{topic[PROFILE_CONFIG]} is not JSON: ramp settings unknown")
-    prefix = f"{ns.strip('/')}/" if ns else ""
-    report: dict[str, str] = {}
-    profile = ""
-    for arr in decoded[DIAGNOSTICS]:
-        for st in arr.status:
-            values = {kv.key: kv.value for kv in st.values}
-            if st.name == f"{prefix}sim_node: job" and "state" in values:
-                report = values
-            elif st.name == f"{prefix}profile_node: job" and "profile" in values:
-                profile = values["profile"]  # older bags: only the profile node's status says
-    profile = str(profile_config.get("profile", profile))
+    sim_config = _decode_sim_config(raw.path, decoded[topic[SIM_CONFIG]], topic[SIM_CONFIG], notes)
+    steps = _decode_steps(decoded[topic[STEP_TIMES]], topic[STEP_TIMES])
+    profile_config = _decode_profile_config(decoded[topic[PROFILE_CONFIG]], topic[PROFILE_CONFIG], notes)
+    report, profile = _decode_diagnostics(decoded[DIAGNOSTICS], ns)
     return Run(
         path=raw.path,
         namespace=ns,
@@ -676,7 +377,7 @@ def read_run(path: str | Path, namespace: str | None = None) -> Run:
         commands=_joint_samples(decoded[topic[JOINT_COMMANDS]], topic[JOINT_COMMANDS]),
         states=_joint_samples(decoded[topic[JOINT_STATES]], topic[JOINT_STATES]),
         report=report,
-        profile=profile,
+        profile=str(profile_config.get("profile", profile)),
         closed=raw.closed,
         recovered=raw.recovered,
         counts=counts,
@@ -685,53 +386,57 @@ def read_run(path: str | Path, namespace: str | None = None) -> Run:
     )
 
 
-# -- repair -------------------------------------------------------------------------
-
-
-def recover(path: str | Path, out: str | Path | None = None) -> tuple[Path, int]:
-    """Write the readable messages of a cut-short recording as a new, closed
-    rosbag2/MCAP directory (default ``<bag>_recovered`` beside it); return the
-    directory and the number of messages saved. Never writes into an existing
-    directory; a failed write leaves nothing behind."""
-    from rosbags.rosbag2 import StoragePlugin, Writer
-    from rosbags.typesys import get_types_from_msg
-
-    raw = read_raw(path)
-    src = raw.path
-    if out is None:
-        base = src if src.is_dir() else src.with_suffix("")
-        out = base.with_name(base.name + "_recovered")
-    out = Path(out)
-    if out.exists():
-        raise BagError(f"{out}: already exists; remove it or choose another name")
-    store = _typestore()
-    writer = Writer(out, version=9, storage_plugin=StoragePlugin.MCAP)
-    saved = 0
+def _decode_plan(bag: Path, msgs: list[Any], topic: str) -> JobPlan:
+    """The job plan from the first job message."""
     try:
-        writer.open()
-        conns: dict[int, Any] = {}
-        by_topic: dict[tuple[str, str], Any] = {}
-        for c in raw.connections.values():
-            if c.encoding != "cdr" or not c.msgtype:
-                continue
-            if c.msgtype not in store.fielddefs and c.schema and c.schema_encoding == "ros2msg":
-                try:
-                    store.register(get_types_from_msg(c.schema, c.msgtype))
-                except Exception:
-                    continue
-            if c.msgtype not in store.fielddefs:
-                continue
-            key = (c.topic, c.msgtype)
-            if key not in by_topic:
-                by_topic[key] = writer.add_connection(c.topic, c.msgtype, typestore=store)
-            conns[c.id] = by_topic[key]
-        for cid, t, data in raw.messages:
-            conn = conns.get(cid)
-            if conn is not None:
-                writer.write(conn, t, data)
-                saved += 1
-        writer.close()
-    except BaseException:
-        shutil.rmtree(out, ignore_errors=True)
-        raise
-    return out, saved
+        return parse_job_description(msgs[0].data)
+    except (ValueError, KeyError, TypeError) as exc:
+        raise BagError(f"{bag}: {topic}: {exc}") from None
+
+
+def _decode_sim_config(bag: Path, msgs: list[Any], topic: str, notes: list[str]) -> SimConfig | None:
+    """The sim node's configuration from its first message; None (and a note) if there is none."""
+    if not msgs:
+        notes.append(f"no {topic} message: motor parameters unknown")
+        return None
+    try:
+        return SimConfig.from_json(msgs[0].data)
+    except (ValueError, KeyError, TypeError) as exc:
+        raise BagError(f"{bag}: {topic} is not a sim configuration: {exc}") from None
+
+
+def _decode_steps(msgs: list[Any], topic: str) -> IntArray:
+    """The timed step rows of every step_times chunk, in order."""
+    chunks = [_unpack_steps(m, topic) for m in msgs]
+    return np.vstack(chunks) if chunks else np.zeros((0, 5), np.int64)
+
+
+def _decode_profile_config(msgs: list[Any], topic: str, notes: list[str]) -> dict[str, Any]:
+    """The profile node's ramp settings from its last message; empty (with a
+    note if the message is not JSON) if unknown."""
+    if not msgs:
+        return {}
+    try:
+        return dict(json.loads(msgs[-1].data))
+    except (ValueError, TypeError):
+        notes.append(f"{topic} is not JSON: ramp settings unknown")
+        return {}
+
+
+def _decode_diagnostics(msgs: list[Any], ns: str) -> tuple[dict[str, str], str]:
+    """The sim node's last job status and the profile kind the profile node's
+    status names (older bags say it only there), of the cell in ``ns``."""
+    sim_status, profile_status = (
+        status_name("sim_node", namespace=ns),
+        status_name("profile_node", namespace=ns),
+    )
+    report: dict[str, str] = {}
+    profile = ""
+    for arr in msgs:
+        for st in arr.status:
+            values = {kv.key: kv.value for kv in st.values}
+            if st.name == sim_status and "state" in values:
+                report = values
+            elif st.name == profile_status and "profile" in values:
+                profile = values["profile"]
+    return report, profile

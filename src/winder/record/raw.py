@@ -1,0 +1,426 @@
+"""Reading the messages of a rosbag2 recording undecoded, ROS-free: the bag's
+files found, each MCAP file walked record by record, and a cut-short
+recording written out again closed.
+
+A recording is what the sim node writes (:mod:`winder.record.bag`): a rosbag2
+directory ``<job_id>_<UTC stamp>/`` with ``metadata.yaml`` and one MCAP file.
+:func:`read_raw` returns a :class:`RawBag`: the channels and the messages as
+CDR bytes, in file order; :mod:`winder.record.reader` decodes them.
+
+Cut-short recordings
+--------------------
+When the sim node dies mid-job (SIGKILL, power loss) the directory holds an
+MCAP file without its summary and footer, and no metadata.yaml; rosbags and
+``ros2 bag`` refuse it. The file is read here record by record with the
+``mcap`` library's record parsers: every record that reached the file whole is
+kept, and reading stops cleanly at the first incomplete one. Inside the last,
+incomplete chunk (rosbags writes uncompressed chunks of about 1 MiB by
+default) the messages that are whole are recovered too. Such a bag is
+``recovered`` and never ``closed``; :func:`recover` writes it out again as a
+closed rosbag2 directory.
+"""
+
+from __future__ import annotations
+
+import io
+import mmap
+import re
+import shutil
+import struct
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from mcap.data_stream import ReadDataStream
+from mcap.opcode import Opcode
+from mcap.records import Channel, Chunk, Message, Schema
+
+__all__ = ["BagError", "Connection", "RawBag", "read_raw", "recover"]
+
+MAGIC = b"\x89MCAP0\r\n"
+
+
+class BagError(ValueError):
+    """A recording cannot be read; the message says which file and why, in one line."""
+
+
+# -- raw MCAP -------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Connection:
+    """One MCAP channel: topic, ROS type and the type's definition text."""
+
+    id: int
+    topic: str
+    msgtype: str
+    encoding: str  #: message encoding, "cdr" for ROS 2
+    schema_encoding: str  #: "ros2msg" or "ros2idl"
+    schema: str  #: message definition text
+
+
+@dataclass
+class RawBag:
+    """The messages of a recording, undecoded, in file order.
+
+    ``closed``: every file ended with its MCAP footer. ``recovered``: some file
+    was cut short (or damaged) and was read up to its first incomplete record.
+    """
+
+    path: Path
+    files: list[Path]
+    connections: dict[int, Connection]
+    messages: list[tuple[int, int, bytes]]  #: (connection id, log time ns, CDR bytes)
+    closed: bool
+    recovered: bool
+    metadata: bool = False  #: metadata.yaml present
+    notes: list[str] = field(default_factory=list)
+
+    def topics(self) -> dict[str, int]:
+        """Message count per topic."""
+        counts = {c.topic: 0 for c in self.connections.values()}
+        for cid, _, _ in self.messages:
+            topic = self.connections[cid].topic
+            counts[topic] = counts.get(topic, 0) + 1
+        return counts
+
+
+def _bag_files(path: Path) -> tuple[Path, list[Path], bool]:
+    """(bag directory or file, the MCAP files to read, metadata.yaml present)."""
+    if not path.exists():
+        raise BagError(f"{path}: no such file or directory")
+    if path.is_file():
+        if path.name == "metadata.yaml":
+            return _bag_files(path.parent)
+        return path, [path], (path.parent / "metadata.yaml").exists()
+    if not path.is_dir():
+        raise BagError(f"{path}: not a directory or a regular file")
+    meta = path / "metadata.yaml"
+    files: list[Path] = []
+    if meta.exists():
+        text = meta.read_text(errors="replace")
+        if re.search(r"storage_identifier:\s*sqlite3", text):
+            db3 = sorted(path.glob("*.db3"))
+            if not db3:
+                raise BagError(f"{path}: metadata.yaml names an sqlite3 recording, but there is no .db3 file")
+            return path, db3, True
+        listed = re.findall(r"^\s*(?:-\s*)?path:\s*(\S+)", text, flags=re.M)
+        files = [path / name for name in listed if (path / name).exists()]
+    if not files:
+        files = sorted(p for p in path.glob("*.mcap") if p.is_file())
+    if not files:
+        entries = [p.name for p in path.iterdir()]
+        if not entries:
+            raise BagError(f"{path}: empty directory, not a rosbag2 recording (no metadata.yaml, no .mcap)")
+        if meta.exists():
+            raise BagError(f"{path}: metadata.yaml lists no MCAP file that exists here")
+        raise BagError(f"{path}: not a rosbag2 recording (no metadata.yaml and no .mcap file)")
+    return path, files, meta.exists()
+
+
+def _parse_chunk_partial(body: bytes | memoryview) -> tuple[str, bytes] | None:
+    """Compression and the records of a chunk record cut short (its body up to
+    the cut): as much of the chunk's record data as can be had, or None."""
+    if len(body) < 8 + 8 + 8 + 4 + 4:
+        return None
+    clen = int.from_bytes(body[28:32], "little")
+    start = 32 + clen + 8
+    if len(body) < start:
+        return None
+    compression = bytes(body[32 : 32 + clen]).decode("utf-8", "replace")
+    data = bytes(body[start:])
+    if compression == "":
+        return compression, data
+    if compression == "zstd":
+        try:
+            import zstandard
+
+            return compression, zstandard.ZstdDecompressor().decompressobj().decompress(data)
+        except Exception:  # a cut inside a frame: nothing usable
+            return None
+    return None  # lz4 frames cannot be read before their end
+
+
+_MSG_HEAD = struct.Struct("<HIQQ")  # channel id, sequence, log time, publish time
+
+
+def _record_spans(data: bytes | memoryview, pos: int) -> Iterator[tuple[int, int, int]]:
+    """(opcode, body start, body end) of the whole MCAP records in ``data`` from
+    byte ``pos`` on, in order; stops at the first incomplete record."""
+    n = len(data)
+    while pos + 9 <= n:
+        op = data[pos]
+        length = int.from_bytes(data[pos + 1 : pos + 9], "little")
+        end = pos + 9 + length
+        if end > n:
+            return
+        yield op, pos + 9, end
+        pos = end
+
+
+def _inner_records(data: bytes | memoryview) -> Iterator[Schema | Channel | tuple[int, int, bytes]]:
+    """The whole records inside (part of) a chunk's record data, in order:
+    Schema and Channel records (parsed by ``mcap``), messages as (channel id,
+    log time, bytes). Stops at the first incomplete record."""
+    for op, start, end in _record_spans(data, 0):
+        if op == Opcode.MESSAGE:
+            cid, _, log_time, _ = _MSG_HEAD.unpack_from(data, start)
+            yield cid, log_time, bytes(data[start + _MSG_HEAD.size : end])
+        elif op == Opcode.SCHEMA:
+            yield Schema.read(ReadDataStream(io.BytesIO(data[start:end])))
+        elif op == Opcode.CHANNEL:
+            yield Channel.read(ReadDataStream(io.BytesIO(data[start:end])))
+
+
+def _chunk_data(chunk: Chunk) -> bytes:
+    if chunk.compression == "":
+        return chunk.data
+    if chunk.compression == "zstd":
+        import zstandard
+
+        return zstandard.ZstdDecompressor().decompress(chunk.data, max_output_size=chunk.uncompressed_size)
+    if chunk.compression == "lz4":
+        import lz4.frame
+
+        return lz4.frame.decompress(chunk.data)  # type: ignore[no-any-return]
+    raise ValueError(f"unsupported chunk compression {chunk.compression!r}")
+
+
+def _read_mcap(path: Path, raw: RawBag) -> None:
+    """Append the records of one MCAP file to ``raw``, stopping cleanly at the
+    first incomplete or damaged record."""
+    size = path.stat().st_size
+    if size == 0:
+        raise BagError(f"{path}: empty file (0 bytes)")
+    with path.open("rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as mm:
+        data = memoryview(mm)
+        try:
+            _scan(path, data, raw)
+        finally:
+            data.release()
+
+
+def _scan(path: Path, data: memoryview, raw: RawBag) -> None:
+    """Add the records of one mapped MCAP file to ``raw``: the whole records
+    in order, then what can be had of a cut-short end."""
+    _check_magic(path, data)
+    sink = _Sink(raw)
+    walk = _walk(data, sink)
+    _finish(path, data, raw, sink, walk)
+
+
+def _check_magic(path: Path, data: memoryview) -> None:
+    n = len(data)
+    if bytes(data[:8]) != MAGIC:
+        if bytes(data[:8]) == MAGIC[: min(8, n)] and n < 8:
+            raise BagError(f"{path}: MCAP file cut short inside its header, damaged beyond recovery")
+        raise BagError(f"{path}: not an MCAP file (it does not start with the MCAP magic bytes)")
+
+
+class _Sink:
+    """Adds the records of one MCAP file to a RawBag: schemas kept for the
+    channels that name them, channel ids of a later split file following on
+    from the earlier files', messages of unknown channels dropped."""
+
+    def __init__(self, raw: RawBag) -> None:
+        self.raw = raw
+        self.schemas: dict[int, Schema] = {}
+        self.offset = max(raw.connections, default=0)
+        self.ids: dict[int, int] = {}  #: channel id in the file -> connection id in the RawBag
+
+    def add(self, rec: Schema | Channel | Message | tuple[int, int, bytes]) -> None:
+        ids = self.ids
+        if isinstance(rec, tuple):  # a message inside a chunk, the most frequent case
+            if rec[0] in ids:
+                self.raw.messages.append((ids[rec[0]], rec[1], rec[2]))
+        elif isinstance(rec, Schema):
+            self.schemas[rec.id] = rec
+        elif isinstance(rec, Channel):
+            self._channel(rec)
+        elif rec.channel_id in ids:
+            self.raw.messages.append((ids[rec.channel_id], rec.log_time, rec.data))
+
+    def _channel(self, rec: Channel) -> None:
+        if rec.id in self.ids:
+            return
+        sch = self.schemas.get(rec.schema_id)
+        cid = self.offset + rec.id
+        self.ids[rec.id] = cid
+        self.raw.connections[cid] = Connection(
+            cid,
+            rec.topic,
+            sch.name if sch else "",
+            rec.message_encoding,
+            sch.encoding if sch else "",
+            bytes(sch.data).decode("utf-8", "replace") if sch else "",
+        )
+
+
+@dataclass(frozen=True)
+class _Walk:
+    """Where the walk over a file's top-level records stopped."""
+
+    pos: int  #: byte after the last whole record read (after the footer, if found)
+    footer: bool = False
+    damaged: str = ""  #: why a whole record could not be read, "" if none
+
+
+def _walk(data: memoryview, sink: _Sink) -> _Walk:
+    """Add the whole top-level records after the magic to ``sink``, up to the
+    footer, the first incomplete record or the first damaged one."""
+    pos = 8
+    for op, start, end in _record_spans(data, pos):
+        if op == Opcode.FOOTER:
+            return _Walk(end, footer=True)
+        try:
+            _read_record(op, data[start:end], end - start, sink)
+        except Exception as exc:  # a damaged record: keep what came before it
+            return _Walk(pos, damaged=f"damaged record at byte {pos} ({type(exc).__name__})")
+        pos = end
+    return _Walk(pos)
+
+
+def _read_record(op: int, body: memoryview, length: int, sink: _Sink) -> None:
+    """Add one whole top-level record (its opcode and body) to ``sink``."""
+    if op == Opcode.CHUNK:
+        chunk = Chunk.read(ReadDataStream(io.BytesIO(body)))
+        for rec in _inner_records(_chunk_data(chunk)):
+            sink.add(rec)
+    elif op in (Opcode.SCHEMA, Opcode.CHANNEL):
+        stream = ReadDataStream(io.BytesIO(body))
+        sink.add(Schema.read(stream) if op == Opcode.SCHEMA else Channel.read(stream))
+    elif op == Opcode.MESSAGE:
+        sink.add(Message.read(ReadDataStream(io.BytesIO(body)), length))
+
+
+def _finish(path: Path, data: memoryview, raw: RawBag, sink: _Sink, walk: _Walk) -> None:
+    """Mark ``raw`` cut short unless the walk ended at the footer and the
+    closing magic, and say in a note how the file ended."""
+    n, pos = len(data), walk.pos
+    if walk.footer and bytes(data[pos : pos + 8]) == MAGIC:
+        return
+    raw.closed = False
+    raw.recovered = True
+    if walk.footer:
+        raw.notes.append(f"{path.name}: cut short inside its closing magic bytes; every message was read")
+        return
+    if walk.damaged:
+        raw.notes.append(f"{path.name}: {walk.damaged}; {n - pos} bytes after it not read")
+        return
+    _read_cut_chunk(data, pos, sink)
+    where = f"inside the record at byte {pos}" if pos < n else "after a whole record"
+    raw.notes.append(
+        f"{path.name}: cut short at byte {n} ({where}), without summary and footer; "
+        "every whole message before the cut was read"
+    )
+
+
+def _read_cut_chunk(data: memoryview, pos: int, sink: _Sink) -> None:
+    """The record the file was cut in, at ``pos``: a chunk may still hold whole messages."""
+    if pos + 9 > len(data) or data[pos] != Opcode.CHUNK:
+        return
+    part = _parse_chunk_partial(data[pos + 9 :])
+    if part is None:
+        return
+    try:
+        for rec in _inner_records(part[1]):
+            sink.add(rec)
+    except Exception:
+        pass
+
+
+def _read_sqlite(path: Path, files: list[Path], raw: RawBag) -> None:
+    from rosbags.rosbag2 import Reader
+
+    try:
+        with Reader(path) as reader:
+            for c in reader.connections:
+                raw.connections[c.id] = Connection(
+                    c.id, c.topic, c.msgtype, "cdr", "ros2msg", c.msgdef.data if c.msgdef else ""
+                )
+            for conn, t, data in reader.messages():
+                raw.messages.append((conn.id, t, bytes(data)))
+    except Exception as exc:
+        raise BagError(f"{path}: rosbag2 (sqlite3) recording cannot be read: {exc}") from None
+
+
+def read_raw(path: str | Path) -> RawBag:
+    """Every readable message of a recording (directory, metadata.yaml or .mcap file)."""
+    bag, files, meta = _bag_files(Path(path))
+    raw = RawBag(bag, files, {}, [], closed=True, recovered=False, metadata=meta)
+    if files and files[0].suffix == ".db3":
+        _read_sqlite(bag, files, raw)
+        return raw
+    for f in files:
+        try:
+            _read_mcap(f, raw)
+        except OSError as exc:
+            raise BagError(f"{f}: cannot be read: {exc.strerror or exc}") from None
+    if raw.closed and bag.is_dir() and not meta:
+        raw.notes.append("metadata.yaml missing (the MCAP file itself is complete)")
+    if not raw.messages:
+        if raw.recovered:
+            raise BagError(
+                f"{bag}: damaged beyond recovery: the MCAP file is cut short before its first whole message"
+            )
+        raise BagError(f"{bag}: empty recording: no messages")
+    return raw
+
+
+def _typestore() -> Any:
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+# -- repair -------------------------------------------------------------------------
+
+
+def recover(path: str | Path, out: str | Path | None = None) -> tuple[Path, int]:
+    """Write the readable messages of a cut-short recording as a new, closed
+    rosbag2/MCAP directory (default ``<bag>_recovered`` beside it); return the
+    directory and the number of messages saved. Never writes into an existing
+    directory; a failed write leaves nothing behind."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import get_types_from_msg
+
+    raw = read_raw(path)
+    src = raw.path
+    if out is None:
+        base = src if src.is_dir() else src.with_suffix("")
+        out = base.with_name(base.name + "_recovered")
+    out = Path(out)
+    if out.exists():
+        raise BagError(f"{out}: already exists; remove it or choose another name")
+    store = _typestore()
+    writer = Writer(out, version=9, storage_plugin=StoragePlugin.MCAP)
+    saved = 0
+    try:
+        writer.open()
+        conns: dict[int, Any] = {}
+        by_topic: dict[tuple[str, str], Any] = {}
+        for c in raw.connections.values():
+            if c.encoding != "cdr" or not c.msgtype:
+                continue
+            if c.msgtype not in store.fielddefs and c.schema and c.schema_encoding == "ros2msg":
+                try:
+                    store.register(get_types_from_msg(c.schema, c.msgtype))
+                except Exception:
+                    continue
+            if c.msgtype not in store.fielddefs:
+                continue
+            key = (c.topic, c.msgtype)
+            if key not in by_topic:
+                by_topic[key] = writer.add_connection(c.topic, c.msgtype, typestore=store)
+            conns[c.id] = by_topic[key]
+        for cid, t, data in raw.messages:
+            conn = conns.get(cid)
+            if conn is not None:
+                writer.write(conn, t, data)
+                saved += 1
+        writer.close()
+    except BaseException:
+        shutil.rmtree(out, ignore_errors=True)
+        raise
+    return out, saved
