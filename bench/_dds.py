@@ -151,7 +151,7 @@ def _messages(n: int, form: str) -> tuple[object, object]:
     publish) or bytes serialized once beforehand (what the nodes publish)."""
     import numpy as np
 
-    from winder.ros.contract import STEPS_CDR, TIMED_CDR, pack_steps, pack_timed
+    from winder.ros.chunks import STEPS_CDR, TIMED_CDR, pack_steps, pack_timed
 
     steps = np.zeros((n, 4), np.int32)
     steps[:, 2] = np.arange(1, n + 1)
@@ -168,7 +168,7 @@ def run_pub(rows: int, timeout: float, form: str = "message") -> dict[str, float
     from rclpy.duration import Duration
     from std_msgs.msg import Int32MultiArray, Int64MultiArray
 
-    from winder.ros.contract import QOS_STREAM
+    from winder.ros.qos import QOS_STREAM
 
     t_proc = time.monotonic()
     rclpy.init(args=[])
@@ -211,7 +211,7 @@ def run_sub(rows: int, timeout: float) -> dict[str, float | int]:
     import rclpy
     from std_msgs.msg import Int32MultiArray, Int64MultiArray
 
-    from winder.ros.contract import QOS_STREAM
+    from winder.ros.qos import QOS_STREAM
 
     t_proc = time.monotonic()
     rclpy.init(args=[])

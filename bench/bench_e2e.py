@@ -255,7 +255,7 @@ def replay_split(bag: Path) -> None:
     import winder_sim.sim_node as sim_module
 
     from winder.contract.cdr import JointStateEncoder
-    from winder.ros.contract import Settings
+    from winder.ros.settings import Settings
 
     spent: dict[str, list[float]] = {}
 

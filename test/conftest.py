@@ -19,6 +19,8 @@ from typing import Any
 import pytest
 from rosbags.highlevel import AnyReader
 
+from winder.contract.topics import status_name
+
 BIN = Path(sys.executable).parent
 _domains = itertools.count((os.getpid() * 7) % 60)
 
@@ -146,5 +148,5 @@ def final_report(bag: dict[str, list[tuple[int, Any]]]) -> dict[str, str]:
         {kv.key: kv.value for kv in st.values}
         for _, arr in bag["/diagnostics"]
         for st in arr.status
-        if st.name == "sim_node: job"
+        if st.name == status_name("sim_node")
     ][-1]

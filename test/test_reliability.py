@@ -59,7 +59,7 @@ class FakeProfile:
         from diagnostic_msgs.msg import DiagnosticArray
         from std_msgs.msg import Int64MultiArray, String
 
-        from winder.ros.contract import QOS_LATCHED, QOS_STREAM
+        from winder.ros.qos import QOS_LATCHED, QOS_STREAM
 
         self.node = node
         self.job = job
@@ -91,7 +91,7 @@ class FakeProfile:
         return out
 
     def send(self, chunks: list[np.ndarray]) -> None:
-        from winder.ros.contract import pack_timed
+        from winder.ros.chunks import pack_timed
 
         spin_until(
             self.node, lambda: self.pub.get_subscription_count() > 0, 30, "the sim node's subscription"

@@ -23,23 +23,14 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from winder.contract.params import INTERP_SPECS, check_interp
 from winder.contract.stream import describe_job
+from winder.contract.topics import TOPIC_JOB, TOPIC_PATH, TOPIC_PROGRESS, TOPIC_STEPS
 from winder.motion.interp import interpolate
 from winder.motion.job import AXES, FIELD_SPECS, Job
-from winder.ros.contract import (
-    ERROR,
-    OK,
-    QOS_LATCHED,
-    QOS_STATE,
-    QOS_STREAM,
-    STEPS_CDR,
-    TOPIC_JOB,
-    TOPIC_PATH,
-    TOPIC_PROGRESS,
-    TOPIC_STEPS,
-    Diagnostics,
-    Settings,
-    spin,
-)
+from winder.ros.chunks import STEPS_CDR
+from winder.ros.diagnostics import ERROR, OK, Diagnostics
+from winder.ros.qos import QOS_LATCHED, QOS_STATE, QOS_STREAM
+from winder.ros.settings import Settings
+from winder.ros.spin import spin
 from winder.spec import SpecError
 
 

@@ -20,27 +20,17 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 from rclpy.node import Node
+from rclpy.subscription import Subscription
 from std_msgs.msg import Int32MultiArray, Int64MultiArray, String
 
 from winder.contract.params import PROFILE_SPECS, check_profile, plan_segment
-from winder.contract.stream import JobPlan, StreamChecker, parse_job_description
-from winder.ros.contract import (
-    ERROR,
-    OK,
-    QOS_LATCHED,
-    QOS_STREAM,
-    STEPS_CDR,
-    TIMED_CDR,
-    TOPIC_JOB,
-    TOPIC_PROFILE_CONFIG,
-    TOPIC_STEP_TIMES,
-    TOPIC_STEPS,
-    WARN,
-    Diagnostics,
-    Settings,
-    spin,
-    waiting,
-)
+from winder.contract.stream import TIMED_COLUMNS, JobPlan, StreamChecker, parse_job_description
+from winder.contract.topics import TOPIC_JOB, TOPIC_PROFILE_CONFIG, TOPIC_STEP_TIMES, TOPIC_STEPS
+from winder.ros.chunks import STEPS_CDR, TIMED_CDR, waiting
+from winder.ros.diagnostics import ERROR, OK, WARN, Diagnostics
+from winder.ros.qos import QOS_LATCHED, QOS_STREAM
+from winder.ros.settings import Settings
+from winder.ros.spin import spin
 
 
 class ProfileNode(Node):
@@ -52,7 +42,7 @@ class ProfileNode(Node):
         self.pub_config = self.create_publisher(String, TOPIC_PROFILE_CONFIG, QOS_LATCHED)
         self.diag = Diagnostics(self, "winder_profile")
         self.create_subscription(String, TOPIC_JOB, self.on_job, QOS_LATCHED)
-        self.sub_steps = None  # created once the timed stream has a reader
+        self.sub_steps: Subscription | None = None  # created once the timed stream has a reader
         self.create_timer(0.05, self.connect)
         self.create_timer(1.0, self.report)
 
@@ -138,7 +128,7 @@ class ProfileNode(Node):
         # count, so step k sits at position k (memory per chunk, not per segment)
         k = self.checker.step_index(seg, pos)
         times = self.profiles[seg].times_at(k.astype(np.float64))
-        out = np.empty((rows.shape[0], 5), np.int64)
+        out = np.empty((rows.shape[0], len(TIMED_COLUMNS)), np.int64)
         out[:, 0] = self.seg_t0_ns[seg] + np.rint(times * 1e9).astype(np.int64)
         out[:, 1:] = rows
         self.pub.publish(TIMED_CDR.encode(out))

@@ -37,18 +37,7 @@ from winder.axis import StepperAxis
 from winder.contract.cdr import JointStateEncoder, encode_clocks
 from winder.contract.params import MOTOR_FIELDS, SIM_SPECS, check_sim
 from winder.contract.stream import JobPlan, StreamChecker, parse_job_description
-from winder.motion.interp import line_distance
-from winder.motion.job import AXES
-from winder.record.bag import BagRecorder, new_bag_path, signals_held
-from winder.ros.contract import (
-    ERROR,
-    OK,
-    QOS_CLOCK,
-    QOS_DIAGNOSTICS,
-    QOS_LATCHED,
-    QOS_STATE,
-    QOS_STREAM,
-    TIMED_CDR,
+from winder.contract.topics import (
     TOPIC_CLOCK,
     TOPIC_DIAGNOSTICS,
     TOPIC_JOB,
@@ -59,12 +48,15 @@ from winder.ros.contract import (
     TOPIC_PROGRESS,
     TOPIC_SIM_CONFIG,
     TOPIC_STEP_TIMES,
-    WARN,
-    Diagnostics,
-    Settings,
-    spin,
-    waiting,
 )
+from winder.motion.interp import line_distance
+from winder.motion.job import AXES
+from winder.record.bag import BagRecorder, new_bag_path, signals_held
+from winder.ros.chunks import TIMED_CDR, waiting
+from winder.ros.diagnostics import ERROR, OK, WARN, Diagnostics
+from winder.ros.qos import QOS_CLOCK, QOS_DIAGNOSTICS, QOS_LATCHED, QOS_STATE, QOS_STREAM
+from winder.ros.settings import Settings
+from winder.ros.spin import spin
 
 PATH_WAIT = 2.0  # s of wall time the steps wait for the job's path and profile config
 # Running ahead of time, chunks are gathered and simulated together (one tracker
@@ -462,7 +454,9 @@ class SimNode(Node):
         s = self.plan.segments[seg]
         if s.kind != "layer":
             return
-        dist = line_distance(pos[:, :2], s.delta[0], s.delta[1], step_lengths=self.lxly, origin=s.start[:2])
+        dist = line_distance(
+            pos[:, :2], s.delta[0], s.delta[1], step_lengths=self.lxly, origin=(s.start[0], s.start[1])
+        )
         self.accumulate(self.dev_cmd, dist)
 
     def deviation_of_axes(self, segs: npt.NDArray[np.int64], act_pos: npt.NDArray[np.float64]) -> None:

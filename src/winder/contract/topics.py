@@ -1,0 +1,32 @@
+"""Topic names of the cell and the names of its status reports (ROS-free).
+
+Names are relative (``winder/steps``) so that a node namespace
+(``--ros-args -r __ns:=/cell1``) moves the whole cell; ``/clock`` and
+``/diagnostics`` stay global, as ROS tools expect them. Their QoS is in
+:mod:`winder.ros.qos`; their types and contents in the README's topic contract.
+"""
+
+from __future__ import annotations
+
+TOPIC_JOB = "winder/job"
+TOPIC_PATH = "winder/path"
+TOPIC_STEPS = "winder/steps"
+TOPIC_STEP_TIMES = "winder/step_times"
+TOPIC_JOINT_STATES = "winder/joint_states"
+TOPIC_JOINT_COMMANDS = "winder/joint_commands"
+TOPIC_SIM_CONFIG = "winder/sim_config"
+TOPIC_PROGRESS = "winder/progress"
+TOPIC_PROFILE_CONFIG = "winder/profile_config"
+TOPIC_CLOCK = "/clock"
+TOPIC_DIAGNOSTICS = "/diagnostics"
+
+#: The diagnostic task every node reports its job under (``"<node>: job"``).
+TASK_JOB = "job"
+
+
+def status_name(node: str, task: str = TASK_JOB, namespace: str = "") -> str:
+    """The DiagnosticStatus name of ``node``'s ``task`` in ``namespace``, as
+    diagnostic_updater forms it from the node's fully qualified name:
+    ``"sim_node: job"``, ``"cell1/sim_node: job"``."""
+    ns = namespace.strip("/")
+    return f"{ns}/{node}: {task}" if ns else f"{node}: {task}"

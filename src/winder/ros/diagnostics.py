@@ -1,0 +1,43 @@
+"""Diagnostics the diagnostic_updater way: one DiagnosticStatus per task,
+named ``"<node>: <task>"``, with a hardware id and key/value pairs."""
+
+from __future__ import annotations
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.node import Node
+
+from winder.contract.topics import TOPIC_DIAGNOSTICS
+from winder.ros.qos import QOS_DIAGNOSTICS
+
+
+class Diagnostics:
+    """Publishes one node's DiagnosticStatus entries the diagnostic_updater way:
+    names ``"<node>: <task>"``, a hardware id, key/value pairs. The node name
+    includes its namespace (``cell1/sim_node: job``): /diagnostics is global,
+    and two cells on one graph must stay tellable apart."""
+
+    def __init__(self, node: Node, hardware_id: str) -> None:
+        self.node = node
+        self.hardware_id = hardware_id
+        self.pub = node.create_publisher(DiagnosticArray, TOPIC_DIAGNOSTICS, QOS_DIAGNOSTICS)
+
+    def publish(self, task: str, level: int, message: str, values: dict[str, object]) -> None:
+        self.pub.publish(self.status(task, level, message, values))
+
+    def status(self, task: str, level: int, message: str, values: dict[str, object]) -> DiagnosticArray:
+        """The DiagnosticArray that :meth:`publish` would send."""
+        status = DiagnosticStatus(
+            level=bytes([level]),
+            name=f"{self.node.get_fully_qualified_name().lstrip('/')}: {task}",
+            message=message,
+            hardware_id=self.hardware_id,
+            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()],
+        )
+        arr = DiagnosticArray(status=[status])
+        arr.header.stamp = self.node.get_clock().now().to_msg()
+        return arr
+
+
+OK = int.from_bytes(DiagnosticStatus.OK, "little")
+WARN = int.from_bytes(DiagnosticStatus.WARN, "little")
+ERROR = int.from_bytes(DiagnosticStatus.ERROR, "little")

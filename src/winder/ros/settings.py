@@ -1,0 +1,128 @@
+"""A node's settings as ROS parameters, declared from a winder spec table
+(:mod:`winder.contract.params`): descriptors with ranges, start-up overrides
+checked, run-time changes refused with the reason. Every check is the spec's
+own, so a value is judged the same way in a node and in ``winder run``."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    ParameterType,
+    SetParametersResult,
+)
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from winder.spec import Spec, SpecError
+
+
+def descriptor(spec: Spec) -> ParameterDescriptor:
+    """The ROS parameter descriptor of a winder setting. Typing is dynamic so
+    that ``v_max:=3000`` (an integer) is accepted for a double; the checks in
+    the set-parameters callback convert and validate every value."""
+    kind = {
+        bool: ParameterType.PARAMETER_BOOL,
+        int: ParameterType.PARAMETER_INTEGER,
+        float: ParameterType.PARAMETER_DOUBLE,
+        str: ParameterType.PARAMETER_STRING,
+    }[spec.kind]
+    d = ParameterDescriptor(type=kind, description=spec.help(), dynamic_typing=True)
+    if spec.low is not None and spec.high is not None:
+        if spec.kind is float:
+            d.floating_point_range = [
+                FloatingPointRange(from_value=float(spec.low), to_value=float(spec.high), step=0.0)
+            ]
+        elif spec.kind is int:
+            d.integer_range = [IntegerRange(from_value=int(spec.low), to_value=int(spec.high), step=1)]
+    if spec.choices:
+        d.additional_constraints = "one of: " + ", ".join(spec.choices)
+    return d
+
+
+class Settings:
+    """A node's settings declared as ROS parameters from a winder spec table.
+
+    A bad start-up override (``--ros-args -p name:=value``) is not fatal: it is
+    logged with its reason and the default is kept, and :attr:`rejected` lists
+    it; run-time changes go through the same checks and are refused with the
+    reason. :meth:`values` returns the current values converted to their types.
+    """
+
+    def __init__(
+        self,
+        node: Node,
+        specs: dict[str, Spec],
+        check: Callable[[dict[str, Any]], None],
+    ) -> None:
+        self.node = node
+        self.specs = specs
+        self.check = check
+        self.rejected: list[str] = []
+        self._values: dict[str, Any] | None = None
+        log = node.get_logger()
+        for name, spec in specs.items():
+            try:
+                node.declare_parameter(name, spec.default, descriptor(spec))
+            except (InvalidParameterValueException, InvalidParameterTypeException) as exc:
+                log.error(f"{self._reason_for_override(name, exc)}; keeping the default {spec.default!r}")
+                node.declare_parameter(name, spec.default, descriptor(spec), ignore_override=True)
+                self.rejected.append(name)
+                continue
+            try:
+                spec.check(node.get_parameter(name).value)
+            except SpecError as exc:
+                log.error(f"{exc}; keeping the default {spec.default!r}")
+                node.set_parameters([Parameter(name, value=spec.default)])
+                self.rejected.append(name)
+        try:
+            check(self.values())
+        except SpecError as exc:
+            log.error(f"settings rejected at start: {exc}")
+            self.rejected.append(str(exc))
+        node.add_on_set_parameters_callback(self._on_set)
+
+    def _reason_for_override(self, name: str, exc: Exception) -> str:
+        override = self.node._parameter_overrides.get(name)
+        if override is not None:
+            try:
+                self.specs[name].check(override.value)
+            except SpecError as err:
+                return str(err)
+        return f"{name}: {str(exc).splitlines()[0]}"
+
+    def values(self) -> dict[str, Any]:
+        """Current values, typed; cached until a parameter change is accepted."""
+        if self._values is None:
+            self._values = {n: s.check(self.node.get_parameter(n).value) for n, s in self.specs.items()}
+        return self._values
+
+    def _on_set(self, params: list[Parameter]) -> SetParametersResult:
+        merged = {n: self.node.get_parameter(n).value for n in self.specs}
+        try:
+            for p in params:
+                if p.name in self.specs:
+                    merged[p.name] = self.specs[p.name].check(p.value)
+            self.check({n: self.specs[n].check(v) for n, v in merged.items()})
+        except SpecError as exc:
+            self.node.get_logger().warning(f"parameter change rejected: {exc}")
+            return SetParametersResult(successful=False, reason=str(exc))
+        self._values = None  # the new values are in place once this returns
+        # a start-up rejection is resolved once that parameter is set validly
+        names = {p.name for p in params}
+        self.rejected = [r for r in self.rejected if r in self.specs and r not in names]
+        return SetParametersResult(successful=True)
+
+    def blocked(self) -> str | None:
+        """Why the node must not run a job: start-up values it had to refuse."""
+        if self.rejected:
+            return (
+                f"settings rejected at start: {', '.join(self.rejected)}; "
+                "set valid values (ros2 param set) to proceed"
+            )
+        return None
