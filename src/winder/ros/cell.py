@@ -1,8 +1,12 @@
 """Run the whole winding cell: the three node executables as separate processes
 (what ``ros2 launch winder_sim winder.launch.py`` does on a ROS install), a
-progress bar while the job runs, and a summary at the end.
+progress callback while the job runs, and the final report at the end.
 
-Used by ``winder run``; the nodes' logs go to a file that is shown on failure.
+Used by ``winder run``; the nodes' logs go to a directory that is kept and
+named when the run fails, removed after a clean run. The steps, in order:
+:func:`cell_environment` (domain, discovery), :class:`NodeProcesses` (spawn,
+stop), :class:`CellWatch` (listen to /diagnostics, ask the interp node to
+start) and :func:`run_cell`, which strings them together.
 """
 
 from __future__ import annotations
@@ -15,11 +19,29 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.task import Future
+from std_srvs.srv import Trigger
+
+from winder.contract.topics import TOPIC_DIAGNOSTICS, status_name
+
 NODES = {"interp": "interp_node", "profile": "profile_node", "sim": "sim_node"}
+#: Start order: the sim node first; the others wait for their readers, so the
+#: job starts only when the whole chain is connected.
+START_ORDER = ("sim", "profile", "interp")
+#: Seconds before an unanswered start request is asked again.
+START_RETRY = 5.0
+ERROR_LEVEL = b"\x02"
 
 
 @dataclass
@@ -42,6 +64,7 @@ def find_executable(name: str) -> str:
 
 
 def ros_args(params: dict[str, Any], namespace: str) -> list[str]:
+    """``--ros-args`` for a node: the namespace remap and one ``-p`` per parameter."""
     args = ["--ros-args"]
     if namespace:
         args += ["-r", f"__ns:={namespace}"]
@@ -56,23 +79,11 @@ def ros_args(params: dict[str, Any], namespace: str) -> list[str]:
     return args
 
 
-def run_cell(
-    params: dict[str, dict[str, Any]],
-    *,
-    namespace: str = "",
-    domain: int | None = None,
-    timeout: float = 3600.0,
-    progress: Any = None,
-) -> CellResult:
-    """Start the three nodes with ``params[node]`` parameters, wait for the sim
-    node to report the job done, stop them with SIGINT, return the summary.
-    The nodes' output goes to ``result.log_dir``, removed after a clean run."""
-    import rclpy
-    from diagnostic_msgs.msg import DiagnosticArray
-    from rclpy.executors import ExternalShutdownException
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
-    from std_srvs.srv import Trigger
-
+@contextmanager
+def cell_environment(domain: int | None) -> Iterator[dict[str, str]]:
+    """The environment of the cell's processes (this one's included while it
+    lasts): a ROS domain (``ROS_DOMAIN_ID`` if set, else a random one in
+    100-199) and localhost-only discovery unless the caller chose otherwise."""
     env = dict(os.environ)
     if domain is None:
         domain = (
@@ -81,125 +92,202 @@ def run_cell(
     env["ROS_DOMAIN_ID"] = str(domain)
     env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     env["PYTHONUNBUFFERED"] = "1"
-    log_dir = Path(tempfile.mkdtemp(prefix="winder-cell-"))
-    procs: dict[str, subprocess.Popen[bytes]] = {}
-    saved = {k: os.environ.get(k) for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")}
-    os.environ["ROS_DOMAIN_ID"] = env["ROS_DOMAIN_ID"]
-    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = env["ROS_AUTOMATIC_DISCOVERY_RANGE"]
-    rclpy.init(args=[])
-    node = rclpy.create_node("winder_cell", namespace=namespace or "/")
-    state: dict[str, Any] = {
-        "summary": None,
-        "progress": 0.0,
-        "errors": [],
-        "heard_sim": False,
-        "job_seen": False,
-    }
-
-    ns = namespace.strip("/")
-    sim_status = f"{ns}/sim_node: job" if ns else "sim_node: job"
-    interp_status = f"{ns}/interp_node: job" if ns else "interp_node: job"
-
-    def on_diag(msg: DiagnosticArray) -> None:
-        for st in msg.status:
-            values = {kv.key: kv.value for kv in st.values}
-            if st.name == sim_status:
-                state["heard_sim"] = True
-            if st.name == interp_status and values.get("state") in ("sending", "sent"):
-                state["job_seen"] = True  # the start request got through
-            if st.name == sim_status and values.get("job_id"):
-                state["progress"] = float(values.get("progress", 0.0))
-                state["sim_time"] = values.get("sim_time_s", "0")
-                if values.get("state") in ("done", "incomplete"):
-                    state["summary"] = values
-                    state["message"] = st.message
-            elif st.level == b"\x02" and st.name.startswith(ns) and st.message not in state["errors"]:
-                state["errors"].append(f"{st.name}: {st.message}")
-
-    node.create_subscription(
-        DiagnosticArray,
-        "/diagnostics",
-        on_diag,
-        QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE),
-    )
-    result = CellResult(False, log_dir=log_dir)
+    keys = ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")
+    saved = {k: os.environ.get(k) for k in keys}
+    os.environ.update({k: env[k] for k in keys})
     try:
-        # the sim node first: the others wait for their readers, so the job starts
-        # only when the whole chain is connected
-        for key in ("sim", "profile", "interp"):
-            exe = find_executable(NODES[key])
-            log = open(log_dir / f"{NODES[key]}.log", "wb")  # noqa: SIM115 - closed with the process
-            node_params = dict(params.get(key, {}))
-            if key == "interp":
-                node_params["autostart"] = False  # started below, once we listen
-            procs[key] = subprocess.Popen(
-                [exe, *ros_args(node_params, namespace)],
-                env=env,
-                stdout=log,
-                stderr=subprocess.STDOUT,
-                stdin=subprocess.DEVNULL,
-            )
-        # start the job only when this process hears the sim node's diagnostics
-        # and the interp node's start service is up: no report can be missed
-        start = node.create_client(Trigger, f"{namespace.rstrip('/')}/interp_node/start")
-        t_end = time.monotonic() + timeout
-        started: Any = None
-        asked = 0.0
-        accepted = False
-        while state["summary"] is None:
-            accepted = accepted or state["job_seen"]
-            if not accepted and start.service_is_ready() and state["heard_sim"]:
-                if started is None or (not started.done() and time.monotonic() - asked > 5.0):
-                    # a DDS service reply can be lost while its topic is still
-                    # matching: ask again (a job already started is no error)
-                    if started is not None:
-                        start.remove_pending_request(started)
-                    started, asked = start.call_async(Trigger.Request()), time.monotonic()
-                elif started.done():
-                    reply = started.result()
-                    if reply is not None and (reply.success or "still being sent" in reply.message):
-                        accepted = True
-                    else:
-                        result.message = f"job refused: {reply.message if reply else 'no reply'}"
-                        break
-
-            rclpy.spin_once(node, timeout_sec=0.1)
-            if progress is not None:
-                progress(state["progress"], state.get("sim_time", "0"))
-            dead = [k for k, p in procs.items() if p.poll() is not None]
-            if dead:
-                result.message = f"{NODES[dead[0]]} exited with status {procs[dead[0]].returncode}"
-                break
-            if time.monotonic() > t_end:
-                result.message = f"job did not finish within {timeout:g} s"
-                break
-        if state["summary"] is not None:
-            result.summary = state["summary"]
-            result.ok = state["summary"].get("state") == "done"
-            result.message = state.get("message", "")
-        if state["errors"] and not result.message:
-            result.message = state["errors"][0]
-    except ExternalShutdownException:
-        raise KeyboardInterrupt from None  # Ctrl-C: the caller reports it
+        yield env
     finally:
-        for p in procs.values():
-            if p.poll() is None:
-                p.send_signal(signal.SIGINT)
-        for p in procs.values():
-            try:
-                p.wait(timeout=15)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
-        node.destroy_node()
-        rclpy.try_shutdown()
         for k, v in saved.items():
             if v is None:
                 os.environ.pop(k, None)
             else:
                 os.environ[k] = v
-    if result.ok and not state["errors"] and not int(result.summary.get("errors", "0")):
+
+
+class NodeProcesses:
+    """The node executables as child processes, output to ``log_dir/<name>.log``;
+    :meth:`stop` sends SIGINT (the nodes close their bags) and kills what is
+    still running after ``grace`` seconds."""
+
+    def __init__(self, env: dict[str, str], log_dir: Path) -> None:
+        self.env = env
+        self.log_dir = log_dir
+        self.procs: dict[str, subprocess.Popen[bytes]] = {}
+
+    def start(self, name: str, args: list[str]) -> subprocess.Popen[bytes]:
+        with open(self.log_dir / f"{name}.log", "wb") as log:  # the child holds its own copy
+            p = subprocess.Popen(
+                [find_executable(name), *args],
+                env=self.env,
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                stdin=subprocess.DEVNULL,
+            )
+        self.procs[name] = p
+        return p
+
+    def dead(self) -> str | None:
+        """``"<name> exited with status N"`` for the first child that ended, else None."""
+        for name, p in self.procs.items():
+            if p.poll() is not None:
+                return f"{name} exited with status {p.returncode}"
+        return None
+
+    def stop(self, grace: float = 15.0) -> None:
+        for p in self.procs.values():
+            if p.poll() is None:
+                p.send_signal(signal.SIGINT)
+        for p in self.procs.values():
+            try:
+                p.wait(timeout=grace)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+
+
+class CellWatch:
+    """What this process hears of the cell on /diagnostics, and its start call.
+
+    ``heard_sim``: the sim node's job status got through (so no report can be
+    missed once the job starts); ``job_seen``: the interp node reports the job
+    sending; ``summary``: the sim node's final job report (``done`` or
+    ``incomplete``); ``errors``: ERROR statuses of the cell's nodes.
+    """
+
+    def __init__(self, node: Node, namespace: str) -> None:
+        self.node = node
+        self.ns = namespace.strip("/")
+        self.sim_status = status_name("sim_node", namespace=namespace)
+        self.interp_status = status_name("interp_node", namespace=namespace)
+        self.heard_sim = False
+        self.job_seen = False
+        self.progress = 0.0
+        self.sim_time = "0"
+        self.summary: dict[str, str] | None = None
+        self.message = ""
+        self.errors: list[str] = []
+        node.create_subscription(
+            DiagnosticArray,
+            TOPIC_DIAGNOSTICS,
+            self._on_diagnostics,
+            QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE),
+        )
+        self.start = node.create_client(Trigger, f"{namespace.rstrip('/')}/interp_node/start")
+        self._request: Future | None = None
+        self._asked = 0.0
+        self.accepted = False
+
+    def _on_diagnostics(self, msg: DiagnosticArray) -> None:
+        for st in msg.status:
+            values = {kv.key: kv.value for kv in st.values}
+            if st.name == self.sim_status:
+                self.heard_sim = True
+            if st.name == self.interp_status and values.get("state") in ("sending", "sent"):
+                self.job_seen = True  # the start request got through
+            if st.name == self.sim_status and values.get("job_id"):
+                self.progress = float(values.get("progress", 0.0))
+                self.sim_time = values.get("sim_time_s", "0")
+                if values.get("state") in ("done", "incomplete"):
+                    self.summary = values
+                    self.message = st.message
+            elif st.level == ERROR_LEVEL and st.name.startswith(self.ns) and st.message not in self.errors:
+                self.errors.append(f"{st.name}: {st.message}")
+
+    def ask_to_start(self) -> str | None:
+        """One step of starting the job: call ``~/start`` once the cell is
+        listening, ask again if the reply is lost, and return the reason if the
+        job was refused (None while starting or once started)."""
+        self.accepted = self.accepted or self.job_seen
+        if self.accepted or not (self.start.service_is_ready() and self.heard_sim):
+            return None
+        req = self._request
+        if req is None or (not req.done() and time.monotonic() - self._asked > START_RETRY):
+            # a DDS service reply can be lost while its topic is still matching:
+            # ask again (a job already started is no error)
+            if req is not None:
+                self.start.remove_pending_request(req)
+            self._request, self._asked = self.start.call_async(Trigger.Request()), time.monotonic()
+        elif req.done():
+            reply = req.result()
+            if reply is not None and (reply.success or "still being sent" in reply.message):
+                self.accepted = True
+            else:
+                return f"job refused: {reply.message if reply else 'no reply'}"
+        return None
+
+
+def _spawn(procs: NodeProcesses, params: dict[str, dict[str, Any]], namespace: str) -> None:
+    for key in START_ORDER:
+        node_params = dict(params.get(key, {}))
+        if key == "interp":
+            node_params["autostart"] = False  # started by the watch, once it listens
+        procs.start(NODES[key], ros_args(node_params, namespace))
+
+
+def _wait_for_job(
+    node: Node,
+    watch: CellWatch,
+    procs: NodeProcesses,
+    timeout: float,
+    progress: Callable[[float, str], None] | None,
+) -> str:
+    """Spin until the sim node's final report; the reason if it never came."""
+    t_end = time.monotonic() + timeout
+    while watch.summary is None:
+        refused = watch.ask_to_start()
+        if refused:
+            return refused
+        rclpy.spin_once(node, timeout_sec=0.1)
+        if progress is not None:
+            progress(watch.progress, watch.sim_time)
+        dead = procs.dead()
+        if dead:
+            return dead
+        if time.monotonic() > t_end:
+            return f"job did not finish within {timeout:g} s"
+    return ""
+
+
+def _result(watch: CellWatch, failure: str, log_dir: Path) -> CellResult:
+    result = CellResult(False, message=failure, log_dir=log_dir)
+    if watch.summary is not None:
+        result.summary = watch.summary
+        result.ok = watch.summary.get("state") == "done"
+        result.message = watch.message
+    if watch.errors and not result.message:
+        result.message = watch.errors[0]
+    if result.ok and not watch.errors and not int(result.summary.get("errors", "0")):
         # a clean run's logs say nothing the summary does not: leave no litter in /tmp
         shutil.rmtree(log_dir, ignore_errors=True)
         result.log_dir = None
     return result
+
+
+def run_cell(
+    params: dict[str, dict[str, Any]],
+    *,
+    namespace: str = "",
+    domain: int | None = None,
+    timeout: float = 3600.0,
+    progress: Callable[[float, str], None] | None = None,
+) -> CellResult:
+    """Start the three nodes with ``params[node]`` parameters, wait for the sim
+    node to report the job done, stop them with SIGINT, return the summary.
+    The nodes' output goes to ``result.log_dir``, removed after a clean run."""
+    log_dir = Path(tempfile.mkdtemp(prefix="winder-cell-"))
+    with cell_environment(domain) as env:
+        procs = NodeProcesses(env, log_dir)
+        rclpy.init(args=[])
+        node = rclpy.create_node("winder_cell", namespace=namespace or "/")
+        try:
+            watch = CellWatch(node, namespace)
+            _spawn(procs, params, namespace)
+            failure = _wait_for_job(node, watch, procs, timeout, progress)
+        except ExternalShutdownException:
+            raise KeyboardInterrupt from None  # Ctrl-C: the caller reports it
+        finally:
+            procs.stop()
+            node.destroy_node()
+            rclpy.try_shutdown()
+    return _result(watch, failure, log_dir)
