@@ -56,6 +56,7 @@ import numpy.typing as npt
 
 from winder.motion.interp import line_distance
 from winder.motion.job import AXES
+from winder.motion.profile import LIMITS
 from winder.record.reader import Run
 
 __all__ = [
@@ -463,13 +464,8 @@ def _ramp(a: Analysis) -> str:
     r = a.ramp
     if not r:
         return "not recorded"
-    used = {
-        "scurve": ("v_max", "a_max", "j_max"),
-        "trapezoid": ("v_max", "a_max"),
-        "exponential": ("v_max", "tau"),
-    }
     names = {"v_max": "v", "a_max": "a", "j_max": "j", "tau": "tau"}
-    parts = [f"{names[k]} {r[k]:g}" for k in used.get(a.profile, ("v_max",)) if k in r]
+    parts = [f"{names[k]} {r[k]:g}" for k in ("v_max", *LIMITS.get(a.profile, ())) if k in r]
     return ", ".join(parts) + " (steps/s^n, s)"
 
 

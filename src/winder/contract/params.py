@@ -10,6 +10,7 @@ import math
 from typing import Any
 
 from winder.motion.job import AXES, FIELD_SPECS, Job
+from winder.motion.profile import KINDS, LIMITS, plan
 from winder.spec import Spec, SpecError
 
 __all__ = [
@@ -46,7 +47,7 @@ INTERP_SPECS = {
     ),
 }
 
-PROFILE_KINDS = ("scurve", "trapezoid", "exponential")
+PROFILE_KINDS = KINDS
 PROFILE_SPECS = _table(
     Spec("profile", str, "scurve", "velocity ramp of every segment", choices=PROFILE_KINDS),
     Spec("v_max", float, 2048.0, "peak step rate of the major axis", "steps/s", 0.0, 1e7, low_open=True),
@@ -153,16 +154,9 @@ def check_interp(values: dict[str, Any]) -> None:
 
 def plan_segment(values: dict[str, Any], steps: int) -> Any:
     """The profile of one segment of ``steps`` steps with the profile settings."""
-    from winder.motion.profile import plan
-
     kind = values["profile"]
     kw: dict[str, Any] = {"v_max": values["v_max"], "v_start": values["v_start"], "v_end": values["v_start"]}
-    if kind in ("scurve", "trapezoid"):
-        kw["a_max"] = values["a_max"]
-    if kind == "scurve":
-        kw["j_max"] = values["j_max"]
-    if kind == "exponential":
-        kw["tau"] = values["tau"]
+    kw.update({name: values[name] for name in LIMITS[kind]})
     return plan(kind, float(steps), **kw)
 
 

@@ -66,9 +66,17 @@ from numpy.typing import ArrayLike, NDArray
 
 from winder.motion import _scurve
 
-__all__ = ["EXP_CUT", "KINDS", "Jog", "Phase", "Profile", "jog", "plan"]
+__all__ = ["EXP_CUT", "KINDS", "LIMITS", "Jog", "Phase", "Profile", "jog", "plan"]
 
-KINDS = ("scurve", "trapezoid", "exponential")
+#: The ramp kinds and the limits each one uses (its :func:`plan` keywords beside
+#: the distance and the speeds): the one list of kinds the node settings, the
+#: segment planner and the analysis read.
+LIMITS: dict[str, tuple[str, ...]] = {
+    "scurve": ("a_max", "j_max"),
+    "trapezoid": ("a_max",),
+    "exponential": ("tau",),
+}
+KINDS = tuple(LIMITS)
 EXP_CUT = 0.01
 """Default truncation of the exponential ramp: the fraction of the velocity
 change the plain exponential would still lack at the cut (``ln(1/EXP_CUT)``
