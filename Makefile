@@ -1,6 +1,6 @@
 # winder: the two commands of the README, plus the side jobs.
 #   make demo   - create .venv if needed, run the default winding job
-#   make test   - create .venv if needed, run the whole test suite
+#   make test   - create .venv if needed, lint and type-check every package, run the whole test suite
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
@@ -23,6 +23,8 @@ demo: $(STAMP)
 	$(BIN)/winder run
 
 test: $(STAMP)
+	$(BIN)/ruff check src winder_interp winder_profile winder_sim test bench
+	$(BIN)/mypy
 	$(BIN)/python -m pytest
 
 bench: $(STAMP)

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Sequence
+from typing import Generic, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -115,15 +116,18 @@ class JointStateEncoder:
         return [row.tobytes() for row in block]
 
 
-class MultiArrayCodec:
+IntT = TypeVar("IntT", np.int32, np.int64)
+
+
+class MultiArrayCodec(Generic[IntT]):
     """2-D chunks of ``std_msgs/Int32MultiArray`` (``dtype`` int32) or
     ``Int64MultiArray`` (int64): dim 0 labelled ``rows_label``, dim 1 labelled
     with the comma-joined ``columns``, ``data_offset`` 0, row-major data."""
 
-    def __init__(self, columns: Sequence[str], dtype: type[np.integer], rows_label: str = "steps") -> None:
+    def __init__(self, columns: Sequence[str], dtype: type[IntT], rows_label: str = "steps") -> None:
         self.columns = tuple(columns)
         self.cols = len(self.columns)
-        self.dtype = np.dtype(dtype).newbyteorder("<")
+        self.dtype: np.dtype[IntT] = np.dtype(dtype).newbyteorder("<")
         if self.dtype.kind != "i" or self.dtype.itemsize not in (4, 8):
             raise ValueError(f"dtype={dtype!r} is invalid: must be int32 or int64")
         self.label = ",".join(self.columns)
@@ -156,7 +160,7 @@ class MultiArrayCodec:
         struct.pack_into("<I", head, 4 + self._count, n * self.cols)
         return b"".join((head, a.data))
 
-    def decode(self, raw: bytes) -> npt.NDArray[np.integer]:
+    def decode(self, raw: bytes) -> npt.NDArray[IntT]:
         """The (n, columns) rows of a payload, a read-only view of it; ValueError
         if the payload is not such a chunk (other layout, truncated)."""
         h = len(self._expect)

@@ -162,12 +162,13 @@ class StreamChecker:
         segs = self.plan.segments
         return not segs or tuple(self.position) == segs[-1].end
 
-    def step_index(self, seg: int, pos: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:
+    def step_index(self, seg: int, pos: npt.NDArray[np.integer[Any]]) -> npt.NDArray[np.integer[Any]]:
         """1-based index of each row's step within segment ``seg``."""
         s = self.plan.segments[seg]
-        return np.abs(pos[:, s.major] - s.start[s.major])
+        index: npt.NDArray[np.integer[Any]] = np.abs(pos[:, s.major] - s.start[s.major])
+        return index
 
-    def check(self, segment: int, pos: npt.NDArray[np.int64]) -> ChunkVerdict:
+    def check(self, segment: int, pos: npt.NDArray[np.integer[Any]]) -> ChunkVerdict:
         """Check one chunk: ``segment`` index and its (n, axes) positions."""
         segs = self.plan.segments
         n = pos.shape[0]

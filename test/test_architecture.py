@@ -1,0 +1,100 @@
+"""The import rules of docs/ARCHITECTURE.md, read from the code itself.
+
+* Arrows only go down the layers: ``spec`` < ``motion`` < ``axis`` <
+  ``contract`` < ``record`` < ``analysis`` < ``ros`` < ``cli``; a module may
+  import its own layer and those below, never one above.
+* Nothing under ``winder/`` imports a node package.
+* Only ``winder.ros`` (and the node packages) import rclpy or ROS message
+  packages; only ``winder.analysis.figures`` imports matplotlib.
+* Importing every other module leaves rclpy out of ``sys.modules`` (the core
+  stays usable without a ROS install).
+"""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SRC = ROOT / "src" / "winder"
+LAYERS = ("spec", "motion", "axis", "contract", "record", "analysis", "ros", "cli")
+NODE_PACKAGES = ("winder_interp", "winder_profile", "winder_sim")
+ROS_PACKAGES = (
+    "rclpy",
+    "rcl_interfaces",
+    "std_msgs",
+    "std_srvs",
+    "sensor_msgs",
+    "trajectory_msgs",
+    "diagnostic_msgs",
+    "rosgraph_msgs",
+    "builtin_interfaces",
+    "launch",
+    "launch_ros",
+)
+
+
+def module_name(path: Path) -> str:
+    parts = path.relative_to(SRC.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def modules() -> list[tuple[str, Path]]:
+    return sorted((module_name(p), p) for p in SRC.rglob("*.py"))
+
+
+def imports(path: Path) -> set[str]:
+    """Every module name imported anywhere in the file (also inside functions)."""
+    found: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            found.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            found.add(node.module)
+            found.update(f"{node.module}.{a.name}" for a in node.names)
+    return found
+
+
+def layer(name: str) -> str | None:
+    """The layer of a ``winder`` module name (None: the package root)."""
+    parts = name.split(".")
+    return parts[1] if len(parts) > 1 and parts[0] == "winder" else None
+
+
+def test_every_module_is_in_a_layer() -> None:
+    for name, _ in modules():
+        assert name == "winder" or layer(name) in LAYERS, f"{name} is in no layer of {LAYERS}"
+
+
+@pytest.mark.parametrize(("name", "path"), modules(), ids=[n for n, _ in modules()])
+def test_imports_only_go_down(name: str, path: Path) -> None:
+    own = layer(name)
+    rank = LAYERS.index(own) if own in LAYERS else -1
+    for imp in imports(path):
+        top = imp.split(".")[0]
+        assert top not in NODE_PACKAGES, f"{name} imports the node package {imp}"
+        if top in ROS_PACKAGES:
+            assert own == "ros", f"{name} imports {imp}: only winder.ros may import ROS packages"
+        if top == "matplotlib":
+            assert name.startswith("winder.analysis.figures"), f"{name} imports matplotlib"
+        target = layer(imp)
+        if top == "winder" and target in LAYERS:
+            assert LAYERS.index(target) <= rank, f"{name} ({own}) imports {imp} ({target}), a layer above"
+
+
+def test_the_core_imports_without_rclpy() -> None:
+    core = [n for n, _ in modules() if layer(n) != "ros" and not n.endswith("__main__")]
+    code = (
+        "import importlib, sys\n"
+        f"for m in {core!r}:\n"
+        "    importlib.import_module(m)\n"
+        "bad = sorted(m for m in sys.modules if m.split('.')[0] in "
+        f"{ROS_PACKAGES!r})\n"
+        "print(','.join(bad))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "", f"importing the core pulled in ROS modules: {out.stdout.strip()}"
