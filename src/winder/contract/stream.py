@@ -35,7 +35,7 @@ __all__ = [
 
 STEP_COLUMNS = ("segment", *AXES)
 TIMED_COLUMNS = ("t_ns", "segment", *AXES)
-FORMAT = "winder.motion.job/1"
+FORMAT = "winder.job/1"
 
 
 def describe_job(job: Job) -> str:
