@@ -124,3 +124,104 @@ def test_bad_segment_and_empty_chunk() -> None:
     assert c.check(0, np.zeros((0, 3), np.int64)).message == "empty chunk"
     with pytest.raises(AssertionError):
         assert c.check(0, np.zeros((2, 3), np.int64)).accept
+
+
+# -- hardening: rows that are single steps but not the job's, and lying job descriptions
+
+
+@settings(max_examples=300, deadline=None)
+@given(jobs_and_chunks(), st.data())
+def test_rows_off_the_path_are_refused_and_change_nothing(case, data: st.DataObject) -> None:
+    """A chunk whose rows are shifted, negated, out of int32 range or past the
+    segment's end is refused as "bad" and leaves the checker where it was: the
+    true chunk is still accepted after it, and the stream completes."""
+    job, chunks = case
+    k = data.draw(st.integers(0, len(chunks) - 1))
+    seg, pos = chunks[k]
+    segment = job.segments()[seg]
+    major = int(np.argmax(np.abs(segment.delta)))
+    how = data.draw(st.sampled_from(["shift", "negate", "int32", "past_end", "one_row"]))
+    bad = pos.astype(np.int64).copy()
+    if how == "shift":  # a whole column moved: still single steps inside the chunk
+        bad[:, data.draw(st.integers(0, 2))] += data.draw(st.integers(1, 10**5) | st.integers(-(10**5), -1))
+    elif how == "negate":
+        bad[:, major] = -bad[:, major]
+        if np.array_equal(bad, pos):  # zero stays zero
+            return
+    elif how == "int32":
+        bad[-1, data.draw(st.integers(0, 2))] = 2**31 - 1
+        if np.array_equal(bad, pos):
+            return
+    elif how == "past_end":  # the same shape, moved past the segment's last step
+        bad = interpolate(
+            segment.start, [2 * d for d in segment.delta], first=segment.steps, stop=segment.steps + 3
+        )
+    else:  # one row's minor axis off by one
+        r = data.draw(st.integers(0, pos.shape[0] - 1))
+        minor = [i for i in range(3) if i != major][data.draw(st.integers(0, 1))]
+        bad[r, minor] += data.draw(st.sampled_from([-1, 1]))
+    # a shift along the path itself gives true rows of other steps: not damage
+    k0 = (int(bad[0, major]) - segment.start[major]) * (1 if segment.delta[major] > 0 else -1)
+    if 1 <= k0 <= segment.steps - bad.shape[0] + 1 and np.array_equal(
+        bad, interpolate(segment.start, segment.delta, first=k0 - 1, stop=k0 - 1 + bad.shape[0])
+    ):
+        return
+    c = checker(job)
+    for s, p in chunks[:k]:
+        assert c.check(s, p).accept
+    before = (c.done, c.missing, c.gaps, c.segment, c.position.tolist())
+    v = c.check(seg, bad)
+    assert (v.accept, v.kind) == (False, "bad"), (how, v)
+    assert v.message and "\n" not in v.message
+    assert (c.done, c.missing, c.gaps, c.segment, c.position.tolist()) == before
+    for s, p in chunks[k:]:
+        assert c.check(s, p).kind == "ok"
+    assert c.complete and c.missing == 0 and c.rejected == 1
+
+
+def _json_values() -> st.SearchStrategy[object]:
+    scalars = st.none() | st.booleans() | st.integers(-(2**70), 2**70) | st.floats() | st.text(max_size=8)
+    return st.recursive(
+        scalars,
+        lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=8), inner, max_size=4),
+        max_leaves=12,
+    )
+
+
+@settings(max_examples=400, deadline=None)
+@given(st.data())
+def test_a_damaged_job_description_is_refused_in_one_line(data: st.DataObject) -> None:
+    """Any change to a description's structure, or any JSON at all, gives back
+    the same job or a one-line ValueError: never another exception, never a
+    different job accepted."""
+    import json
+
+    job = Job(job_id="d", turns_per_layer=3, layers=2, poles=2, fork_steps_per_rev=16)
+    doc = json.loads(describe_job(job))
+    how = data.draw(st.sampled_from(["any", "key", "segment", "total"]))
+    if how == "any":
+        text = json.dumps(data.draw(_json_values()))
+    elif how == "key":
+        key = data.draw(st.sampled_from(sorted(doc)))
+        doc[key] = data.draw(_json_values())
+        text = json.dumps(doc)
+    elif how == "segment":
+        i = data.draw(st.integers(0, len(doc["segments"]) - 1))
+        field = data.draw(st.sampled_from(["kind", "start", "delta", "steps", None]))
+        if field is None:
+            doc["segments"][i] = data.draw(_json_values())
+        else:
+            doc["segments"][i][field] = data.draw(_json_values())
+        text = json.dumps(doc)
+    else:  # a job that lies about its size (a consumer would wait for ever)
+        doc["total_steps"] = data.draw(st.integers(0, 10**15))
+        text = json.dumps(doc)
+    try:
+        plan = parse_job_description(text)
+    except ValueError as exc:
+        assert str(exc) and "\n" not in str(exc)
+        return
+    assert plan.job == job and plan.total_steps == job.total_steps
+    assert [(s.start, s.delta, s.steps) for s in plan.segments] == [
+        (s.start, s.delta, s.steps) for s in job.segments()
+    ]

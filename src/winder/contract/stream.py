@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from winder.motion.interp import interpolate
 from winder.motion.job import AXES, Job
 
 __all__ = [
@@ -92,31 +93,63 @@ class JobPlan:
         return self.job.job_id
 
 
+def _expect(doc: dict[str, Any], key: str, kind: type | tuple[type, ...], what: str) -> Any:
+    value = doc.get(key)
+    if not isinstance(value, kind) or isinstance(value, bool):
+        raise ValueError(f"job description: {key!r} is {json.dumps(value)[:40]}, expected {what}")
+    return value
+
+
 def parse_job_description(text: str) -> JobPlan:
-    """Parse and check :func:`describe_job` output; ValueError if it is not one."""
+    """Parse and check :func:`describe_job` output; ValueError (one line) if it
+    is not one. Only the job's fields are taken from the text: the segments,
+    step sizes and step count are derived from them again and must match what
+    the text says, so a description that lies about its job is refused."""
     try:
-        doc: dict[str, Any] = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"job description is not JSON: {exc}") from None
-    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
-        raise ValueError(f"job description format is {doc.get('format')!r}, expected {FORMAT!r}")
-    job = Job.from_dict(doc["job"])
-    segs = []
-    for s in doc["segments"]:
-        delta = tuple(int(v) for v in s["delta"])
-        major = int(np.argmax(np.abs(delta)))
-        segs.append(SegmentPlan(s["kind"], tuple(int(v) for v in s["start"]), delta, int(s["steps"]), major))
+        doc = json.loads(text)
+    except (json.JSONDecodeError, RecursionError) as exc:
+        raise ValueError(f"job description is not JSON: {str(exc).splitlines()[0]}") from None
+    if not isinstance(doc, dict):
+        raise ValueError(f"job description is a JSON {type(doc).__name__}, expected an object")
+    if doc.get("format") != FORMAT:
+        raise ValueError(
+            f"job description format is {json.dumps(doc.get('format'))[:40]}, expected {FORMAT!r}"
+        )
+    fields = _expect(doc, "job", dict, "an object of job fields")
+    try:
+        job = Job.from_dict(fields)
+    except TypeError as exc:  # a field missing or of another shape
+        raise ValueError(f"job description: bad job fields: {exc}") from None
     expected = job.segments()
-    if len(expected) != len(segs) or any(
-        e.delta != s.delta or e.start != s.start for e, s in zip(expected, segs, strict=True)
-    ):
-        raise ValueError("job description segments do not match its job fields")
+    listed = _expect(doc, "segments", list, "a list of segments")
+    if len(listed) != len(expected):
+        raise ValueError(f"job description lists {len(listed)} segments, its job has {len(expected)}")
+    segs = []
+    for e, s in zip(expected, listed, strict=True):
+        if not isinstance(s, dict) or (s.get("kind"), s.get("start"), s.get("delta"), s.get("steps")) != (
+            e.kind,
+            list(e.start),
+            list(e.delta),
+            e.steps,
+        ):
+            raise ValueError(f"job description: segment {e.index} does not match its job fields")
+        major = int(np.argmax(np.abs(e.delta)))
+        segs.append(SegmentPlan(e.kind, tuple(e.start), tuple(e.delta), e.steps, major))
+    total = sum(e.steps for e in expected)
+    derived = {
+        "total_steps": total,
+        "joint_step": list(job.joint_step),
+        "step_lengths": list(job.step_lengths),
+    }
+    for key, value in derived.items():
+        if doc.get(key) != value:
+            raise ValueError(f"job description: {key} {json.dumps(doc.get(key))[:40]} does not match its job")
     return JobPlan(
         job=job,
-        joint_step=tuple(float(v) for v in doc["joint_step"]),
-        step_lengths=tuple(float(v) for v in doc["step_lengths"]),
+        joint_step=tuple(job.joint_step),
+        step_lengths=tuple(job.step_lengths),
         segments=tuple(segs),
-        total_steps=int(doc["total_steps"]),
+        total_steps=total,
         text=text,
     )
 
@@ -177,26 +210,40 @@ class StreamChecker:
         if not 0 <= segment < len(segs):
             return self._reject("bad", f"segment {segment} out of range 0..{len(segs) - 1}")
         seg = segs[segment]
-        k = self.step_index(segment, pos)
-        # single steps: no axis moves by more than one step per row, and the
-        # major axis (which moves on every step) covers n - 1 steps in n - 1
-        # rows, so it moves on every row; column by column (a 1-D pass each is
-        # much cheaper than one over the strided (n, axes) block)
-        if n > 1 and (
-            int(k[-1]) - int(k[0]) != n - 1
-            or any(not -1 <= int(d.min()) <= int(d.max()) <= 1 for d in map(np.diff, pos.T))
-        ):
-            return self._reject("bad", f"segment {segment}: rows inside the chunk are not single steps")
+        if pos.ndim != 2 or pos.shape[1] != len(seg.start):
+            return self._reject(
+                "bad", f"segment {segment}: rows have {pos.shape[1:]} axes, expected {len(seg.start)}"
+            )
+        # every row must be the job's own step: the major axis gives the step's
+        # index k in the segment, and the row must equal the minimum-deviation
+        # path's k-th position exactly (a shifted, negated or invented row is
+        # refused, not simulated)
+        s_major = 1 if seg.delta[seg.major] > 0 else -1
+        k0 = (int(pos[0, seg.major]) - seg.start[seg.major]) * s_major
+        if not 1 <= k0 <= seg.steps - n + 1:
+            return self._reject(
+                "bad", f"segment {segment}: {n} rows from step {k0} lie outside its steps 1..{seg.steps}"
+            )
+        path = interpolate(seg.start, seg.delta, first=k0 - 1, stop=k0 - 1 + n)
+        if not np.array_equal(pos, path):
+            off = np.flatnonzero(np.any(pos != path, axis=1))
+            i = int(off[0])
+            return self._reject(
+                "bad",
+                f"segment {segment} step {k0 + i}: position {pos[i].tolist()} is not on the job's path "
+                f"({path[i].tolist()} expected); {off.size} of {n} rows off",
+            )
+        k_last = k0 + n - 1
         # steps are counted across segments (self._offsets): where the stream
         # stands, and where this chunk starts
         at = int(self.step_index(self.segment, self.position[None, :])[0])
-        here, first = self._offsets[self.segment] + at, self._offsets[segment] + int(k[0])
+        here, first = self._offsets[self.segment] + at, self._offsets[segment] + k0
         if first <= here:
             # late if it falls into a gap reported before, else a repeat
-            last = self._offsets[segment] + int(k[-1])
+            last = self._offsets[segment] + k_last
             late = any(a <= last and first <= b for a, b in self._gaps)
             kind, why = ("reorder", "arrived late") if late else ("duplicate", "arrived again")
-            return self._reject(kind, f"segment {segment} steps {k[0]}..{k[-1]} {why}")
+            return self._reject(kind, f"segment {segment} steps {k0}..{k_last} {why}")
         verdict = ChunkVerdict(True, "ok")
         # steps skipped: rest of the current segment, whole segments between, head of this one
         missing = first - here - 1
@@ -209,7 +256,7 @@ class StreamChecker:
                 "gap",
                 missing,
                 f"gap in the step stream: {missing} steps missing before segment {segment} "
-                f"step {k[0]} of {seg.steps}",
+                f"step {k0} of {seg.steps}",
             )
         self.segment = segment
         self.position = pos[-1].astype(np.int64).copy()
