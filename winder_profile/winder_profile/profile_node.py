@@ -23,7 +23,7 @@ from rclpy.node import Node
 from rclpy.subscription import Subscription
 from std_msgs.msg import Int32MultiArray, Int64MultiArray, String
 
-from winder.contract.params import PROFILE_SPECS, check_profile, plan_segment
+from winder.contract.params import PROFILE_SPECS, check_profile, plan_job
 from winder.contract.stream import TIMED_COLUMNS, JobPlan, StreamChecker, parse_job_description
 from winder.contract.topics import TOPIC_JOB, TOPIC_PROFILE_CONFIG, TOPIC_STEP_TIMES, TOPIC_STEPS
 from winder.ros.chunks import STEPS_CDR, TIMED_CDR, waiting
@@ -74,26 +74,20 @@ class ProfileNode(Node):
             return
         values = self.settings.values()
         try:
-            profiles = [plan_segment(values, s.steps) for s in job.segments]
+            profiles, t0, duration_ns = plan_job(values, [s.steps for s in job.segments])
         except ValueError as exc:
             self.fail(f"job {job.job_id} cannot be ramped: {exc}")
             return
-        dwell_ns = round(values["dwell"] * 1e9)
-        t0 = np.zeros(len(profiles), np.int64)
-        acc = 0
-        for i, p in enumerate(profiles):
-            t0[i] = acc
-            acc += round(p.duration * 1e9) + dwell_ns
         self.plan, self.profiles, self.seg_t0_ns = job, profiles, t0
         # the ramp in force for this job, latched: the sim node records it
-        config = {"job_id": job.job_id, **values, "job_duration_s": (acc - dwell_ns) / 1e9}
+        config = {"job_id": job.job_id, **values, "job_duration_s": duration_ns / 1e9}
         self.pub_config.publish(String(data=json.dumps(config)))
         self.checker = StreamChecker(job)
         self.timed = 0
         self.error = ""
         self.get_logger().info(
             f"job {job.job_id}: {values['profile']} ramps, {len(profiles)} segments, "
-            f"{(acc - dwell_ns) / 1e9:.3f} s"
+            f"{duration_ns / 1e9:.3f} s"
         )
         early, self.early = self.early, []
         for raw in early:  # in order, before any taken from the queue

@@ -15,7 +15,8 @@ from typing import Any, NoReturn
 
 import numpy as np
 
-from winder.contract.params import PROFILE_SPECS, SIM_SPECS, check_profile, check_sim
+from winder.contract.params import PROFILE_SPECS, SIM_SPECS, check_profile, check_sim, plan_job
+from winder.contract.topics import check_namespace
 from winder.motion.interp import dda, deviation_stats, interpolate, min_deviation, point_by_point
 from winder.motion.job import FIELD_SPECS, Job
 from winder.spec import Spec, SpecError
@@ -156,8 +157,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     job = job_from_args(args)
     profile = values_from_args(args, PROFILE_SPECS)
     check_profile(profile)
+    plan_job(profile, [s.steps for s in job.segments()])  # the job as a whole: its duration
     sim = values_from_args(args, SIM_SPECS)
     check_sim(sim)
+    args.namespace = check_namespace(args.namespace)
     try:
         from winder.ros.cell import run_cell
     except ImportError as exc:

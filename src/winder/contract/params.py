@@ -7,14 +7,19 @@ anything, so a value is judged the same way wherever it is typed.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Any
 
+import numpy as np
+import numpy.typing as npt
+
 from winder.motion.job import AXES, FIELD_SPECS, Job
-from winder.motion.profile import KINDS, LIMITS, plan
+from winder.motion.profile import KINDS, LIMITS, Profile, plan
 from winder.spec import Spec, SpecError
 
 __all__ = [
     "INTERP_SPECS",
+    "MAX_JOB_SECONDS",
     "MOTOR_FIELDS",
     "PROFILE_KINDS",
     "PROFILE_SPECS",
@@ -22,6 +27,7 @@ __all__ = [
     "check_interp",
     "check_profile",
     "check_sim",
+    "plan_job",
     "plan_segment",
 ]
 
@@ -152,12 +158,57 @@ def check_interp(values: dict[str, Any]) -> None:
     Job(**{k: v for k, v in values.items() if k in FIELD_SPECS})
 
 
-def plan_segment(values: dict[str, Any], steps: int) -> Any:
-    """The profile of one segment of ``steps`` steps with the profile settings."""
+#: The longest a job may last, in simulated time: a week. Step times travel as
+#: int64 nanoseconds (good for 292 years), but the sim node produces every
+#: sample of that time; limits that would stretch a job beyond it are refused.
+MAX_JOB_SECONDS = 7 * 24 * 3600.0
+
+
+def plan_segment(values: dict[str, Any], steps: int) -> Profile:
+    """The profile of one segment of ``steps`` steps with the profile settings;
+    ValueError (one line) if the limits cannot plan it or it would last longer
+    than :data:`MAX_JOB_SECONDS`."""
     kind = values["profile"]
     kw: dict[str, Any] = {"v_max": values["v_max"], "v_start": values["v_start"], "v_end": values["v_start"]}
     kw.update({name: values[name] for name in LIMITS[kind]})
-    return plan(kind, float(steps), **kw)
+    limits = ", ".join(f"{k}={v:g}" for k, v in kw.items() if k != "v_end")
+    try:
+        profile = plan(kind, float(steps), **kw)
+    except (ZeroDivisionError, OverflowError):
+        raise ValueError(
+            f"profile={kind} with {limits}: the limits are too far apart to plan a {steps}-step move "
+            "in floating point"
+        ) from None
+    if not math.isfinite(profile.duration) or profile.duration > MAX_JOB_SECONDS:
+        raise ValueError(
+            f"profile={kind} with {limits}: a {steps}-step move takes {profile.duration:.3g} s, "
+            f"more than a job may last ({MAX_JOB_SECONDS:g} s)"
+        )
+    return profile
+
+
+def plan_job(
+    values: dict[str, Any], segment_steps: Sequence[int]
+) -> tuple[list[Profile], npt.NDArray[np.int64], int]:
+    """The profiles of a job's segments, each segment's start time (ns) and the
+    job's duration (ns, without the last dwell). Segments of equal length share
+    one plan (a job of 10^5 layers plans two or three moves, not 10^5).
+    ValueError (one line) if the job would last longer than :data:`MAX_JOB_SECONDS`."""
+    plans: dict[int, Profile] = {}
+    profiles = [
+        plans[n] if n in plans else plans.setdefault(n, plan_segment(values, n)) for n in segment_steps
+    ]
+    dwell_ns = round(values["dwell"] * 1e9)
+    durations = np.array([round(p.duration * 1e9) + dwell_ns for p in profiles], dtype=np.float64)
+    total = float(durations.sum()) - dwell_ns
+    if total > MAX_JOB_SECONDS * 1e9:
+        raise ValueError(
+            f"the job takes {total / 1e9:.4g} s with profile={values['profile']}, v_max={values['v_max']:g}: "
+            f"more than a job may last ({MAX_JOB_SECONDS:g} s); raise the limits or split the job"
+        )
+    t0 = np.zeros(len(profiles), np.int64)
+    np.cumsum(durations[:-1].astype(np.int64), out=t0[1:])
+    return profiles, t0, int(total)
 
 
 def check_profile(values: dict[str, Any]) -> None:

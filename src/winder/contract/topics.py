@@ -8,6 +8,8 @@ Names are relative (``winder/steps``) so that a node namespace
 
 from __future__ import annotations
 
+import re
+
 TOPIC_JOB = "winder/job"
 TOPIC_PATH = "winder/path"
 TOPIC_STEPS = "winder/steps"
@@ -30,3 +32,25 @@ def status_name(node: str, task: str = TASK_JOB, namespace: str = "") -> str:
     ``"sim_node: job"``, ``"cell1/sim_node: job"``."""
     ns = namespace.strip("/")
     return f"{ns}/{node}: {task}" if ns else f"{node}: {task}"
+
+
+_TOKEN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+
+
+def check_namespace(namespace: str) -> str:
+    """A cell's namespace as ROS 2 accepts it, with the leading ``/`` added:
+    ``""`` or ``"/"`` (the root), else ``/name[/name...]``, each name of
+    letters, digits and ``_``, not starting with a digit. ValueError (one line)
+    naming the value and the rule otherwise."""
+    if namespace in ("", "/"):
+        return ""
+    body = namespace[1:] if namespace.startswith("/") else namespace
+    tokens = body.split("/")
+    bad = next((t for t in tokens if not _TOKEN.fullmatch(t)), None)
+    if bad is not None:
+        why = "an empty name ('//' or a trailing '/')" if bad == "" else f"the name {bad!r}"
+        raise ValueError(
+            f"namespace={namespace!r} is invalid: it has {why}; a namespace is /name[/name...], "
+            "each name letters, digits and '_', not starting with a digit"
+        )
+    return "/" + body

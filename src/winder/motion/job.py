@@ -28,6 +28,8 @@ from winder.spec import Spec, SpecError
 __all__ = ["AXES", "FIELD_SPECS", "Job", "JobError", "Segment"]
 
 AXES = ("feed", "fork", "pole")
+#: Steps of one axis in one segment, at most: positions travel as int32.
+MAX_STEPS = 2**31 - 1
 
 
 class JobError(SpecError):
@@ -131,7 +133,15 @@ class Job:
                 f"{self.turns_per_layer * self.wire_diameter:g} m, coil_length is "
                 f"{self.coil_length:g} m (at most {int(self.coil_length / self.wire_diameter)} turns fit)"
             )
-        if self.layer_feed_steps > 2**31 - 1 or self.layer_fork_steps > 2**31 - 1:
+        layer_length = self.turns_per_layer * self.wire_diameter
+        feed_steps = layer_length / self.feed_step
+        if not feed_steps < MAX_STEPS:  # also inf: a tiny feed_step overflows the ratio
+            raise JobError(
+                f"feed_step={self.feed_step:g} m is invalid with turns_per_layer={self.turns_per_layer} of "
+                f"{self.wire_diameter:g} m wire: a layer would take {feed_steps:.3g} feed steps, "
+                f"more than 2**31 - 1 (feed_step must be at least {layer_length / MAX_STEPS:.3g} m)"
+            )
+        if self.layer_fork_steps > 2**31 - 1:
             raise JobError(
                 f"turns_per_layer={self.turns_per_layer} is invalid: a layer of "
                 f"{self.layer_fork_steps} fork steps exceeds 2**31 - 1 steps"
