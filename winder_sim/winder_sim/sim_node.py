@@ -20,7 +20,6 @@ import json
 import math
 import time
 from collections import deque
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -35,7 +34,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from winder.axis import StepperAxis
 from winder.contract.cdr import JointStateEncoder, encode_clocks
-from winder.contract.params import MOTOR_FIELDS, SIM_SPECS, check_sim
+from winder.contract.params import MOTOR_FIELDS, SIM_SPECS, bag_directory, check_sim
 from winder.contract.stream import JobPlan, StreamChecker, parse_job_description
 from winder.contract.topics import (
     TOPIC_CLOCK,
@@ -65,6 +64,10 @@ PATH_WAIT = 2.0  # s of wall time the steps wait for the job's path and profile 
 BATCH_STEPS = 1 << 16
 BATCH_CHUNKS = 8
 BATCH_WAIT = 0.01
+#: Samples simulated in one go, at most: the node's memory is bounded by this,
+#: never by the simulated time a batch of steps covers (at 1 step/s, a chunk of
+#: 8192 steps spans 8192 s: 1.6 million samples at 200 Hz).
+SAMPLE_BATCH = 1 << 15
 BAG_TYPES = {
     "job": "std_msgs/msg/String",
     "path": "trajectory_msgs/msg/JointTrajectory",
@@ -154,6 +157,7 @@ class SimNode(Node):
         self.t_sim_ns = 0  # simulated time reached (ns)
         self.out: deque[dict[str, Any]] = deque()  # computed samples waiting to be published
         self.inbox: deque[bytes] = deque()  # received chunks waiting to be simulated
+        self.rest: npt.NDArray[np.int64] | None = None  # accepted rows beyond the last sample batch
         self.inbox_since = time.monotonic()
         self.last_step_ns = -1
         self.path_recorded = False
@@ -216,12 +220,20 @@ class SimNode(Node):
         )
         self.pub_config.publish(config)
         if values["record"]:
-            path = new_bag_path(Path(values["bag_dir"]), plan.job_id)
-            self.bag = BagRecorder(
-                path, {self.topic[k]: t for k, t in BAG_TYPES.items()}, compression=values["bag_compression"]
-            )
-            self.bag.write(self.topic["job"], 0, raw)
-            self.bag.write(self.topic["sim_config"], 0, serialize_message(config))
+            try:
+                path = new_bag_path(bag_directory(values["bag_dir"]), plan.job_id)
+                self.bag = BagRecorder(
+                    path,
+                    {self.topic[k]: t for k, t in BAG_TYPES.items()},
+                    compression=values["bag_compression"],
+                )
+            except (OSError, ValueError) as exc:  # the disk changed since bag_dir was accepted
+                self.error(
+                    f"job {plan.job_id} runs unrecorded: cannot open a bag: {str(exc).splitlines()[0]}"
+                )
+            else:
+                self.bag.write(self.topic["job"], 0, raw)
+                self.bag.write(self.topic["sim_config"], 0, serialize_message(config))
         self.job_wall = time.monotonic()
         self.path_recorded = False
         self.profile_recorded = False
@@ -309,7 +321,10 @@ class SimNode(Node):
             and now - self.inbox_since < BATCH_WAIT
         ):
             return  # gather a few chunks: one tracker call for many costs less
-        while self.inbox and not self.finishing:
+        if self.rest is not None and not (settings["real_time"] and self.out):
+            rest, self.rest = self.rest, None
+            self.advance(rest, settings)
+        while self.inbox and not self.finishing and self.rest is None:
             if settings["real_time"] and self.out:
                 break
             # as fast as possible: simulate every chunk waiting, up to
@@ -358,11 +373,27 @@ class SimNode(Node):
         return rows
 
     def advance(self, rows: npt.NDArray[np.int64], settings: dict[str, Any]) -> None:
-        """Simulate accepted rows (possibly of several chunks and segments)."""
+        """Simulate accepted rows (possibly of several chunks and segments) in
+        batches of at most SAMPLE_BATCH samples: as fast as possible, each
+        batch is published before the next; in real time, the rows beyond the
+        first batch wait in ``self.rest`` until its samples are out."""
         assert self.checker is not None
         t_s = rows[:, 0] / 1e9
-        self.simulate(rows, t_s, until=float(t_s[-1]))
-        self.done_steps += rows.shape[0]
+        n, lo = rows.shape[0], 0
+        while lo < n:
+            end = (self.next_sample + SAMPLE_BATCH - 1) / self.rate  # the batch's last sample
+            hi = int(np.searchsorted(t_s, end, side="right"))  # a step at a sample goes before it
+            if hi == lo:
+                self.simulate(None, None, until=end)  # no step within the batch: samples only
+            else:
+                self.simulate(rows[lo:hi], t_s[lo:hi], until=float(t_s[hi - 1]) if hi == n else end)
+            self.done_steps += hi - lo
+            lo = hi
+            if lo < n:
+                if settings["real_time"]:
+                    self.rest = rows[lo:]
+                    return
+                self.emit(settings)
         if self.checker.complete:
             self.simulate(None, None, until=float(t_s[-1]) + settings["settle_time"])
             self.finishing = True

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import shutil
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -15,7 +16,7 @@ from typing import Any, NoReturn
 
 import numpy as np
 
-from winder.contract.params import PROFILE_SPECS, SIM_SPECS, check_profile, check_sim, plan_job
+from winder.contract.params import PROFILE_SPECS, SIM_SPECS, bag_directory, check_profile, check_sim, plan_job
 from winder.contract.topics import check_namespace
 from winder.motion.interp import dda, deviation_stats, interpolate, min_deviation, point_by_point
 from winder.motion.job import FIELD_SPECS, Job
@@ -165,12 +166,16 @@ def cmd_run(args: argparse.Namespace) -> int:
         from winder.ros.cell import run_cell
     except ImportError as exc:
         raise UserError(f"the ROS 2 node packages are not installed ({exc}); run 'make demo'") from None
-    sim["bag_dir"] = str(Path(sim["bag_dir"]).resolve())
+    bag_dir = bag_directory(sim["bag_dir"])
+    sim["bag_dir"] = str(bag_dir)
     params = {"interp": job.to_dict(), "profile": profile, "sim": sim}
     args.profile, args.model = profile["profile"], sim["model"]
     print(
         f"winder: job {job.job_id}, {job.total_steps} steps, {args.profile} profile, {args.model} motor model"
     )
+    if sim["record"]:
+        probe = next(p for p in (bag_dir, *bag_dir.parents) if p.exists())
+        print(f"  recording into     {bag_dir}  ({shutil.disk_usage(probe).free / 2**30:.1f} GiB free)")
     bar = Progress(1.0, "winding")
     t0 = time.monotonic()
     result = run_cell(

@@ -7,7 +7,10 @@ anything, so a value is judged the same way wherever it is typed.
 from __future__ import annotations
 
 import math
+import os
+import tempfile
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -24,6 +27,7 @@ __all__ = [
     "PROFILE_KINDS",
     "PROFILE_SPECS",
     "SIM_SPECS",
+    "bag_directory",
     "check_interp",
     "check_profile",
     "check_sim",
@@ -219,9 +223,35 @@ def check_profile(values: dict[str, Any]) -> None:
         raise SpecError(str(exc)) from None
 
 
+def bag_directory(text: str) -> Path:
+    """``bag_dir`` as an absolute path (``~`` expanded, symlinks resolved);
+    SpecError (one line) unless it is a directory this process can write
+    into, or one it can create. Checked by writing: a probe directory is made
+    and removed in it (or in its nearest existing parent), which also catches
+    read-only mounts and pseudo file systems such as /proc."""
+    try:
+        path = Path(text).expanduser().resolve()
+    except (OSError, RuntimeError) as exc:  # a symlink loop, an unreadable link
+        raise SpecError(f"bag_dir={text!r} is invalid: {exc}") from None
+    probe = path
+    while not probe.exists() and probe != probe.parent:
+        probe = probe.parent
+    if not probe.is_dir():
+        raise SpecError(f"bag_dir={text!r} is invalid: {probe} is not a directory")
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=".winder-probe-", dir=probe))
+    except OSError as exc:
+        raise SpecError(f"bag_dir={text!r} is invalid: cannot write in {probe} ({exc.strerror})") from None
+    return path
+
+
 def check_sim(values: dict[str, Any]) -> None:
-    """Cross-field check: each axis must be a valid motor."""
+    """Cross-field check: each axis must be a valid motor; the bag directory
+    must be writable when recording."""
     from winder.axis import StepperAxis
+
+    if values["record"]:
+        bag_directory(values["bag_dir"])
 
     for axis in AXES:
         try:
