@@ -11,6 +11,7 @@ start) and :func:`run_cell`, which strings them together.
 
 from __future__ import annotations
 
+import ctypes
 import os
 import random
 import shutil
@@ -105,10 +106,19 @@ def cell_environment(domain: int | None) -> Iterator[dict[str, str]]:
                 os.environ[k] = v
 
 
+def _die_with_parent() -> None:
+    """In the child, before exec: SIGINT when the parent dies, even by SIGKILL
+    (Linux ``PR_SET_PDEATHSIG``), so no node outlives ``winder run``; SIGINT
+    lets it close its bag."""
+    if sys.platform.startswith("linux"):
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGINT)  # 1 = PR_SET_PDEATHSIG
+
+
 class NodeProcesses:
     """The node executables as child processes, output to ``log_dir/<name>.log``;
     :meth:`stop` sends SIGINT (the nodes close their bags) and kills what is
-    still running after ``grace`` seconds."""
+    still running after ``grace`` seconds. The children get SIGINT when this
+    process dies, however it dies."""
 
     def __init__(self, env: dict[str, str], log_dir: Path) -> None:
         self.env = env
@@ -123,6 +133,7 @@ class NodeProcesses:
                 stdout=log,
                 stderr=subprocess.STDOUT,
                 stdin=subprocess.DEVNULL,
+                preexec_fn=_die_with_parent,
             )
         self.procs[name] = p
         return p
