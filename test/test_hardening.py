@@ -1,0 +1,171 @@
+"""Hardening (issue 13): values inside the documented ranges that the system
+cannot simulate, bad namespaces and bag directories are refused before
+anything starts, in one line, exit 2; the sim node's samples come in bounded
+batches and still equal the exact response; no node outlives `winder run`."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import BIN, Procs, rosbags_read
+from test_nodes import SMALL_JOB, job_args, only_bag, timed_rows, winder_run
+
+from winder.axis import StepperAxis
+from winder.cli import commands as cli
+from winder.contract.params import MAX_JOB_SECONDS, SIM_SPECS, bag_directory
+from winder.spec import SpecError
+
+# (arguments, what the one line must name): each value is inside its own
+# documented range; together with the others it is not something the cell can
+# represent or simulate (each crashed a node before)
+EXTREMES = [
+    (["--feed-step", "5e-324"], "feed_step="),
+    (["--feed-step", "1e-310"], "feed_step="),
+    (["--a-max", "1e-300"], "a_max=1e-300"),
+    (["--profile", "exponential", "--tau", "1e-300"], "tau=1e-300"),
+    (["--v-max", "1e-6"], "v_max=1e-06"),
+    (["--j-max", "1e-300"], "j_max=1e-300"),
+    (["--profile", "trapezoid", "--a-max", "1e-12"], "a_max=1e-12"),
+    (["--turns-per-layer", "100000", "--layers", "1000", "--poles", "360"], "the job takes"),
+]
+
+
+def run_cli(args: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, list[str]]:
+    code = cli.main(["run", *args])
+    return code, capsys.readouterr().err.strip().splitlines()
+
+
+@pytest.mark.parametrize(("args", "named"), EXTREMES, ids=[" ".join(a) for a, _ in EXTREMES])
+def test_extreme_in_range_values_are_refused_in_one_line(
+    args: list[str], named: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    code, lines = run_cli([*args, "--bag-dir", str(tmp_path / "bags")], capsys)
+    assert code == 2
+    assert len(lines) == 1, lines
+    assert lines[0].startswith("winder run: error: ") and named in lines[0]
+    assert not (tmp_path / "bags").exists()  # nothing started, nothing written
+
+
+def test_a_job_as_long_as_allowed_is_not_refused_for_its_length() -> None:
+    from winder.contract.params import PROFILE_SPECS, plan_job
+
+    values = {k: s.default for k, s in PROFILE_SPECS.items()}
+    # 1e6 steps at 2 steps/s: 5e5 s, under a week; 2e6 steps: over it
+    values["v_max"] = 2.0
+    _, t0, total = plan_job(values, [10**6])
+    assert t0.tolist() == [0] and 5e5 * 1e9 <= total <= MAX_JOB_SECONDS * 1e9
+    with pytest.raises(ValueError, match="more than a job may last"):
+        plan_job(values, [10**6, 10**6])
+
+
+@pytest.mark.parametrize("namespace", ["a b", "1cell", "/cell//x", "/cell1/", "cell-1", "/ä"])
+def test_bad_namespace_is_refused_in_one_line(
+    namespace: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    code, lines = run_cli(["--namespace", namespace, "--bag-dir", str(tmp_path / "bags")], capsys)
+    assert code == 2 and len(lines) == 1, lines
+    assert lines[0].startswith(f"winder run: error: namespace={namespace!r} is invalid")
+
+
+def bad_bag_dirs(tmp_path: Path) -> list[str]:
+    loop = tmp_path / "loop"
+    loop.symlink_to(loop)
+    plain = tmp_path / "file"
+    plain.write_text("")
+    return ["/dev/null", "/proc/winder", str(loop / "x"), str(plain / "x"), "/sys/kernel/winder"]
+
+
+def test_unwritable_bag_dir_is_refused_in_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    for bad in bad_bag_dirs(tmp_path):
+        code, lines = run_cli(["--bag-dir", bad], capsys)
+        assert code == 2 and len(lines) == 1, (bad, lines)
+        assert lines[0].startswith(f"winder run: error: bag_dir={bad!r} is invalid"), lines
+        with pytest.raises(SpecError):  # the sim node's check is the same function
+            bag_directory(bad)
+
+
+def test_bag_dir_expands_home_and_is_not_created_by_the_check(tmp_path: Path) -> None:
+    assert bag_directory("~/winder-bags-x") == Path.home() / "winder-bags-x"
+    target = tmp_path / "a" / "b"
+    assert bag_directory(str(target)) == target
+    assert not (tmp_path / "a").exists() and list(tmp_path.iterdir()) == []
+    assert SIM_SPECS["bag_dir"].default == "bags"
+
+
+@pytest.mark.ros
+def test_samples_in_bounded_batches_equal_the_exact_response(tmp_path: Path, procs: Procs) -> None:
+    """At 20 kHz the small job has more samples than one batch of the sim
+    node: the fork axis' recorded states must still be the exact linear
+    response to its recorded steps at every sample."""
+    from winder_sim.sim_node import SAMPLE_BATCH
+
+    rate = 20000.0
+    r = winder_run(tmp_path, procs.domain, *job_args(SMALL_JOB), "--publish-rate", str(rate))
+    assert r.returncode == 0, r.stdout + r.stderr
+    bag = rosbags_read(only_bag(tmp_path))
+    rows = timed_rows(bag)
+    states = bag["/winder/joint_states"]
+    assert len(states) > 2 * SAMPLE_BATCH  # the job spans several batches
+    t = np.array([m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for _, m in states])
+    fork = np.array([m.position[1] for _, m in states])
+    d = np.diff(np.concatenate([[0], rows[:, 3]]))
+    moved = d != 0
+    angle = float(SIM_SPECS["fork.motor_step_angle"].default)
+    axis = StepperAxis(**{k: float(SIM_SPECS[f"fork.{k}"].default) for k in ("Zr", "L", "i_a", "J", "D")})
+    theta = axis.response(rows[moved, 0] / 1e9, d[moved] * angle, t)
+    joint_step = 2 * np.pi / SMALL_JOB["fork_steps_per_rev"]
+    expected = theta / angle * joint_step
+    assert np.max(np.abs(fork - expected)) <= 1e-9 * joint_step * max(1.0, float(np.max(np.abs(rows[:, 3]))))
+
+
+def children_of(pid: int) -> list[int]:
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            out.append(int(stat.parent.name))
+    return out
+
+
+@pytest.mark.ros
+def test_no_node_outlives_a_killed_winder_run(tmp_path: Path, procs: Procs) -> None:
+    env = {**os.environ, "ROS_DOMAIN_ID": str(procs.domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    p = subprocess.Popen(
+        [str(BIN / "winder"), "run", "--bag-dir", str(tmp_path / "bags"), "--real-time"],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        stdin=subprocess.DEVNULL,
+    )
+    try:
+        t_end = time.monotonic() + 30
+        while len(kids := children_of(p.pid)) < 3:
+            assert time.monotonic() < t_end, "the three nodes did not start"
+            time.sleep(0.1)
+        p.send_signal(signal.SIGKILL)
+        p.wait()
+        t_end = time.monotonic() + 20
+        while alive := [k for k in kids if Path(f"/proc/{k}").exists() and not _zombie(k)]:
+            assert time.monotonic() < t_end, f"nodes {alive} outlived winder run"
+            time.sleep(0.1)
+    finally:
+        if p.poll() is None:
+            p.kill()
+
+
+def _zombie(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] == "Z"
+    except OSError:
+        return False
