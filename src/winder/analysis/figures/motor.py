@@ -148,15 +148,12 @@ def make(outdir: pathlib.Path) -> list[pathlib.Path]:
     axes[1, 1].set_title("|error| > half a pitch (dotted) = past the unstable point: a slip")
     axes[2, 0].set_ylabel("rotor velocity (rad/s)")
     axes[2, 0].set_title(
-        f"Paper motor, sine torque: pull-out speed T_m/D = {paper.pull_out_speed:.1f} rad/s "
-        "(dotted)"
+        f"Paper motor, sine torque: pull-out speed T_m/D = {paper.pull_out_speed:.1f} rad/s (dotted)"
     )
     axes[2, 1].set_title("D = 0.03 N m s/rad: 20 rad/s is out of reach whatever the ramp")
     axes[3, 0].set_ylabel("tracking error (tooth pitches)")
     axes[3, 0].set_title(f"Light damping D = 0.003 (zeta = {zeta_l:.2f}), sine torque")
-    axes[3, 1].set_title(
-        "no ramp slips at once; exponential and S-curve pull in (dotted: +-1/2 pitch)"
-    )
+    axes[3, 1].set_title("no ramp slips at once; exponential and S-curve pull in (dotted: +-1/2 pitch)")
     for ax in axes.flat:
         ax.grid(True, lw=0.3)
     for r, where in enumerate(("lower right", "upper right", "lower right", "lower right")):
