@@ -198,10 +198,8 @@ def plan_job(
     job's duration (ns, without the last dwell). Segments of equal length share
     one plan (a job of 10^5 layers plans two or three moves, not 10^5).
     ValueError (one line) if the job would last longer than :data:`MAX_JOB_SECONDS`."""
-    plans: dict[int, Profile] = {}
-    profiles = [
-        plans[n] if n in plans else plans.setdefault(n, plan_segment(values, n)) for n in segment_steps
-    ]
+    plans = {n: plan_segment(values, n) for n in dict.fromkeys(segment_steps)}
+    profiles = [plans[n] for n in segment_steps]
     dwell_ns = round(values["dwell"] * 1e9)
     durations = np.array([round(p.duration * 1e9) + dwell_ns for p in profiles], dtype=np.float64)
     total = float(durations.sum()) - dwell_ns

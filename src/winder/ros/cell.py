@@ -35,6 +35,7 @@ from rclpy.task import Future
 from std_srvs.srv import Trigger
 
 from winder.contract.topics import TOPIC_DIAGNOSTICS, status_name
+from winder.ros.diagnostics import ERROR
 
 NODES = {"interp": "interp_node", "profile": "profile_node", "sim": "sim_node"}
 #: Start order: the sim node first; the others wait for their readers, so the
@@ -42,7 +43,6 @@ NODES = {"interp": "interp_node", "profile": "profile_node", "sim": "sim_node"}
 START_ORDER = ("sim", "profile", "interp")
 #: Seconds before an unanswered start request is asked again.
 START_RETRY = 5.0
-ERROR_LEVEL = b"\x02"
 
 
 @dataclass
@@ -202,7 +202,7 @@ class CellWatch:
                 if values.get("state") in ("done", "incomplete"):
                     self.summary = values
                     self.message = st.message
-            elif st.level == ERROR_LEVEL and st.name.startswith(self.ns) and st.message not in self.errors:
+            elif st.level == bytes([ERROR]) and st.name.startswith(self.ns) and st.message not in self.errors:
                 self.errors.append(f"{st.name}: {st.message}")
 
     def ask_to_start(self) -> str | None:
