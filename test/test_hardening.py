@@ -10,6 +10,7 @@ import signal
 import subprocess
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -169,3 +170,149 @@ def _zombie(pid: int) -> bool:
         return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] == "Z"
     except OSError:
         return False
+
+
+# -- malformed messages from a neighbour on the graph, through real DDS ---------
+
+CHUNK_FAULTS = ["empty", "span", "shift", "negate", "int32", "past_end", "huge_time", "negative_time"]
+
+
+def damage(chunks: list[np.ndarray], fault: str, job: Any) -> tuple[list[np.ndarray], bool]:
+    """The stream with one damaged chunk; True if the damage replaces the last
+    chunk's times (its steps then count as missing: the job must still close)."""
+    out = [c.copy() for c in chunks]
+    good = out[2]
+    bad = good.copy()
+    if fault == "empty":
+        bad = bad[:0]
+    elif fault == "span":
+        bad[-1, 1] += 1
+    elif fault == "shift":
+        bad[:, 3] += 10**5
+    elif fault == "negate":
+        seg = job.segments()[int(good[0, 1])]
+        major = int(np.argmax(np.abs(seg.delta)))
+        bad[:, 2 + major] = -bad[:, 2 + major]
+    elif fault == "int32":
+        bad[-1, 4] = 2**31 - 1
+    elif fault == "past_end":
+        bad[:, 2:] += 10**6
+    else:  # step times out of range on the job's last chunk
+        last = out[-1]
+        last[:, 0] = last[:, 0] + 2**62 if fault == "huge_time" else -last[:, 0]
+        return out, True
+    out.insert(3, bad)  # an extra chunk beside the good ones
+    return out, False
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize("fault", CHUNK_FAULTS)
+def test_sim_node_reports_a_malformed_chunk_and_closes_the_job(
+    tmp_path: Path, procs: Procs, ros: Any, fault: str
+) -> None:
+    from test_reliability import FakeProfile
+
+    from winder.motion.job import Job
+
+    job = Job(job_id="hostile", turns_per_layer=2, layers=2, poles=1, fork_steps_per_rev=256)
+    sim = procs.start("sim_node", "-p", f"bag_dir:={tmp_path / 'bags'}", "-p", "stall_timeout:=60.0")
+    fake = FakeProfile(ros, job)
+    chunks, last_dropped = damage(fake.chunks(100), fault, job)
+    fake.send(chunks)
+    from conftest import spin_until
+
+    def closed() -> dict[str, str] | None:
+        ends = [
+            v
+            for _, name, v in fake.statuses
+            if "sim_node: job" in name and v.get("state") in ("done", "incomplete")
+        ]
+        return ends[-1] if ends else None
+
+    spin_until(ros, lambda: closed() is not None, 30, "the job to close")
+    end = closed()
+    assert end is not None
+    errors = [text for level, text, _ in fake.statuses if level == 2 and "sim_node" in text]
+    assert errors, "no ERROR report"
+    assert all("\n" not in e for e in errors)
+    assert int(end["errors"]) >= 1
+    if last_dropped:
+        assert int(end["steps_missing"]) == chunks[-1].shape[0]
+    else:
+        assert int(end["steps_missing"]) == 0 and int(end["steps_done"]) == job.total_steps
+    assert sim.poll() is None, "the sim node died"
+    log = procs.log(sim)
+    assert "Traceback" not in log
+    status = final_status_of(only_bag(tmp_path))
+    assert status["state"] == end["state"]
+
+
+def final_status_of(bag_dir: Path) -> dict[str, str]:
+    from conftest import final_report
+
+    return final_report(rosbags_read(bag_dir))
+
+
+@pytest.mark.ros
+def test_nodes_survive_junk_jobs_chunks_and_receipts(tmp_path: Path, procs: Procs, ros: Any) -> None:
+    """Junk on winder/job, winder/steps, winder/step_times and winder/progress:
+    every node reports it in one line and stays alive; a good job runs after."""
+    from conftest import spin_until
+    from diagnostic_msgs.msg import DiagnosticArray, KeyValue
+    from std_msgs.msg import Int32MultiArray, Int64MultiArray, String
+
+    from winder.ros.chunks import pack_steps, pack_timed
+    from winder.ros.qos import QOS_LATCHED, QOS_STATE, QOS_STREAM
+
+    seen: list[str] = []
+    ros.create_subscription(
+        DiagnosticArray, "/diagnostics", lambda m: seen.extend(f"{s.name}|{s.message}" for s in m.status), 100
+    )
+    bags = tmp_path / "bags"
+    nodes = [
+        procs.start("sim_node", "-p", f"bag_dir:={bags}"),
+        procs.start("profile_node"),
+        procs.start("interp_node", "-p", "autostart:=false", "-p", "turns_per_layer:=2", "-p", "poles:=1"),
+    ]
+    pub_job = ros.create_publisher(String, "/winder/job", QOS_LATCHED)
+    pub_steps = ros.create_publisher(Int32MultiArray, "/winder/steps", QOS_STREAM)
+    pub_times = ros.create_publisher(Int64MultiArray, "/winder/step_times", QOS_STREAM)
+    pub_progress = ros.create_publisher(KeyValue, "/winder/progress", QOS_STATE)
+    spin_until(
+        ros,
+        lambda: pub_times.get_subscription_count() > 0 and pub_steps.get_subscription_count() > 0,
+        30,
+        "the nodes",
+    )
+    for text in [
+        "[1,2]",
+        '{"format": "winder.job/1"}',
+        '{"format": "winder.job/1", "job": null}',
+        "{",
+        '"x"',
+    ]:
+        pub_job.publish(String(data=text))
+        time.sleep(0.2)
+    spin_until(ros, lambda: sum("job description rejected" in s for s in seen) >= 2, 30, "the rejections")
+    pub_steps.publish(pack_steps(np.zeros((0, 4), np.int32)))
+    pub_times.publish(pack_timed(np.zeros((0, 5), np.int64)))
+    pub_progress.publish(KeyValue(key="rw400", value="lots"))
+    pub_progress.publish(KeyValue(key="rw400", value="-5"))
+    time.sleep(1.0)
+    assert all(p.poll() is None for p in nodes), [procs.log(p) for p in nodes if p.poll() is not None]
+    # a good job still runs through the same three nodes
+    from rclpy.task import Future
+    from std_srvs.srv import Trigger
+
+    client = ros.create_client(Trigger, "/interp_node/start")
+    spin_until(ros, client.service_is_ready, 30, "the start service")
+    future: Future = client.call_async(Trigger.Request())
+    spin_until(ros, future.done, 30, "the start reply")
+    try:
+        spin_until(
+            ros, lambda: any(s.startswith("sim_node: job|job rw400: complete") for s in seen), 60, "the job"
+        )
+    except AssertionError:
+        raise AssertionError("\n".join(sorted(set(seen)))) from None
+    for p in nodes:
+        assert "Traceback" not in procs.log(p)

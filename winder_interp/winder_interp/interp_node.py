@@ -126,8 +126,20 @@ class InterpNode(Node):
                 yield rows
 
     def on_progress(self, msg: KeyValue) -> None:
-        if self.job is not None and msg.key == self.job.job_id:
-            self.consumed = max(self.consumed, int(msg.value))
+        """A receipt: steps of the running job the sim node has taken. Anything
+        else on the topic (another job's, not a count, more than was sent) is
+        ignored with a warning: it must not move the flow control."""
+        if self.job is None or msg.key != self.job.job_id:
+            return
+        value = msg.value.strip()
+        if not (value.isdigit() and value.isascii() and int(value) <= self.sent):
+            self.get_logger().warning(
+                f"{TOPIC_PROGRESS}: receipt {msg.value[:40]!r} for job {msg.key} ignored: "
+                f"must be a step count in [0, {self.sent}]",
+                throttle_duration_sec=5.0,
+            )
+            return
+        self.consumed = max(self.consumed, int(value))
 
     def send_some(self) -> None:
         if self.pending is None or self.pub_steps.get_subscription_count() == 0:

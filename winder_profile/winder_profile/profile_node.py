@@ -24,7 +24,7 @@ from rclpy.subscription import Subscription
 from std_msgs.msg import Int32MultiArray, Int64MultiArray, String
 
 from winder.contract.params import PROFILE_SPECS, check_profile, plan_job
-from winder.contract.stream import TIMED_COLUMNS, JobPlan, StreamChecker, parse_job_description
+from winder.contract.stream import STEP_COLUMNS, TIMED_COLUMNS, JobPlan, StreamChecker, parse_job_description
 from winder.contract.topics import TOPIC_JOB, TOPIC_PROFILE_CONFIG, TOPIC_STEP_TIMES, TOPIC_STEPS
 from winder.ros.chunks import STEPS_CDR, TIMED_CDR, waiting
 from winder.ros.diagnostics import ERROR, OK, WARN, Diagnostics
@@ -108,9 +108,7 @@ class ProfileNode(Node):
         except ValueError as exc:
             self.fail(f"bad steps chunk: {exc}")
             return
-        seg = int(rows[0, 0])
-        pos = rows[:, 1:]
-        verdict = self.checker.check(seg, pos)
+        verdict = self.checker.check_rows(rows, STEP_COLUMNS)
         if verdict.kind != "ok":
             self.get_logger().error(verdict.message)
             self.diag.publish(
@@ -120,7 +118,8 @@ class ProfileNode(Node):
             return
         # the times of just these steps: segments are planned over their step
         # count, so step k sits at position k (memory per chunk, not per segment)
-        k = self.checker.step_index(seg, pos)
+        seg = int(rows[0, 0])
+        k = self.checker.step_index(seg, rows[:, 1:])
         times = self.profiles[seg].times_at(k.astype(np.float64))
         out = np.empty((rows.shape[0], len(TIMED_COLUMNS)), np.int64)
         out[:, 0] = self.seg_t0_ns[seg] + np.rint(times * 1e9).astype(np.int64)

@@ -34,8 +34,8 @@ from trajectory_msgs.msg import JointTrajectory
 
 from winder.axis import StepperAxis
 from winder.contract.cdr import JointStateEncoder, encode_clocks
-from winder.contract.params import MOTOR_FIELDS, SIM_SPECS, bag_directory, check_sim
-from winder.contract.stream import JobPlan, StreamChecker, parse_job_description
+from winder.contract.params import MAX_JOB_SECONDS, MOTOR_FIELDS, SIM_SPECS, bag_directory, check_sim
+from winder.contract.stream import TIMED_COLUMNS, JobPlan, StreamChecker, parse_job_description
 from winder.contract.topics import (
     TOPIC_CLOCK,
     TOPIC_DIAGNOSTICS,
@@ -68,6 +68,8 @@ BATCH_WAIT = 0.01
 #: never by the simulated time a batch of steps covers (at 1 step/s, a chunk of
 #: 8192 steps spans 8192 s: 1.6 million samples at 200 Hz).
 SAMPLE_BATCH = 1 << 15
+#: Step times beyond the longest a job may last are refused, not simulated.
+MAX_STEP_NS = round(MAX_JOB_SECONDS * 1e9)
 BAG_TYPES = {
     "job": "std_msgs/msg/String",
     "path": "trajectory_msgs/msg/JointTrajectory",
@@ -343,6 +345,8 @@ class SimNode(Node):
             if self.plan is not None and self.checker is not None:
                 done = self.checker.done + self.checker.missing + self.checker.rejected_steps
                 self.pub_progress.publish(KeyValue(key=self.plan.job_id, value=str(done)))
+        if not self.inbox:  # the job's last chunk may have been dropped, not simulated
+            self.settle_if_complete(settings)
         self.emit(settings)
 
     def accept(self, raw: bytes) -> npt.NDArray[np.int64] | None:
@@ -353,18 +357,19 @@ class SimNode(Node):
         except ValueError as exc:
             self.error(f"bad step_times chunk: {exc}")
             return None
-        seg = int(rows[0, 1])
-        pos = rows[:, 2:]
-        verdict = self.checker.check(seg, pos)  # positions tell gaps, repeats, reordering
+        verdict = self.checker.check_rows(rows, TIMED_COLUMNS)  # positions tell gaps, repeats, reordering
         if verdict.kind != "ok":
             self.error(verdict.message)
         if not verdict.accept:
             self.checker.rejected_steps += rows.shape[0]
             return None
-        if np.any(np.diff(rows[:, 0]) <= 0) or rows[0, 0] <= self.last_step_ns:
+        seg, pos = int(rows[0, 1]), rows[:, 2:]
+        late = int(rows[-1, 0]) > MAX_STEP_NS
+        if late or np.any(np.diff(rows[:, 0]) <= 0) or rows[0, 0] <= self.last_step_ns:
             # in sequence by position but not in time: the steps cannot be
             # simulated; they count as missing, never silently integrated
-            self.error(f"segment {seg}: step times do not increase; {rows.shape[0]} steps dropped")
+            why = f"later than a job may last ({MAX_JOB_SECONDS:g} s)" if late else "do not increase"
+            self.error(f"segment {seg}: step times {why}; {rows.shape[0]} steps dropped")
             self.checker.done -= rows.shape[0]
             self.checker.missing += rows.shape[0]
             return None
@@ -394,9 +399,15 @@ class SimNode(Node):
                     self.rest = rows[lo:]
                     return
                 self.emit(settings)
-        if self.checker.complete:
-            self.simulate(None, None, until=float(t_s[-1]) + settings["settle_time"])
-            self.finishing = True
+        self.settle_if_complete(settings)
+
+    def settle_if_complete(self, settings: dict[str, Any]) -> None:
+        """Once every step of the job is simulated or counted missing: the
+        settle time after the last simulated step, then the job closes."""
+        if self.checker is None or not self.checker.complete or self.finishing or self.rest is not None:
+            return
+        self.simulate(None, None, until=max(self.last_step_ns, 0) / 1e9 + settings["settle_time"])
+        self.finishing = True
 
     # -- work ------------------------------------------------------------
     def simulate(

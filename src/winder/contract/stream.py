@@ -201,6 +201,18 @@ class StreamChecker:
         index: npt.NDArray[np.integer[Any]] = np.abs(pos[:, s.major] - s.start[s.major])
         return index
 
+    def check_rows(self, rows: npt.NDArray[np.integer[Any]], columns: tuple[str, ...]) -> ChunkVerdict:
+        """Check a chunk as it came off the wire: rows of ``columns``
+        (:data:`STEP_COLUMNS` or :data:`TIMED_COLUMNS`). Besides :meth:`check`,
+        a chunk must hold rows and name one segment in all of them."""
+        col = columns.index("segment")
+        if rows.ndim != 2 or rows.shape[0] == 0:
+            return self._reject("bad", "empty chunk")
+        segment = rows[:, col]
+        if np.any(segment != segment[0]):
+            return self._reject("bad", f"a chunk spans segments {int(segment.min())}..{int(segment.max())}")
+        return self.check(int(segment[0]), rows[:, col + 1 :])
+
     def check(self, segment: int, pos: npt.NDArray[np.integer[Any]]) -> ChunkVerdict:
         """Check one chunk: ``segment`` index and its (n, axes) positions."""
         segs = self.plan.segments
