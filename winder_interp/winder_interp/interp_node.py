@@ -55,6 +55,8 @@ class InterpNode(Node):
         self.started_wall = 0.0
         self.autostarted = False
         self.finished = False
+        self.aborted = ""  # why the running job was given up, if it was
+        self.last_receipt_wall = 0.0
         if self.settings.blocked():
             self.diag.publish("job", ERROR, str(self.settings.blocked()), {})
 
@@ -93,7 +95,8 @@ class InterpNode(Node):
         self.sent = 0
         self.consumed = 0
         self.finished = False
-        self.started_wall = time.monotonic()
+        self.aborted = ""
+        self.started_wall = self.last_receipt_wall = time.monotonic()
         self.pub_job.publish(String(data=describe_job(job)))
         self.pub_path.publish(self.path_message(job))
         self.pending = self.chunks(job, values["chunk_steps"])
@@ -140,6 +143,7 @@ class InterpNode(Node):
             )
             return
         self.consumed = max(self.consumed, int(value))
+        self.last_receipt_wall = time.monotonic()  # a repeated receipt: the sim node is alive
 
     def send_some(self) -> None:
         if self.pending is None or self.pub_steps.get_subscription_count() == 0:
@@ -151,6 +155,7 @@ class InterpNode(Node):
         deadline = time.monotonic() + 0.015  # stay responsive to services and parameters
         while time.monotonic() < deadline:
             if paced and self.sent - self.consumed >= window:
+                self.abort_if_stalled()
                 return
             rows = next(self.pending, None)
             if rows is None:
@@ -161,6 +166,22 @@ class InterpNode(Node):
             self.pub_steps.publish(STEPS_CDR.encode(rows))
             self.sent += rows.shape[0]
 
+    def abort_if_stalled(self) -> None:
+        """Stop sending a job whose receipts stopped: its sim node died or was
+        restarted and will never take the steps in flight. The sim node closes
+        its side after the same time; the next start runs a new job."""
+        quiet = time.monotonic() - self.last_receipt_wall
+        if self.job is None or quiet <= self.settings.values()["stall_abort"]:
+            return
+        why = (
+            f"job {self.job.job_id} aborted: no receipt for {quiet:.1f} s at "
+            f"{self.consumed}/{self.sent} steps taken of {self.sent} sent"
+        )
+        self.get_logger().error(why)
+        self.pending = None
+        self.aborted = why
+        self.report()
+
     def report(self) -> None:
         blocked = self.settings.blocked()
         if blocked:  # repeated, as a status is: late listeners hear it too
@@ -170,11 +191,11 @@ class InterpNode(Node):
             self.diag.publish("job", OK, "idle: no job started", {"state": "idle"})
             return
         total = self.job.total_steps
-        state = "sent" if self.finished else "sending"
+        state = "aborted" if self.aborted else ("sent" if self.finished else "sending")
         self.diag.publish(
             "job",
-            OK,
-            f"job {self.job.job_id}: {state} {self.sent}/{total} steps",
+            ERROR if self.aborted else OK,
+            self.aborted or f"job {self.job.job_id}: {state} {self.sent}/{total} steps",
             {
                 "job_id": self.job.job_id,
                 "steps_sent": self.sent,

@@ -342,9 +342,7 @@ class SimNode(Node):
                     break
             if batch:
                 self.advance(np.concatenate(batch) if len(batch) > 1 else batch[0], settings)
-            if self.plan is not None and self.checker is not None:
-                done = self.checker.done + self.checker.missing + self.checker.rejected_steps
-                self.pub_progress.publish(KeyValue(key=self.plan.job_id, value=str(done)))
+            self.receipt()
         if not self.inbox:  # the job's last chunk may have been dropped, not simulated
             self.settle_if_complete(settings)
         self.emit(settings)
@@ -637,10 +635,19 @@ class SimNode(Node):
         self.diag.publish("stream", ERROR, why, {"job_id": self.plan.job_id if self.plan else ""})
 
     def watch(self) -> None:
-        if self.plan is None or self.finishing or self.stalled:
+        if self.plan is None or self.finishing:
+            return
+        if self.inbox or self.rest is not None or self.out:
+            self.last_chunk_wall = time.monotonic()  # pacing work already here: not a stall
             return
         idle = time.monotonic() - self.last_chunk_wall
-        if idle > self.settings.values()["stall_timeout"]:
+        settings = self.settings.values()
+        if idle > settings["stall_abort"]:
+            done = f"{self.done_steps}/{self.plan.total_steps}"
+            self.error(f"step stream stalled for {idle:.1f} s at {done} steps: job closed incomplete")
+            self.finish(complete=False)
+            return
+        if not self.stalled and idle > settings["stall_timeout"]:
             # reported at once and while it lasts (report()); a stall that ends
             # with nothing lost does not fail the job, so it is not an error()
             self.stalled = True
@@ -649,6 +656,14 @@ class SimNode(Node):
             why = f"step stream stalled: no steps for {idle:.1f} s at {done} steps"
             self.get_logger().warning(why)
             self.diag.publish("stream", ERROR, why, {"job_id": self.plan.job_id})
+
+    def receipt(self) -> None:
+        """The steps of the job taken so far, on winder/progress: the interp
+        node's flow control, and (repeated by report()) the sign this node
+        is alive while it paces a real-time job."""
+        if self.plan is not None and self.checker is not None:
+            done = self.checker.done + self.checker.missing + self.checker.rejected_steps
+            self.pub_progress.publish(KeyValue(key=self.plan.job_id, value=str(done)))
 
     def report(self) -> None:
         if self.plan is None:
@@ -659,6 +674,7 @@ class SimNode(Node):
                 why = self.settings.blocked()
                 self.diag.publish("job", ERROR if why else OK, why or "idle: waiting for a job", {})
             return
+        self.receipt()
         values = self.summary(complete=False)
         values["state"] = "stalled" if self.stalled else "running"
         self.diag.publish(

@@ -40,6 +40,19 @@ def _table(*specs: Spec) -> dict[str, Spec]:
     return {s.name: s for s in specs}
 
 
+#: Both ends of the stream give up on a job that stopped moving: the sim node
+#: closes it incomplete (bag closed, final report), the interp node stops
+#: sending it, so the next job can run (a node died or was restarted).
+STALL_ABORT = Spec(
+    "stall_abort",
+    float,
+    30.0,
+    "wall time without progress after which the running job is closed incomplete",
+    "s",
+    0.1,
+    86400.0,
+)
+
 INTERP_SPECS = {
     **FIELD_SPECS,
     **_table(
@@ -54,6 +67,7 @@ INTERP_SPECS = {
             1,
             1 << 30,
         ),
+        STALL_ABORT,
     ),
 }
 
@@ -139,6 +153,7 @@ SIM_SPECS = {
             0.1,
             3600.0,
         ),
+        STALL_ABORT,
     ),
     **{
         f"{axis}.{name}": Spec(
