@@ -387,3 +387,15 @@ def test_a_restarted_node_leaves_the_cell_able_to_run_the_next_job(
         ros, lambda: any(v.get("state") == "done" for n, _, v in seen if n == "sim_node: job"), 120, "job 2"
     )
     assert all(p.poll() is None for p in nodes.values())
+
+
+@pytest.mark.ros
+def test_a_namespaced_cell_keeps_its_clock_in_its_namespace(tmp_path: Path, procs: Procs) -> None:
+    """Two cells on one graph must not both drive /clock: a cell in /cell9
+    publishes and records /cell9/clock, never /clock."""
+    r = winder_run(tmp_path, procs.domain, "--namespace", "/cell9", *job_args(SMALL_JOB))
+    assert r.returncode == 0, r.stdout + r.stderr
+    bag = rosbags_read(only_bag(tmp_path))
+    assert "/clock" not in bag
+    clock = np.array([m.clock.sec * 10**9 + m.clock.nanosec for _, m in bag["/cell9/clock"]])
+    assert clock.size == len(bag["/cell9/winder/joint_states"]) and np.all(np.diff(clock) > 0)

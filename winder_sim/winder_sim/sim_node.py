@@ -137,7 +137,7 @@ class SimNode(Node):
             "joint_commands": self.resolve_topic_name(TOPIC_JOINT_COMMANDS),
             "sim_config": self.resolve_topic_name(TOPIC_SIM_CONFIG),
             "profile_config": self.resolve_topic_name(TOPIC_PROFILE_CONFIG),
-            "clock": TOPIC_CLOCK,
+            "clock": self.resolve_topic_name(TOPIC_CLOCK),
             "diagnostics": TOPIC_DIAGNOSTICS,
         }
         self.reset()

@@ -1,8 +1,12 @@
 """Topic names of the cell and the names of its status reports (ROS-free).
 
 Names are relative (``winder/steps``) so that a node namespace
-(``--ros-args -r __ns:=/cell1``) moves the whole cell; ``/clock`` and
-``/diagnostics`` stay global, as ROS tools expect them. Their QoS is in
+(``--ros-args -r __ns:=/cell1``) moves the whole cell. The simulated clock is
+relative too (``clock``): ``/clock`` for a cell in the root namespace, as ROS
+tools expect it, and ``/cell1/clock`` for a cell in ``/cell1``, so that two
+cells on one graph never drive one time base back and forth (a node that
+should follow cell1's time remaps ``/clock:=/cell1/clock``). ``/diagnostics``
+stays global, as diagnostic tools expect it; status names carry the namespace. Their QoS is in
 :mod:`winder.ros.qos`; their types and contents in the README's topic contract.
 """
 
@@ -19,7 +23,7 @@ TOPIC_JOINT_COMMANDS = "winder/joint_commands"
 TOPIC_SIM_CONFIG = "winder/sim_config"
 TOPIC_PROGRESS = "winder/progress"
 TOPIC_PROFILE_CONFIG = "winder/profile_config"
-TOPIC_CLOCK = "/clock"
+TOPIC_CLOCK = "clock"
 TOPIC_DIAGNOSTICS = "/diagnostics"
 
 #: The diagnostic task every node reports its job under (``"<node>: job"``).
