@@ -399,3 +399,71 @@ def test_a_namespaced_cell_keeps_its_clock_in_its_namespace(tmp_path: Path, proc
     assert "/clock" not in bag
     clock = np.array([m.clock.sec * 10**9 + m.clock.nanosec for _, m in bag["/cell9/clock"]])
     assert clock.size == len(bag["/cell9/winder/joint_states"]) and np.all(np.diff(clock) > 0)
+
+
+def small_disk(
+    tmp_path: Path, procs: Procs, sim_args: list[str], want: str
+) -> tuple[str, subprocess.Popen[bytes]]:
+    """A sim node whose bag directory fills up after about 1 MiB: a 1 MiB
+    tmpfs where this machine lets the test mount one, else the same node under
+    a 1 MiB file size limit (RLIMIT_FSIZE: writes fail with EFBIG as a full
+    disk fails them with ENOSPC); ``want="fsize"`` takes the limit anyway.
+    Returns (the kind used, the process)."""
+    disk = tmp_path / "small"
+    disk.mkdir()
+    mounted = (
+        subprocess.run(
+            ["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(disk)], capture_output=True
+        ).returncode
+        == 0
+    )
+    cmd = [str(BIN / "sim_node"), "--ros-args", "-p", f"bag_dir:={disk / 'bags'}", *sim_args]
+    if not mounted:
+        cmd = ["prlimit", f"--fsize={1 << 20}", *cmd]
+    log = procs.log_dir / "sim_node-small-disk.log"
+    p = subprocess.Popen(cmd, env=procs.env, stdout=log.open("wb"), stderr=subprocess.STDOUT)
+    procs.procs.append((p, log))
+    return ("tmpfs" if mounted else "fsize"), p
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize("want", ["tmpfs", "fsize"])
+def test_a_full_disk_mid_job_closes_the_job_and_keeps_what_was_written(
+    tmp_path: Path, procs: Procs, ros: Any, want: str
+) -> None:
+    from conftest import spin_until
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    from winder.record.reader import read_run
+
+    seen: list[tuple[str, str, dict[str, str]]] = []
+    ros.create_subscription(
+        DiagnosticArray,
+        "/diagnostics",
+        lambda m: seen.extend((s.name, s.message, {kv.key: kv.value for kv in s.values}) for s in m.status),
+        100,
+    )
+    kind, sim = small_disk(tmp_path, procs, ["-p", "bag_compression:=none"], want)
+    try:
+        procs.start("profile_node")
+        procs.start("interp_node")  # the default job: far more than 1 MiB of bag
+
+        def closed() -> dict[str, str] | None:
+            ends = [(m, v) for n, m, v in seen if n == "sim_node: job" and v.get("state") == "incomplete"]
+            return ends[-1] if ends else None
+
+        spin_until(ros, lambda: closed() is not None, 120, f"the job to close on the full disk ({kind})")
+        message, _ = closed()  # type: ignore[misc]
+        assert "recording stopped" in message and ("disk full" in message or "file size limit" in message)
+        assert sim.poll() is None, "the sim node died"
+        time.sleep(1.0)
+        assert sim.poll() is None
+        bags = list((tmp_path / "small" / "bags").iterdir())
+        assert len(bags) == 1
+        run = read_run(bags[0])  # readable: what reached the file, flagged as not complete
+        assert not run.complete
+        assert run.steps.shape[0] > 0
+        assert "Traceback" not in procs.log(sim)
+    finally:
+        procs.stop_all()
+        subprocess.run(["umount", str(tmp_path / "small")], capture_output=True)

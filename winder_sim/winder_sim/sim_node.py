@@ -83,6 +83,10 @@ BAG_TYPES = {
 }
 
 
+def one_line(exc: BaseException) -> str:
+    return (str(exc).splitlines() or [type(exc).__name__])[0]
+
+
 def make_axis(values: dict[str, Any], axis: str) -> StepperAxis:
     return StepperAxis(**{k: values[f"{axis}.{k}"] for k in ("Zr", "L", "i_a", "J", "D")})
 
@@ -160,6 +164,7 @@ class SimNode(Node):
         self.out: deque[dict[str, Any]] = deque()  # computed samples waiting to be published
         self.inbox: deque[bytes] = deque()  # received chunks waiting to be simulated
         self.rest: npt.NDArray[np.int64] | None = None  # accepted rows beyond the last sample batch
+        self.record_failure = ""  # why the bag stopped recording (a full disk), if it did
         self.inbox_since = time.monotonic()
         self.last_step_ns = -1
         self.path_recorded = False
@@ -234,8 +239,8 @@ class SimNode(Node):
                     f"job {plan.job_id} runs unrecorded: cannot open a bag: {str(exc).splitlines()[0]}"
                 )
             else:
-                self.bag.write(self.topic["job"], 0, raw)
-                self.bag.write(self.topic["sim_config"], 0, serialize_message(config))
+                self.record("job", 0, raw)
+                self.record("sim_config", 0, serialize_message(config))
         self.job_wall = time.monotonic()
         self.path_recorded = False
         self.profile_recorded = False
@@ -269,8 +274,7 @@ class SimNode(Node):
         if job_id != self.plan.job_id:
             return
         self.profile_recorded = True
-        if self.bag is not None and self.bag.is_open:
-            self.bag.write(self.topic["profile_config"], self.t_sim_ns, self.profile_raw)
+        self.record("profile_config", self.t_sim_ns, self.profile_raw)
 
     def record_path(self) -> None:
         """Record the current job's path once. Job and path travel on two
@@ -281,12 +285,10 @@ class SimNode(Node):
         if path.header.frame_id != self.plan.job_id:
             return  # an earlier job's path; this job's is on its way
         self.path_recorded = True
-        if self.bag is not None and self.bag.is_open:
-            self.bag.write(self.topic["path"], self.t_sim_ns, self.path_raw)
+        self.record("path", self.t_sim_ns, self.path_raw)
 
     def on_diagnostics(self, raw: bytes) -> None:
-        if self.bag is not None and self.bag.is_open:
-            self.bag.write(self.topic["diagnostics"], self.t_sim_ns, raw)
+        self.record("diagnostics", self.t_sim_ns, raw)
 
     def on_step_times(self, raw: bytes) -> None:
         self.receive(raw)
@@ -302,8 +304,7 @@ class SimNode(Node):
         if self.stalled:
             self.stalled = False
             self.get_logger().info("step stream resumed")
-        if self.bag is not None:  # the bag keeps the stream as it arrived
-            self.bag.write(self.topic["step_times"], self.t_sim_ns, raw)
+        self.record("step_times", self.t_sim_ns, raw)  # the bag keeps the stream as it arrived
         if not self.inbox:
             self.inbox_since = time.monotonic()
         self.inbox.append(raw)
@@ -346,6 +347,8 @@ class SimNode(Node):
         if not self.inbox:  # the job's last chunk may have been dropped, not simulated
             self.settle_if_complete(settings)
         self.emit(settings)
+        if self.record_failure and self.plan is not None:
+            self.finish(complete=False)
 
     def accept(self, raw: bytes) -> npt.NDArray[np.int64] | None:
         """The rows of a chunk that may be simulated, or None (reported)."""
@@ -557,7 +560,7 @@ class SimNode(Node):
         clocks = encode_clocks(t_ns)
         cmds = self.encoder.encode(t_ns, block["cmd_pos"][:n], block["cmd_vel"][:n])
         acts = self.encoder.encode(t_ns, block["act_pos"][:n], block["act_vel"][:n])
-        bag = self.bag
+        bag = self.bag if not self.record_failure else None
         topics = self.topic["clock"], self.topic["joint_commands"], self.topic["joint_states"]
         for r in range(n):
             t = int(t_ns[r])
@@ -566,9 +569,13 @@ class SimNode(Node):
             self.pub_cmd.publish(cmds[r])
             self.pub_state.publish(acts[r])
             if bag is not None:
-                bag.write(topics[0], t, clocks[r], exact=True)
-                bag.write(topics[1], t, cmds[r], exact=True)
-                bag.write(topics[2], t, acts[r], exact=True)
+                try:
+                    bag.write(topics[0], t, clocks[r], exact=True)
+                    bag.write(topics[1], t, cmds[r], exact=True)
+                    bag.write(topics[2], t, acts[r], exact=True)
+                except RuntimeError as exc:
+                    self.recording_failed(exc)
+                    bag = None
 
     def summary(self, complete: bool) -> dict[str, object]:
         assert self.plan is not None and self.checker is not None
@@ -607,19 +614,18 @@ class SimNode(Node):
 
     def _finish(self, complete: bool) -> None:
         assert self.plan is not None
-        values = self.summary(complete)
-        ok = complete and not self.errors and values["lost_steps"] == 0
-        level = OK if ok else (WARN if complete else ERROR)
-        state = "complete" if complete else "incomplete"
-        text = f"job {self.plan.job_id}: {state}, {self.done_steps}/{self.plan.total_steps} steps"
-        if self.errors:
-            text += f", {len(self.errors)} stream errors (first: {self.errors[0]})"
+        values, level, text = self.final_report(complete)
         final = self.diag.status("job", level, text, values)
         if self.bag is not None:
             # the final report goes into the bag too, and the bag is closed
             # before anyone hears "done": whoever stops us then finds it complete
-            self.bag.write(self.topic["diagnostics"], self.t_sim_ns, serialize_message(final))
-            self.bag.close()
+            self.record("diagnostics", self.t_sim_ns, serialize_message(final))
+            try:
+                self.bag.close()
+            except (RuntimeError, OSError) as exc:  # what reached the file stays readable
+                self.recording_failed(exc)
+                values, level, text = self.final_report(complete)  # no longer complete
+                final = self.diag.status("job", level, text, values)
         if self.context.ok():
             self.get_logger().info(text + (f"; bag {self.bag.path}" if self.bag else ""))
         self.last_summary, self.last_level, self.last_text = values, level, text
@@ -628,6 +634,39 @@ class SimNode(Node):
         self.bag = None
         if self.context.ok():  # at Ctrl-C the context is already shut down
             self.diag.pub.publish(final)
+
+    def final_report(self, complete: bool) -> tuple[dict[str, object], int, str]:
+        """The job's final status: values, level and message. A job whose
+        recording failed is not complete, whatever the stream did."""
+        assert self.plan is not None
+        complete = complete and not self.record_failure
+        values = self.summary(complete)
+        ok = complete and not self.errors and values["lost_steps"] == 0
+        level = OK if ok else (WARN if complete else ERROR)
+        state = "complete" if complete else "incomplete"
+        text = f"job {self.plan.job_id}: {state}, {self.done_steps}/{self.plan.total_steps} steps"
+        if self.errors:
+            text += f", {len(self.errors)} stream errors (first: {self.errors[0]})"
+        return values, level, text
+
+    def record(self, key: str, t_ns: int, data: bytes, *, exact: bool = False) -> None:
+        """One message into the job's bag, if it records. A failed write (a
+        full disk) stops the recording; pump() then closes the job incomplete."""
+        if self.bag is None or not self.bag.is_open or self.record_failure:
+            return
+        try:
+            self.bag.write(self.topic[key], t_ns, data, exact=exact)
+        except RuntimeError as exc:
+            self.recording_failed(exc)
+
+    def recording_failed(self, exc: BaseException) -> None:
+        if self.record_failure:
+            return
+        cause = exc.__cause__ or exc
+        errno_ = getattr(cause, "errno", None)
+        why = {28: "disk full", 27: "file size limit reached"}.get(errno_ or 0, one_line(cause))
+        self.record_failure = why
+        self.error(f"recording stopped: {why}; what was written stays readable, the job is closed incomplete")
 
     def error(self, why: str) -> None:
         self.errors.append(why)

@@ -175,7 +175,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     )
     if sim["record"]:
         probe = next(p for p in (bag_dir, *bag_dir.parents) if p.exists())
-        print(f"  recording into     {bag_dir}  ({shutil.disk_usage(probe).free / 2**30:.1f} GiB free)")
+        free = shutil.disk_usage(probe).free
+        room = f"{free / 2**30:.1f} GiB" if free >= 2**30 else f"{free / 2**20:.1f} MiB"
+        print(f"  recording into     {bag_dir}  ({room} free)")
     bar = Progress(1.0, "winding")
     t0 = time.monotonic()
     result = run_cell(
