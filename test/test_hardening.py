@@ -467,3 +467,54 @@ def test_a_full_disk_mid_job_closes_the_job_and_keeps_what_was_written(
     finally:
         procs.stop_all()
         subprocess.run(["umount", str(tmp_path / "small")], capture_output=True)
+
+
+# values inside each parameter's own range that the cell cannot simulate,
+# through ROS parameters: at start (--ros-args -p) and at run time, one
+# parameter per call (a ROS parameter call sets each parameter on its own);
+# (name, value, refused): a kind is switched first where a limit needs it
+ROS_EXTREMES: dict[str, list[tuple[str, Any, bool]]] = {
+    "interp_node": [
+        ("feed_step", 1e-310, True),
+        ("feed_step", 5e-324, True),
+        ("feed_step", 1e-9, False),
+        ("turns_per_layer", 100000, True),
+    ],
+    "profile_node": [
+        ("a_max", 1e-300, True),
+        ("v_max", 1e-6, True),
+        ("j_max", 1e-300, True),
+        ("a_max", 8192.0, False),  # valid again: the start override blocked the node till now
+        ("profile", "trapezoid", False),
+        ("a_max", 1e-12, True),
+        ("profile", "exponential", False),
+        ("tau", 1e-300, True),
+    ],
+}
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize("executable", list(ROS_EXTREMES))
+def test_extreme_in_range_parameters_are_refused_and_the_node_lives(
+    procs: Procs, ros: Any, executable: str
+) -> None:
+    from test_nodes import set_params
+
+    from winder.ros.cell import ros_args
+
+    name, value, _ = ROS_EXTREMES[executable][0]
+    start = {name: value, **({"autostart": False} if executable == "interp_node" else {})}
+    p = procs.start(executable, *ros_args(start, "")[1:])
+    for name, value, refused in ROS_EXTREMES[executable]:
+        [result] = set_params(ros, executable, {name: value})
+        assert result.successful != refused, (name, value, result.reason)
+        if refused:
+            assert "\n" not in result.reason and name in result.reason, result.reason
+    assert p.poll() is None
+    log = procs.log(p)
+    # the start override is refused in one line naming it: as a value no job can
+    # use ("settings rejected at start"), or as text that is no number
+    first_line = log.splitlines()[0]
+    assert ROS_EXTREMES[executable][0][0] in first_line, log
+    assert "rejected at start" in first_line or "keeping the default" in first_line, log
+    assert "Traceback" not in log
