@@ -141,6 +141,7 @@ class Analysis:
     complete: bool
     closed: bool
     recovered: bool
+    damaged: int  #: chunks skipped as damaged (CRC or compression)
     steps_recorded: int
     steps_total: int
     job_time: float  #: s, time of the last step
@@ -393,9 +394,18 @@ def analyze(run: Run, stride_time: float = STRIDE_TIME) -> Analysis:
         notes.append(
             "step times do not increase everywhere: the recording holds repeated or reordered chunks"
         )
+    if run.damaged:
+        notes.append(
+            f"damaged recording: {len(run.damaged)} chunk(s) skipped, their messages are missing "
+            f"from every figure (first: {run.damaged[0]})"
+        )
     if not run.complete:
         why = (
-            "cut short and recovered" if run.recovered else f"sim state {run.report.get('state', 'unknown')}"
+            "damaged"
+            if run.damaged and run.closed
+            else "cut short and recovered"
+            if run.recovered
+            else f"sim state {run.report.get('state', 'unknown')}"
         )
         notes.append(f"incomplete recording ({why}): figures cover what was recorded")
     state = run.report.get("state", "")
@@ -420,6 +430,7 @@ def analyze(run: Run, stride_time: float = STRIDE_TIME) -> Analysis:
         complete=run.complete,
         closed=run.closed,
         recovered=run.recovered,
+        damaged=len(run.damaged),
         steps_recorded=int(run.steps.shape[0]),
         steps_total=run.plan.total_steps,
         job_time=float(run.steps[-1, 0] / 1e9) if run.steps.shape[0] else math.nan,
@@ -472,6 +483,8 @@ def _ramp(a: Analysis) -> str:
 def _rows(a: Analysis) -> list[tuple[str, str]]:
     state = a.state or "no report"
     state += ", closed" if a.closed else (", cut short (recovered)" if a.recovered else ", not closed")
+    if a.damaged:
+        state += f", DAMAGED ({a.damaged} chunks skipped)"
     rows = [
         ("job", a.job),
         ("profile / motor model", f"{a.profile} / {a.model}"),

@@ -14,13 +14,16 @@ metadata.yaml and keeps the connections); the file layout is the one
 rosbags writes, MCAP version 0 with chunks, message indexes and a summary
 (https://mcap.dev/spec): schemas and channels at the head of the first chunk
 and again in the summary, a ``rosbag2`` metadata record, statistics and
-summary offsets. The chunks' ``uncompressed_crc`` is 0 (not computed), as in
-rosbags' files.
+summary offsets. Unlike rosbags' files it carries the CRCs the format
+provides: each chunk's ``uncompressed_crc``, the data section's CRC in the
+DataEnd record and the summary's in the footer, so a reader can tell a damaged
+chunk from a good one (winder.record.raw checks them).
 """
 
 from __future__ import annotations
 
 import struct
+import zlib
 from collections import defaultdict
 from collections.abc import Iterable
 from pathlib import Path
@@ -79,8 +82,9 @@ class StreamingMcapStorage:
         self.path = path / f"{path.name}.mcap"
         self.compression = "zstd" if compression == CompressionMode.STORAGE else ""
         self.bio: BinaryIO = self.path.open("xb")
-        self.bio.write(MAGIC)
-        self.bio.write(_record(_OP_HEADER, _string("ros2"), _string("winder")))
+        self._crc = 0  # CRC-32 of the bytes written so far (of the data section, then of the summary)
+        self._out(MAGIC)
+        self._out(_record(_OP_HEADER, _string("ros2"), _string("winder")))
         self.schemas: dict[str, tuple[int, bytes]] = {}  # type name -> (id, record)
         self.channels: list[bytes] = []
         self.chunk_indexes: list[bytes] = []
@@ -88,6 +92,11 @@ class StreamingMcapStorage:
         self.first_t = 2**63 - 1  # log times of the first and last message
         self.last_t = 0
         self._new_chunk()
+
+    def _out(self, data: bytes | memoryview) -> None:
+        """Write to the file, keeping the running CRC the MCAP records carry."""
+        self.bio.write(data)
+        self._crc = zlib.crc32(data, self._crc)
 
     # -- the pending chunk -------------------------------------------------
     def _new_chunk(self) -> None:
@@ -180,25 +189,28 @@ class StreamingMcapStorage:
         else:
             out = pieces
         stored = sum(len(p) for p in out)
+        crc = 0
+        for p in pieces:  # of the uncompressed records: a reader checks what it decompressed
+            crc = zlib.crc32(p, crc)
         if self._index:
             t0, t1 = self._t0, self._t1
             self.first_t, self.last_t = min(self.first_t, t0), max(self.last_t, t1)
         else:  # only schema and channel records
             t0 = t1 = 0
-        head = struct.pack("<QQQI", t0, t1, size, 0) + _string(self.compression)
+        head = struct.pack("<QQQI", t0, t1, size, crc) + _string(self.compression)
         head += struct.pack("<Q", stored)
         bio = self.bio
         chunk_start = bio.tell()
-        bio.write(struct.pack("<BQ", _OP_CHUNK, len(head) + stored))
-        bio.write(head)
+        self._out(struct.pack("<BQ", _OP_CHUNK, len(head) + stored))
+        self._out(head)
         for p in out:
-            bio.write(p)
+            self._out(p)
         chunk_end = bio.tell()
         offsets = []
         for cid, idx in self._index.items():
             offsets.append(struct.pack("<HQ", cid, bio.tell()))
             entries = struct.pack(f"<{len(idx)}Q", *idx)
-            bio.write(_record(_OP_MESSAGE_INDEX, struct.pack("<HI", cid, len(entries)), entries))
+            self._out(_record(_OP_MESSAGE_INDEX, struct.pack("<HI", cid, len(entries)), entries))
         self.chunk_indexes.append(
             _record(
                 _OP_CHUNK_INDEX,
@@ -222,7 +234,7 @@ class StreamingMcapStorage:
         self.flush()
         bio = self.bio
         meta_start = bio.tell()
-        bio.write(
+        self._out(
             _record(
                 _OP_METADATA,
                 _string("rosbag2"),
@@ -230,14 +242,15 @@ class StreamingMcapStorage:
             )
         )
         meta_end = bio.tell()
-        bio.write(_record(_OP_DATA_END, struct.pack("<I", 0)))
+        bio.write(_record(_OP_DATA_END, struct.pack("<I", self._crc)))  # CRC of the data section
+        self._crc = 0  # from here on: the summary's CRC, in the footer
         summary_start = bio.tell()
         groups: list[tuple[int, int, int]] = []
 
         def group(op: int, records: Iterable[bytes]) -> None:
             start = bio.tell()
             for rec in records:
-                bio.write(rec)
+                self._out(rec)
             if bio.tell() > start:
                 groups.append((op, start, bio.tell() - start))
 
@@ -270,8 +283,10 @@ class StreamingMcapStorage:
         )
         offsets_start = bio.tell()
         for op, start, length in groups:
-            bio.write(_record(_OP_SUMMARY_OFFSET, struct.pack("<BQQ", op, start, length)))
-        bio.write(_record(_OP_FOOTER, struct.pack("<QQI", summary_start, offsets_start, 0)))
+            self._out(_record(_OP_SUMMARY_OFFSET, struct.pack("<BQQ", op, start, length)))
+        footer = struct.pack("<BQQQ", _OP_FOOTER, 20, summary_start, offsets_start)
+        self._out(footer)
+        bio.write(struct.pack("<I", self._crc))
         bio.write(MAGIC)
         bio.close()
 

@@ -27,6 +27,7 @@ import mmap
 import re
 import shutil
 import struct
+import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -76,6 +77,8 @@ class RawBag:
     recovered: bool
     metadata: bool = False  #: metadata.yaml present
     notes: list[str] = field(default_factory=list)
+    #: chunks skipped because their CRC or their compression showed damage, one line each
+    damaged: list[str] = field(default_factory=list)
 
     def topics(self) -> dict[str, int]:
         """Message count per topic."""
@@ -173,6 +176,26 @@ def _inner_records(data: bytes | memoryview) -> Iterator[Schema | Channel | tupl
             yield Channel.read(ReadDataStream(io.BytesIO(data[start:end])))
 
 
+class DamagedChunk(Exception):  # noqa: N818 - a finding, not a failure of the reader
+    """A chunk whose bytes are not what was written: it is skipped, named, counted."""
+
+
+def _checked_chunk_data(chunk: Chunk) -> bytes:
+    """The chunk's records, decompressed and checked against its CRC (when it
+    has one: 0 means not computed, as in rosbags' files)."""
+    try:
+        data = _chunk_data(chunk)
+    except Exception as exc:
+        raise DamagedChunk(
+            f"its {chunk.compression} data cannot be decompressed ({type(exc).__name__})"
+        ) from None
+    if len(data) != chunk.uncompressed_size:
+        raise DamagedChunk(f"{len(data)} bytes where its header says {chunk.uncompressed_size}")
+    if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
+        raise DamagedChunk("CRC mismatch")
+    return data
+
+
 def _chunk_data(chunk: Chunk) -> bytes:
     if chunk.compression == "":
         return chunk.data
@@ -206,8 +229,33 @@ def _scan(path: Path, data: memoryview, raw: RawBag) -> None:
     in order, then what can be had of a cut-short end."""
     _check_magic(path, data)
     sink = _Sink(raw)
+    _channels_from_summary(data, sink)
     walk = _walk(data, sink)
     _finish(path, data, raw, sink, walk)
+
+
+_FOOTER = struct.Struct("<BQQQI")  # opcode, length 20, summary start, summary offsets start, summary CRC
+
+
+def _channels_from_summary(data: memoryview, sink: _Sink) -> None:
+    """The schemas and channels of a closed file's summary, before its chunks:
+    a damaged first chunk (where they come first) then costs only its own
+    messages. Used only when the summary's CRC (in the footer) vouches for it."""
+    n = len(data)
+    at = n - 8 - _FOOTER.size
+    if at < 8 or bytes(data[n - 8 :]) != MAGIC or data[at] != Opcode.FOOTER:
+        return
+    _, length, start, _, crc = _FOOTER.unpack_from(data, at)
+    if length != 20 or crc == 0 or not 8 <= start <= at:
+        return
+    if zlib.crc32(data[start : n - 8 - 4]) != crc:
+        return
+    try:
+        for op, s, e in _record_spans(data[:at], start):
+            if op in (Opcode.SCHEMA, Opcode.CHANNEL):
+                _read_record(op, data[s:e], e - s, sink)
+    except Exception:  # a summary that vouched for itself and still does not parse: the chunks tell
+        return
 
 
 def _check_magic(path: Path, data: memoryview) -> None:
@@ -228,6 +276,7 @@ class _Sink:
         self.schemas: dict[int, Schema] = {}
         self.offset = max(raw.connections, default=0)
         self.ids: dict[int, int] = {}  #: channel id in the file -> connection id in the RawBag
+        self.crcs = False  #: the file's chunks carry CRCs (winder's do, rosbags' do not)
 
     def add(self, rec: Schema | Channel | Message | tuple[int, int, bytes]) -> None:
         ids = self.ids
@@ -275,6 +324,8 @@ def _walk(data: memoryview, sink: _Sink) -> _Walk:
             return _Walk(end, footer=True)
         try:
             _read_record(op, data[start:end], end - start, sink)
+        except DamagedChunk as exc:  # its length was whole: skip it, read on
+            sink.raw.damaged.append(f"chunk at byte {pos} skipped: {exc}")
         except Exception as exc:  # a damaged record: keep what came before it
             return _Walk(pos, damaged=f"damaged record at byte {pos} ({type(exc).__name__})")
         pos = end
@@ -284,8 +335,16 @@ def _walk(data: memoryview, sink: _Sink) -> _Walk:
 def _read_record(op: int, body: memoryview, length: int, sink: _Sink) -> None:
     """Add one whole top-level record (its opcode and body) to ``sink``."""
     if op == Opcode.CHUNK:
-        chunk = Chunk.read(ReadDataStream(io.BytesIO(body)))
-        for rec in _inner_records(_chunk_data(chunk)):
+        try:
+            chunk = Chunk.read(ReadDataStream(io.BytesIO(body)))
+        except Exception as exc:
+            raise DamagedChunk(f"its header cannot be read ({type(exc).__name__})") from None
+        if chunk.uncompressed_crc:
+            sink.crcs = True
+        elif sink.crcs:  # a file writes CRCs for all its chunks or for none
+            raise DamagedChunk("no CRC, in a file whose chunks carry one")
+        records = list(_inner_records(_checked_chunk_data(chunk)))  # whole, or none of it
+        for rec in records:
             sink.add(rec)
     elif op in (Opcode.SCHEMA, Opcode.CHANNEL):
         stream = ReadDataStream(io.BytesIO(body))

@@ -143,7 +143,9 @@ class Run:
     pole], positions after each step, as the stream arrived. ``report``: the
     sim node's last job status (key -> value text: state, steps_done,
     lost_steps, real_time_factor, ...), empty if none was recorded.
-    ``complete``: the bag was closed and the sim node reported the job done.
+    ``complete``: the bag was closed, no chunk of it was damaged, and the sim
+    node reported the job done. ``damaged``: the chunks skipped because their
+    CRC or compression showed damage (their messages are not in the run).
     """
 
     path: Path
@@ -159,13 +161,14 @@ class Run:
     recovered: bool
     counts: dict[str, int]
     notes: tuple[str, ...] = ()
+    damaged: tuple[str, ...] = ()
     #: the profile node's ramp settings (winder/profile_config: profile, v_max, a_max,
     #: j_max, tau, v_start, dwell in steps of the major axis, s), empty in older bags
     profile_config: dict[str, Any] = field(default_factory=dict)
 
     @property
     def complete(self) -> bool:
-        return self.closed and self.report.get("state") == "done"
+        return self.closed and not self.damaged and self.report.get("state") == "done"
 
     @property
     def job_id(self) -> str:
@@ -382,6 +385,7 @@ def _assemble(
         recovered=raw.recovered,
         counts=counts,
         notes=tuple(notes),
+        damaged=tuple(raw.damaged),
         profile_config=profile_config,
     )
 

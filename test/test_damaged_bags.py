@@ -1,0 +1,128 @@
+"""Damaged recordings: random byte flips and truncations of a real bag, written
+by the sim node's own writer in every compression mode. The contract: the
+reader either refuses the file in one line or returns only messages that were
+written, byte for byte; whenever a message is missing, the result says so
+(damaged chunks named, or the file marked cut short); `winder analyze` never
+shows a traceback and flags what it could not read. A damaged value never
+reaches a figure."""
+
+from __future__ import annotations
+
+import random
+import shutil
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+import pytest
+from test_reader import bag, run_cli  # noqa: F401 - bag is the session's fixture of real runs
+
+from winder.record.bag import COMPRESSIONS, BagRecorder
+from winder.record.raw import BagError, RawBag, read_raw
+
+pytestmark = pytest.mark.ros  # the bags come from real runs of the three nodes
+
+FLIPS = 60  # per compression mode
+CUTS = 20
+
+
+def rewrite(raw: RawBag, out: Path, compression: str) -> Path:
+    """The messages of ``raw`` written again by the sim node's BagRecorder."""
+    topics = {c.topic: c.msgtype for c in raw.connections.values()}
+    rec = BagRecorder(out, topics, compression=compression)
+    for cid, t, data in raw.messages:
+        rec.write(raw.connections[cid].topic, t, data, exact=True)
+    rec.close()
+    return out
+
+
+def messages(raw: RawBag) -> Counter[tuple[str, int, bytes]]:
+    return Counter((raw.connections[cid].topic, t, bytes(d)) for cid, t, d in raw.messages)
+
+
+def check(path: Path, original: Counter[tuple[str, int, bytes]]) -> str:
+    """Read a damaged bag; return what happened: refused, whole, or flagged."""
+    try:
+        raw = read_raw(path)
+    except BagError as exc:
+        assert str(exc) and "\n" not in str(exc)
+        return "refused"
+    got = messages(raw)
+    assert not got - original, f"{path}: {sum((got - original).values())} messages that were never written"
+    if got == original:
+        return "whole"
+    assert raw.damaged or raw.recovered or not raw.closed, f"{path}: messages missing, nothing flagged"
+    return "flagged"
+
+
+@pytest.mark.parametrize("compression", COMPRESSIONS)
+def test_flipped_bytes_and_truncations_never_pass_as_good(
+    bag: Any,  # noqa: F811 - the fixture imported above
+    tmp_path: Path,
+    compression: str,
+) -> None:
+    source = read_raw(bag("lin2k"))
+    clean = rewrite(source, tmp_path / "clean", compression)
+    original = messages(read_raw(clean))
+    assert original == messages(source)  # the rewrite itself is faithful
+    mcap = next(clean.glob("*.mcap"))
+    data = mcap.read_bytes()
+    rng = random.Random(f"winder-{compression}")
+    outcomes: Counter[str] = Counter()
+    for i in range(FLIPS + CUTS):
+        case = tmp_path / f"case{i}"
+        shutil.copytree(clean, case)
+        damaged = bytearray(data)
+        if i < FLIPS:
+            at = rng.randrange(8, len(damaged) - 8)  # past the magic: that case is refused outright
+            damaged[at] ^= 1 << rng.randrange(8)
+        else:
+            damaged = damaged[: rng.randrange(8, len(damaged))]
+        (case / mcap.name).write_bytes(bytes(damaged))
+        outcomes[check(case, original)] += 1
+        shutil.rmtree(case)
+    # byte flips inside the chunks are the most likely: they must be found
+    assert outcomes["flagged"] + outcomes["refused"] >= CUTS, outcomes
+
+
+def test_a_flipped_byte_in_a_chunk_is_named_and_the_rest_read(bag: Any, tmp_path: Path) -> None:  # noqa: F811
+    """One flip in the middle of a compressed chunk: that chunk is skipped and
+    named; the chunks after it are read; `winder analyze` says DAMAGED."""
+    clean = rewrite(read_raw(bag("lin2k")), tmp_path / "clean", "lz4")
+    original = messages(read_raw(clean))
+    mcap = next(clean.glob("*.mcap"))
+    data = bytearray(mcap.read_bytes())
+    chunks = []  # (position, length) of the chunk records, walking the file by record lengths
+    pos = 8
+    while data[pos] != 0x0F:  # up to DataEnd
+        length = int.from_bytes(data[pos + 1 : pos + 9], "little")
+        if data[pos] == 0x06:
+            chunks.append((pos, length))
+        pos += 9 + length
+    assert len(chunks) >= 3
+    first, length = chunks[1]  # a chunk in the middle
+    data[first + 9 + length // 2] ^= 0x10
+    mcap.write_bytes(bytes(data))
+    raw = read_raw(clean)
+    assert raw.damaged and "skipped" in raw.damaged[0] and str(first) in raw.damaged[0]
+    got = messages(raw)
+    assert got and not got - original and got != original
+    r = run_cli("analyze", str(clean), "--no-plots")
+    assert "Traceback" not in r.stderr
+    assert "DAMAGED" in r.stdout and "chunk(s) skipped" in r.stdout
+
+
+def test_a_file_that_only_starts_like_mcap_fails_fast(tmp_path: Path) -> None:
+    """300 MB of noise behind the MCAP magic: refused in one line (the reader
+    walks records by their lengths; it does not scan the noise)."""
+    junk = tmp_path / "junk"
+    junk.mkdir()
+    rng = random.Random(7)
+    with (junk / "junk.mcap").open("wb") as f:
+        f.write(b"\x89MCAP0\r\n")
+        block = rng.randbytes(1 << 20)
+        for _ in range(300):
+            f.write(block)
+    with pytest.raises(BagError) as err:
+        read_raw(junk)
+    assert "\n" not in str(err.value)
