@@ -15,9 +15,10 @@ rosbags writes, MCAP version 0 with chunks, message indexes and a summary
 (https://mcap.dev/spec): schemas and channels at the head of the first chunk
 and again in the summary, a ``rosbag2`` metadata record, statistics and
 summary offsets. Unlike rosbags' files it carries the CRCs the format
-provides: each chunk's ``uncompressed_crc``, the data section's CRC in the
-DataEnd record and the summary's in the footer, so a reader can tell a damaged
-chunk from a good one (winder.record.raw checks them).
+provides for what a reader uses: each chunk's ``uncompressed_crc`` and the
+summary's CRC in the footer, so a reader can tell a damaged chunk from a good
+one (winder.record.raw checks them). The data section's CRC is left 0 (not
+computed): every message is inside a chunk that has its own.
 """
 
 from __future__ import annotations
@@ -82,9 +83,9 @@ class StreamingMcapStorage:
         self.path = path / f"{path.name}.mcap"
         self.compression = "zstd" if compression == CompressionMode.STORAGE else ""
         self.bio: BinaryIO = self.path.open("xb")
-        self._crc = 0  # CRC-32 of the bytes written so far (of the data section, then of the summary)
-        self._out(MAGIC)
-        self._out(_record(_OP_HEADER, _string("ros2"), _string("winder")))
+        self._crc = 0  # CRC-32 of the summary section, as it is written (see close())
+        self.bio.write(MAGIC)
+        self.bio.write(_record(_OP_HEADER, _string("ros2"), _string("winder")))
         self.schemas: dict[str, tuple[int, bytes]] = {}  # type name -> (id, record)
         self.channels: list[bytes] = []
         self.chunk_indexes: list[bytes] = []
@@ -94,7 +95,7 @@ class StreamingMcapStorage:
         self._new_chunk()
 
     def _out(self, data: bytes | memoryview) -> None:
-        """Write to the file, keeping the running CRC the MCAP records carry."""
+        """Write a summary record to the file, keeping its CRC for the footer."""
         self.bio.write(data)
         self._crc = zlib.crc32(data, self._crc)
 
@@ -201,16 +202,16 @@ class StreamingMcapStorage:
         head += struct.pack("<Q", stored)
         bio = self.bio
         chunk_start = bio.tell()
-        self._out(struct.pack("<BQ", _OP_CHUNK, len(head) + stored))
-        self._out(head)
+        bio.write(struct.pack("<BQ", _OP_CHUNK, len(head) + stored))
+        bio.write(head)
         for p in out:
-            self._out(p)
+            bio.write(p)
         chunk_end = bio.tell()
         offsets = []
         for cid, idx in self._index.items():
             offsets.append(struct.pack("<HQ", cid, bio.tell()))
             entries = struct.pack(f"<{len(idx)}Q", *idx)
-            self._out(_record(_OP_MESSAGE_INDEX, struct.pack("<HI", cid, len(entries)), entries))
+            bio.write(_record(_OP_MESSAGE_INDEX, struct.pack("<HI", cid, len(entries)), entries))
         self.chunk_indexes.append(
             _record(
                 _OP_CHUNK_INDEX,
@@ -234,7 +235,7 @@ class StreamingMcapStorage:
         self.flush()
         bio = self.bio
         meta_start = bio.tell()
-        self._out(
+        bio.write(
             _record(
                 _OP_METADATA,
                 _string("rosbag2"),
@@ -242,8 +243,10 @@ class StreamingMcapStorage:
             )
         )
         meta_end = bio.tell()
-        bio.write(_record(_OP_DATA_END, struct.pack("<I", self._crc)))  # CRC of the data section
-        self._crc = 0  # from here on: the summary's CRC, in the footer
+        # the data section's CRC is left 0 ("not computed"): every message lives in a
+        # chunk with a CRC of its own, and a second pass over the whole file would
+        # cost as much as the chunks' CRCs again
+        bio.write(_record(_OP_DATA_END, struct.pack("<I", 0)))
         summary_start = bio.tell()
         groups: list[tuple[int, int, int]] = []
 
