@@ -15,6 +15,8 @@ from typing import Any
 import numpy as np
 import pytest
 from conftest import BIN, Procs, rosbags_read
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from test_nodes import SMALL_JOB, job_args, only_bag, timed_rows, winder_run
 
 from winder.axis import StepperAxis
@@ -518,3 +520,130 @@ def test_extreme_in_range_parameters_are_refused_and_the_node_lives(
     assert ROS_EXTREMES[executable][0][0] in first_line, log
     assert "rejected at start" in first_line or "keeping the default" in first_line, log
     assert "Traceback" not in log
+
+
+# -- every numeric setting on both sides of each bound, and at its extremes -------------
+
+
+def _bound_cases() -> list[tuple[str, str, bool]]:
+    """(name, value text, inside the setting's own range) for every numeric
+    setting of the job, the three nodes' tables and the cell runner: each bound
+    and the nearest representable value on either side of it."""
+    import math
+
+    from winder.cli.commands import CELL_SPECS
+    from winder.contract.params import INTERP_SPECS, PROFILE_SPECS
+
+    specs = {**INTERP_SPECS, **PROFILE_SPECS, **SIM_SPECS, **CELL_SPECS}
+    cases = []
+    for name, spec in specs.items():
+        if spec.kind not in (int, float) or spec.low is None or spec.high is None:
+            continue
+        for bound, toward_inside, open_ in (
+            (spec.low, math.inf, spec.low_open),
+            (spec.high, -math.inf, False),
+        ):
+            if spec.kind is int:
+                step = 1 if toward_inside > 0 else -1
+                inside, outside = int(bound) + (step if open_ else 0), int(bound) - step
+            else:
+                b = float(bound)
+                inside = math.nextafter(b, toward_inside) if open_ else b
+                outside = b if open_ else math.nextafter(b, -toward_inside)
+            cases += [(name, repr(inside), True), (name, repr(outside), False)]
+    return cases
+
+
+BOUND_CASES = _bound_cases()
+
+
+def test_bound_matrix_covers_every_numeric_setting() -> None:
+    names = {n for n, _, _ in BOUND_CASES}
+    assert {"feed_step", "v_max", "a_max", "j_max", "tau", "fork.J", "publish_rate", "timeout"} <= names
+    assert len(BOUND_CASES) >= 4 * len(names)
+
+
+NODE_ONLY = {"autostart", "chunk_steps", "max_in_flight"}  # interp node settings, no winder run option
+CLI_BOUND_CASES = [c for c in BOUND_CASES if c[0] not in NODE_ONLY]
+
+
+@pytest.mark.parametrize(
+    ("name", "text", "inside"), CLI_BOUND_CASES, ids=[f"{n}={t}" for n, t, _ in CLI_BOUND_CASES]
+)
+def test_cli_at_every_bound(
+    name: str, text: str, inside: bool, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`winder run --check` with one setting at or beside a bound: outside the
+    range it is refused naming it; inside, the job is either valid or refused
+    jointly in one line; never a traceback, nothing started or written."""
+    code = cli.main(
+        ["run", "--check", f"--{name.replace('_', '-')}={text}", "--bag-dir", str(tmp_path / "b")]
+    )
+    out, err = capsys.readouterr()
+    lines = err.strip().splitlines()
+    if inside and code == 0:
+        assert "every setting is valid" in out
+    else:
+        assert code == 2 and len(lines) == 1, (code, out, err)
+        assert lines[0].startswith("winder run: error: ")
+        if not inside:
+            assert lines[0].startswith(f"winder run: error: {name}="), lines[0]
+    assert not (tmp_path / "b").exists()
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize("executable", ["interp_node", "profile_node", "sim_node"])
+def test_ros_parameters_at_every_bound(tmp_path: Path, procs: Procs, ros: Any, executable: str) -> None:
+    """The same bound matrix through set_parameters on the running node: outside
+    a range refused naming the parameter, inside accepted or refused in one
+    line; accepted values are set back; the node lives through all of it."""
+    from test_nodes import set_params
+
+    from winder.contract.params import INTERP_SPECS, PROFILE_SPECS
+
+    specs = {"interp_node": INTERP_SPECS, "profile_node": PROFILE_SPECS, "sim_node": SIM_SPECS}[executable]
+    extra = {"interp_node": ["-p", "autostart:=false"], "sim_node": ["-p", f"bag_dir:={tmp_path / 'b'}"]}
+    p = procs.start(executable, *extra.get(executable, []))
+    cases = [(n, t, inside) for n, t, inside in BOUND_CASES if n in specs]
+    assert len(cases) >= 4
+    outcomes: dict[str, int] = {"accepted": 0, "refused": 0}
+    for name, text, inside in cases:
+        value = specs[name].kind(float(text)) if specs[name].kind is int else float(text)
+        [result] = set_params(ros, executable, {name: value})
+        if result.successful:
+            assert inside, f"{name}={text} accepted outside its range"
+            outcomes["accepted"] += 1
+            [back] = set_params(ros, executable, {name: specs[name].default})
+            assert back.successful, back.reason
+        else:
+            outcomes["refused"] += 1
+            assert result.reason and "\n" not in result.reason, result.reason
+            if not inside:
+                assert name in result.reason, result.reason
+    assert outcomes["accepted"] and outcomes["refused"], outcomes
+    assert p.poll() is None
+    assert "Traceback" not in procs.log(p)
+
+
+@settings(max_examples=500, deadline=None)
+@given(
+    st.floats(5e-324, 1e300),
+    st.floats(5e-324, 1e300),
+    st.floats(5e-324, 1e300),
+    st.floats(5e-324, 1e300),
+    st.floats(0, 1e300),
+)
+def test_any_positive_motor_is_a_model_or_a_one_line_error(
+    Zr: float, L: float, i_a: float, J: float, D: float
+) -> None:
+    """Over the whole positive float range: a StepperAxis with finite derived
+    quantities, or a ValueError naming the values, never another exception."""
+    import math
+
+    try:
+        ax = StepperAxis(Zr, L, i_a, J, D)
+    except ValueError as exc:
+        assert "\n" not in str(exc) and "Zr=" in str(exc)
+        return
+    assert 0 < ax.stiffness < math.inf and 0 < ax.natural_frequency < math.inf
+    assert math.isfinite(ax.damping_ratio)

@@ -78,6 +78,11 @@ __all__ = [
 #: N*m*s/rad per gf*cm*s/rad, e.g. ``StepperAxis.paper(D=0.03 * G_CM_S2)``.
 G_CM_S2 = 9.80665e-5
 
+#: Fastest natural frequency the model takes (rad/s): eight orders of magnitude
+#: above a real stepper (the paper's: 279 rad/s), yet where a job's phases
+#: w_n*t and exponentials stay finite in float64.
+MAX_NATURAL_FREQUENCY = 1e12
+
 #: The paper's motor (004, 2012, section 3), SI: Z_r, L [H], i_a [A], J [kg*m**2], D [N*m*s/rad].
 PAPER: dict[str, float] = {
     "Zr": 40.0,
@@ -163,8 +168,17 @@ class StepperAxis:
         ):
             raise ValueError(f"phases={self.phases!r} is invalid: must be an integer in [1, 16]")
         K = self.Zr * self.peak_torque
-        wn = math.sqrt(K / self.J)
-        zeta = self.D / (2.0 * math.sqrt(K * self.J))
+        wn = math.sqrt(K / self.J) if K > 0 else 0.0
+        zeta = self.D / (2.0 * math.sqrt(K * self.J)) if K * self.J > 0 else math.inf
+        # each value alone may be in range and the motor still not be one the
+        # model can compute: K underflowing to 0 (L or i_a of 1e-300), w_n
+        # overflowing (J of 1e-300), zeta infinite
+        if not (0.0 < K < math.inf and 0.0 < wn <= MAX_NATURAL_FREQUENCY and math.isfinite(zeta)):
+            raise ValueError(
+                f"Zr={self.Zr:g}, L={self.L:g} H, i_a={self.i_a:g} A, J={self.J:g} kg*m**2, D={self.D:g} "
+                f"give K={K:.3g} N*m/rad, w_n={wn:.3g} rad/s, zeta={zeta:.3g}: the model needs K > 0, "
+                f"a finite zeta and w_n in (0, {MAX_NATURAL_FREQUENCY:g}] rad/s"
+            )
         self._cache.update(K=K, wn=wn, zeta=zeta)
 
     @classmethod
@@ -181,7 +195,7 @@ class StepperAxis:
     @property
     def peak_torque(self) -> float:
         """T_m = Z_r*L*i_a**2/2: peak of the sine torque, the static pull-out torque (N*m)."""
-        return 0.5 * self.Zr * self.L * self.i_a**2
+        return 0.5 * self.Zr * self.L * (self.i_a * self.i_a)  # i_a**2 would raise OverflowError
 
     @property
     def stiffness(self) -> float:

@@ -25,6 +25,14 @@ from winder.spec import Spec, SpecError
 __all__ = ["main"]
 
 
+#: Settings of the cell runner itself (``winder run``), checked like the nodes'.
+CELL_SPECS: dict[str, Spec] = {
+    "timeout": Spec(
+        "timeout", float, 3600.0, "give up after this much wall time", "s", 0.0, 1e7, low_open=True
+    ),
+}
+
+
 class UserError(Exception):
     """An error the user can fix; printed as one line, exit status 2."""
 
@@ -158,10 +166,20 @@ def cmd_run(args: argparse.Namespace) -> int:
     job = job_from_args(args)
     profile = values_from_args(args, PROFILE_SPECS)
     check_profile(profile)
-    plan_job(profile, [s.steps for s in job.segments()])  # the job as a whole: its duration
+    segments = job.segments()
+    _, _, duration_ns = plan_job(profile, [s.steps for s in segments])  # the job as a whole
     sim = values_from_args(args, SIM_SPECS)
     check_sim(sim)
+    cell = values_from_args(args, CELL_SPECS)
     args.namespace = check_namespace(args.namespace)
+    if args.check:
+        steps = sum(s.steps for s in segments)
+        print(
+            f"winder run --check: job {job.job_id}: {steps} steps in {len(segments)} segments, "
+            f"{duration_ns / 1e9:.3f} s with the {profile['profile']} profile; every setting is valid, "
+            "nothing was started"
+        )
+        return 0
     try:
         from winder.ros.cell import run_cell
     except ImportError as exc:
@@ -183,7 +201,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     result = run_cell(
         params,
         namespace=args.namespace,
-        timeout=args.timeout,
+        timeout=cell["timeout"],
         progress=lambda frac, sim_t: bar.update(frac, f"sim {float(sim_t):7.2f} s"),
     )
     bar.close()
@@ -245,9 +263,14 @@ def build_parser() -> argparse.ArgumentParser:
     add_spec_arguments(p, FIELD_SPECS, "winding job (defaults: the RW400 paper set-up)")
     add_spec_arguments(p, PROFILE_SPECS, "profile node (rates in steps of each segment's major axis)")
     add_spec_arguments(p, SIM_SPECS, "sim node (motor settings per axis: --feed.J, --fork.D, ...)")
+    add_spec_arguments(p, CELL_SPECS, "cell")
     g = p.add_argument_group("cell")
-    g.add_argument("--namespace", default="", help="ROS namespace of the cell")
-    g.add_argument("--timeout", type=float, default=3600.0, help="give up after this many seconds")
+    g.add_argument("--namespace", default="", help="ROS namespace of the cell (/name[/name...])")
+    g.add_argument(
+        "--check",
+        action="store_true",
+        help="check the job and every setting, print the plan, start nothing",
+    )
     p.set_defaults(func=cmd_run)
 
     p = sub.add_parser("figures", help="reproduce the source papers' figures as PNG files")
