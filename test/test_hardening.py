@@ -320,6 +320,20 @@ def test_nodes_survive_junk_jobs_chunks_and_receipts(tmp_path: Path, procs: Proc
         assert "Traceback" not in procs.log(p)
 
 
+def heard_diagnostics(ros: Any) -> list[tuple[str, str, dict[str, str]]]:
+    """Every DiagnosticStatus the probe node hears from now on: (name, message, values)."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    seen: list[tuple[str, str, dict[str, str]]] = []
+    ros.create_subscription(
+        DiagnosticArray,
+        "/diagnostics",
+        lambda m: seen.extend((s.name, s.message, {kv.key: kv.value for kv in s.values}) for s in m.status),
+        100,
+    )
+    return seen
+
+
 @pytest.mark.ros
 @pytest.mark.parametrize("victim", ["profile_node", "sim_node"])
 def test_a_restarted_node_leaves_the_cell_able_to_run_the_next_job(
@@ -329,16 +343,9 @@ def test_a_restarted_node_leaves_the_cell_able_to_run_the_next_job(
     incomplete (bag closed, final report), the interp node gives it up, and
     the next start runs a whole job through the same cell."""
     from conftest import spin_until
-    from diagnostic_msgs.msg import DiagnosticArray
     from std_srvs.srv import Trigger
 
-    seen: list[tuple[str, str, dict[str, str]]] = []
-    ros.create_subscription(
-        DiagnosticArray,
-        "/diagnostics",
-        lambda m: seen.extend((s.name, s.message, {kv.key: kv.value for kv in s.values}) for s in m.status),
-        100,
-    )
+    seen = heard_diagnostics(ros)
     bags = tmp_path / "bags"
     abort = ["-p", "stall_abort:=2.0"]
     args = {
@@ -434,17 +441,10 @@ def test_a_full_disk_mid_job_closes_the_job_and_keeps_what_was_written(
     tmp_path: Path, procs: Procs, ros: Any, want: str
 ) -> None:
     from conftest import spin_until
-    from diagnostic_msgs.msg import DiagnosticArray
 
     from winder.record.reader import read_run
 
-    seen: list[tuple[str, str, dict[str, str]]] = []
-    ros.create_subscription(
-        DiagnosticArray,
-        "/diagnostics",
-        lambda m: seen.extend((s.name, s.message, {kv.key: kv.value for kv in s.values}) for s in m.status),
-        100,
-    )
+    seen = heard_diagnostics(ros)
     kind, sim = small_disk(tmp_path, procs, ["-p", "bag_compression:=none"], want)
     try:
         procs.start("profile_node")
