@@ -13,12 +13,12 @@ beta**2 = sigma**2 - w_n**2)::
 written with ``sinc`` and ``expm1`` so that it is continuous and free of
 cancellation across zeta = 1 (both forms tend to C = 1, S = t). A step of angle
 d subtracts (d, 0) from z. The recurrence over N steps is evaluated with a
-blocked scan (``StepperAxis._scan``): within blocks of ~sqrt(N) steps a
+blocked scan (``StepperAxis._scan``): within blocks of ~N**(1/3) steps a
 vectorised loop runs across all blocks at once from a zero state, the block-end
-states are chained by the same scan one level up, and each step's state is
+states are chained by the same scan one level up (recursively), and each step's state is
 corrected with Phi of its distance to the previous block end. Every Phi is
 evaluated forward in time (contractive), so the result is as accurate as the
-sequential recurrence, in O(N) numpy work and O(sqrt(N)) Python iterations.
+sequential recurrence, in O(N) numpy work and O(N**(1/3)) Python iterations.
 
 Below damping ratio ``MODAL_ZETA`` (0.95) :class:`LinearTracker` does not need
 every step's state: the error is the real part of one complex mode, and the
