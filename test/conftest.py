@@ -26,7 +26,18 @@ _domains = itertools.count((os.getpid() * 7) % 60)
 
 
 def next_domain() -> int:
+    """A ROS domain for one test's processes: 120-219, reused after a hundred
+    tests (whose processes are long gone by then)."""
     return 120 + next(_domains) % 100
+
+
+_long_domains = itertools.count()
+
+
+def long_lived_domain() -> int:
+    """A domain of its own for processes that outlive one test (the session's
+    bag runs): 20-69, never one a test's next_domain() hands out."""
+    return 20 + next(_long_domains) % 50
 
 
 class Procs:

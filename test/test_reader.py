@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import BIN, Procs, final_report, next_domain, rosbags_read
+from conftest import BIN, Procs, final_report, long_lived_domain, rosbags_read
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
@@ -102,7 +102,7 @@ class _Bags:
     def _start(self, name: str) -> None:
         env = {
             **os.environ,
-            "ROS_DOMAIN_ID": str(next_domain()),
+            "ROS_DOMAIN_ID": str(long_lived_domain()),
             "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
         }
         log = (self.root / f"{name}.log").open("wb")
