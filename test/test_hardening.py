@@ -647,3 +647,66 @@ def test_any_positive_motor_is_a_model_or_a_one_line_error(
         return
     assert 0 < ax.stiffness < math.inf and 0 < ax.natural_frequency < math.inf
     assert math.isfinite(ax.damping_ratio)
+
+
+@pytest.mark.ros
+def test_a_new_real_time_factor_changes_the_rate_not_the_time_elapsed(
+    tmp_path: Path, procs: Procs, ros: Any
+) -> None:
+    """real_time_factor set mid-job: the clock goes on from where it was, at
+    the new rate (it jumped from 1.5 s to 15 s when the new factor rescaled the
+    time already elapsed)."""
+    from conftest import spin_until
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from rosgraph_msgs.msg import Clock
+    from test_nodes import set_params
+
+    ticks: list[tuple[float, float]] = []  # (wall s, simulated s)
+    ros.create_subscription(
+        Clock,
+        "/clock",
+        lambda m: ticks.append((time.monotonic(), m.clock.sec + m.clock.nanosec * 1e-9)),
+        QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT),
+    )
+    procs.start("sim_node", "-p", f"bag_dir:={tmp_path / 'b'}", "-p", "real_time:=true")
+    procs.start("profile_node")
+    procs.start("interp_node")
+    spin_until(ros, lambda: bool(ticks) and ticks[-1][1] > 1.5, 60, "1.5 s of simulated time")
+    before = ticks[-1][1]
+    [res] = set_params(ros, "sim_node", {"real_time_factor": 10.0})
+    assert res.successful, res.reason
+    changed = time.monotonic()
+    spin_until(ros, lambda: ticks[-1][0] > changed + 1.0, 30, "a second at the new rate")
+    sim = np.array([s for w, s in ticks if w >= changed])
+    walls = np.array([w for w, s in ticks if w >= changed])
+    assert np.all(np.diff(np.array([s for _, s in ticks])) > 0)  # never backwards
+    # the first ticks after the change continue from `before` (no jump to 10x the
+    # elapsed time), and the rate afterwards is about the new factor
+    assert sim[0] < before + 10.0 * (walls[0] - changed) + 1.0, (before, sim[0])
+    rate = (sim[-1] - sim[0]) / (walls[-1] - walls[0])
+    assert 3.0 < rate < 15.0, rate
+
+
+@pytest.mark.ros
+def test_pacing_a_real_time_job_is_not_a_stall(tmp_path: Path, procs: Procs, ros: Any) -> None:
+    """A job that fits within max_in_flight sits in the sim node while it is
+    paced to the wall clock: no step arrives for seconds, yet nothing stalled."""
+    from conftest import spin_until
+
+    seen = heard_diagnostics(ros)
+    procs.start(
+        "sim_node", "-p", f"bag_dir:={tmp_path / 'b'}", "-p", "real_time:=true", "-p", "stall_timeout:=0.5"
+    )
+    procs.start("profile_node")
+    procs.start("interp_node", *SMALL_INTERP)  # all of it in flight at once
+
+    def final() -> dict[str, str] | None:
+        ends = [v for n, _, v in seen if n == "sim_node: job" and v.get("state") == "done"]
+        return ends[-1] if ends else None
+
+    spin_until(ros, lambda: final() is not None, 60, "the job to finish")
+    report = final()
+    assert report is not None and report["stalls"] == "0", report
+
+
+SMALL_INTERP = ["-p", "turns_per_layer:=3", "-p", "layers:=1", "-p", "poles:=1", "-p", "chunk_steps:=512"]

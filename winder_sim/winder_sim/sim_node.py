@@ -179,7 +179,9 @@ class SimNode(Node):
         self.errors: list[str] = []
         self.dev_cmd = [0.0, 0, 0.0]  # sum, count, max of command deviation (m)
         self.dev_act = [0.0, 0, 0.0]  # same for the simulated axes
-        self.wall_pace0 = 0.0
+        self.wall_pace0 = 0.0  # wall time at which simulated time pace_sim0 was due
+        self.pace_sim0 = 0.0
+        self.pace_factor = 0.0  # the real_time_factor since wall_pace0
 
     # -- in --------------------------------------------------------------
     def on_job(self, raw: bytes) -> None:
@@ -536,9 +538,7 @@ class SimNode(Node):
         limit = math.inf
         settings = settings or self.settings.values()
         if settings["real_time"]:
-            if self.wall_pace0 == 0.0:
-                self.wall_pace0 = time.monotonic()
-            limit = (time.monotonic() - self.wall_pace0) * settings["real_time_factor"]
+            limit = self.paced_until(settings["real_time_factor"])
         while self.out:
             block = self.out[0]
             ks = block["k"]
@@ -552,6 +552,18 @@ class SimNode(Node):
             self.out.popleft()
         if self.finishing:
             self.finish(complete=True)
+
+    def paced_until(self, factor: float) -> float:
+        """Simulated time (s) the wall clock allows in real-time mode. A new
+        real_time_factor changes the rate from now on: the time already
+        elapsed keeps the factor it elapsed at (the clock never jumps)."""
+        now = time.monotonic()
+        if self.wall_pace0 == 0.0:
+            self.wall_pace0, self.pace_sim0, self.pace_factor = now, 0.0, factor
+        elif factor != self.pace_factor:
+            self.pace_sim0 += (now - self.wall_pace0) * self.pace_factor
+            self.wall_pace0, self.pace_factor = now, factor
+        return self.pace_sim0 + (now - self.wall_pace0) * factor
 
     def publish_samples(self, block: dict[str, Any], n: int) -> None:
         """The first ``n`` samples of a block: /clock first, then commands and
