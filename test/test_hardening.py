@@ -710,3 +710,25 @@ def test_pacing_a_real_time_job_is_not_a_stall(tmp_path: Path, procs: Procs, ros
 
 
 SMALL_INTERP = ["-p", "turns_per_layer:=3", "-p", "layers:=1", "-p", "poles:=1", "-p", "chunk_steps:=512"]
+
+
+@pytest.mark.ros
+def test_a_cell_with_use_sim_time_completes_its_job(tmp_path: Path, procs: Procs) -> None:
+    """use_sim_time:=true on all three nodes (what a simulated cell's launch
+    file sets): their loops run on the steady clock, not on the /clock they
+    produce, so the job runs through (it deadlocked silently)."""
+    from conftest import final_report
+
+    sim_time = ["-p", "use_sim_time:=true"]
+    procs.start("sim_node", "-p", f"bag_dir:={tmp_path / 'bags'}", *sim_time)
+    procs.start("profile_node", *sim_time)
+    procs.start("interp_node", *SMALL_INTERP, *sim_time)
+    t_end = time.monotonic() + 60
+    while time.monotonic() < t_end:
+        bags = list((tmp_path / "bags").glob("*/metadata.yaml"))
+        if bags:
+            break
+        time.sleep(0.2)
+    assert bags, "no closed bag within 60 s"
+    report = final_report(rosbags_read(bags[0].parent))
+    assert report["state"] == "done" and report["steps_done"] == report["steps_total"], report

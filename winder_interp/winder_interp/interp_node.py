@@ -31,6 +31,7 @@ from winder.ros.diagnostics import ERROR, OK, Diagnostics
 from winder.ros.qos import QOS_LATCHED, QOS_STATE, QOS_STREAM
 from winder.ros.settings import Settings
 from winder.ros.spin import spin
+from winder.ros.timers import steady_timer
 from winder.spec import SpecError
 
 
@@ -45,8 +46,8 @@ class InterpNode(Node):
         self.diag = Diagnostics(self, "winder_interp")
         self.create_service(Trigger, "~/start", self.on_start)
         self.create_subscription(KeyValue, TOPIC_PROGRESS, self.on_progress, QOS_STATE)
-        self.create_timer(0.02, self.tick)
-        self.create_timer(1.0, self.report)
+        steady_timer(self, 0.02, self.tick)
+        steady_timer(self, 1.0, self.report)
 
         self.job: Job | None = None
         self.pending: Iterator[npt.NDArray[np.int32]] | None = None  # generator of chunks of the running job

@@ -31,6 +31,7 @@ from winder.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from winder.ros.qos import QOS_LATCHED, QOS_STREAM
 from winder.ros.settings import Settings
 from winder.ros.spin import spin
+from winder.ros.timers import steady_timer
 
 
 class ProfileNode(Node):
@@ -43,8 +44,8 @@ class ProfileNode(Node):
         self.diag = Diagnostics(self, "winder_profile")
         self.create_subscription(String, TOPIC_JOB, self.on_job, QOS_LATCHED)
         self.sub_steps: Subscription | None = None  # created once the timed stream has a reader
-        self.create_timer(0.05, self.connect)
-        self.create_timer(1.0, self.report)
+        steady_timer(self, 0.05, self.connect)
+        steady_timer(self, 1.0, self.report)
 
         self.plan: JobPlan | None = None
         self.checker: StreamChecker | None = None

@@ -56,6 +56,7 @@ from winder.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from winder.ros.qos import QOS_CLOCK, QOS_DIAGNOSTICS, QOS_LATCHED, QOS_STATE, QOS_STREAM
 from winder.ros.settings import Settings
 from winder.ros.spin import spin
+from winder.ros.timers import steady_timer
 
 PATH_WAIT = 2.0  # s of wall time the steps wait for the job's path and profile config
 # Running ahead of time, chunks are gathered and simulated together (one tracker
@@ -130,9 +131,9 @@ class SimNode(Node):
         self.create_subscription(
             DiagnosticArray, TOPIC_DIAGNOSTICS, self.on_diagnostics, QOS_DIAGNOSTICS, raw=True
         )
-        self.create_timer(0.005, self.pump)
-        self.create_timer(0.5, self.watch)
-        self.create_timer(1.0, self.report)
+        steady_timer(self, 0.005, self.pump)
+        steady_timer(self, 0.5, self.watch)
+        steady_timer(self, 1.0, self.report)
         self.topic = {
             "job": self.resolve_topic_name(TOPIC_JOB),
             "path": self.resolve_topic_name(TOPIC_PATH),
