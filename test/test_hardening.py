@@ -732,3 +732,47 @@ def test_a_cell_with_use_sim_time_completes_its_job(tmp_path: Path, procs: Procs
     assert bags, "no closed bag within 60 s"
     report = final_report(rosbags_read(bags[0].parent))
     assert report["state"] == "done" and report["steps_done"] == report["steps_total"], report
+
+
+@pytest.mark.ros
+def test_a_start_while_a_job_runs_is_refused_and_the_job_completes(
+    tmp_path: Path, procs: Procs, ros: Any
+) -> None:
+    """~/start during a run: success = false with the reason, the running job
+    untouched (it was closed incomplete and neither job completed); a start
+    after it ends runs the job again into a second complete bag."""
+    from conftest import final_report, spin_until
+    from std_srvs.srv import Trigger
+
+    seen = heard_diagnostics(ros)
+    bags = tmp_path / "bags"
+    procs.start("sim_node", "-p", f"bag_dir:={bags}", "-p", "real_time:=true", "-p", "real_time_factor:=4.0")
+    procs.start("profile_node")
+    # 20 turns, 20480 steps: about 11 s of motion, under 3 s at 4x real time
+    procs.start("interp_node", *SMALL_INTERP, "-p", "turns_per_layer:=20", "-p", "autostart:=false")
+    client = ros.create_client(Trigger, "/interp_node/start")
+    spin_until(ros, client.service_is_ready, 30, "the start service")
+    spin_until(ros, lambda: any(n == "sim_node: job" for n, _, _ in seen), 30, "the sim node")
+
+    def start() -> Any:
+        future = client.call_async(Trigger.Request())
+        spin_until(ros, future.done, 30, "the start reply")
+        return future.result()
+
+    def done_count() -> int:
+        return sum(1 for n, _, v in seen if n == "sim_node: job" and v.get("state") == "done")
+
+    first = start()
+    assert first.success, first.message
+    spin_until(
+        ros, lambda: any(v.get("state") == "running" for n, _, v in seen if n == "sim_node: job"), 30, "run"
+    )
+    second = start()
+    assert not second.success and "is running" in second.message, second.message
+    spin_until(ros, lambda: done_count() >= 1, 60, "the first job to complete")
+    third = start()
+    assert third.success, third.message
+    spin_until(ros, lambda: len(list(bags.glob("*/metadata.yaml"))) == 2, 60, "the second bag")
+    for meta in sorted(bags.glob("*/metadata.yaml")):
+        report = final_report(rosbags_read(meta.parent))
+        assert report["state"] == "done" and report["steps_done"] == report["steps_total"], report

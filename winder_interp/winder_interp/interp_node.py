@@ -77,11 +77,30 @@ class InterpNode(Node):
             if not ok:
                 self.get_logger().error(why)
         self.send_some()
+        if self.pending is None and self.running():  # all sent, not all taken yet
+            self.abort_if_stalled()
 
     # -- work ------------------------------------------------------------
-    def start_job(self) -> tuple[bool, str]:
+    def running(self) -> bool:
+        """The job is not over: steps still to send, or (with a sim node
+        acknowledging) steps sent that it has not taken yet."""
+        if self.job is None or self.aborted:
+            return False
         if self.pending is not None:
-            return False, f"job {self.job.job_id if self.job else '?'} is still being sent"
+            return True
+        return self.paced() and self.consumed < self.job.total_steps
+
+    def paced(self) -> bool:
+        """A sim node acknowledges the steps it takes (winder/progress)."""
+        return self.count_publishers(self.resolve_topic_name(TOPIC_PROGRESS)) > 0
+
+    def start_job(self) -> tuple[bool, str]:
+        if self.running():
+            assert self.job is not None
+            return False, (
+                f"job {self.job.job_id} is running ({self.consumed}/{self.job.total_steps} steps taken, "
+                f"{self.sent} sent): start refused, the running job goes on"
+            )
         blocked = self.settings.blocked()
         if blocked:
             self.diag.publish("job", ERROR, blocked, {})
@@ -152,7 +171,7 @@ class InterpNode(Node):
         # flow control: with a sim node reporting progress, keep at most
         # max_in_flight steps between us and it; without one, send freely
         window = self.settings.values()["max_in_flight"]
-        paced = self.count_publishers(self.resolve_topic_name(TOPIC_PROGRESS)) > 0
+        paced = self.paced()
         deadline = time.monotonic() + 0.015  # stay responsive to services and parameters
         while time.monotonic() < deadline:
             if paced and self.sent - self.consumed >= window:

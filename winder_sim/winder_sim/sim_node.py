@@ -192,7 +192,14 @@ class SimNode(Node):
         except ValueError as exc:
             self.error(f"job description rejected: {exc}")
             return
-        if self.plan is not None and not self.finishing:
+        if self.plan is not None and self.finishing:
+            # every step of the last job is simulated, its last samples are still
+            # being paced out: they go out now and that job closes complete
+            while self.out:
+                block = self.out.popleft()
+                self.publish_samples(block, block["k"].size)
+            self.finish(complete=True)
+        elif self.plan is not None:
             self.error(
                 f"job {plan.job_id} arrived while {self.plan.job_id} runs: "
                 "the running job is closed incomplete"
@@ -710,11 +717,13 @@ class SimNode(Node):
             self.diag.publish("stream", ERROR, why, {"job_id": self.plan.job_id})
 
     def receipt(self) -> None:
-        """The steps of the job taken so far, on winder/progress: the interp
-        node's flow control, and (repeated by report()) the sign this node
-        is alive while it paces a real-time job."""
+        """The steps of the job simulated so far, or known missing, on
+        winder/progress: the interp node's flow control (at most max_in_flight
+        steps sent and not yet simulated) and its sign that the job is over;
+        repeated by report(), the sign this node is alive while it paces a
+        real-time job. Refused chunks do not count: they were never the job's."""
         if self.plan is not None and self.checker is not None:
-            done = self.checker.done + self.checker.missing + self.checker.rejected_steps
+            done = self.done_steps + self.checker.missing
             self.pub_progress.publish(KeyValue(key=self.plan.job_id, value=str(done)))
 
     def report(self) -> None:

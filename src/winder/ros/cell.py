@@ -221,7 +221,7 @@ class CellWatch:
             self._request, self._asked = self.start.call_async(Trigger.Request()), time.monotonic()
         elif req.done():
             reply = req.result()
-            if reply is not None and (reply.success or "still being sent" in reply.message):
+            if reply is not None and (reply.success or "is running" in reply.message):
                 self.accepted = True
             else:
                 return f"job refused: {reply.message if reply else 'no reply'}"
