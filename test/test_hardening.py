@@ -776,3 +776,32 @@ def test_a_start_while_a_job_runs_is_refused_and_the_job_completes(
     for meta in sorted(bags.glob("*/metadata.yaml")):
         report = final_report(rosbags_read(meta.parent))
         assert report["state"] == "done" and report["steps_done"] == report["steps_total"], report
+
+
+@pytest.mark.ros
+def test_a_plain_reader_is_not_the_sim(tmp_path: Path, procs: Procs, ros: Any) -> None:
+    """A subscriber on winder/step_times started before the sim node does not
+    start the job (it took the chunks and the sim node, started later, waited
+    for ever); the sim node started 5 s later announces itself ready on
+    winder/ready and records the whole job."""
+    from conftest import final_report, spin_until
+    from std_msgs.msg import Int64MultiArray
+
+    from winder.ros.qos import QOS_STREAM
+
+    heard: list[Any] = []
+    ros.create_subscription(Int64MultiArray, "/winder/step_times", heard.append, QOS_STREAM)
+    procs.start("profile_node")
+    procs.start("interp_node", *SMALL_INTERP)  # autostart on
+    t_end = time.monotonic() + 5.0
+    spin_until(ros, lambda: time.monotonic() > t_end, 10, "5 s")
+    assert not heard, "the job started for a plain reader"
+    bags = tmp_path / "bags"
+    procs.start("sim_node", "-p", f"bag_dir:={bags}")
+    spin_until(ros, lambda: bool(list(bags.glob("*/metadata.yaml"))), 60, "the job recorded by the sim node")
+    [meta] = list(bags.glob("*/metadata.yaml"))
+    report = final_report(rosbags_read(meta.parent))
+    assert report["state"] == "done" and report["steps_done"] == report["steps_total"] == "3072", report
+    assert (
+        sum(np.frombuffer(bytes(m.data), np.int64).size for m in heard) // 5 == 3072
+    )  # the reader saw it too

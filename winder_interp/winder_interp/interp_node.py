@@ -29,6 +29,7 @@ from winder.motion.job import AXES, FIELD_SPECS, Job
 from winder.ros.chunks import STEPS_CDR
 from winder.ros.diagnostics import ERROR, OK, Diagnostics
 from winder.ros.qos import QOS_LATCHED, QOS_STATE, QOS_STREAM
+from winder.ros.ready import Readiness
 from winder.ros.settings import Settings
 from winder.ros.spin import spin
 from winder.ros.timers import steady_timer
@@ -46,6 +47,7 @@ class InterpNode(Node):
         self.diag = Diagnostics(self, "winder_interp")
         self.create_service(Trigger, "~/start", self.on_start)
         self.create_subscription(KeyValue, TOPIC_PROGRESS, self.on_progress, QOS_STATE)
+        self.readiness = Readiness(self)  # the start handshake: consumer and profile node ready
         steady_timer(self, 0.02, self.tick)
         steady_timer(self, 1.0, self.report)
 
@@ -67,11 +69,7 @@ class InterpNode(Node):
         return resp
 
     def tick(self) -> None:
-        if (
-            not self.autostarted
-            and self.settings.values()["autostart"]
-            and self.pub_steps.get_subscription_count() > 0
-        ):
+        if not self.autostarted and self.settings.values()["autostart"] and not self.readiness.missing():
             self.autostarted = True
             ok, why = self.start_job()
             if not ok:
@@ -105,6 +103,9 @@ class InterpNode(Node):
         if blocked:
             self.diag.publish("job", ERROR, blocked, {})
             return False, blocked
+        waiting = self.readiness.missing()
+        if waiting:
+            return False, f"job not started: {waiting}"
         values = self.settings.values()
         try:
             job = Job(**{k: values[k] for k in FIELD_SPECS})

@@ -29,6 +29,7 @@ from winder.contract.topics import TOPIC_JOB, TOPIC_PROFILE_CONFIG, TOPIC_STEP_T
 from winder.ros.chunks import STEPS_CDR, TIMED_CDR, waiting
 from winder.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from winder.ros.qos import QOS_LATCHED, QOS_STREAM
+from winder.ros.ready import Announcer
 from winder.ros.settings import Settings
 from winder.ros.spin import spin
 from winder.ros.timers import steady_timer
@@ -42,10 +43,12 @@ class ProfileNode(Node):
         self.pub = self.create_publisher(Int64MultiArray, TOPIC_STEP_TIMES, QOS_STREAM)
         self.pub_config = self.create_publisher(String, TOPIC_PROFILE_CONFIG, QOS_LATCHED)
         self.diag = Diagnostics(self, "winder_profile")
+        self.ready = Announcer(self, "profile")  # the start handshake (winder/ready)
         self.create_subscription(String, TOPIC_JOB, self.on_job, QOS_LATCHED)
         self.sub_steps: Subscription | None = None  # created once the timed stream has a reader
         steady_timer(self, 0.05, self.connect)
         steady_timer(self, 1.0, self.report)
+        steady_timer(self, 0.1, self.announce)
 
         self.plan: JobPlan | None = None
         self.checker: StreamChecker | None = None
@@ -139,7 +142,17 @@ class ProfileNode(Node):
         self.get_logger().error(why)
         self.diag.publish("job", ERROR, why, {})
 
+    def announce(self) -> None:
+        """winder/ready: ready once the steps' subscription is matched (see connect())."""
+        if self.settings.blocked():
+            self.ready.announce("blocked")
+        elif self.sub_steps is not None and self.sub_steps.get_publisher_count() > 0:
+            self.ready.announce("ready")
+        else:
+            self.ready.announce("waiting")
+
     def report(self) -> None:
+        self.announce()
         if self.plan is None:
             why = self.settings.blocked() or self.error
             if why:

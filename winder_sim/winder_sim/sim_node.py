@@ -54,6 +54,7 @@ from winder.record.bag import BagRecorder, new_bag_path, signals_held
 from winder.ros.chunks import TIMED_CDR, waiting
 from winder.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from winder.ros.qos import QOS_CLOCK, QOS_DIAGNOSTICS, QOS_LATCHED, QOS_STATE, QOS_STREAM
+from winder.ros.ready import Announcer
 from winder.ros.settings import Settings
 from winder.ros.spin import spin
 from winder.ros.timers import steady_timer
@@ -122,6 +123,7 @@ class SimNode(Node):
         self.pub_config = self.create_publisher(String, TOPIC_SIM_CONFIG, QOS_LATCHED)
         self.pub_progress = self.create_publisher(KeyValue, TOPIC_PROGRESS, QOS_STATE)
         self.diag = Diagnostics(self, "winder_sim")
+        self.ready = Announcer(self, "consumer")  # the start handshake (winder/ready)
         self.create_subscription(String, TOPIC_JOB, self.on_job, QOS_LATCHED, raw=True)
         self.create_subscription(JointTrajectory, TOPIC_PATH, self.on_path, QOS_LATCHED, raw=True)
         self.create_subscription(String, TOPIC_PROFILE_CONFIG, self.on_profile_config, QOS_LATCHED, raw=True)
@@ -134,6 +136,7 @@ class SimNode(Node):
         steady_timer(self, 0.005, self.pump)
         steady_timer(self, 0.5, self.watch)
         steady_timer(self, 1.0, self.report)
+        steady_timer(self, 0.1, self.announce)
         self.topic = {
             "job": self.resolve_topic_name(TOPIC_JOB),
             "path": self.resolve_topic_name(TOPIC_PATH),
@@ -212,6 +215,7 @@ class SimNode(Node):
         values = self.settings.values()
         self.reset()
         self.plan = plan
+        self.announce()
         self.checker = StreamChecker(plan)
         self.rate = float(values["publish_rate"])
         self.encoder = JointStateEncoder(AXES, plan.job_id)
@@ -654,6 +658,7 @@ class SimNode(Node):
         self.bag = None
         if self.context.ok():  # at Ctrl-C the context is already shut down
             self.diag.pub.publish(final)
+            self.announce()
 
     def final_report(self, complete: bool) -> tuple[dict[str, object], int, str]:
         """The job's final status: values, level and message. A job whose
@@ -726,7 +731,20 @@ class SimNode(Node):
             done = self.done_steps + self.checker.missing
             self.pub_progress.publish(KeyValue(key=self.plan.job_id, value=str(done)))
 
+    def announce(self) -> None:
+        """Tell the interp node whether a job can start here (winder/ready):
+        ready once the step times' publisher is matched, so no chunk of the
+        job can go out before this node hears it."""
+        if self.plan is not None:
+            state = "busy"
+        elif self.settings.blocked():
+            state = "blocked"
+        else:
+            state = "ready" if self.sub_times.get_publisher_count() > 0 else "waiting"
+        self.ready.announce(state)
+
     def report(self) -> None:
+        self.announce()
         if self.plan is None:
             if self.last_summary:  # keep telling how the last job ended, as a status does
                 s = self.last_summary

@@ -58,3 +58,15 @@ def check_namespace(namespace: str) -> str:
             "each name letters, digits and '_', not starting with a digit"
         )
     return "/" + body
+
+
+#: The start handshake (diagnostic_msgs/KeyValue, latched): the step stream's
+#: consumer (``key="consumer"``: the sim node, or a hardware driver) and the
+#: profile node (``key="profile"``) say whether they can take a job now
+#: (``value`` one of :data:`READY_STATES`: "waiting" = its stream is not
+#: connected yet, "busy" = running a job, "blocked" = settings refused). The
+#: interp node starts a job only when both say "ready"; readers of any other
+#: topic change nothing.
+TOPIC_READY = "winder/ready"
+READY_ROLES = ("consumer", "profile")
+READY_STATES = ("ready", "waiting", "busy", "blocked")

@@ -223,6 +223,8 @@ class CellWatch:
             reply = req.result()
             if reply is not None and (reply.success or "is running" in reply.message):
                 self.accepted = True
+            elif reply is not None and "not ready" in reply.message:
+                self._request = None  # the consumer or the profile node is still coming up: ask again
             else:
                 return f"job refused: {reply.message if reply else 'no reply'}"
         return None
