@@ -223,7 +223,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     print(f"  max tracking error {float(s['max_tracking_error_steps']):.3f} steps")
     print(f"  lost steps         {s['lost_steps']}")
     print(f"  bag                {s['bag']}")
-    if not result.ok or int(s["errors"]):
+    if result.errors:
+        print(f"  ERROR reports      {len(result.errors)}, first: {result.errors[0]}")
+    if not result.ok or int(s["errors"]) or result.errors:
         logs = f" (node logs in {result.log_dir})" if result.log_dir else ""
         print(f"winder run: {result.message}{logs}", file=sys.stderr)
         return 1

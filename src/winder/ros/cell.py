@@ -51,6 +51,7 @@ class CellResult:
     summary: dict[str, str] = field(default_factory=dict)
     message: str = ""
     log_dir: Path | None = None
+    errors: list[str] = field(default_factory=list)  #: every ERROR a node of the cell reported
 
 
 def find_executable(name: str) -> str:
@@ -202,8 +203,10 @@ class CellWatch:
                 if values.get("state") in ("done", "incomplete"):
                     self.summary = values
                     self.message = st.message
-            elif st.level == bytes([ERROR]) and st.name.startswith(self.ns) and st.message not in self.errors:
-                self.errors.append(f"{st.name}: {st.message}")
+            elif st.level == bytes([ERROR]) and st.name.startswith(self.ns):
+                report = f"{st.name}: {st.message}"
+                if report not in self.errors:  # a status repeats every second while it lasts
+                    self.errors.append(report)
 
     def ask_to_start(self) -> str | None:
         """One step of starting the job: call ``~/start`` once the cell is
@@ -268,6 +271,7 @@ def _result(watch: CellWatch, failure: str, log_dir: Path) -> CellResult:
         result.summary = watch.summary
         result.ok = watch.summary.get("state") == "done"
         result.message = watch.message
+    result.errors = list(watch.errors)
     if watch.errors and not result.message:
         result.message = watch.errors[0]
     if result.ok and not watch.errors and not int(result.summary.get("errors", "0")):
