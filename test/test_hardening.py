@@ -805,3 +805,29 @@ def test_a_plain_reader_is_not_the_sim(tmp_path: Path, procs: Procs, ros: Any) -
     assert (
         sum(np.frombuffer(bytes(m.data), np.int64).size for m in heard) // 5 == 3072
     )  # the reader saw it too
+
+
+@pytest.mark.ros
+def test_an_integer_for_a_double_setting_stays_a_double(procs: Procs, ros: Any) -> None:
+    """-p v_max:=3000 at start and v_max=4000 at run time: the parameter keeps
+    the DOUBLE type its descriptor declares (it became an INTEGER parameter)."""
+    from conftest import spin_until
+    from rcl_interfaces.msg import ParameterType
+    from rcl_interfaces.srv import GetParameters
+    from test_nodes import set_params
+
+    procs.start("profile_node", "-p", "v_max:=3000")
+    client = ros.create_client(GetParameters, "/profile_node/get_parameters")
+    spin_until(ros, client.service_is_ready, 30, "get_parameters")
+
+    def v_max() -> Any:
+        future = client.call_async(GetParameters.Request(names=["v_max"]))
+        spin_until(ros, future.done, 30, "the reply")
+        return future.result().values[0]
+
+    first = v_max()
+    assert (first.type, first.double_value) == (ParameterType.PARAMETER_DOUBLE, 3000.0)
+    [res] = set_params(ros, "profile_node", {"v_max": 4000})
+    assert res.successful, res.reason
+    second = v_max()
+    assert (second.type, second.double_value) == (ParameterType.PARAMETER_DOUBLE, 4000.0)

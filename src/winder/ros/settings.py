@@ -5,6 +5,7 @@ own, so a value is judged the same way in a node and in ``winder run``."""
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable
 from typing import Any
 
@@ -74,18 +75,36 @@ class Settings:
                 node.declare_parameter(name, spec.default, descriptor(spec), ignore_override=True)
                 self.rejected.append(name)
                 continue
+            given = node.get_parameter(name).value
             try:
-                spec.check(node.get_parameter(name).value)
+                value = spec.check(given)
             except SpecError as exc:
                 log.error(f"{exc}; keeping the default {spec.default!r}")
                 node.set_parameters([Parameter(name, value=spec.default)])
                 self.rejected.append(name)
+                continue
+            if value != given or type(value) is not type(given):  # v_max:=3000 is a double, as declared
+                node.set_parameters([Parameter(name, value=value)])
         try:
             check(self.values())
         except SpecError as exc:
             log.error(f"settings rejected at start: {exc}")
             self.rejected.append(str(exc))
+        node.add_pre_set_parameters_callback(self._as_declared)
         node.add_on_set_parameters_callback(self._on_set)
+
+    def _as_declared(self, params: list[Parameter]) -> list[Parameter]:
+        """An integer given for a double setting (``ros2 param set v_max 3000``)
+        becomes the double it stands for, so every tool reading the parameter
+        finds the type its descriptor declares."""
+        out = []
+        for p in params:
+            spec = self.specs.get(p.name)
+            if spec is not None and spec.kind is float and type(p.value) is int:
+                with contextlib.suppress(SpecError):  # else refused in _on_set, as it was given
+                    p = Parameter(p.name, value=spec.check(p.value))
+            out.append(p)
+        return out
 
     def _reason_for_override(self, name: str, exc: Exception) -> str:
         override = self.node._parameter_overrides.get(name)
