@@ -73,6 +73,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
@@ -105,6 +106,8 @@ FloatArray = npt.NDArray[np.float64]
 
 #: default window of the integrated equations (s); at least one sample interval
 WINDOW = 0.005
+#: step events integrated together when a record holds them in memory
+EVENT_BATCH = 1 << 16
 #: default MRAS gain beta (dimensionless: the regressors are normalised)
 GAIN = 3.0
 #: the MRAS fluctuation is measured over the last 1/SETTLE_PART of its updates
@@ -123,7 +126,10 @@ _GL_X, _GL_W = np.polynomial.legendre.leggauss(4)
 class AxisRecord:
     """One axis of a run in motor angle: samples ``t`` (s), ``theta`` (rad),
     ``omega`` (rad/s); the command as step events ``step_t`` (s) with the
-    command angle ``command`` (rad) after each, ``command0`` before the first."""
+    command angle ``command`` (rad) after each, ``command0`` before the first.
+
+    ``source``, when given, gives the step events instead, batch by batch (a
+    recording's rows are read again each time: see :func:`axis_record`)."""
 
     axis: str
     t: FloatArray
@@ -134,15 +140,47 @@ class AxisRecord:
     command0: float
     motor: AxisConfig
     model: str
+    source: Callable[[], Iterable[tuple[FloatArray, FloatArray]]] | None = field(default=None, repr=False)
+
+    def events(self) -> Iterable[tuple[FloatArray, FloatArray]]:
+        """The step events (times s, command angles rad), in batches."""
+        if self.source is not None:
+            return self.source()
+        return (
+            (self.step_t[i : i + EVENT_BATCH], self.command[i : i + EVENT_BATCH])
+            for i in range(0, self.step_t.size, EVENT_BATCH)
+        )
 
     @property
     def steps_moved(self) -> int:
-        c = np.concatenate([[self.command0], self.command]) / self.motor.motor_step_angle
-        return round(float(np.abs(np.diff(c)).sum()))
+        return _Integrator(self, WINDOW).run(self.events()).steps_moved
+
+
+def _events(run: Run) -> Iterator[list[tuple[FloatArray, FloatArray]]]:
+    """The step events of every axis (times s, command angles rad), a recorded
+    chunk at a time: one walk over the recording."""
+    assert run.sim_config is not None
+    angles = [run.sim_config.axes[a].motor_step_angle for a in AXES]
+    prev = list(run.plan.segments[0].start) if run.plan.segments else [0] * len(AXES)
+    for rows in run.step_rows:
+        if rows.shape[0] == 0:
+            continue
+        out = []
+        for ax, sa in enumerate(angles):
+            pos = rows[:, 2 + ax]
+            moved = np.diff(pos, prepend=prev[ax]) != 0
+            prev[ax] = int(pos[-1])
+            out.append((rows[moved, 0] / 1e9, pos[moved] * sa))
+        yield out
+
+
+def _axis_events(run: Run, ax: int) -> Iterator[tuple[FloatArray, FloatArray]]:
+    return (batch[ax] for batch in _events(run))
 
 
 def axis_record(run: Run, axis: str) -> AxisRecord:
-    """The signals of ``axis`` (feed, fork or pole) in motor angle."""
+    """The signals of ``axis`` (feed, fork or pole) in motor angle; the step
+    events are read from the recording when needed, a chunk at a time."""
     if run.sim_config is None:
         raise ValueError(f"{run.path}: no winder/sim_config message: the motor constants are unknown")
     if axis not in AXES:
@@ -153,18 +191,17 @@ def axis_record(run: Run, axis: str) -> AxisRecord:
     js = run.plan.joint_step[i]
     st = run.states
     start = run.plan.segments[0].start[i] if run.plan.segments else 0
-    pos = run.steps[:, 2 + i]
-    moved = np.diff(np.concatenate([[start], pos])) != 0
     return AxisRecord(
         axis=axis,
         t=st.t.copy(),
         theta=st.pos[:, i] / js * sa,
         omega=st.vel[:, i] / js * sa,
-        step_t=run.steps[moved, 0] / 1e9,
-        command=pos[moved] * sa,
+        step_t=np.zeros(0),
+        command=np.zeros(0),
         command0=start * sa,
         motor=motor,
         model=run.sim_config.model,
+        source=lambda: _axis_events(run, i),
     )
 
 
@@ -198,6 +235,7 @@ class Equations:
     t: FloatArray  #: end time of each window (s)
     window: float  #: window length (s)
     moving: npt.NDArray[np.bool_]  #: the axis moves or is commanded in the window
+    steps_moved: int = 0  #: commanded steps of the axis over the record
 
 
 def _torque(rec: AxisRecord, err: FloatArray) -> FloatArray:
@@ -207,61 +245,138 @@ def _torque(rec: AxisRecord, err: FloatArray) -> FloatArray:
     return m.peak_torque * np.sin(m.Zr * err) - m.load_torque
 
 
+class _Integrator:
+    """The integrals Q of the model over every sample interval, from the step
+    events given in batches (in time order). The intervals are integrated as
+    soon as every event before their end is in hand, each in one piece of
+    work, so the sums are the same however the events are cut into batches
+    and memory holds only the events of the intervals not yet integrated."""
+
+    def __init__(self, rec: AxisRecord, window: float) -> None:
+        self.rec, self.window = rec, window
+        t = rec.t
+        self.n = t.size
+        if self.n >= 3 and np.any(np.diff(t) <= 0):
+            raise ValueError(f"{rec.axis}: joint sample times do not increase")
+        size = max(self.n - 1, 0)
+        self.q = np.zeros(size)
+        self.steps_in = np.zeros(size, np.int64)
+        self.k_done = 0  #: the intervals before this are integrated
+        self.cmd = rec.command0  #: the command at t[k_done] (after every event at or before it)
+        self.pending_t: list[FloatArray] = []
+        self.pending_c: list[FloatArray] = []
+        self.last = rec.command0  #: the last command seen, for the steps moved
+        self.moved = 0.0
+
+    def run(self, events: Iterable[tuple[FloatArray, FloatArray]]) -> Equations:
+        for et, ec in events:
+            self.add(np.asarray(et, np.float64), np.asarray(ec, np.float64))
+        return self.finish()
+
+    def add(self, et: FloatArray, ec: FloatArray) -> None:
+        if et.size == 0:
+            return
+        sa = self.rec.motor.motor_step_angle
+        self.moved += float(np.abs(np.diff(ec / sa, prepend=self.last / sa)).sum())
+        self.last = float(ec[-1])
+        self.pending_t.append(et)
+        self.pending_c.append(ec)
+        if self.n >= 3:
+            # an interval is whole once an event at or after its end has come
+            k_hi = min(int(np.searchsorted(self.rec.t[1:], et[-1], side="right")), self.n - 1)
+            if k_hi > self.k_done:
+                self._integrate(k_hi)
+
+    def _integrate(self, k_hi: int) -> None:
+        """Integrate the intervals k_done .. k_hi - 1 with the pending events."""
+        t, th, w = self.rec.t, self.rec.theta, self.rec.omega
+        et = np.concatenate(self.pending_t) if len(self.pending_t) > 1 else self.pending_t[0]
+        ec = np.concatenate(self.pending_c) if len(self.pending_c) > 1 else self.pending_c[0]
+        lo, hi = self.k_done, k_hi
+        tt = t[lo : hi + 1]
+        early = et <= tt[0]
+        if np.any(early):
+            self.cmd = float(ec[np.nonzero(early)[0][-1]])
+        inside_m = (et > tt[0]) & (et < tt[-1])
+        inside_t, inside_c = et[inside_m], ec[inside_m]
+        # pieces between consecutive sample and step times; the command is constant on each
+        edges = np.union1d(tt, inside_t)
+        a0, a1 = edges[:-1], edges[1:]
+        j = np.searchsorted(inside_t, a0, side="right") - 1
+        cmd = (
+            np.where(j >= 0, inside_c[np.maximum(j, 0)], self.cmd)
+            if inside_c.size
+            else np.full(a0.size, self.cmd)
+        )
+        k = np.clip(np.searchsorted(tt, a0, side="right") - 1, 0, hi - lo - 1) + lo
+        h = t[k + 1] - t[k]
+        th0, th1, w0, w1 = th[k], th[k + 1], w[k] * h, w[k + 1] * h
+        half = 0.5 * (a1 - a0)
+        mid = 0.5 * (a1 + a0)
+        q = np.zeros(hi - lo)
+        for x, wt in zip(_GL_X, _GL_W, strict=True):
+            s = (mid + half * x - t[k]) / h
+            s2 = s * s
+            s3 = s2 * s
+            theta = (
+                (2 * s3 - 3 * s2 + 1) * th0
+                + (s3 - 2 * s2 + s) * w0
+                + (3 * s2 - 2 * s3) * th1
+                + (s3 - s2) * w1
+            )
+            q += np.bincount(k - lo, weights=wt * half * _torque(self.rec, cmd - theta), minlength=hi - lo)
+        self.q[lo:hi] = q
+        if inside_t.size:
+            where = np.clip(np.searchsorted(tt, inside_t, side="right") - 1, 0, hi - lo - 1)
+            self.steps_in[lo:hi] += np.bincount(where, minlength=hi - lo)
+        # the events up to the new start are spent: the command there is what they left
+        spent = et <= tt[-1]
+        if np.any(spent):
+            self.cmd = float(ec[np.nonzero(spent)[0][-1]])
+        keep = ~spent
+        self.pending_t = [et[keep]] if np.any(keep) else []
+        self.pending_c = [ec[keep]] if np.any(keep) else []
+        self.k_done = hi
+
+    def finish(self) -> Equations:
+        rec, n = self.rec, self.n
+        moved = round(self.moved)
+        if n < 3:
+            z = np.zeros(0)
+            return Equations(z, z, z, z, 0.0, np.zeros(0, dtype=bool), moved)
+        if self.k_done < n - 1:
+            if not self.pending_t:
+                self.pending_t, self.pending_c = [np.zeros(0)], [np.zeros(0)]
+            self._integrate(n - 1)
+        t, th, w = rec.t, rec.theta, rec.omega
+        h_mean = float(t[-1] - t[0]) / (n - 1)
+        m = max(1, round(self.window / h_mean))
+        dw = np.diff(w)
+        dth = np.diff(th)
+        # the axis takes part in an interval if it is commanded or moves in it
+        speed = np.maximum(np.abs(w[:-1]), np.abs(w[1:]))
+        moving = (self.steps_in > 0) | (speed > 1e-9 * max(float(np.max(np.abs(w))), 1e-300))
+        nw = (n - 1) // m
+        cut = nw * m
+
+        def group(v: npt.NDArray[Any]) -> npt.NDArray[Any]:
+            out: npt.NDArray[Any] = v[:cut].reshape(nw, m).sum(axis=1)
+            return out
+
+        return Equations(
+            q=group(self.q),
+            dw=group(dw),
+            dth=group(dth),
+            t=t[m : cut + 1 : m],
+            window=m * h_mean,
+            moving=group(moving.astype(np.int64)) > 0,
+            steps_moved=moved,
+        )
+
+
 def equations(rec: AxisRecord, window: float = WINDOW) -> Equations:
     """The model integrated over windows of about ``window`` s (module doc)."""
-    t, th, w = rec.t, rec.theta, rec.omega
-    n = t.size
-    if n < 3:
-        z = np.zeros(0)
-        return Equations(z, z, z, z, 0.0, np.zeros(0, dtype=bool))
-    if np.any(np.diff(t) <= 0):
-        raise ValueError(f"{rec.axis}: joint sample times do not increase")
-    h_mean = float(t[-1] - t[0]) / (n - 1)
-    m = max(1, round(window / h_mean))
-    # pieces between consecutive sample and step times; the command is constant on each
-    inside = rec.step_t[(rec.step_t > t[0]) & (rec.step_t < t[-1])]
-    edges = np.union1d(t, inside)
-    a0, a1 = edges[:-1], edges[1:]
-    j = np.searchsorted(rec.step_t, a0, side="right") - 1
-    if rec.command.size:
-        cmd = np.where(j >= 0, rec.command[np.maximum(j, 0)], rec.command0)
-    else:
-        cmd = np.full(a0.size, rec.command0)
-    k = np.clip(np.searchsorted(t, a0, side="right") - 1, 0, n - 2)
-    h = t[k + 1] - t[k]
-    th0, th1, w0, w1 = th[k], th[k + 1], w[k] * h, w[k + 1] * h
-    q = np.zeros(n - 1)
-    half = 0.5 * (a1 - a0)
-    mid = 0.5 * (a1 + a0)
-    for x, wt in zip(_GL_X, _GL_W, strict=True):
-        s = (mid + half * x - t[k]) / h
-        s2 = s * s
-        s3 = s2 * s
-        theta = (
-            (2 * s3 - 3 * s2 + 1) * th0 + (s3 - 2 * s2 + s) * w0 + (3 * s2 - 2 * s3) * th1 + (s3 - s2) * w1
-        )
-        q += np.bincount(k, weights=wt * half * _torque(rec, cmd - theta), minlength=n - 1)
-    dw = np.diff(w)
-    dth = np.diff(th)
-    # the axis takes part in an interval if it is commanded or moves in it
-    steps_in = np.bincount(np.clip(np.searchsorted(t, inside, side="right") - 1, 0, n - 2), minlength=n - 1)
-    speed = np.maximum(np.abs(w[:-1]), np.abs(w[1:]))
-    moving = (steps_in > 0) | (speed > 1e-9 * max(float(np.max(np.abs(w))), 1e-300))
-    nw = (n - 1) // m
-    cut = nw * m
-
-    def group(v: npt.NDArray[Any]) -> npt.NDArray[Any]:
-        out: npt.NDArray[Any] = v[:cut].reshape(nw, m).sum(axis=1)
-        return out
-
-    return Equations(
-        q=group(q),
-        dw=group(dw),
-        dth=group(dth),
-        t=t[m : cut + 1 : m],
-        window=m * h_mean,
-        moving=group(moving.astype(np.int64)) > 0,
-    )
+    return _Integrator(rec, window).run(rec.events())
 
 
 def least_squares(eq: Equations) -> tuple[float, float, float, float]:
@@ -396,10 +511,14 @@ class Identification:
     notes: list[str] = field(default_factory=list)
 
 
-def identify_axis(rec: AxisRecord, gain: float = GAIN, window: float = WINDOW) -> AxisIdentification:
-    """Identify one axis from its record (module doc)."""
-    eq = equations(rec, window)
-    moved = rec.steps_moved
+def identify_axis(
+    rec: AxisRecord, gain: float = GAIN, window: float = WINDOW, eq: Equations | None = None
+) -> AxisIdentification:
+    """Identify one axis from its record (module doc); ``eq``: its
+    :func:`equations` with ``window``, if made already."""
+    if eq is None:
+        eq = equations(rec, window)
+    moved = eq.steps_moved
     windows = int(np.count_nonzero(eq.moving))
     nan = math.nan
     base: dict[str, Any] = dict(axis=rec.axis, steps_moved=moved, windows=windows)
@@ -481,7 +600,15 @@ def identify(run: Run, gain: float = GAIN, window: float = WINDOW) -> Identifica
             f"joint states at {rate:g} Hz: expect J errors of up to about 2 % from the sampling "
             "(record with --publish-rate 2000 for 0.1 %)"
         )
-    axes = {a: identify_axis(axis_record(run, a), gain, window) for a in AXES}
+    records = [axis_record(run, a) for a in AXES]
+    integrators = [_Integrator(rec, window) for rec in records]
+    for batches in _events(run):
+        for integ, (et, ec) in zip(integrators, batches, strict=True):
+            integ.add(et, ec)
+    axes = {
+        rec.axis: identify_axis(rec, gain, window, integ.finish())
+        for rec, integ in zip(records, integrators, strict=True)
+    }
     h = float(run.states.t[-1] - run.states.t[0]) / (len(run.states) - 1)
     return Identification(
         label=run.label,

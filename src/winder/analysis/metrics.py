@@ -54,6 +54,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from winder.analysis.digest import STRIDE_TIME, Digest, SegmentKinematics, digest, turn_index
 from winder.motion.interp import line_distance
 from winder.motion.job import AXES
 from winder.motion.profile import LIMITS
@@ -68,18 +69,16 @@ __all__ = [
     "analyze",
     "axis_deviation",
     "command_deviation",
-    "command_kinematics",
+    "digest_run",
     "format_table",
+    "paired_error",
     "step_kinematics",
     "to_json",
+    "winding_samples",
 ]
 
 FloatArray = npt.NDArray[np.float64]
 
-#: the shortest time the finite-difference stencil of the step-time derivatives spans (s)
-STRIDE_TIME = 0.002
-#: the stencil keeps this many strides away from the start and end of a move
-END_STRIDES = 8
 UNITS = {"feed": "m", "fork": "rad", "pole": "rad"}
 
 
@@ -159,17 +158,45 @@ class Analysis:
 
 
 def _turns(y_rel: FloatArray, per_rev: int, turns: int) -> npt.NDArray[np.int64]:
-    """Turn index (0-based) of points at fork offsets ``y_rel`` (steps) into a layer."""
-    out: npt.NDArray[np.int64] = np.clip(np.ceil(y_rel / per_rev) - 1, 0, turns - 1).astype(np.int64)
-    return out
+    return turn_index(y_rel, per_rev, turns)
+
+
+def _no_deviation(layers: list[LayerDeviation]) -> Deviation:
+    nan = math.nan
+    return Deviation(nan, nan, nan, 0, nan, nan, nan, layers)
+
+
+def command_deviation(run: Run, digested: Digest | None = None) -> Deviation:
+    """Eq. 7 of the commanded steps: every step row of every layer segment."""
+    d = digested if digested is not None else digest_run(run)
+    segs = run.plan.job.segments()
+    stats = [s for s in d.layers.values() if s.points]
+    layers = [
+        LayerDeviation(s.segment, segs[s.segment].pole, segs[s.segment].layer, s.points, s.mean, s.max)
+        for s in stats
+    ]
+    if not stats:
+        return _no_deviation(layers)
+    points = sum(s.points for s in stats)
+    tm = np.concatenate([s.turn_means() for s in stats])
+    wire = run.plan.job.wire_diameter
+    return Deviation(
+        mean=sum(s.total for s in stats) / points,
+        max=max(s.max for s in stats),
+        rms=math.sqrt(sum(s.total_sq for s in stats) / points),
+        points=points,
+        turn_max=float(tm.max()),
+        turn_max_pct=float(100 * tm.max() / wire),
+        turn_mean_pct=float(100 * tm.mean() / wire),
+        layers=layers,
+    )
 
 
 def _summarise(
     dists: list[FloatArray], turn_ids: list[npt.NDArray[np.int64]], layers: list[LayerDeviation], wire: float
 ) -> Deviation:
     if not dists or sum(d.size for d in dists) == 0:
-        nan = math.nan
-        return Deviation(nan, nan, nan, 0, nan, nan, nan, layers)
+        return _no_deviation(layers)
     d = np.concatenate(dists)
     turn_means = []
     for dist, tid in zip(dists, turn_ids, strict=True):
@@ -190,64 +217,41 @@ def _summarise(
     )
 
 
-def command_deviation(run: Run) -> Deviation:
-    """Eq. 7 of the commanded steps: every step row of every layer segment."""
-    plan = run.plan
-    lx, ly = plan.step_lengths[0], plan.step_lengths[1]
-    spr, turns = plan.job.fork_steps_per_rev, plan.job.turns_per_layer
-    dists, tids, layers = [], [], []
-    seg_col = run.steps[:, 1]
-    segs = plan.job.segments()
-    for i, s in enumerate(plan.segments):
-        if s.kind != "layer":
-            continue
-        rows = run.steps[seg_col == i]
-        if rows.shape[0] == 0:
-            continue
-        rel = rows[:, 2:4] - np.asarray(s.start[:2])
-        dist = line_distance(rel, s.delta[0], s.delta[1], step_lengths=(lx, ly))
-        dists.append(dist)
-        tids.append(_turns(rel[:, 1].astype(np.float64), spr, turns))
-        layers.append(
-            LayerDeviation(i, segs[i].pole, segs[i].layer, dist.size, float(dist.mean()), float(dist.max()))
-        )
-    return _summarise(dists, tids, layers, plan.job.wire_diameter)
-
-
-def _segment_at(run: Run, t: FloatArray) -> npt.NDArray[np.int64]:
-    """Segment index the command is in at times ``t`` (s): that of the last step
-    at or before t; -1 before the first step."""
-    ts = run.steps[:, 0]
-    i = np.searchsorted(ts, np.round(t * 1e9).astype(np.int64), side="right") - 1
-    return np.where(i >= 0, run.steps[np.maximum(i, 0), 1], -1)
-
-
-def axis_deviation(run: Run) -> Deviation | None:
-    """Eq. 7 of the simulated axes (see module doc); None without joint states or steps."""
-    if len(run.states) == 0 or run.steps.shape[0] == 0:
-        return None
+def winding_samples(run: Run, digested: Digest) -> tuple[npt.NDArray[np.int64], FloatArray, FloatArray]:
+    """The joint samples taken while a layer is wound, each with the layer
+    whose fork range holds it (module doc): (layer segment, x, y), x and y in
+    steps of the feed and the fork."""
     plan = run.plan
     js = plan.joint_step
-    lx, ly = plan.step_lengths[0], plan.step_lengths[1]
-    spr, turns = plan.job.fork_steps_per_rev, plan.job.turns_per_layer
     layer_ids = [i for i, s in enumerate(plan.segments) if s.kind == "layer"]
-    if not layer_ids:
-        return None
-    seg_now = _segment_at(run, run.states.t)
-    winding = np.zeros(seg_now.size, dtype=bool)
-    ok = seg_now >= 0
+    seg_now = digested.sample_segment
+    if not layer_ids or seg_now.size != len(run.states):
+        z = np.zeros(0)
+        return np.zeros(0, np.int64), z, z
     kinds = np.array([s.kind == "layer" for s in plan.segments])
+    ok = (seg_now >= 0) & (seg_now < kinds.size)
+    winding = np.zeros(seg_now.size, dtype=bool)
     winding[ok] = kinds[seg_now[ok]]
     x = run.states.pos[winding, 0] / js[0]  # steps, float
     y = run.states.pos[winding, 1] / js[1]
     starts = np.array([plan.segments[i].start[1] for i in layer_ids], dtype=np.float64)
     which = np.clip(np.searchsorted(starts, y, side="right") - 1, 0, len(layer_ids) - 1)
+    return np.asarray(layer_ids, np.int64)[which], x, y
+
+
+def axis_deviation(run: Run, digested: Digest | None = None) -> Deviation | None:
+    """Eq. 7 of the simulated axes (see module doc); None without joint states or steps."""
+    d = digested if digested is not None else digest_run(run)
+    plan = run.plan
+    if len(run.states) == 0 or d.rows == 0 or not any(s.kind == "layer" for s in plan.segments):
+        return None
+    lx, ly = plan.step_lengths[0], plan.step_lengths[1]
+    spr, turns = plan.job.fork_steps_per_rev, plan.job.turns_per_layer
+    seg, x, y = winding_samples(run, d)
     dists, tids, layers = [], [], []
     segs = plan.job.segments()
-    for w, i in enumerate(layer_ids):
-        m = which == w
-        if not np.any(m):
-            continue
+    for i in (int(v) for v in np.unique(seg)):
+        m = seg == i
         s = plan.segments[i]
         xr = x[m] - s.start[0]
         yr = y[m] - s.start[1]
@@ -271,77 +275,50 @@ def step_kinematics(t_ns: npt.ArrayLike, stride_time: float = STRIDE_TIME) -> tu
     ``t_ns[k]`` is the time (ns) at which the move reached k steps (k = 0 may
     be NaN when the start is unknown; missing steps NaN). Returns (t, v, a, j)
     at the steps where the central stencil fits, in s and steps/s, /s^2, /s^3
-    (see module doc; v = 1/t'(k), a = -t''/t'^3, j = 3a^2/v - t'''*v^4).
+    (see module doc). The stencil slides over the step times
+    (:class:`winder.analysis.digest.SegmentKinematics`), as in the analysis.
     """
     t = np.asarray(t_ns, dtype=np.float64)
     n = t.size
-    empty = np.zeros(0)
-    if n < 2 * END_STRIDES + 1:
-        return empty, empty, empty, empty
-    k = np.arange(n)
-    local = np.full(n, np.nan)
-    local[1:-1] = (t[2:] - t[:-2]) / 2e9
-    local[0], local[-1] = (t[1] - t[0]) / 1e9, (t[-1] - t[-2]) / 1e9
-    with np.errstate(invalid="ignore", divide="ignore"):
-        m = np.ceil(stride_time / local)
-    m = np.where(np.isfinite(m), np.clip(m, 1, max(1, (n - 1) // (2 * END_STRIDES + 1))), 1).astype(np.int64)
-    # t(k) is singular where the move starts or ends at rest (t ~ k**(1/3) for
-    # an S-curve): the stencil must stay well inside the move
-    fits = (k >= END_STRIDES * m) & (k <= n - 1 - END_STRIDES * m)
-    k, m = k[fits], m[fits]
-    if k.size == 0:
-        return empty, empty, empty, empty
-    mf = m.astype(np.float64)
-    # second-order central differences of t(k) (t in ns, exact integers in float64); higher
-    # orders overshoot where a profile's acceleration or jerk jumps
-    t0, tp, tm, tp2, tm2 = t[k], t[k + m], t[k - m], t[k + 2 * m], t[k - 2 * m]
-    d1 = (tp - tm) / (2 * mf) * 1e-9  # s per step
-    d2 = (tp - 2 * t0 + tm) / mf**2 * 1e-9
-    d3 = (tp2 - 2 * tp + 2 * tm - tm2) / (2 * mf**3) * 1e-9
-    v = 1.0 / d1
-    a = -d2 / d1**3
-    j = 3 * a * a / v - d3 * v**4
-    good = np.isfinite(v) & np.isfinite(a) & np.isfinite(j)
-    return t0[good] * 1e-9, v[good], a[good], j[good]
+    out: list[FloatArray] = []
+    if n == 0:
+        return _EMPTY, _EMPTY, _EMPTY, _EMPTY
+
+    def keep(*x: FloatArray) -> None:
+        out.append(np.vstack(x))
+
+    kin = SegmentKinematics(n - 1, keep, stride_time=stride_time)
+    kin.add(np.arange(n, dtype=np.int64), t)
+    kin.finish()
+    if not out:
+        return _EMPTY, _EMPTY, _EMPTY, _EMPTY
+    w = np.hstack(out)
+    return w[0], w[1], w[2], w[3]
 
 
-def command_kinematics(run: Run, stride_time: float = STRIDE_TIME) -> dict[str, tuple[FloatArray, ...]]:
-    """Per axis: (t, v, a, j) of the commanded (interpolated) motion in joint
-    units, from the step times of each segment's major axis (module doc)."""
-    out: dict[str, list[list[FloatArray]]] = {a: [[], [], [], []] for a in AXES}
-    js = run.plan.joint_step
-    seg_col = run.steps[:, 1]
-    for i, s in enumerate(run.plan.segments):
-        rows = run.steps[seg_col == i]
-        if rows.shape[0] < 5:
-            continue
-        k = np.abs(rows[:, 2 + s.major] - s.start[s.major])
-        tk = np.full(s.steps + 1, np.nan)
-        inside = (k >= 0) & (k <= s.steps)
-        tk[k[inside]] = rows[inside, 0]
-        t, v, a, j = step_kinematics(tk, stride_time)
-        for ax, name in enumerate(AXES):
-            r = s.delta[ax] / s.steps * js[ax]
-            if r == 0:
-                continue
-            for lst, val in zip(out[name], (t, v * r, a * r, j * r), strict=True):
-                lst.append(val)
-    return {
-        name: tuple(np.concatenate(v) if v else np.zeros(0) for v in lists) for name, lists in out.items()
-    }
+_EMPTY = np.zeros(0)
 
 
 def _peak(x: FloatArray) -> float:
     return float(np.max(np.abs(x))) if x.size else math.nan
 
 
-def _axis_motion(run: Run, kin: dict[str, tuple[FloatArray, ...]]) -> dict[str, AxisMotion]:
-    js = run.plan.joint_step
+def paired_error(run: Run) -> tuple[npt.NDArray[np.intp], FloatArray]:
+    """The samples where both the command and the axis position were recorded
+    (written in pairs: matched by time): their indices in ``run.states`` and
+    command - axis position there, (k, 3) in joint units."""
     st, cm = run.states, run.commands
-    # command and state samples are written in pairs: match them by time
     ti_s = np.round(st.t * 1e9).astype(np.int64)
     ti_c = np.round(cm.t * 1e9).astype(np.int64)
     _, i_s, i_c = np.intersect1d(ti_s, ti_c, assume_unique=False, return_indices=True)
+    diff: FloatArray = cm.pos[i_c] - st.pos[i_s]
+    return i_s, diff
+
+
+def _axis_motion(run: Run, d: Digest) -> dict[str, AxisMotion]:
+    js = run.plan.joint_step
+    st = run.states
+    _, diff = paired_error(run)
     if st.t.size >= 3:
         acc = np.gradient(st.vel, st.t, axis=0)
         jerk = np.gradient(acc, st.t, axis=0)
@@ -349,22 +326,19 @@ def _axis_motion(run: Run, kin: dict[str, tuple[FloatArray, ...]]) -> dict[str, 
         acc = jerk = np.zeros((0, 3))
     out = {}
     for ax, name in enumerate(AXES):
-        moved = int(np.abs(np.diff(run.steps[:, 2 + ax])).sum()) if run.steps.shape[0] else 0
-        if run.steps.shape[0]:
-            moved += int(abs(run.steps[0, 2 + ax] - run.plan.segments[0].start[ax]))
-        err = (cm.pos[i_c, ax] - st.pos[i_s, ax]) / js[ax]
+        err = diff[:, ax] / js[ax]
         final = float(err[-1]) if err.size else math.nan
         slips = 0
         if run.sim_config is not None and err.size:
             slips = round(final / run.sim_config.axes[name].pitch_steps)
-        _, v, a, j = kin[name]
+        tr = d.traces[name]
         out[name] = AxisMotion(
             axis=name,
             unit=UNITS[name],
-            steps_moved=moved,
-            cmd_v=_peak(v),
-            cmd_a=_peak(a),
-            cmd_j=_peak(j),
+            steps_moved=d.moved[ax],
+            cmd_v=tr.peak_v,
+            cmd_a=tr.peak_a,
+            cmd_j=tr.peak_j,
             act_v=_peak(st.vel[:, ax]),
             act_a=_peak(acc[:, ax]) if acc.size else math.nan,
             act_j=_peak(jerk[:, ax]) if jerk.size else math.nan,
@@ -377,6 +351,11 @@ def _axis_motion(run: Run, kin: dict[str, tuple[FloatArray, ...]]) -> dict[str, 
     return out
 
 
+def digest_run(run: Run, stride_time: float = STRIDE_TIME) -> Digest:
+    """One pass over the run's step rows (:func:`winder.analysis.digest.digest`)."""
+    return digest(run.plan, run.step_rows, run.states.t, stride_time)
+
+
 def _num(report: dict[str, str], key: str, default: float = math.nan) -> float:
     try:
         return float(report[key])
@@ -384,13 +363,15 @@ def _num(report: dict[str, str], key: str, default: float = math.nan) -> float:
         return default
 
 
-def analyze(run: Run, stride_time: float = STRIDE_TIME) -> Analysis:
-    """Winding accuracy and motion quality of one recorded run (module doc)."""
+def analyze(run: Run, stride_time: float = STRIDE_TIME, digested: Digest | None = None) -> Analysis:
+    """Winding accuracy and motion quality of one recorded run (module doc).
+    ``digested``: the run's :func:`digest_run` with ``stride_time``, if made already."""
+    d = digested if digested is not None else digest_run(run, stride_time)
     job = run.plan.job
     notes = list(run.notes)
-    if run.steps.shape[0] == 0:
+    if d.rows == 0:
         notes.append("no steps recorded")
-    elif np.any(np.diff(run.steps[:, 0]) <= 0):
+    elif not d.increasing:
         notes.append(
             "step times do not increase everywhere: the recording holds repeated or reordered chunks"
         )
@@ -408,6 +389,11 @@ def analyze(run: Run, stride_time: float = STRIDE_TIME) -> Analysis:
             else f"sim state {run.report.get('state', 'unknown')}"
         )
         notes.append(f"incomplete recording ({why}): figures cover what was recorded")
+    if d.lost_stencils:
+        notes.append(
+            f"{d.lost_stencils} command kinematics points left out: the move sped up faster "
+            "than the analysis keeps step times for"
+        )
     state = run.report.get("state", "")
     lost = int(_num(run.report, "lost_steps", -1))
     sim_time = float(run.states.t[-1]) if len(run.states) else math.nan
@@ -431,16 +417,16 @@ def analyze(run: Run, stride_time: float = STRIDE_TIME) -> Analysis:
         closed=run.closed,
         recovered=run.recovered,
         damaged=len(run.damaged),
-        steps_recorded=int(run.steps.shape[0]),
+        steps_recorded=d.rows,
         steps_total=run.plan.total_steps,
-        job_time=float(run.steps[-1, 0] / 1e9) if run.steps.shape[0] else math.nan,
+        job_time=d.last_t / 1e9 if d.last_t is not None else math.nan,
         sim_time=sim_time,
         wall_time=_num(run.report, "wall_time_s"),
         real_time_factor=_num(run.report, "real_time_factor"),
         lost_steps=lost,
-        command=command_deviation(run),
-        actual=axis_deviation(run),
-        axes=_axis_motion(run, command_kinematics(run, stride_time)),
+        command=command_deviation(run, d),
+        actual=axis_deviation(run, d),
+        axes=_axis_motion(run, d),
         notes=notes,
     )
 

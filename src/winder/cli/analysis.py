@@ -43,21 +43,21 @@ def _say(lines: list[str], to_stderr: bool) -> None:
 
 def cmd_analyze(args: argparse.Namespace) -> int:
     """Winding accuracy and motion quality of one or more recordings, as one table."""
-    from winder.analysis.metrics import analyze, format_table, to_json
+    from winder.analysis.metrics import analyze, digest_run, format_table, to_json
     from winder.record.reader import read_run
 
-    runs = []
     try:
         runs = [read_run(b, args.namespace) for b in args.bags]
-        results = [analyze(r) for r in runs]
+        digests = [digest_run(r) for r in runs]
+        results = [analyze(r, digested=d) for r, d in zip(runs, digests, strict=True)]
         print(to_json(results) if args.json else format_table(results))
         if not args.no_plots:
             from winder.analysis.figures.analysis import plot_analysis
 
             written: list[str] = []
-            for run, res in zip(runs, results, strict=True):
+            for run, res, d in zip(runs, results, digests, strict=True):
                 out = _plots_for(run.path, args.plots_dir, len(runs) > 1)
-                written += [f"plot: {p}" for p in plot_analysis(run, res, out)]
+                written += [f"plot: {p}" for p in plot_analysis(run, res, out, digested=d)]
             _say(written, args.json)
     except OSError as exc:
         raise ValueError(_os_error(exc)) from None

@@ -22,13 +22,14 @@ closed rosbag2 directory.
 
 from __future__ import annotations
 
+import contextlib
 import io
 import mmap
 import re
 import shutil
 import struct
 import zlib
-from collections.abc import Iterator
+from collections.abc import Callable, Collection, Generator, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -61,9 +62,19 @@ class Connection:
     schema: str  #: message definition text
 
 
+#: one message as :meth:`RawBag.stream` gives it: (topic, log time ns, CDR bytes)
+TopicMessage = tuple[str, int, bytes]
+
+
 @dataclass
 class RawBag:
     """The messages of a recording, undecoded, in file order.
+
+    ``messages`` holds the messages of the topics :func:`read_raw` was told to
+    keep (all, by default); every message is counted in ``counts`` whether
+    kept or not, and :meth:`stream` reads the file(s) again for the topics
+    that were not kept, a batch at a time, so that a recording much larger
+    than memory can be read.
 
     ``closed``: every file ended with its MCAP footer. ``recovered``: some file
     was cut short (or damaged) and was read up to its first incomplete record.
@@ -79,14 +90,34 @@ class RawBag:
     notes: list[str] = field(default_factory=list)
     #: chunks skipped because their CRC or their compression showed damage, one line each
     damaged: list[str] = field(default_factory=list)
+    #: messages read per connection id, kept or not
+    counts: dict[int, int] = field(default_factory=dict)
 
     def topics(self) -> dict[str, int]:
         """Message count per topic."""
         counts = {c.topic: 0 for c in self.connections.values()}
-        for cid, _, _ in self.messages:
+        for cid, n in self.counts.items():
             topic = self.connections[cid].topic
-            counts[topic] = counts.get(topic, 0) + 1
+            counts[topic] = counts.get(topic, 0) + n
         return counts
+
+    def stream(self, topics: Collection[str]) -> Iterator[list[TopicMessage]]:
+        """The messages on ``topics``, read from the file(s) again: in file
+        order, one batch per top-level record (an MCAP chunk), the same
+        messages a full read keeps (damaged chunks skipped, a cut-short end
+        read as far as it is whole)."""
+        wanted = frozenset(topics)
+        if self.files and self.files[0].suffix == ".db3":
+            yield from _stream_sqlite(self.path, wanted)
+            return
+        scratch = RawBag(self.path, self.files, {}, [], closed=True, recovered=False)
+        for f in self.files:
+            sink = _Sink(scratch, keep=lambda topic: topic in wanted)
+            for _ in _read_mcap(f, sink):
+                if scratch.messages:
+                    conns = scratch.connections
+                    yield [(conns[cid].topic, t, data) for cid, t, data in scratch.messages]
+                    scratch.messages = []
 
 
 def _bag_files(path: Path) -> tuple[Path, list[Path], bool]:
@@ -210,28 +241,43 @@ def _chunk_data(chunk: Chunk) -> bytes:
     raise ValueError(f"unsupported chunk compression {chunk.compression!r}")
 
 
-def _read_mcap(path: Path, raw: RawBag) -> None:
-    """Append the records of one MCAP file to ``raw``, stopping cleanly at the
-    first incomplete or damaged record."""
+#: the steps of a walk: it pauses after every top-level record it has added to
+#: its sink, saying the byte offset it has read up to
+Steps = Generator[int, None, None]
+#: the walk hands the pages it has read back to the kernel every this many bytes
+#: (mapped pages of the file would otherwise count in the process' memory)
+RELEASE_BYTES = 4 << 20
+
+
+def _read_mcap(path: Path, sink: _Sink) -> Steps:
+    """Add the records of one MCAP file to ``sink``, stopping cleanly at the
+    first incomplete or damaged record; pauses after every top-level record."""
     size = path.stat().st_size
     if size == 0:
         raise BagError(f"{path}: empty file (0 bytes)")
     with path.open("rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as mm:
         data = memoryview(mm)
+        released = 0
         try:
-            _scan(path, data, raw)
+            for pos in _scan(path, data, sink):
+                if pos - released >= RELEASE_BYTES:
+                    upto = pos - pos % mmap.PAGESIZE
+                    mm.madvise(mmap.MADV_DONTNEED, released, upto - released)
+                    released = upto
+                yield pos
         finally:
-            data.release()
+            with contextlib.suppress(BufferError):  # a walk left early may still hold a slice
+                data.release()
 
 
-def _scan(path: Path, data: memoryview, raw: RawBag) -> None:
-    """Add the records of one mapped MCAP file to ``raw``: the whole records
+def _scan(path: Path, data: memoryview, sink: _Sink) -> Steps:
+    """Add the records of one mapped MCAP file to ``sink``: the whole records
     in order, then what can be had of a cut-short end."""
     _check_magic(path, data)
-    sink = _Sink(raw)
     _channels_from_summary(data, sink)
-    walk = _walk(data, sink)
-    _finish(path, data, raw, sink, walk)
+    walk = yield from _walk(data, sink)
+    _finish(path, data, sink.raw, sink, walk)
+    yield len(data)
 
 
 _FOOTER = struct.Struct("<BQQQI")  # opcode, length 20, summary start, summary offsets start, summary CRC
@@ -271,24 +317,33 @@ class _Sink:
     channels that name them, channel ids of a later split file following on
     from the earlier files', messages of unknown channels dropped."""
 
-    def __init__(self, raw: RawBag) -> None:
+    def __init__(self, raw: RawBag, keep: Callable[[str], bool] | None = None) -> None:
         self.raw = raw
         self.schemas: dict[int, Schema] = {}
         self.offset = max(raw.connections, default=0)
         self.ids: dict[int, int] = {}  #: channel id in the file -> connection id in the RawBag
+        self.kept: dict[int, bool] = {}  #: channel id in the file -> its messages are kept
+        self.keep = keep
         self.crcs = False  #: the file's chunks carry CRCs (winder's do, rosbags' do not)
 
     def add(self, rec: Schema | Channel | Message | tuple[int, int, bytes]) -> None:
-        ids = self.ids
         if isinstance(rec, tuple):  # a message inside a chunk, the most frequent case
-            if rec[0] in ids:
-                self.raw.messages.append((ids[rec[0]], rec[1], rec[2]))
+            self._message(rec[0], rec[1], rec[2])
         elif isinstance(rec, Schema):
             self.schemas[rec.id] = rec
         elif isinstance(rec, Channel):
             self._channel(rec)
-        elif rec.channel_id in ids:
-            self.raw.messages.append((ids[rec.channel_id], rec.log_time, rec.data))
+        else:
+            self._message(rec.channel_id, rec.log_time, rec.data)
+
+    def _message(self, channel: int, log_time: int, data: bytes) -> None:
+        cid = self.ids.get(channel)
+        if cid is None:
+            return
+        counts = self.raw.counts
+        counts[cid] = counts.get(cid, 0) + 1
+        if self.kept[channel]:
+            self.raw.messages.append((cid, log_time, data))
 
     def _channel(self, rec: Channel) -> None:
         if rec.id in self.ids:
@@ -296,6 +351,7 @@ class _Sink:
         sch = self.schemas.get(rec.schema_id)
         cid = self.offset + rec.id
         self.ids[rec.id] = cid
+        self.kept[rec.id] = self.keep is None or self.keep(rec.topic)
         self.raw.connections[cid] = Connection(
             cid,
             rec.topic,
@@ -315,7 +371,7 @@ class _Walk:
     damaged: str = ""  #: why a whole record could not be read, "" if none
 
 
-def _walk(data: memoryview, sink: _Sink) -> _Walk:
+def _walk(data: memoryview, sink: _Sink) -> Generator[int, None, _Walk]:
     """Add the whole top-level records after the magic to ``sink``, up to the
     footer, the first incomplete record or the first damaged one."""
     pos = 8
@@ -329,6 +385,7 @@ def _walk(data: memoryview, sink: _Sink) -> _Walk:
         except Exception as exc:  # a damaged record: keep what came before it
             return _Walk(pos, damaged=f"damaged record at byte {pos} ({type(exc).__name__})")
         pos = end
+        yield pos
     return _Walk(pos)
 
 
@@ -389,7 +446,7 @@ def _read_cut_chunk(data: memoryview, pos: int, sink: _Sink) -> None:
         pass
 
 
-def _read_sqlite(path: Path, files: list[Path], raw: RawBag) -> None:
+def _read_sqlite(path: Path, raw: RawBag, keep: Callable[[str], bool] | None) -> None:
     from rosbags.rosbag2 import Reader
 
     try:
@@ -399,26 +456,46 @@ def _read_sqlite(path: Path, files: list[Path], raw: RawBag) -> None:
                     c.id, c.topic, c.msgtype, "cdr", "ros2msg", c.msgdef.data if c.msgdef else ""
                 )
             for conn, t, data in reader.messages():
-                raw.messages.append((conn.id, t, bytes(data)))
+                raw.counts[conn.id] = raw.counts.get(conn.id, 0) + 1
+                if keep is None or keep(conn.topic):
+                    raw.messages.append((conn.id, t, bytes(data)))
     except Exception as exc:
         raise BagError(f"{path}: rosbag2 (sqlite3) recording cannot be read: {exc}") from None
 
 
-def read_raw(path: str | Path) -> RawBag:
-    """Every readable message of a recording (directory, metadata.yaml or .mcap file)."""
+def _stream_sqlite(path: Path, wanted: frozenset[str], batch: int = 4096) -> Iterator[list[TopicMessage]]:
+    from rosbags.rosbag2 import Reader
+
+    with Reader(path) as reader:
+        conns = [c for c in reader.connections if c.topic in wanted]
+        out: list[TopicMessage] = []
+        for conn, t, data in reader.messages(connections=conns) if conns else ():
+            out.append((conn.topic, t, bytes(data)))
+            if len(out) >= batch:
+                yield out
+                out = []
+        if out:
+            yield out
+
+
+def read_raw(path: str | Path, keep: Callable[[str], bool] | None = None) -> RawBag:
+    """Every readable message of a recording (directory, metadata.yaml or .mcap
+    file); with ``keep``, only the messages of the topics it accepts are kept
+    (the others are counted; :meth:`RawBag.stream` reads them)."""
     bag, files, meta = _bag_files(Path(path))
     raw = RawBag(bag, files, {}, [], closed=True, recovered=False, metadata=meta)
     if files and files[0].suffix == ".db3":
-        _read_sqlite(bag, files, raw)
+        _read_sqlite(bag, raw, keep)
         return raw
     for f in files:
         try:
-            _read_mcap(f, raw)
+            for _ in _read_mcap(f, _Sink(raw, keep)):
+                pass
         except OSError as exc:
             raise BagError(f"{f}: cannot be read: {exc.strerror or exc}") from None
     if raw.closed and bag.is_dir() and not meta:
         raw.notes.append("metadata.yaml missing (the MCAP file itself is complete)")
-    if not raw.messages:
+    if not raw.counts:
         if raw.recovered:
             raise BagError(
                 f"{bag}: damaged beyond recovery: the MCAP file is cut short before its first whole message"

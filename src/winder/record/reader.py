@@ -14,6 +14,13 @@ into the :class:`Run`. A run read from a cut-short recording is ``recovered``
 and never ``complete``; :func:`recover` writes such a recording out again as
 a closed rosbag2 directory.
 
+Memory stays bounded however long the job: the first walk keeps only the few
+messages that describe the run (job, configurations, diagnostics), a second
+one decodes the joint samples (their number grows with the job's duration,
+not its steps) and checks the step chunks, and the step rows themselves are
+never held whole: :attr:`Run.step_rows` reads them again, one chunk at a time,
+each time it is iterated (:mod:`winder.analysis` streams through them).
+
 Everything here is ROS-free: messages are decoded with the ``rosbags``
 typestore of ROS 2 Jazzy.
 """
@@ -23,9 +30,10 @@ from __future__ import annotations
 import json
 import math
 import struct
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -51,6 +59,9 @@ __all__ = [
     "Run",
     "Samples",
     "SimConfig",
+    "StepArray",
+    "StepRows",
+    "StepSource",
     "read_raw",
     "read_run",
     "recover",
@@ -135,12 +146,66 @@ class Samples:
         return int(self.t.size)
 
 
+class StepSource(Protocol):
+    """The timed step rows of a run: (k, 5) int64 arrays [t_ns since job start,
+    segment, feed, fork, pole] (positions after each step), chunk by chunk in
+    the order the stream arrived; iterable any number of times."""
+
+    def __iter__(self) -> Iterator[IntArray]: ...
+
+    def __len__(self) -> int: ...
+
+
+_NO_ROWS = np.zeros((0, len(TIMED_COLUMNS)), np.int64)
+
+
+def _stack(chunks: Iterator[IntArray]) -> IntArray:
+    parts = list(chunks)
+    return np.vstack(parts) if parts else _NO_ROWS.copy()
+
+
+class StepRows:
+    """The step rows of a recording, read from the bag again, one recorded
+    chunk at a time, each time they are iterated."""
+
+    def __init__(self, raw: RawBag, topic: str, msgtype: str, rows: int) -> None:
+        self._raw, self._topic, self._msgtype, self._rows = raw, topic, msgtype, rows
+
+    def __len__(self) -> int:
+        return self._rows
+
+    def __iter__(self) -> Iterator[IntArray]:
+        store = _typestore()
+        for batch in self._raw.stream([self._topic]):
+            for _, _, data in batch:
+                yield _unpack_steps(
+                    _deserialize(store, self._raw.path, self._topic, data, self._msgtype), self._topic
+                )
+
+
+class StepArray:
+    """Step rows held in memory, given out in chunks of ``chunk`` rows (for
+    tests of the streamed analysis, and for runs built in memory)."""
+
+    def __init__(self, rows: IntArray, chunk: int = 8192) -> None:
+        if chunk < 1:
+            raise ValueError(f"chunk={chunk} is invalid: must be >= 1")
+        self._rows, self._chunk = np.asarray(rows, dtype=np.int64).reshape(-1, len(TIMED_COLUMNS)), chunk
+
+    def __len__(self) -> int:
+        return int(self._rows.shape[0])
+
+    def __iter__(self) -> Iterator[IntArray]:
+        for i in range(0, self._rows.shape[0], self._chunk):
+            yield self._rows[i : i + self._chunk]
+
+
 @dataclass(frozen=True)
 class Run:
     """One recorded winding job, decoded (see module doc).
 
-    ``steps``: (N, 5) int64 rows [t_ns since job start, segment, feed, fork,
-    pole], positions after each step, as the stream arrived. ``report``: the
+    ``step_rows``: the timed step rows (:class:`StepSource`), streamed;
+    :attr:`steps` holds them all in one array (for small runs). ``report``: the
     sim node's last job status (key -> value text: state, steps_done,
     lost_steps, real_time_factor, ...), empty if none was recorded.
     ``complete``: the bag was closed, no chunk of it was damaged, and the sim
@@ -152,7 +217,7 @@ class Run:
     namespace: str
     plan: JobPlan
     sim_config: SimConfig | None
-    steps: IntArray
+    step_rows: StepSource
     commands: Samples
     states: Samples
     report: dict[str, str]
@@ -169,6 +234,16 @@ class Run:
     @property
     def complete(self) -> bool:
         return self.closed and not self.damaged and self.report.get("state") == "done"
+
+    @property
+    def steps(self) -> IntArray:
+        """All step rows as one (N, 5) array: memory grows with the job; the
+        analysis iterates :attr:`step_rows` instead."""
+        return _stack(iter(self.step_rows))
+
+    @property
+    def steps_recorded(self) -> int:
+        return len(self.step_rows)
 
     @property
     def job_id(self) -> str:
@@ -295,6 +370,16 @@ def _joint_samples_slow(datas: list[bytes], topic: str) -> Samples:
     return Samples(t, pos, vel)
 
 
+#: the topics whose messages the first walk keeps (they describe the run and
+#: are few); step chunks and joint samples are streamed
+_KEPT = ("/" + JOB, "/" + SIM_CONFIG, "/" + PROFILE_CONFIG)
+_JOINT_BATCH = 8192
+
+
+def _kept(topic: str) -> bool:
+    return topic == DIAGNOSTICS or topic.endswith(_KEPT)
+
+
 def read_run(path: str | Path, namespace: str | None = None) -> Run:
     """Read a winder recording (bag directory, its metadata.yaml or .mcap file).
 
@@ -302,7 +387,7 @@ def read_run(path: str | Path, namespace: str | None = None) -> Run:
     default the one cell whose ``winder/job`` topic has a message. Raises
     :class:`BagError` (a ValueError) with a one-line reason.
     """
-    raw = read_raw(path)
+    raw = read_raw(path, keep=_kept)
     counts = raw.topics()
     ns = _pick_namespace(raw.path, counts, namespace)
     topic = {
@@ -310,7 +395,8 @@ def read_run(path: str | Path, namespace: str | None = None) -> Run:
         for key in (JOB, SIM_CONFIG, PROFILE_CONFIG, STEP_TIMES, JOINT_COMMANDS, JOINT_STATES)
     }
     decoded = _decode(raw, topic)
-    return _assemble(raw, ns, counts, topic, decoded)
+    streamed = _stream_pass(raw, topic)
+    return _assemble(raw, ns, counts, topic, decoded, streamed)
 
 
 def _pick_namespace(bag: Path, counts: dict[str, int], namespace: str | None) -> str:
@@ -333,42 +419,95 @@ def _pick_namespace(bag: Path, counts: dict[str, int], namespace: str | None) ->
     return spaces[0]
 
 
+def _deserialize(store: Any, bag: Path, topic: str, data: bytes, msgtype: str) -> Any:
+    try:
+        return store.deserialize_cdr(data, msgtype)
+    except Exception as exc:
+        raise BagError(f"{bag}: a {topic} message ({msgtype}) cannot be decoded: {exc}") from None
+
+
 def _decode(raw: RawBag, topic: dict[str, str]) -> dict[str, list[Any]]:
-    """The messages of the cell's topics and of /diagnostics, per topic, in
-    file order: decoded, but joint states kept as CDR bytes (decoded together
-    by :func:`_joint_samples`)."""
+    """The kept messages of the cell's topics and of /diagnostics, per topic,
+    in file order, decoded."""
     wanted = {*topic.values(), DIAGNOSTICS}
-    joints = {topic[JOINT_COMMANDS], topic[JOINT_STATES]}
     store = _typestore()
     decoded: dict[str, list[Any]] = {t: [] for t in wanted}
     for cid, _, data in raw.messages:
         conn = raw.connections[cid]
-        if conn.topic not in wanted:
-            continue
-        if conn.topic in joints:
-            if conn.msgtype != "sensor_msgs/msg/JointState":
-                raise BagError(
-                    f"{raw.path}: {conn.topic} has type {conn.msgtype}, not sensor_msgs/msg/JointState"
-                )
-            decoded[conn.topic].append(data)
-            continue
-        try:
-            decoded[conn.topic].append(store.deserialize_cdr(data, conn.msgtype))
-        except Exception as exc:
-            raise BagError(
-                f"{raw.path}: a {conn.topic} message ({conn.msgtype}) cannot be decoded: {exc}"
-            ) from None
+        if conn.topic in wanted:
+            decoded[conn.topic].append(_deserialize(store, raw.path, conn.topic, data, conn.msgtype))
     return decoded
 
 
+@dataclass(frozen=True)
+class _Streamed:
+    commands: Samples
+    states: Samples
+    steps: StepSource
+
+
+def _stream_pass(raw: RawBag, topic: dict[str, str]) -> _Streamed:
+    """The second walk: the joint samples decoded (a batch at a time), the step
+    chunks checked and counted but not kept."""
+    joints = (topic[JOINT_COMMANDS], topic[JOINT_STATES])
+    steps_type = "std_msgs/msg/Int64MultiArray"
+    for conn in raw.connections.values():
+        if conn.topic in joints and conn.msgtype != "sensor_msgs/msg/JointState":
+            raise BagError(
+                f"{raw.path}: {conn.topic} has type {conn.msgtype}, not sensor_msgs/msg/JointState"
+            )
+        if conn.topic == topic[STEP_TIMES]:
+            steps_type = conn.msgtype
+    store = _typestore()
+    pending: dict[str, list[bytes]] = {t: [] for t in joints}
+    parts: dict[str, list[Samples]] = {t: [] for t in joints}
+    rows = 0
+    for batch in raw.stream({*joints, topic[STEP_TIMES]}):
+        for name, _, data in batch:
+            if name == topic[STEP_TIMES]:
+                msg = _deserialize(store, raw.path, name, data, steps_type)
+                rows += _unpack_steps(msg, name).shape[0]
+                continue
+            pending[name].append(data)
+            if len(pending[name]) >= _JOINT_BATCH:
+                parts[name].append(_joint_samples(pending[name], name))
+                pending[name] = []
+    samples = {}
+    for name in joints:
+        if pending[name]:
+            parts[name].append(_joint_samples(pending[name], name))
+        samples[name] = _concat(parts[name])
+    return _Streamed(
+        samples[topic[JOINT_COMMANDS]],
+        samples[topic[JOINT_STATES]],
+        StepRows(raw, topic[STEP_TIMES], steps_type, rows),
+    )
+
+
+def _concat(parts: list[Samples]) -> Samples:
+    if not parts:
+        return Samples.empty()
+    if len(parts) == 1:
+        return parts[0]
+    return Samples(
+        np.concatenate([p.t for p in parts]),
+        np.vstack([p.pos for p in parts]),
+        np.vstack([p.vel for p in parts]),
+    )
+
+
 def _assemble(
-    raw: RawBag, ns: str, counts: dict[str, int], topic: dict[str, str], decoded: dict[str, list[Any]]
+    raw: RawBag,
+    ns: str,
+    counts: dict[str, int],
+    topic: dict[str, str],
+    decoded: dict[str, list[Any]],
+    streamed: _Streamed,
 ) -> Run:
     """The :class:`Run` of the cell in namespace ``ns`` from its decoded messages."""
     plan = _decode_plan(raw.path, decoded[topic[JOB]], topic[JOB])
     notes = list(raw.notes)
     sim_config = _decode_sim_config(raw.path, decoded[topic[SIM_CONFIG]], topic[SIM_CONFIG], notes)
-    steps = _decode_steps(decoded[topic[STEP_TIMES]], topic[STEP_TIMES])
     profile_config = _decode_profile_config(decoded[topic[PROFILE_CONFIG]], topic[PROFILE_CONFIG], notes)
     report, profile = _decode_diagnostics(decoded[DIAGNOSTICS], ns)
     return Run(
@@ -376,9 +515,9 @@ def _assemble(
         namespace=ns,
         plan=plan,
         sim_config=sim_config,
-        steps=steps,
-        commands=_joint_samples(decoded[topic[JOINT_COMMANDS]], topic[JOINT_COMMANDS]),
-        states=_joint_samples(decoded[topic[JOINT_STATES]], topic[JOINT_STATES]),
+        step_rows=streamed.steps,
+        commands=streamed.commands,
+        states=streamed.states,
         report=report,
         profile=str(profile_config.get("profile", profile)),
         closed=raw.closed,
@@ -407,12 +546,6 @@ def _decode_sim_config(bag: Path, msgs: list[Any], topic: str, notes: list[str])
         return SimConfig.from_json(msgs[0].data)
     except (ValueError, KeyError, TypeError) as exc:
         raise BagError(f"{bag}: {topic} is not a sim configuration: {exc}") from None
-
-
-def _decode_steps(msgs: list[Any], topic: str) -> IntArray:
-    """The timed step rows of every step_times chunk, in order."""
-    chunks = [_unpack_steps(m, topic) for m in msgs]
-    return np.vstack(chunks) if chunks else np.zeros((0, 5), np.int64)
 
 
 def _decode_profile_config(msgs: list[Any], topic: str, notes: list[str]) -> dict[str, Any]:

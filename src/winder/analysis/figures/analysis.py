@@ -29,8 +29,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 import numpy.typing as npt
 
+from winder.analysis.digest import ZOOM_STEPS, Digest
 from winder.analysis.identify import Identification
-from winder.analysis.metrics import Analysis, command_kinematics
+from winder.analysis.metrics import Analysis, digest_run, paired_error, winding_samples
 from winder.motion.job import AXES
 from winder.record.reader import Run
 
@@ -40,8 +41,6 @@ CMD, ACT, IDEAL = "tab:blue", "tab:orange", "k"
 #: joint units and the scale to show them in
 SHOW = {"feed": (1e3, "mm"), "fork": (1.0, "rad"), "pole": (1.0, "rad")}
 MAX_POINTS = 40_000
-#: steps shown in the tracking zoom
-ZOOM_STEPS = 40
 
 
 def plots_dir(run_path: Path) -> Path:
@@ -66,17 +65,16 @@ def _title(run: Run) -> str:
 
 
 def _first_ramp(
-    run: Run, c: int, t: npt.NDArray[np.float64], v: npt.NDArray[np.float64]
+    d: Digest, axis: str, t: npt.NDArray[np.float64], v: npt.NDArray[np.float64]
 ) -> tuple[float, float] | None:
-    """Time window around the first acceleration of axis ``c``: from just before
-    its first step until shortly after its commanded speed first levels off."""
-    moves = np.nonzero(np.diff(np.concatenate([[run.plan.segments[0].start[c]], run.steps[:, 2 + c]])))[0]
-    if not moves.size:
+    """Time window around the first acceleration of ``axis``: from just before
+    its first step until shortly after its commanded speed first levels off
+    (``t``, ``v``: its command over the segment of that first step)."""
+    first = d.first_moves[axis]
+    if first is None:
         return None
-    t0 = run.steps[moves[0], 0] / 1e9
-    seg = run.steps[moves[0], 1]
-    in_seg = run.steps[run.steps[:, 1] == seg, 0] / 1e9
-    t_seg_end = float(in_seg[-1]) if in_seg.size else t0 + 1.0
+    t0 = first.t0 / 1e9
+    t_seg_end = d.segment_end.get(first.segment, first.t0) / 1e9
     m = (t >= t0) & (t <= t_seg_end)
     if np.any(m):
         peak = np.max(np.abs(v[m]))
@@ -87,8 +85,7 @@ def _first_ramp(
     return t0 - 0.03 * max(t1 - t0, 0.1), t1
 
 
-def _motion(run: Run, out: Path) -> Path:
-    kin = command_kinematics(run)
+def _motion(run: Run, d: Digest, out: Path) -> Path:
     st = run.states
     acc = np.asarray(np.gradient(st.vel, st.t, axis=0)) if len(st) >= 3 else np.zeros((0, 3))
     jerk = np.asarray(np.gradient(acc, st.t, axis=0)) if len(st) >= 3 else np.zeros((0, 3))
@@ -97,18 +94,18 @@ def _motion(run: Run, out: Path) -> Path:
     rate = run.sim_config.publish_rate if run.sim_config else math.nan
     for c, axis in enumerate(AXES):
         scale, unit = SHOW[axis]
-        t, v, a, j = kin[axis]
+        tc, vc, _, _ = d.traces[axis].whole_run()
+        t, v, a, j = d.traces[axis].first_move()
         ax = axes[0, c]
         if len(st):
             ta, va = _thin(st.t, st.vel[:, c])
             ax.plot(ta, va * scale, color=ACT, lw=0.6, label="simulated axis")
-        if v.size:
-            tc, vc = _thin(t, v)
+        if vc.size:
             ax.plot(tc, vc * scale, ".", color=CMD, ms=1.0, label="command")
         ax.set_title(f"{axis}: whole run", fontsize=10)
         ax.set_ylabel(f"{axis} velocity ({unit}/s)")
         ax.set_xlabel("time (s)")
-        window = _first_ramp(run, c, t, v) if v.size else None
+        window = _first_ramp(d, axis, t, v) if v.size else None
         for r, (cmd, act) in enumerate(((v, st.vel[:, c]), (a, acc[:, c]), (j, jerk[:, c]))):
             ax = axes[r + 1, c]
             if window is None:
@@ -153,13 +150,11 @@ def _motion(run: Run, out: Path) -> Path:
     return path
 
 
-def _tracking(run: Run, out: Path) -> Path:
+def _tracking(run: Run, d: Digest, out: Path) -> Path:
     cm, st = run.commands, run.states
     fig, axes = plt.subplots(3, 3, figsize=(15, 9.5), constrained_layout=True)
     js = run.plan.joint_step
-    ti_s = np.round(st.t * 1e9).astype(np.int64)
-    ti_c = np.round(cm.t * 1e9).astype(np.int64)
-    _, i_s, i_c = np.intersect1d(ti_s, ti_c, return_indices=True)
+    i_s, diff = paired_error(run)
     for c, axis in enumerate(AXES):
         scale, unit = SHOW[axis]
         ax = axes[0, c]
@@ -171,14 +166,14 @@ def _tracking(run: Run, out: Path) -> Path:
         ax.set_title(axis)
         # zoom: the start of the axis' first move, from the step rows (exact staircase)
         ax = axes[1, c]
-        moves = np.nonzero(np.diff(np.concatenate([[run.plan.segments[0].start[c]], run.steps[:, 2 + c]])))[0]
-        if moves.size:
-            t0 = run.steps[moves[0], 0] / 1e9
-            t_end = run.steps[moves[min(ZOOM_STEPS, moves.size - 1)], 0] / 1e9 + 0.01
-            sel_s = (run.steps[:, 0] / 1e9 >= t0 - 0.02) & (run.steps[:, 0] / 1e9 <= t_end)
-            ts = np.concatenate([[t0 - 0.02], run.steps[sel_s, 0] / 1e9, [t_end]])
-            before = run.steps[moves[0] - 1, 2 + c] if moves[0] > 0 else run.plan.segments[0].start[c]
-            ps = np.concatenate([[before], run.steps[sel_s, 2 + c], [run.steps[sel_s, 2 + c][-1]]])
+        first = d.first_moves[axis]
+        if first is not None:
+            t0 = first.t0 / 1e9
+            t_end = first.move_times[min(ZOOM_STEPS, len(first.move_times) - 1)] / 1e9 + 0.01
+            rows = first.zoom_rows()
+            sel = rows[0] / 1e9 <= t_end
+            ts = np.concatenate([[t0 - 0.02], rows[0, sel] / 1e9, [t_end]])
+            ps = np.concatenate([[first.before], rows[1, sel], [rows[1, sel][-1]]])
             ax.step(ts, ps, where="post", color=CMD, lw=1.0, label="command (steps)")
             m = (st.t >= t0 - 0.02) & (st.t <= t_end)
             ax.plot(st.t[m], st.pos[m, c] / js[c], ".-", color=ACT, lw=0.8, ms=2.5, label="simulated axis")
@@ -187,7 +182,7 @@ def _tracking(run: Run, out: Path) -> Path:
         ax.set_ylabel(f"{axis} position (steps)")
         ax.set_xlabel("time (s)")
         ax = axes[2, c]
-        err = (cm.pos[i_c, c] - st.pos[i_s, c]) / js[c]
+        err = diff[:, c] / js[c]
         te, ee = _thin(st.t[i_s], err)
         ax.plot(te, ee, color="tab:red", lw=0.6)
         peak = float(np.max(np.abs(err))) if err.size else math.nan
@@ -212,7 +207,7 @@ def _tracking(run: Run, out: Path) -> Path:
     return path
 
 
-def _winding(run: Run, analysis: Analysis, out: Path) -> Path:
+def _winding(run: Run, analysis: Analysis, d: Digest, out: Path) -> Path:
     plan = run.plan
     lx, ly = plan.step_lengths[0], plan.step_lengths[1]
     js = plan.joint_step
@@ -223,16 +218,21 @@ def _winding(run: Run, analysis: Analysis, out: Path) -> Path:
     ax1 = fig.add_subplot(gs[0, 1])
     ax2 = fig.add_subplot(gs[1, :])
     layers = [(i, s) for i, s in enumerate(plan.segments) if s.kind == "layer"]
-    seg_col = run.steps[:, 1]
     # overview: the ideal lines and the commanded path, unrolled
     for n, (i, s) in enumerate(layers):
         x = np.array([s.start[0], s.end[0]]) * lx * 1e3
         y = np.array([s.start[1], s.end[1]]) * ly
         ax0.plot(y, x, color=IDEAL, lw=0.8, label="ideal lines" if n == 0 else None)
-        rows = run.steps[seg_col == i]
-        if rows.shape[0]:
-            yy, xx = _thin(rows[:, 3] * ly, rows[:, 2] * lx * 1e3, n=4000)
-            ax0.plot(yy, xx, ".", ms=1.0, color=CMD, label="commanded steps" if n == 0 else None)
+        if d.layers[i].path:
+            rows = np.vstack(d.layers[i].path)
+            ax0.plot(
+                rows[:, 1] * ly,
+                rows[:, 0] * lx * 1e3,
+                ".",
+                ms=1.0,
+                color=CMD,
+                label="commanded steps" if n == 0 else None,
+            )
     ax0.set_xlabel("flyer arc, unrolled (m)")
     ax0.set_ylabel("feed (mm)")
     ax0.set_title("unrolled winding path: every layer a straight line", fontsize=10)
@@ -242,23 +242,20 @@ def _winding(run: Run, analysis: Analysis, out: Path) -> Path:
     if layers:
         i, s = layers[0]
         norm = math.hypot(s.delta[0] * lx, s.delta[1] * ly)
-        y_mid = s.start[1] + s.delta[1] // 2
-        y_lo, y_hi = y_mid - spr // 16, y_mid + spr // 16
-        rows = run.steps[seg_col == i]
-        if rows.shape[0]:
-            xr = rows[:, 2] - s.start[0]
-            yr = rows[:, 3] - s.start[1]
-            d = (s.delta[0] * yr - xr * s.delta[1]) * lx * ly / norm
-            m = (rows[:, 3] >= y_lo) & (rows[:, 3] <= y_hi)
-            ax1.plot(rows[m, 3] / spr, d[m] * 1e6, ".-", color=CMD, lw=0.5, ms=3, label="commanded steps")
+        zoom = d.layers[i].zoom
+        assert zoom is not None
+        y_lo, y_hi = zoom
+        if d.layers[i].zoom_rows:
+            fork, dist = np.hstack(d.layers[i].zoom_rows)
+            ax1.plot(fork / spr, dist * 1e6, ".-", color=CMD, lw=0.5, ms=3, label="commanded steps")
         st = run.states
         if len(st):
             x = st.pos[:, 0] / js[0] - s.start[0]
             y = st.pos[:, 1] / js[1] - s.start[1]
             m = (y + s.start[1] >= y_lo) & (y + s.start[1] <= y_hi)
-            d = (s.delta[0] * y[m] - x[m] * s.delta[1]) * lx * ly / norm
+            dist = (s.delta[0] * y[m] - x[m] * s.delta[1]) * lx * ly / norm
             ax1.plot(
-                (y[m] + s.start[1]) / spr, d * 1e6, "o-", color=ACT, ms=3, lw=0.8, label="simulated axes"
+                (y[m] + s.start[1]) / spr, dist * 1e6, "o-", color=ACT, ms=3, lw=0.8, label="simulated axes"
             )
         ax1.axhline(0, color=IDEAL, lw=0.8, label="ideal line")
         ax1.set_xlabel("fork position (turns)")
@@ -271,8 +268,8 @@ def _winding(run: Run, analysis: Analysis, out: Path) -> Path:
     # per turn: eq. 7 over each turn, in % of the wire diameter
     wire = plan.job.wire_diameter
     for label, color, per_turn in (
-        ("command", CMD, _per_turn_command(run)),
-        ("simulated axes", ACT, _per_turn_axes(run)),
+        ("command", CMD, _per_turn_command(d)),
+        ("simulated axes", ACT, _per_turn_axes(run, d)),
     ):
         if per_turn.size:
             ax2.plot(
@@ -305,55 +302,42 @@ def _winding(run: Run, analysis: Analysis, out: Path) -> Path:
     return path
 
 
-def _per_turn(
-    run: Run, seg: npt.NDArray[np.int64], x: npt.NDArray[np.float64], y: npt.NDArray[np.float64]
-) -> npt.NDArray[np.float64]:
-    """Mean distance per turn, in winding order, of points (x, y) in steps
-    measured against the layer ``seg`` of each point."""
+def _per_turn_command(d: Digest) -> npt.NDArray[np.float64]:
+    """Mean distance of the commanded steps per turn, in winding order."""
+    means = [d.layers[i].turn_means() for i in sorted(d.layers) if d.layers[i].points]
+    return np.concatenate(means) if means else np.zeros(0)
+
+
+def _per_turn_axes(run: Run, d: Digest) -> npt.NDArray[np.float64]:
+    """Mean distance of the joint samples per turn, in winding order, each
+    measured against the layer whose fork range holds it."""
     plan = run.plan
     lx, ly = plan.step_lengths[0], plan.step_lengths[1]
     spr, turns = plan.job.fork_steps_per_rev, plan.job.turns_per_layer
+    seg, x, y = winding_samples(run, d)
     out = []
-    for i, s in enumerate(plan.segments):
-        if s.kind != "layer":
-            continue
+    for i in (int(v) for v in np.unique(seg)):
+        s = plan.segments[i]
         m = seg == i
-        if not np.any(m):
-            continue
         xr, yr = x[m] - s.start[0], y[m] - s.start[1]
-        d = np.abs(s.delta[0] * yr - xr * s.delta[1]) * lx * ly / math.hypot(s.delta[0] * lx, s.delta[1] * ly)
+        dist = (
+            np.abs(s.delta[0] * yr - xr * s.delta[1]) * lx * ly / math.hypot(s.delta[0] * lx, s.delta[1] * ly)
+        )
         tid = np.clip(np.ceil(yr / spr) - 1, 0, turns - 1).astype(np.int64)
-        sums, counts = np.bincount(tid, weights=d), np.bincount(tid)
+        sums, counts = np.bincount(tid, weights=dist), np.bincount(tid)
         out.append(sums[counts > 0] / counts[counts > 0])
     return np.concatenate(out) if out else np.zeros(0)
 
 
-def _per_turn_command(run: Run) -> npt.NDArray[np.float64]:
-    return _per_turn(run, run.steps[:, 1], run.steps[:, 2].astype(float), run.steps[:, 3].astype(float))
-
-
-def _per_turn_axes(run: Run) -> npt.NDArray[np.float64]:
-    st, plan = run.states, run.plan
-    if not len(st) or not run.steps.shape[0]:
-        return np.zeros(0)
-    js = plan.joint_step
-    ts = run.steps[:, 0]
-    i = np.searchsorted(ts, np.round(st.t * 1e9).astype(np.int64), side="right") - 1
-    seg_now = np.where(i >= 0, run.steps[np.maximum(i, 0), 1], -1)
-    kinds = np.array([s.kind == "layer" for s in plan.segments])
-    winding = (seg_now >= 0) & kinds[np.maximum(seg_now, 0)]
-    x, y = st.pos[winding, 0] / js[0], st.pos[winding, 1] / js[1]
-    layer_ids = [k for k, s in enumerate(plan.segments) if s.kind == "layer"]
-    starts = np.array([plan.segments[k].start[1] for k in layer_ids], dtype=float)
-    which = np.clip(np.searchsorted(starts, y, side="right") - 1, 0, len(layer_ids) - 1)
-    return _per_turn(run, np.asarray(layer_ids)[which], x, y)
-
-
-def plot_analysis(run: Run, analysis: Analysis, out: Path | None = None) -> list[Path]:
-    """Write motion.png, tracking.png and winding.png; return their paths."""
+def plot_analysis(
+    run: Run, analysis: Analysis, out: Path | None = None, digested: Digest | None = None
+) -> list[Path]:
+    """Write motion.png, tracking.png and winding.png; return their paths.
+    ``digested``: the run's :func:`winder.analysis.metrics.digest_run`, if made already."""
+    d = digested if digested is not None else digest_run(run)
     out = plots_dir(run.path) if out is None else Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    return [_motion(run, out), _tracking(run, out), _winding(run, analysis, out)]
+    return [_motion(run, d, out), _tracking(run, d, out), _winding(run, analysis, d, out)]
 
 
 def plot_identification(run: Run, ident: Identification, out: Path | None = None) -> list[Path]:
