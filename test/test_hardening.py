@@ -387,6 +387,13 @@ def test_a_restarted_node_leaves_the_cell_able_to_run_the_next_job(
     finished = [b for b in sorted(bags.iterdir()) if (b / "metadata.yaml").exists()]
     assert finished, sorted(bags.iterdir())
     assert final_status_of(finished[-1])["state"] == "incomplete"
+    # the stall's ERROR reports are in the bag, and winder analyze says so
+    from winder.analysis.metrics import analyze
+    from winder.record.reader import read_run
+
+    run = read_run(finished[-1])
+    assert any("stalled" in e for e in run.errors), run.errors
+    assert any("ERROR report" in n for n in analyze(run).notes)
     # the next job runs through the same (restarted) cell
     seen.clear()
     future = client.call_async(Trigger.Request())

@@ -109,15 +109,21 @@ def test_cell_records_every_step_once_in_order(tmp_path: Path, procs: Procs, pro
     # the job, path and motor set-up travel with the recording
     job = json.loads(bag["/winder/job"][0][1].data)
     assert job["job"]["job_id"] == "small"
+    assert job["run_id"].startswith("small_")  # the run's identity travels with its job
     path = bag["/winder/path"][0][1]
-    assert path.header.frame_id == "small"
+    assert path.header.frame_id == job["run_id"]
     assert list(path.joint_names) == ["feed", "fork", "pole"]
     end = np.array(path.points[-1].positions)
     assert end == pytest.approx(np.array(expected_end(SMALL_JOB)) * np.array(job["joint_step"]))
     config = json.loads(bag["/winder/sim_config"][0][1].data)
     assert config["model"] == "linear"
     ramp = json.loads(bag["/winder/profile_config"][0][1].data)
-    assert ramp["profile"] == profile and ramp["job_id"] == "small"
+    assert ramp["profile"] == profile and ramp["job_id"] == "small" and ramp["run_id"] == job["run_id"]
+    # the path's corners carry the time each is reached: 0 at the start, the
+    # planned job duration at the end, in order
+    reach = np.array([p.time_from_start.sec + p.time_from_start.nanosec * 1e-9 for p in path.points])
+    assert reach[0] == 0 and np.all(np.diff(reach) > 0)
+    assert reach[-1] == pytest.approx(ramp["job_duration_s"], abs=1e-9)
 
     # the clock never goes backwards and joint states come with it
     clock = np.array([m.clock.sec * 10**9 + m.clock.nanosec for _, m in bag["/clock"]])
@@ -396,7 +402,7 @@ def test_launch_file_describes_the_three_nodes() -> None:
                 sys.modules.pop(k, None)
             else:
                 sys.modules[k] = v
-    from winder.contract.params import INTERP_SPECS, PROFILE_SPECS
+    from winder.contract.params import INTERP_SPECS, PROFILE_SPECS, SIM_SPECS
 
     assert [(n["package"], n["executable"]) for n in made] == [
         ("winder_sim", "sim_node"),
@@ -405,5 +411,6 @@ def test_launch_file_describes_the_three_nodes() -> None:
     ]
     assert set(made[2]["parameters"][0]) == set(INTERP_SPECS)
     assert set(made[1]["parameters"][0]) == set(PROFILE_SPECS)
+    assert set(made[0]["parameters"][0]) == set(SIM_SPECS)  # fork.J and the other dotted ones too
     declared = {a.args[0] for a in desc.args[0] if isinstance(a, Recorder) and a.args}
-    assert {"namespace", "turns_per_layer", "profile", "model"} <= declared
+    assert {"namespace", "turns_per_layer", "profile", "model", "fork.J", "feed.D"} <= declared

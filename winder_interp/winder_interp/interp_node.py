@@ -1,10 +1,13 @@
 """interp_node: winding job (parameters) -> minimum-deviation step commands.
 
 In:  parameters (the fields of winder.motion.job.Job, autostart, chunk_steps),
-     service ~/start (std_srvs/Trigger).
-Out: winder/job (std_msgs/String, JSON job description, latched),
-     winder/path (trajectory_msgs/JointTrajectory, latched),
+     service ~/start (std_srvs/Trigger), winder/ready, winder/progress.
+Out: winder/job (std_msgs/String, JSON job description with the run id, latched),
      winder/steps (std_msgs/Int32MultiArray chunks), /diagnostics.
+
+Every start is a run with its own id (:func:`winder.contract.stream.make_run_id`):
+the start reply names it, the job description carries it to the other nodes,
+every status of the run reports it and the sim node names the run's bag after it.
 """
 
 from __future__ import annotations
@@ -14,18 +17,16 @@ from collections.abc import Iterator
 
 import numpy as np
 import numpy.typing as npt
-from builtin_interfaces.msg import Duration
 from diagnostic_msgs.msg import KeyValue
 from rclpy.node import Node
 from std_msgs.msg import Int32MultiArray, String
 from std_srvs.srv import Trigger
-from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from winder.contract.params import INTERP_SPECS, check_interp
-from winder.contract.stream import describe_job
-from winder.contract.topics import TOPIC_JOB, TOPIC_PATH, TOPIC_PROGRESS, TOPIC_STEPS
+from winder.contract.stream import describe_job, make_run_id
+from winder.contract.topics import TOPIC_JOB, TOPIC_PROGRESS, TOPIC_STEPS, status_values
 from winder.motion.interp import interpolate
-from winder.motion.job import AXES, FIELD_SPECS, Job
+from winder.motion.job import FIELD_SPECS, Job
 from winder.ros.chunks import STEPS_CDR
 from winder.ros.diagnostics import ERROR, OK, Diagnostics
 from winder.ros.qos import QOS_LATCHED, QOS_STATE, QOS_STREAM
@@ -42,16 +43,19 @@ class InterpNode(Node):
         self.settings = Settings(self, INTERP_SPECS, check_interp)
 
         self.pub_job = self.create_publisher(String, TOPIC_JOB, QOS_LATCHED)
-        self.pub_path = self.create_publisher(JointTrajectory, TOPIC_PATH, QOS_LATCHED)
         self.pub_steps = self.create_publisher(Int32MultiArray, TOPIC_STEPS, QOS_STREAM)
         self.diag = Diagnostics(self, "winder_interp")
         self.create_service(Trigger, "~/start", self.on_start)
         self.create_subscription(KeyValue, TOPIC_PROGRESS, self.on_progress, QOS_STATE)
-        self.readiness = Readiness(self)  # the start handshake: consumer and profile node ready
-        steady_timer(self, 0.02, self.tick)
+        # the start handshake: consumer and profile node ready (an autostart waits for it)
+        self.readiness = Readiness(self, on_change=self.wake)
+        # tick() sends a running job's chunks every 20 ms; idle, only the 1 Hz report runs
+        self.tick_timer = steady_timer(self, 0.02, self.tick)
         steady_timer(self, 1.0, self.report)
 
         self.job: Job | None = None
+        self.run_id = ""
+        self.runs = 0  # runs started in this node's life
         self.pending: Iterator[npt.NDArray[np.int32]] | None = None  # generator of chunks of the running job
         self.sent = 0
         self.consumed = 0
@@ -68,15 +72,24 @@ class InterpNode(Node):
         resp.success, resp.message = self.start_job()
         return resp
 
+    def wake(self) -> None:
+        """Something happened that may let work go on: run tick() now and on its timer."""
+        if self.tick_timer.is_canceled():
+            self.tick_timer.reset()
+        self.tick()
+
     def tick(self) -> None:
-        if not self.autostarted and self.settings.values()["autostart"] and not self.readiness.missing():
-            self.autostarted = True
+        autostart = not self.autostarted and self.settings.values()["autostart"]
+        if autostart and not self.readiness.missing():
+            self.autostarted = autostart = True
             ok, why = self.start_job()
             if not ok:
                 self.get_logger().error(why)
         self.send_some()
         if self.pending is None and self.running():  # all sent, not all taken yet
             self.abort_if_stalled()
+        if not self.running():
+            self.tick_timer.cancel()  # nothing to do until a start or a readiness change
 
     # -- work ------------------------------------------------------------
     def running(self) -> bool:
@@ -96,8 +109,8 @@ class InterpNode(Node):
         if self.running():
             assert self.job is not None
             return False, (
-                f"job {self.job.job_id} is running ({self.consumed}/{self.job.total_steps} steps taken, "
-                f"{self.sent} sent): start refused, the running job goes on"
+                f"job {self.job.job_id} run {self.run_id} is running ({self.consumed}/{self.job.total_steps} "
+                f"steps taken, {self.sent} sent): start refused, the running job goes on"
             )
         blocked = self.settings.blocked()
         if blocked:
@@ -112,31 +125,26 @@ class InterpNode(Node):
         except SpecError as exc:
             self.diag.publish("job", ERROR, f"job rejected: {exc}", {})
             return False, f"job rejected: {exc}"
+        self.runs += 1
         self.job = job
+        self.run_id = make_run_id(job.job_id, self.runs)
         self.sent = 0
         self.consumed = 0
         self.finished = False
         self.aborted = ""
         self.started_wall = self.last_receipt_wall = time.monotonic()
-        self.pub_job.publish(String(data=describe_job(job)))
-        self.pub_path.publish(self.path_message(job))
+        self.pub_job.publish(String(data=describe_job(job, self.run_id)))
         self.pending = self.chunks(job, values["chunk_steps"])
-        self.get_logger().info(f"job {job.job_id}: {job.total_steps} steps in {len(job.segments())} segments")
-        return True, f"job {job.job_id} started: {job.total_steps} steps"
-
-    def path_message(self, job: Job) -> JointTrajectory:
-        msg = JointTrajectory()
-        msg.header.frame_id = job.job_id
-        msg.header.stamp = self.get_clock().now().to_msg()
-        msg.joint_names = list(AXES)
-        scale = job.joint_step
-        segs = job.segments()
-        for pos in [segs[0].start] + [s.end for s in segs]:
-            pt = JointTrajectoryPoint()
-            pt.positions = [p * k for p, k in zip(pos, scale, strict=True)]
-            pt.time_from_start = Duration()  # timing belongs to the profile node
-            msg.points.append(pt)
-        return msg
+        if self.tick_timer.is_canceled():
+            self.tick_timer.reset()
+        self.get_logger().info(
+            f"run {self.run_id}: job {job.job_id}, {job.total_steps} steps in {len(job.segments())} segments"
+        )
+        self.report()
+        return True, (
+            f"run {self.run_id} started: job {job.job_id}, {job.total_steps} steps; "
+            f"bag {self.run_id} (in the consumer's bag_dir, if it records)"
+        )
 
     @staticmethod
     def chunks(job: Job, size: int) -> Iterator[npt.NDArray[np.int32]]:
@@ -153,7 +161,7 @@ class InterpNode(Node):
         """A receipt: steps of the running job the sim node has taken. Anything
         else on the topic (another job's, not a count, more than was sent) is
         ignored with a warning: it must not move the flow control."""
-        if self.job is None or msg.key != self.job.job_id:
+        if self.job is None or msg.key not in (self.run_id, self.job.job_id):
             return
         value = msg.value.strip()
         if not (value.isdigit() and value.isascii() and int(value) <= self.sent):
@@ -204,27 +212,32 @@ class InterpNode(Node):
         self.report()
 
     def report(self) -> None:
+        if not self.autostarted and self.settings.values()["autostart"] and not self.readiness.missing():
+            self.wake()  # autostart switched on while the cell was ready already
+            return
         blocked = self.settings.blocked()
         if blocked:  # repeated, as a status is: late listeners hear it too
-            self.diag.publish("job", ERROR, blocked, {})
+            self.diag.publish("job", ERROR, blocked, status_values("blocked"))
             return
         if self.job is None:
-            self.diag.publish("job", OK, "idle: no job started", {"state": "idle"})
+            self.diag.publish("job", OK, "idle: no job started", status_values("idle"))
             return
         total = self.job.total_steps
-        state = "aborted" if self.aborted else ("sent" if self.finished else "sending")
+        state = "incomplete" if self.aborted else ("running" if self.running() else "done")
+        sending = "sending" if self.pending is not None else "all sent"
         self.diag.publish(
             "job",
             ERROR if self.aborted else OK,
-            self.aborted or f"job {self.job.job_id}: {state} {self.sent}/{total} steps",
-            {
-                "job_id": self.job.job_id,
-                "steps_sent": self.sent,
-                "steps_total": total,
-                "progress": f"{self.sent / max(total, 1):.4f}",
-                "state": state,
-                "elapsed_s": f"{time.monotonic() - self.started_wall:.3f}",
-            },
+            self.aborted or f"run {self.run_id}: {sending}, {self.sent}/{total} steps",
+            status_values(
+                state,
+                self.job.job_id,
+                self.run_id,
+                self.sent,
+                total,
+                steps_taken=self.consumed,
+                elapsed_s=f"{time.monotonic() - self.started_wall:.3f}",
+            ),
         )
 
 

@@ -3,7 +3,9 @@
 In:  winder/job (std_msgs/String, latched), winder/steps (Int32MultiArray),
      parameters (profile kind and limits, in steps of the segment's major axis).
 Out: winder/step_times (std_msgs/Int64MultiArray: [t_ns, segment, feed, fork,
-     pole]), /diagnostics.
+     pole]), winder/path (trajectory_msgs/JointTrajectory, latched: the corner
+     points of the job with the time each is reached), winder/profile_config
+     (String, latched: the ramp in force), /diagnostics.
 
 Each segment is one move of its major axis' step count, ramped with the chosen
 profile from and to the start/stop rate ``v_start``; step k of N happens when
@@ -19,13 +21,24 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+from builtin_interfaces.msg import Duration
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.subscription import Subscription
 from std_msgs.msg import Int32MultiArray, Int64MultiArray, String
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from winder.contract.params import PROFILE_SPECS, check_profile, plan_job
 from winder.contract.stream import STEP_COLUMNS, TIMED_COLUMNS, JobPlan, StreamChecker, parse_job_description
-from winder.contract.topics import TOPIC_JOB, TOPIC_PROFILE_CONFIG, TOPIC_STEP_TIMES, TOPIC_STEPS
+from winder.contract.topics import (
+    TOPIC_JOB,
+    TOPIC_PATH,
+    TOPIC_PROFILE_CONFIG,
+    TOPIC_STEP_TIMES,
+    TOPIC_STEPS,
+    status_values,
+)
+from winder.motion.job import AXES
 from winder.ros.chunks import STEPS_CDR, TIMED_CDR, waiting
 from winder.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from winder.ros.qos import QOS_LATCHED, QOS_STREAM
@@ -40,15 +53,21 @@ class ProfileNode(Node):
         super().__init__("profile_node")
         self.settings = Settings(self, PROFILE_SPECS, check_profile)
 
-        self.pub = self.create_publisher(Int64MultiArray, TOPIC_STEP_TIMES, QOS_STREAM)
+        self.pub = self.create_publisher(
+            Int64MultiArray,
+            TOPIC_STEP_TIMES,
+            QOS_STREAM,
+            event_callbacks=PublisherEventCallbacks(matched=lambda _info: self.connect()),
+        )
         self.pub_config = self.create_publisher(String, TOPIC_PROFILE_CONFIG, QOS_LATCHED)
+        self.pub_path = self.create_publisher(JointTrajectory, TOPIC_PATH, QOS_LATCHED)
         self.diag = Diagnostics(self, "winder_profile")
         self.ready = Announcer(self, "profile")  # the start handshake (winder/ready)
         self.create_subscription(String, TOPIC_JOB, self.on_job, QOS_LATCHED)
         self.sub_steps: Subscription | None = None  # created once the timed stream has a reader
-        steady_timer(self, 0.05, self.connect)
+        # connect() and announce() follow the streams' matching as it happens;
+        # the 1 Hz report repeats both (and is the only timer)
         steady_timer(self, 1.0, self.report)
-        steady_timer(self, 0.1, self.announce)
 
         self.plan: JobPlan | None = None
         self.checker: StreamChecker | None = None
@@ -57,13 +76,18 @@ class ProfileNode(Node):
         self.early: list[bytes] = []
         self.timed = 0
         self.error = ""
-        self.error = ""
 
     def connect(self) -> None:
         if self.sub_steps is None and self.pub.get_subscription_count() > 0:
             self.sub_steps = self.create_subscription(
-                Int32MultiArray, TOPIC_STEPS, self.on_steps, QOS_STREAM, raw=True
+                Int32MultiArray,
+                TOPIC_STEPS,
+                self.on_steps,
+                QOS_STREAM,
+                raw=True,
+                event_callbacks=SubscriptionEventCallbacks(matched=lambda _info: self.announce()),
             )
+            self.announce()
 
     # -- in --------------------------------------------------------------
     def on_job(self, msg: String) -> None:
@@ -84,8 +108,9 @@ class ProfileNode(Node):
             return
         self.plan, self.profiles, self.seg_t0_ns = job, profiles, t0
         # the ramp in force for this job, latched: the sim node records it
-        config = {"job_id": job.job_id, **values, "job_duration_s": duration_ns / 1e9}
+        config = {"job_id": job.job_id, "run_id": job.run_id, **values, "job_duration_s": duration_ns / 1e9}
         self.pub_config.publish(String(data=json.dumps(config)))
+        self.pub_path.publish(self.path_message(job))
         self.checker = StreamChecker(job)
         self.timed = 0
         self.error = ""
@@ -93,6 +118,7 @@ class ProfileNode(Node):
             f"job {job.job_id}: {values['profile']} ramps, {len(profiles)} segments, "
             f"{duration_ns / 1e9:.3f} s"
         )
+        self.report()  # the run is on: its status at once
         early, self.early = self.early, []
         for raw in early:  # in order, before any taken from the queue
             self.time_chunk(raw)
@@ -133,6 +159,25 @@ class ProfileNode(Node):
         if self.checker.complete:
             self.report()
 
+    def path_message(self, job: JobPlan) -> JointTrajectory:
+        """The job's corner points (joint units) with the time each is reached:
+        the start at 0, each segment's end when its move ends. ``frame_id``
+        names the run (its id; the job id for a job without one)."""
+        msg = JointTrajectory()
+        msg.header.frame_id = job.run_id or job.job_id
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.joint_names = list(AXES)
+        ends = [
+            int(t0) + round(p.duration * 1e9) for t0, p in zip(self.seg_t0_ns, self.profiles, strict=True)
+        ]
+        corners = [(job.segments[0].start, 0)] + [(s.end, t) for s, t in zip(job.segments, ends, strict=True)]
+        for pos, t_ns in corners:
+            pt = JointTrajectoryPoint()
+            pt.positions = [p * k for p, k in zip(pos, job.joint_step, strict=True)]
+            pt.time_from_start = Duration(sec=t_ns // 1_000_000_000, nanosec=t_ns % 1_000_000_000)
+            msg.points.append(pt)
+        return msg
+
     def job_duration_ns(self) -> int:
         return int(self.seg_t0_ns[-1]) + round(self.profiles[-1].duration * 1e9) if self.profiles else 0
 
@@ -140,7 +185,22 @@ class ProfileNode(Node):
     def fail(self, why: str) -> None:
         self.error = why
         self.get_logger().error(why)
-        self.diag.publish("job", ERROR, why, {})
+        self.diag.publish("job", ERROR, why, self.values("incomplete"))
+
+    def values(self, state: str) -> dict[str, object]:
+        """This node's job status values in ``state`` (the common keys first)."""
+        if self.plan is None:
+            return status_values(state, profile=self.settings.values()["profile"])
+        return status_values(
+            state,
+            self.plan.job_id,
+            self.plan.run_id,
+            self.timed,
+            self.plan.total_steps,
+            profile=self.settings.values()["profile"],
+            gaps=self.checker.gaps if self.checker else 0,
+            job_duration_s=f"{self.job_duration_ns() / 1e9:.6f}",
+        )
 
     def announce(self) -> None:
         """winder/ready: ready once the steps' subscription is matched (see connect())."""
@@ -152,29 +212,26 @@ class ProfileNode(Node):
             self.ready.announce("waiting")
 
     def report(self) -> None:
+        self.connect()
         self.announce()
+        blocked = self.settings.blocked()
+        if blocked:
+            self.diag.publish("job", ERROR, blocked, self.values("blocked"))
+            return
         if self.plan is None:
-            why = self.settings.blocked() or self.error
-            if why:
-                self.diag.publish("job", ERROR, why, {})
+            if self.error:
+                self.diag.publish("job", ERROR, self.error, self.values("incomplete"))
             else:
-                self.diag.publish("job", OK, "idle: waiting for a job", {"state": "idle"})
+                self.diag.publish("job", OK, "idle: waiting for a job", self.values("idle"))
             return
         total = self.plan.total_steps
         level = ERROR if self.error else (WARN if self.checker and self.checker.gaps else OK)
+        state = "incomplete" if self.error else ("done" if self.timed >= total else "running")
         self.diag.publish(
             "job",
             level,
-            self.error or f"job {self.plan.job_id}: timed {self.timed}/{total} steps",
-            {
-                "job_id": self.plan.job_id,
-                "profile": self.settings.values()["profile"],
-                "steps_timed": self.timed,
-                "steps_total": total,
-                "progress": f"{self.timed / max(total, 1):.4f}",
-                "gaps": self.checker.gaps if self.checker else 0,
-                "job_duration_s": f"{self.job_duration_ns() / 1e9:.6f}",
-            },
+            self.error or f"run {self.plan.run_id or self.plan.job_id}: timed {self.timed}/{total} steps",
+            self.values(state),
         )
 
 

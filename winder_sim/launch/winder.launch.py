@@ -2,8 +2,9 @@
 
     ros2 launch winder_sim winder.launch.py profile:=trapezoid turns_per_layer:=40
 
-Every node parameter can be given as a launch argument of the same name; the
-job starts as soon as the chain is connected (interp_node's autostart). Use
+Every node parameter can be given as a launch argument of the same name, the
+sim node's per-axis motor parameters included (``fork.J:=2e-4``); the job
+starts as soon as the chain is connected (interp_node's autostart). Use
 ``namespace:=cell1`` to run several cells on one ROS graph.
 """
 
@@ -23,12 +24,12 @@ def _args(specs):
             description=spec.help(),
         )
         for name, spec in specs.items()
-        if "." not in name
     ]
 
 
 def _params(specs):
-    return [{name: LaunchConfiguration(name) for name in specs if "." not in name}]
+    # every parameter, the per-axis motor ones too (fork.J:=2e-4)
+    return [{name: LaunchConfiguration(name) for name in specs}]
 
 
 # downstream first: each node waits for its reader, so the job starts when the

@@ -6,7 +6,17 @@ In:  winder/job (String, latched), winder/path (JointTrajectory, latched),
 Out: /clock, winder/joint_commands and winder/joint_states (JointState at
      ``publish_rate`` Hz of simulated time), winder/sim_config (String, latched,
      the motor parameters in force), /diagnostics, and a rosbag2/MCAP
-     directory ``<bag_dir>/<job_id>_<UTC stamp>`` holding all of them.
+     directory ``<bag_dir>/<run id>`` holding all of them.
+
+Time: /clock is the cell's simulated time. It never goes backwards in the
+node's life: each job starts at the simulated time the last one ended (a
+sample period later); the step times in the messages stay relative to their
+job's start, and ``winder/sim_config`` records where the job starts on the
+clock (``clock_origin_ns``). Joint states are stamped with /clock. In the bag,
+a message's log time is the wall-clock time at which the job started plus the
+simulated time since then, so every viewer shows the recording at its real
+date and durations in simulated time; ``wall_start_ns`` in sim_config is that
+start.
 
 Each axis is a stepper driven through ``winder.axis``: the linear model is
 exact between steps, the nonlinear one integrates the sine torque and reports
@@ -25,6 +35,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 from diagnostic_msgs.msg import DiagnosticArray, KeyValue
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message, serialize_message
 from rosgraph_msgs.msg import Clock
@@ -47,10 +58,11 @@ from winder.contract.topics import (
     TOPIC_PROGRESS,
     TOPIC_SIM_CONFIG,
     TOPIC_STEP_TIMES,
+    status_values,
 )
 from winder.motion.interp import line_distance
 from winder.motion.job import AXES
-from winder.record.bag import BagRecorder, new_bag_path, signals_held
+from winder.record.bag import BagRecorder, new_bag_path, run_bag_path, signals_held
 from winder.ros.chunks import TIMED_CDR, waiting
 from winder.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from winder.ros.qos import QOS_CLOCK, QOS_DIAGNOSTICS, QOS_LATCHED, QOS_STATE, QOS_STREAM
@@ -128,15 +140,22 @@ class SimNode(Node):
         self.create_subscription(JointTrajectory, TOPIC_PATH, self.on_path, QOS_LATCHED, raw=True)
         self.create_subscription(String, TOPIC_PROFILE_CONFIG, self.on_profile_config, QOS_LATCHED, raw=True)
         self.sub_times = self.create_subscription(
-            Int64MultiArray, TOPIC_STEP_TIMES, self.on_step_times, QOS_STREAM, raw=True
+            Int64MultiArray,
+            TOPIC_STEP_TIMES,
+            self.on_step_times,
+            QOS_STREAM,
+            raw=True,
+            # the handshake follows the stream's connection as it happens, not by polling
+            event_callbacks=SubscriptionEventCallbacks(matched=lambda _info: self.announce()),
         )
         self.create_subscription(
             DiagnosticArray, TOPIC_DIAGNOSTICS, self.on_diagnostics, QOS_DIAGNOSTICS, raw=True
         )
-        steady_timer(self, 0.005, self.pump)
+        # pump() runs on events (a chunk, a job) and, while work waits on the
+        # clock (pacing, batching), every 5 ms; idle, only the 1 Hz report runs
+        self.pump_timer = steady_timer(self, 0.005, self.pump)
         steady_timer(self, 0.5, self.watch)
         steady_timer(self, 1.0, self.report)
-        steady_timer(self, 0.1, self.announce)
         self.topic = {
             "job": self.resolve_topic_name(TOPIC_JOB),
             "path": self.resolve_topic_name(TOPIC_PATH),
@@ -148,6 +167,8 @@ class SimNode(Node):
             "clock": self.resolve_topic_name(TOPIC_CLOCK),
             "diagnostics": TOPIC_DIAGNOSTICS,
         }
+        self.clock_ns = -1  # the last /clock published in this node's life (ns)
+        self.own_ns = self.get_namespace().strip("/")  # "" or "cell1": the prefix of our status names
         self.reset()
         self.early: list[bytes] = []
         self.path_raw: bytes | None = None
@@ -164,7 +185,9 @@ class SimNode(Node):
         self.axes: list[AxisSim] = []
         self.rate = 1.0
         self.next_sample = 0  # index of the next sample, t = k / rate
-        self.t_sim_ns = 0  # simulated time reached (ns)
+        self.t_sim_ns = 0  # simulated time reached (ns), since the job's start
+        self.origin_ns = 0  # /clock at the job's start
+        self.wall0_ns = time.time_ns()  # wall-clock time of the job's start: the bag's time base
         self.out: deque[dict[str, Any]] = deque()  # computed samples waiting to be published
         self.inbox: deque[bytes] = deque()  # received chunks waiting to be simulated
         self.rest: npt.NDArray[np.int64] | None = None  # accepted rows beyond the last sample batch
@@ -215,6 +238,8 @@ class SimNode(Node):
         values = self.settings.values()
         self.reset()
         self.plan = plan
+        # the job starts on the cell's clock one sample after the last one published
+        self.origin_ns = 0 if self.clock_ns < 0 else self.clock_ns + round(1e9 / values["publish_rate"])
         self.announce()
         self.checker = StreamChecker(plan)
         self.rate = float(values["publish_rate"])
@@ -236,13 +261,21 @@ class SimNode(Node):
                     "axes": {axis: {k: values[f"{axis}.{k}"] for k in MOTOR_FIELDS} for axis in AXES},
                     "publish_rate": self.rate,
                     "settle_time": values["settle_time"],
+                    "run_id": plan.run_id,
+                    "clock_origin_ns": self.origin_ns,
+                    "wall_start_ns": self.wall0_ns,
                 }
             )
         )
         self.pub_config.publish(config)
         if values["record"]:
             try:
-                path = new_bag_path(bag_directory(values["bag_dir"]), plan.job_id)
+                directory = bag_directory(values["bag_dir"])
+                path = (
+                    run_bag_path(directory, plan.run_id)
+                    if plan.run_id
+                    else new_bag_path(directory, plan.job_id)
+                )
                 self.bag = BagRecorder(
                     path,
                     {self.topic[k]: t for k, t in BAG_TYPES.items()},
@@ -261,9 +294,10 @@ class SimNode(Node):
         self.record_path()
         self.record_profile_config()
         self.get_logger().info(
-            f"job {plan.job_id}: {plan.total_steps} steps, {values['model']} model"
+            f"run {plan.run_id or '-'}: job {plan.job_id}, {plan.total_steps} steps, {values['model']} model"
             + (f", recording to {self.bag.path}" if self.bag else "")
         )
+        self.report()  # the run is on: its status at once, not at the next second
         early, self.early = self.early, []
         for chunk in early:  # in order, before any taken from the queue
             self.receive(chunk)
@@ -282,11 +316,12 @@ class SimNode(Node):
         if self.plan is None or self.profile_raw is None or self.profile_recorded:
             return
         try:
-            job_id = json.loads(deserialize_message(self.profile_raw, String).data).get("job_id")
+            doc = json.loads(deserialize_message(self.profile_raw, String).data)
+            ids = (doc.get("job_id"), doc.get("run_id", ""))
         except (ValueError, AttributeError):
             return
-        if job_id != self.plan.job_id:
-            return
+        if ids != (self.plan.job_id, self.plan.run_id):
+            return  # an earlier run's ramp; this run's is on its way
         self.profile_recorded = True
         self.record("profile_config", self.t_sim_ns, self.profile_raw)
 
@@ -296,13 +331,28 @@ class SimNode(Node):
         if self.plan is None or self.path_raw is None or self.path_recorded:
             return
         path = deserialize_message(self.path_raw, JointTrajectory)
-        if path.header.frame_id != self.plan.job_id:
-            return  # an earlier job's path; this job's is on its way
+        if path.header.frame_id != (self.plan.run_id or self.plan.job_id):
+            return  # an earlier run's path; this run's is on its way
         self.path_recorded = True
         self.record("path", self.t_sim_ns, self.path_raw)
 
     def on_diagnostics(self, raw: bytes) -> None:
-        self.record("diagnostics", self.t_sim_ns, raw)
+        """Record the statuses of this cell's nodes: another cell's are its own bag's."""
+        if self.bag is None:
+            return
+        try:
+            names = [st.name for st in deserialize_message(raw, DiagnosticArray).status]
+        except Exception:  # not ours to judge; nothing of it is recorded
+            return
+        if any(self.ours(n) for n in names):
+            self.record("diagnostics", self.t_sim_ns, raw)
+
+    def ours(self, name: str) -> bool:
+        """A status name of a node in this node's namespace (not in a deeper one)."""
+        node = name.split(":", 1)[0]
+        if not self.own_ns:
+            return "/" not in node
+        return node.startswith(self.own_ns + "/") and "/" not in node[len(self.own_ns) + 1 :]
 
     def on_step_times(self, raw: bytes) -> None:
         self.receive(raw)
@@ -324,6 +374,17 @@ class SimNode(Node):
         self.inbox.append(raw)
 
     def pump(self) -> None:
+        """Do the work that is due (:meth:`work`); keep the 5 ms timer running
+        while work waits on the clock (pacing, batching, the path), stop it
+        when there is none: an idle node wakes only for its 1 Hz report."""
+        self.work()
+        if self.inbox or self.rest is not None or self.out or self.finishing:
+            if self.pump_timer.is_canceled():
+                self.pump_timer.reset()
+        else:
+            self.pump_timer.cancel()
+
+    def work(self) -> None:
         """Simulate queued chunks. In real-time mode one chunk at a time, once
         the samples of the last one are out: memory stays bounded, and the
         progress report holds the interp node back (flow control)."""
@@ -581,9 +642,12 @@ class SimNode(Node):
         """The first ``n`` samples of a block: /clock first, then commands and
         states, each sample's three messages before the next sample's."""
         t_ns = np.rint(block["k"][:n] * (1e9 / self.rate)).astype(np.int64)
-        clocks = encode_clocks(t_ns)
-        cmds = self.encoder.encode(t_ns, block["cmd_pos"][:n], block["cmd_vel"][:n])
-        acts = self.encoder.encode(t_ns, block["act_pos"][:n], block["act_vel"][:n])
+        stamps = t_ns + self.origin_ns  # on the cell's clock
+        clocks = encode_clocks(stamps)
+        cmds = self.encoder.encode(stamps, block["cmd_pos"][:n], block["cmd_vel"][:n])
+        acts = self.encoder.encode(stamps, block["act_pos"][:n], block["act_vel"][:n])
+        if n:
+            self.clock_ns = int(stamps[n - 1])
         bag = self.bag if not self.record_failure else None
         topics = self.topic["clock"], self.topic["joint_commands"], self.topic["joint_states"]
         for r in range(n):
@@ -593,10 +657,11 @@ class SimNode(Node):
             self.pub_cmd.publish(cmds[r])
             self.pub_state.publish(acts[r])
             if bag is not None:
+                log = self.wall0_ns + t
                 try:
-                    bag.write(topics[0], t, clocks[r], exact=True)
-                    bag.write(topics[1], t, cmds[r], exact=True)
-                    bag.write(topics[2], t, acts[r], exact=True)
+                    bag.write(topics[0], log, clocks[r], exact=True)
+                    bag.write(topics[1], log, cmds[r], exact=True)
+                    bag.write(topics[2], log, acts[r], exact=True)
                 except RuntimeError as exc:
                     self.recording_failed(exc)
                     bag = None
@@ -605,12 +670,19 @@ class SimNode(Node):
         assert self.plan is not None and self.checker is not None
         wall = time.monotonic() - self.start_wall
         sim_s = self.t_sim_ns / 1e9
+        return status_values(
+            "done" if complete else "incomplete",
+            self.plan.job_id,
+            self.plan.run_id,
+            self.done_steps,
+            self.plan.total_steps,
+            **self.details(wall, sim_s),
+        )
+
+    def details(self, wall: float, sim_s: float) -> dict[str, object]:
+        """The sim node's own status keys, after the common ones."""
+        assert self.plan is not None and self.checker is not None
         return {
-            "job_id": self.plan.job_id,
-            "state": "done" if complete else "incomplete",
-            "steps_done": self.done_steps,
-            "steps_total": self.plan.total_steps,
-            "progress": f"{self.done_steps / max(self.plan.total_steps, 1):.4f}",
             "steps_missing": self.checker.missing,
             "gaps": self.checker.gaps,
             "chunks_rejected": self.checker.rejected,
@@ -680,7 +752,7 @@ class SimNode(Node):
         if self.bag is None or not self.bag.is_open or self.record_failure:
             return
         try:
-            self.bag.write(self.topic[key], t_ns, data, exact=exact)
+            self.bag.write(self.topic[key], self.wall0_ns + t_ns, data, exact=exact)
         except RuntimeError as exc:
             self.recording_failed(exc)
 
@@ -696,7 +768,13 @@ class SimNode(Node):
     def error(self, why: str) -> None:
         self.errors.append(why)
         self.get_logger().error(why)
-        self.diag.publish("stream", ERROR, why, {"job_id": self.plan.job_id if self.plan else ""})
+        plan = self.plan
+        self.diag.publish(
+            "stream",
+            ERROR,
+            why,
+            {"job_id": plan.job_id if plan else "", "run_id": plan.run_id if plan else ""},
+        )
 
     def watch(self) -> None:
         if self.plan is None or self.finishing:
@@ -719,7 +797,7 @@ class SimNode(Node):
             done = f"{self.done_steps}/{self.plan.total_steps}"
             why = f"step stream stalled: no steps for {idle:.1f} s at {done} steps"
             self.get_logger().warning(why)
-            self.diag.publish("stream", ERROR, why, {"job_id": self.plan.job_id})
+            self.diag.publish("stream", ERROR, why, {"job_id": self.plan.job_id, "run_id": self.plan.run_id})
 
     def receipt(self) -> None:
         """The steps of the job simulated so far, or known missing, on
@@ -729,7 +807,7 @@ class SimNode(Node):
         real-time job. Refused chunks do not count: they were never the job's."""
         if self.plan is not None and self.checker is not None:
             done = self.done_steps + self.checker.missing
-            self.pub_progress.publish(KeyValue(key=self.plan.job_id, value=str(done)))
+            self.pub_progress.publish(KeyValue(key=self.plan.run_id or self.plan.job_id, value=str(done)))
 
     def announce(self) -> None:
         """Tell the interp node whether a job can start here (winder/ready):
@@ -751,13 +829,17 @@ class SimNode(Node):
                 self.diag.publish("job", self.last_level, self.last_text, s)
             else:
                 why = self.settings.blocked()
-                self.diag.publish("job", ERROR if why else OK, why or "idle: waiting for a job", {})
+                values = status_values("blocked" if why else "idle")
+                self.diag.publish("job", ERROR if why else OK, why or "idle: waiting for a job", values)
             return
         self.receipt()
         values = self.summary(complete=False)
         values["state"] = "stalled" if self.stalled else "running"
         self.diag.publish(
-            "job", ERROR if self.stalled else OK, f"job {self.plan.job_id}: {values['state']}", values
+            "job",
+            ERROR if self.stalled else OK,
+            f"run {self.plan.run_id or self.plan.job_id}: {values['state']}",
+            values,
         )
 
     def shutdown(self) -> None:

@@ -132,6 +132,7 @@ class Analysis:
     label: str
     path: str
     job_id: str
+    run_id: str  #: "" in bags recorded before run ids
     job: str  #: one-line description
     profile: str
     ramp: dict[str, float]  #: the recorded ramp limits (steps of the major axis, s); empty if unknown
@@ -141,6 +142,7 @@ class Analysis:
     closed: bool
     recovered: bool
     damaged: int  #: chunks skipped as damaged (CRC or compression)
+    errors: int  #: ERROR reports recorded during the run
     steps_recorded: int
     steps_total: int
     job_time: float  #: s, time of the last step
@@ -389,6 +391,8 @@ def analyze(run: Run, stride_time: float = STRIDE_TIME, digested: Digest | None 
             else f"sim state {run.report.get('state', 'unknown')}"
         )
         notes.append(f"incomplete recording ({why}): figures cover what was recorded")
+    if run.errors:
+        notes.append(f"{len(run.errors)} ERROR report(s) recorded during the run (first: {run.errors[0]})")
     if d.lost_stencils:
         notes.append(
             f"{d.lost_stencils} command kinematics points left out: the move sped up faster "
@@ -401,6 +405,7 @@ def analyze(run: Run, stride_time: float = STRIDE_TIME, digested: Digest | None 
         label=run.label,
         path=str(run.path),
         job_id=run.job_id,
+        run_id=run.run_id,
         job=(
             f"{job.job_id}: {job.poles} poles x {job.layers} layers x {job.turns_per_layer} turns, "
             f"wire {job.wire_diameter * 1e3:g} mm"
@@ -417,6 +422,7 @@ def analyze(run: Run, stride_time: float = STRIDE_TIME, digested: Digest | None 
         closed=run.closed,
         recovered=run.recovered,
         damaged=len(run.damaged),
+        errors=len(run.errors),
         steps_recorded=d.rows,
         steps_total=run.plan.total_steps,
         job_time=d.last_t / 1e9 if d.last_t is not None else math.nan,
@@ -471,8 +477,11 @@ def _rows(a: Analysis) -> list[tuple[str, str]]:
     state += ", closed" if a.closed else (", cut short (recovered)" if a.recovered else ", not closed")
     if a.damaged:
         state += f", DAMAGED ({a.damaged} chunks skipped)"
+    if a.errors:
+        state += f", {a.errors} ERROR reports"
     rows = [
         ("job", a.job),
+        ("run", a.run_id or "-"),
         ("profile / motor model", f"{a.profile} / {a.model}"),
         ("ramp limits (major axis)", _ramp(a)),
         ("state", state),

@@ -181,7 +181,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         )
         return 0
     try:
-        from winder.ros.cell import run_cell
+        from winder.ros.cell import cell_network, run_cell
     except ImportError as exc:
         raise UserError(f"the ROS 2 node packages are not installed ({exc}); run 'make demo'") from None
     bag_dir = bag_directory(sim["bag_dir"])
@@ -196,11 +196,14 @@ def cmd_run(args: argparse.Namespace) -> int:
         free = shutil.disk_usage(probe).free
         room = f"{free / 2**30:.1f} GiB" if free >= 2**30 else f"{free / 2**20:.1f} MiB"
         print(f"  recording into     {bag_dir}  ({room} free)")
+    domain, discovery, source = cell_network()
+    print(f"  ROS domain         {domain} ({source}), discovery {discovery}")
     bar = Progress(1.0, "winding")
     t0 = time.monotonic()
     result = run_cell(
         params,
         namespace=args.namespace,
+        domain=domain,
         timeout=cell["timeout"],
         progress=lambda frac, sim_t: bar.update(frac, f"sim {float(sim_t):7.2f} s"),
     )
@@ -209,6 +212,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     if not s:
         raise UserError(f"the cell did not finish: {result.message} (node logs in {result.log_dir})")
     wall = time.monotonic() - t0
+    print(f"  run                {s.get('run_id') or '-'}")
     print(f"  state              {s['state']}")
     print(
         f"  steps              {s['steps_done']} of {s['steps_total']}"

@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import collections
 import json
+import re
+import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -39,11 +41,27 @@ TIMED_COLUMNS = ("t_ns", "segment", *AXES)
 FORMAT = "winder.job/1"
 
 
-def describe_job(job: Job) -> str:
-    """JSON text of a job as the downstream nodes and the bag need it."""
+#: a run id: ``<job_id>_<UTC date>_<UTC time with ms>_<n>`` (:func:`make_run_id`)
+RUN_ID = re.compile(r"^[A-Za-z0-9_\-]+_\d{8}_\d{9}_\d+$")
+
+
+def make_run_id(job_id: str, counter: int, now: float | None = None) -> str:
+    """A run's identity: the job id, the UTC time of the start to the
+    millisecond and the start's number in this node's life. Unique across
+    restarts of the nodes (a restart takes longer than a millisecond) and
+    usable as a file name (the sim node names the run's bag after it)."""
+    t = time.time() if now is None else now
+    ms = int(t * 1000) % 1000
+    return f"{job_id}_{time.strftime('%Y%m%d_%H%M%S', time.gmtime(t))}{ms:03d}_{counter}"
+
+
+def describe_job(job: Job, run_id: str = "") -> str:
+    """JSON text of a job as the downstream nodes and the bag need it; the
+    run it starts (``run_id``) travels with it."""
     segs = job.segments()
     doc = {
         "format": FORMAT,
+        "run_id": run_id,
         "job": job.to_dict(),
         "axes": list(AXES),
         "joint_step": list(job.joint_step),
@@ -87,6 +105,7 @@ class JobPlan:
     segments: tuple[SegmentPlan, ...]
     total_steps: int
     text: str = field(repr=False)
+    run_id: str = ""  #: the run this job description started ("" in bags before run ids)
 
     @property
     def job_id(self) -> str:
@@ -114,6 +133,11 @@ def parse_job_description(text: str) -> JobPlan:
     if doc.get("format") != FORMAT:
         raise ValueError(
             f"job description format is {json.dumps(doc.get('format'))[:40]}, expected {FORMAT!r}"
+        )
+    run_id = doc.get("run_id", "")
+    if not isinstance(run_id, str) or (run_id and not RUN_ID.match(run_id)):
+        raise ValueError(
+            f"job description: run_id {json.dumps(run_id)[:60]} is not a run id (<job_id>_<date>_<time>_<n>)"
         )
     fields = _expect(doc, "job", dict, "an object of job fields")
     try:
@@ -151,6 +175,7 @@ def parse_job_description(text: str) -> JobPlan:
         segments=tuple(segs),
         total_steps=total,
         text=text,
+        run_id=run_id,
     )
 
 

@@ -70,3 +70,34 @@ def check_namespace(namespace: str) -> str:
 TOPIC_READY = "winder/ready"
 READY_ROLES = ("consumer", "profile")
 READY_STATES = ("ready", "waiting", "busy", "blocked")
+
+
+#: The keys every node's ``"<node>: job"`` status carries, in every state, so
+#: that a controller reads one schema: ``state`` (:data:`JOB_STATES`), the
+#: ``job_id`` and ``run_id`` of the run it speaks of ("" before the first),
+#: the node's ``steps_done`` of ``steps_total`` and their ratio ``progress``.
+#: Nodes add their own keys after these (the sim node: lost steps, bag...).
+STATUS_KEYS = ("state", "job_id", "run_id", "steps_done", "steps_total", "progress")
+#: idle: no run yet; running: a run in progress; stalled: running, but its
+#: step stream stopped (the sim node); done: the last run ended complete;
+#: incomplete: it ended short (aborted, stalled for good, cut off...);
+#: blocked: the node's settings are refused, it takes no run
+JOB_STATES = ("idle", "running", "stalled", "done", "incomplete", "blocked")
+
+
+def status_values(
+    state: str, job_id: str = "", run_id: str = "", done: int = 0, total: int = 0, **extra: object
+) -> dict[str, object]:
+    """The key/values of a ``job`` status: :data:`STATUS_KEYS` first, then ``extra``."""
+    if state not in JOB_STATES:
+        raise ValueError(f"state={state!r} is invalid: must be one of {', '.join(JOB_STATES)}")
+    values: dict[str, object] = {
+        "state": state,
+        "job_id": job_id,
+        "run_id": run_id,
+        "steps_done": done,
+        "steps_total": total,
+        "progress": f"{done / total:.4f}" if total else "0.0000",
+    }
+    values.update(extra)
+    return values

@@ -59,6 +59,18 @@ def new_bag_path(directory: Path, job_id: str) -> Path:
     return path
 
 
+def run_bag_path(directory: Path, run_id: str) -> Path:
+    """The directory of a run's bag: ``<directory>/<run id>`` (``_2``... if
+    that exists: a run id is unique, but a directory may be copied in)."""
+    if not re.match(r"^[A-Za-z0-9_\-]+$", run_id):
+        raise ValueError(f"run_id={run_id!r} cannot name a bag")
+    path, n = directory / run_id, 1
+    while path.exists():
+        n += 1
+        path = directory / f"{run_id}_{n}"
+    return path
+
+
 #: Types whose serialized form can end in alignment padding: the last field is
 #: a sequence of 8-byte values that may be empty (Fast CDR aligns it anyway).
 #: Strings, Clock, DiagnosticArray and JointTrajectory cannot.

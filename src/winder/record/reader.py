@@ -115,6 +115,11 @@ class SimConfig:
     axes: dict[str, AxisConfig]
     publish_rate: float
     settle_time: float
+    #: where the job starts on the cell's /clock (ns; its joint states are
+    #: stamped on that clock): 0 for a cell's first job and in older bags
+    clock_origin_ns: int = 0
+    #: wall-clock time of the job's start (ns since the epoch; 0 if not recorded)
+    wall_start_ns: int = 0
 
     @classmethod
     def from_json(cls, text: str) -> SimConfig:
@@ -126,7 +131,14 @@ class SimConfig:
                 **{k: float(a[k]) for k in ("Zr", "L", "i_a", "J", "D", "motor_step_angle")},
                 load_torque=float(a.get("load_torque", 0.0)),
             )
-        return cls(str(doc["model"]), axes, float(doc["publish_rate"]), float(doc.get("settle_time", 0.0)))
+        return cls(
+            str(doc["model"]),
+            axes,
+            float(doc["publish_rate"]),
+            float(doc.get("settle_time", 0.0)),
+            int(doc.get("clock_origin_ns", 0)),
+            int(doc.get("wall_start_ns", 0)),
+        )
 
 
 @dataclass(frozen=True)
@@ -227,6 +239,9 @@ class Run:
     counts: dict[str, int]
     notes: tuple[str, ...] = ()
     damaged: tuple[str, ...] = ()
+    #: the ERROR statuses the cell's nodes published during the run, as
+    #: recorded ("<node>: <task>: <message>", each different one once)
+    errors: tuple[str, ...] = ()
     #: the profile node's ramp settings (winder/profile_config: profile, v_max, a_max,
     #: j_max, tau, v_start, dwell in steps of the major axis, s), empty in older bags
     profile_config: dict[str, Any] = field(default_factory=dict)
@@ -248,6 +263,11 @@ class Run:
     @property
     def job_id(self) -> str:
         return self.plan.job_id
+
+    @property
+    def run_id(self) -> str:
+        """The run's identity ("" in bags recorded before run ids)."""
+        return self.plan.run_id
 
     @property
     def label(self) -> str:
@@ -372,6 +392,8 @@ def _joint_samples_slow(datas: list[bytes], topic: str) -> Samples:
 
 #: the topics whose messages the first walk keeps (they describe the run and
 #: are few); step chunks and joint samples are streamed
+#: DiagnosticStatus.ERROR
+ERROR_LEVEL = 2
 _KEPT = ("/" + JOB, "/" + SIM_CONFIG, "/" + PROFILE_CONFIG)
 _JOINT_BATCH = 8192
 
@@ -509,15 +531,16 @@ def _assemble(
     notes = list(raw.notes)
     sim_config = _decode_sim_config(raw.path, decoded[topic[SIM_CONFIG]], topic[SIM_CONFIG], notes)
     profile_config = _decode_profile_config(decoded[topic[PROFILE_CONFIG]], topic[PROFILE_CONFIG], notes)
-    report, profile = _decode_diagnostics(decoded[DIAGNOSTICS], ns)
+    report, profile, errors = _decode_diagnostics(decoded[DIAGNOSTICS], ns)
+    origin = sim_config.clock_origin_ns / 1e9 if sim_config else 0.0
     return Run(
         path=raw.path,
         namespace=ns,
         plan=plan,
         sim_config=sim_config,
         step_rows=streamed.steps,
-        commands=streamed.commands,
-        states=streamed.states,
+        commands=_shifted(streamed.commands, origin),
+        states=_shifted(streamed.states, origin),
         report=report,
         profile=str(profile_config.get("profile", profile)),
         closed=raw.closed,
@@ -525,8 +548,16 @@ def _assemble(
         counts=counts,
         notes=tuple(notes),
         damaged=tuple(raw.damaged),
+        errors=errors,
         profile_config=profile_config,
     )
+
+
+def _shifted(samples: Samples, origin: float) -> Samples:
+    """Samples stamped on the cell's clock, timed from their job's start."""
+    if not origin:
+        return samples
+    return Samples(samples.t - origin, samples.pos, samples.vel)
 
 
 def _decode_plan(bag: Path, msgs: list[Any], topic: str) -> JobPlan:
@@ -560,15 +591,18 @@ def _decode_profile_config(msgs: list[Any], topic: str, notes: list[str]) -> dic
         return {}
 
 
-def _decode_diagnostics(msgs: list[Any], ns: str) -> tuple[dict[str, str], str]:
-    """The sim node's last job status and the profile kind the profile node's
-    status names (older bags say it only there), of the cell in ``ns``."""
+def _decode_diagnostics(msgs: list[Any], ns: str) -> tuple[dict[str, str], str, tuple[str, ...]]:
+    """The sim node's last job status, the profile kind the profile node's
+    status names (older bags say it only there) and the ERROR statuses of the
+    cell in ``ns`` (each different one once, in order)."""
     sim_status, profile_status = (
         status_name("sim_node", namespace=ns),
         status_name("profile_node", namespace=ns),
     )
+    prefix = ns.strip("/")
     report: dict[str, str] = {}
     profile = ""
+    errors: dict[str, None] = {}
     for arr in msgs:
         for st in arr.status:
             values = {kv.key: kv.value for kv in st.values}
@@ -576,4 +610,9 @@ def _decode_diagnostics(msgs: list[Any], ns: str) -> tuple[dict[str, str], str]:
                 report = values
             elif st.name == profile_status and "profile" in values:
                 profile = values["profile"]
-    return report, profile
+            node = st.name.split(":", 1)[0]
+            mine = ("/" not in node) if not prefix else node.startswith(prefix + "/")
+            level = st.level if isinstance(st.level, int) else int.from_bytes(bytes(st.level), "little")
+            if mine and level == ERROR_LEVEL:
+                errors[f"{st.name}: {st.message}"] = None
+    return report, profile, tuple(errors)

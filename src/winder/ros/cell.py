@@ -14,6 +14,7 @@ from __future__ import annotations
 import ctypes
 import os
 import random
+import re
 import shutil
 import signal
 import subprocess
@@ -81,18 +82,27 @@ def ros_args(params: dict[str, Any], namespace: str) -> list[str]:
     return args
 
 
+def cell_network(environ: dict[str, str] | None = None) -> tuple[int, str, str]:
+    """The ROS domain and discovery range a cell runs on, and where they come
+    from: ``ROS_DOMAIN_ID`` and ``ROS_AUTOMATIC_DISCOVERY_RANGE`` when set,
+    else a random domain in 100-199 (a private graph) and LOCALHOST."""
+    env = os.environ if environ is None else environ
+    text = env.get("ROS_DOMAIN_ID", "")
+    if text.isdigit():
+        domain, source = int(text), "ROS_DOMAIN_ID"
+    else:
+        domain, source = random.randint(100, 199), "random in 100-199; set ROS_DOMAIN_ID to choose"
+    return domain, env.get("ROS_AUTOMATIC_DISCOVERY_RANGE") or "LOCALHOST", source
+
+
 @contextmanager
 def cell_environment(domain: int | None) -> Iterator[dict[str, str]]:
     """The environment of the cell's processes (this one's included while it
-    lasts): a ROS domain (``ROS_DOMAIN_ID`` if set, else a random one in
-    100-199) and localhost-only discovery unless the caller chose otherwise."""
+    lasts): the domain given, else :func:`cell_network`'s, and its discovery range."""
     env = dict(os.environ)
-    if domain is None:
-        domain = (
-            int(env["ROS_DOMAIN_ID"]) if env.get("ROS_DOMAIN_ID", "").isdigit() else random.randint(100, 199)
-        )
-    env["ROS_DOMAIN_ID"] = str(domain)
-    env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    chosen, discovery, _ = cell_network(env)
+    env["ROS_DOMAIN_ID"] = str(chosen if domain is None else domain)
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = discovery
     env["PYTHONUNBUFFERED"] = "1"
     keys = ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")
     saved = {k: os.environ.get(k) for k in keys}
@@ -178,6 +188,7 @@ class CellWatch:
         self.sim_time = "0"
         self.summary: dict[str, str] | None = None
         self.message = ""
+        self.run_id = ""  #: the run started (from the start reply or the interp node's status)
         self.errors: list[str] = []
         node.create_subscription(
             DiagnosticArray,
@@ -195,9 +206,10 @@ class CellWatch:
             values = {kv.key: kv.value for kv in st.values}
             if st.name == self.sim_status:
                 self.heard_sim = True
-            if st.name == self.interp_status and values.get("state") in ("sending", "sent"):
+            if st.name == self.interp_status and values.get("run_id"):
                 self.job_seen = True  # the start request got through
-            if st.name == self.sim_status and values.get("job_id"):
+                self.run_id = self.run_id or values["run_id"]
+            if st.name == self.sim_status and values.get("run_id") and values["run_id"] == self.run_id:
                 self.progress = float(values.get("progress", 0.0))
                 self.sim_time = values.get("sim_time_s", "0")
                 if values.get("state") in ("done", "incomplete"):
@@ -226,6 +238,8 @@ class CellWatch:
             reply = req.result()
             if reply is not None and (reply.success or "is running" in reply.message):
                 self.accepted = True
+                said = re.search(r"\brun (\S+) (?:started|is running)", reply.message)
+                self.run_id = self.run_id or (said.group(1) if said else "")
             elif reply is not None and "not ready" in reply.message:
                 self._request = None  # the consumer or the profile node is still coming up: ask again
             else:

@@ -9,6 +9,8 @@ value="ready")`` on ``winder/ready`` with a reliable, transient-local QoS.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from diagnostic_msgs.msg import KeyValue
 from rclpy.node import Node
 
@@ -36,14 +38,17 @@ class Readiness:
     """What the cell's other nodes last said on ``winder/ready``; anything that
     is not a known role and state is ignored (it cannot start a job)."""
 
-    def __init__(self, node: Node) -> None:
+    def __init__(self, node: Node, on_change: Callable[[], None] | None = None) -> None:
         self.node = node
         self.states: dict[str, str] = {}
+        self.on_change = on_change
         node.create_subscription(KeyValue, TOPIC_READY, self._on_ready, QOS_LATCHED)
 
     def _on_ready(self, msg: KeyValue) -> None:
-        if msg.key in READY_ROLES and msg.value in READY_STATES:
+        if msg.key in READY_ROLES and msg.value in READY_STATES and self.states.get(msg.key) != msg.value:
             self.states[msg.key] = msg.value
+            if self.on_change is not None:
+                self.on_change()
 
     def missing(self) -> str:
         """Why a job cannot start now ("" if every role said ready)."""

@@ -1,0 +1,160 @@
+"""The cell integration contract (issue 20), with the real node executables
+started one by one as a cell starts them, on an isolated domain.
+
+* one run identity: the same job started twice in one cell's life gives two
+  complete bags named after two different run ids, each holding its run id;
+  the start reply names the run;
+* one status schema: every ``job`` status of the three nodes carries the
+  common keys first, in every state they pass through;
+* the time base: /clock never goes backwards across the two runs, each run's
+  joint states are stamped on it while the bag's analysis still sees each
+  job from 0, and the bag shows its real date;
+* each cell's bag holds only its own namespace's diagnostics: an ERROR that
+  another cell's node publishes meanwhile is neither recorded nor reported.
+"""
+
+from __future__ import annotations
+
+import re
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from conftest import Procs, final_report, rosbags_read, spin_until
+
+from winder.analysis.metrics import analyze
+from winder.contract.stream import RUN_ID
+from winder.contract.topics import STATUS_KEYS
+from winder.record.reader import read_run
+
+pytestmark = pytest.mark.ros
+
+
+def _clock_qos() -> object:
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+    return QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT)  # as /clock is published
+
+
+SMALL = ["-p", "turns_per_layer:=3", "-p", "layers:=1", "-p", "poles:=2", "-p", "chunk_steps:=512"]
+
+
+def test_the_same_job_twice_gives_two_runs_on_one_clock(tmp_path: Path, procs: Procs, ros: Any) -> None:
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+    from rosgraph_msgs.msg import Clock
+    from std_srvs.srv import Trigger
+
+    statuses: list[tuple[str, list[str], dict[str, str]]] = []
+
+    def on_diag(m: Any) -> None:
+        for s in m.status:
+            statuses.append((s.name, [kv.key for kv in s.values], {kv.key: kv.value for kv in s.values}))
+
+    ros.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 100)
+    clock: list[int] = []
+    ros.create_subscription(
+        Clock, "/clock", lambda m: clock.append(m.clock.sec * 10**9 + m.clock.nanosec), _clock_qos()
+    )
+    foreign = ros.create_publisher(DiagnosticArray, "/diagnostics", 10)
+
+    bags = tmp_path / "bags"
+    procs.start("sim_node", "-p", f"bag_dir:={bags}")
+    procs.start("profile_node")
+    procs.start("interp_node", *SMALL, "-p", "autostart:=false")
+    client = ros.create_client(Trigger, "/interp_node/start")
+    spin_until(ros, client.service_is_ready, 30, "the start service")
+
+    def done(run_id: str) -> bool:
+        return any(
+            n == "sim_node: job" and v.get("run_id") == run_id and v.get("state") == "done"
+            for n, _, v in statuses
+        )
+
+    def start() -> str:
+        t_end = time.monotonic() + 30
+        while True:
+            future = client.call_async(Trigger.Request())
+            spin_until(ros, future.done, 30, "the start reply")
+            reply = future.result()
+            if reply.success or "not ready" not in reply.message or time.monotonic() > t_end:
+                break
+            ros_spin(ros, 0.3)  # the consumer or the profile node is still connecting
+        assert reply.success, reply.message
+        said = re.search(r"^run (\S+) started", reply.message)
+        assert said, reply.message
+        return said.group(1)
+
+    first = start()
+    # another cell's node reports an ERROR while this cell runs: not ours
+    bad = DiagnosticStatus(level=DiagnosticStatus.ERROR, name="cell9/sim_node: job", message="elsewhere")
+    bad.values = [KeyValue(key="state", value="incomplete")]
+    for _ in range(3):
+        foreign.publish(DiagnosticArray(status=[bad]))
+        ros_spin(ros, 0.1)
+    spin_until(ros, lambda: done(first), 60, "the first run to complete")
+    second = start()
+    spin_until(ros, lambda: done(second), 60, "the second run to complete")
+    ros_spin(ros, 0.5)
+
+    # two runs, two ids, two bags named after them, each holding its id
+    assert first != second and RUN_ID.match(first) and RUN_ID.match(second)
+    assert sorted(p.name for p in bags.iterdir()) == sorted([first, second])
+    now = time.time()
+    for run_id in (first, second):
+        run = read_run(bags / run_id)
+        assert run.run_id == run_id and run.complete, (run_id, run.report)
+        assert run.report["run_id"] == run_id and run.errors == ()
+        assert run.states.t[0] == pytest.approx(0.0, abs=1e-9)  # each job seen from its start
+        res = analyze(run)
+        assert res.steps_recorded == res.steps_total and not any("ERROR" in n for n in res.notes)
+        raw = rosbags_read(bags / run_id)
+        assert "elsewhere" not in str([m for _, m in raw["/diagnostics"]])
+        assert final_report(raw)["run_id"] == run_id
+        # the bag's log times are wall-clock dates: this hour, not 1970
+        meta = (bags / run_id / "metadata.yaml").read_text()
+        start_ns = int(re.search(r"starting_time:\s*nanoseconds_since_epoch:\s*(\d+)", meta).group(1))
+        assert abs(start_ns / 1e9 - now) < 600, start_ns
+    origin2 = read_run(bags / second).sim_config.clock_origin_ns  # type: ignore[union-attr]
+    assert origin2 > 0
+    # /clock never goes backwards over the cell's life, across both runs
+    c = np.array(clock)
+    assert c.size > 100 and np.all(np.diff(c) > 0), np.nonzero(np.diff(c) <= 0)
+    assert c[-1] > origin2
+    # one status schema on every node, in every state seen
+    states: dict[str, set[str]] = {}
+    for name, keys, values in statuses:
+        node = name.split(":")[0]
+        if name.endswith(": job") and node in ("interp_node", "profile_node", "sim_node"):
+            assert tuple(keys[: len(STATUS_KEYS)]) == STATUS_KEYS, (name, keys)
+            states.setdefault(node, set()).add(values["state"])
+    for node in ("interp_node", "profile_node", "sim_node"):
+        assert {"running", "done"} <= states[node], states
+
+
+def ros_spin(node: Any, seconds: float) -> None:
+    """Spin the probe node for ``seconds``."""
+    t_end = time.monotonic() + seconds
+    spin_until(node, lambda: time.monotonic() >= t_end, seconds + 5, f"{seconds} s")
+
+
+def test_the_readme_controller_runs_a_cell(tmp_path: Path, procs: Procs) -> None:
+    """docs/cell_controller.py, the README's example of a line controller,
+    against the three node executables started one by one: it starts the job,
+    follows its run id and exits 0 with the run done and its bag named."""
+    import subprocess
+    import sys
+
+    bags = tmp_path / "bags"
+    procs.start("sim_node", "-p", f"bag_dir:={bags}")
+    procs.start("profile_node")
+    procs.start("interp_node", *SMALL, "-p", "autostart:=false")
+    script = Path(__file__).resolve().parents[1] / "docs" / "cell_controller.py"
+    out = subprocess.run(
+        [sys.executable, str(script)], env=procs.env, capture_output=True, text=True, timeout=120
+    )
+    assert out.returncode == 0, out.stdout + out.stderr
+    run_id = re.search(r"started run (\S+)", out.stdout).group(1)  # type: ignore[union-attr]
+    assert f"run {run_id}: done" in out.stdout and str(bags / run_id) in out.stdout, out.stdout
+    assert read_run(bags / run_id).complete
