@@ -63,7 +63,10 @@ def bad_values(spec: Spec) -> list[Any]:
     return [v for v in CANDIDATES if is_bad(spec, v)]
 
 
-CLI_SPECS = {**INTERP_SPECS, **PROFILE_SPECS, **SIM_SPECS}
+# the interp node's ramp.* settings are the profile node's (same specs), which winder run sets
+CLI_SPECS = {
+    n: s for n, s in {**INTERP_SPECS, **PROFILE_SPECS, **SIM_SPECS}.items() if not n.startswith("ramp.")
+}
 CLI_CASES = [
     (name, v)
     for name, spec in CLI_SPECS.items()

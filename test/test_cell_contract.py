@@ -158,3 +158,109 @@ def test_the_readme_controller_runs_a_cell(tmp_path: Path, procs: Procs) -> None
     run_id = re.search(r"started run (\S+)", out.stdout).group(1)  # type: ignore[union-attr]
     assert f"run {run_id}: done" in out.stdout and str(bags / run_id) in out.stdout, out.stdout
     assert read_run(bags / run_id).complete
+
+
+def test_a_dead_consumer_is_not_ready(tmp_path: Path, procs: Procs, ros: Any) -> None:
+    """The sim node killed (SIGKILL) after it said ready: its latched "ready"
+    no longer counts once it stops repeating it (a start was accepted, and
+    its chunks went nowhere), a start is refused as not ready, and a new sim
+    node makes the cell ready again and records the run."""
+    import signal
+
+    from std_srvs.srv import Trigger
+
+    bags = tmp_path / "bags"
+    sim = procs.start("sim_node", "-p", f"bag_dir:={bags}")
+    procs.start("profile_node")
+    procs.start("interp_node", *SMALL, "-p", "autostart:=false")
+    client = ros.create_client(Trigger, "/interp_node/start")
+    spin_until(ros, client.service_is_ready, 30, "the start service")
+    ros_spin(ros, 3.0)  # everyone connected and announced
+    sim.send_signal(signal.SIGKILL)
+    sim.wait()
+    ros_spin(ros, 4.0)  # its announcements stop: after 3 s of silence they no longer count
+    future = client.call_async(Trigger.Request())
+    spin_until(ros, future.done, 30, "the start reply")
+    reply = future.result()
+    assert not reply.success and "not ready" in reply.message and "consumer" in reply.message, reply.message
+    procs.start("sim_node", "-p", f"bag_dir:={bags}")
+    t_end = time.monotonic() + 30
+    while True:
+        future = client.call_async(Trigger.Request())
+        spin_until(ros, future.done, 30, "the start reply")
+        reply = future.result()
+        if reply.success or time.monotonic() > t_end:
+            break
+        ros_spin(ros, 0.3)
+    assert reply.success, reply.message
+    run_id = re.match(r"run (\S+) started", reply.message).group(1)  # type: ignore[union-attr]
+    t_end = time.monotonic() + 60
+    while not (bags / run_id / "metadata.yaml").exists() and time.monotonic() < t_end:
+        ros_spin(ros, 0.2)
+    assert read_run(bags / run_id).complete
+
+
+def test_start_run_sets_up_and_starts_in_one_call(tmp_path: Path, procs: Procs, ros: Any) -> None:
+    """~/start_run (rcl_interfaces/SetParametersAtomically): a request with a
+    bad value sets nothing and starts nothing (the reason names it); a good
+    one sets the job and the ramp it brings and starts the run, whose bag
+    holds that ramp, not the profile node's own (scurve)."""
+    from rcl_interfaces.srv import SetParametersAtomically
+    from rclpy.parameter import Parameter
+
+    bags = tmp_path / "bags"
+    procs.start("sim_node", "-p", f"bag_dir:={bags}")
+    procs.start("profile_node")  # its own ramp: scurve
+    procs.start("interp_node", "-p", "autostart:=false")
+    client = ros.create_client(SetParametersAtomically, "/interp_node/start_run")
+    spin_until(ros, client.service_is_ready, 30, "the start_run service")
+
+    def call(values: dict[str, Any]) -> Any:
+        t_end = time.monotonic() + 30
+        while True:
+            req = SetParametersAtomically.Request()
+            req.parameters = [Parameter(k, value=v).to_parameter_msg() for k, v in values.items()]
+            future = client.call_async(req)
+            spin_until(ros, future.done, 30, "the start_run reply")
+            result = future.result().result
+            if result.successful or "not ready" not in result.reason or time.monotonic() > t_end:
+                return result
+            ros_spin(ros, 0.3)
+
+    setup = {
+        "job_id": "tap",
+        "turns_per_layer": 3,
+        "layers": 1,
+        "poles": 2,
+        "ramp.source": "job",
+        "ramp.profile": "trapezoid",
+        "ramp.v_max": 3000.0,
+        "ramp.a_max": 20000.0,
+    }
+    bad = call({**setup, "poles": 0})
+    assert not bad.successful and "poles" in bad.reason and "0" in bad.reason, bad.reason
+    assert get_params(ros, "interp_node", ["job_id", "ramp.source"]) == ["rw400", "profile_node"]  # untouched
+    assert not bags.exists() or not any(bags.iterdir())
+    good = call(setup)
+    assert good.successful, good.reason
+    run_id = re.match(r"run (\S+) started", good.reason).group(1)  # type: ignore[union-attr]
+    assert run_id.startswith("tap_")
+    t_end = time.monotonic() + 60
+    while not (bags / run_id / "metadata.yaml").exists() and time.monotonic() < t_end:
+        ros_spin(ros, 0.2)
+    run = read_run(bags / run_id)
+    assert run.complete and run.plan.job.poles == 2
+    assert run.profile == "trapezoid" and run.profile_config["v_max"] == 3000.0
+    assert run.profile_config["ramp_source"] == "job"
+
+
+def get_params(node: Any, target: str, names: list[str]) -> list[Any]:
+    """The values of ``target``'s parameters ``names``."""
+    from rcl_interfaces.srv import GetParameters
+    from rclpy.parameter import parameter_value_to_python
+
+    client = node.create_client(GetParameters, f"/{target}/get_parameters")
+    spin_until(node, client.service_is_ready, 30, f"{target}/get_parameters")
+    future = client.call_async(GetParameters.Request(names=names))
+    spin_until(node, future.done, 30, "get_parameters reply")
+    return [parameter_value_to_python(v) for v in future.result().values]

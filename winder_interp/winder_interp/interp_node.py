@@ -1,7 +1,10 @@
 """interp_node: winding job (parameters) -> minimum-deviation step commands.
 
-In:  parameters (the fields of winder.motion.job.Job, autostart, chunk_steps),
-     service ~/start (std_srvs/Trigger), winder/ready, winder/progress.
+In:  parameters (the fields of winder.motion.job.Job, the ramp a run may bring
+     (ramp.*), autostart, chunk_steps), services ~/start (std_srvs/Trigger:
+     start a run with the settings as they are) and ~/start_run
+     (rcl_interfaces/SetParametersAtomically: set the run's settings and start
+     it, in one call, all or nothing), winder/ready, winder/progress.
 Out: winder/job (std_msgs/String, JSON job description with the run id, latched),
      winder/steps (std_msgs/Int32MultiArray chunks), /diagnostics.
 
@@ -18,11 +21,14 @@ from collections.abc import Iterator
 import numpy as np
 import numpy.typing as npt
 from diagnostic_msgs.msg import KeyValue
+from rcl_interfaces.msg import SetParametersResult
+from rcl_interfaces.srv import SetParametersAtomically
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from std_msgs.msg import Int32MultiArray, String
 from std_srvs.srv import Trigger
 
-from winder.contract.params import INTERP_SPECS, check_interp
+from winder.contract.params import INTERP_SPECS, check_interp, run_ramp
 from winder.contract.stream import describe_job, make_run_id
 from winder.contract.topics import TOPIC_JOB, TOPIC_PROGRESS, TOPIC_STEPS, status_values
 from winder.motion.interp import interpolate
@@ -46,6 +52,7 @@ class InterpNode(Node):
         self.pub_steps = self.create_publisher(Int32MultiArray, TOPIC_STEPS, QOS_STREAM)
         self.diag = Diagnostics(self, "winder_interp")
         self.create_service(Trigger, "~/start", self.on_start)
+        self.create_service(SetParametersAtomically, "~/start_run", self.on_start_run)
         self.create_subscription(KeyValue, TOPIC_PROGRESS, self.on_progress, QOS_STATE)
         # the start handshake: consumer and profile node ready (an autostart waits for it)
         self.readiness = Readiness(self, on_change=self.wake)
@@ -71,6 +78,41 @@ class InterpNode(Node):
     def on_start(self, _req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:
         resp.success, resp.message = self.start_job()
         return resp
+
+    def on_start_run(
+        self, req: SetParametersAtomically.Request, resp: SetParametersAtomically.Response
+    ) -> SetParametersAtomically.Response:
+        """Set up and start a run in one call: the request's parameters (job
+        fields, ramp.*) are set all together or not at all, and the run starts
+        with them. Nothing is set when the cell cannot start a run now (a run
+        going on, a node not ready); the reason is in ``result.reason``, the
+        start reply in it when the run starts."""
+        why = self.cannot_start()
+        if why:
+            resp.result = SetParametersResult(successful=False, reason=why)
+            return resp
+        try:
+            params = [Parameter.from_parameter_msg(p) for p in req.parameters]
+            result = self.set_parameters_atomically(params)
+        except Exception as exc:  # an undeclared name, a type rclpy cannot take
+            result = SetParametersResult(successful=False, reason=f"run not set up: {exc}".splitlines()[0])
+        if not result.successful:
+            resp.result = SetParametersResult(successful=False, reason=result.reason or "run not set up")
+            return resp
+        ok, message = self.start_job()
+        resp.result = SetParametersResult(successful=ok, reason=message)
+        return resp
+
+    def cannot_start(self) -> str:
+        """Why a run cannot start now ("" if it can)."""
+        if self.running():
+            assert self.job is not None
+            return (
+                f"job {self.job.job_id} run {self.run_id} is running ({self.consumed}/{self.job.total_steps} "
+                f"steps taken, {self.sent} sent): start refused, the running job goes on"
+            )
+        waiting = self.readiness.missing()
+        return f"job not started: {waiting}" if waiting else ""
 
     def wake(self) -> None:
         """Something happened that may let work go on: run tick() now and on its timer."""
@@ -107,23 +149,19 @@ class InterpNode(Node):
 
     def start_job(self) -> tuple[bool, str]:
         if self.running():
-            assert self.job is not None
-            return False, (
-                f"job {self.job.job_id} run {self.run_id} is running ({self.consumed}/{self.job.total_steps} "
-                f"steps taken, {self.sent} sent): start refused, the running job goes on"
-            )
+            return False, self.cannot_start()
         blocked = self.settings.blocked()
         if blocked:
-            self.diag.publish("job", ERROR, blocked, {})
+            self.diag.publish("job", ERROR, blocked, status_values("blocked"))
             return False, blocked
-        waiting = self.readiness.missing()
+        waiting = self.cannot_start()
         if waiting:
-            return False, f"job not started: {waiting}"
+            return False, waiting
         values = self.settings.values()
         try:
             job = Job(**{k: values[k] for k in FIELD_SPECS})
         except SpecError as exc:
-            self.diag.publish("job", ERROR, f"job rejected: {exc}", {})
+            self.diag.publish("job", ERROR, f"job rejected: {exc}", status_values("blocked"))
             return False, f"job rejected: {exc}"
         self.runs += 1
         self.job = job
@@ -133,7 +171,7 @@ class InterpNode(Node):
         self.finished = False
         self.aborted = ""
         self.started_wall = self.last_receipt_wall = time.monotonic()
-        self.pub_job.publish(String(data=describe_job(job, self.run_id)))
+        self.pub_job.publish(String(data=describe_job(job, self.run_id, run_ramp(values))))
         self.pending = self.chunks(job, values["chunk_steps"])
         if self.tick_timer.is_canceled():
             self.tick_timer.reset()

@@ -46,6 +46,7 @@ from winder.ros.ready import Announcer
 from winder.ros.settings import Settings
 from winder.ros.spin import spin
 from winder.ros.timers import steady_timer
+from winder.spec import SpecError, check_all
 
 
 class ProfileNode(Node):
@@ -76,6 +77,7 @@ class ProfileNode(Node):
         self.early: list[bytes] = []
         self.timed = 0
         self.error = ""
+        self.ramp_kind = ""  # the ramp kind of the run being timed
 
     def connect(self) -> None:
         if self.sub_steps is None and self.pub.get_subscription_count() > 0:
@@ -96,19 +98,38 @@ class ProfileNode(Node):
         except ValueError as exc:
             self.fail(f"job description rejected: {exc}")
             return
-        blocked = self.settings.blocked()
-        if blocked:
-            self.fail(f"job {job.job_id} refused: {blocked}")
-            return
-        values = self.settings.values()
+        if job.ramp is not None:  # the run brings its ramp: it is checked here as a setting would be
+            try:
+                values = check_all(PROFILE_SPECS, job.ramp)
+                missing = sorted(set(PROFILE_SPECS) - set(values))
+                if missing:
+                    raise SpecError(f"the ramp lacks {', '.join(missing)}")
+                check_profile(values)
+            except SpecError as exc:
+                self.fail(f"job {job.job_id} refused: its ramp: {exc}")
+                return
+            source = "job"
+        else:
+            blocked = self.settings.blocked()
+            if blocked:
+                self.fail(f"job {job.job_id} refused: {blocked}")
+                return
+            values, source = self.settings.values(), "profile_node"
         try:
             profiles, t0, duration_ns = plan_job(values, [s.steps for s in job.segments])
         except ValueError as exc:
             self.fail(f"job {job.job_id} cannot be ramped: {exc}")
             return
         self.plan, self.profiles, self.seg_t0_ns = job, profiles, t0
+        self.ramp_kind = str(values["profile"])
         # the ramp in force for this job, latched: the sim node records it
-        config = {"job_id": job.job_id, "run_id": job.run_id, **values, "job_duration_s": duration_ns / 1e9}
+        config = {
+            "job_id": job.job_id,
+            "run_id": job.run_id,
+            **values,
+            "ramp_source": source,
+            "job_duration_s": duration_ns / 1e9,
+        }
         self.pub_config.publish(String(data=json.dumps(config)))
         self.pub_path.publish(self.path_message(job))
         self.checker = StreamChecker(job)
@@ -191,13 +212,14 @@ class ProfileNode(Node):
         """This node's job status values in ``state`` (the common keys first)."""
         if self.plan is None:
             return status_values(state, profile=self.settings.values()["profile"])
+        profile = self.ramp_kind or self.settings.values()["profile"]
         return status_values(
             state,
             self.plan.job_id,
             self.plan.run_id,
             self.timed,
             self.plan.total_steps,
-            profile=self.settings.values()["profile"],
+            profile=profile,
             gaps=self.checker.gaps if self.checker else 0,
             job_duration_s=f"{self.job_duration_ns() / 1e9:.6f}",
         )
@@ -214,6 +236,7 @@ class ProfileNode(Node):
     def report(self) -> None:
         self.connect()
         self.announce()
+        self.ready.repeat()
         blocked = self.settings.blocked()
         if blocked:
             self.diag.publish("job", ERROR, blocked, self.values("blocked"))

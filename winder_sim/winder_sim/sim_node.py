@@ -823,6 +823,7 @@ class SimNode(Node):
 
     def report(self) -> None:
         self.announce()
+        self.ready.repeat()
         if self.plan is None:
             if self.last_summary:  # keep telling how the last job ended, as a status does
                 s = self.last_summary

@@ -26,6 +26,7 @@ __all__ = [
     "MOTOR_FIELDS",
     "PROFILE_KINDS",
     "PROFILE_SPECS",
+    "RAMP_SOURCES",
     "SIM_SPECS",
     "bag_directory",
     "check_interp",
@@ -33,6 +34,7 @@ __all__ = [
     "check_sim",
     "plan_job",
     "plan_segment",
+    "run_ramp",
 ]
 
 
@@ -172,9 +174,53 @@ SIM_SPECS = {
 }
 
 
+#: Where a run's ramp comes from: the profile node's own settings, or the
+#: interp node's ``ramp.*`` settings, carried with the job (one node holds the
+#: whole set-up of a run, and one call sets it and starts it: ``~/start_run``).
+RAMP_SOURCES = ("profile_node", "job")
+
+INTERP_SPECS.update(
+    {
+        "ramp.source": Spec(
+            "ramp.source",
+            str,
+            "profile_node",
+            "where a run's ramp comes from: the profile node's settings, or the ramp.* settings here, "
+            "carried with the job",
+            choices=RAMP_SOURCES,
+        ),
+        **{
+            f"ramp.{name}": Spec(
+                f"ramp.{name}",
+                s.kind,
+                s.default,
+                f"ramp carried with the job (ramp.source job): {s.description}",
+                s.unit,
+                s.low,
+                s.high,
+                s.low_open,
+                choices=s.choices,
+            )
+            for name, s in PROFILE_SPECS.items()
+        },
+    }
+)
+
+
+def run_ramp(values: dict[str, Any]) -> dict[str, Any] | None:
+    """The ramp the interp node's settings carry with a job, or None when the
+    profile node's own settings ramp it (``ramp.source``)."""
+    if values.get("ramp.source", "profile_node") != "job":
+        return None
+    return {name: values[f"ramp.{name}"] for name in PROFILE_SPECS}
+
+
 def check_interp(values: dict[str, Any]) -> None:
     """Cross-field check of the interp node's settings (SpecError)."""
     Job(**{k: v for k, v in values.items() if k in FIELD_SPECS})
+    ramp = run_ramp(values)
+    if ramp is not None:
+        check_profile(ramp)
 
 
 #: The longest a job may last, in simulated time: a week. Step times travel as

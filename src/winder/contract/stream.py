@@ -55,13 +55,15 @@ def make_run_id(job_id: str, counter: int, now: float | None = None) -> str:
     return f"{job_id}_{time.strftime('%Y%m%d_%H%M%S', time.gmtime(t))}{ms:03d}_{counter}"
 
 
-def describe_job(job: Job, run_id: str = "") -> str:
+def describe_job(job: Job, run_id: str = "", ramp: dict[str, Any] | None = None) -> str:
     """JSON text of a job as the downstream nodes and the bag need it; the
-    run it starts (``run_id``) travels with it."""
+    run it starts (``run_id``) travels with it, and the ramp to time it with
+    when the run brings its own (else null: the profile node's settings)."""
     segs = job.segments()
     doc = {
         "format": FORMAT,
         "run_id": run_id,
+        "ramp": ramp,
         "job": job.to_dict(),
         "axes": list(AXES),
         "joint_step": list(job.joint_step),
@@ -106,6 +108,8 @@ class JobPlan:
     total_steps: int
     text: str = field(repr=False)
     run_id: str = ""  #: the run this job description started ("" in bags before run ids)
+    #: the ramp settings the run brings (checked by the profile node), None: the profile node's own
+    ramp: dict[str, Any] | None = None
 
     @property
     def job_id(self) -> str:
@@ -139,6 +143,9 @@ def parse_job_description(text: str) -> JobPlan:
         raise ValueError(
             f"job description: run_id {json.dumps(run_id)[:60]} is not a run id (<job_id>_<date>_<time>_<n>)"
         )
+    ramp = doc.get("ramp")
+    if ramp is not None and not isinstance(ramp, dict):
+        raise ValueError(f"job description: ramp {json.dumps(ramp)[:60]} is not an object of ramp settings")
     fields = _expect(doc, "job", dict, "an object of job fields")
     try:
         job = Job.from_dict(fields)
@@ -176,6 +183,7 @@ def parse_job_description(text: str) -> JobPlan:
         total_steps=total,
         text=text,
         run_id=run_id,
+        ramp=ramp,
     )
 
 

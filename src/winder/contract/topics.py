@@ -66,7 +66,8 @@ def check_namespace(namespace: str) -> str:
 #: (``value`` one of :data:`READY_STATES`: "waiting" = its stream is not
 #: connected yet, "busy" = running a job, "blocked" = settings refused). The
 #: interp node starts a job only when both say "ready"; readers of any other
-#: topic change nothing.
+#: topic change nothing. Each repeats its state every second; one not heard
+#: for 3 s no longer counts (its node is gone).
 TOPIC_READY = "winder/ready"
 READY_ROLES = ("consumer", "profile")
 READY_STATES = ("ready", "waiting", "busy", "blocked")

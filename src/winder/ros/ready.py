@@ -9,9 +9,13 @@ value="ready")`` on ``winder/ready`` with a reliable, transient-local QoS.
 
 from __future__ import annotations
 
+import math
+import time
 from collections.abc import Callable
+from typing import Any
 
 from diagnostic_msgs.msg import KeyValue
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 
 from winder.contract.topics import READY_ROLES, READY_STATES, TOPIC_READY
@@ -19,7 +23,9 @@ from winder.ros.qos import QOS_LATCHED
 
 
 class Announcer:
-    """Publishes one node's readiness, each change once (latched)."""
+    """Publishes one node's readiness: each change at once (latched), and
+    again on :meth:`repeat` (the node's 1 Hz report), so that a listener that
+    forgot it (see :class:`Readiness`) hears it again."""
 
     def __init__(self, node: Node, role: str) -> None:
         assert role in READY_ROLES
@@ -33,28 +39,63 @@ class Announcer:
             self.state = state
             self.pub.publish(KeyValue(key=self.role, value=state))
 
+    def repeat(self) -> None:
+        if self.state:
+            self.pub.publish(KeyValue(key=self.role, value=self.state))
+
+
+#: an announcement older than this (s) no longer counts: the announcers repeat
+#: theirs every second, so silence means the node is gone (a node killed
+#: outright stays in the DDS graph, its latched "ready" with it, for ~20 s)
+FRESH = 3.0
+
 
 class Readiness:
-    """What the cell's other nodes last said on ``winder/ready``; anything that
-    is not a known role and state is ignored (it cannot start a job)."""
+    """What the cell's other nodes last said on ``winder/ready``, and when;
+    anything that is not a known role and state is ignored (it cannot start a
+    job), and so is an announcement that has not been repeated for
+    :data:`FRESH` seconds."""
 
     def __init__(self, node: Node, on_change: Callable[[], None] | None = None) -> None:
         self.node = node
         self.states: dict[str, str] = {}
+        self.heard: dict[str, float] = {}  # role -> monotonic time of its last announcement
         self.on_change = on_change
-        node.create_subscription(KeyValue, TOPIC_READY, self._on_ready, QOS_LATCHED)
+        node.create_subscription(
+            KeyValue,
+            TOPIC_READY,
+            self._on_ready,
+            QOS_LATCHED,
+            event_callbacks=SubscriptionEventCallbacks(matched=self._on_matched),
+        )
+
+    def _on_matched(self, info: Any) -> None:
+        """An announcer left (its node died or stopped): its last word, kept
+        by the latched topic, no longer holds. Everything heard is forgotten;
+        the announcers still there say their state again within a second."""
+        if info.current_count_change < 0:
+            self.states.clear()
 
     def _on_ready(self, msg: KeyValue) -> None:
-        if msg.key in READY_ROLES and msg.value in READY_STATES and self.states.get(msg.key) != msg.value:
+        if msg.key not in READY_ROLES or msg.value not in READY_STATES:
+            return
+        fresh = time.monotonic() - self.heard.get(msg.key, -math.inf) <= FRESH
+        self.heard[msg.key] = time.monotonic()
+        if self.states.get(msg.key) != msg.value or not fresh:
             self.states[msg.key] = msg.value
             if self.on_change is not None:
                 self.on_change()
 
     def missing(self) -> str:
         """Why a job cannot start now ("" if every role said ready)."""
-        waiting = [
-            f"{r} {self.states.get(r, 'not heard from')}"
-            for r in READY_ROLES
-            if self.states.get(r) != "ready"
-        ]
+        now = time.monotonic()
+        waiting = []
+        for r in READY_ROLES:
+            silent = now - self.heard.get(r, -math.inf)
+            if r not in self.states:
+                waiting.append(f"{r} not heard from")
+            elif silent > FRESH:
+                waiting.append(f"{r} silent for {silent:.1f} s")
+            elif self.states[r] != "ready":
+                waiting.append(f"{r} {self.states[r]}")
         return f"not ready: {', '.join(waiting)} (winder/ready)" if waiting else ""
