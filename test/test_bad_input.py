@@ -63,9 +63,12 @@ def bad_values(spec: Spec) -> list[Any]:
     return [v for v in CANDIDATES if is_bad(spec, v)]
 
 
-# the interp node's ramp.* settings are the profile node's (same specs), which winder run sets
+# the interp node's ramp.* settings are the profile node's (same specs), which winder run sets;
+# its job_file is winder run's positional JOB_FILE (test_job_files.py)
 CLI_SPECS = {
-    n: s for n, s in {**INTERP_SPECS, **PROFILE_SPECS, **SIM_SPECS}.items() if not n.startswith("ramp.")
+    n: s
+    for n, s in {**INTERP_SPECS, **PROFILE_SPECS, **SIM_SPECS}.items()
+    if not n.startswith("ramp.") and n != "job_file"
 }
 CLI_CASES = [
     (name, v)

@@ -205,27 +205,13 @@ def test_start_run_sets_up_and_starts_in_one_call(tmp_path: Path, procs: Procs, 
     bad value sets nothing and starts nothing (the reason names it); a good
     one sets the job and the ramp it brings and starts the run, whose bag
     holds that ramp, not the profile node's own (scurve)."""
-    from rcl_interfaces.srv import SetParametersAtomically
-    from rclpy.parameter import Parameter
-
     bags = tmp_path / "bags"
     procs.start("sim_node", "-p", f"bag_dir:={bags}")
     procs.start("profile_node")  # its own ramp: scurve
     procs.start("interp_node", "-p", "autostart:=false")
-    client = ros.create_client(SetParametersAtomically, "/interp_node/start_run")
-    spin_until(ros, client.service_is_ready, 30, "the start_run service")
 
     def call(values: dict[str, Any]) -> Any:
-        t_end = time.monotonic() + 30
-        while True:
-            req = SetParametersAtomically.Request()
-            req.parameters = [Parameter(k, value=v).to_parameter_msg() for k, v in values.items()]
-            future = client.call_async(req)
-            spin_until(ros, future.done, 30, "the start_run reply")
-            result = future.result().result
-            if result.successful or "not ready" not in result.reason or time.monotonic() > t_end:
-                return result
-            ros_spin(ros, 0.3)
+        return start_run(ros, values)
 
     setup = {
         "job_id": "tap",
@@ -264,3 +250,23 @@ def get_params(node: Any, target: str, names: list[str]) -> list[Any]:
     future = client.call_async(GetParameters.Request(names=names))
     spin_until(node, future.done, 30, "get_parameters reply")
     return [parameter_value_to_python(v) for v in future.result().values]
+
+
+def start_run(node: Any, values: dict[str, Any]) -> Any:
+    """Call /interp_node/start_run with ``values``, asking again while the cell
+    is still connecting ("not ready"); the SetParametersResult."""
+    from rcl_interfaces.srv import SetParametersAtomically
+    from rclpy.parameter import Parameter
+
+    client = node.create_client(SetParametersAtomically, "/interp_node/start_run")
+    spin_until(node, client.service_is_ready, 30, "the start_run service")
+    t_end = time.monotonic() + 30
+    while True:
+        req = SetParametersAtomically.Request()
+        req.parameters = [Parameter(k, value=v).to_parameter_msg() for k, v in values.items()]
+        future = client.call_async(req)
+        spin_until(node, future.done, 30, "the start_run reply")
+        result = future.result().result
+        if result.successful or "not ready" not in result.reason or time.monotonic() > t_end:
+            return result
+        ros_spin(node, 0.3)

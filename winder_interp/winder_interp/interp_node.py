@@ -28,6 +28,7 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import Int32MultiArray, String
 from std_srvs.srv import Trigger
 
+from winder.contract.jobfile import load_job_file
 from winder.contract.params import INTERP_SPECS, check_interp, run_ramp
 from winder.contract.stream import describe_job, make_run_id
 from winder.contract.topics import TOPIC_JOB, TOPIC_PROGRESS, TOPIC_STEPS, status_values
@@ -47,6 +48,12 @@ class InterpNode(Node):
     def __init__(self) -> None:
         super().__init__("interp_node")
         self.settings = Settings(self, INTERP_SPECS, check_interp)
+        self.add_pre_set_parameters_callback(self.with_job_file)
+        given = self.settings.values()["job_file"]
+        if given:  # given at start (-p job_file:=...): load it as a change would
+            result = self.set_parameters([Parameter("job_file", value=given)])[0]
+            if not result.successful:
+                self.settings.rejected.append(result.reason)
 
         self.pub_job = self.create_publisher(String, TOPIC_JOB, QOS_LATCHED)
         self.pub_steps = self.create_publisher(Int32MultiArray, TOPIC_STEPS, QOS_STREAM)
@@ -73,6 +80,26 @@ class InterpNode(Node):
         self.last_receipt_wall = 0.0
         if self.settings.blocked():
             self.diag.publish("job", ERROR, str(self.settings.blocked()), {})
+
+    def with_job_file(self, params: list[Parameter]) -> list[Parameter]:
+        """Setting ``job_file`` sets what the file says, in the same change:
+        the job from its interp_node section, and the ramp the run brings from
+        its profile_node section (``ramp.*``, ``ramp.source`` job). Values set
+        in the same change win over the file's. A file that cannot be used is
+        left to the check, which refuses the change with the file's reason."""
+        named = {p.name for p in params}
+        path = next((p.value for p in params if p.name == "job_file"), None)
+        if not path or not isinstance(path, str):
+            return params
+        try:
+            given = load_job_file(path)
+        except (SpecError, ValueError):
+            return params
+        extra = [Parameter(k, value=v) for k, v in given["interp_node"].items() if k not in named]
+        if given["profile_node"]:
+            ramp = {"ramp.source": "job", **{f"ramp.{k}": v for k, v in given["profile_node"].items()}}
+            extra += [Parameter(k, value=v) for k, v in ramp.items() if k not in named]
+        return params + extra
 
     # -- in --------------------------------------------------------------
     def on_start(self, _req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:

@@ -62,13 +62,17 @@ def add_spec_arguments(
             )
 
 
-def values_from_args(args: argparse.Namespace, specs: dict[str, Spec]) -> dict[str, Any]:
-    """The settings given on the command line (defaults filled in), checked."""
+def values_from_args(
+    args: argparse.Namespace, specs: dict[str, Spec], base: dict[str, Any] | None = None
+) -> dict[str, Any]:
+    """The settings given on the command line, checked; the others from
+    ``base`` (a job file's, checked already), else their defaults."""
     out = {}
+    base = base or {}
     for name, spec in specs.items():
         raw = getattr(args, name, None)
         if raw is None:
-            out[name] = spec.default
+            out[name] = base.get(name, spec.default)
         elif isinstance(raw, str):
             out[name] = spec.parse(raw)
         else:
@@ -76,8 +80,18 @@ def values_from_args(args: argparse.Namespace, specs: dict[str, Spec]) -> dict[s
     return out
 
 
-def job_from_args(args: argparse.Namespace) -> Job:
-    return Job(**values_from_args(args, FIELD_SPECS))
+def job_file(args: argparse.Namespace) -> dict[str, dict[str, Any]]:
+    """The settings of the job file named on the command line, per node (none: empty)."""
+    path = getattr(args, "job_file", None)
+    if not path:
+        return {"interp_node": {}, "profile_node": {}, "sim_node": {}}
+    from winder.contract.jobfile import load_job_file
+
+    return load_job_file(path)
+
+
+def job_from_args(args: argparse.Namespace, base: dict[str, Any] | None = None) -> Job:
+    return Job(**values_from_args(args, FIELD_SPECS, base))
 
 
 class Progress:
@@ -110,7 +124,7 @@ class Progress:
 
 def cmd_interp(args: argparse.Namespace) -> int:
     """Interpolate a job and print what the interpolation did."""
-    job = job_from_args(args)
+    job = job_from_args(args, job_file(args)["interp_node"])
     segments = job.segments()
     lx, ly, _ = job.step_lengths
     progress = Progress(job.total_steps, "interpolating")
@@ -163,12 +177,13 @@ def cmd_interp(args: argparse.Namespace) -> int:
 def cmd_run(args: argparse.Namespace) -> int:
     """Run the whole cell: three node processes, progress, summary."""
     # everything is checked here first: a bad value never starts a node or a bag
-    job = job_from_args(args)
-    profile = values_from_args(args, PROFILE_SPECS)
+    given = job_file(args)
+    job = job_from_args(args, given["interp_node"])
+    profile = values_from_args(args, PROFILE_SPECS, given["profile_node"])
     check_profile(profile)
     segments = job.segments()
     _, _, duration_ns = plan_job(profile, [s.steps for s in segments])  # the job as a whole
-    sim = values_from_args(args, SIM_SPECS)
+    sim = values_from_args(args, SIM_SPECS, given["sim_node"])
     check_sim(sim)
     cell = values_from_args(args, CELL_SPECS)
     args.namespace = check_namespace(args.namespace)
@@ -186,7 +201,9 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise UserError(f"the ROS 2 node packages are not installed ({exc}); run 'make demo'") from None
     bag_dir = bag_directory(sim["bag_dir"])
     sim["bag_dir"] = str(bag_dir)
-    params = {"interp": job.to_dict(), "profile": profile, "sim": sim}
+    # the interp node's other settings in the file (chunk_steps, max_in_flight...) go with the job
+    extra = {k: v for k, v in given["interp_node"].items() if k not in FIELD_SPECS and k != "autostart"}
+    params = {"interp": {**job.to_dict(), **extra}, "profile": profile, "sim": sim}
     args.profile, args.model = profile["profile"], sim["model"]
     print(
         f"winder: job {job.job_id}, {job.total_steps} steps, {args.profile} profile, {args.model} motor model"
@@ -258,14 +275,22 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
+JOB_FILE_HELP = (
+    "a job file (a ROS 2 parameters file: interp_node, profile_node and sim_node sections; "
+    "see jobs/); options given here override its values"
+)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="winder", description="winder: coil and rotor winding cell tools")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     p = sub.add_parser("interp", help="interpolate a winding job and print a summary")
+    p.add_argument("job_file", nargs="?", metavar="JOB_FILE", help=JOB_FILE_HELP)
     add_spec_arguments(p, FIELD_SPECS, "winding job (defaults: the RW400 paper set-up)")
     p.set_defaults(func=cmd_interp)
 
     p = sub.add_parser("run", help="run the whole cell (three node processes) on a job")
+    p.add_argument("job_file", nargs="?", metavar="JOB_FILE", help=JOB_FILE_HELP)
     add_spec_arguments(p, FIELD_SPECS, "winding job (defaults: the RW400 paper set-up)")
     add_spec_arguments(p, PROFILE_SPECS, "profile node (rates in steps of each segment's major axis)")
     add_spec_arguments(p, SIM_SPECS, "sim node (motor settings per axis: --feed.J, --fork.D, ...)")

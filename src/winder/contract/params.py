@@ -181,6 +181,15 @@ RAMP_SOURCES = ("profile_node", "job")
 
 INTERP_SPECS.update(
     {
+        "job_file": Spec(
+            "job_file",
+            str,
+            "",
+            "a job file (see winder.contract.jobfile): setting it sets the job from its interp_node "
+            "section and the ramp the run brings from its profile_node section",
+            pattern=r"^[^\x00]*$",
+            pattern_text="a file path, or empty",
+        ),
         "ramp.source": Spec(
             "ramp.source",
             str,
@@ -218,6 +227,10 @@ def run_ramp(values: dict[str, Any]) -> dict[str, Any] | None:
 def check_interp(values: dict[str, Any]) -> None:
     """Cross-field check of the interp node's settings (SpecError)."""
     Job(**{k: v for k, v in values.items() if k in FIELD_SPECS})
+    if values.get("job_file"):
+        from winder.contract.jobfile import load_job_file
+
+        load_job_file(values["job_file"])  # a file that cannot be used is refused with its reason
     ramp = run_ramp(values)
     if ramp is not None:
         check_profile(ramp)

@@ -1,0 +1,210 @@
+"""Job files (issue 14, item 1): a job as a ROS 2 parameters file that
+``winder run``, the nodes' ``--params-file`` and the interp node's
+``job_file`` parameter all take.
+
+Expected values come from the file as ruamel reads it here, flattened by a
+loop in the test; the runs are the real node executables started one by one.
+"""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+from conftest import Procs
+from ruamel.yaml import YAML
+
+from winder.contract.jobfile import JobFileError, load_job_file
+from winder.record.reader import read_run
+
+ROOT = Path(__file__).resolve().parents[1]
+JOBS = sorted((ROOT / "jobs").glob("*.yaml"))
+WINDER = Path(sys.executable).with_name("winder")
+
+
+def flat(doc: Any) -> dict[str, dict[str, Any]]:
+    """node -> {dotted name: value}, by hand."""
+    out: dict[str, dict[str, Any]] = {}
+    for node, body in doc.items():
+        stack = [("", body["ros__parameters"])]
+        values: dict[str, Any] = {}
+        while stack:
+            prefix, d = stack.pop()
+            for k, v in d.items():
+                name = f"{prefix}.{k}" if prefix else k
+                if isinstance(v, dict):
+                    stack.append((name, v))
+                else:
+                    values[name] = v
+        out[node] = values
+    return out
+
+
+def test_three_job_files_ship_and_load_as_written() -> None:
+    assert {p.stem for p in JOBS} >= {"rw400", "stator_12", "armature_fine"}
+    for path in JOBS:
+        want = flat(YAML(typ="safe").load(path.read_text()))
+        got = load_job_file(path)
+        for node, values in want.items():
+            assert got[node] == pytest.approx(values), (path.name, node)
+
+
+@pytest.mark.parametrize("path", JOBS, ids=[p.stem for p in JOBS])
+def test_winder_run_check_takes_a_job_file(path: Path) -> None:
+    out = subprocess.run(
+        [str(WINDER), "run", "--check", str(path)], capture_output=True, text=True, timeout=60
+    )
+    job_id = flat(YAML(typ="safe").load(path.read_text()))["interp_node"]["job_id"]
+    assert out.returncode == 0, out.stderr
+    assert f"job {job_id}:" in out.stdout
+
+
+BAD = [
+    ("", "a job file is a ROS 2 parameters file"),
+    ("- 1\n- 2\n", "a job file is a ROS 2 parameters file"),
+    ("a: [1\n", "not YAML at line 2"),
+    ("spindle_node:\n  ros__parameters: {x: 1}\n", "section 'spindle_node': not a winder node"),
+    ("interp_node: {layers: 2}\n", "must hold exactly one key, ros__parameters"),
+    ("interp_node:\n  ros__parameters: 3\n", "interp_node.ros__parameters must be a map"),
+    ("interp_node:\n  ros__parameters: {turn_per_layer: 3}\n", "interp_node has no setting 'turn_per_layer'"),
+    (
+        "interp_node:\n  ros__parameters: {turns_per_layer: 0}\n",
+        "interp_node.ros__parameters.turns_per_layer: turns_per_layer=0 is invalid: must be in [1, 100000]",
+    ),
+    ("interp_node:\n  ros__parameters: {layers: [1, 2]}\n", "layers=[1, 2] is invalid"),
+    ("interp_node:\n  ros__parameters: {layers: null}\n", "layers=None is invalid"),
+    (
+        "sim_node:\n  ros__parameters: {fork: {J: -1}}\n",
+        "sim_node.ros__parameters.fork.J: fork.J=-1 is invalid",
+    ),
+    ("/**:\n  ros__parameters: {flux: 1}\n", "no winder node has a setting 'flux'"),
+    (
+        "interp_node:\n  ros__parameters: {turns_per_layer: 100, coil_length: 0.01}\n",
+        "interp_node: turns_per_layer=100 is invalid",
+    ),
+    (
+        "profile_node:\n  ros__parameters: {profile: trapezoid, a_max: 1.0e-12}\n",
+        "profile_node: profile=trapezoid",
+    ),
+]
+
+
+@pytest.mark.parametrize(("text", "why"), BAD, ids=[f"bad{i}" for i in range(len(BAD))])
+def test_a_bad_job_file_is_refused_in_one_line(tmp_path: Path, text: str, why: str) -> None:
+    path = tmp_path / "job.yaml"
+    path.write_text(text)
+    with pytest.raises(JobFileError) as err:
+        load_job_file(path)
+    assert str(err.value).startswith(f"{path}: ") and why in str(err.value), str(err.value)
+    out = subprocess.run(
+        [str(WINDER), "run", "--check", str(path)], capture_output=True, text=True, timeout=60
+    )
+    assert out.returncode == 2 and "Traceback" not in out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1 and why in out.stderr, out.stderr
+
+
+def test_a_missing_or_huge_job_file_is_refused(tmp_path: Path) -> None:
+    with pytest.raises(JobFileError, match="no such job file"):
+        load_job_file(tmp_path / "nope.yaml")
+    big = tmp_path / "big.yaml"
+    big.write_text("#" * (2 << 20))
+    with pytest.raises(JobFileError, match="more than a job file holds"):
+        load_job_file(big)
+    with pytest.raises(JobFileError, match="not a file"):
+        load_job_file(tmp_path)
+
+
+def test_command_line_options_override_the_file() -> None:
+    out = subprocess.run(
+        [str(WINDER), "run", "--check", str(ROOT / "jobs" / "stator_12.yaml"), "--poles", "3"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert out.returncode == 0, out.stderr
+    # 3 poles instead of 12: 3 x 3 layers + 2 pole moves = 11 segments
+    assert "in 11 segments" in out.stdout, out.stdout
+
+
+SMALL_JOB = """\
+interp_node:
+  ros__parameters:
+    job_id: filed
+    turns_per_layer: 3
+    layers: 1
+    poles: 2
+    fork_steps_per_rev: 512
+profile_node:
+  ros__parameters:
+    profile: trapezoid
+    v_max: 3000.0
+    a_max: 30000.0
+sim_node:
+  ros__parameters:
+    publish_rate: 500.0
+    fork:
+      J: 2.0e-4
+"""
+
+
+@pytest.mark.ros
+def test_the_nodes_take_a_job_file_as_their_params_file(tmp_path: Path, procs: Procs) -> None:
+    """ros2 run ... --ros-args --params-file job.yaml on each node: each takes
+    its section; the bag holds the file's job, ramp and motor."""
+    job = tmp_path / "job.yaml"
+    job.write_text(SMALL_JOB)
+    bags = tmp_path / "bags"
+    procs.start("sim_node", "--params-file", str(job), "-p", f"bag_dir:={bags}")
+    procs.start("profile_node", "--params-file", str(job))
+    procs.start("interp_node", "--params-file", str(job))
+    t_end = time.monotonic() + 60
+    while not list(bags.glob("*/metadata.yaml")) and time.monotonic() < t_end:
+        time.sleep(0.2)
+    [meta] = list(bags.glob("*/metadata.yaml"))
+    run = read_run(meta.parent)
+    assert run.complete and run.job_id == "filed" and run.plan.job.fork_steps_per_rev == 512
+    assert run.profile == "trapezoid" and run.profile_config["v_max"] == 3000.0
+    assert run.sim_config is not None and run.sim_config.axes["fork"].J == 2.0e-4
+    assert run.sim_config.publish_rate == 500.0
+
+
+@pytest.mark.ros
+def test_the_interp_node_takes_a_job_file_in_one_start_run_call(
+    tmp_path: Path, procs: Procs, ros: Any
+) -> None:
+    """~/start_run with job_file: the file's job and its ramp (carried with the
+    job: the profile node's own is scurve) in one call; a bad file sets
+    nothing and starts nothing, with the file's reason."""
+    from test_cell_contract import get_params, ros_spin, start_run
+
+    job = tmp_path / "job.yaml"
+    job.write_text(SMALL_JOB)
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("interp_node:\n  ros__parameters: {poles: 0}\n")
+    bags = tmp_path / "bags"
+    procs.start("sim_node", "-p", f"bag_dir:={bags}")
+    procs.start("profile_node")
+    procs.start("interp_node", "-p", "autostart:=false")
+
+    def start(path: Path) -> Any:
+        return start_run(ros, {"job_file": str(path)})
+
+    refused = start(bad)
+    assert not refused.successful and str(bad) in refused.reason and "poles=0" in refused.reason, (
+        refused.reason
+    )
+    assert get_params(ros, "interp_node", ["job_file", "job_id"]) == ["", "rw400"]
+    started = start(job)
+    assert started.successful, started.reason
+    run_id = re.match(r"run (\S+) started", started.reason).group(1)  # type: ignore[union-attr]
+    t_end = time.monotonic() + 60
+    while not (bags / run_id / "metadata.yaml").exists() and time.monotonic() < t_end:
+        ros_spin(ros, 0.2)
+    run = read_run(bags / run_id)
+    assert run.complete and run.job_id == "filed" and run.plan.job.poles == 2
+    assert run.profile == "trapezoid" and run.profile_config["ramp_source"] == "job"
