@@ -29,7 +29,7 @@ from std_msgs.msg import Int32MultiArray, String
 from std_srvs.srv import Trigger
 
 from winder.contract.jobfile import load_job_file
-from winder.contract.params import INTERP_SPECS, check_interp, run_ramp
+from winder.contract.params import INTERP_SPECS, check_interp, run_ramp, stop_points
 from winder.contract.stream import describe_job, make_run_id
 from winder.contract.topics import TOPIC_JOB, TOPIC_PROGRESS, TOPIC_STEPS, status_values
 from winder.motion.interp import interpolate
@@ -198,7 +198,9 @@ class InterpNode(Node):
         self.finished = False
         self.aborted = ""
         self.started_wall = self.last_receipt_wall = time.monotonic()
-        self.pub_job.publish(String(data=describe_job(job, self.run_id, run_ramp(values))))
+        stops = stop_points(job, values["stops"]) if values["stops"] else []
+        text = describe_job(job, self.run_id, run_ramp(values), stops, values["stop_pause"])
+        self.pub_job.publish(String(data=text))
         self.pending = self.chunks(job, values["chunk_steps"])
         if self.tick_timer.is_canceled():
             self.tick_timer.reset()

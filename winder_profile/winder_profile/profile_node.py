@@ -17,10 +17,8 @@ arrives, so a step's time depends only on its index, never on arrival order.
 from __future__ import annotations
 
 import json
-from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 from builtin_interfaces.msg import Duration
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.node import Node
@@ -28,7 +26,7 @@ from rclpy.subscription import Subscription
 from std_msgs.msg import Int32MultiArray, Int64MultiArray, String
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from winder.contract.params import PROFILE_SPECS, check_profile, plan_job
+from winder.contract.params import PROFILE_SPECS, SegmentTiming, check_profile, plan_timing
 from winder.contract.stream import STEP_COLUMNS, TIMED_COLUMNS, JobPlan, StreamChecker, parse_job_description
 from winder.contract.topics import (
     TOPIC_JOB,
@@ -72,8 +70,7 @@ class ProfileNode(Node):
 
         self.plan: JobPlan | None = None
         self.checker: StreamChecker | None = None
-        self.seg_t0_ns: npt.NDArray[np.int64] = np.zeros(0, np.int64)
-        self.profiles: list[Any] = []
+        self.timing: list[SegmentTiming] = []
         self.early: list[bytes] = []
         self.timed = 0
         self.error = ""
@@ -116,11 +113,13 @@ class ProfileNode(Node):
                 return
             values, source = self.settings.values(), "profile_node"
         try:
-            profiles, t0, duration_ns = plan_job(values, [s.steps for s in job.segments])
+            timing, duration_ns = plan_timing(
+                values, [s.steps for s in job.segments], job.stops, job.stop_pause
+            )
         except ValueError as exc:
             self.fail(f"job {job.job_id} cannot be ramped: {exc}")
             return
-        self.plan, self.profiles, self.seg_t0_ns = job, profiles, t0
+        self.plan, self.timing = job, timing
         self.ramp_kind = str(values["profile"])
         # the ramp in force for this job, latched: the sim node records it
         config = {
@@ -136,8 +135,7 @@ class ProfileNode(Node):
         self.timed = 0
         self.error = ""
         self.get_logger().info(
-            f"job {job.job_id}: {values['profile']} ramps, {len(profiles)} segments, "
-            f"{duration_ns / 1e9:.3f} s"
+            f"job {job.job_id}: {values['profile']} ramps, {len(timing)} segments, {duration_ns / 1e9:.3f} s"
         )
         self.report()  # the run is on: its status at once
         early, self.early = self.early, []
@@ -171,9 +169,8 @@ class ProfileNode(Node):
         # count, so step k sits at position k (memory per chunk, not per segment)
         seg = int(rows[0, 0])
         k = self.checker.step_index(seg, rows[:, 1:])
-        times = self.profiles[seg].times_at(k.astype(np.float64))
         out = np.empty((rows.shape[0], len(TIMED_COLUMNS)), np.int64)
-        out[:, 0] = self.seg_t0_ns[seg] + np.rint(times * 1e9).astype(np.int64)
+        out[:, 0] = self.timing[seg].times_ns(k)
         out[:, 1:] = rows
         self.pub.publish(TIMED_CDR.encode(out))
         self.timed += rows.shape[0]
@@ -188,9 +185,7 @@ class ProfileNode(Node):
         msg.header.frame_id = job.run_id or job.job_id
         msg.header.stamp = self.get_clock().now().to_msg()
         msg.joint_names = list(AXES)
-        ends = [
-            int(t0) + round(p.duration * 1e9) for t0, p in zip(self.seg_t0_ns, self.profiles, strict=True)
-        ]
+        ends = [t.t0_ns + t.duration_ns for t in self.timing]
         corners = [(job.segments[0].start, 0)] + [(s.end, t) for s, t in zip(job.segments, ends, strict=True)]
         for pos, t_ns in corners:
             pt = JointTrajectoryPoint()
@@ -200,7 +195,7 @@ class ProfileNode(Node):
         return msg
 
     def job_duration_ns(self) -> int:
-        return int(self.seg_t0_ns[-1]) + round(self.profiles[-1].duration * 1e9) if self.profiles else 0
+        return self.timing[-1].t0_ns + self.timing[-1].duration_ns if self.timing else 0
 
     # -- out -------------------------------------------------------------
     def fail(self, why: str) -> None:

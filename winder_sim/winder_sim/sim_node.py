@@ -206,6 +206,9 @@ class SimNode(Node):
         self.errors: list[str] = []
         self.dev_cmd = [0.0, 0, 0.0]  # sum, count, max of command deviation (m)
         self.dev_act = [0.0, 0, 0.0]  # same for the simulated axes
+        #: programmed stops met in the stream: [t_stop ns, t_resume ns (-1: not known yet),
+        #: "coil:turn", state: 0 ahead, 1 paused (announced), 2 resumed]
+        self.pauses: list[list[Any]] = []
         self.wall_pace0 = 0.0  # wall time at which simulated time pace_sim0 was due
         self.pace_sim0 = 0.0
         self.pace_factor = 0.0  # the real_time_factor since wall_pace0
@@ -451,6 +454,7 @@ class SimNode(Node):
             return None
         self.last_step_ns = int(rows[-1, 0])
         self.deviation_of_commands(seg, pos)
+        self.note_stops(seg, rows)
         return rows
 
     def advance(self, rows: npt.NDArray[np.int64], settings: dict[str, Any]) -> None:
@@ -638,6 +642,50 @@ class SimNode(Node):
             self.wall_pace0, self.pace_factor = now, factor
         return self.pace_sim0 + (now - self.wall_pace0) * factor
 
+    def note_stops(self, seg: int, rows: npt.NDArray[np.int64]) -> None:
+        """The programmed stops in accepted rows: the axes rest from the stop's
+        step to the next step (its time comes with it or with the next chunk)."""
+        assert self.plan is not None and self.checker is not None
+        for p in self.pauses:
+            if p[1] < 0:
+                p[1] = int(rows[0, 0])
+        if not self.plan.stops:
+            return
+        k = self.checker.step_index(seg, rows[:, 2:])
+        wanted = [s for g, s in self.plan.stops if g == seg]
+        for i in np.nonzero(np.isin(k, wanted))[0]:
+            s = self.plan.segments[seg]
+            job = self.plan.job
+            layer = self.plan.job.segments()[seg].layer
+            turn = layer * job.turns_per_layer + int(k[i]) // job.fork_steps_per_rev
+            resume = int(rows[i + 1, 0]) if i + 1 < rows.shape[0] else -1
+            label = f"{job.segments()[seg].pole + 1}:{turn}" if s.kind == "layer" else str(int(k[i]))
+            self.pauses.append([int(rows[i, 0]), resume, label, 0])
+
+    def pause_events(self, upto_ns: int) -> None:
+        """Announce (and record) each programmed stop as simulated time reaches
+        it, and its end: the bag keeps every transition."""
+        assert self.plan is not None
+        for p in self.pauses:
+            t_stop, t_resume, label, state = p
+            if state == 0 and t_stop <= upto_ns:
+                p[3] = state = 1
+                self.pause_status("paused", f"paused at turn {label} (coil:turn)", t_stop, label)
+            if state == 1 and 0 <= t_resume <= upto_ns:
+                p[3] = 2
+                self.pause_status("running", f"resumed after the stop at turn {label}", t_resume, label)
+
+    def pause_status(self, state: str, text: str, t_ns: int, label: str) -> None:
+        values = self.summary(complete=False)
+        values["state"] = state
+        values["stop"] = label
+        status = self.diag.status("job", OK, f"run {self.plan.run_id if self.plan else ''}: {text}", values)
+        self.record("diagnostics", t_ns, serialize_message(status))
+        self.diag.pub.publish(status)
+
+    def paused(self) -> bool:
+        return any(p[3] == 1 for p in self.pauses)
+
     def publish_samples(self, block: dict[str, Any], n: int) -> None:
         """The first ``n`` samples of a block: /clock first, then commands and
         states, each sample's three messages before the next sample's."""
@@ -665,6 +713,8 @@ class SimNode(Node):
                 except RuntimeError as exc:
                     self.recording_failed(exc)
                     bag = None
+        if n and self.pauses:
+            self.pause_events(int(t_ns[n - 1]))
 
     def summary(self, complete: bool) -> dict[str, object]:
         assert self.plan is not None and self.checker is not None
@@ -835,7 +885,7 @@ class SimNode(Node):
             return
         self.receipt()
         values = self.summary(complete=False)
-        values["state"] = "stalled" if self.stalled else "running"
+        values["state"] = "stalled" if self.stalled else ("paused" if self.paused() else "running")
         self.diag.publish(
             "job",
             ERROR if self.stalled else OK,

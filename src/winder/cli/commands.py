@@ -16,7 +16,16 @@ from typing import Any, NoReturn
 
 import numpy as np
 
-from winder.contract.params import PROFILE_SPECS, SIM_SPECS, bag_directory, check_profile, check_sim, plan_job
+from winder.contract.params import (
+    INTERP_SPECS,
+    PROFILE_SPECS,
+    SIM_SPECS,
+    bag_directory,
+    check_profile,
+    check_sim,
+    plan_timing,
+    stop_points,
+)
 from winder.contract.topics import check_namespace
 from winder.motion.interp import dda, deviation_stats, interpolate, min_deviation, point_by_point
 from winder.motion.job import FIELD_SPECS, Job
@@ -182,7 +191,16 @@ def cmd_run(args: argparse.Namespace) -> int:
     profile = values_from_args(args, PROFILE_SPECS, given["profile_node"])
     check_profile(profile)
     segments = job.segments()
-    _, _, duration_ns = plan_job(profile, [s.steps for s in segments])  # the job as a whole
+    # the interp node's other settings in the file (chunk_steps, max_in_flight, stops...) go with the job
+    extra = {k: v for k, v in given["interp_node"].items() if k not in FIELD_SPECS and k != "autostart"}
+    extra.update(values_from_args(args, STOP_SPECS, given["interp_node"]))
+    if args.stop_at_turn is not None:
+        extra["stops"] = f"1:{args.stop_at_turn}"
+    if args.auto_resume is not None:
+        extra["stop_pause"] = STOP_SPECS["stop_pause"].parse(args.auto_resume)
+    stops = stop_points(job, extra["stops"])
+    pause = float(extra["stop_pause"])
+    _, duration_ns = plan_timing(profile, [s.steps for s in segments], stops, pause)  # the job as a whole
     sim = values_from_args(args, SIM_SPECS, given["sim_node"])
     check_sim(sim)
     cell = values_from_args(args, CELL_SPECS)
@@ -201,8 +219,6 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise UserError(f"the ROS 2 node packages are not installed ({exc}); run 'make demo'") from None
     bag_dir = bag_directory(sim["bag_dir"])
     sim["bag_dir"] = str(bag_dir)
-    # the interp node's other settings in the file (chunk_steps, max_in_flight...) go with the job
-    extra = {k: v for k, v in given["interp_node"].items() if k not in FIELD_SPECS and k != "autostart"}
     params = {"interp": {**job.to_dict(), **extra}, "profile": profile, "sim": sim}
     args.profile, args.model = profile["profile"], sim["model"]
     print(
@@ -275,6 +291,9 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
+#: the interp node's programmed-stop settings, which winder run takes too
+STOP_SPECS = {name: INTERP_SPECS[name] for name in ("stops", "stop_pause")}
+
 JOB_FILE_HELP = (
     "a job file (a ROS 2 parameters file: interp_node, profile_node and sim_node sections; "
     "see jobs/); options given here override its values"
@@ -294,6 +313,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_spec_arguments(p, FIELD_SPECS, "winding job (defaults: the RW400 paper set-up)")
     add_spec_arguments(p, PROFILE_SPECS, "profile node (rates in steps of each segment's major axis)")
     add_spec_arguments(p, SIM_SPECS, "sim node (motor settings per axis: --feed.J, --fork.D, ...)")
+    add_spec_arguments(p, STOP_SPECS, "programmed stops (see README: Operating the cell)")
     add_spec_arguments(p, CELL_SPECS, "cell")
     g = p.add_argument_group("cell")
     g.add_argument("--namespace", default="", help="ROS namespace of the cell (/name[/name...])")
@@ -301,6 +321,19 @@ def build_parser() -> argparse.ArgumentParser:
         "--check",
         action="store_true",
         help="check the job and every setting, print the plan, start nothing",
+    )
+    g.add_argument(
+        "--stop-at-turn",
+        type=int,
+        default=None,
+        metavar="N",
+        help="a programmed stop: the axes come to rest after turn N of the first coil (--stops 1:N)",
+    )
+    g.add_argument(
+        "--auto-resume",
+        default=None,
+        metavar="S",
+        help="seconds of simulated time the axes rest at each programmed stop (--stop-pause S)",
     )
     p.set_defaults(func=cmd_run)
 

@@ -6,10 +6,12 @@ anything, so a value is judged the same way wherever it is typed.
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
 import tempfile
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -28,13 +30,16 @@ __all__ = [
     "PROFILE_SPECS",
     "RAMP_SOURCES",
     "SIM_SPECS",
+    "SegmentTiming",
     "bag_directory",
     "check_interp",
     "check_profile",
     "check_sim",
     "plan_job",
     "plan_segment",
+    "plan_timing",
     "run_ramp",
+    "stop_points",
 ]
 
 
@@ -179,8 +184,29 @@ SIM_SPECS = {
 #: whole set-up of a run, and one call sets it and starts it: ``~/start_run``).
 RAMP_SOURCES = ("profile_node", "job")
 
+#: a list of programmed stops: ``coil:turn`` pairs, comma-separated
+STOPS_PATTERN = r"^\s*(\d+\s*:\s*\d+\s*(,\s*\d+\s*:\s*\d+\s*)*)?$"
+
 INTERP_SPECS.update(
     {
+        "stops": Spec(
+            "stops",
+            str,
+            "",
+            "programmed stops: the axes come to rest after turn T of coil C (counted over the coil's "
+            "layers, from 1), rest stop_pause seconds and go on",
+            pattern=STOPS_PATTERN,
+            pattern_text='coil:turn pairs separated by commas ("1:40,3:10"), or empty',
+        ),
+        "stop_pause": Spec(
+            "stop_pause",
+            float,
+            1.0,
+            "simulated time the axes rest at each programmed stop before the job goes on",
+            "s",
+            0.0,
+            3600.0,
+        ),
         "job_file": Spec(
             "job_file",
             str,
@@ -224,9 +250,41 @@ def run_ramp(values: dict[str, Any]) -> dict[str, Any] | None:
     return {name: values[f"ramp.{name}"] for name in PROFILE_SPECS}
 
 
+def stop_points(job: Job, text: str) -> list[tuple[int, int]]:
+    """The programmed stops ``text`` (``"coil:turn,..."``) of ``job`` as
+    (segment, step index) pairs, sorted: the axes come to rest after step k of
+    layer segment s, exactly where the fork completes the turn. SpecError (one
+    line) for a coil or turn the job does not have, or a stop inside a layer
+    whose major axis is not the fork (its turns do not fall on step indices)."""
+    out = set()
+    per_coil = job.turns_per_layer * job.layers
+    segs = job.segments()
+    for item in (t for t in text.replace(" ", "").split(",") if t):
+        coil, turn = (int(x) for x in item.split(":"))
+        if not 1 <= coil <= job.poles:
+            raise SpecError(f"stops={text!r} is invalid: coil {coil} is not in [1, {job.poles}] (poles)")
+        if not 1 <= turn <= per_coil:
+            raise SpecError(
+                f"stops={text!r} is invalid: turn {turn} of coil {coil} is not in [1, {per_coil}] "
+                f"({job.layers} layers of {job.turns_per_layer} turns)"
+            )
+        layer, within = divmod(turn - 1, job.turns_per_layer)
+        seg = next(s for s in segs if s.kind == "layer" and s.pole == coil - 1 and s.layer == layer)
+        if abs(seg.delta[1]) < abs(seg.delta[0]) and within + 1 < job.turns_per_layer:
+            raise SpecError(
+                f"stops={text!r} is invalid: turn {turn} ends inside a layer whose feed steps "
+                f"({abs(seg.delta[0])}) outnumber its fork steps: stop at a layer's end instead"
+            )
+        last = within + 1 == job.turns_per_layer  # the layer's end: its last step, whichever axis leads
+        out.add((seg.index, seg.steps if last else (within + 1) * job.fork_steps_per_rev))
+    return sorted(out)
+
+
 def check_interp(values: dict[str, Any]) -> None:
     """Cross-field check of the interp node's settings (SpecError)."""
-    Job(**{k: v for k, v in values.items() if k in FIELD_SPECS})
+    job = Job(**{k: v for k, v in values.items() if k in FIELD_SPECS})
+    if values.get("stops"):
+        stop_points(job, values["stops"])
     if values.get("job_file"):
         from winder.contract.jobfile import load_job_file
 
@@ -285,6 +343,86 @@ def plan_job(
     t0 = np.zeros(len(profiles), np.int64)
     np.cumsum(durations[:-1].astype(np.int64), out=t0[1:])
     return profiles, t0, int(total)
+
+
+@dataclass(frozen=True)
+class SegmentTiming:
+    """When each step of one segment happens: its moves (one, or several
+    split at programmed stops, each from and to rest) and the pauses between.
+
+    ``ends``: the step index at which each move ends (the last is the
+    segment's step count); ``starts_ns``: each move's start after the
+    segment's start ``t0_ns``; ``duration_ns``: to the end of the last move.
+    """
+
+    t0_ns: int
+    ends: tuple[int, ...]
+    profiles: tuple[Profile, ...]
+    starts_ns: tuple[int, ...]
+
+    @property
+    def duration_ns(self) -> int:
+        return self.starts_ns[-1] + round(self.profiles[-1].duration * 1e9)
+
+    def times_ns(self, k: npt.NDArray[np.integer[Any]]) -> npt.NDArray[np.int64]:
+        """The time (ns since the job's start) of steps ``k`` (1-based) of the segment."""
+        if len(self.ends) == 1:  # one move: as before stops existed, bit for bit
+            times = self.profiles[0].times_at(k.astype(np.float64))
+            return self.t0_ns + np.rint(times * 1e9).astype(np.int64)
+        move = np.minimum(np.searchsorted(self.ends, k, side="left"), len(self.ends) - 1)
+        before = np.concatenate([[0], self.ends[:-1]])[move]
+        out = np.empty(k.shape, np.int64)
+        for j in np.unique(move):
+            m = move == j
+            local = (k[m] - before[m]).astype(np.float64)
+            times = self.profiles[int(j)].times_at(local)
+            out[m] = self.t0_ns + self.starts_ns[int(j)] + np.rint(times * 1e9).astype(np.int64)
+        return out
+
+
+def plan_timing(
+    values: dict[str, Any],
+    segment_steps: Sequence[int],
+    stops: Sequence[tuple[int, int]] = (),
+    pause: float = 0.0,
+) -> tuple[list[SegmentTiming], int]:
+    """The timing of every segment of a job with the ramp ``values``, its
+    programmed ``stops`` ((segment, step index) pairs: the axes come to rest
+    there, with the same ramp as a segment end, and rest ``pause`` seconds)
+    and ``dwell`` between segments; and the job's duration (ns). Without stops
+    the steps' times are :func:`plan_job`'s. ValueError (one line) as there."""
+    at: dict[int, list[int]] = {}
+    for seg, k in stops:
+        at.setdefault(seg, []).append(k)
+    lengths: set[int] = set()
+    for i, n in enumerate(segment_steps):
+        cuts = [0, *sorted(k for k in at.get(i, ()) if 0 < k < n), n]
+        lengths.update(b - a for a, b in itertools.pairwise(cuts) if b > a)
+    plans = {n: plan_segment(values, n) for n in sorted(lengths)}
+    dwell_ns, pause_ns = round(values["dwell"] * 1e9), round(pause * 1e9)
+    timings = []
+    t0 = 0
+    for i, n in enumerate(segment_steps):
+        stops_here = sorted(set(at.get(i, ())))
+        cuts = [0, *[k for k in stops_here if 0 < k < n], n]
+        ends, profiles, starts = [], [], []
+        start = 0
+        for a, b in itertools.pairwise(cuts):
+            ends.append(b)
+            profiles.append(plans[b - a])
+            starts.append(start)
+            start += round(plans[b - a].duration * 1e9) + pause_ns
+        timing = SegmentTiming(t0, tuple(ends), tuple(profiles), tuple(starts))
+        timings.append(timing)
+        rest = pause_ns if n in stops_here else 0  # a stop at a segment's end: the pause after it
+        t0 += timing.duration_ns + dwell_ns + rest
+        if t0 > MAX_JOB_SECONDS * 1e9:
+            raise ValueError(
+                f"the job takes more than {MAX_JOB_SECONDS:g} s with profile={values['profile']}, "
+                f"v_max={values['v_max']:g}: more than a job may last; raise the limits or split the job"
+            )
+    total = timings[-1].t0_ns + timings[-1].duration_ns if timings else 0
+    return timings, total
 
 
 def check_profile(values: dict[str, Any]) -> None:

@@ -15,8 +15,10 @@ from __future__ import annotations
 
 import collections
 import json
+import math
 import re
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -55,15 +57,24 @@ def make_run_id(job_id: str, counter: int, now: float | None = None) -> str:
     return f"{job_id}_{time.strftime('%Y%m%d_%H%M%S', time.gmtime(t))}{ms:03d}_{counter}"
 
 
-def describe_job(job: Job, run_id: str = "", ramp: dict[str, Any] | None = None) -> str:
+def describe_job(
+    job: Job,
+    run_id: str = "",
+    ramp: dict[str, Any] | None = None,
+    stops: Sequence[tuple[int, int]] = (),
+    stop_pause: float = 0.0,
+) -> str:
     """JSON text of a job as the downstream nodes and the bag need it; the
-    run it starts (``run_id``) travels with it, and the ramp to time it with
-    when the run brings its own (else null: the profile node's settings)."""
+    run it starts (``run_id``) travels with it, the ramp to time it with
+    when the run brings its own (else null: the profile node's settings), and
+    its programmed stops ((segment, step index): rest ``stop_pause`` s there)."""
     segs = job.segments()
     doc = {
         "format": FORMAT,
         "run_id": run_id,
         "ramp": ramp,
+        "stops": [list(s) for s in stops],
+        "stop_pause": stop_pause,
         "job": job.to_dict(),
         "axes": list(AXES),
         "joint_step": list(job.joint_step),
@@ -110,6 +121,9 @@ class JobPlan:
     run_id: str = ""  #: the run this job description started ("" in bags before run ids)
     #: the ramp settings the run brings (checked by the profile node), None: the profile node's own
     ramp: dict[str, Any] | None = None
+    #: programmed stops: (segment, step index) after which the axes rest ``stop_pause`` s
+    stops: tuple[tuple[int, int], ...] = ()
+    stop_pause: float = 0.0
 
     @property
     def job_id(self) -> str:
@@ -166,6 +180,7 @@ def parse_job_description(text: str) -> JobPlan:
             raise ValueError(f"job description: segment {e.index} does not match its job fields")
         major = int(np.argmax(np.abs(e.delta)))
         segs.append(SegmentPlan(e.kind, tuple(e.start), tuple(e.delta), e.steps, major))
+    stops, stop_pause = _stops(doc, expected)
     total = sum(e.steps for e in expected)
     derived = {
         "total_steps": total,
@@ -184,7 +199,29 @@ def parse_job_description(text: str) -> JobPlan:
         text=text,
         run_id=run_id,
         ramp=ramp,
+        stops=stops,
+        stop_pause=stop_pause,
     )
+
+
+def _stops(doc: dict[str, Any], segments: list[Any]) -> tuple[tuple[tuple[int, int], ...], float]:
+    """The programmed stops of a job description, checked against its segments."""
+    listed = doc.get("stops", [])
+    pause = doc.get("stop_pause", 0.0)
+    if not isinstance(listed, list) or not isinstance(pause, (int, float)) or isinstance(pause, bool):
+        raise ValueError("job description: stops must be a list and stop_pause a number")
+    if not (math.isfinite(pause) and 0 <= pause <= 3600):
+        raise ValueError(f"job description: stop_pause {pause!r} is not in [0, 3600] s")
+    out = []
+    for item in listed:
+        ok = isinstance(item, list) and len(item) == 2 and all(type(x) is int for x in item)
+        if not ok or not 0 <= item[0] < len(segments):
+            raise ValueError(f"job description: stop {json.dumps(item)[:40]} is not [segment, step]")
+        seg = segments[item[0]]
+        if seg.kind != "layer" or not 1 <= item[1] <= seg.steps:
+            raise ValueError(f"job description: stop {item} is not a step of a layer segment")
+        out.append((item[0], item[1]))
+    return tuple(sorted(set(out))), float(pause)
 
 
 @dataclass(frozen=True)

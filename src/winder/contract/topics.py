@@ -79,11 +79,12 @@ READY_STATES = ("ready", "waiting", "busy", "blocked")
 #: the node's ``steps_done`` of ``steps_total`` and their ratio ``progress``.
 #: Nodes add their own keys after these (the sim node: lost steps, bag...).
 STATUS_KEYS = ("state", "job_id", "run_id", "steps_done", "steps_total", "progress")
-#: idle: no run yet; running: a run in progress; stalled: running, but its
+#: idle: no run yet; running: a run in progress; paused: at rest at a
+#: programmed stop (the sim node), going on after its pause; stalled: running, but its
 #: step stream stopped (the sim node); done: the last run ended complete;
 #: incomplete: it ended short (aborted, stalled for good, cut off...);
 #: blocked: the node's settings are refused, it takes no run
-JOB_STATES = ("idle", "running", "stalled", "done", "incomplete", "blocked")
+JOB_STATES = ("idle", "running", "paused", "stalled", "done", "incomplete", "blocked")
 
 
 def status_values(
