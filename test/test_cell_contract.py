@@ -122,6 +122,16 @@ def test_the_same_job_twice_gives_two_runs_on_one_clock(tmp_path: Path, procs: P
     c = np.array(clock)
     assert c.size > 100 and np.all(np.diff(c) > 0), np.nonzero(np.diff(c) <= 0)
     assert c[-1] > origin2
+    # the cell's state, latched: a late subscriber hears how the last run ended
+    from diagnostic_msgs.msg import DiagnosticStatus
+
+    from winder.ros.qos import QOS_LATCHED
+
+    late: list[Any] = []
+    ros.create_subscription(DiagnosticStatus, "/winder/state", late.append, QOS_LATCHED)
+    spin_until(ros, lambda: bool(late), 10, "the latched cell state")
+    last = {kv.key: kv.value for kv in late[-1].values}
+    assert last["state"] == "done" and last["run_id"] == second, last
     # one status schema on every node, in every state seen
     states: dict[str, set[str]] = {}
     for name, keys, values in statuses:

@@ -129,3 +129,8 @@ def test_a_run_stopped_at_turn_2_has_the_uninterrupted_steps(tmp_path: Path, pro
     ]
     marks = [(v["state"], v.get("stop")) for v in states if v.get("stop")]
     assert marks == [("paused", "1:2"), ("running", "1:2")], marks
+    # and the cell's state topic, one message per transition, with where the axes are
+    cell = [{kv.key: kv.value for kv in m.values} for _, m in raw["/winder/state"]]
+    assert [c["state"] for c in cell] == ["running", "paused", "running", "done"], cell
+    assert (cell[1]["coil"], cell[1]["layer"], cell[1]["turn"]) == ("1", "1", "2")
+    assert all(c["run_id"] == stopped.run_id for c in cell)

@@ -3,7 +3,8 @@
 In:  winder/job (String, latched), winder/path (JointTrajectory, latched),
      winder/step_times (Int64MultiArray), /diagnostics (recorded),
      parameters: model, per-axis motor (``<axis>.J`` ...), output rate, pacing.
-Out: /clock, winder/joint_commands and winder/joint_states (JointState at
+Out: winder/state (DiagnosticStatus, latched: the cell's state at each
+     transition), /clock, winder/joint_commands and winder/joint_states (JointState at
      ``publish_rate`` Hz of simulated time), winder/sim_config (String, latched,
      the motor parameters in force), /diagnostics, and a rosbag2/MCAP
      directory ``<bag_dir>/<run id>`` holding all of them.
@@ -34,7 +35,7 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from diagnostic_msgs.msg import DiagnosticArray, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message, serialize_message
@@ -57,6 +58,7 @@ from winder.contract.topics import (
     TOPIC_PROFILE_CONFIG,
     TOPIC_PROGRESS,
     TOPIC_SIM_CONFIG,
+    TOPIC_STATE,
     TOPIC_STEP_TIMES,
     status_values,
 )
@@ -94,6 +96,7 @@ BAG_TYPES = {
     "profile_config": "std_msgs/msg/String",
     "clock": "rosgraph_msgs/msg/Clock",
     "diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
+    "state": "diagnostic_msgs/msg/DiagnosticStatus",
 }
 
 
@@ -134,6 +137,7 @@ class SimNode(Node):
         self.pub_cmd = self.create_publisher(JointState, TOPIC_JOINT_COMMANDS, QOS_STATE)
         self.pub_config = self.create_publisher(String, TOPIC_SIM_CONFIG, QOS_LATCHED)
         self.pub_progress = self.create_publisher(KeyValue, TOPIC_PROGRESS, QOS_STATE)
+        self.pub_cell_state = self.create_publisher(DiagnosticStatus, TOPIC_STATE, QOS_LATCHED)
         self.diag = Diagnostics(self, "winder_sim")
         self.ready = Announcer(self, "consumer")  # the start handshake (winder/ready)
         self.create_subscription(String, TOPIC_JOB, self.on_job, QOS_LATCHED, raw=True)
@@ -166,6 +170,7 @@ class SimNode(Node):
             "profile_config": self.resolve_topic_name(TOPIC_PROFILE_CONFIG),
             "clock": self.resolve_topic_name(TOPIC_CLOCK),
             "diagnostics": TOPIC_DIAGNOSTICS,
+            "state": self.resolve_topic_name(TOPIC_STATE),
         }
         self.clock_ns = -1  # the last /clock published in this node's life (ns)
         self.own_ns = self.get_namespace().strip("/")  # "" or "cell1": the prefix of our status names
@@ -175,6 +180,7 @@ class SimNode(Node):
         self.profile_raw: bytes | None = None
         self.last_summary: dict[str, object] = {}
         self.last_level, self.last_text = OK, ""
+        self.cell_state("idle", "no job yet")
         if self.settings.blocked():
             self.diag.publish("job", ERROR, str(self.settings.blocked()), {})
 
@@ -300,6 +306,7 @@ class SimNode(Node):
             f"run {plan.run_id or '-'}: job {plan.job_id}, {plan.total_steps} steps, {values['model']} model"
             + (f", recording to {self.bag.path}" if self.bag else "")
         )
+        self.cell_state("running", f"run {plan.run_id or plan.job_id} started", where=(1, 1, 0))
         self.report()  # the run is on: its status at once, not at the next second
         early, self.early = self.early, []
         for chunk in early:  # in order, before any taken from the queue
@@ -676,6 +683,10 @@ class SimNode(Node):
                 self.pause_status("running", f"resumed after the stop at turn {label}", t_resume, label)
 
     def pause_status(self, state: str, text: str, t_ns: int, label: str) -> None:
+        assert self.plan is not None
+        coil, turn = (int(x) for x in label.split(":"))
+        layer = min((turn - 1) // self.plan.job.turns_per_layer + 1, self.plan.job.layers)
+        self.cell_state(state, text, where=(coil, layer, turn), t_ns=t_ns)
         values = self.summary(complete=False)
         values["state"] = state
         values["stop"] = label
@@ -758,9 +769,41 @@ class SimNode(Node):
         with signals_held():
             self._finish(complete)
 
+    def cell_state(
+        self, state: str, text: str, where: tuple[int, int, int] = (0, 0, 0), t_ns: int | None = None
+    ) -> None:
+        """winder/state: the cell's state at a transition, latched, and into the bag."""
+        plan = self.plan
+        t = self.t_sim_ns if t_ns is None else t_ns
+        coil, layer, turn = where
+        values = {
+            "state": state,
+            "job_id": plan.job_id if plan else "",
+            "run_id": plan.run_id if plan else "",
+            "coil": coil,
+            "layer": layer,
+            "turn": turn,
+            "sim_time_s": f"{t / 1e9:.6f}",
+        }
+        msg = DiagnosticStatus(
+            level=bytes([ERROR if state == "failed" else OK]),
+            name=f"{self.get_fully_qualified_name().lstrip('/')}: state",
+            message=text,
+            hardware_id="winder_sim",
+            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()],
+        )
+        if plan is not None:
+            self.record("state", t, serialize_message(msg))
+        if self.context.ok():
+            self.pub_cell_state.publish(msg)
+
     def _finish(self, complete: bool) -> None:
         assert self.plan is not None
         values, level, text = self.final_report(complete)
+        job = self.plan.job
+        ended = "done" if values["state"] == "done" else "failed"
+        last = (job.poles, job.layers, job.turns_per_layer * job.layers) if ended == "done" else (0, 0, 0)
+        self.cell_state(ended, text, where=last)
         final = self.diag.status("job", level, text, values)
         if self.bag is not None:
             # the final report goes into the bag too, and the bag is closed

@@ -24,6 +24,12 @@ TOPIC_SIM_CONFIG = "winder/sim_config"
 TOPIC_PROGRESS = "winder/progress"
 TOPIC_PROFILE_CONFIG = "winder/profile_config"
 TOPIC_CLOCK = "clock"
+#: The cell's state (diagnostic_msgs/DiagnosticStatus, latched): one message
+#: per transition, values :data:`CELL_STATE_KEYS`
+TOPIC_STATE = "winder/state"
+#: idle, running, paused (at a programmed stop), done, failed (ended incomplete)
+CELL_STATES = ("idle", "running", "paused", "done", "failed")
+CELL_STATE_KEYS = ("state", "job_id", "run_id", "coil", "layer", "turn", "sim_time_s")
 TOPIC_DIAGNOSTICS = "/diagnostics"
 
 #: The diagnostic task every node reports its job under (``"<node>: job"``).
