@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -134,3 +135,72 @@ def test_a_run_stopped_at_turn_2_has_the_uninterrupted_steps(tmp_path: Path, pro
     assert [c["state"] for c in cell] == ["running", "paused", "running", "done"], cell
     assert (cell[1]["coil"], cell[1]["layer"], cell[1]["turn"]) == ("1", "1", "2")
     assert all(c["run_id"] == stopped.run_id for c in cell)
+
+
+@pytest.mark.ros
+def test_a_stop_that_waits_for_resume_holds_until_winder_ctl_resume(
+    tmp_path: Path, procs: Procs, ros: object
+) -> None:
+    """stop_resume:=call: the axes rest at the stop until `winder ctl resume`,
+    however long (here 4 s of wall time with a 1 s stall timeout: no stall is
+    reported, nothing moves); then the job goes on with the step times of the
+    automatic resume, and completes. A resume when nothing waits says so."""
+    from conftest import spin_until
+    from diagnostic_msgs.msg import DiagnosticArray
+    from test_cell_contract import ros_spin
+
+    seen: list[dict[str, str]] = []
+
+    ros.create_subscription(  # type: ignore[attr-defined]
+        DiagnosticArray,
+        "/diagnostics",
+        lambda m: seen.extend(
+            {"name": s.name, "level": str(s.level[0]), **{kv.key: kv.value for kv in s.values}}
+            for s in m.status
+        ),
+        100,
+    )
+    bags = tmp_path / "bags"
+    procs.start("sim_node", "-p", f"bag_dir:={bags}", "-p", "stall_timeout:=1.0")
+    procs.start("profile_node")
+    job = ["-p", "turns_per_layer:=4", "-p", "layers:=1", "-p", "poles:=2", "-p", "fork_steps_per_rev:=512"]
+    stop = ["-p", "stops:=1:2", "-p", "stop_pause:=0.5", "-p", "stop_resume:=call"]
+    procs.start("interp_node", *job, *stop)
+
+    def sim_state() -> str:
+        states = [v.get("state", "") for v in seen if v["name"] == "sim_node: job"]
+        return states[-1] if states else ""
+
+    spin_until(ros, lambda: sim_state() == "paused", 60, "the sim node to rest at the stop")
+    done_before = max(int(v.get("steps_done", 0)) for v in seen if v["name"] == "sim_node: job")
+    ros_spin(ros, 4.0)
+    assert sim_state() == "paused"
+    assert not [v for v in seen if v["name"] == "sim_node: stream"], (
+        "a stall was reported at a programmed stop"
+    )
+    assert max(int(v.get("steps_done", 0)) for v in seen if v["name"] == "sim_node: job") == done_before
+    out = subprocess.run(
+        [str(WINDER), "ctl", "resume"], env=procs.env, capture_output=True, text=True, timeout=60
+    )
+    assert out.returncode == 0 and "resumed after the stop" in out.stdout, out.stdout + out.stderr
+    t_end = time.monotonic() + 60
+    while not list(bags.glob("*/metadata.yaml")) and time.monotonic() < t_end:
+        ros_spin(ros, 0.2)
+    [meta] = list(bags.glob("*/metadata.yaml"))
+    run = read_run(meta.parent)
+    assert run.complete and not run.errors, run.errors
+    layer = run.steps[run.steps[:, 1] == 0]
+    k_stop = 2 * 512
+    one, two = plan_segment(RAMP, k_stop), plan_segment(RAMP, layer.shape[0] - k_stop)
+    k = np.arange(1, layer.shape[0] + 1, dtype=np.float64)
+    want = np.concatenate(
+        [
+            np.rint(one.times_at(k[:k_stop]) * 1e9),
+            round(one.duration * 1e9) + round(0.5e9) + np.rint(two.times_at(k[k_stop:] - k_stop) * 1e9),
+        ]
+    ).astype(np.int64)
+    assert np.array_equal(layer[:, 0], want)  # the automatic resume's times: the wait is wall time only
+    again = subprocess.run(
+        [str(WINDER), "ctl", "resume"], env=procs.env, capture_output=True, text=True, timeout=60
+    )
+    assert again.returncode == 1 and "nothing to resume" in again.stderr, again.stdout + again.stderr

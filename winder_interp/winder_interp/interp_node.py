@@ -199,7 +199,9 @@ class InterpNode(Node):
         self.aborted = ""
         self.started_wall = self.last_receipt_wall = time.monotonic()
         stops = stop_points(job, values["stops"]) if values["stops"] else []
-        text = describe_job(job, self.run_id, run_ramp(values), stops, values["stop_pause"])
+        text = describe_job(
+            job, self.run_id, run_ramp(values), stops, values["stop_pause"], values["stop_resume"]
+        )
         self.pub_job.publish(String(data=text))
         self.pending = self.chunks(job, values["chunk_steps"])
         if self.tick_timer.is_canceled():

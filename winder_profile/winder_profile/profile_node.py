@@ -24,6 +24,7 @@ from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallba
 from rclpy.node import Node
 from rclpy.subscription import Subscription
 from std_msgs.msg import Int32MultiArray, Int64MultiArray, String
+from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from winder.contract.params import PROFILE_SPECS, SegmentTiming, check_profile, plan_timing
@@ -67,6 +68,7 @@ class ProfileNode(Node):
         # connect() and announce() follow the streams' matching as it happens;
         # the 1 Hz report repeats both (and is the only timer)
         steady_timer(self, 1.0, self.report)
+        self.create_service(Trigger, "~/resume", self.on_resume)
 
         self.plan: JobPlan | None = None
         self.checker: StreamChecker | None = None
@@ -75,6 +77,11 @@ class ProfileNode(Node):
         self.timed = 0
         self.error = ""
         self.ramp_kind = ""  # the ramp kind of the run being timed
+        #: a programmed stop waiting for ~/resume (stop_resume call): the stops
+        #: still ahead, the one the job waits at, and the timed rows held beyond it
+        self.holds: list[tuple[int, int]] = []
+        self.waiting_at: tuple[int, int] | None = None
+        self.held: list[np.ndarray] = []
 
     def connect(self) -> None:
         if self.sub_steps is None and self.pub.get_subscription_count() > 0:
@@ -120,6 +127,8 @@ class ProfileNode(Node):
             self.fail(f"job {job.job_id} cannot be ramped: {exc}")
             return
         self.plan, self.timing = job, timing
+        self.holds = list(job.stops) if job.stop_resume == "call" else []
+        self.waiting_at, self.held = None, []
         self.ramp_kind = str(values["profile"])
         # the ramp in force for this job, latched: the sim node records it
         config = {
@@ -172,10 +181,50 @@ class ProfileNode(Node):
         out = np.empty((rows.shape[0], len(TIMED_COLUMNS)), np.int64)
         out[:, 0] = self.timing[seg].times_ns(k)
         out[:, 1:] = rows
-        self.pub.publish(TIMED_CDR.encode(out))
+        self.send(out, seg, k)
         self.timed += rows.shape[0]
         if self.checker.complete:
             self.report()
+
+    def send(self, out: np.ndarray, seg: int, k: np.ndarray) -> None:
+        """Publish timed rows, up to a programmed stop that waits for ~/resume:
+        the rows beyond it are held until the call (their times are planned
+        already: the run's step times are those of the automatic resume)."""
+        if self.waiting_at is not None:
+            self.held.append(out)
+            return
+        stop = next((s for s in self.holds if s[0] == seg and s[1] in k), None)
+        if stop is None:
+            self.pub.publish(TIMED_CDR.encode(out))
+            return
+        cut = int(np.nonzero(k == stop[1])[0][0]) + 1
+        self.pub.publish(TIMED_CDR.encode(out[:cut]))
+        self.holds.remove(stop)
+        self.waiting_at = stop
+        if cut < out.shape[0]:
+            self.held.append(out[cut:])
+        self.get_logger().info(f"programmed stop at segment {stop[0]}, step {stop[1]}: waiting for ~/resume")
+        self.report()
+
+    def on_resume(self, _req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:
+        """Go on after a programmed stop that waits for a call."""
+        if self.waiting_at is None or self.plan is None:
+            resp.success, resp.message = False, "not at a programmed stop: nothing to resume"
+            return resp
+        stop, held = self.waiting_at, self.held
+        self.waiting_at, self.held = None, []
+        for i, out in enumerate(held):
+            seg = int(out[0, 1])
+            k = self.checker.step_index(seg, out[:, 2:]) if self.checker else np.zeros(0, np.int64)
+            self.send(out, seg, k)
+            if self.waiting_at is not None:  # the next stop is in what was held
+                self.held.extend(held[i + 1 :])
+                break
+        resp.success = True
+        resp.message = f"run {self.plan.run_id or self.plan.job_id}: resumed after the stop at step {stop[1]}"
+        self.get_logger().info(resp.message)
+        self.report()
+        return resp
 
     def path_message(self, job: JobPlan) -> JointTrajectory:
         """The job's corner points (joint units) with the time each is reached:
@@ -245,6 +294,8 @@ class ProfileNode(Node):
         total = self.plan.total_steps
         level = ERROR if self.error else (WARN if self.checker and self.checker.gaps else OK)
         state = "incomplete" if self.error else ("done" if self.timed >= total else "running")
+        if self.waiting_at is not None and not self.error:
+            state = "paused"
         self.diag.publish(
             "job",
             level,

@@ -656,6 +656,9 @@ class SimNode(Node):
         for p in self.pauses:
             if p[1] < 0:
                 p[1] = int(rows[0, 0])
+                if self.plan.stop_resume == "call" and self.wall_pace0:
+                    # the job waited for ~/resume: pacing goes on from here, it does not catch up
+                    self.wall_pace0, self.pace_sim0 = time.monotonic(), self.t_sim_ns / 1e9
         if not self.plan.stops:
             return
         k = self.checker.step_index(seg, rows[:, 2:])
@@ -696,6 +699,12 @@ class SimNode(Node):
 
     def paused(self) -> bool:
         return any(p[3] == 1 for p in self.pauses)
+
+    def waiting_for_resume(self) -> bool:
+        """At a programmed stop that waits for ~/resume: no steps come, and that is no stall."""
+        return (
+            self.plan is not None and self.plan.stop_resume == "call" and any(p[1] < 0 for p in self.pauses)
+        )
 
     def publish_samples(self, block: dict[str, Any], n: int) -> None:
         """The first ``n`` samples of a block: /clock first, then commands and
@@ -871,6 +880,11 @@ class SimNode(Node):
 
     def watch(self) -> None:
         if self.plan is None or self.finishing:
+            return
+        if self.waiting_for_resume() and not (self.inbox or self.rest is not None or self.out):
+            self.last_chunk_wall = time.monotonic()
+            if any(p[3] == 0 for p in self.pauses):  # the axes are at the stop: say so
+                self.pause_events(max(p[0] for p in self.pauses))
             return
         if self.inbox or self.rest is not None or self.out:
             self.last_chunk_wall = time.monotonic()  # pacing work already here: not a stall

@@ -269,6 +269,19 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_ctl(args: argparse.Namespace) -> int:
+    """One command to a running cell: exit 0 if it was done, 1 if the cell said no."""
+    ns = check_namespace(args.namespace)
+    timeout = CELL_SPECS["timeout"].parse(args.timeout)
+    try:
+        from winder.ros.ctl import trigger
+    except ImportError as exc:
+        raise UserError(f"the ROS 2 packages are not installed ({exc}); run 'make demo'") from None
+    ok, message = trigger(f"{ns}/profile_node/{args.action}", timeout=timeout)
+    print(message if ok else f"winder ctl {args.action}: {message}", file=sys.stdout if ok else sys.stderr)
+    return 0 if ok else 1
+
+
 FIGURES = ("interp", "profile", "motor")
 
 
@@ -292,7 +305,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 #: the interp node's programmed-stop settings, which winder run takes too
-STOP_SPECS = {name: INTERP_SPECS[name] for name in ("stops", "stop_pause")}
+STOP_SPECS = {name: INTERP_SPECS[name] for name in ("stops", "stop_pause", "stop_resume")}
 
 JOB_FILE_HELP = (
     "a job file (a ROS 2 parameters file: interp_node, profile_node and sim_node sections; "
@@ -336,6 +349,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="seconds of simulated time the axes rest at each programmed stop (--stop-pause S)",
     )
     p.set_defaults(func=cmd_run)
+
+    p = sub.add_parser("ctl", help="send a command to a running cell (resume after a programmed stop)")
+    p.add_argument("action", choices=("resume",), help="resume: go on after a stop that waits for a call")
+    p.add_argument("--namespace", default="", help="ROS namespace of the cell (/name[/name...])")
+    p.add_argument("--timeout", default="10", help="seconds to wait for the cell's reply (default 10)")
+    p.set_defaults(func=cmd_ctl)
 
     p = sub.add_parser("figures", help="reproduce the source papers' figures as PNG files")
     p.add_argument("outdir", nargs="?", default="docs/img", help="where the PNG files go (default docs/img)")

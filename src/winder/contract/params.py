@@ -207,6 +207,14 @@ INTERP_SPECS.update(
             0.0,
             3600.0,
         ),
+        "stop_resume": Spec(
+            "stop_resume",
+            str,
+            "auto",
+            "how the job goes on after a programmed stop: auto (after stop_pause) or call (on the "
+            "profile node's ~/resume, then after stop_pause)",
+            choices=("auto", "call"),
+        ),
         "job_file": Spec(
             "job_file",
             str,

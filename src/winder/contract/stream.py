@@ -63,6 +63,7 @@ def describe_job(
     ramp: dict[str, Any] | None = None,
     stops: Sequence[tuple[int, int]] = (),
     stop_pause: float = 0.0,
+    stop_resume: str = "auto",
 ) -> str:
     """JSON text of a job as the downstream nodes and the bag need it; the
     run it starts (``run_id``) travels with it, the ramp to time it with
@@ -75,6 +76,7 @@ def describe_job(
         "ramp": ramp,
         "stops": [list(s) for s in stops],
         "stop_pause": stop_pause,
+        "stop_resume": stop_resume,
         "job": job.to_dict(),
         "axes": list(AXES),
         "joint_step": list(job.joint_step),
@@ -124,6 +126,8 @@ class JobPlan:
     #: programmed stops: (segment, step index) after which the axes rest ``stop_pause`` s
     stops: tuple[tuple[int, int], ...] = ()
     stop_pause: float = 0.0
+    #: "auto": the job goes on after stop_pause; "call": it waits for ~/resume first
+    stop_resume: str = "auto"
 
     @property
     def job_id(self) -> str:
@@ -181,6 +185,9 @@ def parse_job_description(text: str) -> JobPlan:
         major = int(np.argmax(np.abs(e.delta)))
         segs.append(SegmentPlan(e.kind, tuple(e.start), tuple(e.delta), e.steps, major))
     stops, stop_pause = _stops(doc, expected)
+    stop_resume = doc.get("stop_resume", "auto")
+    if stop_resume not in ("auto", "call"):
+        raise ValueError(f"job description: stop_resume {json.dumps(stop_resume)[:40]} is not auto or call")
     total = sum(e.steps for e in expected)
     derived = {
         "total_steps": total,
@@ -201,6 +208,7 @@ def parse_job_description(text: str) -> JobPlan:
         ramp=ramp,
         stops=stops,
         stop_pause=stop_pause,
+        stop_resume=stop_resume,
     )
 
 
