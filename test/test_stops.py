@@ -76,6 +76,16 @@ def test_stop_points_fall_on_turn_boundaries() -> None:
     assert stop_points(feedy, "1:4") == [(0, max(abs(d) for d in feedy.segments()[0].delta))]
 
 
+def stopped_layer_times(n: int, k_stop: int, pause: float) -> np.ndarray:
+    """The step times (ns) of an n-step layer stopped after step k_stop: a
+    k_stop-step move to rest, the pause, and the rest as another move."""
+    one, two = plan_segment(RAMP, k_stop), plan_segment(RAMP, n - k_stop)
+    k = np.arange(1, n + 1, dtype=np.float64)
+    first = np.rint(one.times_at(k[:k_stop]) * 1e9)
+    second = round(one.duration * 1e9) + round(pause * 1e9) + np.rint(two.times_at(k[k_stop:] - k_stop) * 1e9)
+    return np.concatenate([first, second]).astype(np.int64)
+
+
 SMALL = ["--turns-per-layer", "4", "--layers", "1", "--poles", "2", "--fork-steps-per-rev", "512"]
 
 
@@ -110,15 +120,7 @@ def test_a_run_stopped_at_turn_2_has_the_uninterrupted_steps(tmp_path: Path, pro
     assert rb.lost_steps == 0
     # the first layer: 2048 steps of fork; the stop after 1024 (turn 2 of 512-step turns)
     layer = b[b[:, 1] == 0]
-    k_stop = 2 * 512
-    one, two = plan_segment(RAMP, k_stop), plan_segment(RAMP, layer.shape[0] - k_stop)
-    k = np.arange(1, layer.shape[0] + 1, dtype=np.float64)
-    want = np.concatenate(
-        [
-            np.rint(one.times_at(k[:k_stop]) * 1e9),
-            round(one.duration * 1e9) + round(0.5e9) + np.rint(two.times_at(k[k_stop:] - k_stop) * 1e9),
-        ]
-    ).astype(np.int64)
+    want = stopped_layer_times(layer.shape[0], 2 * 512, 0.5)
     assert np.array_equal(layer[:, 0], want)
     # the paused and resumed transitions are in the bag, in that order
     raw = rosbags_read(stopped_bag)
@@ -190,15 +192,7 @@ def test_a_stop_that_waits_for_resume_holds_until_winder_ctl_resume(
     run = read_run(meta.parent)
     assert run.complete and not run.errors, run.errors
     layer = run.steps[run.steps[:, 1] == 0]
-    k_stop = 2 * 512
-    one, two = plan_segment(RAMP, k_stop), plan_segment(RAMP, layer.shape[0] - k_stop)
-    k = np.arange(1, layer.shape[0] + 1, dtype=np.float64)
-    want = np.concatenate(
-        [
-            np.rint(one.times_at(k[:k_stop]) * 1e9),
-            round(one.duration * 1e9) + round(0.5e9) + np.rint(two.times_at(k[k_stop:] - k_stop) * 1e9),
-        ]
-    ).astype(np.int64)
+    want = stopped_layer_times(layer.shape[0], 2 * 512, 0.5)
     assert np.array_equal(layer[:, 0], want)  # the automatic resume's times: the wait is wall time only
     again = subprocess.run(
         [str(WINDER), "ctl", "resume"], env=procs.env, capture_output=True, text=True, timeout=60
