@@ -22,7 +22,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from winder.analysis.metrics import analyze
-from winder.contract.params import PROFILE_SPECS, plan_job, plan_segment, plan_timing, stop_points
+from winder.contract.params import PROFILE_SPECS, plan_job, plan_segment, plan_timing, stop_place, stop_points
 from winder.motion.job import Job
 from winder.record.reader import read_run
 from winder.spec import SpecError
@@ -74,6 +74,13 @@ def test_stop_points_fall_on_turn_boundaries() -> None:
     with pytest.raises(SpecError, match="outnumber its fork steps"):
         stop_points(feedy, "1:2")
     assert stop_points(feedy, "1:4") == [(0, max(abs(d) for d in feedy.segments()[0].delta))]
+
+    # stop_place is their inverse: (coil, layer, turn) of each stop, as the sim node reports it
+    for j, text in ((job, "1:10"), (job, "2:40"), (job, "3:21"), (feedy, "1:4")):
+        [(seg, k)] = stop_points(j, text)
+        coil, turn = (int(x) for x in text.split(":"))
+        layer = (turn - 1) // j.turns_per_layer + 1
+        assert stop_place(j, j.segments()[seg], k) == (coil, layer, turn), text
 
 
 def stopped_layer_times(n: int, k_stop: int, pause: float) -> np.ndarray:

@@ -148,9 +148,8 @@ class InterpNode(Node):
         self.tick()
 
     def tick(self) -> None:
-        autostart = not self.autostarted and self.settings.values()["autostart"]
-        if autostart and not self.readiness.missing():
-            self.autostarted = autostart = True
+        if not self.autostarted and self.settings.values()["autostart"] and not self.readiness.missing():
+            self.autostarted = True
             ok, why = self.start_job()
             if not ok:
                 self.get_logger().error(why)

@@ -46,7 +46,14 @@ from trajectory_msgs.msg import JointTrajectory
 
 from winder.axis import StepperAxis
 from winder.contract.cdr import JointStateEncoder, encode_clocks
-from winder.contract.params import MAX_JOB_SECONDS, MOTOR_FIELDS, SIM_SPECS, bag_directory, check_sim
+from winder.contract.params import (
+    MAX_JOB_SECONDS,
+    MOTOR_FIELDS,
+    SIM_SPECS,
+    bag_directory,
+    check_sim,
+    stop_place,
+)
 from winder.contract.stream import TIMED_COLUMNS, JobPlan, StreamChecker, parse_job_description
 from winder.contract.topics import (
     TOPIC_CLOCK,
@@ -60,6 +67,7 @@ from winder.contract.topics import (
     TOPIC_SIM_CONFIG,
     TOPIC_STATE,
     TOPIC_STEP_TIMES,
+    in_namespace,
     status_values,
 )
 from winder.motion.interp import line_distance
@@ -173,7 +181,6 @@ class SimNode(Node):
             "state": self.resolve_topic_name(TOPIC_STATE),
         }
         self.clock_ns = -1  # the last /clock published in this node's life (ns)
-        self.own_ns = self.get_namespace().strip("/")  # "" or "cell1": the prefix of our status names
         self.reset()
         self.early: list[bytes] = []
         self.path_raw: bytes | None = None
@@ -213,8 +220,10 @@ class SimNode(Node):
         self.dev_cmd = [0.0, 0, 0.0]  # sum, count, max of command deviation (m)
         self.dev_act = [0.0, 0, 0.0]  # same for the simulated axes
         #: programmed stops met in the stream: [t_stop ns, t_resume ns (-1: not known yet),
-        #: "coil:turn", state: 0 ahead, 1 paused (announced), 2 resumed]
+        #: (coil, layer, turn), state: 0 ahead, 1 paused (announced), 2 resumed]
         self.pauses: list[list[Any]] = []
+        #: where each programmed stop of the job is: (segment, step) -> (coil, layer, turn)
+        self.stop_places: dict[tuple[int, int], tuple[int, int, int]] = {}
         self.wall_pace0 = 0.0  # wall time at which simulated time pace_sim0 was due
         self.pace_sim0 = 0.0
         self.pace_factor = 0.0  # the real_time_factor since wall_pace0
@@ -247,6 +256,9 @@ class SimNode(Node):
         values = self.settings.values()
         self.reset()
         self.plan = plan
+        if plan.stops:
+            segs = plan.job.segments()
+            self.stop_places = {(g, k): stop_place(plan.job, segs[g], k) for g, k in plan.stops}
         # the job starts on the cell's clock one sample after the last one published
         self.origin_ns = 0 if self.clock_ns < 0 else self.clock_ns + round(1e9 / values["publish_rate"])
         self.announce()
@@ -354,15 +366,8 @@ class SimNode(Node):
             names = [st.name for st in deserialize_message(raw, DiagnosticArray).status]
         except Exception:  # not ours to judge; nothing of it is recorded
             return
-        if any(self.ours(n) for n in names):
+        if any(in_namespace(n, self.get_namespace()) for n in names):
             self.record("diagnostics", self.t_sim_ns, raw)
-
-    def ours(self, name: str) -> bool:
-        """A status name of a node in this node's namespace (not in a deeper one)."""
-        node = name.split(":", 1)[0]
-        if not self.own_ns:
-            return "/" not in node
-        return node.startswith(self.own_ns + "/") and "/" not in node[len(self.own_ns) + 1 :]
 
     def on_step_times(self, raw: bytes) -> None:
         self.receive(raw)
@@ -664,35 +669,29 @@ class SimNode(Node):
         k = self.checker.step_index(seg, rows[:, 2:])
         wanted = [s for g, s in self.plan.stops if g == seg]
         for i in np.nonzero(np.isin(k, wanted))[0]:
-            s = self.plan.segments[seg]
-            job = self.plan.job
-            layer = self.plan.job.segments()[seg].layer
-            turn = layer * job.turns_per_layer + int(k[i]) // job.fork_steps_per_rev
             resume = int(rows[i + 1, 0]) if i + 1 < rows.shape[0] else -1
-            label = f"{job.segments()[seg].pole + 1}:{turn}" if s.kind == "layer" else str(int(k[i]))
-            self.pauses.append([int(rows[i, 0]), resume, label, 0])
+            self.pauses.append([int(rows[i, 0]), resume, self.stop_places[(seg, int(k[i]))], 0])
 
     def pause_events(self, upto_ns: int) -> None:
         """Announce (and record) each programmed stop as simulated time reaches
         it, and its end: the bag keeps every transition."""
         assert self.plan is not None
         for p in self.pauses:
-            t_stop, t_resume, label, state = p
+            t_stop, t_resume, place, state = p
+            label = f"{place[0]}:{place[2]}"
             if state == 0 and t_stop <= upto_ns:
                 p[3] = state = 1
-                self.pause_status("paused", f"paused at turn {label} (coil:turn)", t_stop, label)
+                self.pause_status("paused", f"paused at turn {label} (coil:turn)", t_stop, place)
             if state == 1 and 0 <= t_resume <= upto_ns:
                 p[3] = 2
-                self.pause_status("running", f"resumed after the stop at turn {label}", t_resume, label)
+                self.pause_status("running", f"resumed after the stop at turn {label}", t_resume, place)
 
-    def pause_status(self, state: str, text: str, t_ns: int, label: str) -> None:
+    def pause_status(self, state: str, text: str, t_ns: int, place: tuple[int, int, int]) -> None:
         assert self.plan is not None
-        coil, turn = (int(x) for x in label.split(":"))
-        layer = min((turn - 1) // self.plan.job.turns_per_layer + 1, self.plan.job.layers)
-        self.cell_state(state, text, where=(coil, layer, turn), t_ns=t_ns)
+        self.cell_state(state, text, where=place, t_ns=t_ns)
         values = self.summary(complete=False)
         values["state"] = state
-        values["stop"] = label
+        values["stop"] = f"{place[0]}:{place[2]}"
         status = self.diag.status("job", OK, f"run {self.plan.run_id if self.plan else ''}: {text}", values)
         self.record("diagnostics", t_ns, serialize_message(status))
         self.diag.pub.publish(status)

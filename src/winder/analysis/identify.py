@@ -153,7 +153,17 @@ class AxisRecord:
 
     @property
     def steps_moved(self) -> int:
-        return _Integrator(self, WINDOW).run(self.events()).steps_moved
+        last, moved = self.command0, 0.0
+        for _, ec in self.events():
+            moved, last = _moved(moved, last, ec, self.motor.motor_step_angle)
+        return round(moved)
+
+
+def _moved(moved: float, last: float, ec: FloatArray, step_angle: float) -> tuple[float, float]:
+    """Steps moved so far, after the command angles ``ec`` following ``last``: (moved, new last)."""
+    if ec.size == 0:
+        return moved, last
+    return moved + float(np.abs(np.diff(ec / step_angle, prepend=last / step_angle)).sum()), float(ec[-1])
 
 
 def _events(run: Run) -> Iterator[list[tuple[FloatArray, FloatArray]]]:
@@ -276,9 +286,7 @@ class _Integrator:
     def add(self, et: FloatArray, ec: FloatArray) -> None:
         if et.size == 0:
             return
-        sa = self.rec.motor.motor_step_angle
-        self.moved += float(np.abs(np.diff(ec / sa, prepend=self.last / sa)).sum())
-        self.last = float(ec[-1])
+        self.moved, self.last = _moved(self.moved, self.last, ec, self.rec.motor.motor_step_angle)
         self.pending_t.append(et)
         self.pending_c.append(ec)
         if self.n >= 3:

@@ -159,10 +159,6 @@ class Analysis:
 # -- eq. 7 -------------------------------------------------------------------------
 
 
-def _turns(y_rel: FloatArray, per_rev: int, turns: int) -> npt.NDArray[np.int64]:
-    return turn_index(y_rel, per_rev, turns)
-
-
 def _no_deviation(layers: list[LayerDeviation]) -> Deviation:
     nan = math.nan
     return Deviation(nan, nan, nan, 0, nan, nan, nan, layers)
@@ -259,7 +255,7 @@ def axis_deviation(run: Run, digested: Digest | None = None) -> Deviation | None
         yr = y[m] - s.start[1]
         dist = line_distance(np.column_stack([xr, yr]), s.delta[0], s.delta[1], step_lengths=(lx, ly))
         dists.append(dist)
-        tids.append(_turns(yr, spr, turns))
+        tids.append(turn_index(yr, spr, turns))
         layers.append(
             LayerDeviation(
                 i, segs[i].pole, segs[i].layer, int(dist.size), float(dist.mean()), float(dist.max())

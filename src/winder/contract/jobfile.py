@@ -157,7 +157,6 @@ def _check_together(path: Path, given: dict[str, dict[str, Any]]) -> None:
     for node, check in checks.items():
         values = {n: s.default for n, s in NODE_SPECS[node].items()}
         values.update(given[node])
-        values["job_file"] = ""
         if node == "sim_node":
             values["record"] = False  # the bag directory is the sim node's to probe, on its machine
         try:

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from winder.motion.job import AXES, FIELD_SPECS, Job
+from winder.motion.job import AXES, FIELD_SPECS, Job, Segment
 from winder.motion.profile import KINDS, LIMITS, Profile, plan
 from winder.spec import Spec, SpecError
 
@@ -39,6 +39,7 @@ __all__ = [
     "plan_segment",
     "plan_timing",
     "run_ramp",
+    "stop_place",
     "stop_points",
 ]
 
@@ -286,6 +287,14 @@ def stop_points(job: Job, text: str) -> list[tuple[int, int]]:
         last = within + 1 == job.turns_per_layer  # the layer's end: its last step, whichever axis leads
         out.add((seg.index, seg.steps if last else (within + 1) * job.fork_steps_per_rev))
     return sorted(out)
+
+
+def stop_place(job: Job, segment: Segment, k: int) -> tuple[int, int, int]:
+    """(coil, layer, turn), from 1, of a programmed stop after step ``k`` of
+    the layer ``segment``: the inverse of :func:`stop_points` (the turn is
+    counted over the coil's layers)."""
+    within = job.turns_per_layer if k == segment.steps else k // job.fork_steps_per_rev
+    return segment.pole + 1, segment.layer + 1, segment.layer * job.turns_per_layer + within
 
 
 def check_interp(values: dict[str, Any]) -> None:

@@ -44,6 +44,16 @@ def status_name(node: str, task: str = TASK_JOB, namespace: str = "") -> str:
     return f"{ns}/{node}: {task}" if ns else f"{node}: {task}"
 
 
+def in_namespace(name: str, namespace: str) -> bool:
+    """A status name (``"cell1/sim_node: job"``) of a node in ``namespace``
+    itself, not in a deeper one: what a cell's bag records and reports."""
+    node = name.split(":", 1)[0]
+    ns = namespace.strip("/")
+    if not ns:
+        return "/" not in node
+    return node.startswith(ns + "/") and "/" not in node[len(ns) + 1 :]
+
+
 _TOKEN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
 

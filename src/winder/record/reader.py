@@ -47,6 +47,7 @@ from winder.contract.topics import (
     TOPIC_PROFILE_CONFIG,
     TOPIC_SIM_CONFIG,
     TOPIC_STEP_TIMES,
+    in_namespace,
     status_name,
 )
 from winder.motion.job import AXES
@@ -599,7 +600,6 @@ def _decode_diagnostics(msgs: list[Any], ns: str) -> tuple[dict[str, str], str, 
         status_name("sim_node", namespace=ns),
         status_name("profile_node", namespace=ns),
     )
-    prefix = ns.strip("/")
     report: dict[str, str] = {}
     profile = ""
     errors: dict[str, None] = {}
@@ -610,9 +610,7 @@ def _decode_diagnostics(msgs: list[Any], ns: str) -> tuple[dict[str, str], str, 
                 report = values
             elif st.name == profile_status and "profile" in values:
                 profile = values["profile"]
-            node = st.name.split(":", 1)[0]
-            mine = ("/" not in node) if not prefix else node.startswith(prefix + "/")
             level = st.level if isinstance(st.level, int) else int.from_bytes(bytes(st.level), "little")
-            if mine and level == ERROR_LEVEL:
+            if level == ERROR_LEVEL and in_namespace(st.name, ns):
                 errors[f"{st.name}: {st.message}"] = None
     return report, profile, tuple(errors)
