@@ -15,6 +15,7 @@ every status of the run reports it and the sim node names the run's bag after it
 
 from __future__ import annotations
 
+import json
 import time
 from collections.abc import Iterator
 
@@ -31,12 +32,12 @@ from std_srvs.srv import Trigger
 from winder.contract.jobfile import load_job_file
 from winder.contract.params import INTERP_SPECS, check_interp, run_ramp, stop_points
 from winder.contract.stream import describe_job, make_run_id
-from winder.contract.topics import TOPIC_JOB, TOPIC_PROGRESS, TOPIC_STEPS, status_values
+from winder.contract.topics import TOPIC_CONTROL, TOPIC_JOB, TOPIC_PROGRESS, TOPIC_STEPS, status_values
 from winder.motion.interp import interpolate
 from winder.motion.job import FIELD_SPECS, Job
 from winder.ros.chunks import STEPS_CDR
 from winder.ros.diagnostics import ERROR, OK, Diagnostics
-from winder.ros.qos import QOS_LATCHED, QOS_STATE, QOS_STREAM
+from winder.ros.qos import QOS_EVENTS, QOS_LATCHED, QOS_STATE, QOS_STREAM
 from winder.ros.ready import Readiness
 from winder.ros.settings import Settings
 from winder.ros.spin import spin
@@ -61,6 +62,7 @@ class InterpNode(Node):
         self.create_service(Trigger, "~/start", self.on_start)
         self.create_service(SetParametersAtomically, "~/start_run", self.on_start_run)
         self.create_subscription(KeyValue, TOPIC_PROGRESS, self.on_progress, QOS_STATE)
+        self.create_subscription(String, TOPIC_CONTROL, self.on_control, QOS_EVENTS)
         # the start handshake: consumer and profile node ready (an autostart waits for it)
         self.readiness = Readiness(self, on_change=self.wake)
         # tick() sends a running job's chunks every 20 ms; idle, only the 1 Hz report runs
@@ -77,6 +79,7 @@ class InterpNode(Node):
         self.autostarted = False
         self.finished = False
         self.aborted = ""  # why the running job was given up, if it was
+        self.operator_abort = False  # it was aborted on purpose (~/abort, a schedule)
         self.last_receipt_wall = 0.0
         if self.settings.blocked():
             self.diag.publish("job", ERROR, str(self.settings.blocked()), {})
@@ -196,10 +199,17 @@ class InterpNode(Node):
         self.consumed = 0
         self.finished = False
         self.aborted = ""
+        self.operator_abort = False
         self.started_wall = self.last_receipt_wall = time.monotonic()
         stops = stop_points(job, values["stops"]) if values["stops"] else []
         text = describe_job(
-            job, self.run_id, run_ramp(values), stops, values["stop_pause"], values["stop_resume"]
+            job,
+            self.run_id,
+            run_ramp(values),
+            stops,
+            values["stop_pause"],
+            values["stop_resume"],
+            values["schedule"],
         )
         self.pub_job.publish(String(data=text))
         self.pending = self.chunks(job, values["chunk_steps"])
@@ -241,6 +251,26 @@ class InterpNode(Node):
             return
         self.consumed = max(self.consumed, int(value))
         self.last_receipt_wall = time.monotonic()  # a repeated receipt: the sim node is alive
+
+    def on_control(self, msg: String) -> None:
+        """An abort of the running run (winder/control): stop sending it. The
+        profile node brings the axes to rest and the sim node closes the run
+        aborted; events of other runs, or not JSON, change nothing."""
+        try:
+            event = json.loads(msg.data)
+        except (json.JSONDecodeError, RecursionError):
+            return
+        if not isinstance(event, dict) or event.get("event") != "abort" or self.job is None:
+            return
+        if event.get("run_id") != self.run_id or self.aborted:
+            return
+        steps = event.get("steps")
+        self.pending = None
+        self.operator_abort = True
+        total = self.job.total_steps
+        self.aborted = f"run {self.run_id} aborted: the axes stop after {steps} of {total} steps"
+        self.get_logger().info(self.aborted)
+        self.report()
 
     def send_some(self) -> None:
         if self.pending is None or self.pub_steps.get_subscription_count() == 0:
@@ -292,10 +322,12 @@ class InterpNode(Node):
             return
         total = self.job.total_steps
         state = "incomplete" if self.aborted else ("running" if self.running() else "done")
+        if self.operator_abort:
+            state = "aborted"
         sending = "sending" if self.pending is not None else "all sent"
         self.diag.publish(
             "job",
-            ERROR if self.aborted else OK,
+            ERROR if self.aborted and not self.operator_abort else OK,
             self.aborted or f"run {self.run_id}: {sending}, {self.sent}/{total} steps",
             status_values(
                 state,

@@ -12,27 +12,48 @@ profile from and to the start/stop rate ``v_start``; step k of N happens when
 the planned motion reaches k/N of the move. Segments follow each other with
 ``dwell`` seconds between them. The whole job is planned when its description
 arrives, so a step's time depends only on its index, never on arrival order.
+
+Operation (:mod:`winder.contract.timeline`): ``~/pause``, ``~/resume`` and
+``~/abort`` (std_srvs/Trigger) and the parameter ``feed_override`` change the
+time law of the running job from the moment they take effect; the job's
+``schedule`` gives such commands at simulated times. Each is published on
+winder/control as it takes effect. Steps are timed when they are sent: in a
+real-time run (the consumer's winder/sim_config says so) no further than
+``lookahead`` ahead of the cell's clock, so a command takes effect within it;
+otherwise as soon as they arrive, and a command takes effect after the last
+step sent.
 """
 
 from __future__ import annotations
 
 import json
+import struct
+import time
+from collections import deque
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from builtin_interfaces.msg import Duration
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.subscription import Subscription
+from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Int32MultiArray, Int64MultiArray, String
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from winder.contract.params import PROFILE_SPECS, SegmentTiming, check_profile, plan_timing
+from winder.contract.params import OPERATION_SPECS, PROFILE_SPECS, SegmentTiming, check_profile, plan_timing
 from winder.contract.stream import STEP_COLUMNS, TIMED_COLUMNS, JobPlan, StreamChecker, parse_job_description
+from winder.contract.timeline import Command, CommandError, Timeline, parse_schedule
 from winder.contract.topics import (
+    TOPIC_CLOCK,
+    TOPIC_CONTROL,
     TOPIC_JOB,
     TOPIC_PATH,
     TOPIC_PROFILE_CONFIG,
+    TOPIC_SIM_CONFIG,
     TOPIC_STEP_TIMES,
     TOPIC_STEPS,
     status_values,
@@ -40,18 +61,25 @@ from winder.contract.topics import (
 from winder.motion.job import AXES
 from winder.ros.chunks import STEPS_CDR, TIMED_CDR, waiting
 from winder.ros.diagnostics import ERROR, OK, WARN, Diagnostics
-from winder.ros.qos import QOS_LATCHED, QOS_STREAM
+from winder.ros.qos import QOS_CLOCK, QOS_EVENTS, QOS_LATCHED, QOS_STREAM
 from winder.ros.ready import Announcer
 from winder.ros.settings import Settings
 from winder.ros.spin import spin
 from winder.ros.timers import steady_timer
 from winder.spec import SpecError, check_all
 
+#: How long steps wait for the consumer's winder/sim_config of a run (which
+#: says whether it runs in real time) before they go out without look-ahead.
+MODE_WAIT = 1.0
+#: Steps timed per pass in a real-time run (the rest wait for the clock).
+RELEASE_BLOCK = 256
+
 
 class ProfileNode(Node):
     def __init__(self) -> None:
         super().__init__("profile_node")
-        self.settings = Settings(self, PROFILE_SPECS, check_profile)
+        self.settings = Settings(self, {**PROFILE_SPECS, **OPERATION_SPECS}, check_profile)
+        self.add_post_set_parameters_callback(self.on_settings_set)
 
         self.pub = self.create_publisher(
             Int64MultiArray,
@@ -69,19 +97,34 @@ class ProfileNode(Node):
         # the 1 Hz report repeats both (and is the only timer)
         steady_timer(self, 1.0, self.report)
         self.create_service(Trigger, "~/resume", self.on_resume)
+        self.create_service(Trigger, "~/pause", lambda _q, r: self.reply(r, *self.command("pause")))
+        self.create_service(Trigger, "~/abort", lambda _q, r: self.reply(r, *self.command("abort")))
+        self.pub_control = self.create_publisher(String, TOPIC_CONTROL, QOS_EVENTS)
+        self.create_subscription(String, TOPIC_SIM_CONFIG, self.on_sim_config, QOS_LATCHED)
+        self.sub_clock: Subscription | None = None  # only while a real-time run is timed
 
         self.plan: JobPlan | None = None
         self.checker: StreamChecker | None = None
-        self.timing: list[SegmentTiming] = []
+        self.timeline: Timeline | None = None
         self.early: list[bytes] = []
         self.timed = 0
         self.error = ""
         self.ramp_kind = ""  # the ramp kind of the run being timed
+        #: accepted step rows not sent yet, with their step indices in the segment
+        self.queue: deque[tuple[npt.NDArray[np.int32], npt.NDArray[np.int64]]] = deque()
+        self.t_sent_ns = -1  # time of the last step sent
+        self.dropped = 0  # steps beyond the end of an aborted run, never sent
+        #: the run's look-ahead: None = unbounded (as fast as possible), known
+        #: once the consumer's sim_config for the run came (or MODE_WAIT passed)
+        self.lookahead_ns: int | None = None
+        self.mode_known = False
+        self.job_wall = 0.0
+        self.clock_origin_ns = 0
+        self.t_now_ns = -1  # the cell's clock, as time since the run's start (real-time runs)
         #: a programmed stop waiting for ~/resume (stop_resume call): the stops
-        #: still ahead, the one the job waits at, and the timed rows held beyond it
+        #: still ahead, and the one the job waits at
         self.holds: list[tuple[int, int]] = []
         self.waiting_at: tuple[int, int] | None = None
-        self.held: list[np.ndarray] = []
 
     def connect(self) -> None:
         if self.sub_steps is None and self.pub.get_subscription_count() > 0:
@@ -126,9 +169,13 @@ class ProfileNode(Node):
         except ValueError as exc:
             self.fail(f"job {job.job_id} cannot be ramped: {exc}")
             return
-        self.plan, self.timing = job, timing
+        self.end_clock()
+        self.plan, self.timeline = job, Timeline(values, timing)
         self.holds = list(job.stops) if job.stop_resume == "call" else []
-        self.waiting_at, self.held = None, []
+        self.waiting_at = None
+        self.queue.clear()
+        self.t_sent_ns, self.dropped, self.t_now_ns = -1, 0, -1
+        self.lookahead_ns, self.mode_known, self.job_wall = None, False, time.monotonic()
         self.ramp_kind = str(values["profile"])
         # the ramp in force for this job, latched: the sim node records it
         config = {
@@ -139,13 +186,21 @@ class ProfileNode(Node):
             "job_duration_s": duration_ns / 1e9,
         }
         self.pub_config.publish(String(data=json.dumps(config)))
-        self.pub_path.publish(self.path_message(job))
+        self.pub_path.publish(self.path_message(job, timing, self.get_clock().now().to_msg()))
         self.checker = StreamChecker(job)
         self.timed = 0
         self.error = ""
         self.get_logger().info(
             f"job {job.job_id}: {values['profile']} ramps, {len(timing)} segments, {duration_ns / 1e9:.3f} s"
         )
+        override = self.settings.values()["feed_override"]
+        commands = [Command(0, "override", override)] if override != 1.0 else []
+        for cmd in commands + parse_schedule(job.schedule):  # checked with the description
+            source = "schedule" if cmd.t_ns or cmd.kind != "override" else "setting"
+            try:
+                self.publish_event(self.timeline.apply(cmd, source), cmd.t_ns)
+            except CommandError as exc:
+                self.get_logger().warning(f"{source}: {cmd.kind} at {cmd.t_ns / 1e9:g} s not applied: {exc}")
         self.report()  # the run is on: its status at once
         early, self.early = self.early, []
         for raw in early:  # in order, before any taken from the queue
@@ -174,67 +229,194 @@ class ProfileNode(Node):
             )
         if not verdict.accept:
             return
-        # the times of just these steps: segments are planned over their step
-        # count, so step k sits at position k (memory per chunk, not per segment)
+        # segments are planned over their step count, so step k sits at
+        # position k; the rows are timed when they are sent (release())
         seg = int(rows[0, 0])
-        k = self.checker.step_index(seg, rows[:, 1:])
-        out = np.empty((rows.shape[0], len(TIMED_COLUMNS)), np.int64)
-        out[:, 0] = self.timing[seg].times_ns(k)
-        out[:, 1:] = rows
-        self.send(out, seg, k)
-        self.timed += rows.shape[0]
-        if self.checker.complete:
+        self.queue.append((rows, self.checker.step_index(seg, rows[:, 1:]).astype(np.int64)))
+        self.release()
+
+    def release(self) -> None:
+        """Time and send the queued steps the law fixes now: all of them, or in
+        a real-time run those up to ``lookahead`` ahead of the clock and the
+        first one beyond (so the consumer's clock never waits for a step);
+        none beyond a pause (until the resume), a programmed stop that waits
+        for ~/resume, or the end of an aborted run (those are dropped)."""
+        tl = self.timeline
+        if tl is None or self.plan is None or not self.mode_ready():
+            return
+        sent_before = self.timed + self.dropped
+        while self.queue and self.waiting_at is None:
+            rows, k = self.queue[0]
+            seg = int(rows[0, 0])
+            n_try = len(k) if self.lookahead_ns is None else min(len(k), RELEASE_BLOCK)
+            times, n = tl.times_ns(seg, k[:n_try])
+            if self.lookahead_ns is not None:
+                horizon = max(self.t_now_ns, 0) + self.lookahead_ns
+                cut = int(np.searchsorted(times, horizon, side="right"))
+                if cut < n and (cut > 0 or self.t_sent_ns <= horizon):
+                    cut += 1  # the first step beyond the horizon
+                n = cut
+            stop = next((s for s in self.holds if s[0] == seg and s[1] in k[:n]), None)
+            if stop is not None:
+                n = int(np.nonzero(k[:n] == stop[1])[0][0]) + 1
+            if n:
+                out = np.empty((n, len(TIMED_COLUMNS)), np.int64)
+                out[:, 0] = times[:n]
+                out[:, 1:] = rows[:n]
+                self.pub.publish(TIMED_CDR.encode(out))
+                self.t_sent_ns = int(times[n - 1])
+                self.timed += n
+            if stop is not None:
+                self.holds.remove(stop)
+                self.waiting_at = stop
+                self.get_logger().info(
+                    f"programmed stop at segment {stop[0]}, step {stop[1]}: waiting for ~/resume"
+                )
+            rest_k = k[n:]
+            if tl.end_step is not None and rest_k.size and tl.beyond_end(seg, rest_k).all():
+                self.dropped += rest_k.size  # past the end of an aborted run
+                self.queue.popleft()
+                continue
+            if n < len(k):
+                self.queue[0] = (rows[n:], rest_k)
+                if n < n_try or n == 0:
+                    break  # the law fixes no more now (a pause, the look-ahead)
+                continue
+            self.queue.popleft()
+        if self.timed + self.dropped != sent_before and (self.run_over() or self.waiting_at is not None):
+            if self.run_over():
+                self.end_clock()
             self.report()
 
-    def send(self, out: np.ndarray, seg: int, k: np.ndarray) -> None:
-        """Publish timed rows, up to a programmed stop that waits for ~/resume:
-        the rows beyond it are held until the call (their times are planned
-        already: the run's step times are those of the automatic resume)."""
-        if self.waiting_at is not None:
-            self.held.append(out)
+    def run_over(self) -> bool:
+        """Every step of the run is sent, or dropped past the end of an abort."""
+        return self.plan is not None and self.timed + self.dropped >= self.plan.total_steps
+
+    def mode_ready(self) -> bool:
+        """Whether the run's look-ahead is known: the consumer's sim_config for
+        it came, or MODE_WAIT passed without one (then there is none)."""
+        if not self.mode_known and time.monotonic() - self.job_wall > MODE_WAIT:
+            self.mode_known = True
+            self.get_logger().warning(
+                f"no {TOPIC_SIM_CONFIG} for this run within {MODE_WAIT:g} s: "
+                "steps are sent without look-ahead"
+            )
+        return self.mode_known
+
+    def on_sim_config(self, msg: String) -> None:
+        """The consumer's configuration of the run: a real-time run gets the
+        look-ahead, and the clock it is measured on."""
+        if self.plan is None or self.mode_known:
             return
-        stop = next((s for s in self.holds if s[0] == seg and s[1] in k), None)
-        if stop is None:
-            self.pub.publish(TIMED_CDR.encode(out))
+        try:
+            config = json.loads(msg.data)
+        except (json.JSONDecodeError, RecursionError):
             return
-        cut = int(np.nonzero(k == stop[1])[0][0]) + 1
-        self.pub.publish(TIMED_CDR.encode(out[:cut]))
-        self.holds.remove(stop)
-        self.waiting_at = stop
-        if cut < out.shape[0]:
-            self.held.append(out[cut:])
-        self.get_logger().info(f"programmed stop at segment {stop[0]}, step {stop[1]}: waiting for ~/resume")
+        if not isinstance(config, dict) or config.get("run_id") != self.plan.run_id:
+            return
+        origin = config.get("clock_origin_ns")
+        if config.get("real_time") is True and isinstance(origin, int):
+            self.clock_origin_ns = origin
+            self.lookahead_ns = round(self.settings.values()["lookahead"] * 1e9)
+            if self.sub_clock is None:
+                self.sub_clock = self.create_subscription(
+                    Clock, TOPIC_CLOCK, self.on_clock, QOS_CLOCK, raw=True
+                )
+        self.mode_known = True
+        self.release()
+
+    def on_clock(self, raw: bytes) -> None:
+        """The cell's clock (builtin_interfaces/Time after the CDR header)."""
+        if len(raw) < 12:
+            return
+        sec, nsec = struct.unpack_from("<iI", raw, 4)
+        self.t_now_ns = max(self.t_now_ns, sec * 1_000_000_000 + nsec - self.clock_origin_ns)
+        self.release()
+
+    def end_clock(self) -> None:
+        if self.sub_clock is not None:
+            self.destroy_subscription(self.sub_clock)
+            self.sub_clock = None
+
+    # -- operation -------------------------------------------------------
+    @staticmethod
+    def reply(resp: Trigger.Response, ok: bool, message: str) -> Trigger.Response:
+        resp.success, resp.message = ok, message
+        return resp
+
+    def command(self, kind: str, value: float = 1.0) -> tuple[bool, str]:
+        """Apply an operator command to the running run now: in a real-time run
+        at the later of the clock and the last step sent (within the
+        look-ahead), otherwise after the last step sent. (ok, one line)."""
+        tl, plan = self.timeline, self.plan
+        if tl is None or plan is None or self.run_over():
+            return False, f"{kind} refused: no run is being timed"
+        t_req = (
+            self.t_now_ns if self.lookahead_ns is not None and self.t_now_ns >= 0 else max(self.t_sent_ns, 0)
+        )
+        t = max(self.t_sent_ns, t_req, 0)
+        if kind == "resume" and self.lookahead_ns is not None:
+            t = max(t, t_req + self.lookahead_ns)  # the new steps reach the consumer before they are due
+        try:
+            event = tl.apply(Command(t, kind, value))
+        except CommandError as exc:
+            return False, f"{kind} refused: {exc}"
+        self.publish_event(event, t_req)
+        rest = f"at rest after {event.get('steps')} steps at {event.get('t_rest_ns', 0) / 1e9:.6f} s"
+        what = {
+            "pause": f"pausing: {rest}",
+            "abort": f"aborting: {rest}",
+            "resume": f"resuming at {t / 1e9:.6f} s",
+            "override": f"feed override {value:g}: {event.get('note', '')}",
+        }[kind]
+        message = f"run {plan.run_id or plan.job_id}: {what}"
+        self.get_logger().info(message)
+        self.release()
         self.report()
+        return True, message
+
+    def publish_event(self, event: dict[str, Any], t_request: int) -> None:
+        """An operator event on winder/control, with the run and the latency
+        from the request (simulated time) to the moment it takes effect."""
+        assert self.plan is not None
+        doc = {"run_id": self.plan.run_id, "job_id": self.plan.job_id, **event}
+        doc["t_request_ns"] = t_request
+        doc["latency_ns"] = int(event["t_ns"]) - t_request
+        self.pub_control.publish(String(data=json.dumps(doc)))
+
+    def on_settings_set(self, params: list[Parameter]) -> None:
+        """A new feed_override acts on the run being timed at once."""
+        for p in params:
+            if p.name == "feed_override" and self.timeline is not None and not self.run_over():
+                ok, why = self.command("override", float(p.value))
+                if not ok:
+                    self.get_logger().warning(why)
 
     def on_resume(self, _req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:
-        """Go on after a programmed stop that waits for a call."""
+        """Go on after a pause, or after a programmed stop that waits for a call."""
+        if self.timeline is not None and self.timeline.paused and not self.timeline.aborted:
+            return self.reply(resp, *self.command("resume"))
         if self.waiting_at is None or self.plan is None:
-            resp.success, resp.message = False, "not at a programmed stop: nothing to resume"
-            return resp
-        stop, held = self.waiting_at, self.held
-        self.waiting_at, self.held = None, []
-        for i, out in enumerate(held):
-            seg = int(out[0, 1])
-            k = self.checker.step_index(seg, out[:, 2:]) if self.checker else np.zeros(0, np.int64)
-            self.send(out, seg, k)
-            if self.waiting_at is not None:  # the next stop is in what was held
-                self.held.extend(held[i + 1 :])
-                break
+            return self.reply(resp, False, "resume refused: not paused, not at a programmed stop")
+        stop = self.waiting_at
+        self.waiting_at = None
         resp.success = True
         resp.message = f"run {self.plan.run_id or self.plan.job_id}: resumed after the stop at step {stop[1]}"
         self.get_logger().info(resp.message)
+        self.release()
         self.report()
         return resp
 
-    def path_message(self, job: JobPlan) -> JointTrajectory:
+    @staticmethod
+    def path_message(job: JobPlan, timing: list[SegmentTiming], stamp: Any) -> JointTrajectory:
         """The job's corner points (joint units) with the time each is reached:
         the start at 0, each segment's end when its move ends. ``frame_id``
         names the run (its id; the job id for a job without one)."""
         msg = JointTrajectory()
         msg.header.frame_id = job.run_id or job.job_id
-        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.stamp = stamp
         msg.joint_names = list(AXES)
-        ends = [t.t0_ns + t.duration_ns for t in self.timing]
+        ends = [t.t0_ns + t.duration_ns for t in timing]
         corners = [(job.segments[0].start, 0)] + [(s.end, t) for s, t in zip(job.segments, ends, strict=True)]
         for pos, t_ns in corners:
             pt = JointTrajectoryPoint()
@@ -244,7 +426,7 @@ class ProfileNode(Node):
         return msg
 
     def job_duration_ns(self) -> int:
-        return self.timing[-1].t0_ns + self.timing[-1].duration_ns if self.timing else 0
+        return self.timeline.duration_ns if self.timeline else 0
 
     # -- out -------------------------------------------------------------
     def fail(self, why: str) -> None:
@@ -278,6 +460,7 @@ class ProfileNode(Node):
             self.ready.announce("waiting")
 
     def report(self) -> None:
+        self.release()  # steps waiting for the run's mode (MODE_WAIT) go out
         self.connect()
         self.announce()
         self.ready.repeat()
@@ -294,7 +477,10 @@ class ProfileNode(Node):
         total = self.plan.total_steps
         level = ERROR if self.error else (WARN if self.checker and self.checker.gaps else OK)
         state = "incomplete" if self.error else ("done" if self.timed >= total else "running")
-        if self.waiting_at is not None and not self.error:
+        tl = self.timeline
+        if not self.error and tl is not None and tl.aborted:
+            state = "aborted" if self.run_over() else "aborting"
+        elif (self.waiting_at is not None or (tl is not None and tl.paused)) and not self.error:
             state = "paused"
         self.diag.publish(
             "job",

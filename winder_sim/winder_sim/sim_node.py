@@ -57,6 +57,7 @@ from winder.contract.params import (
 from winder.contract.stream import TIMED_COLUMNS, JobPlan, StreamChecker, parse_job_description
 from winder.contract.topics import (
     TOPIC_CLOCK,
+    TOPIC_CONTROL,
     TOPIC_DIAGNOSTICS,
     TOPIC_JOB,
     TOPIC_JOINT_COMMANDS,
@@ -75,7 +76,7 @@ from winder.motion.job import AXES
 from winder.record.bag import BagRecorder, new_bag_path, run_bag_path, signals_held
 from winder.ros.chunks import TIMED_CDR, waiting
 from winder.ros.diagnostics import ERROR, OK, WARN, Diagnostics
-from winder.ros.qos import QOS_CLOCK, QOS_DIAGNOSTICS, QOS_LATCHED, QOS_STATE, QOS_STREAM
+from winder.ros.qos import QOS_CLOCK, QOS_DIAGNOSTICS, QOS_EVENTS, QOS_LATCHED, QOS_STATE, QOS_STREAM
 from winder.ros.ready import Announcer
 from winder.ros.settings import Settings
 from winder.ros.spin import spin
@@ -105,6 +106,7 @@ BAG_TYPES = {
     "clock": "rosgraph_msgs/msg/Clock",
     "diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
     "state": "diagnostic_msgs/msg/DiagnosticStatus",
+    "control": "std_msgs/msg/String",
 }
 
 
@@ -151,6 +153,7 @@ class SimNode(Node):
         self.create_subscription(String, TOPIC_JOB, self.on_job, QOS_LATCHED, raw=True)
         self.create_subscription(JointTrajectory, TOPIC_PATH, self.on_path, QOS_LATCHED, raw=True)
         self.create_subscription(String, TOPIC_PROFILE_CONFIG, self.on_profile_config, QOS_LATCHED, raw=True)
+        self.create_subscription(String, TOPIC_CONTROL, self.on_control, QOS_EVENTS, raw=True)
         self.sub_times = self.create_subscription(
             Int64MultiArray,
             TOPIC_STEP_TIMES,
@@ -179,6 +182,7 @@ class SimNode(Node):
             "clock": self.resolve_topic_name(TOPIC_CLOCK),
             "diagnostics": TOPIC_DIAGNOSTICS,
             "state": self.resolve_topic_name(TOPIC_STATE),
+            "control": self.resolve_topic_name(TOPIC_CONTROL),
         }
         self.clock_ns = -1  # the last /clock published in this node's life (ns)
         self.reset()
@@ -227,6 +231,14 @@ class SimNode(Node):
         self.wall_pace0 = 0.0  # wall time at which simulated time pace_sim0 was due
         self.pace_sim0 = 0.0
         self.pace_factor = 0.0  # the real_time_factor since wall_pace0
+        #: operator events of the run (winder/control) as simulated time reaches
+        #: them: [t ns, cell state, message, (segment, step)], in time order
+        self.ops: list[tuple[int, str, str, tuple[int, int]]] = []
+        self.op_state = ""  # the last operator state announced (pausing, paused, aborting)
+        self.pause_open = -1  # a pause's rest time (ns) while no resume has come: the clock runs on
+        self.pause_steps = 0  # the steps up to that rest
+        self.abort_steps = -1  # an abort: the run ends once this many steps are simulated
+        self.abort_rest_ns = 0
 
     # -- in --------------------------------------------------------------
     def on_job(self, raw: bytes) -> None:
@@ -285,6 +297,8 @@ class SimNode(Node):
                     "run_id": plan.run_id,
                     "clock_origin_ns": self.origin_ns,
                     "wall_start_ns": self.wall0_ns,
+                    "real_time": bool(values["real_time"]),
+                    "real_time_factor": values["real_time_factor"],
                 }
             )
         )
@@ -328,6 +342,71 @@ class SimNode(Node):
     def on_path(self, raw: bytes) -> None:
         self.path_raw = raw
         self.record_path()
+
+    def on_control(self, raw: bytes) -> None:
+        """An operator event of the running run (winder/control): recorded, and
+        its states announced as simulated time reaches them; an abort ends the
+        run once the steps up to the rest are simulated. Events of other runs,
+        or that do not parse, change nothing."""
+        plan = self.plan
+        if plan is None:
+            return
+        try:
+            event = json.loads(deserialize_message(raw, String).data)
+            kind, t_ns = event["event"], int(event["t_ns"])
+            seg, step = int(event.get("segment", -1)), int(event.get("step", 0))
+        except (ValueError, KeyError, TypeError, RecursionError):
+            return
+        if not isinstance(event, dict) or event.get("run_id") != plan.run_id or t_ns < 0:
+            return
+        self.record("control", max(t_ns, self.t_sim_ns), raw)
+        where = (seg, step)
+        if kind == "pause":
+            rest = int(event.get("t_rest_ns", t_ns))
+            self.ops.append((t_ns, "pausing", "pausing: braking to rest", where))
+            self.ops.append((rest, "paused", f"paused after {event.get('steps')} steps", where))
+            self.pause_open, self.pause_steps = rest, int(event.get("steps", 0))
+        elif kind == "resume":
+            self.ops.append((t_ns, "running", "resumed", where))
+            self.pause_open = -1
+        elif kind == "abort":
+            rest = int(event.get("t_rest_ns", t_ns))
+            steps = int(event.get("steps", -1))
+            if not 0 <= steps <= plan.total_steps:
+                return
+            self.ops.append((t_ns, "aborting", f"aborting: at rest after {steps} steps", where))
+            self.abort_steps, self.abort_rest_ns, self.pause_open = steps, rest, -1
+        elif kind == "override":
+            self.get_logger().info(f"feed override {event.get('factor')} from {t_ns / 1e9:.6f} s")
+        self.ops.sort(key=lambda op: op[0])
+        self.pump()
+
+    def op_events(self, upto_ns: int) -> None:
+        """Announce (and record) each operator state as simulated time reaches it."""
+        plan = self.plan
+        while self.ops and self.ops[0][0] <= upto_ns and plan is not None:
+            t_ns, state, text, (seg, step) = self.ops.pop(0)
+            self.op_state = "" if state == "running" else state
+            segs = plan.job.segments()
+            if 0 <= seg < len(segs) and segs[seg].kind == "layer":
+                where = stop_place(plan.job, segs[seg], max(step, 0))
+            else:
+                where = (segs[seg].pole + 1 if 0 <= seg < len(segs) else 0, 0, 0)
+            self.cell_state(state, f"run {plan.run_id}: {text}", where=where, t_ns=t_ns)
+
+    def at_rest(self) -> bool:
+        """Paused by the operator, every step up to the rest simulated."""
+        return (
+            self.plan is not None
+            and self.checker is not None
+            and self.pause_open >= 0
+            and self.done_steps + self.checker.missing >= self.pause_steps
+            and not self.finishing
+        )
+
+    def free_running(self) -> bool:
+        """A real-time run at rest after a pause: its clock goes on."""
+        return self.at_rest() and bool(self.settings.values()["real_time"])
 
     def on_profile_config(self, raw: bytes) -> None:
         self.profile_raw = raw
@@ -393,7 +472,7 @@ class SimNode(Node):
         while work waits on the clock (pacing, batching, the path), stop it
         when there is none: an idle node wakes only for its 1 Hz report."""
         self.work()
-        if self.inbox or self.rest is not None or self.out or self.finishing:
+        if self.inbox or self.rest is not None or self.out or self.finishing or self.free_running():
             if self.pump_timer.is_canceled():
                 self.pump_timer.reset()
         else:
@@ -436,6 +515,15 @@ class SimNode(Node):
             self.receipt()
         if not self.inbox:  # the job's last chunk may have been dropped, not simulated
             self.settle_if_complete(settings)
+        if self.at_rest() and not (self.inbox or self.rest is not None or self.out):
+            # at rest after a pause: the samples go on to the rest, and on with
+            # the wall clock in a real-time run (until the resume's steps come)
+            if settings["real_time"]:
+                until = max(self.paced_until(settings["real_time_factor"]), self.pause_open / 1e9)
+            else:
+                until = self.pause_open / 1e9
+            if until * 1e9 > max(self.last_step_ns, self.t_sim_ns):
+                self.simulate(None, None, until=until)
         self.emit(settings)
         if self.record_failure and self.plan is not None:
             self.finish(complete=False)
@@ -496,7 +584,10 @@ class SimNode(Node):
     def settle_if_complete(self, settings: dict[str, Any]) -> None:
         """Once every step of the job is simulated or counted missing: the
         settle time after the last simulated step, then the job closes."""
-        if self.checker is None or not self.checker.complete or self.finishing or self.rest is not None:
+        if self.checker is None or self.finishing or self.rest is not None:
+            return
+        aborted_here = 0 <= self.abort_steps <= self.done_steps + self.checker.missing
+        if not (self.checker.complete or aborted_here):
             return
         self.simulate(None, None, until=max(self.last_step_ns, 0) / 1e9 + settings["settle_time"])
         self.finishing = True
@@ -734,13 +825,20 @@ class SimNode(Node):
                     bag = None
         if n and self.pauses:
             self.pause_events(int(t_ns[n - 1]))
+        if n and self.ops:
+            self.op_events(int(t_ns[n - 1]))
+
+    def aborted(self) -> bool:
+        """The run was aborted and every step up to the rest is simulated."""
+        assert self.checker is not None
+        return 0 <= self.abort_steps <= self.done_steps + self.checker.missing and not self.record_failure
 
     def summary(self, complete: bool) -> dict[str, object]:
         assert self.plan is not None and self.checker is not None
         wall = time.monotonic() - self.start_wall
         sim_s = self.t_sim_ns / 1e9
         return status_values(
-            "done" if complete else "incomplete",
+            "done" if complete else ("aborted" if self.aborted() else "incomplete"),
             self.plan.job_id,
             self.plan.run_id,
             self.done_steps,
@@ -809,7 +907,7 @@ class SimNode(Node):
         assert self.plan is not None
         values, level, text = self.final_report(complete)
         job = self.plan.job
-        ended = "done" if values["state"] == "done" else "failed"
+        ended = {"done": "done", "aborted": "aborted"}.get(str(values["state"]), "failed")
         last = (job.poles, job.layers, job.turns_per_layer * job.layers) if ended == "done" else (0, 0, 0)
         self.cell_state(ended, text, where=last)
         final = self.diag.status("job", level, text, values)
@@ -837,11 +935,12 @@ class SimNode(Node):
         """The job's final status: values, level and message. A job whose
         recording failed is not complete, whatever the stream did."""
         assert self.plan is not None
-        complete = complete and not self.record_failure
+        aborted = self.aborted()
+        complete = complete and not self.record_failure and not aborted
         values = self.summary(complete)
-        ok = complete and not self.errors and values["lost_steps"] == 0
-        level = OK if ok else (WARN if complete else ERROR)
-        state = "complete" if complete else "incomplete"
+        ok = (complete or aborted) and not self.errors and values["lost_steps"] == 0
+        level = OK if ok else (WARN if complete or aborted else ERROR)
+        state = "complete" if complete else ("aborted, the axes at rest" if aborted else "incomplete")
         text = f"job {self.plan.job_id}: {state}, {self.done_steps}/{self.plan.total_steps} steps"
         if self.errors:
             text += f", {len(self.errors)} stream errors (first: {self.errors[0]})"
@@ -880,7 +979,9 @@ class SimNode(Node):
     def watch(self) -> None:
         if self.plan is None or self.finishing:
             return
-        if self.waiting_for_resume() and not (self.inbox or self.rest is not None or self.out):
+        if (self.waiting_for_resume() or self.pause_open >= 0) and not (
+            self.inbox or self.rest is not None or self.out
+        ):
             self.last_chunk_wall = time.monotonic()
             if any(p[3] == 0 for p in self.pauses):  # the axes are at the stop: say so
                 self.pause_events(max(p[0] for p in self.pauses))
@@ -942,6 +1043,8 @@ class SimNode(Node):
         self.receipt()
         values = self.summary(complete=False)
         values["state"] = "stalled" if self.stalled else ("paused" if self.paused() else "running")
+        if self.op_state and not self.stalled:
+            values["state"] = self.op_state
         self.diag.publish(
             "job",
             ERROR if self.stalled else OK,

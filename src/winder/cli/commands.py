@@ -18,6 +18,7 @@ import numpy as np
 
 from winder.contract.params import (
     INTERP_SPECS,
+    OPERATION_SPECS,
     PROFILE_SPECS,
     SIM_SPECS,
     bag_directory,
@@ -190,6 +191,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     job = job_from_args(args, given["interp_node"])
     profile = values_from_args(args, PROFILE_SPECS, given["profile_node"])
     check_profile(profile)
+    operation = values_from_args(args, OPERATION_SPECS, given["profile_node"])
     segments = job.segments()
     # the interp node's other settings in the file (chunk_steps, max_in_flight, stops...) go with the job
     extra = {k: v for k, v in given["interp_node"].items() if k not in FIELD_SPECS and k != "autostart"}
@@ -219,7 +221,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise UserError(f"the ROS 2 node packages are not installed ({exc}); run 'make demo'") from None
     bag_dir = bag_directory(sim["bag_dir"])
     sim["bag_dir"] = str(bag_dir)
-    params = {"interp": {**job.to_dict(), **extra}, "profile": profile, "sim": sim}
+    params = {"interp": {**job.to_dict(), **extra}, "profile": {**profile, **operation}, "sim": sim}
     args.profile, args.model = profile["profile"], sim["model"]
     print(
         f"winder: job {job.job_id}, {job.total_steps} steps, {args.profile} profile, {args.model} motor model"
@@ -262,6 +264,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     print(f"  bag                {s['bag']}")
     if result.errors:
         print(f"  ERROR reports      {len(result.errors)}, first: {result.errors[0]}")
+    if s["state"] == "aborted" and not int(s["errors"]) and not result.errors:
+        print(f"winder run: {result.message}", file=sys.stderr)
+        return 3
     if not result.ok or int(s["errors"]) or result.errors:
         logs = f" (node logs in {result.log_dir})" if result.log_dir else ""
         print(f"winder run: {result.message}{logs}", file=sys.stderr)
@@ -273,11 +278,19 @@ def cmd_ctl(args: argparse.Namespace) -> int:
     """One command to a running cell: exit 0 if it was done, 1 if the cell said no."""
     ns = check_namespace(args.namespace)
     timeout = CELL_SPECS["timeout"].parse(args.timeout)
+    if (args.action == "override") != (args.value is not None):
+        raise UserError(
+            "override takes a factor (winder ctl override 0.5); pause, resume and abort take none"
+        )
+    factor = OPERATION_SPECS["feed_override"].parse(args.value) if args.value is not None else 1.0
     try:
-        from winder.ros.ctl import trigger
+        from winder.ros.ctl import set_parameter, trigger
     except ImportError as exc:
         raise UserError(f"the ROS 2 packages are not installed ({exc}); run 'make demo'") from None
-    ok, message = trigger(f"{ns}/profile_node/{args.action}", timeout=timeout)
+    if args.action == "override":
+        ok, message = set_parameter(f"{ns}/profile_node", "feed_override", factor, timeout=timeout)
+    else:
+        ok, message = trigger(f"{ns}/profile_node/{args.action}", timeout=timeout)
     print(message if ok else f"winder ctl {args.action}: {message}", file=sys.stdout if ok else sys.stderr)
     return 0 if ok else 1
 
@@ -304,8 +317,8 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-#: the interp node's programmed-stop settings, which winder run takes too
-STOP_SPECS = {name: INTERP_SPECS[name] for name in ("stops", "stop_pause", "stop_resume")}
+#: the interp node's programmed-stop and schedule settings, which winder run takes too
+STOP_SPECS = {name: INTERP_SPECS[name] for name in ("stops", "stop_pause", "stop_resume", "schedule")}
 
 JOB_FILE_HELP = (
     "a job file (a ROS 2 parameters file: interp_node, profile_node and sim_node sections; "
@@ -325,6 +338,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("job_file", nargs="?", metavar="JOB_FILE", help=JOB_FILE_HELP)
     add_spec_arguments(p, FIELD_SPECS, "winding job (defaults: the RW400 paper set-up)")
     add_spec_arguments(p, PROFILE_SPECS, "profile node (rates in steps of each segment's major axis)")
+    add_spec_arguments(p, OPERATION_SPECS, "operation (see README: Operating the cell)")
     add_spec_arguments(p, SIM_SPECS, "sim node (motor settings per axis: --feed.J, --fork.D, ...)")
     add_spec_arguments(p, STOP_SPECS, "programmed stops (see README: Operating the cell)")
     add_spec_arguments(p, CELL_SPECS, "cell")
@@ -350,8 +364,15 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.set_defaults(func=cmd_run)
 
-    p = sub.add_parser("ctl", help="send a command to a running cell (resume after a programmed stop)")
-    p.add_argument("action", choices=("resume",), help="resume: go on after a stop that waits for a call")
+    p = sub.add_parser("ctl", help="send a command to a running cell: pause, resume, abort, override X")
+    p.add_argument(
+        "action",
+        choices=("pause", "resume", "abort", "override"),
+        help="pause: brake to rest (feed hold); resume: go on after a pause or a programmed stop that "
+        "waits for a call; abort: brake to rest and end the run; override X: scale v_max by X in "
+        "[0.05, 2] from now on",
+    )
+    p.add_argument("value", nargs="?", default=None, metavar="X", help="the override factor")
     p.add_argument("--namespace", default="", help="ROS namespace of the cell (/name[/name...])")
     p.add_argument("--timeout", default="10", help="seconds to wait for the cell's reply (default 10)")
     p.set_defaults(func=cmd_ctl)

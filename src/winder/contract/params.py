@@ -26,6 +26,7 @@ __all__ = [
     "INTERP_SPECS",
     "MAX_JOB_SECONDS",
     "MOTOR_FIELDS",
+    "OPERATION_SPECS",
     "PROFILE_KINDS",
     "PROFILE_SPECS",
     "RAMP_SOURCES",
@@ -105,6 +106,31 @@ PROFILE_SPECS = _table(
         1e7,
     ),
     Spec("dwell", float, 0.0, "pause between segments", "s", 0.0, 3600.0),
+)
+
+#: The profile node's operation settings, beside its ramp: they act on a run
+#: while it goes on and never travel with a job.
+OPERATION_SPECS = _table(
+    Spec(
+        "feed_override",
+        float,
+        1.0,
+        "scales v_max of the running job (and the next ones) from the moment it is set, with a "
+        "jerk-limited change of speed (a CNC's feed override)",
+        "",
+        0.05,
+        2.0,
+    ),
+    Spec(
+        "lookahead",
+        float,
+        0.05,
+        "in real-time runs, how far ahead of the axes' clock steps are timed and sent: a pause, "
+        "abort or override takes effect within it",
+        "s",
+        0.001,
+        10.0,
+    ),
 )
 
 #: Per-axis motor settings of the sim node: ``<axis>.<field>``. Defaults: the
@@ -216,6 +242,16 @@ INTERP_SPECS.update(
             "profile node's ~/resume, then after stop_pause)",
             choices=("auto", "call"),
         ),
+        "schedule": Spec(
+            "schedule",
+            str,
+            "",
+            "operator commands at simulated times since the run's start, for scripts and tests: "
+            "pause@S, resume@S, abort@S, override@S=FACTOR, comma-separated (live: the profile "
+            "node's ~/pause, ~/resume, ~/abort and feed_override)",
+            pattern=r"^[a-z0-9@=.,\s]*$",
+            pattern_text='commands such as "pause@1.5,resume@3,override@4=0.5", or empty',
+        ),
         "job_file": Spec(
             "job_file",
             str,
@@ -302,6 +338,10 @@ def check_interp(values: dict[str, Any]) -> None:
     job = Job(**{k: v for k, v in values.items() if k in FIELD_SPECS})
     if values.get("stops"):
         stop_points(job, values["stops"])
+    if values.get("schedule"):
+        from winder.contract.timeline import parse_schedule
+
+        parse_schedule(values["schedule"])
     if values.get("job_file"):
         from winder.contract.jobfile import load_job_file
 

@@ -64,6 +64,7 @@ def describe_job(
     stops: Sequence[tuple[int, int]] = (),
     stop_pause: float = 0.0,
     stop_resume: str = "auto",
+    schedule: str = "",
 ) -> str:
     """JSON text of a job as the downstream nodes and the bag need it; the
     run it starts (``run_id``) travels with it, the ramp to time it with
@@ -77,6 +78,7 @@ def describe_job(
         "stops": [list(s) for s in stops],
         "stop_pause": stop_pause,
         "stop_resume": stop_resume,
+        "schedule": schedule,
         "job": job.to_dict(),
         "axes": list(AXES),
         "joint_step": list(job.joint_step),
@@ -128,6 +130,8 @@ class JobPlan:
     stop_pause: float = 0.0
     #: "auto": the job goes on after stop_pause; "call": it waits for ~/resume first
     stop_resume: str = "auto"
+    #: operator commands at simulated times (winder.contract.timeline.parse_schedule)
+    schedule: str = ""
 
     @property
     def job_id(self) -> str:
@@ -188,6 +192,16 @@ def parse_job_description(text: str) -> JobPlan:
     stop_resume = doc.get("stop_resume", "auto")
     if stop_resume not in ("auto", "call"):
         raise ValueError(f"job description: stop_resume {json.dumps(stop_resume)[:40]} is not auto or call")
+    schedule = doc.get("schedule", "")
+    if not isinstance(schedule, str):
+        raise ValueError(f"job description: schedule {json.dumps(schedule)[:40]} is not a text")
+    if schedule:
+        from winder.contract.timeline import parse_schedule
+
+        try:
+            parse_schedule(schedule)
+        except ValueError as exc:
+            raise ValueError(f"job description: {exc}") from None
     total = sum(e.steps for e in expected)
     derived = {
         "total_steps": total,
@@ -209,6 +223,7 @@ def parse_job_description(text: str) -> JobPlan:
         stops=stops,
         stop_pause=stop_pause,
         stop_resume=stop_resume,
+        schedule=schedule,
     )
 
 

@@ -310,12 +310,15 @@ class Timeline:
             prof = from_rest(mv.profile, mv.length - rest, self.v_max * self.factor)
             mv.pieces.append(_Piece(t, rest, prof, "resume"))
             self._shift_from(m + 1, mv.end_ns + mv.gap_ns)
-            seg = mv.seg
+            seg, step = mv.seg, mv.k0 + math.floor(rest * (1 + _SNAP) + _SNAP)
+            steps = self._steps_before(m) + step - mv.k0
         else:
             self._shift_from(m, t + self.gap_left_ns)
-            seg = self.moves[m].seg if m < len(self.moves) else -1
+            prev = self.moves[m - 1] if m else None
+            seg, step = (prev.seg, prev.k1) if prev else (0, 0)
+            steps = self._steps_before(m)
         self.paused = False
-        return {"t_ns": t, "segment": seg}
+        return {"t_ns": t, "segment": seg, "step": step, "steps": steps}
 
     def _abort(self, cmd: Command) -> dict[str, Any]:
         if self.paused:  # at rest already (or stopping): the job ends where the stop ends

@@ -27,10 +27,18 @@ TOPIC_CLOCK = "clock"
 #: The cell's state (diagnostic_msgs/DiagnosticStatus, latched): one message
 #: per transition, values :data:`CELL_STATE_KEYS`
 TOPIC_STATE = "winder/state"
-#: idle, running, paused (at a programmed stop), done, failed (ended incomplete)
-CELL_STATES = ("idle", "running", "paused", "done", "failed")
+#: idle, running, pausing (braking for a pause), paused (at rest: a pause or a
+#: programmed stop), aborting (braking for an abort), done, aborted (ended at
+#: rest by an abort), failed (ended incomplete otherwise)
+CELL_STATES = ("idle", "running", "pausing", "paused", "aborting", "done", "aborted", "failed")
 CELL_STATE_KEYS = ("state", "job_id", "run_id", "coil", "layer", "turn", "sim_time_s")
 TOPIC_DIAGNOSTICS = "/diagnostics"
+#: Operator commands as they take effect (std_msgs/String, JSON, reliable,
+#: transient-local, depth 100): the profile node publishes one event per
+#: pause, resume, abort or override of a run - when it takes effect in
+#: simulated time, where the axes come to rest - and the sim node records and
+#: announces them; the interp node stops sending an aborted run.
+TOPIC_CONTROL = "winder/control"
 
 #: The diagnostic task every node reports its job under (``"<node>: job"``).
 TASK_JOB = "job"
@@ -95,12 +103,16 @@ READY_STATES = ("ready", "waiting", "busy", "blocked")
 #: the node's ``steps_done`` of ``steps_total`` and their ratio ``progress``.
 #: Nodes add their own keys after these (the sim node: lost steps, bag...).
 STATUS_KEYS = ("state", "job_id", "run_id", "steps_done", "steps_total", "progress")
-#: idle: no run yet; running: a run in progress; paused: at rest at a
-#: programmed stop (the sim node), going on after its pause; stalled: running, but its
-#: step stream stopped (the sim node); done: the last run ended complete;
-#: incomplete: it ended short (aborted, stalled for good, cut off...);
-#: blocked: the node's settings are refused, it takes no run
-JOB_STATES = ("idle", "running", "paused", "stalled", "done", "incomplete", "blocked")
+#: idle: no run yet; running: a run in progress; pausing / paused: braking
+#: for a pause / at rest (a pause, or a programmed stop), going on after a
+#: resume; aborting: braking for an abort; stalled: running, but its step
+#: stream stopped (the sim node); done: the last run ended complete; aborted:
+#: it was ended by an abort, the axes at rest; incomplete: it ended short
+#: otherwise (stalled for good, cut off...); blocked: the node's settings are
+#: refused, it takes no run
+JOB_STATES = (
+    "idle", "running", "pausing", "paused", "aborting", "stalled", "done", "aborted", "incomplete", "blocked",
+)  # fmt: skip
 
 
 def status_values(

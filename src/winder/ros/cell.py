@@ -173,8 +173,8 @@ class CellWatch:
 
     ``heard_sim``: the sim node's job status got through (so no report can be
     missed once the job starts); ``job_seen``: the interp node reports the job
-    sending; ``summary``: the sim node's final job report (``done`` or
-    ``incomplete``); ``errors``: ERROR statuses of the cell's nodes.
+    sending; ``summary``: the sim node's final job report (``done``,
+    ``aborted`` or ``incomplete``); ``errors``: ERROR statuses of the cell's nodes.
     """
 
     def __init__(self, node: Node, namespace: str) -> None:
@@ -212,7 +212,7 @@ class CellWatch:
             if st.name == self.sim_status and values.get("run_id") and values["run_id"] == self.run_id:
                 self.progress = float(values.get("progress", 0.0))
                 self.sim_time = values.get("sim_time_s", "0")
-                if values.get("state") in ("done", "incomplete"):
+                if values.get("state") in ("done", "aborted", "incomplete"):
                     self.summary = values
                     self.message = st.message
             elif st.level == bytes([ERROR]) and st.name.startswith(self.ns):
