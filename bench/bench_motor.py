@@ -70,9 +70,7 @@ def main() -> None:
         ref = closed_form(times, angles, grid[check])
         u = staircase(times, angles, grid)
         big = n >= 10**6
-        ours_t = best_of(
-            lambda t=times, a=angles, g=grid: AX.response(t, a, g), repeat=3 if big else 5
-        )
+        ours_t = best_of(lambda t=times, a=angles, g=grid: AX.response(t, a, g), repeat=3 if big else 5)
         ours = AX.response(times, angles, grid)
         lsim_t = best_of(lambda g=grid, u=u: signal.lsim(lti, u, g, interp=False), repeat=1)
         y_lsim = signal.lsim(lti, u, grid, interp=False)[1]

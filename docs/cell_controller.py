@@ -27,7 +27,7 @@ def main() -> int:
             values = {kv.key: kv.value for kv in st.values}
             # every node's job status carries state, job_id, run_id, steps_done, steps_total, progress
             mine = st.name == sim_status and run_id and values["run_id"] == run_id
-            if mine and values["state"] in ("done", "incomplete"):
+            if mine and values["state"] in ("done", "aborted", "incomplete"):
                 ending.update(values)
 
     node.create_subscription(DiagnosticArray, "/diagnostics", on_status, 10)

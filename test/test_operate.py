@@ -178,10 +178,9 @@ def test_override_tail_holds_the_new_limits(D, lv, la, lj, f, where, kind):
     # v_max: a jerk-limited change may first pass through a higher speed) the speed stays within it
     edges = [ph.t_start for ph in tail.phases]
     _, vel, acc, _ = tail.sample(np.array(edges))
-    settled = next(
-        (e for e, x, u in zip(edges, acc, vel, strict=True) if e > 0 and x == 0.0 and u <= V * f * (1 + 1e-9)),
-        tail.duration,
-    )
+    cap = V * f * (1 + 1e-9)
+    within = [e for e, x, u in zip(edges, acc, vel, strict=True) if e > 0 and x == 0.0 and u <= cap]
+    settled = within[0] if within else tail.duration
     if kind != "exponential":
         check_limits(tail, max(V * f, v, v + a * abs(a) / (2 * J) if kind == "scurve" else v) * (1 + 1e-9), A,
                      J if kind == "scurve" else None)  # fmt: skip

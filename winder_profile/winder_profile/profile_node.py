@@ -397,7 +397,8 @@ class ProfileNode(Node):
         if self.timeline is not None and self.timeline.paused and not self.timeline.aborted:
             return self.reply(resp, *self.command("resume"))
         if self.waiting_at is None or self.plan is None:
-            return self.reply(resp, False, "resume refused: not paused, not at a programmed stop")
+            why = "resume refused: not paused, not at a programmed stop: nothing to resume"
+            return self.reply(resp, False, why)
         stop = self.waiting_at
         self.waiting_at = None
         resp.success = True

@@ -928,8 +928,8 @@ class SimNode(Node):
         self.finishing = False
         self.bag = None
         if self.context.ok():  # at Ctrl-C the context is already shut down
+            self.announce()  # ready first: whoever hears "done" can start the next run at once
             self.diag.pub.publish(final)
-            self.announce()
 
     def final_report(self, complete: bool) -> tuple[dict[str, object], int, str]:
         """The job's final status: values, level and message. A job whose

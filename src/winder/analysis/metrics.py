@@ -378,7 +378,14 @@ def analyze(run: Run, stride_time: float = STRIDE_TIME, digested: Digest | None 
             f"damaged recording: {len(run.damaged)} chunk(s) skipped, their messages are missing "
             f"from every figure (first: {run.damaged[0]})"
         )
-    if not run.complete:
+    for e in run.events:
+        notes.append(_event_note(e))
+    if run.report.get("state") == "aborted" and run.closed and not run.damaged:
+        notes.append(
+            f"run aborted: it ended at rest after {run.report.get('steps_done', '?')} steps; "
+            "the figures cover those"
+        )
+    elif not run.complete:
         why = (
             "damaged"
             if run.damaged and run.closed
@@ -457,6 +464,21 @@ def _g(x: float, scale: float = 1.0, digits: int = 4) -> str:
 
 def _f(x: float, scale: float = 1.0, decimals: int = 3) -> str:
     return "-" if not math.isfinite(x) else f"{x * scale:.{decimals}f}"
+
+
+def _event_note(e: dict[str, Any]) -> str:
+    """One line for an operator event of the run."""
+    t = f"{e['t_ns'] / 1e9:.3f} s"
+    kind = e.get("event", "?")
+    if kind in ("pause", "abort"):
+        return (
+            f"operator {kind} at {t} ({e.get('source', 'call')}): at rest at "
+            f"{e.get('t_rest_ns', e['t_ns']) / 1e9:.3f} s after {e.get('steps', '?')} steps, "
+            f"stop distance {float(e.get('stop_distance', 0.0)):.1f} steps"
+        )
+    if kind == "override":
+        return f"operator feed override x{e.get('factor', '?')} at {t}: {e.get('note', '')}"
+    return f"operator {kind} at {t}"
 
 
 def _ramp(a: Analysis) -> str:

@@ -40,6 +40,7 @@ import numpy.typing as npt
 
 from winder.contract.stream import TIMED_COLUMNS, JobPlan, parse_job_description
 from winder.contract.topics import (
+    TOPIC_CONTROL,
     TOPIC_DIAGNOSTICS,
     TOPIC_JOB,
     TOPIC_JOINT_COMMANDS,
@@ -75,6 +76,7 @@ IntArray = npt.NDArray[np.int64]
 JOB, SIM_CONFIG, STEP_TIMES = TOPIC_JOB, TOPIC_SIM_CONFIG, TOPIC_STEP_TIMES
 JOINT_COMMANDS, JOINT_STATES = TOPIC_JOINT_COMMANDS, TOPIC_JOINT_STATES
 PROFILE_CONFIG, DIAGNOSTICS = TOPIC_PROFILE_CONFIG, TOPIC_DIAGNOSTICS
+CONTROL = TOPIC_CONTROL
 
 
 # -- decoding ---------------------------------------------------------------------
@@ -246,6 +248,10 @@ class Run:
     #: the profile node's ramp settings (winder/profile_config: profile, v_max, a_max,
     #: j_max, tau, v_start, dwell in steps of the major axis, s), empty in older bags
     profile_config: dict[str, Any] = field(default_factory=dict)
+    #: operator events (winder/control: pause, resume, abort, override), each a
+    #: dict with ``event``, ``t_ns`` (simulated time since the job's start) and,
+    #: for a stop, ``t_rest_ns``, ``steps``, ``stop_distance``; empty if none
+    events: tuple[dict[str, Any], ...] = ()
 
     @property
     def complete(self) -> bool:
@@ -395,7 +401,7 @@ def _joint_samples_slow(datas: list[bytes], topic: str) -> Samples:
 #: are few); step chunks and joint samples are streamed
 #: DiagnosticStatus.ERROR
 ERROR_LEVEL = 2
-_KEPT = ("/" + JOB, "/" + SIM_CONFIG, "/" + PROFILE_CONFIG)
+_KEPT = ("/" + JOB, "/" + SIM_CONFIG, "/" + PROFILE_CONFIG, "/" + CONTROL)
 _JOINT_BATCH = 8192
 
 
@@ -415,7 +421,7 @@ def read_run(path: str | Path, namespace: str | None = None) -> Run:
     ns = _pick_namespace(raw.path, counts, namespace)
     topic = {
         key: f"{ns}/{key}"
-        for key in (JOB, SIM_CONFIG, PROFILE_CONFIG, STEP_TIMES, JOINT_COMMANDS, JOINT_STATES)
+        for key in (JOB, SIM_CONFIG, PROFILE_CONFIG, CONTROL, STEP_TIMES, JOINT_COMMANDS, JOINT_STATES)
     }
     decoded = _decode(raw, topic)
     streamed = _stream_pass(raw, topic)
@@ -551,7 +557,22 @@ def _assemble(
         damaged=tuple(raw.damaged),
         errors=errors,
         profile_config=profile_config,
+        events=_decode_events(decoded.get(topic[CONTROL], []), plan.run_id),
     )
+
+
+def _decode_events(msgs: list[Any], run_id: str) -> tuple[dict[str, Any], ...]:
+    """The operator events of the run (winder/control), in the order recorded;
+    messages that are not events of this run are left out."""
+    out = []
+    for m in msgs:
+        try:
+            event = json.loads(m.data)
+        except (json.JSONDecodeError, RecursionError, AttributeError):
+            continue
+        if isinstance(event, dict) and event.get("run_id") == run_id and isinstance(event.get("t_ns"), int):
+            out.append(event)
+    return tuple(out)
 
 
 def _shifted(samples: Samples, origin: float) -> Samples:

@@ -10,6 +10,8 @@ directory, which rosbag2 tools ignore; for a lone ``.mcap`` file
 * ``tracking.png`` - commanded and simulated position, a zoom into the start
   of each axis' first move (the staircase and the rotor following it) and the
   tracking error in steps;
+* ``operations.png`` (a run with operator commands) - the velocity of the
+  moving axes around the commands, each marked where it takes effect;
 * ``winding.png`` - the unrolled winding path, a zoom into one stretch of it
   with the signed distance of every commanded step and simulated sample to
   the ideal line, and the per-turn mean deviation (eq. 7) in % of the wire;
@@ -21,6 +23,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -85,6 +88,33 @@ def _first_ramp(
     return t0 - 0.03 * max(t1 - t0, 0.1), t1
 
 
+def _mark_events(ax: Any, run: Run, label: bool) -> None:
+    """The operator's commands on a time axis: a pause shaded from the moment
+    it takes effect to the resume (the rest dotted), an abort and an override
+    as lines."""
+    end = float(run.states.t[-1]) if len(run.states) else 0.0
+    pause: dict[str, Any] | None = None
+    for e in run.events:
+        t = e["t_ns"] / 1e9
+        kind = e.get("event")
+        if kind in ("pause", "abort"):
+            color = "black" if kind == "pause" else "tab:red"
+            ax.axvline(t, color=color, lw=1.0, label=f"{kind} takes effect" if label else None)
+            ax.axvline(e.get("t_rest_ns", e["t_ns"]) / 1e9, color=color, lw=0.8, ls=":",
+                       label="at rest" if label and kind == "pause" else None)  # fmt: skip
+            pause = e if kind == "pause" else None
+        elif kind == "resume":
+            ax.axvline(t, color="tab:green", lw=1.0, label="resume" if label else None)
+            if pause is not None:
+                ax.axvspan(pause["t_ns"] / 1e9, t, color="tab:gray", alpha=0.12)
+            pause = None
+        elif kind == "override":
+            ax.axvline(t, color="tab:purple", lw=1.0, ls="--",
+                       label=f"override x{e.get('factor', 1.0):g}" if label else None)  # fmt: skip
+    if pause is not None:
+        ax.axvspan(pause["t_ns"] / 1e9, max(end, pause["t_ns"] / 1e9), color="tab:gray", alpha=0.12)
+
+
 def _motion(run: Run, d: Digest, out: Path) -> Path:
     st = run.states
     acc = np.asarray(np.gradient(st.vel, st.t, axis=0)) if len(st) >= 3 else np.zeros((0, 3))
@@ -103,6 +133,7 @@ def _motion(run: Run, d: Digest, out: Path) -> Path:
         if vc.size:
             ax.plot(tc, vc * scale, ".", color=CMD, ms=1.0, label="command")
         ax.set_title(f"{axis}: whole run", fontsize=10)
+        _mark_events(ax, run, label=c == 0)
         ax.set_ylabel(f"{axis} velocity ({unit}/s)")
         ax.set_xlabel("time (s)")
         window = _first_ramp(d, axis, t, v) if v.size else None
@@ -145,6 +176,40 @@ def _motion(run: Run, d: Digest, out: Path) -> Path:
         fontsize=10,
     )
     path = out / "motion.png"
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def _operations(run: Run, d: Digest, out: Path) -> Path:
+    """operations.png: the velocity of the moving axes around the operator's
+    commands (from half a second before the first to two after the last)."""
+    st = run.states
+    times = [e["t_ns"] / 1e9 for e in run.events] + [e.get("t_rest_ns", e["t_ns"]) / 1e9 for e in run.events]
+    end = float(st.t[-1]) if len(st) else max(times)
+    lo, hi = max(min(times) - 0.5, 0.0), min(max(times) + 2.0, end)
+    moving = [c for c, axis in enumerate(AXES) if len(st) and np.ptp(st.pos[:, c]) > 0]
+    fig, axes = plt.subplots(max(len(moving), 1), 1, figsize=(11, 3.2 * max(len(moving), 1)), squeeze=False)
+    for row, c in enumerate(moving):
+        axis = AXES[c]
+        scale, unit = SHOW[axis]
+        ax = axes[row, 0]
+        m = (st.t >= lo) & (st.t <= hi)
+        ax.plot(st.t[m], st.vel[m, c] * scale, color=ACT, lw=0.7, label="simulated axis")
+        tc, vc, _, _ = d.traces[axis].whole_run()
+        mc = (tc >= lo) & (tc <= hi)
+        ax.plot(tc[mc], vc[mc] * scale, ".", color=CMD, ms=1.5, label="command (from the step times)")
+        _mark_events(ax, run, label=row == 0)
+        ax.set_xlim(lo, hi)
+        ax.set_ylabel(f"{axis} velocity ({unit}/s)")
+        ax.grid(True, lw=0.3)
+    axes[-1, 0].set_xlabel("time since the run's start (s, simulated)")
+    axes[0, 0].legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, markerscale=4)
+    fig.suptitle(
+        _title(run) + "\noperator commands: where each takes effect, the rest it brakes to", fontsize=10
+    )
+    fig.tight_layout()
+    path = out / "operations.png"
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path
@@ -337,7 +402,10 @@ def plot_analysis(
     d = digested if digested is not None else digest_run(run)
     out = plots_dir(run.path) if out is None else Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    return [_motion(run, d, out), _tracking(run, d, out), _winding(run, analysis, d, out)]
+    paths = [_motion(run, d, out), _tracking(run, d, out), _winding(run, analysis, d, out)]
+    if run.events:
+        paths.append(_operations(run, d, out))
+    return paths
 
 
 def plot_identification(run: Run, ident: Identification, out: Path | None = None) -> list[Path]:
