@@ -24,7 +24,6 @@ import numpy.typing as npt
 from diagnostic_msgs.msg import KeyValue
 from rcl_interfaces.msg import SetParametersResult
 from rcl_interfaces.srv import SetParametersAtomically
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import Int32MultiArray, String
 from std_srvs.srv import Trigger
@@ -37,6 +36,7 @@ from winder.motion.interp import interpolate
 from winder.motion.job import FIELD_SPECS, Job
 from winder.ros.chunks import STEPS_CDR
 from winder.ros.diagnostics import ERROR, OK, Diagnostics
+from winder.ros.managed import ManagedNode
 from winder.ros.qos import QOS_EVENTS, QOS_LATCHED, QOS_STATE, QOS_STREAM
 from winder.ros.ready import Readiness
 from winder.ros.settings import Settings
@@ -45,7 +45,7 @@ from winder.ros.timers import steady_timer
 from winder.spec import SpecError
 
 
-class InterpNode(Node):
+class InterpNode(ManagedNode):
     def __init__(self) -> None:
         super().__init__("interp_node")
         self.settings = Settings(self, INTERP_SPECS, check_interp)
@@ -83,6 +83,18 @@ class InterpNode(Node):
         self.last_receipt_wall = 0.0
         if self.settings.blocked():
             self.diag.publish("job", ERROR, str(self.settings.blocked()), {})
+        self.start_lifecycle()
+
+    # -- lifecycle (winder.ros.managed) ----------------------------------------
+    def in_run(self) -> bool:
+        return self.running()
+
+    def blocked_reason(self) -> str | None:
+        return self.settings.blocked()
+
+    def lifecycle_changed(self) -> None:
+        if self.active:
+            self.wake()  # an autostart waits for the activation
 
     def with_job_file(self, params: list[Parameter]) -> list[Parameter]:
         """Setting ``job_file`` sets what the file says, in the same change:
@@ -135,6 +147,8 @@ class InterpNode(Node):
 
     def cannot_start(self) -> str:
         """Why a run cannot start now ("" if it can)."""
+        if not self.active:
+            return f"job not started: {self.inactive_reason()}"
         if self.running():
             assert self.job is not None
             return (
@@ -151,7 +165,8 @@ class InterpNode(Node):
         self.tick()
 
     def tick(self) -> None:
-        if not self.autostarted and self.settings.values()["autostart"] and not self.readiness.missing():
+        autostart = self.settings.values()["autostart"] and self.active
+        if not self.autostarted and autostart and not self.readiness.missing():
             self.autostarted = True
             ok, why = self.start_job()
             if not ok:

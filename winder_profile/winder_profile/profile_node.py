@@ -36,7 +36,6 @@ import numpy as np
 import numpy.typing as npt
 from builtin_interfaces.msg import Duration
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.subscription import Subscription
 from rosgraph_msgs.msg import Clock
@@ -61,6 +60,7 @@ from winder.contract.topics import (
 from winder.motion.job import AXES
 from winder.ros.chunks import STEPS_CDR, TIMED_CDR, waiting
 from winder.ros.diagnostics import ERROR, OK, WARN, Diagnostics
+from winder.ros.managed import ManagedNode
 from winder.ros.qos import QOS_CLOCK, QOS_EVENTS, QOS_LATCHED, QOS_STREAM
 from winder.ros.ready import Announcer
 from winder.ros.settings import Settings
@@ -75,7 +75,7 @@ MODE_WAIT = 1.0
 RELEASE_BLOCK = 256
 
 
-class ProfileNode(Node):
+class ProfileNode(ManagedNode):
     def __init__(self) -> None:
         super().__init__("profile_node")
         self.settings = Settings(self, {**PROFILE_SPECS, **OPERATION_SPECS}, check_profile)
@@ -102,6 +102,7 @@ class ProfileNode(Node):
         self.pub_control = self.create_publisher(String, TOPIC_CONTROL, QOS_EVENTS)
         self.create_subscription(String, TOPIC_SIM_CONFIG, self.on_sim_config, QOS_LATCHED)
         self.sub_clock: Subscription | None = None  # only while a real-time run is timed
+        self.last_sim_config: String | None = None
 
         self.plan: JobPlan | None = None
         self.checker: StreamChecker | None = None
@@ -125,6 +126,17 @@ class ProfileNode(Node):
         #: still ahead, and the one the job waits at
         self.holds: list[tuple[int, int]] = []
         self.waiting_at: tuple[int, int] | None = None
+        self.start_lifecycle()
+
+    # -- lifecycle (winder.ros.managed) ----------------------------------------
+    def in_run(self) -> bool:
+        return self.plan is not None and not self.run_over()
+
+    def blocked_reason(self) -> str | None:
+        return self.settings.blocked()
+
+    def lifecycle_changed(self) -> None:
+        self.announce()
 
     def connect(self) -> None:
         if self.sub_steps is None and self.pub.get_subscription_count() > 0:
@@ -144,6 +156,9 @@ class ProfileNode(Node):
             job = parse_job_description(msg.data)
         except ValueError as exc:
             self.fail(f"job description rejected: {exc}")
+            return
+        if not self.active:
+            self.fail(f"job {job.job_id} refused: {self.inactive_reason()}")
             return
         if job.ramp is not None:  # the run brings its ramp: it is checked here as a setting would be
             try:
@@ -176,6 +191,8 @@ class ProfileNode(Node):
         self.queue.clear()
         self.t_sent_ns, self.dropped, self.t_now_ns = -1, 0, -1
         self.lookahead_ns, self.mode_known, self.job_wall = None, False, time.monotonic()
+        if self.last_sim_config is not None:  # the consumer's word on this run may be here already
+            self.on_sim_config(self.last_sim_config)
         self.ramp_kind = str(values["profile"])
         # the ramp in force for this job, latched: the sim node records it
         config = {
@@ -248,6 +265,9 @@ class ProfileNode(Node):
         while self.queue and self.waiting_at is None:
             rows, k = self.queue[0]
             seg = int(rows[0, 0])
+            lead = self.t_sent_ns - max(self.t_now_ns, 0)
+            if self.lookahead_ns is not None and lead > self.lookahead_ns // 2:
+                break  # more than half the look-ahead is out: steps go in blocks, not one per clock tick
             n_try = len(k) if self.lookahead_ns is None else min(len(k), RELEASE_BLOCK)
             times, n = tl.times_ns(seg, k[:n_try])
             if self.lookahead_ns is not None:
@@ -305,7 +325,9 @@ class ProfileNode(Node):
 
     def on_sim_config(self, msg: String) -> None:
         """The consumer's configuration of the run: a real-time run gets the
-        look-ahead, and the clock it is measured on."""
+        look-ahead, and the clock it is measured on. It may come before the
+        job description does: the last one is kept for it."""
+        self.last_sim_config = msg
         if self.plan is None or self.mode_known:
             return
         try:
@@ -455,6 +477,8 @@ class ProfileNode(Node):
         """winder/ready: ready once the steps' subscription is matched (see connect())."""
         if self.settings.blocked():
             self.ready.announce("blocked")
+        elif not self.active:
+            self.ready.announce("inactive")
         elif self.sub_steps is not None and self.sub_steps.get_publisher_count() > 0:
             self.ready.announce("ready")
         else:

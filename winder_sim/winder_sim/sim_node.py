@@ -37,7 +37,6 @@ import numpy as np
 import numpy.typing as npt
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.event_handler import SubscriptionEventCallbacks
-from rclpy.node import Node
 from rclpy.serialization import deserialize_message, serialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
@@ -76,6 +75,7 @@ from winder.motion.job import AXES
 from winder.record.bag import BagRecorder, new_bag_path, run_bag_path, signals_held
 from winder.ros.chunks import TIMED_CDR, waiting
 from winder.ros.diagnostics import ERROR, OK, WARN, Diagnostics
+from winder.ros.managed import ManagedNode
 from winder.ros.qos import QOS_CLOCK, QOS_DIAGNOSTICS, QOS_EVENTS, QOS_LATCHED, QOS_STATE, QOS_STREAM
 from winder.ros.ready import Announcer
 from winder.ros.settings import Settings
@@ -137,7 +137,7 @@ class AxisSim:
         return int(getattr(self.tracker, "lost_steps", 0))
 
 
-class SimNode(Node):
+class SimNode(ManagedNode):
     def __init__(self) -> None:
         super().__init__("sim_node")
         self.settings = Settings(self, SIM_SPECS, check_sim)
@@ -187,6 +187,7 @@ class SimNode(Node):
         self.clock_ns = -1  # the last /clock published in this node's life (ns)
         self.reset()
         self.early: list[bytes] = []
+        self.early_events: deque[bytes] = deque(maxlen=100)  # winder/control of a run not started here yet
         self.path_raw: bytes | None = None
         self.profile_raw: bytes | None = None
         self.last_summary: dict[str, object] = {}
@@ -194,6 +195,17 @@ class SimNode(Node):
         self.cell_state("idle", "no job yet")
         if self.settings.blocked():
             self.diag.publish("job", ERROR, str(self.settings.blocked()), {})
+        self.start_lifecycle()
+
+    # -- lifecycle (winder.ros.managed) ----------------------------------------
+    def in_run(self) -> bool:
+        return self.plan is not None
+
+    def blocked_reason(self) -> str | None:
+        return self.settings.blocked()
+
+    def lifecycle_changed(self) -> None:
+        self.announce()
 
     def reset(self) -> None:
         self.plan: JobPlan | None = None
@@ -247,6 +259,9 @@ class SimNode(Node):
             plan = parse_job_description(msg.data)
         except ValueError as exc:
             self.error(f"job description rejected: {exc}")
+            return
+        if not self.active:
+            self.error(f"job {plan.job_id} refused: {self.inactive_reason()}")
             return
         if self.plan is not None and self.finishing:
             # every step of the last job is simulated, its last samples are still
@@ -334,6 +349,10 @@ class SimNode(Node):
         )
         self.cell_state("running", f"run {plan.run_id or plan.job_id} started", where=(1, 1, 0))
         self.report()  # the run is on: its status at once, not at the next second
+        events, self.early_events = list(self.early_events), deque(maxlen=100)
+        for event in events:  # the run's own events that came before its description; others dropped
+            self.on_control(event)
+        self.early_events.clear()
         early, self.early = self.early, []
         for chunk in early:  # in order, before any taken from the queue
             self.receive(chunk)
@@ -349,17 +368,20 @@ class SimNode(Node):
         run once the steps up to the rest are simulated. Events of other runs,
         or that do not parse, change nothing."""
         plan = self.plan
-        if plan is None:
-            return
         try:
             event = json.loads(deserialize_message(raw, String).data)
             kind, t_ns = event["event"], int(event["t_ns"])
             seg, step = int(event.get("segment", -1)), int(event.get("step", 0))
         except (ValueError, KeyError, TypeError, RecursionError):
             return
-        if not isinstance(event, dict) or event.get("run_id") != plan.run_id or t_ns < 0:
+        if not isinstance(event, dict) or t_ns < 0:
             return
-        self.record("control", max(t_ns, self.t_sim_ns), raw)
+        if plan is None or event.get("run_id") != plan.run_id:
+            # the profile node may speak of a run before its job description is
+            # here (a schedule is published as the run starts): kept for it
+            self.early_events.append(raw)
+            return
+        self.record("control", self.t_sim_ns, raw)  # when it was heard; its own times are inside
         where = (seg, step)
         if kind == "pause":
             rest = int(event.get("t_rest_ns", t_ns))
@@ -493,11 +515,11 @@ class SimNode(Node):
             and now - self.inbox_since < BATCH_WAIT
         ):
             return  # gather a few chunks: one tracker call for many costs less
-        if self.rest is not None and not (settings["real_time"] and self.out):
+        if self.rest is not None and not (settings["real_time"] and self.out and self.ahead(settings)):
             rest, self.rest = self.rest, None
             self.advance(rest, settings)
         while self.inbox and not self.finishing and self.rest is None:
-            if settings["real_time"] and self.out:
+            if settings["real_time"] and self.out and self.ahead(settings):
                 break
             # as fast as possible: simulate every chunk waiting, up to
             # BATCH_STEPS, in one go (the per-call costs are paid once)
@@ -527,6 +549,15 @@ class SimNode(Node):
         self.emit(settings)
         if self.record_failure and self.plan is not None:
             self.finish(complete=False)
+
+    def ahead(self, settings: dict[str, Any]) -> bool:
+        """In real time: the samples computed reach beyond what the wall clock
+        allows now, so the next chunk can wait (memory stays bounded); short
+        chunks (the profile node's look-ahead at a high real_time_factor) are
+        simulated until they catch up with the clock."""
+        if self.wall_pace0 == 0.0:
+            return True
+        return (self.next_sample - 1) / self.rate > self.paced_until(settings["real_time_factor"])
 
     def accept(self, raw: bytes) -> npt.NDArray[np.int64] | None:
         """The rows of a chunk that may be simulated, or None (reported)."""
@@ -908,7 +939,8 @@ class SimNode(Node):
         values, level, text = self.final_report(complete)
         job = self.plan.job
         ended = {"done": "done", "aborted": "aborted"}.get(str(values["state"]), "failed")
-        last = (job.poles, job.layers, job.turns_per_layer * job.layers) if ended == "done" else (0, 0, 0)
+        final = job.coil(job.poles - 1)
+        last = (job.poles, final.layers, job.turns_of(job.poles - 1)) if ended == "done" else (0, 0, 0)
         self.cell_state(ended, text, where=last)
         final = self.diag.status("job", level, text, values)
         if self.bag is not None:
@@ -1024,6 +1056,8 @@ class SimNode(Node):
             state = "busy"
         elif self.settings.blocked():
             state = "blocked"
+        elif not self.active:
+            state = "inactive"
         else:
             state = "ready" if self.sub_times.get_publisher_count() > 0 else "waiting"
         self.ready.announce(state)

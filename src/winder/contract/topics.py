@@ -89,12 +89,13 @@ def check_namespace(namespace: str) -> str:
 #: profile node (``key="profile"``) say whether they can take a job now
 #: (``value`` one of :data:`READY_STATES`: "waiting" = its stream is not
 #: connected yet, "busy" = running a job, "blocked" = settings refused). The
-#: interp node starts a job only when both say "ready"; readers of any other
+#: interp node starts a job only when both say "ready" ("inactive": a managed
+#: node not activated yet, see winder.ros.managed); readers of any other
 #: topic change nothing. Each repeats its state every second; one not heard
 #: for 3 s no longer counts (its node is gone).
 TOPIC_READY = "winder/ready"
 READY_ROLES = ("consumer", "profile")
-READY_STATES = ("ready", "waiting", "busy", "blocked")
+READY_STATES = ("ready", "waiting", "busy", "blocked", "inactive")
 
 
 #: The keys every node's ``"<node>: job"`` status carries, in every state, so

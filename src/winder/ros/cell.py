@@ -247,6 +247,60 @@ class CellWatch:
         return None
 
 
+#: keys of `winder run` on a terminal: the profile node's service each calls
+KEYS = {" ": "pause/resume", "p": "pause", "r": "resume", "a": "abort"}
+
+
+class Keys:
+    """Single keys from a terminal on stdin, read without waiting (cbreak
+    mode, restored at :meth:`close`); does nothing when stdin is not a
+    terminal (a script, CI). Each key calls the profile node's ``~/pause``,
+    ``~/resume`` or ``~/abort``; the space bar pauses a running cell and
+    resumes a paused one. Replies are written to stderr."""
+
+    def __init__(self, node: Node, namespace: str) -> None:
+        self.enabled = sys.stdin.isatty()
+        self.saved: Any = None
+        self.paused = False
+        self.pending: list[tuple[str, Future]] = []
+        base = f"{namespace.rstrip('/')}/profile_node"
+        self.clients = {k: node.create_client(Trigger, f"{base}/{k}") for k in ("pause", "resume", "abort")}
+        if self.enabled:
+            import termios
+            import tty
+
+            self.saved = termios.tcgetattr(sys.stdin.fileno())
+            tty.setcbreak(sys.stdin.fileno())
+            sys.stderr.write("keys: space pause/resume, p pause, r resume, a abort\n")
+
+    def poll(self) -> None:
+        """Act on the keys typed since the last call, report the replies that came."""
+        import select
+
+        while self.enabled and select.select([sys.stdin], [], [], 0)[0]:
+            key = sys.stdin.read(1).lower()
+            action = KEYS.get(key)
+            if action == "pause/resume":
+                action = "resume" if self.paused else "pause"
+            if action is not None:
+                self.pending.append((action, self.clients[action].call_async(Trigger.Request())))
+        for item in [p for p in self.pending if p[1].done()]:
+            self.pending.remove(item)
+            action, future = item
+            reply = future.result()
+            if reply is not None and reply.success:
+                self.paused = action == "pause" or (self.paused and action != "resume")
+            text = reply.message if reply is not None else "no reply"
+            sys.stderr.write(f"\n{action}: {text}\n")
+
+    def close(self) -> None:
+        if self.saved is not None:
+            import termios
+
+            termios.tcsetattr(sys.stdin.fileno(), termios.TCSADRAIN, self.saved)
+            self.saved = None
+
+
 def _spawn(procs: NodeProcesses, params: dict[str, dict[str, Any]], namespace: str) -> None:
     for key in START_ORDER:
         node_params = dict(params.get(key, {}))
@@ -261,6 +315,7 @@ def _wait_for_job(
     procs: NodeProcesses,
     timeout: float,
     progress: Callable[[float, str], None] | None,
+    keys: Keys | None = None,
 ) -> str:
     """Spin until the sim node's final report; the reason if it never came."""
     t_end = time.monotonic() + timeout
@@ -269,6 +324,8 @@ def _wait_for_job(
         if refused:
             return refused
         rclpy.spin_once(node, timeout_sec=0.1)
+        if keys is not None:
+            keys.poll()
         if progress is not None:
             progress(watch.progress, watch.sim_time)
         dead = procs.dead()
@@ -311,13 +368,15 @@ def run_cell(
         procs = NodeProcesses(env, log_dir)
         rclpy.init(args=[])
         node = rclpy.create_node("winder_cell", namespace=namespace or "/")
+        keys = Keys(node, namespace)
         try:
             watch = CellWatch(node, namespace)
             _spawn(procs, params, namespace)
-            failure = _wait_for_job(node, watch, procs, timeout, progress)
+            failure = _wait_for_job(node, watch, procs, timeout, progress, keys)
         except ExternalShutdownException:
             raise KeyboardInterrupt from None  # Ctrl-C: the caller reports it
         finally:
+            keys.close()
             procs.stop()
             node.destroy_node()
             rclpy.try_shutdown()

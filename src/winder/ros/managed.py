@@ -1,0 +1,119 @@
+"""The managed-node (lifecycle) interface of every winder node.
+
+Each node is an ``rclpy.lifecycle.LifecycleNode``: a cell orchestrator drives
+``configure``, ``activate``, ``deactivate``, ``cleanup`` and ``shutdown``
+through the standard ``~/change_state`` service (``~/get_state`` and the
+others come with it) and brings the nodes up in the order it wants. Started
+plainly (``ros2 run``, ``winder run``, the launch file) a node configures and
+activates itself at once, as before; with ``-p managed:=true`` it waits,
+unconfigured, for the orchestrator.
+
+What each state means here (the node builds its publishers, subscriptions and
+services at start, and gates them itself, as the style guide asks):
+
+* unconfigured / inactive: the node takes no run. It says ``inactive`` on
+  ``winder/ready`` (so the interp node starts nothing), the interp node
+  refuses ``~/start`` with that reason, a job description that arrives is
+  refused; status reports go on.
+* configure: refused (FAILURE, the reason logged) while the node's settings
+  are refused, as a start would be. (A node started plainly with refused
+  settings is active but ``blocked``: it takes no run until they are set
+  validly, as before.)
+* active: as a plainly started node.
+* deactivate: refused while the node is in a run (abort it, or wait for its
+  end); the run is never cut by a state change.
+* shutdown: a run still going is closed as at Ctrl-C (its bag readable,
+  marked incomplete).
+"""
+
+from __future__ import annotations
+
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+
+__all__ = ["ManagedNode"]
+
+
+class ManagedNode(LifecycleNode):
+    """A winder node with the lifecycle interface (see the module doc).
+    Subclasses call :meth:`start_lifecycle` at the end of ``__init__`` and
+    implement :meth:`in_run`, :meth:`blocked_reason` and :meth:`lifecycle_changed`."""
+
+    def __init__(self, name: str) -> None:
+        super().__init__(name)
+        self.active = False
+        self.auto = False  # configuring itself at start (not managed)
+        self.declare_parameter(
+            "managed",
+            False,
+            ParameterDescriptor(
+                description="wait, unconfigured, for an orchestrator's configure and activate "
+                "(lifecycle); false: configure and activate at start",
+                read_only=True,
+            ),
+        )
+
+    def start_lifecycle(self) -> None:
+        if self.get_parameter("managed").value is True:
+            self.get_logger().info("managed: unconfigured, waiting for configure and activate")
+            self.lifecycle_changed()
+            return
+        # started plainly: active at once; settings refused at start leave the
+        # node "blocked" (it takes no run until they are set validly), as before
+        self.auto = True
+        self.trigger_configure()
+        self.trigger_activate()
+        self.auto = False
+
+    # -- what a node tells ---------------------------------------------------
+    def in_run(self) -> bool:
+        """Whether the node is in a run now."""
+        return False
+
+    def blocked_reason(self) -> str | None:
+        """Why the node cannot be configured (its settings refused), or None."""
+        return None
+
+    def lifecycle_changed(self) -> None:
+        """The state changed: say so (readiness, status)."""
+
+    def inactive_reason(self) -> str:
+        """Why the node takes no run now ("" when active)."""
+        if self.active:
+            return ""
+        return f"{self.get_name()} is not active (lifecycle state: {self.lifecycle_state()})"
+
+    def lifecycle_state(self) -> str:
+        return str(self._state_machine.current_state[1])
+
+    # -- transitions -------------------------------------------------------
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        why = self.blocked_reason()
+        if why and not self.auto:
+            self.get_logger().error(f"configure refused: {why}")
+            return TransitionCallbackReturn.FAILURE
+        return super().on_configure(state)
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.active = True
+        self.lifecycle_changed()
+        return super().on_activate(state)
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        if self.in_run():
+            self.get_logger().error("deactivate refused: a run is going on (abort it, or wait for its end)")
+            return TransitionCallbackReturn.FAILURE
+        self.active = False
+        self.lifecycle_changed()
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        return super().on_cleanup(state)
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.active = False
+        hook = getattr(self, "shutdown", None)
+        if callable(hook):
+            hook()
+        self.lifecycle_changed()
+        return super().on_shutdown(state)
