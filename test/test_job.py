@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 
 from winder.motion.interp import interpolate
 from winder.motion.job import FIELD_SPECS, Job, JobError
+from winder.spec import SpecError
 
 
 def test_default_job_is_the_rw400_setup() -> None:
@@ -164,3 +165,83 @@ def test_cli_bad_input_is_one_line_without_traceback(args: list[str], expect: st
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1, r.stderr
     assert expect in lines[0]
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.data())
+def test_coil_overrides_wind_each_coil_as_given(data: st.DataObject) -> None:
+    """Segments of a job with random per-coil overrides against a walk written
+    here: each coil its own turns, layers and fork direction, the feed
+    reversing at every layer, the pole indexing between coils."""
+    poles = data.draw(st.integers(1, 6))
+    tpl, layers = data.draw(st.integers(1, 8)), data.draw(st.integers(1, 3))
+    spr = data.draw(st.sampled_from([4, 16, 1024]))
+    over: dict[int, dict[str, object]] = {}
+    for coil in range(1, poles + 1):
+        keys = data.draw(
+            st.dictionaries(st.sampled_from(["turns_per_layer", "layers", "direction"]), st.just(0))
+        )
+        values = {
+            k: data.draw(st.integers(1, 8) if k != "direction" else st.sampled_from(["cw", "ccw"]))
+            for k in keys
+        }
+        if values:
+            over[coil] = values
+    text = ";".join(f"{c}:" + ",".join(f"{k}={v}" for k, v in kv.items()) for c, kv in over.items())
+    job = Job(poles=poles, turns_per_layer=tpl, layers=layers, fork_steps_per_rev=spr, coil_overrides=text)
+    want = []
+    pos, feed_dir = [0, 0, 0], 1
+    for pole in range(poles):
+        if pole:
+            step = round(pole * 1024 / poles) - round((pole - 1) * 1024 / poles)
+            want.append((tuple(pos), (0, 0, step)))
+            pos[2] += step
+        kv = over.get(pole + 1, {})
+        turns = int(kv.get("turns_per_layer", tpl))  # type: ignore[call-overload]
+        sign = -1 if kv.get("direction") == "ccw" else 1
+        for _ in range(int(kv.get("layers", layers))):  # type: ignore[call-overload]
+            delta = (feed_dir * turns * 250, sign * turns * spr, 0)  # 2.5 mm wire / 10 um feed steps
+            want.append((tuple(pos), delta))
+            pos = [p + d for p, d in zip(pos, delta, strict=True)]
+            feed_dir = -feed_dir
+    assert [(s.start, s.delta) for s in job.segments()] == want
+    assert Job.from_dict(job.to_dict()) == job  # travels in the job description as it is
+    end = np.asarray(job.segments()[0].start)
+    for s in job.segments():
+        end = interpolate(end, s.delta)[-1]
+    assert tuple(end) == tuple(pos)
+
+
+@pytest.mark.parametrize(
+    ("text", "why"),
+    [
+        ("5:layers=1", r"coil 5 is not in \[1, 4\]"),
+        ("2:turns=3", "unknown key 'turns'"),
+        ("2:direction=up", "must be cw or ccw"),
+        ("2:layers=0", r"layers=0 is invalid: must be .*\[1, 1000\]"),
+        ("1:layers=1;1:layers=2", "coil 1 is given twice"),
+        ("x", "COIL:KEY=VALUE"),
+    ],
+)
+def test_bad_coil_overrides_are_refused_in_one_line(text: str, why: str) -> None:
+    with pytest.raises(JobError, match=why) as err:
+        Job(coil_overrides=text)
+    assert "\n" not in str(err.value) and "coil_overrides" in str(err.value)
+
+
+def test_a_coil_override_is_checked_like_the_job() -> None:
+    with pytest.raises(JobError, match="coil 3: turns_per_layer=30 is invalid: 30 turns"):
+        Job(coil_length=0.05, coil_overrides="3:turns_per_layer=30")
+
+
+def test_programmed_stops_count_a_coils_own_turns() -> None:
+    from winder.contract.params import stop_place, stop_points
+
+    job = Job(poles=3, turns_per_layer=4, layers=2, coil_overrides="2:turns_per_layer=6,direction=ccw")
+    segs = job.segments()
+    # coil 2, turn 9: its second layer (6 turns each), 3 turns in
+    [(seg, k)] = stop_points(job, "2:9")
+    assert (segs[seg].pole, segs[seg].layer, k) == (1, 1, 3 * 1024)
+    assert stop_place(job, segs[seg], k) == (2, 2, 9)
+    with pytest.raises(SpecError, match=r"turn 13 of coil 2 is not in \[1, 12\]"):
+        stop_points(job, "2:13")

@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 from conftest import Procs
 from ruamel.yaml import YAML
@@ -120,14 +121,20 @@ def test_a_missing_or_huge_job_file_is_refused(tmp_path: Path) -> None:
 
 
 def test_command_line_options_override_the_file() -> None:
-    out = subprocess.run(
-        [str(WINDER), "run", "--check", str(ROOT / "jobs" / "stator_12.yaml"), "--poles", "3"],
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
+    def check(*options: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(
+            [str(WINDER), "run", "--check", str(ROOT / "jobs" / "stator_12.yaml"), *options],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+
+    # 3 poles instead of 12: the file's overrides of coils 4 to 12 no longer fit, and say so
+    out = check("--poles", "3")
+    assert out.returncode == 2 and "coil_overrides: coil 4 is not in [1, 3] (poles)" in out.stderr, out.stderr
+    out = check("--poles", "3", "--coil-overrides", "2:direction=ccw")
     assert out.returncode == 0, out.stderr
-    # 3 poles instead of 12: 3 x 3 layers + 2 pole moves = 11 segments
+    # 3 x 3 layers + 2 pole moves = 11 segments
     assert "in 11 segments" in out.stdout, out.stdout
 
 
@@ -208,3 +215,40 @@ def test_the_interp_node_takes_a_job_file_in_one_start_run_call(
     run = read_run(bags / run_id)
     assert run.complete and run.job_id == "filed" and run.plan.job.poles == 2
     assert run.profile == "trapezoid" and run.profile_config["ramp_source"] == "job"
+
+
+@pytest.mark.ros
+def test_a_job_with_coil_overrides_runs_through_the_nodes(tmp_path: Path, procs: Procs) -> None:
+    """A job file whose second coil is wound backward with more turns and whose
+    third has one layer: the recorded steps are the interpolation of those
+    segments, nothing lost, and the analysis measures every layer against its
+    own line (eq. 7 of the axes as small as for a plain job)."""
+    from winder.analysis.metrics import analyze
+    from winder.motion.interp import interpolate
+    from winder.motion.job import Job
+
+    fields = {"poles": 3, "turns_per_layer": 4, "layers": 2, "fork_steps_per_rev": 512}
+    overrides = "2:turns_per_layer=6,direction=ccw; 3:layers=1"
+    body = "\n".join(f"    {k}: {v}" for k, v in fields.items())
+    job_file = tmp_path / "coils.yaml"
+    job_file.write_text(f'interp_node:\n  ros__parameters:\n{body}\n    coil_overrides: "{overrides}"\n')
+    bags = tmp_path / "bags"
+    out = subprocess.run(
+        [str(WINDER), "run", str(job_file), "--bag-dir", str(bags)],
+        env=procs.env,
+        capture_output=True,
+        text=True,
+        timeout=180,
+    )
+    assert out.returncode == 0, out.stdout + out.stderr
+    [bag] = list(bags.iterdir())
+    run = read_run(bag)
+    assert run.complete and not run.errors
+    job = Job(**fields, coil_overrides=overrides)
+    segs = job.segments()
+    assert [s.delta[1] for s in segs if s.kind == "layer"] == [2048, 2048, -3072, -3072, 2048]
+    want = np.concatenate([interpolate(s.start, s.delta) for s in segs])
+    assert np.array_equal(run.steps[:, 2:], want)
+    a = analyze(run)
+    assert a.lost_steps == 0 and len(a.command.layers) == 5
+    assert a.actual is not None and a.actual.mean < 2 * a.command.mean, (a.actual.mean, a.command.mean)

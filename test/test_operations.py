@@ -202,3 +202,40 @@ def test_live_pause_override_resume_abort_in_real_time(tmp_path: Path, procs: Pr
         "a stall was reported while paused"
     )
     assert math.isclose(float(json.loads(raw["/winder/sim_config"][0][1].data)["real_time_factor"]), 1.0)
+
+
+def test_winder_run_takes_keys_on_a_terminal(tmp_path: Path, procs: Procs) -> None:
+    """`winder run` with a terminal on stdin: the space bar pauses and resumes,
+    `a` aborts (exit status 3); the bag records the three commands."""
+    import os
+    import pty
+
+    master, slave = pty.openpty()
+    bags = tmp_path / "bags"
+    job = ["--turns-per-layer", "20", "--layers", "1", "--poles", "1", "--real-time"]
+    run = subprocess.Popen(
+        [str(WINDER), "run", *job, "--bag-dir", str(bags)],
+        env=procs.env,
+        stdin=slave,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    os.close(slave)
+    try:
+        t_end = time.monotonic() + 60
+        while not list(bags.glob("*")) and time.monotonic() < t_end:
+            time.sleep(0.1)
+        for key in (b" ", b" ", b"a"):  # pause, resume, abort, a second and a half apart
+            time.sleep(1.5)
+            os.write(master, key)
+        out, err = run.communicate(timeout=60)
+    finally:
+        os.close(master)
+        if run.poll() is None:
+            run.kill()
+    assert run.returncode == 3, out + err
+    assert "keys: space pause/resume" in err and "pause: run" in err and "abort: run" in err, err
+    [bag] = list(bags.iterdir())
+    kinds = [(e["event"], e["source"]) for e in events(rosbags_read(bag))]
+    assert kinds == [("pause", "call"), ("resume", "call"), ("abort", "call")], kinds

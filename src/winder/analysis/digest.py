@@ -290,7 +290,7 @@ class LayerStats:
         s = self.plan
         rel = rows[:, 2:4] - np.asarray(s.start[:2])
         dist = line_distance(rel, s.delta[0], s.delta[1], step_lengths=step_lengths)
-        tid = turn_index(rel[:, 1].astype(np.float64), self.per_rev, self.turns)
+        tid = turn_index(np.abs(rel[:, 1]).astype(np.float64), self.per_rev, self.turns)
         idx = self.points + np.arange(rows.shape[0])
         self.points += dist.size
         self.total += float(dist.sum())
@@ -371,7 +371,7 @@ class _Pass:
                 i,
                 s,
                 lx * ly / norm if norm else 0.0,
-                job.turns_per_layer,
+                abs(s.delta[1]) // job.fork_steps_per_rev,  # this layer's turns (its coil's)
                 job.fork_steps_per_rev,
                 path_stride=max(1, layer_steps // PATH_POINTS),
             )

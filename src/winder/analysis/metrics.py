@@ -233,7 +233,22 @@ def winding_samples(run: Run, digested: Digest) -> tuple[npt.NDArray[np.int64], 
     x = run.states.pos[winding, 0] / js[0]  # steps, float
     y = run.states.pos[winding, 1] / js[1]
     starts = np.array([plan.segments[i].start[1] for i in layer_ids], dtype=np.float64)
-    which = np.clip(np.searchsorted(starts, y, side="right") - 1, 0, len(layer_ids) - 1)
+    if np.all(np.diff(starts) > 0):  # the fork always turns forward: its ranges tile the axis
+        which = np.clip(np.searchsorted(starts, y, side="right") - 1, 0, len(layer_ids) - 1)
+        return np.asarray(layer_ids, np.int64)[which], x, y
+    # coils wound backward (coil_overrides direction ccw): fork ranges overlap, so a
+    # sample belongs to the layer being wound when it was taken, or to the layer
+    # before or after it if the axis is still (or already) in that one's range
+    rank = np.full(len(plan.segments), -1, np.int64)
+    rank[layer_ids] = np.arange(len(layer_ids))
+    ends = starts + np.array([plan.segments[i].delta[1] for i in layer_ids], dtype=np.float64)
+    lo, hi = np.minimum(starts, ends), np.maximum(starts, ends)
+    which = np.maximum(rank[seg_now[winding]], 0)
+    for step in (-1, 1):
+        other = np.clip(which + step, 0, len(layer_ids) - 1)
+        outside = (y < lo[which]) | (y > hi[which])
+        inside_other = (y >= lo[other]) & (y <= hi[other])
+        which = np.where(outside & inside_other, other, which)
     return np.asarray(layer_ids, np.int64)[which], x, y
 
 
@@ -244,7 +259,7 @@ def axis_deviation(run: Run, digested: Digest | None = None) -> Deviation | None
     if len(run.states) == 0 or d.rows == 0 or not any(s.kind == "layer" for s in plan.segments):
         return None
     lx, ly = plan.step_lengths[0], plan.step_lengths[1]
-    spr, turns = plan.job.fork_steps_per_rev, plan.job.turns_per_layer
+    spr = plan.job.fork_steps_per_rev
     seg, x, y = winding_samples(run, d)
     dists, tids, layers = [], [], []
     segs = plan.job.segments()
@@ -255,7 +270,7 @@ def axis_deviation(run: Run, digested: Digest | None = None) -> Deviation | None
         yr = y[m] - s.start[1]
         dist = line_distance(np.column_stack([xr, yr]), s.delta[0], s.delta[1], step_lengths=(lx, ly))
         dists.append(dist)
-        tids.append(turn_index(yr, spr, turns))
+        tids.append(turn_index(np.abs(yr), spr, abs(s.delta[1]) // spr))
         layers.append(
             LayerDeviation(
                 i, segs[i].pole, segs[i].layer, int(dist.size), float(dist.mean()), float(dist.max())

@@ -302,26 +302,28 @@ def stop_points(job: Job, text: str) -> list[tuple[int, int]]:
     line) for a coil or turn the job does not have, or a stop inside a layer
     whose major axis is not the fork (its turns do not fall on step indices)."""
     out = set()
-    per_coil = job.turns_per_layer * job.layers
+    spr = job.fork_steps_per_rev
     segs = job.segments()
     for item in (t for t in text.replace(" ", "").split(",") if t):
         coil, turn = (int(x) for x in item.split(":"))
         if not 1 <= coil <= job.poles:
             raise SpecError(f"stops={text!r} is invalid: coil {coil} is not in [1, {job.poles}] (poles)")
+        wound = job.coil(coil - 1)
+        per_coil = wound.turns_per_layer * wound.layers
         if not 1 <= turn <= per_coil:
             raise SpecError(
                 f"stops={text!r} is invalid: turn {turn} of coil {coil} is not in [1, {per_coil}] "
-                f"({job.layers} layers of {job.turns_per_layer} turns)"
+                f"({wound.layers} layers of {wound.turns_per_layer} turns)"
             )
-        layer, within = divmod(turn - 1, job.turns_per_layer)
+        layer, within = divmod(turn - 1, wound.turns_per_layer)
         seg = next(s for s in segs if s.kind == "layer" and s.pole == coil - 1 and s.layer == layer)
-        if abs(seg.delta[1]) < abs(seg.delta[0]) and within + 1 < job.turns_per_layer:
+        if abs(seg.delta[1]) < abs(seg.delta[0]) and within + 1 < wound.turns_per_layer:
             raise SpecError(
                 f"stops={text!r} is invalid: turn {turn} ends inside a layer whose feed steps "
                 f"({abs(seg.delta[0])}) outnumber its fork steps: stop at a layer's end instead"
             )
-        last = within + 1 == job.turns_per_layer  # the layer's end: its last step, whichever axis leads
-        out.add((seg.index, seg.steps if last else (within + 1) * job.fork_steps_per_rev))
+        last = within + 1 == wound.turns_per_layer  # the layer's end: its last step, whichever axis leads
+        out.add((seg.index, seg.steps if last else (within + 1) * spr))
     return sorted(out)
 
 
@@ -329,8 +331,9 @@ def stop_place(job: Job, segment: Segment, k: int) -> tuple[int, int, int]:
     """(coil, layer, turn), from 1, of a programmed stop after step ``k`` of
     the layer ``segment``: the inverse of :func:`stop_points` (the turn is
     counted over the coil's layers)."""
-    within = job.turns_per_layer if k == segment.steps else k // job.fork_steps_per_rev
-    return segment.pole + 1, segment.layer + 1, segment.layer * job.turns_per_layer + within
+    turns = job.coil(segment.pole).turns_per_layer
+    within = turns if k == segment.steps else k // job.fork_steps_per_rev
+    return segment.pole + 1, segment.layer + 1, segment.layer * turns + within
 
 
 def check_interp(values: dict[str, Any]) -> None:

@@ -4,6 +4,9 @@ A job winds ``poles`` coils. Each coil is ``layers`` layers of
 ``turns_per_layer`` turns; during a layer the flyer (fork) turns once per turn
 while the feed axis advances the rotor one wire diameter per turn, reversing at
 every layer. Between coils the pole axis indexes the rotor by 360 deg / poles.
+``coil_overrides`` changes single coils: ``"2:turns_per_layer=30;3:direction=ccw,layers=1"``
+(coils counted from 1; ``direction`` cw, the fork turning forward as for every
+other coil, or ccw, backward: the winding direction).
 
 Axes, in this order everywhere in winder (``AXES``):
 
@@ -20,12 +23,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass, fields, replace
 from typing import Any
 
 from winder.spec import Spec, SpecError
 
-__all__ = ["AXES", "FIELD_SPECS", "Job", "JobError", "Segment"]
+__all__ = ["AXES", "FIELD_SPECS", "Coil", "Job", "JobError", "Segment", "parse_coil_overrides"]
 
 AXES = ("feed", "fork", "pole")
 #: Steps of one axis in one segment, at most: positions travel as int32.
@@ -70,8 +73,66 @@ FIELD_SPECS: dict[str, Spec] = {
         _f("feed_step", 0.0, 1e-3, "m", "feed axis travel per step", 1e-5),
         _i("pole_steps_per_rev", 4, 2**24, "pole axis steps per revolution", 1024),
         _f("coil_length", 0.0, 10.0, "m", "axial room for one layer (0 = unchecked)", 0.0, open_low=False),
+        Spec(
+            "coil_overrides",
+            str,
+            "",
+            "single coils that differ from the others: COIL:KEY=VALUE[,KEY=VALUE] separated by ';', "
+            "KEY turns_per_layer, layers or direction (cw|ccw)",
+            pattern=r"[0-9A-Za-z_:=,;\s]*",
+            pattern_text='e.g. "2:turns_per_layer=30;3:direction=ccw,layers=1", or empty',
+        ),
     )
 }
+
+#: what a coil override may set: the field's spec (direction: cw or ccw)
+COIL_KEYS = ("turns_per_layer", "layers", "direction")
+
+
+@dataclass(frozen=True)
+class Coil:
+    """How one coil is wound: its turns per layer, layers and direction (+1 cw, -1 ccw)."""
+
+    turns_per_layer: int
+    layers: int
+    direction: int
+
+
+def parse_coil_overrides(text: str, poles: int, base: Coil) -> dict[int, Coil]:
+    """The coils ``text`` changes (0-based pole index -> Coil); JobError (one
+    line) naming the item, the key and the allowed range."""
+    out: dict[int, Coil] = {}
+    for item in (t.strip() for t in text.split(";") if t.strip()):
+        head, _, body = item.partition(":")
+        try:
+            coil = int(head)
+        except ValueError:
+            raise JobError(f"coil_overrides: {item!r} must be COIL:KEY=VALUE[,KEY=VALUE]") from None
+        if not 1 <= coil <= poles:
+            raise JobError(f"coil_overrides: coil {coil} is not in [1, {poles}] (poles)")
+        values = {"turns_per_layer": base.turns_per_layer, "layers": base.layers, "direction": base.direction}
+        for pair in (p.strip() for p in body.split(",") if p.strip()):
+            key, _, value = pair.partition("=")
+            key, value = key.strip(), value.strip()
+            if key == "direction":
+                if value not in ("cw", "ccw"):
+                    raise JobError(
+                        f"coil_overrides: coil {coil} direction={value!r} is invalid: must be cw or ccw"
+                    )
+                values["direction"] = 1 if value == "cw" else -1
+            elif key in ("turns_per_layer", "layers"):
+                try:
+                    values[key] = FIELD_SPECS[key].parse(value)
+                except SpecError as exc:
+                    raise JobError(f"coil_overrides: coil {coil}: {exc}") from None
+            else:
+                raise JobError(
+                    f"coil_overrides: coil {coil}: unknown key {key!r}: must be one of {', '.join(COIL_KEYS)}"
+                )
+        if coil - 1 in out:
+            raise JobError(f"coil_overrides: coil {coil} is given twice")
+        out[coil - 1] = Coil(**values)
+    return out
 
 
 @dataclass(frozen=True)
@@ -110,10 +171,21 @@ class Job:
     feed_step: float = FIELD_SPECS["feed_step"].default
     pole_steps_per_rev: int = FIELD_SPECS["pole_steps_per_rev"].default
     coil_length: float = FIELD_SPECS["coil_length"].default
+    coil_overrides: str = FIELD_SPECS["coil_overrides"].default
 
     def __post_init__(self) -> None:
         for f in fields(self):
             object.__setattr__(self, f.name, check_field(f.name, getattr(self, f.name)))
+        base = Coil(self.turns_per_layer, self.layers, 1)
+        coils = parse_coil_overrides(self.coil_overrides, self.poles, base)
+        wound = tuple(coils.get(p, base) for p in range(self.poles))
+        object.__setattr__(self, "_coils", wound)
+        for p, c in enumerate(wound):
+            if c != base:  # each coil's layers checked as the common one is below
+                try:
+                    replace(self, turns_per_layer=c.turns_per_layer, layers=c.layers, coil_overrides="")
+                except JobError as exc:
+                    raise JobError(f"coil_overrides: coil {p + 1}: {exc}") from None
         steps_per_turn = self.wire_diameter / self.feed_step
         if steps_per_turn < 1.0:
             raise JobError(
@@ -153,8 +225,7 @@ class Job:
         """Feed steps of one layer, rounded to the nearest step, halves up. The
         ratio is nudged by 1e-9 relative so that decimal inputs such as
         99 um / 6 um, which land a hair below .5 in binary, round as written."""
-        exact = self.turns_per_layer * self.wire_diameter / self.feed_step
-        return math.floor(exact * (1 + 1e-9) + 0.5)
+        return self.feed_steps_of(self.turns_per_layer)
 
     @property
     def layer_fork_steps(self) -> int:
@@ -178,6 +249,20 @@ class Job:
             2 * math.pi / self.pole_steps_per_rev,
         )
 
+    def coil(self, pole: int) -> Coil:
+        """How coil ``pole`` (0-based) is wound, its overrides applied."""
+        return self._coils[pole]  # type: ignore[attr-defined, no-any-return]
+
+    def turns_of(self, pole: int) -> int:
+        """Turns of coil ``pole`` (0-based) over its layers."""
+        c = self.coil(pole)
+        return c.turns_per_layer * c.layers
+
+    def feed_steps_of(self, turns: int) -> int:
+        """Feed steps of a layer of ``turns`` turns (rounded as :attr:`layer_feed_steps`)."""
+        exact = turns * self.wire_diameter / self.feed_step
+        return math.floor(exact * (1 + 1e-9) + 0.5)
+
     def pole_position(self, pole: int) -> int:
         """Pole-axis step position of coil ``pole`` (cumulative rounding: the
         last index lands exactly on a full revolution)."""
@@ -193,8 +278,10 @@ class Job:
                 delta = (0, 0, self.pole_position(pole) - self.pole_position(pole - 1))
                 out.append(Segment(len(out), "index", tuple(pos), delta, pole, -1))  # type: ignore[arg-type]
                 pos[2] += delta[2]
-            for layer in range(self.layers):
-                delta = (direction * self.layer_feed_steps, self.layer_fork_steps, 0)
+            coil = self.coil(pole)
+            fork = coil.direction * coil.turns_per_layer * self.fork_steps_per_rev
+            for layer in range(coil.layers):
+                delta = (direction * self.feed_steps_of(coil.turns_per_layer), fork, 0)
                 out.append(Segment(len(out), "layer", tuple(pos), delta, pole, layer))  # type: ignore[arg-type]
                 pos[0] += delta[0]
                 pos[1] += delta[1]
@@ -206,7 +293,7 @@ class Job:
         return sum(s.steps for s in self.segments())
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        return {f.name: getattr(self, f.name) for f in fields(self)}
 
     @classmethod
     def from_dict(cls, values: Mapping[str, Any]) -> Job:

@@ -378,7 +378,7 @@ def _per_turn_axes(run: Run, d: Digest) -> npt.NDArray[np.float64]:
     measured against the layer whose fork range holds it."""
     plan = run.plan
     lx, ly = plan.step_lengths[0], plan.step_lengths[1]
-    spr, turns = plan.job.fork_steps_per_rev, plan.job.turns_per_layer
+    spr = plan.job.fork_steps_per_rev
     seg, x, y = winding_samples(run, d)
     out = []
     for i in (int(v) for v in np.unique(seg)):
@@ -388,7 +388,8 @@ def _per_turn_axes(run: Run, d: Digest) -> npt.NDArray[np.float64]:
         dist = (
             np.abs(s.delta[0] * yr - xr * s.delta[1]) * lx * ly / math.hypot(s.delta[0] * lx, s.delta[1] * ly)
         )
-        tid = np.clip(np.ceil(yr / spr) - 1, 0, turns - 1).astype(np.int64)
+        turns = abs(s.delta[1]) // spr  # this layer's (its coil's)
+        tid = np.clip(np.ceil(np.abs(yr) / spr) - 1, 0, turns - 1).astype(np.int64)
         sums, counts = np.bincount(tid, weights=dist), np.bincount(tid)
         out.append(sums[counts > 0] / counts[counts > 0])
     return np.concatenate(out) if out else np.zeros(0)
