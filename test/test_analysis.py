@@ -263,3 +263,11 @@ def test_plots_are_written(bag: Any, tmp_path: Path) -> None:
     ident = run_cli("identify", str(bag("trap")), "--plots-dir", str(tmp_path))
     assert ident.returncode == 0, ident.stderr
     assert (tmp_path / "identify.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_value_that_rounds_to_zero_prints_without_a_sign() -> None:
+    """'-0.000 steps' appeared in the summary: a tiny negative is 0."""
+    from winder.analysis.metrics import _f
+
+    assert _f(-1e-9) == "0.000" and _f(-4e-4) == "0.000" and _f(-6e-4) == "-0.001"
+    assert _f(2.5e-6, 1e6) == "2.500" and _f(float("nan")) == "-"

@@ -191,3 +191,18 @@ def test_synthetic_records(model: str, J: float, D: float, load: float) -> None:
     assert a.ls_D == pytest.approx(D, rel=1e-4)
     assert a.mras_J == pytest.approx(J, rel=0.01)
     assert a.mras_D == pytest.approx(D, rel=0.01)
+
+
+@pytest.mark.ros
+def test_cli_identifies_several_bags_one_after_another(bag: Any) -> None:
+    """`winder identify bags/rw400_*` with two bags: a table for each (it was
+    'unrecognized arguments'); the help shows percent signs, not '%%'."""
+    a, b = str(bag("pole1")), str(bag("trap"))
+    r = run_cli("identify", a, b, "--no-plots")
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.count("not identifiable: too little excitation") >= 1
+    j = run_cli("identify", a, b, "--json", "--no-plots")
+    assert j.returncode == 0, j.stderr
+    assert [Path(x["path"]).name for x in json.loads(j.stdout)] == [Path(a).name, Path(b).name]
+    h = run_cli("identify", "--help")
+    assert "0.1 % accuracy" in h.stdout.replace("\n", " ") and "%%" not in h.stdout

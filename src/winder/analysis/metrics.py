@@ -478,7 +478,11 @@ def _g(x: float, scale: float = 1.0, digits: int = 4) -> str:
 
 
 def _f(x: float, scale: float = 1.0, decimals: int = 3) -> str:
-    return "-" if not math.isfinite(x) else f"{x * scale:.{decimals}f}"
+    """A number for the table; a value that rounds to zero is 0, never -0."""
+    if not math.isfinite(x):
+        return "-"
+    text = f"{x * scale:.{decimals}f}"
+    return text[1:] if text.startswith("-") and float(text) == 0.0 else text
 
 
 def _event_note(e: dict[str, Any]) -> str:

@@ -72,14 +72,18 @@ def cmd_identify(args: argparse.Namespace) -> int:
     gain = _positive("gain", args.gain)
     window = _positive("window", args.window) / 1e3
     try:
-        run = read_run(args.bag, args.namespace)
-        ident = identify(run, gain=gain, window=window)
-        print(identification_json([ident]) if args.json else format_identification(ident))
+        runs = [read_run(bag, args.namespace) for bag in args.bags]  # every bag readable, or none is done
+        idents = [identify(run, gain=gain, window=window) for run in runs]
+        if args.json:
+            print(identification_json(idents))
+        else:
+            print("\n\n".join(format_identification(ident) for ident in idents))
         if not args.no_plots:
             from winder.analysis.figures.analysis import plot_identification
 
-            out = _plots_for(run.path, args.plots_dir, False)
-            _say([f"plot: {p}" for p in plot_identification(run, ident, out)], args.json)
+            for run, ident in zip(runs, idents, strict=True):
+                out = _plots_for(run.path, args.plots_dir, len(runs) > 1)
+                _say([f"plot: {p}" for p in plot_identification(run, ident, out)], args.json)
     except OSError as exc:
         raise ValueError(_os_error(exc)) from None
     return 0
@@ -131,9 +135,11 @@ def register(sub: argparse._SubParsersAction[Any]) -> None:
         "identify",
         help="identify each axis' inertia J and damping D (MRAS and least squares)",
         description="Estimate J and D of every axis from a recording and compare them with the values "
-        "the simulation used. Record with --publish-rate 2000 for 0.1 %% accuracy (200 Hz: about 2 %%).",
+        "the simulation used. Record with --publish-rate 2000 for 0.1 % accuracy (200 Hz: about 2 %).",
     )
-    p.add_argument("bag", metavar="BAG", help="bag directory or .mcap file")
+    p.add_argument(
+        "bags", nargs="+", metavar="BAG", help="bag directory or .mcap file (several: one after another)"
+    )
     p.add_argument("--gain", default="3", help="MRAS adaptation gain beta, dimensionless (default 3)")
     p.add_argument("--window", default="5", help="equation window in ms (default 5; at least one sample)")
     p.add_argument("--json", action="store_true", help="print JSON instead of the table")

@@ -378,7 +378,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_ctl)
 
     p = sub.add_parser("figures", help="reproduce the source papers' figures as PNG files")
-    p.add_argument("outdir", nargs="?", default="docs/img", help="where the PNG files go (default docs/img)")
+    p.add_argument(
+        "outdir",
+        nargs="?",
+        default="figures",
+        help="where the PNG files go (default ./figures; `make figures` renews the README's, docs/img)",
+    )
     p.set_defaults(func=cmd_figures)
 
     from winder.cli.analysis import register  # analyze, identify, bag recover (issue 6)
