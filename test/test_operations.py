@@ -162,7 +162,7 @@ def test_live_pause_override_resume_abort_in_real_time(tmp_path: Path, procs: Pr
         latched,
     )
     bags = tmp_path / "bags"
-    procs.start("sim_node", "-p", f"bag_dir:={bags}", "-p", "real_time:=true", "-p", "stall_timeout:=0.5")
+    procs.start("sim_node", "-p", f"bag_dir:={bags}", "-p", "real_time:=true", "-p", "stall_timeout:=1.0")
     procs.start("profile_node", "-p", "lookahead:=0.05")
     job = [a for k, v in {**JOB, "turns_per_layer": 40}.items() for a in ("-p", f"{k}:={v}")]
     procs.start("interp_node", *job)

@@ -153,7 +153,9 @@ class SimNode(ManagedNode):
         self.create_subscription(String, TOPIC_JOB, self.on_job, QOS_LATCHED, raw=True)
         self.create_subscription(JointTrajectory, TOPIC_PATH, self.on_path, QOS_LATCHED, raw=True)
         self.create_subscription(String, TOPIC_PROFILE_CONFIG, self.on_profile_config, QOS_LATCHED, raw=True)
-        self.create_subscription(String, TOPIC_CONTROL, self.on_control, QOS_EVENTS, raw=True)
+        self.sub_control = self.create_subscription(
+            String, TOPIC_CONTROL, self.on_control, QOS_EVENTS, raw=True
+        )
         self.sub_times = self.create_subscription(
             Int64MultiArray,
             TOPIC_STEP_TIMES,
@@ -351,7 +353,7 @@ class SimNode(ManagedNode):
         self.report()  # the run is on: its status at once, not at the next second
         events, self.early_events = list(self.early_events), deque(maxlen=100)
         for event in events:  # the run's own events that came before its description; others dropped
-            self.on_control(event)
+            self.handle_control(event)
         self.early_events.clear()
         early, self.early = self.early, []
         for chunk in early:  # in order, before any taken from the queue
@@ -363,6 +365,10 @@ class SimNode(ManagedNode):
         self.record_path()
 
     def on_control(self, raw: bytes) -> None:
+        self.handle_control(raw)
+        self.pump()
+
+    def handle_control(self, raw: bytes) -> None:
         """An operator event of the running run (winder/control): recorded, and
         its states announced as simulated time reaches them; an abort ends the
         run once the steps up to the rest are simulated. Events of other runs,
@@ -401,7 +407,13 @@ class SimNode(ManagedNode):
         elif kind == "override":
             self.get_logger().info(f"feed override {event.get('factor')} from {t_ns / 1e9:.6f} s")
         self.ops.sort(key=lambda op: op[0])
-        self.pump()
+
+    def take_control(self) -> None:
+        """Operator events already here, before any step is simulated: the
+        executor may serve a busy step stream first, and an event must not
+        come after the steps it times (the profile node sends it first)."""
+        for raw in waiting(self.sub_control):
+            self.handle_control(raw)
 
     def op_events(self, upto_ns: int) -> None:
         """Announce (and record) each operator state as simulated time reaches it."""
@@ -504,6 +516,7 @@ class SimNode(ManagedNode):
         """Simulate queued chunks. In real-time mode one chunk at a time, once
         the samples of the last one are out: memory stays bounded, and the
         progress report holds the interp node back (flow control)."""
+        self.take_control()
         settings = self.settings.values()
         now = time.monotonic()
         waiting = not (self.path_recorded and self.profile_recorded)
@@ -903,6 +916,7 @@ class SimNode(ManagedNode):
         Signals wait meanwhile, so a Ctrl-C cannot split the three."""
         if self.plan is None:
             return
+        self.take_control()  # the run's last events go into its bag
         with signals_held():
             self._finish(complete)
 

@@ -283,13 +283,16 @@ class Keys:
             if action == "pause/resume":
                 action = "resume" if self.paused else "pause"
             if action is not None:
+                # the toggle follows what was asked, at once (a key typed before
+                # the reply toggles back); a refusal below puts it right
+                self.paused = {"pause": True, "resume": False}.get(action, self.paused)
                 self.pending.append((action, self.clients[action].call_async(Trigger.Request())))
         for item in [p for p in self.pending if p[1].done()]:
             self.pending.remove(item)
             action, future = item
             reply = future.result()
-            if reply is not None and reply.success:
-                self.paused = action == "pause" or (self.paused and action != "resume")
+            if reply is not None and not reply.success and action in ("pause", "resume"):
+                self.paused = "already paused" in reply.message or (action == "resume" and self.paused)
             text = reply.message if reply is not None else "no reply"
             sys.stderr.write(f"\n{action}: {text}\n")
 
