@@ -11,6 +11,7 @@ limits checked by sampling every piece of the law.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -30,23 +31,10 @@ FAST = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCh
 _RK = ruckig.Ruckig(1)
 
 
-def ruckig_stop(v: float, a: float, v_end: float, A: float, J: float) -> tuple[float, float]:
-    """Duration and distance of ruckig's time-optimal stop to ``v_end`` from (v, a)."""
-    inp = ruckig.InputParameter(1)
-    inp.control_interface = ruckig.ControlInterface.Velocity
-    inp.current_position, inp.current_velocity, inp.current_acceleration = [0.0], [v], [a]
-    inp.target_velocity, inp.target_acceleration = [v_end], [0.0]
-    # ruckig refuses a current acceleration at its limit to the last bit (the
-    # states on a planned move sit there): the limit a hair above, 1e-12 of it
-    inp.max_velocity, inp.max_acceleration, inp.max_jerk = [1e12], [A * (1 + 1e-12)], [J]
-    traj = ruckig.Trajectory(1)
-    assert _RK.calculate(inp, traj) in (ruckig.Result.Working, ruckig.Result.Finished)
-    pos, _, _ = traj.at_time(traj.duration)
-    return traj.duration, pos[0]
-
-
-def ruckig_change(v: float, a: float, v_to: float, A: float, J: float) -> float:
-    """Distance of ruckig's time-optimal change from (v, a) to (v_to, 0)."""
+def ruckig_change_traj(v: float, a: float, v_to: float, A: float, J: float) -> Any:
+    """ruckig's time-optimal velocity-mode change from (v, a) to (v_to, 0).
+    ruckig refuses a current acceleration at its limit to the last bit (the
+    states on a planned move sit there): the limit a hair above, 1e-12 of it."""
     inp = ruckig.InputParameter(1)
     inp.control_interface = ruckig.ControlInterface.Velocity
     inp.current_position, inp.current_velocity, inp.current_acceleration = [0.0], [v], [a]
@@ -54,6 +42,18 @@ def ruckig_change(v: float, a: float, v_to: float, A: float, J: float) -> float:
     inp.max_velocity, inp.max_acceleration, inp.max_jerk = [1e12], [A * (1 + 1e-12)], [J]
     traj = ruckig.Trajectory(1)
     assert _RK.calculate(inp, traj) in (ruckig.Result.Working, ruckig.Result.Finished)
+    return traj
+
+
+def ruckig_stop(v: float, a: float, v_end: float, A: float, J: float) -> tuple[float, float]:
+    """Duration and distance of ruckig's time-optimal stop to ``v_end`` from (v, a)."""
+    traj = ruckig_change_traj(v, a, v_end, A, J)
+    return traj.duration, float(traj.at_time(traj.duration)[0][0])
+
+
+def ruckig_change(v: float, a: float, v_to: float, A: float, J: float) -> float:
+    """Distance of ruckig's time-optimal change from (v, a) to (v_to, 0)."""
+    traj = ruckig_change_traj(v, a, v_to, A, J)
     return float(traj.at_time(traj.duration)[0][0])
 
 
