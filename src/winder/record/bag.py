@@ -15,16 +15,19 @@ import shutil
 import signal
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 
+from rosbags.interfaces import Qos as BagQos
+from rosbags.interfaces import QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from winder.contract.params import BAG_COMPRESSIONS
+from winder.contract.qos import Qos, qos_of
 from winder.record.mcap_storage import StreamingMcapStorage
 
-__all__ = ["BagRecorder", "cdr_exact", "new_bag_path", "signals_held"]
+__all__ = ["BagRecorder", "bag_qos", "cdr_exact", "new_bag_path", "signals_held"]
 
 
 @contextlib.contextmanager
@@ -100,6 +103,27 @@ def cdr_exact(data: bytes | memoryview, msgtype: str) -> bytes | memoryview:
     return data[:end] if len(data) > end else data
 
 
+#: rmw's "infinite" duration, as rosbag2 writes it for the policies winder leaves at their default
+_INFINITE = QosTime(9223372036, 854775807)
+
+
+def bag_qos(q: Qos) -> BagQos:
+    """A topic's QoS as rosbag2 records it in ``offered_qos_profiles``
+    (metadata.yaml and the MCAP channel): the policies winder sets, the
+    others at rmw's defaults (no deadline, lifespan or lease; automatic liveliness)."""
+    return BagQos(
+        history=QosHistory.KEEP_ALL if q.keep_all else QosHistory.KEEP_LAST,
+        depth=q.depth,
+        reliability=QosReliability.RELIABLE if q.reliable else QosReliability.BEST_EFFORT,
+        durability=QosDurability.TRANSIENT_LOCAL if q.transient_local else QosDurability.VOLATILE,
+        deadline=_INFINITE,
+        lifespan=_INFINITE,
+        liveliness=QosLiveliness.AUTOMATIC,
+        liveliness_lease_duration=_INFINITE,
+        avoid_ros_namespace_conventions=False,
+    )
+
+
 #: Chunk compression of the MCAP file: lz4 (~2 GB/s here, a third of the size
 #: of step chunks), zstd (level 1, ~0.7 GB/s, a tenth) or none. Compressed
 #: chunks are part of the MCAP format: Foxglove, ros2 bag
@@ -127,7 +151,11 @@ BATCH_MESSAGES = 512
 class BagRecorder:
     """Writes serialized messages to a new rosbag2/MCAP directory.
 
-    ``topics`` maps each topic name to its ROS type (``"std_msgs/msg/String"``).
+    ``topics`` maps each topic name to its ROS type (``"std_msgs/msg/String"``);
+    ``qos`` each topic to the QoS its publishers offer (default: the cell's
+    table, :func:`winder.contract.qos.qos_of`), recorded with it so that a
+    player offers it again (a latched topic stays latched). The type hash of
+    each topic (RIHS01) is recorded too.
     Timestamps are integer nanoseconds of *simulated* time. :meth:`close` writes
     metadata.yaml; :meth:`discard` removes the directory (a job that never ran
     leaves nothing behind).
@@ -140,7 +168,14 @@ class BagRecorder:
     close().
     """
 
-    def __init__(self, path: Path, topics: dict[str, str], *, compression: str = "lz4") -> None:
+    def __init__(
+        self,
+        path: Path,
+        topics: dict[str, str],
+        *,
+        compression: str = "lz4",
+        qos: Mapping[str, Qos] | None = None,
+    ) -> None:
         if compression not in COMPRESSIONS:
             raise ValueError(f"compression={compression!r} is invalid: must be one of {COMPRESSIONS}")
         self.path = Path(path)
@@ -170,7 +205,12 @@ class BagRecorder:
         self._error: BaseException | None = None
         try:
             for topic, msgtype in topics.items():
-                self._conns[topic] = writer.add_connection(topic, msgtype, typestore=_TYPESTORE).id
+                offered = (qos or {}).get(topic) or qos_of(topic)
+                profiles = [bag_qos(offered)] if offered is not None else []
+                conn = writer.add_connection(
+                    topic, msgtype, typestore=_TYPESTORE, offered_qos_profiles=profiles
+                )
+                self._conns[topic] = conn.id
                 self._types[topic] = msgtype
         except Exception:
             self.discard()

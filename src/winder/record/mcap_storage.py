@@ -127,7 +127,11 @@ class StreamingMcapStorage:
         self._add(rec)
 
     def add_connection(self, connection: Connection, offered_qos_profiles: str) -> None:
+        # the channel's metadata as rosbag2_storage_mcap writes it: the QoS its
+        # publishers offered and the type's hash, so a player can offer it again
         meta = _string("offered_qos_profiles") + _string(offered_qos_profiles)
+        if connection.digest.startswith("RIHS01_"):
+            meta += _string("topic_type_hash") + _string(connection.digest)
         rec = _record(
             _OP_CHANNEL,
             struct.pack("<HH", connection.id, self.schemas[connection.msgtype][0]),

@@ -60,6 +60,8 @@ class Connection:
     encoding: str  #: message encoding, "cdr" for ROS 2
     schema_encoding: str  #: "ros2msg" or "ros2idl"
     schema: str  #: message definition text
+    #: the channel's metadata as rosbag2 writes it (``offered_qos_profiles``: YAML, ``topic_type_hash``)
+    metadata: dict[str, str] = field(default_factory=dict)
 
 
 #: one message as :meth:`RawBag.stream` gives it: (topic, log time ns, CDR bytes)
@@ -359,6 +361,7 @@ class _Sink:
             rec.message_encoding,
             sch.encoding if sch else "",
             bytes(sch.data).decode("utf-8", "replace") if sch else "",
+            dict(rec.metadata),
         )
 
 
@@ -496,6 +499,11 @@ def read_raw(path: str | Path, keep: Callable[[str], bool] | None = None) -> Raw
     if raw.closed and bag.is_dir() and not meta:
         raw.notes.append("metadata.yaml missing (the MCAP file itself is complete)")
     if not raw.counts:
+        if raw.damaged:
+            raise BagError(
+                f"{bag}: damaged beyond recovery: {len(raw.damaged)} chunk(s) skipped and no message "
+                f"readable (first: {raw.damaged[0]})"
+            )
         if raw.recovered:
             raise BagError(
                 f"{bag}: damaged beyond recovery: the MCAP file is cut short before its first whole message"
