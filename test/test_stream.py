@@ -13,7 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from winder.contract.stream import StreamChecker, describe_job, parse_job_description
+from winder.contract.stream import StreamChecker, describe_job, parse_job_description, with_source
 from winder.motion.interp import interpolate
 from winder.motion.job import Job
 
@@ -225,3 +225,22 @@ def test_a_damaged_job_description_is_refused_in_one_line(data: st.DataObject) -
     assert [(s.start, s.delta, s.steps) for s in plan.segments] == [
         (s.start, s.delta, s.steps) for s in job.segments()
     ]
+
+
+def test_a_resimulation_names_its_source_and_nothing_else_changes() -> None:
+    """winder resim's job description: a new run id and the source; a source
+    that is not {bag, run_id} is refused in one line."""
+    import json
+
+    job = Job(turns_per_layer=2, poles=2, layers=1)
+    text = describe_job(job, run_id="rw400_20261124_101010123_1")
+    resim = parse_job_description(with_source(text, "rw400_20261124_111111123_1", "/bags/a"))
+    plan = parse_job_description(text)
+    assert (resim.source_bag, resim.source_run_id) == ("/bags/a", "rw400_20261124_101010123_1")
+    assert resim.run_id == "rw400_20261124_111111123_1" and (plan.source_bag, plan.source_run_id) == ("", "")
+    assert resim.segments == plan.segments and resim.total_steps == plan.total_steps
+    for bad in ([], {"bag": ""}, {"bag": 3}, {"bag": "x", "run_id": "not a run"}, "x"):
+        doc = json.loads(text)
+        doc["source"] = bad
+        with pytest.raises(ValueError, match="source"):
+            parse_job_description(json.dumps(doc))

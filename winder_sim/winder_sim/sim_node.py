@@ -316,6 +316,12 @@ class SimNode(ManagedNode):
                     "wall_start_ns": self.wall0_ns,
                     "real_time": bool(values["real_time"]),
                     "real_time_factor": values["real_time_factor"],
+                    # a re-simulation (winder resim) names the recording its steps come from
+                    **(
+                        {"source_bag": plan.source_bag, "source_run_id": plan.source_run_id}
+                        if plan.source_bag
+                        else {}
+                    ),
                 }
             )
         )

@@ -243,10 +243,15 @@ def cmd_run(args: argparse.Namespace) -> int:
         progress=lambda frac, sim_t: bar.update(frac, f"sim {float(sim_t):7.2f} s"),
     )
     bar.close()
+    return report_run(result, time.monotonic() - t0)
+
+
+def report_run(result: Any, wall: float, command: str = "run") -> int:
+    """The summary of a finished run (``winder run``, ``winder resim``) and
+    the exit status: 0 done, 3 aborted cleanly, 1 failed or with errors."""
     s = result.summary
     if not s:
         raise UserError(f"the cell did not finish: {result.message} (node logs in {result.log_dir})")
-    wall = time.monotonic() - t0
     print(f"  run                {s.get('run_id') or '-'}")
     print(f"  state              {s['state']}")
     print(
@@ -265,11 +270,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     if result.errors:
         print(f"  ERROR reports      {len(result.errors)}, first: {result.errors[0]}")
     if s["state"] == "aborted" and not int(s["errors"]) and not result.errors:
-        print(f"winder run: {result.message}", file=sys.stderr)
+        print(f"winder {command}: {result.message}", file=sys.stderr)
         return 3
     if not result.ok or int(s["errors"]) or result.errors:
         logs = f" (node logs in {result.log_dir})" if result.log_dir else ""
-        print(f"winder run: {result.message}{logs}", file=sys.stderr)
+        print(f"winder {command}: {result.message}{logs}", file=sys.stderr)
         return 1
     return 0
 
@@ -389,6 +394,9 @@ def build_parser() -> argparse.ArgumentParser:
     from winder.cli.analysis import register  # analyze, identify, bag recover (issue 6)
 
     register(sub)
+    from winder.cli.replay import register as register_replay  # play, resim (issue 21)
+
+    register_replay(sub)
     return parser
 
 

@@ -36,6 +36,7 @@ __all__ = [
     "StreamChecker",
     "describe_job",
     "parse_job_description",
+    "with_source",
 ]
 
 STEP_COLUMNS = ("segment", *AXES)
@@ -132,6 +133,9 @@ class JobPlan:
     stop_resume: str = "auto"
     #: operator commands at simulated times (winder.contract.timeline.parse_schedule)
     schedule: str = ""
+    #: a re-simulation (``winder resim``): the recording its steps come from, and that run's id
+    source_bag: str = ""
+    source_run_id: str = ""
 
     @property
     def job_id(self) -> str:
@@ -202,6 +206,7 @@ def parse_job_description(text: str) -> JobPlan:
             parse_schedule(schedule)
         except ValueError as exc:
             raise ValueError(f"job description: {exc}") from None
+    source_bag, source_run_id = _source(doc)
     total = sum(e.steps for e in expected)
     derived = {
         "total_steps": total,
@@ -224,7 +229,34 @@ def parse_job_description(text: str) -> JobPlan:
         stop_pause=stop_pause,
         stop_resume=stop_resume,
         schedule=schedule,
+        source_bag=source_bag,
+        source_run_id=source_run_id,
     )
+
+
+def _source(doc: dict[str, Any]) -> tuple[str, str]:
+    """The recording a re-simulated job's steps come from (``source``:
+    ``{"bag": path, "run_id": id}``), ("", "") for a job of its own."""
+    source = doc.get("source")
+    if source is None:
+        return "", ""
+    bag = source.get("bag") if isinstance(source, dict) else None
+    run = source.get("run_id", "") if isinstance(source, dict) else None
+    if not isinstance(bag, str) or not bag or len(bag) > 4096 or not isinstance(run, str):
+        raise ValueError(f"job description: source {json.dumps(source)[:60]} is not {{bag, run_id}}")
+    if run and not RUN_ID.match(run):
+        raise ValueError(f"job description: source run_id {json.dumps(run)[:60]} is not a run id")
+    return bag, run
+
+
+def with_source(text: str, run_id: str, bag: str) -> str:
+    """A recorded job description made the description of a re-simulation:
+    a new ``run_id``, and the recording and run its steps come from."""
+    doc = json.loads(text)
+    old = doc.get("run_id", "")
+    doc["run_id"] = run_id
+    doc["source"] = {"bag": bag, "run_id": old}
+    return json.dumps(doc, separators=(",", ":"))
 
 
 def _stops(doc: dict[str, Any], segments: list[Any]) -> tuple[tuple[tuple[int, int], ...], float]:

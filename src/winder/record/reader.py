@@ -123,6 +123,9 @@ class SimConfig:
     clock_origin_ns: int = 0
     #: wall-clock time of the job's start (ns since the epoch; 0 if not recorded)
     wall_start_ns: int = 0
+    #: a re-simulation (winder resim): the recording its steps come from and that run's id
+    source_bag: str = ""
+    source_run_id: str = ""
 
     @classmethod
     def from_json(cls, text: str) -> SimConfig:
@@ -141,6 +144,8 @@ class SimConfig:
             float(doc.get("settle_time", 0.0)),
             int(doc.get("clock_origin_ns", 0)),
             int(doc.get("wall_start_ns", 0)),
+            str(doc.get("source_bag", "")),
+            str(doc.get("source_run_id", "")),
         )
 
 

@@ -37,6 +37,7 @@ from std_srvs.srv import Trigger
 
 from winder.contract.topics import TOPIC_DIAGNOSTICS, status_name
 from winder.ros.diagnostics import ERROR
+from winder.ros.terminal import KeyReader
 
 NODES = {"interp": "interp_node", "profile": "profile_node", "sim": "sim_node"}
 #: Start order: the sim node first; the others wait for their readers, so the
@@ -259,26 +260,18 @@ class Keys:
     resumes a paused one. Replies are written to stderr."""
 
     def __init__(self, node: Node, namespace: str) -> None:
-        self.enabled = sys.stdin.isatty()
-        self.saved: Any = None
+        self.terminal = KeyReader()
+        self.enabled = self.terminal.enabled
         self.paused = False
         self.pending: list[tuple[str, Future]] = []
         base = f"{namespace.rstrip('/')}/profile_node"
         self.clients = {k: node.create_client(Trigger, f"{base}/{k}") for k in ("pause", "resume", "abort")}
         if self.enabled:
-            import termios
-            import tty
-
-            self.saved = termios.tcgetattr(sys.stdin.fileno())
-            tty.setcbreak(sys.stdin.fileno())
             sys.stderr.write("keys: space pause/resume, p pause, r resume, a abort\n")
 
     def poll(self) -> None:
         """Act on the keys typed since the last call, report the replies that came."""
-        import select
-
-        while self.enabled and select.select([sys.stdin], [], [], 0)[0]:
-            key = sys.stdin.read(1).lower()
+        for key in self.terminal.read():
             action = KEYS.get(key)
             if action == "pause/resume":
                 action = "resume" if self.paused else "pause"
@@ -297,11 +290,7 @@ class Keys:
             sys.stderr.write(f"\n{action}: {text}\n")
 
     def close(self) -> None:
-        if self.saved is not None:
-            import termios
-
-            termios.tcsetattr(sys.stdin.fileno(), termios.TCSADRAIN, self.saved)
-            self.saved = None
+        self.terminal.close()
 
 
 def _spawn(procs: NodeProcesses, params: dict[str, dict[str, Any]], namespace: str) -> None:

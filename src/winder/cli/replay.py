@@ -1,0 +1,254 @@
+"""``winder play`` and ``winder resim``: recorded jobs back onto a ROS graph,
+and through another motor (issue 21). Registered into the ``winder`` parser
+by :func:`register`; user errors are ValueErrors (one line, exit status 2).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from typing import Any
+
+__all__ = ["register"]
+
+
+def _number(name: str, text: str, low: float, high: float, *, low_open: bool = False) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    ok = math.isfinite(value) and (value > low if low_open else value >= low) and value <= high
+    if not ok:
+        bound = f"({low:g}" if low_open else f"[{low:g}"
+        raise ValueError(f"{name}={text!r} is invalid: must be a number in {bound}, {high:g}]")
+    return value
+
+
+def cmd_play(args: argparse.Namespace) -> int:
+    """Publish a recording's topics onto the graph (see winder.ros.player)."""
+    from winder.cli.commands import Progress, UserError
+    from winder.record.replay import plan_play
+
+    rate = _number("rate", args.rate, 0.001, 1e6)
+    offset = _number("start_offset", args.start_offset, 0.0, 1e7)
+    delay = _number("delay", args.delay, 0.0, 3600.0)
+    wait = _number("wait_for_subscribers", args.wait_for_subscribers, 0.0, 3600.0)
+    try:
+        plan = plan_play(
+            args.bag,
+            start_offset=offset,
+            clock=args.clock,
+            topics=args.topics or (),
+            exclude=args.exclude or (),
+            namespace=args.namespace,
+        )
+    except OSError as exc:
+        raise ValueError(f"{exc.filename}: {exc.strerror or exc}") from None
+    try:
+        from winder.ros.player import describe, run_player
+    except ImportError as exc:
+        raise UserError(f"the ROS 2 packages are not installed ({exc}); run 'make demo'") from None
+    from winder.ros.cell import cell_network
+
+    domain, discovery, source = cell_network()
+    span = (plan.last_ns - plan.first_ns) / 1e9
+    print(
+        f"winder play: {plan.raw.path}, {span:.3f} s recorded, from {offset:g} s at x{rate:g}"
+        + (", looping" if args.loop else "")
+    )
+    print(f"  ROS domain {domain} ({source}), discovery {discovery}")
+    print(f"  {'topic':24s} {'messages':>8s}  {'type':36s} recorded QoS")
+    for line in describe(plan):
+        print(line)
+    for topic, why in sorted(plan.skipped.items()):
+        print(f"  {topic:24s} not played: {why}")
+    import os
+
+    os.environ.setdefault("ROS_DOMAIN_ID", str(domain))
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", discovery)
+    bar = Progress(1.0, "playing")
+    result = run_player(
+        plan,
+        rate=rate,
+        loop=args.loop,
+        start_paused=args.start_paused,
+        delay=delay,
+        wait_subscribers=wait,
+        progress=bar.update,
+        keys=True,
+    )
+    bar.close()
+    total = sum(result.published.values())
+    print(
+        f"  published {total} messages on {len(result.published)} topics in {result.wall_s:.2f} s"
+        + (f", {result.loops} passes" if result.loops > 1 else "")
+    )
+    if result.unacked:
+        print(
+            f"winder play: not every subscriber acknowledged every message on: {', '.join(result.unacked)}",
+            file=sys.stderr,
+        )
+        return 1
+    return 0
+
+
+#: sim settings a re-simulation takes from the recording unless given
+_RECORDED = ("model", "publish_rate", "settle_time")
+
+
+def _recorded_sim(run: Any) -> dict[str, Any]:
+    """The sim node's settings the recording says the run had."""
+    cfg = run.sim_config
+    if cfg is None:
+        return {}
+    base: dict[str, Any] = {
+        "model": cfg.model,
+        "publish_rate": cfg.publish_rate,
+        "settle_time": cfg.settle_time,
+    }
+    for axis, a in cfg.axes.items():
+        for key in ("Zr", "L", "i_a", "J", "D", "motor_step_angle", "load_torque"):
+            base[f"{axis}.{key}"] = getattr(a, key)
+    return base
+
+
+def cmd_resim(args: argparse.Namespace) -> int:
+    """A recording's step times through the sim node again, with other motor settings."""
+    import time
+    from pathlib import Path
+
+    from winder.cli.commands import Progress, UserError, report_run, values_from_args
+    from winder.contract.params import SIM_SPECS, bag_directory, check_sim
+    from winder.contract.topics import (
+        TOPIC_CONTROL,
+        TOPIC_JOB,
+        TOPIC_PATH,
+        TOPIC_PROFILE_CONFIG,
+        TOPIC_STEP_TIMES,
+    )
+    from winder.record.reader import read_run
+    from winder.record.replay import plan_play
+
+    try:
+        run = read_run(args.bag, args.namespace)
+        ns = run.namespace
+        wanted = [
+            f"{ns}/{t}"
+            for t in (TOPIC_JOB, TOPIC_PATH, TOPIC_PROFILE_CONFIG, TOPIC_CONTROL, TOPIC_STEP_TIMES)
+        ]
+        plan = plan_play(args.bag, topics=[t for t in wanted if run.counts.get(t)])
+    except OSError as exc:
+        raise ValueError(f"{exc.filename}: {exc.strerror or exc}") from None
+    recorded = _recorded_sim(run)
+    sim = values_from_args(args, SIM_SPECS, recorded)
+    check_sim(sim)
+    changed = [k for k in SIM_SPECS if k in recorded and sim[k] != recorded[k]]
+    sim["bag_dir"] = str(bag_directory(sim["bag_dir"]))
+    first: dict[str, bytes] = {}
+    events: list[bytes] = []
+    for topic, _t, data in plan.messages():
+        if topic.recorded.endswith(TOPIC_CONTROL):
+            events.append(data)
+        elif not topic.recorded.endswith(TOPIC_STEP_TIMES):
+            first.setdefault(topic.recorded, data)
+    try:
+        from winder.ros.cell import cell_network
+        from winder.ros.resim import Recorded, resimulate
+    except ImportError as exc:
+        raise UserError(f"the ROS 2 node packages are not installed ({exc}); run 'make demo'") from None
+    rec = Recorded(
+        job=first[f"{ns}/{TOPIC_JOB}"],
+        path=first.get(f"{ns}/{TOPIC_PATH}"),
+        profile_config=first.get(f"{ns}/{TOPIC_PROFILE_CONFIG}"),
+        events=events,
+        plan=plan,
+        step_topic=f"{ns}/{TOPIC_STEP_TIMES}",
+    )
+    source = str(Path(run.path).resolve())
+    what = ", ".join(
+        f"{k} {recorded[k]:g} -> {sim[k]:g}"
+        if isinstance(sim[k], float)
+        else f"{k} {recorded[k]} -> {sim[k]}"
+        for k in changed
+    )
+    print(f"winder resim: {run.path} (run {run.plan.run_id or '-'}), {run.plan.total_steps} steps")
+    print(f"  changed            {what or 'nothing: the recorded settings'}")
+    domain, discovery, dsource = cell_network()
+    print(f"  ROS domain         {domain} ({dsource}), discovery {discovery}")
+    bar = Progress(1.0, "re-simulating")
+    t0 = time.monotonic()
+    _, result = resimulate(
+        rec,
+        run.plan.text,
+        source,
+        sim,
+        namespace=ns,
+        domain=domain,
+        progress=lambda frac, sim_t: bar.update(frac, f"sim {float(sim_t):7.2f} s"),
+    )
+    bar.close()
+    print(f"  source             {source}")
+    return report_run(result, time.monotonic() - t0, "resim")
+
+
+def register(sub: argparse._SubParsersAction[Any]) -> None:
+    """Add ``play`` and ``resim`` to the ``winder`` subcommands."""
+    p = sub.add_parser(
+        "play",
+        help="publish a recording's topics onto the ROS graph (like ros2 bag play, every message delivered)",
+        description="Publish the topics of a winder recording in log-time order, each with the QoS it "
+        "was recorded with (job, path and configs latched: a late subscriber still gets them, also "
+        "with --start-offset), reliably: nothing is dropped at any rate. While playing: the space bar "
+        "pauses and resumes, n plays the next message, + and - double and halve the rate; the node "
+        "winder_player offers ~/pause, ~/resume, ~/toggle_paused, ~/play_next (std_srvs/Trigger) "
+        "and the parameter rate.",
+    )
+    p.add_argument("bag", metavar="BAG", help="bag directory or .mcap file")
+    p.add_argument("--rate", default="1", help="playback speed factor (default 1; 0.001 to 1e6)")
+    p.add_argument("--loop", action="store_true", help="play again from the start when done (Ctrl-C ends)")
+    p.add_argument(
+        "--start-offset",
+        default="0",
+        metavar="S",
+        help="start S seconds into the recording; the latched topics' last messages before it still go out",
+    )
+    p.add_argument(
+        "--clock",
+        action="store_true",
+        help="publish the recorded simulated clock (/clock of the cell), so use_sim_time nodes follow it",
+    )
+    p.add_argument("--topics", nargs="+", metavar="TOPIC", help="only these topics (names or regexes)")
+    p.add_argument("--exclude", nargs="+", metavar="TOPIC", help="leave these topics out (names or regexes)")
+    p.add_argument(
+        "--namespace",
+        default=None,
+        help="publish the cell's topics in this namespace instead of the recorded one (/name[/name...])",
+    )
+    p.add_argument("--start-paused", action="store_true", help="start paused (space, ~/resume to go)")
+    p.add_argument("--delay", default="0", metavar="S", help="wait S seconds before the first message")
+    p.add_argument(
+        "--wait-for-subscribers",
+        default="0",
+        metavar="S",
+        help="first wait up to S seconds until every subscriber on the graph is matched",
+    )
+    p.set_defaults(func=cmd_play)
+
+    from winder.cli.commands import add_spec_arguments
+    from winder.contract.params import SIM_SPECS
+
+    p = sub.add_parser(
+        "resim",
+        help="re-simulate a recording's step times with another motor model or motor parameters",
+        description="Run the recorded winder/step_times of a job through the sim node again, with the "
+        "settings given here (the others as recorded), into a new bag that names its source bag "
+        "and run. The step times are the recorded ones to the nanosecond; the sim node checks the "
+        "stream and simulates exactly as in a live run.",
+    )
+    p.add_argument("bag", metavar="BAG", help="bag directory or .mcap file")
+    p.add_argument("--namespace", default=None, help="the cell's ROS namespace, if the bag holds several")
+    add_spec_arguments(
+        p, SIM_SPECS, "sim node (default: as recorded; motor per axis: --feed.J, --fork.D, ...)"
+    )
+    p.set_defaults(func=cmd_resim)

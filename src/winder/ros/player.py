@@ -1,0 +1,343 @@
+"""``winder play``: a recording's messages back onto a ROS graph.
+
+:func:`winder.record.replay.plan_play` chooses what is played; here one node,
+``winder_player`` (in the cell's namespace), publishes it: each topic with
+the QoS it was recorded with (latched ones latched), every message in
+log-time order at ``rate`` times the recorded pace. Nothing is dropped: the
+writers are reliable and keep-all, so a slow reliable subscriber holds the
+player back instead of losing messages, and before the node goes the player
+waits until every subscriber has acknowledged every message.
+
+While it plays, the node offers ``~/pause``, ``~/resume``, ``~/toggle_paused``
+and ``~/play_next`` (std_srvs/Trigger; play_next publishes the next message
+while paused) and the parameter ``rate``; on a terminal the space bar pauses
+and resumes, ``n`` plays the next message, ``+`` and ``-`` double and halve
+the rate. A pause stops the recording's time: after the resume it goes on
+from where it stopped, it does not catch up.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+import sys
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import rclpy
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from std_srvs.srv import Trigger
+
+from winder.record.replay import PlayPlan, PlayTopic
+from winder.ros.qos import profile
+
+__all__ = ["PlayResult", "Player", "message_class"]
+
+#: seconds the player waits, at the end, for its subscribers to acknowledge everything
+ACK_TIMEOUT = 10.0
+
+
+def message_class(msgtype: str) -> Any:
+    """The Python class of a ROS message type name (``sensor_msgs/msg/JointState``)."""
+    pkg, kind, name = msgtype.split("/")
+    try:
+        return getattr(importlib.import_module(f"{pkg}.{kind}"), name)
+    except (ImportError, AttributeError):
+        raise ValueError(f"message type {msgtype} is not installed here; it cannot be published") from None
+
+
+@dataclass
+class PlayResult:
+    published: dict[str, int] = field(default_factory=dict)  #: by played name
+    loops: int = 0
+    wall_s: float = 0.0
+    unacked: list[str] = field(default_factory=list)  #: topics whose readers did not acknowledge all
+
+
+class Player:
+    """Plays a :class:`PlayPlan` from the calling thread; services and the
+    ``rate`` parameter are served by an executor thread meanwhile."""
+
+    def __init__(
+        self, plan: PlayPlan, *, rate: float = 1.0, node_namespace: str = "", start_paused: bool = False
+    ) -> None:
+        self.plan = plan
+        self.node = rclpy.create_node("winder_player", namespace=node_namespace or "/")
+        self.cond = threading.Condition()
+        self.rate = rate
+        self.paused = start_paused
+        self.steps = 0  # play_next requests not served yet
+        self.stopped = False
+        self.position_ns = plan.start_ns  # log time of the last message published
+        self.anchor_wall = 0.0  # wall time at which log time anchor_log was due
+        self.anchor_log = plan.start_ns
+        self.pubs: dict[str, Any] = {}
+        for topic in plan.topics.values():
+            cls = message_class(topic.msgtype)
+            self.pubs[topic.recorded] = self.node.create_publisher(cls, topic.name, profile(topic.qos))
+        self.node.declare_parameter("rate", rate)
+        self.node.add_on_set_parameters_callback(self._on_parameters)
+        for name, handler in (
+            ("pause", self._pause),
+            ("resume", self._resume),
+            ("toggle_paused", self._toggle),
+            ("play_next", self._play_next),
+        ):
+            self.node.create_service(Trigger, f"~/{name}", handler)
+        self.executor = SingleThreadedExecutor()
+        self.executor.add_node(self.node)
+        self.thread = threading.Thread(target=self._spin, name="player-services", daemon=True)
+        self.thread.start()
+
+    def _spin(self) -> None:
+        with contextlib.suppress(Exception):  # the context was shut down under it: the player is ending
+            self.executor.spin()
+
+    # -- control (executor thread, or keys from the playing thread) -------------------
+    def _reanchor(self) -> None:
+        self.anchor_wall, self.anchor_log = time.monotonic(), self.position_ns
+
+    def set_paused(self, paused: bool) -> str:
+        with self.cond:
+            if paused == self.paused:
+                return "already paused" if paused else "not paused"
+            self.paused = paused
+            if not paused:
+                self._reanchor()  # the recording's time goes on from where it stopped
+            self.cond.notify_all()
+        at = (self.position_ns - self.plan.first_ns) / 1e9
+        return f"{'paused' if paused else 'resumed'} at {at:.3f} s of the recording"
+
+    def _pause(self, _req: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
+        res.message = self.set_paused(True)
+        res.success = res.message.startswith("paused")
+        return res
+
+    def _resume(self, _req: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
+        res.message = self.set_paused(False)
+        res.success = res.message.startswith("resumed")
+        return res
+
+    def _toggle(self, _req: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
+        res.message = self.set_paused(not self.paused)
+        res.success = True
+        return res
+
+    def play_next(self) -> str:
+        with self.cond:
+            if not self.paused:
+                return "not paused: play_next steps through a paused replay"
+            self.steps += 1
+            self.cond.notify_all()
+        return "the next message is published"
+
+    def _play_next(self, _req: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
+        res.message = self.play_next()
+        res.success = res.message.startswith("the next")
+        return res
+
+    def set_rate(self, rate: float) -> None:
+        with self.cond:
+            self.rate = rate
+            self._reanchor()
+            self.cond.notify_all()
+
+    def _on_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        for p in params:
+            if p.name == "rate":
+                value = p.value
+                if not isinstance(value, (int, float)) or isinstance(value, bool) or not 1e-3 <= value <= 1e6:
+                    return SetParametersResult(
+                        successful=False, reason=f"rate={value!r} is invalid: must be in [0.001, 1e6]"
+                    )
+                self.set_rate(float(value))
+        return SetParametersResult(successful=True)
+
+    # -- playing (the calling thread) -------------------------------------------------
+    def wait_for_subscribers(self, timeout: float) -> str:
+        """Wait until every subscriber the graph shows on a played topic is
+        matched (at least one in all); the topics still unmatched, if any."""
+        deadline = time.monotonic() + timeout
+        while True:
+            missing = [
+                t.name
+                for t in self.plan.topics.values()
+                if self.pubs[t.recorded].get_subscription_count() < self.node.count_subscribers(t.name)
+            ]
+            any_reader = any(p.get_subscription_count() for p in self.pubs.values())
+            if (any_reader and not missing) or time.monotonic() > deadline:
+                return ", ".join(missing) if any_reader else "no subscriber on any played topic"
+            time.sleep(0.05)
+
+    def _wait_until_due(self, t_ns: int, poll: Callable[[], None] | None) -> bool:
+        """Block until the message of log time ``t_ns`` is due (or a step is
+        asked for while paused); False if the player was stopped."""
+        while True:
+            if poll is not None:
+                poll()
+            with self.cond:
+                if self.stopped:
+                    return False
+                if self.paused:
+                    if self.steps:
+                        self.steps -= 1
+                        return True
+                    self.cond.wait(0.05)
+                    continue
+                due = self.anchor_wall + (t_ns - self.anchor_log) / 1e9 / self.rate
+                wait = due - time.monotonic()
+                if wait <= 0:
+                    return True
+                self.cond.wait(min(wait, 0.05))
+
+    def play(
+        self,
+        *,
+        loop: bool = False,
+        progress: Callable[[float, str], None] | None = None,
+        poll: Callable[[], None] | None = None,
+    ) -> PlayResult:
+        """Publish the plan (again and again with ``loop``, until stopped)."""
+        result = PlayResult({t.name: 0 for t in self.plan.topics.values()})
+        wall0 = time.monotonic()
+        span = max(self.plan.last_ns - self.plan.start_ns, 1)
+        last_report = 0.0
+        while not self.stopped:
+            with self.cond:
+                self.position_ns = self.anchor_log = self.plan.start_ns
+                self.anchor_wall = time.monotonic()
+            for topic, t, data in self.plan.messages():
+                if not self._wait_until_due(t, poll):
+                    break
+                self.pubs[topic.recorded].publish(data)
+                result.published[topic.name] += 1
+                self.position_ns = max(self.position_ns, t)
+                now = time.monotonic()
+                if progress is not None and now - last_report > 0.1:
+                    last_report = now
+                    progress(
+                        (self.position_ns - self.plan.start_ns) / span,
+                        f"{(self.position_ns - self.plan.first_ns) / 1e9:8.3f} s  x{self.rate:g}"
+                        + ("  paused" if self.paused else ""),
+                    )
+            else:
+                result.loops += 1
+                if progress is not None:
+                    progress(1.0, f"{(self.plan.last_ns - self.plan.first_ns) / 1e9:8.3f} s")
+                if loop:
+                    continue
+            break
+        result.unacked = self.wait_for_acks(ACK_TIMEOUT)
+        result.wall_s = time.monotonic() - wall0
+        return result
+
+    def wait_for_acks(self, timeout: float) -> list[str]:
+        """Wait until every reliable subscriber has acknowledged every message;
+        the topics where some did not within ``timeout`` s."""
+        from rclpy.duration import Duration
+
+        deadline = time.monotonic() + timeout
+        late = []
+        for topic, pub in self.pubs.items():
+            left = max(deadline - time.monotonic(), 0.0)
+            if not pub.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))):
+                late.append(self.plan.topics[topic].name)
+        return late
+
+    def stop(self) -> None:
+        with self.cond:
+            self.stopped = True
+            self.cond.notify_all()
+
+    def close(self) -> None:
+        self.stop()
+        self.executor.shutdown(timeout_sec=1.0)
+        self.thread.join(timeout=2.0)
+        self.node.destroy_node()
+
+
+def played_topics(plan: PlayPlan) -> list[PlayTopic]:
+    return sorted(plan.topics.values(), key=lambda t: t.name)
+
+
+def describe(plan: PlayPlan) -> list[str]:
+    """One line per played topic: name, type, messages, QoS (and where it comes from)."""
+    lines = []
+    for t in played_topics(plan):
+        moved = f" (recorded as {t.recorded})" if t.name != t.recorded else ""
+        lines.append(
+            f"  {t.name:24s} {t.count:8d}  {t.msgtype:36s} {t.recorded_qos.describe()}"
+            f" [{t.qos_source}]{moved}"
+        )
+    return lines
+
+
+def run_player(
+    plan: PlayPlan,
+    *,
+    rate: float,
+    loop: bool,
+    start_paused: bool,
+    delay: float,
+    wait_subscribers: float,
+    progress: Callable[[float, str], None] | None,
+    keys: bool,
+) -> PlayResult:
+    """Init rclpy, play, shut down. Ctrl-C ends the replay (KeyboardInterrupt)."""
+    from rclpy.executors import ExternalShutdownException
+
+    rclpy.init(args=[])
+    player = None
+    terminal = None
+    try:
+        ns = plan.topics[next(iter(plan.topics))].name
+        node_ns = _namespace_of(plan, ns)
+        player = Player(plan, rate=rate, node_namespace=node_ns, start_paused=start_paused)
+        if wait_subscribers > 0:
+            missing = player.wait_for_subscribers(wait_subscribers)
+            if missing:
+                sys.stderr.write(f"winder play: after {wait_subscribers:g} s still unmatched: {missing}\n")
+        if delay > 0:
+            time.sleep(delay)
+        from winder.ros.terminal import KeyReader
+
+        terminal = KeyReader() if keys else None
+        poll = None
+        if terminal is not None and terminal.enabled:
+            sys.stderr.write("keys: space pause/resume, n next message, + faster, - slower\n")
+            poll = lambda: _keys(player, terminal)  # noqa: E731 - a closure over both
+        return player.play(loop=loop, progress=progress, poll=poll)
+    except ExternalShutdownException:
+        raise KeyboardInterrupt from None
+    finally:
+        if terminal is not None:
+            terminal.close()
+        if player is not None:
+            player.close()
+        rclpy.try_shutdown()
+
+
+def _namespace_of(plan: PlayPlan, _name: str) -> str:
+    """The namespace the player node lives in: the played cell's."""
+    for t in plan.topics.values():
+        if t.recorded.endswith("/winder/job"):
+            return t.name[: -len("/winder/job")]
+    return ""
+
+
+def _keys(player: Player | None, terminal: Any) -> None:
+    if player is None:
+        return
+    for key in terminal.read():
+        if key == " ":
+            sys.stderr.write(f"\n{player.set_paused(not player.paused)}\n")
+        elif key == "n":
+            player.play_next()
+        elif key in "+-":
+            player.set_rate(min(max(player.rate * (2.0 if key == "+" else 0.5), 1e-3), 1e6))
+            sys.stderr.write(f"\nrate x{player.rate:g}\n")
