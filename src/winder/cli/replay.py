@@ -28,6 +28,7 @@ def _number(name: str, text: str, low: float, high: float, *, low_open: bool = F
 def cmd_play(args: argparse.Namespace) -> int:
     """Publish a recording's topics onto the graph (see winder.ros.player)."""
     from winder.cli.commands import Progress, UserError
+    from winder.contract.topics import check_namespace
     from winder.record.replay import plan_play
 
     rate = _number("rate", args.rate, 0.001, 1e6)
@@ -58,11 +59,12 @@ def cmd_play(args: argparse.Namespace) -> int:
         + (", looping" if args.loop else "")
     )
     print(f"  ROS domain {domain} ({source}), discovery {discovery}")
-    print(f"  {'topic':24s} {'messages':>8s}  {'type':36s} recorded QoS")
+    if args.namespace is not None:
+        print(f"  cell namespace {plan.namespace or '/'} -> {check_namespace(args.namespace) or '/'}")
     for line in describe(plan):
         print(line)
     for topic, why in sorted(plan.skipped.items()):
-        print(f"  {topic:24s} not played: {why}")
+        print(f"  not played: {topic} ({why})")
     import os
 
     os.environ.setdefault("ROS_DOMAIN_ID", str(domain))

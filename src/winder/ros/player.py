@@ -266,14 +266,15 @@ def played_topics(plan: PlayPlan) -> list[PlayTopic]:
 
 
 def describe(plan: PlayPlan) -> list[str]:
-    """One line per played topic: name, type, messages, QoS (and where it comes from)."""
-    lines = []
-    for t in played_topics(plan):
-        moved = f" (recorded as {t.recorded})" if t.name != t.recorded else ""
-        lines.append(
-            f"  {t.name:24s} {t.count:8d}  {t.msgtype:36s} {t.recorded_qos.describe()}"
-            f" [{t.qos_source}]{moved}"
-        )
+    """A table of the played topics: name, messages recorded, type, QoS (and
+    where the QoS comes from when the recording does not say)."""
+    topics = played_topics(plan)
+    wide = max(len(t.name) for t in topics)
+    kind = max(len(t.msgtype) for t in topics)
+    lines = [f"  {'topic':{wide}s} {'messages':>8s}  {'type':{kind}s}  QoS offered"]
+    for t in topics:
+        source = "" if t.qos_source == "recording" else f"  (not recorded: {t.qos_source})"
+        lines.append(f"  {t.name:{wide}s} {t.count:8d}  {t.msgtype:{kind}s}  {t.qos.describe()}{source}")
     return lines
 
 
