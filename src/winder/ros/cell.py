@@ -36,6 +36,7 @@ from rclpy.task import Future
 from std_srvs.srv import Trigger
 
 from winder.contract.topics import TOPIC_DIAGNOSTICS, status_name
+from winder.ros.dds import PROFILE_KEYS, use_profile
 from winder.ros.diagnostics import ERROR
 from winder.ros.terminal import KeyReader
 
@@ -99,15 +100,17 @@ def cell_network(environ: dict[str, str] | None = None) -> tuple[int, str, str]:
 @contextmanager
 def cell_environment(domain: int | None) -> Iterator[dict[str, str]]:
     """The environment of the cell's processes (this one's included while it
-    lasts): the domain given, else :func:`cell_network`'s, and its discovery range."""
+    lasts): the domain given, else :func:`cell_network`'s, its discovery
+    range and winder's DDS profile (:mod:`winder.ros.dds`)."""
     env = dict(os.environ)
     chosen, discovery, _ = cell_network(env)
     env["ROS_DOMAIN_ID"] = str(chosen if domain is None else domain)
     env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = discovery
     env["PYTHONUNBUFFERED"] = "1"
-    keys = ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")
+    use_profile(env)
+    keys = ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", *PROFILE_KEYS)
     saved = {k: os.environ.get(k) for k in keys}
-    os.environ.update({k: env[k] for k in keys})
+    os.environ.update({k: env[k] for k in keys if k in env})
     try:
         yield env
     finally:
@@ -221,11 +224,23 @@ class CellWatch:
                 if report not in self.errors:  # a status repeats every second while it lasts
                     self.errors.append(report)
 
+    def _sim_reports_here(self) -> bool:
+        """The sim node's /diagnostics writer is matched with this process'
+        reader (the graph shows it), so its job reports reach us: no need to
+        wait for its first 1 Hz status to know."""
+        ns = "/" + self.ns if self.ns else "/"
+        return any(
+            info.node_name == "sim_node" and info.node_namespace == ns
+            for info in self.node.get_publishers_info_by_topic(TOPIC_DIAGNOSTICS)
+        )
+
     def ask_to_start(self) -> str | None:
         """One step of starting the job: call ``~/start`` once the cell is
         listening, ask again if the reply is lost, and return the reason if the
         job was refused (None while starting or once started)."""
         self.accepted = self.accepted or self.job_seen
+        if not self.heard_sim and self.start.service_is_ready():
+            self.heard_sim = self._sim_reports_here()
         if self.accepted or not (self.start.service_is_ready() and self.heard_sim):
             return None
         req = self._request

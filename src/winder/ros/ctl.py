@@ -15,6 +15,9 @@ def _call(srv_type: Any, service: str, request: Any, timeout: float) -> tuple[An
     within ``timeout`` s)."""
     import rclpy
 
+    from winder.ros.dds import use_profile
+
+    use_profile()
     rclpy.init(args=[])
     node = rclpy.create_node("winder_ctl")
     try:

@@ -292,6 +292,9 @@ def run_player(
     """Init rclpy, play, shut down. Ctrl-C ends the replay (KeyboardInterrupt)."""
     from rclpy.executors import ExternalShutdownException
 
+    from winder.ros.dds import use_profile
+
+    use_profile()
     rclpy.init(args=[])
     player = None
     terminal = None

@@ -18,6 +18,9 @@ def spin(factory: Callable[[], Node], args: list[str] | None = None) -> None:
     from rclpy._rclpy_pybind11 import RCLError
     from rclpy.executors import ExternalShutdownException
 
+    from winder.ros.dds import use_profile
+
+    use_profile()
     rclpy.init(args=args)
     node = None
     try:

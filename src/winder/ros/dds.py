@@ -1,0 +1,31 @@
+"""The DDS settings every winder process starts with: winder's Fast DDS
+participant profile (``fastdds_profile.xml`` beside this file: discovery
+timing only), unless the user names a profile of their own or another rmw."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import MutableMapping
+from pathlib import Path
+
+__all__ = ["PROFILE", "PROFILE_KEYS", "use_profile"]
+
+PROFILE = Path(__file__).with_name("fastdds_profile.xml")
+#: the variables Fast DDS reads its XML profiles from (2.x reads the first, 3.x the second)
+PROFILE_KEYS = ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE")
+
+
+def use_profile(environ: MutableMapping[str, str] | None = None) -> str:
+    """Point ``environ`` (default: this process' environment, before
+    ``rclpy.init``) at winder's profile, unless it names a profile already or
+    selects an rmw other than Fast DDS; return the profile in force ("" for none)."""
+    env = os.environ if environ is None else environ
+    for key in PROFILE_KEYS:
+        if env.get(key):
+            return env[key]
+    rmw = env.get("RMW_IMPLEMENTATION", "")
+    if rmw and rmw != "rmw_fastrtps_cpp":
+        return ""
+    for key in PROFILE_KEYS:
+        env[key] = str(PROFILE)
+    return str(PROFILE)
