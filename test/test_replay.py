@@ -134,7 +134,8 @@ def expected(bag: Path, start_offset: float = 0.0) -> dict[str, list[bytes]]:
 
 
 def play(procs: Procs, bag: Path, *args: str) -> subprocess.Popen[str]:
-    return subprocess.Popen(
+    """``winder play`` as a process of the test's domain (stopped at teardown if the test fails)."""
+    p = subprocess.Popen(
         [str(BIN / "winder"), "play", str(bag), *args],
         env=procs.env,
         stdout=subprocess.PIPE,
@@ -142,6 +143,8 @@ def play(procs: Procs, bag: Path, *args: str) -> subprocess.Popen[str]:
         stdin=subprocess.DEVNULL,
         text=True,
     )
+    procs.procs.append((p, procs.log_dir / "winder-play.log"))  # type: ignore[arg-type]
+    return p
 
 
 def spin_while(node: Any, p: subprocess.Popen[str], timeout: float) -> tuple[str, str]:
