@@ -207,6 +207,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     check_sim(sim)
     cell = values_from_args(args, CELL_SPECS)
     args.namespace = check_namespace(args.namespace)
+    external = external_nodes(args)
     if args.check:
         steps = sum(s.steps for s in segments)
         print(
@@ -219,14 +220,15 @@ def cmd_run(args: argparse.Namespace) -> int:
         from winder.ros.cell import cell_network, run_cell
     except ImportError as exc:
         raise UserError(f"the ROS 2 node packages are not installed ({exc}); run 'make demo'") from None
-    bag_dir = bag_directory(sim["bag_dir"])
+    bag_dir = bag_directory(sim["bag_dir"]) if "sim" not in external else Path(sim["bag_dir"])
     sim["bag_dir"] = str(bag_dir)
     params = {"interp": {**job.to_dict(), **extra}, "profile": {**profile, **operation}, "sim": sim}
-    args.profile, args.model = profile["profile"], sim["model"]
-    print(
-        f"winder: job {job.job_id}, {job.total_steps} steps, {args.profile} profile, {args.model} motor model"
-    )
-    if sim["record"]:
+    ramp = "the external profile node's ramp" if "profile" in external else f"{profile['profile']} profile"
+    model = "the external sim node" if "sim" in external else f"{sim['model']} motor model"
+    print(f"winder: job {job.job_id}, {job.total_steps} steps, {ramp}, {model}")
+    if external:
+        print(f"  not started here   {', '.join(NODE_NAMES[n] for n in sorted(external))} (--external)")
+    if sim["record"] and "sim" not in external:
         probe = next(p for p in (bag_dir, *bag_dir.parents) if p.exists())
         free = shutil.disk_usage(probe).free
         room = f"{free / 2**30:.1f} GiB" if free >= 2**30 else f"{free / 2**20:.1f} MiB"
@@ -240,10 +242,40 @@ def cmd_run(args: argparse.Namespace) -> int:
         namespace=args.namespace,
         domain=domain,
         timeout=cell["timeout"],
+        external=external,
         progress=lambda frac, sim_t: bar.update(frac, f"sim {float(sim_t):7.2f} s"),
     )
     bar.close()
     return report_run(result, time.monotonic() - t0)
+
+
+#: the nodes ``winder run --external`` may leave to another host, and their executables
+NODE_NAMES = {"profile": "profile_node", "sim": "sim_node"}
+
+
+def external_nodes(args: argparse.Namespace) -> frozenset[str]:
+    """The nodes named by ``--external`` (they run elsewhere on the graph);
+    settings of theirs given on this command line would silently not apply,
+    so they are refused (a job file's sections for them are theirs to load:
+    ``--ros-args --params-file JOB_FILE`` where they run)."""
+    text = getattr(args, "external", None) or ""
+    names = frozenset(n.strip() for n in text.split(",") if n.strip())
+    bad = sorted(names - set(NODE_NAMES))
+    if bad:
+        raise UserError(
+            f"external={text!r} is invalid: {bad[0]!r} is not a node winder run can leave to another "
+            f"host (choose from {', '.join(NODE_NAMES)}, comma-separated; the interp node holds the job)"
+        )
+    for name, specs in (("sim", SIM_SPECS), ("profile", PROFILE_SPECS)):
+        if name not in names:
+            continue
+        set_here = [k for k, spec in specs.items() if getattr(args, k, None) not in (None, spec.default)]
+        if set_here:
+            raise UserError(
+                f"{set_here[0]} is a setting of the {NODE_NAMES[name]}, which runs elsewhere (--external "
+                f"{name}): set it where that node runs (--ros-args -p {set_here[0]}:=...)"
+            )
+    return names
 
 
 def report_run(result: Any, wall: float, command: str = "run") -> int:
@@ -349,6 +381,13 @@ def build_parser() -> argparse.ArgumentParser:
     add_spec_arguments(p, CELL_SPECS, "cell")
     g = p.add_argument_group("cell")
     g.add_argument("--namespace", default="", help="ROS namespace of the cell (/name[/name...])")
+    g.add_argument(
+        "--external",
+        default=None,
+        metavar="NODES",
+        help="nodes that run elsewhere on the graph (another host) and are not started here: sim, "
+        "profile or both, comma-separated (see README: Deploying a cell)",
+    )
     g.add_argument(
         "--check",
         action="store_true",

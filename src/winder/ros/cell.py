@@ -308,8 +308,12 @@ class Keys:
         self.terminal.close()
 
 
-def _spawn(procs: NodeProcesses, params: dict[str, dict[str, Any]], namespace: str) -> None:
+def _spawn(
+    procs: NodeProcesses, params: dict[str, dict[str, Any]], namespace: str, external: frozenset[str]
+) -> None:
     for key in START_ORDER:
+        if key in external:
+            continue  # it runs elsewhere on the graph (another host)
         node_params = dict(params.get(key, {}))
         if key == "interp":
             node_params["autostart"] = False  # started by the watch, once it listens
@@ -366,10 +370,12 @@ def run_cell(
     domain: int | None = None,
     timeout: float = 3600.0,
     progress: Callable[[float, str], None] | None = None,
+    external: frozenset[str] = frozenset(),
 ) -> CellResult:
-    """Start the three nodes with ``params[node]`` parameters, wait for the sim
-    node to report the job done, stop them with SIGINT, return the summary.
-    The nodes' output goes to ``result.log_dir``, removed after a clean run."""
+    """Start the three nodes with ``params[node]`` parameters (but those in
+    ``external``, which run elsewhere on the graph), wait for the sim node to
+    report the job done, stop them with SIGINT, return the summary. The
+    nodes' output goes to ``result.log_dir``, removed after a clean run."""
     log_dir = Path(tempfile.mkdtemp(prefix="winder-cell-"))
     with cell_environment(domain) as env:
         procs = NodeProcesses(env, log_dir)
@@ -378,7 +384,7 @@ def run_cell(
         keys = Keys(node, namespace)
         try:
             watch = CellWatch(node, namespace)
-            _spawn(procs, params, namespace)
+            _spawn(procs, params, namespace, external)
             failure = _wait_for_job(node, watch, procs, timeout, progress, keys)
         except ExternalShutdownException:
             raise KeyboardInterrupt from None  # Ctrl-C: the caller reports it

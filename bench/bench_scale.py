@@ -1,0 +1,317 @@
+"""Scale-out (issue 16): start-up, many cells on one graph, a cell across
+hosts. Each figure is a ratio against an anchor measured in the same run.
+
+    .venv/bin/python bench/bench_scale.py [--quick]
+
+1. Start-up. ``winder run`` of a one-layer job, spawn to first step (the sim
+   node's ``wall_start_ns`` in ``winder/sim_config``, the wall clock when the
+   job started there, minus the wall clock just before the spawn), and the
+   whole command, against two bare rclpy processes (a publisher and a
+   subscriber, spawned together: spawn to the first message received). Best
+   and median of several runs.
+2. Many cells. N cells (N = 1, 2, 4, 8: ``winder run --namespace /cK``, all
+   on one ROS domain at once), each a job of 164 608 steps: every one must
+   complete with every step and record only its own topics; aggregate steps/s
+   (all steps / first spawn to last exit) against N = 1, and each cell's
+   spawn-to-first-step.
+3. Across hosts. Two network namespaces joined by a veth link (bench/_netns.py;
+   skipped, with the reason, where the machine forbids it): the sim node on
+   host b, ``winder run --external sim`` (interp and profile nodes) on host a,
+   discovery by static peers, so the step times cross the link over UDP.
+   Steady steps/s (the sim node's job time) against raw DDS over the same link
+   (bench/_dds.py: publisher on a, subscriber on b, the same chunks and QoS),
+   clean and with packet loss (0.1 %, 1 %), a 100 Mbit/s rate limit and, where
+   the kernel has netem, 1 ms and 5 ms delay; the stream checker's figures
+   (missing steps, gaps) from the run.
+The fourth figure of issue 16, end-to-end throughput at 10^7 steps on one
+host, is bench/bench_e2e.py's.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+from _common import table
+from _netns import Hosts
+
+HERE = Path(__file__).resolve().parent
+BIN = Path(sys.executable).parent
+QUICK = "--quick" in sys.argv
+#: ROS domains of this benchmark: clear of the tests' (20-69, 120-219), winder run's
+#: (100-199) and bench_e2e's (221-232); Fast DDS allows 0-232
+DOMAINS = iter(range(70, 100))
+FAST = ["--v-max", "1e6", "--a-max", "1e9", "--j-max", "1e12"]
+
+
+def env_for(domain: int) -> dict[str, str]:
+    """A process on ``domain``, localhost discovery, winder's DDS profile (the
+    bare processes of the anchors too: the same discovery settings)."""
+    from winder.ros.dds import use_profile
+
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    use_profile(env)
+    return env
+
+
+def summary_of(out: str) -> dict[str, str]:
+    """The figures of ``winder run``'s summary lines."""
+    got: dict[str, str] = {}
+    m = re.search(r"steps\s+(\d+) of (\d+)\s+\(missing (\d+), gaps (\d+)\)", out)
+    if m:
+        got.update(done=m[1], total=m[2], missing=m[3], gaps=m[4])
+    m = re.search(r"bag\s+(\S+)", out)
+    if m:
+        got["bag"] = m[1]
+    return got
+
+
+def wall_start(bag: str) -> int:
+    """wall_start_ns of the run: when the job started at the sim node."""
+    from winder.record.reader import read_run
+
+    cfg = read_run(bag).sim_config
+    return cfg.wall_start_ns if cfg else 0
+
+
+# -- 1. start-up -----------------------------------------------------------------------
+PAIR = """
+import sys, time, rclpy
+from std_msgs.msg import String
+rclpy.init()
+n = rclpy.create_node(sys.argv[1])
+if sys.argv[1] == "pub":
+    p = n.create_publisher(String, "ping", 10)
+    while True:
+        p.publish(String(data="x")); rclpy.spin_once(n, timeout_sec=0.01)
+else:
+    got = []
+    n.create_subscription(String, "ping", lambda m: got.append(time.time_ns()), 10)
+    while not got:
+        rclpy.spin_once(n, timeout_sec=0.01)
+    print(got[0])
+"""
+
+
+def bare_pair(domain: int) -> float:
+    """Spawn to the first message between two bare rclpy processes (s)."""
+    env = env_for(domain)
+    t0 = time.time_ns()
+    pub = subprocess.Popen([sys.executable, "-c", PAIR, "pub"], env=env, stdout=subprocess.DEVNULL)
+    sub = subprocess.run([sys.executable, "-c", PAIR, "sub"], env=env, capture_output=True, text=True)
+    pub.kill()
+    pub.wait()
+    return (int(sub.stdout.strip()) - t0) / 1e9
+
+
+def winder_start(domain: int, bags: Path, job: list[str]) -> tuple[float, float]:
+    """``winder run``: (spawn to first step, whole command) in s."""
+    t0 = time.time_ns()
+    r = subprocess.run(
+        [str(BIN / "winder"), "run", *job, "--bag-dir", str(bags)],
+        env=env_for(domain),
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    t1 = time.time_ns()
+    if r.returncode != 0:
+        raise RuntimeError(r.stdout + r.stderr)
+    return (wall_start(summary_of(r.stdout)["bag"]) - t0) / 1e9, (t1 - t0) / 1e9
+
+
+def startup(tmp: Path) -> None:
+    reps = 3 if QUICK else 7
+    domain = next(DOMAINS)
+    pair = [bare_pair(domain) for _ in range(reps)]
+    small = ["--turns-per-layer", "2", "--poles", "1", "--layers", "1"]
+    tiny = [winder_start(domain, tmp / "startup", small) for _ in range(reps)]
+    default = [winder_start(domain, tmp / "startup", []) for _ in range(max(3, reps // 2))]
+    anchor = statistics.median(pair)
+    rows = [
+        ["bare rclpy pair: spawn -> first message", f"{min(pair):.3f}", f"{anchor:.3f}", "1.00"],
+        ["winder run, 1 layer: spawn -> first step", *_stats([s for s, _ in tiny], anchor)],
+        ["winder run, 1 layer: whole command", *_stats([w for _, w in tiny], anchor)],
+        ["winder run, default job: spawn -> first step", *_stats([s for s, _ in default], anchor)],
+        ["winder run, default job: whole command", *_stats([w for _, w in default], anchor)],
+    ]
+    print(f"1. start-up ({reps} runs each; ratio of medians against the bare pair)")
+    print(table(["what", "best s", "median s", "x pair"], rows))
+
+
+def _stats(xs: list[float], anchor: float) -> list[str]:
+    med = statistics.median(xs)
+    return [f"{min(xs):.3f}", f"{med:.3f}", f"{med / anchor:.2f}"]
+
+
+# -- 2. many cells ---------------------------------------------------------------------
+def many_cells(tmp: Path) -> None:
+    from winder.record.raw import read_raw
+
+    counts = (1, 2, 4) if QUICK else (1, 2, 4, 8)
+    rows = []
+    base = 0.0
+    for n in counts:
+        domain = next(DOMAINS)
+        t0 = time.time_ns()
+        procs = [
+            subprocess.Popen(
+                [str(BIN / "winder"), "run", "--namespace", f"/c{k}", *FAST, "--bag-dir", str(tmp / f"n{n}")],
+                env=env_for(domain),
+                stdout=subprocess.PIPE,
+                stderr=subprocess.STDOUT,
+                text=True,
+            )
+            for k in range(n)
+        ]
+        outs = [p.communicate(timeout=600)[0] for p in procs]
+        t1 = time.time_ns()
+        steps, starts, problems = 0, [], []
+        for k, (p, out) in enumerate(zip(procs, outs, strict=True)):
+            s = summary_of(out)
+            if p.returncode != 0 or s.get("done") != s.get("total") or s.get("missing") != "0":
+                problems.append(f"/c{k}: status {p.returncode}, {s}")
+                continue
+            steps += int(s["done"])
+            starts.append((wall_start(s["bag"]) - t0) / 1e9)
+            foreign = [t for t in read_raw(s["bag"], keep=lambda _t: False).topics() if not _own(t, k)]
+            if foreign:
+                problems.append(f"/c{k}: its bag holds other cells' topics {foreign}")
+        rate = steps / ((t1 - t0) / 1e9)
+        base = base or rate
+        rows.append(
+            [
+                n,
+                f"{steps}",
+                f"{rate / 1e6:.2f}",
+                f"{rate / base:.2f}",
+                f"{min(starts):.2f}-{max(starts):.2f}" if starts else "-",
+                "ok" if not problems else "; ".join(problems),
+            ]
+        )
+    print("\n2. many cells on one graph (each the default job, fast ramp; aggregate over spawn -> last exit)")
+    heads = ["cells", "steps", "M steps/s", "x 1 cell", "spawn->first step s", "every step, own topics"]
+    print(table(heads, rows))
+
+
+def _own(topic: str, k: int) -> bool:
+    return topic == "/diagnostics" or topic.startswith(f"/c{k}/")
+
+
+# -- 3. across hosts -------------------------------------------------------------------
+def across_hosts(tmp: Path) -> None:
+    hosts = Hosts("bs")
+    why = hosts.up()
+    print("\n3. a cell across two hosts (network namespaces, veth link, static peers)")
+    if why:
+        print(f"   skipped: {why}")
+        return
+    try:
+        steps = 1 << 19 if QUICK else 1 << 21
+        layers = steps // (100 * 1024 * 4)
+        job = ["--turns-per-layer", "100", "--poles", "4", "--layers", str(max(layers, 1)), *FAST]
+        cases: list[tuple[str, dict[str, float]]] = [
+            ("clean link", {}),
+            ("loss 0.1 %", {"loss": 0.001}),
+            ("loss 1 %", {"loss": 0.01}),
+            ("100 Mbit/s", {"rate_mbit": 100}),
+            ("delay 1 ms", {"delay_ms": 1}),
+            ("delay 5 ms", {"delay_ms": 5}),
+        ]
+        rows = []
+        for name, shaping in cases:
+            why = hosts.shape(**shaping)
+            if why:
+                rows.append([name, "-", "-", "-", "-", why])
+                continue
+            raw = raw_across(hosts, steps)
+            cell = cell_across(hosts, job, tmp)
+            ratio = cell["rate"] / raw if raw else float("nan")
+            rows.append(
+                [
+                    name,
+                    f"{raw / 1e6:.2f}",
+                    f"{cell['rate'] / 1e6:.2f}",
+                    f"{ratio:.2f}",
+                    f"{cell['done']}/{cell['total']}, missing {cell['missing']}, gaps {cell['gaps']}",
+                    f"{cell['link_mb']:.0f} MB over the link",
+                ]
+            )
+        print(table(["link", "raw DDS M rows/s", "cell M steps/s", "x raw", "stream checker", "note"], rows))
+    finally:
+        hosts.down()
+
+
+def raw_across(hosts: Hosts, rows: int) -> float:
+    """Raw DDS rows/s from host a to host b (first publish to last chunk in)."""
+    domain = next(DOMAINS)
+    dds = [sys.executable, str(HERE / "_dds.py")]
+    sub = subprocess.Popen(
+        hosts.command("b", [*dds, "sub", "--rows", str(rows), "--timeout", "120"]),
+        env=hosts.env("b", env_for(domain)),
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    pub = subprocess.run(
+        hosts.command("a", [*dds, "pub", "--rows", str(rows), "--timeout", "120", "--form", "bytes"]),
+        env=hosts.env("a", env_for(domain)),
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    out = json.loads(sub.communicate(timeout=300)[0].strip().splitlines()[-1])
+    start = json.loads(pub.stdout.strip().splitlines()[-1])["t_start"]
+    if out["chunks"] != out["chunks_expected"]:
+        return 0.0
+    return rows / (out["last"] - start)
+
+
+def cell_across(hosts: Hosts, job: list[str], tmp: Path) -> dict[str, Any]:
+    """The sim node on host b, the rest of the cell on host a; steady steps/s."""
+    domain = next(DOMAINS)
+    bags = tmp / f"across{domain}"
+    sim = subprocess.Popen(
+        hosts.command("b", [str(BIN / "sim_node"), "--ros-args", "-p", f"bag_dir:={bags}"]),
+        env=hosts.env("b", env_for(domain)),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        rx0 = hosts.rx_bytes("b")
+        r = subprocess.run(
+            hosts.command("a", [str(BIN / "winder"), "run", "--external", "sim", *job]),
+            env=hosts.env("a", env_for(domain)),
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+        link = hosts.rx_bytes("b") - rx0
+    finally:
+        sim.send_signal(2)
+        sim.wait(timeout=30)
+    s = summary_of(r.stdout)
+    from winder.record.reader import read_run
+
+    run = read_run(s["bag"])
+    job_s = float(run.report.get("wall_time_s", "nan"))
+    return {**s, "rate": int(s["done"]) / job_s, "link_mb": link / 1e6}
+
+
+def main() -> None:
+    with tempfile.TemporaryDirectory(prefix="winder-scale-") as d:
+        tmp = Path(d)
+        startup(tmp)
+        many_cells(tmp)
+        across_hosts(tmp)
+
+
+if __name__ == "__main__":
+    main()
