@@ -248,6 +248,44 @@ def test_three_profiles_in_one_table(bag: Any) -> None:
     assert "v 2048, a 8192, j 65536" in table.stdout and "v 2048, tau 0.1" in table.stdout
 
 
+@pytest.mark.parametrize("name", ["lin2k", "nlns", "trap", "slip"])
+def test_the_live_summary_and_analyze_give_one_eq7(bag: Any, name: str) -> None:
+    """The sim node's live figure (its final report, 6 digits) and winder
+    analyze's are one function's (winder.contract.eq7): equal to the digits recorded."""
+    path = bag(name)
+    res = analyze(read_run(path))
+    reports = [  # the sim node's job statuses, in any namespace, as rosbags decodes them
+        {kv.key: kv.value for kv in st.values}
+        for _, arr in rosbags_read(path)["/diagnostics"]
+        for st in arr.status
+        if st.name.endswith("sim_node: job")
+    ]
+    live = float(reports[-1]["mean_deviation_actual_m"])
+    assert res.actual is not None
+    assert res.actual.mean == pytest.approx(live, rel=1e-6, abs=1e-15)
+
+
+def test_two_runs_side_by_side_mark_their_differences(bag: Any) -> None:
+    """Set-up rows in which two runs differ are marked *, the others not;
+    the motors are the ones the sim_config of each bag recorded."""
+    lin, trap, nlns = bag("lin2k"), bag("trap"), bag("nlns")
+    r = run_cli("analyze", str(lin), str(trap), "--no-plots")
+    assert r.returncode == 0, r.stderr
+    lines = r.stdout.splitlines()
+    marked = {ln[2:].split("  ")[0] for ln in lines if ln.startswith("* ") and "  " in ln}
+    # the job ids differ (lin2k, trap), the ramps and the joint-state rates; the motors do not
+    assert marked == {"job", "profile / motor model", "ramp limits (major axis)", "joint-state rate"}, marked
+    assert "* the runs differ in this setting" in lines
+    r = run_cli("analyze", str(lin), str(nlns), "--no-plots")
+    marked = {ln[2:].split("  ")[0] for ln in r.stdout.splitlines() if ln.startswith("* ") and "  " in ln}
+    cfg = json.loads(rosbags_read(nlns)["/cell1/winder/sim_config"][0][1].data)
+    assert cfg["axes"]["fork"]["J"] == 2e-4 and cfg["model"] == "nonlinear"
+    assert {"fork: motor J, D", "feed: motor J, D", "pole: motor J, D", "profile / motor model"} <= marked
+    assert "job" in marked  # another job id
+    fork = next(ln for ln in r.stdout.splitlines() if "fork: motor J, D" in ln)
+    assert "0.0002 kg m^2" in fork
+
+
 def test_plots_are_written(bag: Any, tmp_path: Path) -> None:
     import matplotlib.image as mpimg
 

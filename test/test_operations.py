@@ -198,6 +198,17 @@ def test_live_pause_override_resume_abort_in_real_time(tmp_path: Path, procs: Pr
     )
     assert np.array_equal(steps[:, 2:], job_all[: steps.shape[0]])
     assert np.all(np.diff(steps[:, 0]) > 0)
+    # winder analyze counts the steps simulated and recorded, not the job's total
+    rows = sum(len(m.data) // 5 for _, m in raw["/winder/step_times"])
+    out = subprocess.run(
+        [str(Path(sys.executable).parent / "winder"), "analyze", str(meta.parent), "--no-plots"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    ).stdout
+    simulated = int(run.report["steps_done"])
+    assert simulated == evs[3]["steps"] < job_all.shape[0]
+    assert f"{simulated} simulated, {rows} recorded, of {job_all.shape[0]}" in out, out
     assert not any(s.name.endswith("stream") for _, m in raw["/diagnostics"] for s in m.status), (
         "a stall was reported while paused"
     )

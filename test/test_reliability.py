@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import json
 import signal
+import subprocess
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -138,6 +140,17 @@ def test_stream_fault_is_detected_and_reported(tmp_path: Path, procs: Procs, ros
         assert int(done["gaps"]) == 1
         bag = rosbags_read(only_bag(tmp_path))
         assert int(final_status(bag)["steps_missing"]) == 100
+        # winder analyze lists the recorded ERROR, at the simulated time the bag logged it
+        wall0 = json.loads(bag["/winder/sim_config"][0][1].data)["wall_start_ns"]
+        logged = next(t for t, arr in bag["/diagnostics"] for st in arr.status if words[fault] in st.message)
+        out = subprocess.run(
+            [str(Path(sys.executable).parent / "winder"), "analyze", str(only_bag(tmp_path)), "--no-plots"],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        ).stdout
+        line = next((ln for ln in out.splitlines() if ln.startswith("ERROR ") and words[fault] in ln), out)
+        assert f"at {(logged - wall0) / 1e9:.3f} s: sim_node: stream:" in line, line
 
 
 def test_killed_profile_node_is_reported_as_a_stall(tmp_path: Path, procs: Procs, ros: Any) -> None:

@@ -45,6 +45,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from winder.axis import StepperAxis
 from winder.contract.cdr import JointStateEncoder, encode_clocks
+from winder.contract.eq7 import layer_of_samples, sample_deviation
 from winder.contract.params import (
     MAX_JOB_SECONDS,
     MOTOR_FIELDS,
@@ -253,6 +254,7 @@ class SimNode(ManagedNode):
         self.pause_steps = 0  # the steps up to that rest
         self.abort_steps = -1  # an abort: the run ends once this many steps are simulated
         self.abort_rest_ns = 0
+        self.last_seg = -1  # the segment of the last step row simulated (-1: none yet)
 
     # -- in --------------------------------------------------------------
     def on_job(self, raw: bytes) -> None:
@@ -485,8 +487,18 @@ class SimNode(ManagedNode):
             names = [st.name for st in deserialize_message(raw, DiagnosticArray).status]
         except Exception:  # not ours to judge; nothing of it is recorded
             return
+        own = self.get_fully_qualified_name().lstrip("/") + ":"
+        if all(n.startswith(own) for n in names):
+            return  # this node records its own statuses as it publishes them (publish_status)
         if any(in_namespace(n, self.get_namespace()) for n in names):
             self.record("diagnostics", self.t_sim_ns, raw)
+
+    def publish_status(self, task: str, level: int, text: str, values: dict[str, object]) -> None:
+        """A status of this node on /diagnostics, and into the run's bag at
+        once: an ERROR raised just before the run closes is in its bag too."""
+        status = self.diag.status(task, level, text, values)
+        self.record("diagnostics", self.t_sim_ns, serialize_message(status))
+        self.diag.pub.publish(status)
 
     def on_step_times(self, raw: bytes) -> None:
         self.receive(raw)
@@ -655,11 +667,13 @@ class SimNode(ManagedNode):
         cmd_vel = np.zeros((samples.size, len(AXES)))
         act_pos = np.empty((samples.size, len(AXES)))
         act_vel = np.empty((samples.size, len(AXES)))
-        seg_of_sample = None
+        # the command's segment at each sample: that of the last row at or before it (eq. 7)
+        seg_of_sample = np.full(samples.size, self.last_seg, np.int64)
         j = np.empty(0, np.int64)
         if rows is not None and t_s is not None:
             j = np.searchsorted(t_s, samples, side="right") - 1  # last row at or before each sample
-            seg_of_sample = rows[np.maximum(j, 0), 1]
+            seg_of_sample = np.where(j >= 0, rows[np.maximum(j, 0), 1], self.last_seg)
+            self.last_seg = int(rows[-1, 1])
         for i, ax in enumerate(self.axes):
             if rows is not None and t_s is not None:
                 p = rows[:, 2 + i]
@@ -691,8 +705,7 @@ class SimNode(ManagedNode):
             act_pos[:, i] = actual_steps * ax.joint_step
             act_vel[:, i] = omega / ax.step_angle * ax.joint_step
         if samples.size:
-            if seg_of_sample is not None:
-                self.deviation_of_axes(seg_of_sample, act_pos)
+            self.deviation_of_axes(seg_of_sample, act_pos)
             self.out.append(
                 {"k": ks, "cmd_pos": cmd_pos, "cmd_vel": cmd_vel, "act_pos": act_pos, "act_vel": act_vel}
             )
@@ -735,15 +748,14 @@ class SimNode(ManagedNode):
         self.accumulate(self.dev_cmd, dist)
 
     def deviation_of_axes(self, segs: npt.NDArray[np.int64], act_pos: npt.NDArray[np.float64]) -> None:
+        """Eq. 7 of the samples, as ``winder analyze`` computes it (winder.contract.eq7)."""
         assert self.plan is not None
         js = self.plan.joint_step
-        for seg in np.unique(segs):
-            s = self.plan.segments[int(seg)]
-            if s.kind != "layer":
-                continue
-            m = segs == seg
-            rel = act_pos[m, :2] / np.asarray(js[:2]) - np.asarray(s.start[:2])
-            self.accumulate(self.dev_act, line_distance(rel, s.delta[0], s.delta[1], step_lengths=self.lxly))
+        x, y = act_pos[:, 0] / js[0], act_pos[:, 1] / js[1]
+        layer = layer_of_samples(self.plan, segs, y)
+        if np.any(layer >= 0):
+            dist = sample_deviation(self.plan, layer, x, y)
+            self.accumulate(self.dev_act, dist[layer >= 0])
 
     @property
     def lxly(self) -> tuple[float, float]:
@@ -1021,7 +1033,7 @@ class SimNode(ManagedNode):
         self.errors.append(why)
         self.get_logger().error(why)
         plan = self.plan
-        self.diag.publish(
+        self.publish_status(
             "stream",
             ERROR,
             why,
@@ -1056,7 +1068,9 @@ class SimNode(ManagedNode):
             done = f"{self.done_steps}/{self.plan.total_steps}"
             why = f"step stream stalled: no steps for {idle:.1f} s at {done} steps"
             self.get_logger().warning(why)
-            self.diag.publish("stream", ERROR, why, {"job_id": self.plan.job_id, "run_id": self.plan.run_id})
+            self.publish_status(
+                "stream", ERROR, why, {"job_id": self.plan.job_id, "run_id": self.plan.run_id}
+            )
 
     def receipt(self) -> None:
         """The steps of the job simulated so far, or known missing, on
@@ -1099,7 +1113,7 @@ class SimNode(ManagedNode):
         values["state"] = "stalled" if self.stalled else ("paused" if self.paused() else "running")
         if self.op_state and not self.stalled:
             values["state"] = self.op_state
-        self.diag.publish(
+        self.publish_status(
             "job",
             ERROR if self.stalled else OK,
             f"run {self.plan.run_id or self.plan.job_id}: {values['state']}",

@@ -55,7 +55,7 @@ import numpy as np
 import numpy.typing as npt
 
 from winder.analysis.digest import STRIDE_TIME, Digest, SegmentKinematics, digest, turn_index
-from winder.motion.interp import line_distance
+from winder.contract.eq7 import layer_of_samples, sample_deviation
 from winder.motion.job import AXES
 from winder.motion.profile import LIMITS
 from winder.record.reader import Run
@@ -154,6 +154,12 @@ class Analysis:
     actual: Deviation | None
     axes: dict[str, AxisMotion]
     notes: list[str] = field(default_factory=list)
+    steps_simulated: int = -1  #: steps the sim node simulated, from its report (-1 if unknown)
+    #: each axis' motor as the simulation used it: J, D, Zr, L, i_a, load_torque (SI)
+    motors: dict[str, dict[str, float]] = field(default_factory=dict)
+    publish_rate: float = math.nan  #: joint-state rate, Hz of simulated time
+    source: str = ""  #: a re-simulation: the bag and run its steps come from
+    error_list: list[str] = field(default_factory=list)  #: every ERROR recorded, with its time
 
 
 # -- eq. 7 -------------------------------------------------------------------------
@@ -217,39 +223,18 @@ def _summarise(
 
 def winding_samples(run: Run, digested: Digest) -> tuple[npt.NDArray[np.int64], FloatArray, FloatArray]:
     """The joint samples taken while a layer is wound, each with the layer
-    whose fork range holds it (module doc): (layer segment, x, y), x and y in
-    steps of the feed and the fork."""
+    it is measured against (:mod:`winder.contract.eq7`): (layer segment, x,
+    y), x and y in steps of the feed and the fork."""
     plan = run.plan
     js = plan.joint_step
-    layer_ids = [i for i, s in enumerate(plan.segments) if s.kind == "layer"]
-    seg_now = digested.sample_segment
-    if not layer_ids or seg_now.size != len(run.states):
+    if digested.sample_segment.size != len(run.states):
         z = np.zeros(0)
         return np.zeros(0, np.int64), z, z
-    kinds = np.array([s.kind == "layer" for s in plan.segments])
-    ok = (seg_now >= 0) & (seg_now < kinds.size)
-    winding = np.zeros(seg_now.size, dtype=bool)
-    winding[ok] = kinds[seg_now[ok]]
-    x = run.states.pos[winding, 0] / js[0]  # steps, float
-    y = run.states.pos[winding, 1] / js[1]
-    starts = np.array([plan.segments[i].start[1] for i in layer_ids], dtype=np.float64)
-    if np.all(np.diff(starts) > 0):  # the fork always turns forward: its ranges tile the axis
-        which = np.clip(np.searchsorted(starts, y, side="right") - 1, 0, len(layer_ids) - 1)
-        return np.asarray(layer_ids, np.int64)[which], x, y
-    # coils wound backward (coil_overrides direction ccw): fork ranges overlap, so a
-    # sample belongs to the layer being wound when it was taken, or to the layer
-    # before or after it if the axis is still (or already) in that one's range
-    rank = np.full(len(plan.segments), -1, np.int64)
-    rank[layer_ids] = np.arange(len(layer_ids))
-    ends = starts + np.array([plan.segments[i].delta[1] for i in layer_ids], dtype=np.float64)
-    lo, hi = np.minimum(starts, ends), np.maximum(starts, ends)
-    which = np.maximum(rank[seg_now[winding]], 0)
-    for step in (-1, 1):
-        other = np.clip(which + step, 0, len(layer_ids) - 1)
-        outside = (y < lo[which]) | (y > hi[which])
-        inside_other = (y >= lo[other]) & (y <= hi[other])
-        which = np.where(outside & inside_other, other, which)
-    return np.asarray(layer_ids, np.int64)[which], x, y
+    x = run.states.pos[:, 0] / js[0]  # steps, float
+    y = run.states.pos[:, 1] / js[1]
+    layer = layer_of_samples(plan, digested.sample_segment, y)
+    keep = layer >= 0
+    return layer[keep], x[keep], y[keep]
 
 
 def axis_deviation(run: Run, digested: Digest | None = None) -> Deviation | None:
@@ -258,17 +243,16 @@ def axis_deviation(run: Run, digested: Digest | None = None) -> Deviation | None
     plan = run.plan
     if len(run.states) == 0 or d.rows == 0 or not any(s.kind == "layer" for s in plan.segments):
         return None
-    lx, ly = plan.step_lengths[0], plan.step_lengths[1]
     spr = plan.job.fork_steps_per_rev
     seg, x, y = winding_samples(run, d)
+    every = sample_deviation(plan, seg, x, y)  # the sim node's live figure is the same function's
     dists, tids, layers = [], [], []
     segs = plan.job.segments()
     for i in (int(v) for v in np.unique(seg)):
         m = seg == i
         s = plan.segments[i]
-        xr = x[m] - s.start[0]
         yr = y[m] - s.start[1]
-        dist = line_distance(np.column_stack([xr, yr]), s.delta[0], s.delta[1], step_lengths=(lx, ly))
+        dist = every[m]
         dists.append(dist)
         tids.append(turn_index(np.abs(yr), spr, abs(s.delta[1]) // spr))
         layers.append(
@@ -409,8 +393,16 @@ def analyze(run: Run, stride_time: float = STRIDE_TIME, digested: Digest | None 
             else f"sim state {run.report.get('state', 'unknown')}"
         )
         notes.append(f"incomplete recording ({why}): figures cover what was recorded")
-    if run.errors:
-        notes.append(f"{len(run.errors)} ERROR report(s) recorded during the run (first: {run.errors[0]})")
+    simulated = int(_num(run.report, "steps_done", -1))
+    if 0 <= simulated != d.rows:
+        notes.append(
+            f"the sim node simulated {simulated} steps, the recording holds {d.rows} step rows: "
+            + (
+                f"{d.rows - simulated} recorded steps were never simulated"
+                if simulated < d.rows
+                else f"{simulated - d.rows} simulated steps are missing from the recording"
+            )
+        )
     if d.lost_stencils:
         notes.append(
             f"{d.lost_stencils} command kinematics points left out: the move sped up faster "
@@ -452,6 +444,18 @@ def analyze(run: Run, stride_time: float = STRIDE_TIME, digested: Digest | None 
         actual=axis_deviation(run, d),
         axes=_axis_motion(run, d),
         notes=notes,
+        steps_simulated=simulated,
+        motors={
+            axis: {k: getattr(a, k) for k in ("J", "D", "Zr", "L", "i_a", "load_torque")}
+            for axis, a in (run.sim_config.axes.items() if run.sim_config else ())
+        },
+        publish_rate=run.sim_config.publish_rate if run.sim_config else math.nan,
+        source=(
+            f"{run.sim_config.source_bag} (run {run.sim_config.source_run_id or '-'})"
+            if run.sim_config and run.sim_config.source_bag
+            else ""
+        ),
+        error_list=list(run.errors),
     )
 
 
@@ -516,13 +520,24 @@ def _rows(a: Analysis) -> list[tuple[str, str]]:
         state += f", DAMAGED ({a.damaged} chunks skipped)"
     if a.errors:
         state += f", {a.errors} ERROR reports"
+    if a.steps_simulated >= 0:
+        steps = f"{a.steps_simulated} simulated, {a.steps_recorded} recorded, of {a.steps_total}"
+    else:
+        steps = f"{a.steps_recorded} recorded, of {a.steps_total} (no report of the sim node)"
     rows = [
         ("job", a.job),
         ("run", a.run_id or "-"),
+        ("re-simulation of", a.source or "-"),
         ("profile / motor model", f"{a.profile} / {a.model}"),
         ("ramp limits (major axis)", _ramp(a)),
+    ]
+    for name, motor in a.motors.items():
+        load = f", load {motor['load_torque']:.4g} N m" if motor.get("load_torque") else ""
+        rows.append((f"{name}: motor J, D", f"{motor['J']:.4g} kg m^2, {motor['D']:.4g} N m s/rad{load}"))
+    rows += [
+        ("joint-state rate", f"{a.publish_rate:g} Hz" if math.isfinite(a.publish_rate) else "-"),
         ("state", state),
-        ("steps", f"{a.steps_recorded} of {a.steps_total}"),
+        ("steps", steps),
         ("job time (last step)", f"{_f(a.job_time)} s"),
         ("simulated / wall time", f"{_f(a.sim_time)} s / {_f(a.wall_time)} s"),
         ("real-time factor", f"{_f(a.real_time_factor, decimals=1)} x"),
@@ -550,18 +565,38 @@ def _rows(a: Analysis) -> list[tuple[str, str]]:
     return rows
 
 
+#: the rows of a run's set-up: several runs side by side, those that differ are marked
+SETUP_ROWS = ("job", "profile / motor model", "ramp limits (major axis)", "joint-state rate")
+
+
+def _setup_row(name: str) -> bool:
+    return name in SETUP_ROWS or name.endswith(": motor J, D")
+
+
 def format_table(analyses: list[Analysis]) -> str:
-    """One readable table, one column per run."""
+    """One readable table, one column per run; with several runs, the set-up
+    rows (job, ramp, motors, rates) in which they differ are marked ``*``."""
     cols = [_rows(a) for a in analyses]
     names = [r[0] for r in cols[0]]
     header = ["", *[a.label for a in analyses]]
     body = [[n, *[c[i][1] for c in cols]] for i, n in enumerate(names)]
+    differ = False
+    if len(analyses) > 1:
+        for r in body:
+            mark = _setup_row(r[0]) and len(set(r[1:])) > 1
+            differ = differ or mark
+            r[0] = ("* " if mark else "  ") + r[0]
     widths = [max(len(r[i]) for r in [header, *body]) for i in range(len(header))]
     lines = ["  ".join(h.ljust(w) for h, w in zip(header, widths, strict=True)).rstrip()]
     lines.append("  ".join("-" * w for w in widths))
     for r in body:
         lines.append("  ".join(v.ljust(w) for v, w in zip(r, widths, strict=True)).rstrip())
+    if differ:
+        lines.append("* the runs differ in this setting")
     for a in analyses:
+        who = f" ({a.label})" if len(analyses) > 1 else ""
         for n in a.notes:
-            lines.append(f"note ({a.label}): {n}")
+            lines.append(f"note{who}: {n}")
+        for e in a.error_list:
+            lines.append(f"ERROR{who} {e}")
     return "\n".join(lines)

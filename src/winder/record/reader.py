@@ -248,7 +248,8 @@ class Run:
     notes: tuple[str, ...] = ()
     damaged: tuple[str, ...] = ()
     #: the ERROR statuses the cell's nodes published during the run, as
-    #: recorded ("<node>: <task>: <message>", each different one once)
+    #: recorded ("at <t> s: <node>: <task>: <message>", each different one
+    #: once, t the simulated time it was recorded at)
     errors: tuple[str, ...] = ()
     #: the profile node's ramp settings (winder/profile_config: profile, v_max, a_max,
     #: j_max, tau, v_start, dwell in steps of the major axis, s), empty in older bags
@@ -466,11 +467,17 @@ def _decode(raw: RawBag, topic: dict[str, str]) -> dict[str, list[Any]]:
     wanted = {*topic.values(), DIAGNOSTICS}
     store = _typestore()
     decoded: dict[str, list[Any]] = {t: [] for t in wanted}
-    for cid, _, data in raw.messages:
+    decoded[_DIAGNOSTIC_TIMES] = []  # the log time of each /diagnostics message
+    for cid, t, data in raw.messages:
         conn = raw.connections[cid]
         if conn.topic in wanted:
             decoded[conn.topic].append(_deserialize(store, raw.path, conn.topic, data, conn.msgtype))
+            if conn.topic == DIAGNOSTICS:
+                decoded[_DIAGNOSTIC_TIMES].append(t)
     return decoded
+
+
+_DIAGNOSTIC_TIMES = " diagnostics log times"
 
 
 @dataclass(frozen=True)
@@ -543,7 +550,8 @@ def _assemble(
     notes = list(raw.notes)
     sim_config = _decode_sim_config(raw.path, decoded[topic[SIM_CONFIG]], topic[SIM_CONFIG], notes)
     profile_config = _decode_profile_config(decoded[topic[PROFILE_CONFIG]], topic[PROFILE_CONFIG], notes)
-    report, profile, errors = _decode_diagnostics(decoded[DIAGNOSTICS], ns)
+    wall0 = sim_config.wall_start_ns if sim_config else 0
+    report, profile, errors = _decode_diagnostics(decoded[DIAGNOSTICS], ns, decoded[_DIAGNOSTIC_TIMES], wall0)
     origin = sim_config.clock_origin_ns / 1e9 if sim_config else 0.0
     return Run(
         path=raw.path,
@@ -618,18 +626,21 @@ def _decode_profile_config(msgs: list[Any], topic: str, notes: list[str]) -> dic
         return {}
 
 
-def _decode_diagnostics(msgs: list[Any], ns: str) -> tuple[dict[str, str], str, tuple[str, ...]]:
+def _decode_diagnostics(
+    msgs: list[Any], ns: str, times: list[int], wall0: int
+) -> tuple[dict[str, str], str, tuple[str, ...]]:
     """The sim node's last job status, the profile kind the profile node's
     status names (older bags say it only there) and the ERROR statuses of the
-    cell in ``ns`` (each different one once, in order)."""
+    cell in ``ns`` (each different one once, in order, with the simulated
+    time it was first recorded at: the log time less the job's wall start)."""
     sim_status, profile_status = (
         status_name("sim_node", namespace=ns),
         status_name("profile_node", namespace=ns),
     )
     report: dict[str, str] = {}
     profile = ""
-    errors: dict[str, None] = {}
-    for arr in msgs:
+    errors: dict[str, str] = {}
+    for arr, t in zip(msgs, times, strict=True):
         for st in arr.status:
             values = {kv.key: kv.value for kv in st.values}
             if st.name == sim_status and "state" in values:
@@ -637,6 +648,8 @@ def _decode_diagnostics(msgs: list[Any], ns: str) -> tuple[dict[str, str], str, 
             elif st.name == profile_status and "profile" in values:
                 profile = values["profile"]
             level = st.level if isinstance(st.level, int) else int.from_bytes(bytes(st.level), "little")
-            if level == ERROR_LEVEL and in_namespace(st.name, ns):
-                errors[f"{st.name}: {st.message}"] = None
-    return report, profile, tuple(errors)
+            text = f"{st.name}: {st.message}"
+            if level == ERROR_LEVEL and in_namespace(st.name, ns) and text not in errors:
+                at = f"at {(t - wall0) / 1e9:.3f} s: " if wall0 and t >= wall0 else ""
+                errors[text] = at + text
+    return report, profile, tuple(errors.values())

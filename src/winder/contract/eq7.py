@@ -1,0 +1,79 @@
+"""Eq. 7 of the simulated axes, one definition for the sim node's live
+summary and for ``winder analyze`` (so both print the same figure for the
+same run).
+
+A joint sample counts while a layer is wound: the command at the sample (the
+last step row at or before it) is in a layer segment. It is measured against
+the ideal line of the layer whose fork range holds the sample's fork
+position, not the layer the command is in: an axis pair that lags along the
+line is on the line, and at a corner a lagging sample still belongs to the
+layer it is on. Samples before the first step row have no command segment
+(-1) and do not count; samples after the last one (the settle time) keep
+its segment.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+from winder.contract.stream import JobPlan
+from winder.motion.interp import line_distance
+
+__all__ = ["layer_of_samples", "sample_deviation"]
+
+IntArray = npt.NDArray[np.int64]
+FloatArray = npt.NDArray[np.float64]
+
+
+def layer_of_samples(plan: JobPlan, seg_now: npt.ArrayLike, y: npt.ArrayLike) -> IntArray:
+    """For each sample (its command's segment ``seg_now``, -1 for none; its
+    fork position ``y`` in steps): the layer segment it is measured against,
+    -1 if it does not count (module doc)."""
+    seg = np.asarray(seg_now, dtype=np.int64)
+    yy = np.asarray(y, dtype=np.float64)
+    out = np.full(seg.size, -1, np.int64)
+    layer_ids = [i for i, s in enumerate(plan.segments) if s.kind == "layer"]
+    if not layer_ids or seg.size == 0:
+        return out
+    kinds = np.array([s.kind == "layer" for s in plan.segments])
+    ok = (seg >= 0) & (seg < kinds.size)
+    winding = np.zeros(seg.size, dtype=bool)
+    winding[ok] = kinds[seg[ok]]
+    yw = yy[winding]
+    starts = np.array([plan.segments[i].start[1] for i in layer_ids], dtype=np.float64)
+    if np.all(np.diff(starts) > 0):  # the fork always turns forward: its ranges tile the axis
+        which = np.clip(np.searchsorted(starts, yw, side="right") - 1, 0, len(layer_ids) - 1)
+    else:
+        # coils wound backward (coil_overrides direction ccw): fork ranges overlap, so a
+        # sample belongs to the layer being wound when it was taken, or to the layer
+        # before or after it if the axis is still (or already) in that one's range
+        rank = np.full(len(plan.segments), -1, np.int64)
+        rank[layer_ids] = np.arange(len(layer_ids))
+        ends = starts + np.array([plan.segments[i].delta[1] for i in layer_ids], dtype=np.float64)
+        lo, hi = np.minimum(starts, ends), np.maximum(starts, ends)
+        which = np.maximum(rank[seg[winding]], 0)
+        for step in (-1, 1):
+            other = np.clip(which + step, 0, len(layer_ids) - 1)
+            outside = (yw < lo[which]) | (yw > hi[which])
+            inside_other = (yw >= lo[other]) & (yw <= hi[other])
+            which = np.where(outside & inside_other, other, which)
+    out[winding] = np.asarray(layer_ids, np.int64)[which]
+    return out
+
+
+def sample_deviation(plan: JobPlan, layer: npt.ArrayLike, x: npt.ArrayLike, y: npt.ArrayLike) -> FloatArray:
+    """The eq. 5 distance (m) of each sample (x, y in steps of the feed and the
+    fork) to the ideal line of its ``layer`` (:func:`layer_of_samples`); NaN
+    where the layer is -1."""
+    lay = np.asarray(layer, dtype=np.int64)
+    xx = np.asarray(x, dtype=np.float64)
+    yy = np.asarray(y, dtype=np.float64)
+    out = np.full(lay.size, np.nan)
+    lengths = (plan.step_lengths[0], plan.step_lengths[1])
+    for i in (int(v) for v in np.unique(lay[lay >= 0])):
+        m = lay == i
+        s = plan.segments[i]
+        rel = np.column_stack([xx[m] - s.start[0], yy[m] - s.start[1]])
+        out[m] = line_distance(rel, s.delta[0], s.delta[1], step_lengths=lengths)
+    return out
