@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 from pathlib import Path
 from typing import Any
 
@@ -309,3 +310,48 @@ def test_a_value_that_rounds_to_zero_prints_without_a_sign() -> None:
 
     assert _f(-1e-9) == "0.000" and _f(-4e-4) == "0.000" and _f(-6e-4) == "-0.001"
     assert _f(2.5e-6, 1e6) == "2.500" and _f(float("nan")) == "-"
+
+
+def test_export_csv_holds_every_message_and_step(bag: Any, tmp_path: Path) -> None:
+    """winder export: each CSV file has one row per recorded message (per step
+    for the step times), with the values rosbags decodes, and loads with numpy
+    and the csv module; a damaged bag or an existing directory is refused."""
+    import csv
+
+    path = bag("lin2k")
+    out = tmp_path / "csv"
+    r = run_cli("export", str(path), "--csv", str(out))
+    assert r.returncode == 0, r.stderr
+    ref = rosbags_read(path)
+    origin = json.loads(ref["/winder/sim_config"][0][1].data).get("clock_origin_ns", 0)
+    for topic, name in (
+        ("/winder/joint_states", "joint_states.csv"),
+        ("/winder/joint_commands", "joint_commands.csv"),
+    ):
+        t, pos, vel = joint_arrays(ref[topic])
+        table = np.loadtxt(out / name, delimiter=",", skiprows=1)
+        assert table.shape == (len(ref[topic]), 7)
+        np.testing.assert_allclose(table[:, 0], t - origin / 1e9, rtol=0, atol=1e-9)
+        np.testing.assert_array_equal(table[:, 1:4], pos)
+        np.testing.assert_array_equal(table[:, 4:7], vel)
+        assert f"{out / name}  {len(ref[topic])} rows" in r.stdout
+    steps = np.loadtxt(
+        out / "step_times.csv", delimiter=",", skiprows=1, usecols=(0, 2, 3, 4, 5), dtype=np.int64
+    )
+    np.testing.assert_array_equal(steps, step_rows(ref["/winder/step_times"]))
+    with open(out / "step_times.csv", newline="") as f:
+        head = next(csv.reader(f))
+    assert head == ["t_ns", "t_s", "segment", "feed_steps", "fork_steps", "pole_steps"]
+    meta = json.loads((out / "run.json").read_text())
+    assert meta["rows"]["step_times.csv"] == steps.shape[0] and meta["final_report"]["state"] == "done"
+    again = run_cli("export", str(path), "--csv", str(out))
+    assert again.returncode == 2 and "already exists" in again.stderr and "Traceback" not in again.stderr
+    damaged = tmp_path / "damaged"
+    shutil.copytree(path, damaged)
+    mcap = next(damaged.glob("*.mcap"))
+    data = bytearray(mcap.read_bytes())
+    data[len(data) // 2] ^= 0x10  # inside a chunk of the uncompressed bag's data section
+    mcap.write_bytes(bytes(data))
+    refused = run_cli("export", str(damaged), "--csv", str(tmp_path / "d"))
+    assert refused.returncode == 2 and "Traceback" not in refused.stderr, refused.stderr
+    assert not (tmp_path / "d").exists() and not list(tmp_path.glob(".d.*"))

@@ -111,6 +111,33 @@ def cmd_bag_recover(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_export(args: argparse.Namespace) -> int:
+    """A recording as CSV files (winder.analysis.export)."""
+    from winder.analysis.export import export_csv
+    from winder.record.reader import read_run
+
+    try:
+        run = read_run(args.bag, args.namespace)
+        if run.damaged:
+            raise ValueError(
+                f"{run.path}: damaged recording: {len(run.damaged)} chunk(s) skipped (first: "
+                f"{run.damaged[0]}); exported rows would hide the gap, so nothing is written"
+            )
+        if run.recovered:
+            raise ValueError(
+                f"{run.path}: the recording was cut short; `winder bag recover {run.path}` writes its "
+                "whole messages as a complete bag, which exports"
+            )
+        out = Path(args.csv) if args.csv else Path(f"{run.path}_csv")
+        rows = export_csv(run, out)
+    except OSError as exc:
+        raise ValueError(_os_error(exc)) from None
+    for name, n in rows.items():
+        print(f"{out / name}  {n} rows")
+    print(f"{out / 'run.json'}  job, motors, ramp, final report")
+    return 0
+
+
 def _bag_help(parser: argparse.ArgumentParser) -> int:
     parser.print_help()
     return 2
@@ -147,6 +174,20 @@ def register(sub: argparse._SubParsersAction[Any]) -> None:
     p.add_argument("--plots-dir", default=None, help="where the figure goes (default: BAG/plots)")
     p.add_argument("--namespace", default=None, help="the cell's ROS namespace, if the bag holds several")
     p.set_defaults(func=cmd_identify)
+
+    p = sub.add_parser(
+        "export",
+        help="a recording as CSV files (joint states, commands, step times, events) for spreadsheets, MATLAB",
+        description="Write a winder recording as CSV files, one per stream, with a header row naming "
+        "each column and its unit, plus run.json (job, motors, ramp, final report). Times are seconds "
+        "of simulated time since the job's start; step times also in exact ns.",
+    )
+    p.add_argument("bag", metavar="BAG", help="bag directory or .mcap file")
+    p.add_argument(
+        "--csv", metavar="DIR", default=None, help="new directory for the files (default: BAG_csv)"
+    )
+    p.add_argument("--namespace", default=None, help="the cell's ROS namespace, if the bag holds several")
+    p.set_defaults(func=cmd_export)
 
     p = sub.add_parser("bag", help="bag tools: recover a recording cut short")
     bag_sub = p.add_subparsers(dest="bag_command", metavar="BAG_COMMAND", parser_class=type(p))
