@@ -44,6 +44,12 @@ CMD, ACT, IDEAL = "tab:blue", "tab:orange", "k"
 #: joint units and the scale to show them in
 SHOW = {"feed": (1e3, "mm"), "fork": (1.0, "rad"), "pole": (1.0, "rad")}
 MAX_POINTS = 40_000
+#: fixed margins (fractions of the figure): matplotlib's constrained layout
+#: measured every tick label of every panel and took most of the plotting time
+MARGINS = {"left": 0.06, "right": 0.985, "bottom": 0.06, "wspace": 0.22}
+#: PNG compression: level 1 writes the figures several times faster than the
+#: default 6 for files about a third larger
+PNG = {"compress_level": 1}
 
 
 def plots_dir(run_path: Path) -> Path:
@@ -55,6 +61,20 @@ def plots_dir(run_path: Path) -> Path:
 def _thin(*arrays: npt.NDArray[np.float64], n: int = MAX_POINTS) -> list[npt.NDArray[np.float64]]:
     step = max(1, arrays[0].size // n)
     return [a[::step] for a in arrays]
+
+
+def _legend(ax: Any, **kw: Any) -> None:
+    """The legend in a band above the data (the y range is raised for it),
+    in one row: it never hides a curve, however dense the data."""
+    handles, labels = ax.get_legend_handles_labels()
+    if not handles:
+        return
+    lo, hi = ax.get_ylim()
+    ax.set_ylim(lo, hi + 0.3 * (hi - lo))
+    per_row = 3 if max(len(x) for x in labels) < 45 else 1
+    if per_row == 1:
+        ax.set_ylim(lo, hi + (0.3 + 0.12 * len(handles)) * (hi - lo))
+    ax.legend(loc="upper left", ncol=min(len(handles), per_row), fontsize=8, framealpha=0.9, **kw)
 
 
 def _title(run: Run) -> str:
@@ -119,7 +139,8 @@ def _motion(run: Run, d: Digest, out: Path) -> Path:
     st = run.states
     acc = np.asarray(np.gradient(st.vel, st.t, axis=0)) if len(st) >= 3 else np.zeros((0, 3))
     jerk = np.asarray(np.gradient(acc, st.t, axis=0)) if len(st) >= 3 else np.zeros((0, 3))
-    fig, axes = plt.subplots(4, 3, figsize=(15, 12), constrained_layout=True)
+    fig, axes = plt.subplots(4, 3, figsize=(15, 12))
+    fig.subplots_adjust(**MARGINS, top=0.89, hspace=0.4)
     names = ("velocity", "acceleration", "jerk")
     rate = run.sim_config.publish_rate if run.sim_config else math.nan
     for c, axis in enumerate(AXES):
@@ -166,8 +187,8 @@ def _motion(run: Run, d: Digest, out: Path) -> Path:
         axes[3, c].set_xlabel("time (s)")
     for ax in axes.flat:
         ax.grid(True, lw=0.3)
-    axes[0, 0].legend(loc="lower left", fontsize=8, markerscale=6)
-    axes[1, 0].legend(loc="lower right", fontsize=8)
+    _legend(axes[0, 0], markerscale=6)
+    _legend(axes[1, 0])
     fig.suptitle(
         _title(run) + "\ncommand: the ideal interpolated motion from each segment's step times (not "
         "estimated over the first and last few steps of a move, where the speed is near 0)\n"
@@ -176,7 +197,7 @@ def _motion(run: Run, d: Digest, out: Path) -> Path:
         fontsize=10,
     )
     path = out / "motion.png"
-    fig.savefig(path, dpi=100)
+    fig.savefig(path, dpi=100, pil_kwargs=PNG)
     plt.close(fig)
     return path
 
@@ -210,14 +231,15 @@ def _operations(run: Run, d: Digest, out: Path) -> Path:
     )
     fig.tight_layout()
     path = out / "operations.png"
-    fig.savefig(path, dpi=100)
+    fig.savefig(path, dpi=100, pil_kwargs=PNG)
     plt.close(fig)
     return path
 
 
 def _tracking(run: Run, d: Digest, out: Path) -> Path:
     cm, st = run.commands, run.states
-    fig, axes = plt.subplots(3, 3, figsize=(15, 9.5), constrained_layout=True)
+    fig, axes = plt.subplots(3, 3, figsize=(15, 9.5))
+    fig.subplots_adjust(**MARGINS, top=0.92, hspace=0.32)
     js = run.plan.joint_step
     i_s, diff = paired_error(run)
     for c, axis in enumerate(AXES):
@@ -262,12 +284,12 @@ def _tracking(run: Run, d: Digest, out: Path) -> Path:
                 ax.text(0.01, 0.02, "dotted: +-1/2 tooth pitch", transform=ax.transAxes, fontsize=8)
         for a in axes[:, c]:
             a.grid(True, lw=0.3)
-    axes[0, 0].legend(fontsize=8)
-    axes[1, 0].legend(fontsize=8)
+    _legend(axes[0, 0])
+    _legend(axes[1, 0])
     axes[0, 0].set_xlabel("time (s)")
     fig.suptitle(_title(run), fontsize=10)
     path = out / "tracking.png"
-    fig.savefig(path, dpi=100)
+    fig.savefig(path, dpi=100, pil_kwargs=PNG)
     plt.close(fig)
     return path
 
@@ -277,31 +299,28 @@ def _winding(run: Run, analysis: Analysis, d: Digest, out: Path) -> Path:
     lx, ly = plan.step_lengths[0], plan.step_lengths[1]
     js = plan.joint_step
     spr = plan.job.fork_steps_per_rev
-    fig = plt.figure(figsize=(15, 9.5), constrained_layout=True)
-    gs = fig.add_gridspec(2, 2)
+    fig = plt.figure(figsize=(15, 9.5))
+    gs = fig.add_gridspec(2, 2, **MARGINS, top=0.92, hspace=0.3)
     ax0 = fig.add_subplot(gs[0, 0])
     ax1 = fig.add_subplot(gs[0, 1])
     ax2 = fig.add_subplot(gs[1, :])
     layers = [(i, s) for i, s in enumerate(plan.segments) if s.kind == "layer"]
-    # overview: the ideal lines and the commanded path, unrolled
-    for n, (i, s) in enumerate(layers):
-        x = np.array([s.start[0], s.end[0]]) * lx * 1e3
-        y = np.array([s.start[1], s.end[1]]) * ly
-        ax0.plot(y, x, color=IDEAL, lw=0.8, label="ideal lines" if n == 0 else None)
-        if d.layers[i].path:
-            rows = np.vstack(d.layers[i].path)
-            ax0.plot(
-                rows[:, 1] * ly,
-                rows[:, 0] * lx * 1e3,
-                ".",
-                ms=1.0,
-                color=CMD,
-                label="commanded steps" if n == 0 else None,
-            )
-    ax0.set_xlabel("flyer arc, unrolled (m)")
-    ax0.set_ylabel("feed (mm)")
-    ax0.set_title("unrolled winding path: every layer a straight line", fontsize=10)
-    ax0.legend(fontsize=8, markerscale=6)
+    # overview: eq. 7 of every layer (the whole path unrolled is a solid band at this scale)
+    per_layer = [("command", CMD, analysis.command.layers)]
+    if analysis.actual is not None:
+        per_layer.append(("simulated axes", ACT, analysis.actual.layers))
+    for k, (label, color, rows) in enumerate(per_layer):
+        if not rows:
+            continue
+        x = np.arange(len(rows)) + (k - 0.5) * 0.15
+        ax0.plot(x, [r.mean * 1e6 for r in rows], "o", color=color, ms=4, label=f"{label}: mean")
+        ax0.plot(x, [r.max * 1e6 for r in rows], "^", color=color, ms=4, mfc="none", label=f"{label}: max")
+        ax0.set_xticks(np.arange(len(rows)), [f"{r.pole + 1}:{r.layer + 1}" for r in rows], fontsize=7)
+    ax0.set_xlabel("coil:layer, in winding order")
+    ax0.set_ylabel("distance to the ideal line (um)")
+    ax0.set_title("eq. 7 of each layer: mean and max distance of steps and samples", fontsize=10)
+    ax0.set_ylim(bottom=0)
+    _legend(ax0)
     ax0.grid(True, lw=0.3)
     # zoom: a quarter turn in the middle of the first layer, signed distance to the line
     if layers:
@@ -328,7 +347,7 @@ def _winding(run: Run, analysis: Analysis, d: Digest, out: Path) -> Path:
         ax1.set_title(
             f"zoom: 1/8 turn in the middle of layer 1 (a feed step is {lx * 1e6:g} um)", fontsize=10
         )
-        ax1.legend(fontsize=8)
+        _legend(ax1)
         ax1.grid(True, lw=0.3)
     # per turn: eq. 7 over each turn, in % of the wire diameter
     wire = plan.job.wire_diameter
@@ -358,11 +377,11 @@ def _winding(run: Run, analysis: Analysis, d: Digest, out: Path) -> Path:
         fontsize=10,
     )
     ax2.set_ylim(bottom=0)
-    ax2.legend(fontsize=8)
+    _legend(ax2)
     ax2.grid(True, lw=0.3)
     fig.suptitle(_title(run), fontsize=10)
     path = out / "winding.png"
-    fig.savefig(path, dpi=100)
+    fig.savefig(path, dpi=100, pil_kwargs=PNG)
     plt.close(fig)
     return path
 
@@ -403,17 +422,54 @@ def plot_analysis(
     d = digested if digested is not None else digest_run(run)
     out = plots_dir(run.path) if out is None else Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    paths = [_motion(run, d, out), _tracking(run, d, out), _winding(run, analysis, d, out)]
-    if run.events:
-        paths.append(_operations(run, d, out))
-    return paths
+    figures = ["motion", "tracking", "winding"] + (["operations"] if run.events else [])
+    global _JOB
+    _JOB = (run, analysis, d, out)
+    try:
+        return _draw_all(figures)
+    finally:
+        _JOB = None
+
+
+#: the run the figures are drawn of, while plot_analysis draws them (the
+#: worker processes it forks inherit it: nothing of it is pickled)
+_JOB: tuple[Run, Analysis, Digest, Path] | None = None
+
+
+def _draw(name: str) -> Path:
+    assert _JOB is not None
+    run, analysis, d, out = _JOB
+    if name == "motion":
+        return _motion(run, d, out)
+    if name == "tracking":
+        return _tracking(run, d, out)
+    if name == "winding":
+        return _winding(run, analysis, d, out)
+    return _operations(run, d, out)
+
+
+def _draw_all(figures: list[str]) -> list[Path]:
+    """Each figure drawn in a process of its own when the machine has cores to
+    spare (forked: the run is shared, not copied), else one after another.
+    Drawing is matplotlib's Python code, one core per figure."""
+    import multiprocessing as mp
+    import os
+
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    if cores < 2 or "fork" not in mp.get_all_start_methods():
+        return [_draw(name) for name in figures]
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(min(cores, len(figures)), mp_context=mp.get_context("fork")) as pool:
+        return list(pool.map(_draw, figures))
 
 
 def plot_identification(run: Run, ident: Identification, out: Path | None = None) -> list[Path]:
     """Write identify.png: the MRAS convergence of J and D per axis."""
     out = plots_dir(run.path) if out is None else Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    fig, axes = plt.subplots(2, 3, figsize=(15, 7.5), sharex="col", constrained_layout=True)
+    fig, axes = plt.subplots(2, 3, figsize=(15, 7.5), sharex="col")
+    fig.subplots_adjust(**MARGINS, top=0.9, hspace=0.15)
     for c, axis in enumerate(AXES):
         a = ident.axes[axis]
         for r, (key, true, ls) in enumerate((("J", a.J_true, a.ls_J), ("D", a.D_true, a.ls_D))):
@@ -475,6 +531,6 @@ def plot_identification(run: Run, ident: Identification, out: Path | None = None
         fontsize=10,
     )
     path = out / "identify.png"
-    fig.savefig(path, dpi=100)
+    fig.savefig(path, dpi=100, pil_kwargs=PNG)
     plt.close(fig)
     return [path]
