@@ -55,11 +55,20 @@ def test_recorded_j_and_d_within_1_percent(bag: Any) -> None:
             assert abs(a.ls_D / D - 1) < 1e-4, (name, axis, a.ls_D / D)
             assert a.ls_J_err == pytest.approx(a.ls_J / J - 1, rel=1e-12)
             # MRAS from b = 0 with the default gain
-            assert abs(a.mras_J / J - 1) < 0.01, (name, axis, a.mras_J / J)
-            assert abs(a.mras_D / D - 1) < 0.01, (name, axis, a.mras_D / D)
+            # the last update within 1 %; the settled mean (the last quarter of the updates)
+            # within 2 %: on an axis with few windows (the pole's 133) it still holds the approach
+            assert abs(a.mras_J_last / J - 1) < 0.01, (name, axis, a.mras_J_last / J)
+            assert abs(a.mras_D_last / D - 1) < 0.01, (name, axis, a.mras_D_last / D)
+            assert abs(a.mras_J / J - 1) < 0.02, (name, axis, a.mras_J / J)
+            assert abs(a.mras_D / D - 1) < 0.02, (name, axis, a.mras_D / D)
             assert a.mras_iterations_1pct is not None and a.mras_iterations_1pct <= a.mras_iterations
             tr = a.trajectory
-            assert tr is not None and tr.J[-1] == a.mras_J and tr.D[-1] == a.mras_D
+            assert tr is not None and tr.J[-1] == a.mras_J_last and tr.D[-1] == a.mras_D_last
+            # the settled figure: mean, min and max over the last quarter of the updates, by hand
+            for est, mean, band in ((tr.J, a.mras_J, a.mras_J_band), (tr.D, a.mras_D, a.mras_D_band)):
+                tail = [float(x) for x in est[len(est) - max(1, len(est) // 4) :] if math.isfinite(x)]
+                assert mean == pytest.approx(sum(tail) / len(tail), rel=1e-12)
+                assert band == (min(tail), max(tail))
             ok = np.isfinite(tr.J)  # J is NaN while the estimate of 1/J = b/T_s is not yet positive
             np.testing.assert_allclose(tr.b[ok], ident.window / tr.J[ok], rtol=1e-12)  # the thesis' b = T_s/J
             assert np.all(tr.b[~ok] <= 0)
@@ -189,8 +198,12 @@ def test_synthetic_records(model: str, J: float, D: float, load: float) -> None:
     assert a.identifiable, a.reason
     assert a.ls_J == pytest.approx(J, rel=1e-3)
     assert a.ls_D == pytest.approx(D, rel=1e-4)
-    assert a.mras_J == pytest.approx(J, rel=0.01)
-    assert a.mras_D == pytest.approx(D, rel=0.01)
+    assert a.mras_J_last == pytest.approx(J, rel=0.01)
+    assert a.mras_D_last == pytest.approx(D, rel=0.01)
+    # the settled figure is the last quarter's mean and band: on a move this short (3000
+    # steps) the estimate is still approaching there, and the band says so
+    assert a.mras_J_band[0] <= a.mras_J <= a.mras_J_band[1]
+    assert a.mras_J_band[0] <= a.mras_J_last <= a.mras_J_band[1]
 
 
 @pytest.mark.ros

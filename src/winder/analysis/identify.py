@@ -433,6 +433,18 @@ class Mras:
         j = self._tail(self.J)
         return float(j.std() / j.mean()) if j.size > 1 else math.nan
 
+    @property
+    def settled(self) -> tuple[float, float, float, float, float, float]:
+        """The settled estimate and its spread: the mean, min and max of J and
+        of D over the last 1/SETTLE_PART of the updates (J mean, J min, J max,
+        D mean, D min, D max); the last update alone still swings with the
+        excitation of the moment."""
+        j, d = self._tail(self.J), self._tail(self.D)
+        nan = math.nan
+        jj = (float(j.mean()), float(j.min()), float(j.max())) if j.size else (nan, nan, nan)
+        dd = (float(d.mean()), float(d.min()), float(d.max())) if d.size else (nan, nan, nan)
+        return (*jj, *dd)
+
     def iterations_within(self, value: float, tol: float = 0.01) -> int | None:
         """Updates until J stays within ``tol`` of ``value`` for good (None: never)."""
         if self.J.size == 0:
@@ -490,8 +502,13 @@ class AxisIdentification:
     ls_D: float
     ls_J_se: float  #: standard error (kg*m^2)
     ls_D_se: float
-    mras_J: float  #: the estimate after the last update
+    mras_J: float  #: the settled estimate: the mean over the last quarter of the updates
     mras_D: float
+    #: the settled estimate's band: min and max over the last quarter of the updates
+    mras_J_band: tuple[float, float]
+    mras_D_band: tuple[float, float]
+    mras_J_last: float  #: the estimate after the last update
+    mras_D_last: float
     mras_spread: float  #: relative std of J over the last quarter of the updates
     mras_iterations: int
     mras_iterations_1pct: int | None
@@ -538,6 +555,10 @@ def identify_axis(
         ls_D_se=nan,
         mras_J=nan,
         mras_D=nan,
+        mras_J_band=(nan, nan),
+        mras_D_band=(nan, nan),
+        mras_J_last=nan,
+        mras_D_last=nan,
         mras_spread=nan,
         mras_iterations=0,
         mras_iterations_1pct=None,
@@ -561,7 +582,7 @@ def identify_axis(
         return AxisIdentification(identifiable=False, reason=why, **base, **empty)
     traj = mras(eq, gain)
     paper = mras(eq, gain, damping=False)
-    mJ, mD = traj.final
+    mJ, j_lo, j_hi, mD, d_lo, d_hi = traj.settled
     it = traj.iterations_within(rec.motor.J)
 
     def err(x: float, ref: float) -> float:
@@ -577,6 +598,10 @@ def identify_axis(
         ls_D_se=D_se,
         mras_J=mJ,
         mras_D=mD,
+        mras_J_band=(j_lo, j_hi),
+        mras_D_band=(d_lo, d_hi),
+        mras_J_last=traj.final[0],
+        mras_D_last=traj.final[1],
         mras_spread=traj.spread,
         mras_iterations=int(traj.J.size),
         mras_iterations_1pct=it,
@@ -642,13 +667,21 @@ def _g(x: float) -> str:
     return "-" if not math.isfinite(x) else f"{x:.5g}"
 
 
+def _band(band: tuple[float, float], true: float) -> str:
+    """The min-max band of an estimate as errors against the recorded value."""
+    lo, hi = band
+    if not (math.isfinite(lo) and math.isfinite(hi) and true):
+        return "-"
+    return f"{_pct(lo / true - 1)} .. {_pct(hi / true - 1)}"
+
+
 def format_identification(ident: Identification) -> str:
     """A readable table: per axis, recorded vs estimated J and D."""
     lines = [
         f"{ident.label}: {ident.model} model, joint states at {ident.publish_rate:g} Hz, "
         f"window {ident.window * 1e3:.3g} ms, MRAS gain {ident.gain:g}",
         f"{'axis':5s} {'':6s} {'recorded':>11s} {'least sq.':>11s} {'error':>10s} "
-        f"{'MRAS':>11s} {'error':>10s}",
+        f"{'MRAS':>11s} {'error':>10s}  MRAS band, last quarter",
     ]
     for a in ident.axes.values():
         if not a.identifiable:
@@ -656,11 +689,11 @@ def format_identification(ident: Identification) -> str:
             continue
         lines.append(
             f"{a.axis:5s} {'J':6s} {_g(a.J_true):>11s} {_g(a.ls_J):>11s} {_pct(a.ls_J_err):>10s} "
-            f"{_g(a.mras_J):>11s} {_pct(a.mras_J_err):>10s}"
+            f"{_g(a.mras_J):>11s} {_pct(a.mras_J_err):>10s}  {_band(a.mras_J_band, a.J_true)}"
         )
         lines.append(
             f"{'':5s} {'D':6s} {_g(a.D_true):>11s} {_g(a.ls_D):>11s} {_pct(a.ls_D_err):>10s} "
-            f"{_g(a.mras_D):>11s} {_pct(a.mras_D_err):>10s}"
+            f"{_g(a.mras_D):>11s} {_pct(a.mras_D_err):>10s}  {_band(a.mras_D_band, a.D_true)}"
         )
         conv = (
             f"stays within 1 % from update {a.mras_iterations_1pct} of {a.mras_iterations} "
@@ -669,7 +702,8 @@ def format_identification(ident: Identification) -> str:
             else f"does not stay within 1 % ({a.mras_iterations} updates)"
         )
         lines.append(
-            f"{'':5s} MRAS J {conv}, last quarter +-{100 * a.mras_spread:.2g} %; "
+            f"{'':5s} MRAS (the mean of its last quarter of updates) J {conv}, std +-"
+            f"{100 * a.mras_spread:.2g} %, last update {_pct(a.mras_J_last / a.J_true - 1)}; "
             f"the thesis' J-only law: {_pct(a.paper_mras_J_err)}"
         )
     lines += [f"note: {n}" for n in ident.notes]

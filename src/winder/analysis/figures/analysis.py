@@ -71,7 +71,7 @@ def _legend(ax: Any, **kw: Any) -> None:
         return
     lo, hi = ax.get_ylim()
     ax.set_ylim(lo, hi + 0.3 * (hi - lo))
-    per_row = 3 if max(len(x) for x in labels) < 45 else 1
+    per_row = 3 if sum(len(x) for x in labels) < 90 else 1
     if per_row == 1:
         ax.set_ylim(lo, hi + (0.3 + 0.12 * len(handles)) * (hi - lo))
     ax.legend(loc="upper left", ncol=min(len(handles), per_row), fontsize=8, framealpha=0.9, **kw)
@@ -493,12 +493,19 @@ def plot_identification(run: Run, ident: Identification, out: Path | None = None
                 assert tr is not None
                 est = getattr(tr, key)
                 ax.plot(
-                    tr.t,
-                    est / true,
+                    tr.t, est / true, color=CMD, lw=1.0, label=f"MRAS (gain {ident.gain:g}): {key} / recorded"
+                )
+                settled = a.mras_J if key == "J" else a.mras_D
+                band = a.mras_J_band if key == "J" else a.mras_D_band
+                t0 = float(tr.t[tr.t.size - max(1, tr.t.size // 4)]) if tr.t.size else 0.0
+                ax.fill_between(
+                    [t0, float(tr.t[-1]) if tr.t.size else 0.0],
+                    band[0] / true,
+                    band[1] / true,
                     color=CMD,
-                    lw=1.0,
-                    label=f"MRAS (gain {ident.gain:g}): {key} / recorded, "
-                    f"at the end {100 * (est[-1] / true - 1):+.3f} %",
+                    alpha=0.2,
+                    label=f"last quarter: mean {100 * (settled / true - 1):+.2f} %, "
+                    f"{100 * (band[0] / true - 1):+.1f}..{100 * (band[1] / true - 1):+.1f} %",
                 )
                 ax.axhline(
                     ls / true,
@@ -519,7 +526,7 @@ def plot_identification(run: Run, ident: Identification, out: Path | None = None
                         lw=1.0,
                         label=f"within 1 % from update {a.mras_iterations_1pct}",
                     )
-                ax.legend(fontsize=8, loc="lower right")
+                _legend(ax)
             ax.set_ylabel(f"{key} estimate / recorded {key}")
             ax.grid(True, lw=0.3)
         axes[0, c].set_title(f"{axis}: J = {a.J_true:.4g} kg m², D = {a.D_true:.4g} N m s/rad", fontsize=10)
