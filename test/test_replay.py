@@ -394,6 +394,11 @@ def test_resim_with_another_inertia(ops_bag: Path, procs: Procs, tmp_path: Path)
     )
     new_run = json.loads(new_msgs["/winder/job"][0][1].data)["run_id"]
     assert new_run != old_run and new.name == new_run
+    # the path and the ramp are recorded too, for the new run
+    assert new_msgs["/winder/path"][0][1].header.frame_id == new_run
+    ramp = json.loads(new_msgs["/winder/profile_config"][0][1].data)
+    old_ramp = json.loads(old_msgs["/winder/profile_config"][0][1].data)
+    assert ramp["run_id"] == new_run and {**ramp, "run_id": old_run} == old_ramp
     report = final_report(new_msgs)
     assert report["state"] == "done" and report["steps_done"] == report["steps_total"]
     # other joint states: the fork lags more

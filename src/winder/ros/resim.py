@@ -121,9 +121,9 @@ def resimulate(
             if not failure:
                 pub_job.publish(_string(description))
                 if rec.path is not None:
-                    pub_path.publish(rec.path)
+                    pub_path.publish(_path_of(rec.path, run_id))
                 if rec.profile_config is not None:
-                    pub_profile.publish(rec.profile_config)
+                    pub_profile.publish(_string(_event_of(rec.profile_config, run_id)))
                 for raw in rec.events:
                     pub_control.publish(_string(_event_of(raw, run_id)))
                 failure = _stream(node, procs, rec, pub_steps, done, timeout)
@@ -143,8 +143,18 @@ def resimulate(
     return run_id, _result(watch, failure, log_dir)
 
 
+def _path_of(raw: bytes, run_id: str) -> JointTrajectory:
+    """The recorded path (JointTrajectory CDR) for the new run: its header names the run."""
+    from rclpy.serialization import deserialize_message
+
+    path = deserialize_message(raw, JointTrajectory)
+    path.header.frame_id = run_id
+    return path
+
+
 def _event_of(raw: bytes, run_id: str) -> str:
-    """A recorded operator event (String CDR) for the new run."""
+    """A recorded JSON message of the run (String CDR: an operator event, the
+    ramp configuration) for the new run: the same, with the new run id."""
     from rclpy.serialization import deserialize_message
 
     event = json.loads(deserialize_message(raw, String).data)
