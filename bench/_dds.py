@@ -163,7 +163,9 @@ def _messages(n: int, form: str) -> tuple[object, object]:
     return pack_steps(steps), pack_timed(timed)
 
 
-def run_pub(rows: int, timeout: float, form: str = "message") -> dict[str, float | int]:
+def run_pub(
+    rows: int, timeout: float, form: str = "message", timed_only: bool = False
+) -> dict[str, float | int]:
     import rclpy
     from rclpy.duration import Duration
     from std_msgs.msg import Int32MultiArray, Int64MultiArray
@@ -179,14 +181,15 @@ def run_pub(rows: int, timeout: float, form: str = "message") -> dict[str, float
         sizes = chunk_rows(rows)
         built = {n: _messages(n, form) for n in set(sizes)}  # built once: DDS cost only
         t_end = time.monotonic() + timeout
-        while p32.get_subscription_count() == 0 or p64.get_subscription_count() == 0:
+        while (p32.get_subscription_count() == 0 and not timed_only) or p64.get_subscription_count() == 0:
             if time.monotonic() > t_end:
                 raise TimeoutError("no subscriber")
             rclpy.spin_once(node, timeout_sec=0.01)
         t_start, cpu0 = time.monotonic(), time.process_time()
         for n in sizes:
             m32, m64 = built[n]
-            p32.publish(m32)
+            if not timed_only:
+                p32.publish(m32)
             p64.publish(m64)
         t_sent = time.monotonic()
         left = max(t_end - time.monotonic(), 1.0)
@@ -207,7 +210,7 @@ def run_pub(rows: int, timeout: float, form: str = "message") -> dict[str, float
         rclpy.try_shutdown()  # type: ignore[attr-defined]
 
 
-def run_sub(rows: int, timeout: float) -> dict[str, float | int]:
+def run_sub(rows: int, timeout: float, timed_only: bool = False) -> dict[str, float | int]:
     import rclpy
     from std_msgs.msg import Int32MultiArray, Int64MultiArray
 
@@ -235,7 +238,7 @@ def run_sub(rows: int, timeout: float) -> dict[str, float | int]:
             Int64MultiArray, TOPIC_TIMED, lambda r: on_msg("n64", r), QOS_STREAM, raw=True
         )
         t_end = time.monotonic() + timeout
-        while got["n32"] < want or got["n64"] < want:
+        while (got["n32"] < want and not timed_only) or got["n64"] < want:
             if time.monotonic() > t_end:
                 break
             rclpy.spin_once(node, timeout_sec=0.05)
@@ -245,7 +248,7 @@ def run_sub(rows: int, timeout: float) -> dict[str, float | int]:
             "last": got["last"],
             "t_done": time.monotonic(),
             "chunks": int(got["n32"] + got["n64"]),
-            "chunks_expected": 2 * want,
+            "chunks_expected": want if timed_only else 2 * want,
             "bytes": int(got["bytes"]),
             "cpu_s": got["cpu1"] - got["cpu0"],  # all threads, first to last chunk
             "hwm_kb": proc_status_kb(os.getpid(), "VmHWM") or 0,
@@ -261,11 +264,16 @@ def main() -> None:
     ap.add_argument("--rows", type=int, required=True)
     ap.add_argument("--timeout", type=float, default=300.0)
     ap.add_argument("--form", choices=("message", "bytes"), default="message")
+    ap.add_argument(
+        "--timed-only",
+        action="store_true",
+        help="only the step-time chunks (what crosses hosts in a split cell)",
+    )
     args = ap.parse_args()
     if args.role == "pub":
-        out = run_pub(args.rows, args.timeout, args.form)
+        out = run_pub(args.rows, args.timeout, args.form, args.timed_only)
     else:
-        out = run_sub(args.rows, args.timeout)
+        out = run_sub(args.rows, args.timeout, args.timed_only)
     print(json.dumps(out), flush=True)
     sys.exit(0)
 

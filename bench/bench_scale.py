@@ -30,6 +30,7 @@ host, is bench/bench_e2e.py's.
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 import statistics
@@ -155,8 +156,10 @@ def _stats(xs: list[float], anchor: float) -> list[str]:
 # -- 2. many cells ---------------------------------------------------------------------
 def many_cells(tmp: Path) -> None:
     from winder.record.raw import read_raw
+    from winder.record.reader import read_run
 
     counts = (1, 2, 4) if QUICK else (1, 2, 4, 8)
+    job = ["--turns-per-layer", "100", "--poles", "4", "--layers", "2", *FAST]  # 819 200 steps each
     rows = []
     base = 0.0
     for n in counts:
@@ -164,7 +167,7 @@ def many_cells(tmp: Path) -> None:
         t0 = time.time_ns()
         procs = [
             subprocess.Popen(
-                [str(BIN / "winder"), "run", "--namespace", f"/c{k}", *FAST, "--bag-dir", str(tmp / f"n{n}")],
+                [str(BIN / "winder"), "run", "--namespace", f"/c{k}", *job, "--bag-dir", str(tmp / f"n{n}")],
                 env=env_for(domain),
                 stdout=subprocess.PIPE,
                 stderr=subprocess.STDOUT,
@@ -172,20 +175,23 @@ def many_cells(tmp: Path) -> None:
             )
             for k in range(n)
         ]
-        outs = [p.communicate(timeout=600)[0] for p in procs]
-        t1 = time.time_ns()
-        steps, starts, problems = 0, [], []
+        outs = [p.communicate(timeout=900)[0] for p in procs]
+        steps, starts, spans, problems = 0, [], [], []
         for k, (p, out) in enumerate(zip(procs, outs, strict=True)):
             s = summary_of(out)
             if p.returncode != 0 or s.get("done") != s.get("total") or s.get("missing") != "0":
                 problems.append(f"/c{k}: status {p.returncode}, {s}")
                 continue
             steps += int(s["done"])
-            starts.append((wall_start(s["bag"]) - t0) / 1e9)
+            run = read_run(s["bag"])
+            start = run.sim_config.wall_start_ns if run.sim_config else t0
+            starts.append((start - t0) / 1e9)
+            spans.append((start, start + float(run.report.get("wall_time_s", "nan")) * 1e9))
             foreign = [t for t in read_raw(s["bag"], keep=lambda _t: False).topics() if not _own(t, k)]
             if foreign:
                 problems.append(f"/c{k}: its bag holds other cells' topics {foreign}")
-        rate = steps / ((t1 - t0) / 1e9)
+        busy = (max(e for _, e in spans) - min(b for b, _ in spans)) / 1e9 if spans else math.nan
+        rate = steps / busy
         base = base or rate
         rows.append(
             [
@@ -197,7 +203,7 @@ def many_cells(tmp: Path) -> None:
                 "ok" if not problems else "; ".join(problems),
             ]
         )
-    print("\n2. many cells on one graph (each the default job, fast ramp; aggregate over spawn -> last exit)")
+    print("\n2. many cells on one graph (819 200 steps each, fast ramp; aggregate over the jobs' span)")
     heads = ["cells", "steps", "M steps/s", "x 1 cell", "spawn->first step s", "every step, own topics"]
     print(table(heads, rows))
 
@@ -226,43 +232,51 @@ def across_hosts(tmp: Path) -> None:
             ("delay 1 ms", {"delay_ms": 1}),
             ("delay 5 ms", {"delay_ms": 5}),
         ]
+        from winder.ros.dds import LAN_PROFILE, PROFILE
+
         rows = []
         for name, shaping in cases:
             why = hosts.shape(**shaping)
             if why:
-                rows.append([name, "-", "-", "-", "-", why])
+                rows.append([name, "-", "-", "-", "-", "-", why])
                 continue
-            raw = raw_across(hosts, steps)
-            cell = cell_across(hosts, job, tmp)
-            ratio = cell["rate"] / raw if raw else float("nan")
-            rows.append(
-                [
-                    name,
-                    f"{raw / 1e6:.2f}",
-                    f"{cell['rate'] / 1e6:.2f}",
-                    f"{ratio:.2f}",
-                    f"{cell['done']}/{cell['total']}, missing {cell['missing']}, gaps {cell['gaps']}",
-                    f"{cell['link_mb']:.0f} MB over the link",
-                ]
-            )
-        print(table(["link", "raw DDS M rows/s", "cell M steps/s", "x raw", "stream checker", "note"], rows))
+            for label, profile in (("default", PROFILE), ("lan", LAN_PROFILE)):
+                extra = {"FASTRTPS_DEFAULT_PROFILES_FILE": str(profile)}
+                raw = raw_across(hosts, steps, extra)
+                cell = cell_across(hosts, job, tmp, extra)
+                ratio = cell["rate"] / raw if raw else float("nan")
+                rows.append(
+                    [
+                        name,
+                        label,
+                        f"{raw / 1e6:.2f}" if raw else "incomplete",
+                        f"{cell['rate'] / 1e6:.2f}",
+                        f"{ratio:.2f}",
+                        f"{cell['done']}/{cell['total']}, missing {cell['missing']}, gaps {cell['gaps']}",
+                        f"{cell['link_mb']:.0f} MB over the link",
+                    ]
+                )
+        heads = ["link", "profile", "raw DDS M rows/s", "cell M steps/s", "x raw", "stream checker", "note"]
+        print(table(heads, rows))
     finally:
         hosts.down()
 
 
-def raw_across(hosts: Hosts, rows: int) -> float:
+def raw_across(hosts: Hosts, rows: int, extra: dict[str, str]) -> float:
     """Raw DDS rows/s from host a to host b (first publish to last chunk in)."""
     domain = next(DOMAINS)
     dds = [sys.executable, str(HERE / "_dds.py")]
     sub = subprocess.Popen(
-        hosts.command("b", [*dds, "sub", "--rows", str(rows), "--timeout", "120"]),
-        env=hosts.env("b", env_for(domain)),
+        hosts.command("b", [*dds, "sub", "--rows", str(rows), "--timeout", "120", "--timed-only"]),
+        env={**hosts.env("b", env_for(domain)), **extra},
         stdout=subprocess.PIPE,
         text=True,
     )
     pub = subprocess.run(
-        hosts.command("a", [*dds, "pub", "--rows", str(rows), "--timeout", "120", "--form", "bytes"]),
-        env=hosts.env("a", env_for(domain)),
+        hosts.command(
+            "a", [*dds, "pub", "--rows", str(rows), "--timeout", "120", "--form", "bytes", "--timed-only"]
+        ),
+        env={**hosts.env("a", env_for(domain)), **extra},
         capture_output=True,
         text=True,
         timeout=300,
@@ -274,21 +288,21 @@ def raw_across(hosts: Hosts, rows: int) -> float:
     return rows / (out["last"] - start)
 
 
-def cell_across(hosts: Hosts, job: list[str], tmp: Path) -> dict[str, Any]:
+def cell_across(hosts: Hosts, job: list[str], tmp: Path, extra: dict[str, str]) -> dict[str, Any]:
     """The sim node on host b, the rest of the cell on host a; steady steps/s."""
     domain = next(DOMAINS)
     bags = tmp / f"across{domain}"
     sim = subprocess.Popen(
         hosts.command("b", [str(BIN / "sim_node"), "--ros-args", "-p", f"bag_dir:={bags}"]),
-        env=hosts.env("b", env_for(domain)),
+        env={**hosts.env("b", env_for(domain)), **extra},
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )
     try:
         rx0 = hosts.rx_bytes("b")
         r = subprocess.run(
-            hosts.command("a", [str(BIN / "winder"), "run", "--external", "sim", *job]),
-            env=hosts.env("a", env_for(domain)),
+            hosts.command("a", [str(BIN / "winder"), "run", "--external", "sim", *job, "--timeout", "120"]),
+            env={**hosts.env("a", env_for(domain)), **extra},
             capture_output=True,
             text=True,
             timeout=600,
@@ -298,6 +312,9 @@ def cell_across(hosts: Hosts, job: list[str], tmp: Path) -> dict[str, Any]:
         sim.send_signal(2)
         sim.wait(timeout=30)
     s = summary_of(r.stdout)
+    if "done" not in s or "bag" not in s:  # the run did not finish (winder run --timeout)
+        why = (r.stderr.strip().splitlines() or ["no summary"])[-1][:60]
+        return {"done": "0", "total": "?", "missing": "?", "gaps": why, "rate": 0.0, "link_mb": link / 1e6}
     from winder.record.reader import read_run
 
     run = read_run(s["bag"])

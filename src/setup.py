@@ -8,7 +8,7 @@ setup(
     name=package_name,
     version="0.1.0",
     packages=find_packages(include=["winder", "winder.*"]),
-    package_data={"winder": ["py.typed", "ros/fastdds_profile.xml"]},
+    package_data={"winder": ["py.typed", "ros/fastdds_profile.xml", "ros/fastdds_lan.xml"]},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),

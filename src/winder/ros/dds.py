@@ -8,9 +8,11 @@ import os
 from collections.abc import MutableMapping
 from pathlib import Path
 
-__all__ = ["PROFILE", "PROFILE_KEYS", "use_profile"]
+__all__ = ["LAN_PROFILE", "PROFILE", "PROFILE_KEYS", "use_profile"]
 
 PROFILE = Path(__file__).with_name("fastdds_profile.xml")
+#: for a cell split across hosts over a lossy network: UDP only, datagrams within one MTU
+LAN_PROFILE = Path(__file__).with_name("fastdds_lan.xml")
 #: the variables Fast DDS reads its XML profiles from (2.x reads the first, 3.x the second)
 PROFILE_KEYS = ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE")
 
