@@ -251,8 +251,10 @@ def test_three_profiles_in_one_table(bag: Any) -> None:
 
 @pytest.mark.parametrize("name", ["lin2k", "nlns", "trap", "slip"])
 def test_the_live_summary_and_analyze_give_one_eq7(bag: Any, name: str) -> None:
-    """The sim node's live figure (its final report, 6 digits) and winder
-    analyze's are one function's (winder.contract.eq7): equal to the digits recorded."""
+    """The sim node's live figures (its final report, 7 significant digits) and
+    winder analyze's are one function's (winder.contract.eq7): the mean and the
+    maximum, of the commanded steps and of the axes, equal to the digits
+    recorded, and the live summary's 3 decimals in um are analyze's."""
     path = bag(name)
     res = analyze(read_run(path))
     reports = [  # the sim node's job statuses, in any namespace, as rosbags decodes them
@@ -261,9 +263,22 @@ def test_the_live_summary_and_analyze_give_one_eq7(bag: Any, name: str) -> None:
         for st in arr.status
         if st.name.endswith("sim_node: job")
     ]
-    live = float(reports[-1]["mean_deviation_actual_m"])
+    live = reports[-1]
     assert res.actual is not None
-    assert res.actual.mean == pytest.approx(live, rel=1e-6, abs=1e-15)
+    for key, ours in (
+        ("mean_deviation_actual_m", res.actual.mean),
+        ("max_deviation_actual_m", res.actual.max),
+        ("mean_deviation_command_m", res.command.mean),
+        ("max_deviation_command_m", res.command.max),
+    ):
+        assert f"{ours:.6e}" == live[key], key  # the report's own format: every digit it holds
+    table = run_cli("analyze", str(path), "--no-plots").stdout
+    for key, row in (
+        ("mean_deviation_actual_m", "eq.7 mean, axes"),
+        ("mean_deviation_command_m", "eq.7 mean, command"),
+    ):
+        shown = next(ln for ln in table.splitlines() if ln.startswith(row))
+        assert shown.split()[-2] == f"{float(live[key]) * 1e6:.3f}", shown  # as winder run prints it
 
 
 def test_two_runs_side_by_side_mark_their_differences(bag: Any) -> None:

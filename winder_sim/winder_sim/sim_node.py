@@ -45,7 +45,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from winder.axis import StepperAxis
 from winder.contract.cdr import JointStateEncoder, encode_clocks
-from winder.contract.eq7 import layer_of_samples, sample_deviation
+from winder.contract.eq7 import layer_of_samples, sample_deviation, step_deviation
 from winder.contract.params import (
     MAX_JOB_SECONDS,
     MOTOR_FIELDS,
@@ -71,7 +71,6 @@ from winder.contract.topics import (
     in_namespace,
     status_values,
 )
-from winder.motion.interp import line_distance
 from winder.motion.job import AXES
 from winder.record.bag import BagRecorder, new_bag_path, run_bag_path, signals_held
 from winder.ros.chunks import TIMED_CDR, waiting
@@ -738,14 +737,10 @@ class SimNode(ManagedNode):
         return v
 
     def deviation_of_commands(self, seg: int, pos: npt.NDArray[np.int64]) -> None:
+        """Eq. 7 of the commanded steps, as ``winder analyze`` computes it (winder.contract.eq7)."""
         assert self.plan is not None
-        s = self.plan.segments[seg]
-        if s.kind != "layer":
-            return
-        dist = line_distance(
-            pos[:, :2], s.delta[0], s.delta[1], step_lengths=self.lxly, origin=(s.start[0], s.start[1])
-        )
-        self.accumulate(self.dev_cmd, dist)
+        if self.plan.segments[seg].kind == "layer":
+            self.accumulate(self.dev_cmd, step_deviation(self.plan, seg, pos))
 
     def deviation_of_axes(self, segs: npt.NDArray[np.int64], act_pos: npt.NDArray[np.float64]) -> None:
         """Eq. 7 of the samples, as ``winder analyze`` computes it (winder.contract.eq7)."""
@@ -756,12 +751,6 @@ class SimNode(ManagedNode):
         if np.any(layer >= 0):
             dist = sample_deviation(self.plan, layer, x, y)
             self.accumulate(self.dev_act, dist[layer >= 0])
-
-    @property
-    def lxly(self) -> tuple[float, float]:
-        """Feed step and fork arc per step (m): the unrolled winding plane."""
-        assert self.plan is not None
-        return self.plan.step_lengths[0], self.plan.step_lengths[1]
 
     @staticmethod
     def accumulate(acc: list[float], dist: npt.NDArray[np.float64]) -> None:

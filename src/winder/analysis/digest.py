@@ -31,8 +31,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from winder.contract.eq7 import step_deviation
 from winder.contract.stream import JobPlan, SegmentPlan
-from winder.motion.interp import line_distance
 from winder.motion.job import AXES
 
 __all__ = [
@@ -286,10 +286,12 @@ class LayerStats:
         out: FloatArray = self.turn_sum[seen] / self.turn_count[seen]
         return out
 
-    def add(self, rows: IntArray, step_lengths: tuple[float, float]) -> None:
+    def add(self, rows: IntArray, plan: JobPlan) -> None:
+        """The step rows of this layer, of the job ``plan``: their eq. 7 distances
+        (:func:`winder.contract.eq7.step_deviation`, as the sim node's live summary)."""
         s = self.plan
         rel = rows[:, 2:4] - np.asarray(s.start[:2])
-        dist = line_distance(rel, s.delta[0], s.delta[1], step_lengths=step_lengths)
+        dist = step_deviation(plan, self.segment, rows[:, 2:4])
         tid = turn_index(np.abs(rel[:, 1]).astype(np.float64), self.per_rev, self.turns)
         idx = self.points + np.arange(rows.shape[0])
         self.points += dist.size
@@ -359,7 +361,6 @@ class _Pass:
         self.d = Digest()
         self.stride_time = stride_time
         lx, ly = plan.step_lengths[0], plan.step_lengths[1]
-        self.lengths = (lx, ly)
         job = plan.job
         first_layer = True
         layer_steps = sum(s.steps for s in plan.segments if s.kind == "layer")
@@ -462,7 +463,7 @@ class _Pass:
             return
         layer = d.layers.get(i)
         if layer is not None:
-            layer.add(rows, self.lengths)
+            layer.add(rows, self.plan)
         if rows.shape[0] and i not in self.closed:
             for j in [j for j in self.kin if j < i]:  # the stream has moved on: finish earlier moves
                 self._close(j)

@@ -1,6 +1,10 @@
-"""Eq. 7 of the simulated axes, one definition for the sim node's live
-summary and for ``winder analyze`` (so both print the same figure for the
-same run).
+"""Eq. 7, one definition for the sim node's live summary and for ``winder
+analyze`` (so both print the same figures for the same run): of the
+commanded steps (:func:`step_deviation`) and of the simulated axes
+(:func:`layer_of_samples`, :func:`sample_deviation`).
+
+A commanded step counts if its row belongs to a layer segment; it is
+measured against that layer's line, exactly (integer arithmetic).
 
 A joint sample counts while a layer is wound: the command at the sample (the
 last step row at or before it) is in a layer segment. It is measured against
@@ -20,7 +24,7 @@ import numpy.typing as npt
 from winder.contract.stream import JobPlan
 from winder.motion.interp import line_distance
 
-__all__ = ["layer_of_samples", "sample_deviation"]
+__all__ = ["layer_of_samples", "sample_deviation", "step_deviation"]
 
 IntArray = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]
@@ -77,3 +81,13 @@ def sample_deviation(plan: JobPlan, layer: npt.ArrayLike, x: npt.ArrayLike, y: n
         rel = np.column_stack([xx[m] - s.start[0], yy[m] - s.start[1]])
         out[m] = line_distance(rel, s.delta[0], s.delta[1], step_lengths=lengths)
     return out
+
+
+def step_deviation(plan: JobPlan, segment: int, pos: npt.ArrayLike) -> FloatArray:
+    """The eq. 5 distance (m) of commanded step positions ``pos`` (rows of
+    feed, fork, ... in steps; the first two columns count) of layer segment
+    ``segment`` to its ideal line."""
+    s = plan.segments[segment]
+    p = np.asarray(pos)[:, :2]
+    lengths = (plan.step_lengths[0], plan.step_lengths[1])
+    return line_distance(p, s.delta[0], s.delta[1], step_lengths=lengths, origin=(s.start[0], s.start[1]))
