@@ -19,7 +19,8 @@ import numpy as np
 import pytest
 import test_reader
 from conftest import final_report, rosbags_read
-from test_reader import joint_arrays, run_cli, step_rows
+from mcap.reader import make_reader
+from test_reader import assert_one_line_error, joint_arrays, run_cli, step_rows
 
 from winder.analysis.metrics import analyze, step_kinematics
 from winder.record.reader import read_run
@@ -281,25 +282,100 @@ def test_the_live_summary_and_analyze_give_one_eq7(bag: Any, name: str) -> None:
         assert shown.split()[-2] == f"{float(live[key]) * 1e6:.3f}", shown  # as winder run prints it
 
 
+def _marked(table: str) -> dict[str, bool]:
+    """The table's row names, each with whether it is marked ``*``."""
+    rows = table.splitlines()[2:]
+    return {ln[2:].split("  ")[0]: ln.startswith("* ") for ln in rows if ln[:2] in ("* ", "  ")}
+
+
+def _recorded_setup(path: Path) -> dict[str, Any]:
+    """What a bag says it ran with, as rosbags decodes it: job, ramp, motors, rate, compression."""
+    ref = rosbags_read(path)
+    ns = next(k for k in ref if k.endswith("/winder/job"))[: -len("/winder/job")]
+    job = json.loads(ref[f"{ns}/winder/job"][0][1].data)
+    cfg = json.loads(ref[f"{ns}/winder/sim_config"][0][1].data)
+    ramp = json.loads(ref[f"{ns}/winder/profile_config"][-1][1].data)
+    with next(path.glob("*.mcap")).open("rb") as f:  # the chunk compression, by the mcap library
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    out: dict[str, Any] = {
+        "bag compression": {c.compression or "none" for c in summary.chunk_indexes},
+        "job id": job["job"]["job_id"],
+        "job": {k: job["job"][k] for k in ("poles", "layers", "turns_per_layer", "wire_diameter")},
+        "profile / motor model": (ramp["profile"], cfg["model"]),
+        "joint-state rate": cfg["publish_rate"],
+    }
+    for axis, m in cfg["axes"].items():
+        out[f"{axis}: motor J, D"] = (m["J"], m["D"], m["load_torque"])
+        out[f"{axis}: motor Zr, L, i_a"] = (m["Zr"], m["L"], m["i_a"], m["motor_step_angle"])
+    return out
+
+
 def test_two_runs_side_by_side_mark_their_differences(bag: Any) -> None:
-    """Set-up rows in which two runs differ are marked *, the others not;
-    the motors are the ones the sim_config of each bag recorded."""
+    """Set-up rows in which two runs differ are marked *, the others not: the
+    expectation is worked out from what each bag recorded (its job, ramp and
+    sim_config, as rosbags decodes them), per row."""
     lin, trap, nlns = bag("lin2k"), bag("trap"), bag("nlns")
-    r = run_cli("analyze", str(lin), str(trap), "--no-plots")
-    assert r.returncode == 0, r.stderr
-    lines = r.stdout.splitlines()
-    marked = {ln[2:].split("  ")[0] for ln in lines if ln.startswith("* ") and "  " in ln}
-    # the job ids differ (lin2k, trap), the ramps and the joint-state rates; the motors do not
-    assert marked == {"job", "profile / motor model", "ramp limits (major axis)", "joint-state rate"}, marked
-    assert "* the runs differ in this setting" in lines
-    r = run_cli("analyze", str(lin), str(nlns), "--no-plots")
-    marked = {ln[2:].split("  ")[0] for ln in r.stdout.splitlines() if ln.startswith("* ") and "  " in ln}
-    cfg = json.loads(rosbags_read(nlns)["/cell1/winder/sim_config"][0][1].data)
-    assert cfg["axes"]["fork"]["J"] == 2e-4 and cfg["model"] == "nonlinear"
-    assert {"fork: motor J, D", "feed: motor J, D", "pole: motor J, D", "profile / motor model"} <= marked
-    assert "job" in marked  # another job id
-    fork = next(ln for ln in r.stdout.splitlines() if "fork: motor J, D" in ln)
+    for a, b in ((lin, trap), (lin, nlns)):
+        r = run_cli("analyze", str(a), str(b), "--no-plots")
+        assert r.returncode == 0, r.stderr
+        marked = _marked(r.stdout)
+        sa, sb = _recorded_setup(a), _recorded_setup(b)
+        for row in sa:
+            assert marked[row] == (sa[row] != sb[row]), (row, sa[row], sb[row])
+        assert "* the runs differ in this setting" in r.stdout.splitlines()
+        # the rows of the results are never marked
+        assert not any(marked[n] for n in ("run", "state", "steps", "eq.7 mean, axes", "fork: steps moved"))
+    # lin2k is recorded uncompressed, trap and nlns with lz4 chunks (the default)
+    assert marked["bag compression"]
+    r = run_cli("analyze", str(lin), str(nlns), "--no-plots", "--json")
+    out = json.loads(r.stdout)
+    assert out[0]["setup_differs"] == out[1]["setup_differs"]
+    assert {"model", "fork.J", "feed.D", "pole.J", "compression"} <= set(out[0]["setup_differs"])
+    assert not {"fork.D", "feed.J", "pole.D", "fork.Zr"} & set(out[0]["setup_differs"])
+    assert [o["compression"] for o in out] == ["none", "lz4"]
+    fork = next(
+        ln
+        for ln in run_cli("analyze", str(nlns), "--no-plots").stdout.splitlines()
+        if "fork: motor J, D" in ln
+    )
     assert "0.0002 kg m^2" in fork
+    # one bag: nothing is marked
+    assert not any(_marked(run_cli("analyze", str(lin), "--no-plots").stdout).values())
+
+
+def test_an_aborted_run_counts_the_steps_it_simulated(bag: Any) -> None:
+    """An aborted job: the steps simulated, from the sim node's final report,
+    equal the step rows the bag holds up to the abort's rest and the last
+    commanded position; the table and the JSON say so, and of how many."""
+    path = bag("abort")
+    ref = rosbags_read(path)
+    report = final_report(ref)
+    job = json.loads(ref["/winder/job"][0][1].data)
+    total = sum(s["steps"] for s in job["segments"])
+    rows = step_rows(ref["/winder/step_times"])
+    (abort,) = [e for e in (json.loads(m.data) for _, m in ref["/winder/control"]) if e["event"] == "abort"]
+    simulated = int(report["steps_done"])
+    assert report["state"] == "aborted" and 0 < simulated < total
+    assert simulated == int(np.sum(rows[:, 0] <= abort["t_rest_ns"])) == abort["steps"]
+    # the axes were commanded to the position of the last simulated step, and stayed there
+    _, cmd, _ = joint_arrays(ref["/winder/joint_commands"])
+    js = np.asarray(job["joint_step"])
+    np.testing.assert_allclose(cmd[-1] / js, rows[simulated - 1, 2:], atol=1e-6)
+    r = run_cli("analyze", str(path), "--no-plots")
+    assert r.returncode == 0, r.stderr
+    steps = next(ln for ln in r.stdout.splitlines() if ln.startswith("steps "))
+    assert steps.split("  ")[-1].strip() == (
+        f"{simulated} simulated, {rows.shape[0]} recorded, of {total} (aborted at rest)"
+    ), steps
+    assert str(total) + " simulated" not in r.stdout
+    out = json.loads(run_cli("analyze", str(path), "--no-plots", "--json").stdout)[0]
+    assert (out["steps_simulated"], out["steps_recorded"], out["steps_total"]) == (
+        simulated,
+        rows.shape[0],
+        total,
+    )
+    assert out["state"] == "aborted" and out["stream"]["steps_missing"] == 0
 
 
 def test_plots_are_written(bag: Any, tmp_path: Path) -> None:
@@ -321,52 +397,99 @@ def test_plots_are_written(bag: Any, tmp_path: Path) -> None:
 
 def test_a_value_that_rounds_to_zero_prints_without_a_sign() -> None:
     """'-0.000 steps' appeared in the summary: a tiny negative is 0."""
-    from winder.analysis.metrics import _f
+    from winder.analysis.metrics import _f, _g
 
     assert _f(-1e-9) == "0.000" and _f(-4e-4) == "0.000" and _f(-6e-4) == "-0.001"
     assert _f(2.5e-6, 1e6) == "2.500" and _f(float("nan")) == "-"
+    assert _g(-0.0) == "0" and _g(-0.0, 1e6) == "0" and _g(-2.5e-3) == "-0.0025"
 
 
-def test_export_csv_holds_every_message_and_step(bag: Any, tmp_path: Path) -> None:
+@pytest.mark.parametrize("name", ["lin2k", "nlns", "abort"])
+def test_export_csv_holds_every_message_and_step(bag: Any, tmp_path: Path, name: str) -> None:
     """winder export: each CSV file has one row per recorded message (per step
-    for the step times), with the values rosbags decodes, and loads with numpy
-    and the csv module; a damaged bag or an existing directory is refused."""
+    for the step times, per operator event), with the values rosbags decodes,
+    headers that name the unit and are identifiers MATLAB's readtable keeps,
+    no "-0"; it loads with numpy and the csv module. Uncompressed (lin2k), lz4
+    in a namespace (nlns), an aborted run with its event (abort)."""
     import csv
+    import re
 
-    path = bag("lin2k")
+    path = bag(name)
     out = tmp_path / "csv"
     r = run_cli("export", str(path), "--csv", str(out))
     assert r.returncode == 0, r.stderr
     ref = rosbags_read(path)
-    origin = json.loads(ref["/winder/sim_config"][0][1].data).get("clock_origin_ns", 0)
-    for topic, name in (
-        ("/winder/joint_states", "joint_states.csv"),
-        ("/winder/joint_commands", "joint_commands.csv"),
+    ns = next(k for k in ref if k.endswith("/winder/job"))[: -len("/winder/job")]
+    origin = json.loads(ref[f"{ns}/winder/sim_config"][0][1].data).get("clock_origin_ns", 0)
+    for topic, file in (
+        (f"{ns}/winder/joint_states", "joint_states.csv"),
+        (f"{ns}/winder/joint_commands", "joint_commands.csv"),
     ):
         t, pos, vel = joint_arrays(ref[topic])
-        table = np.loadtxt(out / name, delimiter=",", skiprows=1)
+        table = np.loadtxt(out / file, delimiter=",", skiprows=1)
         assert table.shape == (len(ref[topic]), 7)
         np.testing.assert_allclose(table[:, 0], t - origin / 1e9, rtol=0, atol=1e-9)
         np.testing.assert_array_equal(table[:, 1:4], pos)
         np.testing.assert_array_equal(table[:, 4:7], vel)
-        assert f"{out / name}  {len(ref[topic])} rows" in r.stdout
-    steps = np.loadtxt(
-        out / "step_times.csv", delimiter=",", skiprows=1, usecols=(0, 2, 3, 4, 5), dtype=np.int64
-    )
-    np.testing.assert_array_equal(steps, step_rows(ref["/winder/step_times"]))
-    with open(out / "step_times.csv", newline="") as f:
-        head = next(csv.reader(f))
-    assert head == ["t_ns", "t_s", "segment", "feed_steps", "fork_steps", "pole_steps"]
+        assert f"{out / file}  {len(ref[topic])} rows" in r.stdout
+    rows = step_rows(ref[f"{ns}/winder/step_times"])
+    steps = np.loadtxt(out / "step_times.csv", delimiter=",", skiprows=1, ndmin=2)
+    np.testing.assert_array_equal(steps[:, [0, 2, 3, 4, 5]].astype(np.int64), rows)
+    np.testing.assert_allclose(steps[:, 1], rows[:, 0] / 1e9, rtol=0, atol=1e-12)
+    events = [json.loads(m.data) for _, m in ref.get(f"{ns}/winder/control", [])]
+    with open(out / "events.csv", newline="") as f:
+        listed = list(csv.DictReader(f))
+    assert [(e["event"], float(e["t_s"])) for e in listed] == [
+        (e["event"], pytest.approx(e["t_ns"] / 1e9, abs=1e-9)) for e in events
+    ]
+    assert (name == "abort") == any(e["event"] == "abort" for e in listed)
+    for file in ("joint_states.csv", "joint_commands.csv", "step_times.csv", "events.csv", "errors.csv"):
+        text = (out / file).read_text()
+        head = text.split("\n", 1)[0].split(",")
+        assert all(re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", h) for h in head), head
+        assert not re.search(r"(^|,)-0(\.0*)?(,|$)", text, flags=re.M), file
     meta = json.loads((out / "run.json").read_text())
-    assert meta["rows"]["step_times.csv"] == steps.shape[0] and meta["final_report"]["state"] == "done"
-    again = run_cli("export", str(path), "--csv", str(out))
-    assert again.returncode == 2 and "already exists" in again.stderr and "Traceback" not in again.stderr
+    assert meta["rows"]["step_times.csv"] == rows.shape[0] and meta["final_report"] == final_report_of(
+        ref, ns
+    )
+    assert meta["compression"] == ("none" if name == "lin2k" else "lz4")
+    assert sorted(p.name for p in out.iterdir()) == sorted([*meta["rows"], "run.json"])
+    assert not list(tmp_path.glob(".csv.*"))  # the temporary directory was renamed
+
+
+def final_report_of(ref: dict[str, list[tuple[int, Any]]], ns: str) -> dict[str, str]:
+    """The last job status of the sim node of the cell in ``ns``."""
+    return [
+        {kv.key: kv.value for kv in st.values}
+        for _, arr in ref["/diagnostics"]
+        for st in arr.status
+        if st.name == f"{ns.strip('/')}/sim_node: job".lstrip("/")
+    ][-1]
+
+
+def test_export_refuses_what_it_cannot_write_whole(bag: Any, tmp_path: Path) -> None:
+    """An existing directory, a damaged bag and a cut-short one are refused
+    with one line and status 2, and nothing is left behind."""
+    path = bag("lin2k")
+    out = tmp_path / "csv"
+    out.mkdir()
+    assert_one_line_error(run_cli("export", str(path), "--csv", str(out)), "already exists")
+    assert list(out.iterdir()) == []
     damaged = tmp_path / "damaged"
     shutil.copytree(path, damaged)
     mcap = next(damaged.glob("*.mcap"))
     data = bytearray(mcap.read_bytes())
     data[len(data) // 2] ^= 0x10  # inside a chunk of the uncompressed bag's data section
     mcap.write_bytes(bytes(data))
-    refused = run_cli("export", str(damaged), "--csv", str(tmp_path / "d"))
-    assert refused.returncode == 2 and "Traceback" not in refused.stderr, refused.stderr
-    assert not (tmp_path / "d").exists() and not list(tmp_path.glob(".d.*"))
+    assert_one_line_error(
+        run_cli("export", str(damaged), "--csv", str(tmp_path / "d")),
+        "damaged recording",
+        "nothing is written",
+    )
+    cut = tmp_path / "cut"
+    cut.mkdir()
+    (cut / mcap.name).write_bytes(bytes(data[: len(data) // 3]))  # no footer, no metadata.yaml
+    assert_one_line_error(
+        run_cli("export", str(cut), "--csv", str(tmp_path / "c")), "cut short", "bag recover"
+    )
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["csv", "cut", "damaged"]

@@ -151,6 +151,17 @@ def test_stream_fault_is_detected_and_reported(tmp_path: Path, procs: Procs, ros
         ).stdout
         line = next((ln for ln in out.splitlines() if ln.startswith("ERROR ") and words[fault] in ln), out)
         assert f"at {(logged - wall0) / 1e9:.3f} s: sim_node: stream:" in line, line
+        # ... and the stream's own count of the fault, and what it cost, from the recorded report
+        report = final_status(bag)
+        total = fake.chunks(100)
+        rows = sum(len(m.data) // 5 for _, m in bag["/winder/step_times"])
+        faults = next(ln for ln in out.splitlines() if ln.startswith("stream faults"))
+        assert faults.endswith(f"{report['gaps']} gap(s), {report['steps_missing']} steps missing"), faults
+        steps = next(ln for ln in out.splitlines() if ln.startswith("steps "))
+        assert steps.endswith(
+            f"{report['steps_done']} simulated, {rows} recorded, of {sum(c.shape[0] for c in total)} "
+            f"(done, {report['steps_missing']} steps never arrived)"
+        ), steps
 
 
 def test_killed_profile_node_is_reported_as_a_stall(tmp_path: Path, procs: Procs, ros: Any) -> None:

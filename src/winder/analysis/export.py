@@ -103,6 +103,9 @@ def export_csv(run: Run, out: Path) -> dict[str, int]:
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     try:
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o777 & ~umask)  # mkdtemp's 0700 would stay on DIR: a plain new directory's mode
         rows: dict[str, int] = {}
         for name in ("joint_states.csv", "joint_commands.csv", "step_times.csv", "events.csv", "errors.csv"):
             with open(tmp / name, "w", newline="") as f:
@@ -118,7 +121,9 @@ def export_csv(run: Run, out: Path) -> dict[str, int]:
                     rows[name] = _errors(f, run)
         meta = {
             "bag": str(run.path),
+            "job_id": run.job_id,
             "run_id": run.run_id,
+            "compression": run.compression,
             "job": run.plan.job.to_dict(),
             "sim_config": asdict(run.sim_config) if run.sim_config else None,
             "profile_config": run.profile_config,

@@ -4,6 +4,18 @@ Input is a :class:`winder.record.reader.Run`; output an :class:`Analysis` that p
 as a table (:func:`format_table`, several runs side by side) or JSON
 (:func:`to_json`).
 
+What was run, and how much of it
+--------------------------------
+The set-up (:func:`setup`: job, ramp limits of its profile, motor model and
+each axis' motor from ``winder/sim_config``, joint-state rate, the bag's chunk
+compression) is what several runs are compared on: the table marks ``*`` the
+rows whose values differ (:func:`setup_differences`, on the recorded values,
+not on their rounded text). Steps are counted three ways and never taken one
+for another: *simulated* (the sim node's final report, ``steps_done``),
+*recorded* (the step rows in the bag) and *in the job*; a note says where the
+first two disagree. The sim node's stream counters (gaps, steps missing,
+chunks rejected, stalls) and every ERROR status recorded are listed.
+
 Winding accuracy (the 2016 rotor-winding paper, eq. 7)
 ------------------------------------------------------
 Unrolled, a layer is the straight line from its start to (feed distance,
@@ -72,6 +84,8 @@ __all__ = [
     "digest_run",
     "format_table",
     "paired_error",
+    "setup",
+    "setup_differences",
     "step_kinematics",
     "to_json",
     "winding_samples",
@@ -133,7 +147,7 @@ class Analysis:
     path: str
     job_id: str
     run_id: str  #: "" in bags recorded before run ids
-    job: str  #: one-line description
+    job: str  #: one-line description of the winding (poles, layers, turns, wire)
     profile: str
     ramp: dict[str, float]  #: the recorded ramp limits (steps of the major axis, s); empty if unknown
     model: str
@@ -155,11 +169,15 @@ class Analysis:
     axes: dict[str, AxisMotion]
     notes: list[str] = field(default_factory=list)
     steps_simulated: int = -1  #: steps the sim node simulated, from its report (-1 if unknown)
-    #: each axis' motor as the simulation used it: J, D, Zr, L, i_a, load_torque (SI)
+    #: each axis' motor as the simulation used it: J, D, Zr, L, i_a, motor_step_angle, load_torque (SI)
     motors: dict[str, dict[str, float]] = field(default_factory=dict)
     publish_rate: float = math.nan  #: joint-state rate, Hz of simulated time
     source: str = ""  #: a re-simulation: the bag and run its steps come from
     error_list: list[str] = field(default_factory=list)  #: every ERROR recorded, with its time
+    compression: str = ""  #: the bag's MCAP chunk compression ("" if unknown)
+    #: the sim node's stream checks at the end (gaps, steps_missing, chunks_rejected,
+    #: stalls, errors), as it reported them; empty without a report
+    stream: dict[str, int] = field(default_factory=dict)
 
 
 # -- eq. 7 -------------------------------------------------------------------------
@@ -353,6 +371,12 @@ def digest_run(run: Run, stride_time: float = STRIDE_TIME) -> Digest:
     return digest(run.plan, run.step_rows, run.states.t, stride_time)
 
 
+#: the profile node's settings shown as the ramp (winder/profile_config)
+RAMP_KEYS = ("v_max", "a_max", "j_max", "tau", "v_start", "dwell", "feed_override")
+#: the sim node's stream counters (its job status) shown as stream faults
+STREAM_KEYS = ("gaps", "steps_missing", "chunks_rejected", "stalls", "errors")
+
+
 def _num(report: dict[str, str], key: str, default: float = math.nan) -> float:
     try:
         return float(report[key])
@@ -394,6 +418,12 @@ def analyze(run: Run, stride_time: float = STRIDE_TIME, digested: Digest | None 
         )
         notes.append(f"incomplete recording ({why}): figures cover what was recorded")
     simulated = int(_num(run.report, "steps_done", -1))
+    reported_total = int(_num(run.report, "steps_total", -1))
+    if 0 <= reported_total != run.plan.total_steps:
+        notes.append(
+            f"the sim node reported a job of {reported_total} steps, the recorded job has "
+            f"{run.plan.total_steps}"
+        )
     if 0 <= simulated != d.rows:
         notes.append(
             f"the sim node simulated {simulated} steps, the recording holds {d.rows} step rows: "
@@ -417,14 +447,15 @@ def analyze(run: Run, stride_time: float = STRIDE_TIME, digested: Digest | None 
         job_id=run.job_id,
         run_id=run.run_id,
         job=(
-            f"{job.job_id}: {job.poles} poles x {job.layers} layers x {job.turns_per_layer} turns, "
+            f"{job.poles} poles x {job.layers} layers x {job.turns_per_layer} turns, "
             f"wire {job.wire_diameter * 1e3:g} mm"
+            + (f", coils {job.coil_overrides}" if job.coil_overrides else "")
         ),
         profile=run.profile or "unknown",
         ramp={
             k: float(v)
             for k, v in run.profile_config.items()
-            if k in ("v_max", "a_max", "j_max", "tau", "v_start", "dwell") and isinstance(v, (int, float))
+            if k in RAMP_KEYS and isinstance(v, (int, float))
         },
         model=run.sim_config.model if run.sim_config else "unknown",
         state=state,
@@ -446,7 +477,7 @@ def analyze(run: Run, stride_time: float = STRIDE_TIME, digested: Digest | None 
         notes=notes,
         steps_simulated=simulated,
         motors={
-            axis: {k: getattr(a, k) for k in ("J", "D", "Zr", "L", "i_a", "load_torque")}
+            axis: {k: getattr(a, k) for k in ("J", "D", "Zr", "L", "i_a", "motor_step_angle", "load_torque")}
             for axis, a in (run.sim_config.axes.items() if run.sim_config else ())
         },
         publish_rate=run.sim_config.publish_rate if run.sim_config else math.nan,
@@ -456,6 +487,8 @@ def analyze(run: Run, stride_time: float = STRIDE_TIME, digested: Digest | None 
             else ""
         ),
         error_list=list(run.errors),
+        compression=run.compression,
+        stream={k: int(_num(run.report, k)) for k in STREAM_KEYS if math.isfinite(_num(run.report, k))},
     )
 
 
@@ -473,12 +506,44 @@ def _clean(x: Any) -> Any:
 
 
 def to_json(analyses: list[Analysis]) -> str:
-    """JSON text: a list with one object per run (NaN written as null)."""
-    return json.dumps([_clean(asdict(a)) for a in analyses], indent=2)
+    """JSON text: a list with one object per run (NaN written as null); each
+    object's ``setup_differs`` names the set-up values (:func:`setup`) in
+    which the runs differ, the rows the table marks ``*``."""
+    differs = setup_differences(analyses)
+    return json.dumps([_clean({**asdict(a), "setup_differs": differs}) for a in analyses], indent=2)
+
+
+def setup(a: Analysis) -> dict[str, Any]:
+    """A run's set-up as flat key -> value: what two runs are compared on
+    (job, ramp limits of its profile, motor model and each axis' motor,
+    joint-state rate, compression, source of a re-simulation)."""
+    out: dict[str, Any] = {
+        "job_id": a.job_id,
+        "job": a.job,
+        "source": a.source,
+        "profile": a.profile,
+        "model": a.model,
+    }
+    shown = ("v_max", *LIMITS.get(a.profile, ()), "v_start", "dwell", "feed_override")
+    out.update({f"ramp.{k}": a.ramp[k] for k in shown if k in a.ramp})
+    for axis, motor in a.motors.items():
+        out.update({f"{axis}.{k}": v for k, v in motor.items()})
+    out["publish_rate"] = a.publish_rate
+    out["compression"] = a.compression
+    return out
+
+
+def setup_differences(analyses: list[Analysis]) -> list[str]:
+    """The :func:`setup` keys whose values are not the same in every run
+    (a key some run lacks counts as different); empty for one run."""
+    setups = [setup(a) for a in analyses]
+    keys = list(dict.fromkeys(k for s in setups for k in s))
+    return [k for k in keys if len({repr(s.get(k)) for s in setups}) > 1]
 
 
 def _g(x: float, scale: float = 1.0, digits: int = 4) -> str:
-    return "-" if not math.isfinite(x) else f"{x * scale:.{digits}g}"
+    """A number for the table in ``digits`` significant digits; 0, never -0."""
+    return "-" if not math.isfinite(x) else f"{x * scale + 0.0:.{digits}g}"  # -0.0 + 0.0 is 0.0
 
 
 def _f(x: float, scale: float = 1.0, decimals: int = 3) -> str:
@@ -510,7 +575,47 @@ def _ramp(a: Analysis) -> str:
         return "not recorded"
     names = {"v_max": "v", "a_max": "a", "j_max": "j", "tau": "tau"}
     parts = [f"{names[k]} {r[k]:g}" for k in ("v_max", *LIMITS.get(a.profile, ())) if k in r]
+    if r.get("v_start"):
+        parts.append(f"v_start {r['v_start']:g}")
+    if r.get("dwell"):
+        parts.append(f"dwell {r['dwell']:g}")
+    if r.get("feed_override", 1.0) != 1.0:
+        parts.append(f"override x{r['feed_override']:g}")
     return ", ".join(parts) + " (steps/s^n, s)"
+
+
+def _steps(a: Analysis) -> str:
+    """Steps simulated (the sim node's count), recorded (step rows in the bag)
+    and in the job, and why the first falls short of the last."""
+    if a.steps_simulated < 0:
+        cut = "cut short, " if a.recovered else ""
+        return f"{a.steps_recorded} recorded, of {a.steps_total} ({cut}no report of the sim node)"
+    text = f"{a.steps_simulated} simulated, {a.steps_recorded} recorded, of {a.steps_total}"
+    if a.steps_simulated >= a.steps_total:
+        return text
+    missing = a.stream.get("steps_missing", 0)
+    why = [
+        "aborted at rest" if a.state == "aborted" else a.state or "no state",
+        *([f"{missing} steps never arrived"] if missing else []),
+    ]
+    return f"{text} ({', '.join(why)})"
+
+
+def _stream(a: Analysis) -> str:
+    """The stream faults the sim node counted, "none" if it counted none."""
+    if not a.stream:
+        return "-"
+    s = a.stream
+    parts = []
+    if s.get("gaps"):
+        parts.append(f"{s['gaps']} gap(s), {s.get('steps_missing', 0)} steps missing")
+    elif s.get("steps_missing"):
+        parts.append(f"{s['steps_missing']} steps missing")
+    if s.get("chunks_rejected"):
+        parts.append(f"{s['chunks_rejected']} chunk(s) rejected (repeated or late)")
+    if s.get("stalls"):
+        parts.append(f"{s['stalls']} stall(s)")
+    return ", ".join(parts) or "none"
 
 
 def _rows(a: Analysis) -> list[tuple[str, str]]:
@@ -520,11 +625,8 @@ def _rows(a: Analysis) -> list[tuple[str, str]]:
         state += f", DAMAGED ({a.damaged} chunks skipped)"
     if a.errors:
         state += f", {a.errors} ERROR reports"
-    if a.steps_simulated >= 0:
-        steps = f"{a.steps_simulated} simulated, {a.steps_recorded} recorded, of {a.steps_total}"
-    else:
-        steps = f"{a.steps_recorded} recorded, of {a.steps_total} (no report of the sim node)"
     rows = [
+        ("job id", a.job_id),
         ("job", a.job),
         ("run", a.run_id or "-"),
         ("re-simulation of", a.source or "-"),
@@ -533,11 +635,20 @@ def _rows(a: Analysis) -> list[tuple[str, str]]:
     ]
     for name, motor in a.motors.items():
         load = f", load {motor['load_torque']:.4g} N m" if motor.get("load_torque") else ""
-        rows.append((f"{name}: motor J, D", f"{motor['J']:.4g} kg m^2, {motor['D']:.4g} N m s/rad{load}"))
+        rows.append((f"{name}: motor J, D", f"{motor['J']:.5g} kg m^2, {motor['D']:.5g} N m s/rad{load}"))
+        rows.append(
+            (
+                f"{name}: motor Zr, L, i_a",
+                f"{motor['Zr']:g} teeth, {motor['L']:.4g} H, {motor['i_a']:.4g} A, "
+                f"{motor['motor_step_angle']:.4g} rad/step",
+            )
+        )
     rows += [
         ("joint-state rate", f"{a.publish_rate:g} Hz" if math.isfinite(a.publish_rate) else "-"),
+        ("bag compression", a.compression or "-"),
         ("state", state),
-        ("steps", steps),
+        ("steps", _steps(a)),
+        ("stream faults", _stream(a)),
         ("job time (last step)", f"{_f(a.job_time)} s"),
         ("simulated / wall time", f"{_f(a.sim_time)} s / {_f(a.wall_time)} s"),
         ("real-time factor", f"{_f(a.real_time_factor, decimals=1)} x"),
@@ -565,12 +676,26 @@ def _rows(a: Analysis) -> list[tuple[str, str]]:
     return rows
 
 
-#: the rows of a run's set-up: several runs side by side, those that differ are marked
-SETUP_ROWS = ("job", "profile / motor model", "ramp limits (major axis)", "joint-state rate")
+#: the set-up rows of the table and the :func:`setup` keys each shows ("x." for
+#: every key under x); several runs side by side, rows whose keys differ are marked
+SETUP_ROWS: dict[str, tuple[str, ...]] = {
+    "job id": ("job_id",),
+    "job": ("job",),
+    "re-simulation of": ("source",),
+    "profile / motor model": ("profile", "model"),
+    "ramp limits (major axis)": ("ramp.",),
+    **{f"{ax}: motor J, D": (f"{ax}.J", f"{ax}.D", f"{ax}.load_torque") for ax in AXES},
+    **{
+        f"{ax}: motor Zr, L, i_a": (f"{ax}.Zr", f"{ax}.L", f"{ax}.i_a", f"{ax}.motor_step_angle")
+        for ax in AXES
+    },
+    "joint-state rate": ("publish_rate",),
+    "bag compression": ("compression",),
+}
 
 
-def _setup_row(name: str) -> bool:
-    return name in SETUP_ROWS or name.endswith(": motor J, D")
+def _shows(row: str, key: str) -> bool:
+    return any(key == k or (k.endswith(".") and key.startswith(k)) for k in SETUP_ROWS.get(row, ()))
 
 
 def format_table(analyses: list[Analysis]) -> str:
@@ -580,18 +705,17 @@ def format_table(analyses: list[Analysis]) -> str:
     names = [r[0] for r in cols[0]]
     header = ["", *[a.label for a in analyses]]
     body = [[n, *[c[i][1] for c in cols]] for i, n in enumerate(names)]
-    differ = False
+    differs = setup_differences(analyses)
     if len(analyses) > 1:
         for r in body:
-            mark = _setup_row(r[0]) and len(set(r[1:])) > 1
-            differ = differ or mark
+            mark = any(_shows(r[0], k) for k in differs)
             r[0] = ("* " if mark else "  ") + r[0]
     widths = [max(len(r[i]) for r in [header, *body]) for i in range(len(header))]
     lines = ["  ".join(h.ljust(w) for h, w in zip(header, widths, strict=True)).rstrip()]
     lines.append("  ".join("-" * w for w in widths))
     for r in body:
         lines.append("  ".join(v.ljust(w) for v, w in zip(r, widths, strict=True)).rstrip())
-    if differ:
+    if differs:
         lines.append("* the runs differ in this setting")
     for a in analyses:
         who = f" ({a.label})" if len(analyses) > 1 else ""

@@ -133,7 +133,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     except OSError as exc:
         raise ValueError(_os_error(exc)) from None
     for name, n in rows.items():
-        print(f"{out / name}  {n} rows")
+        print(f"{out / name}  {n} row{'' if n == 1 else 's'}")
     print(f"{out / 'run.json'}  job, motors, ramp, final report")
     return 0
 

@@ -94,6 +94,8 @@ class RawBag:
     damaged: list[str] = field(default_factory=list)
     #: messages read per connection id, kept or not
     counts: dict[int, int] = field(default_factory=dict)
+    #: chunks read per chunk compression ("none", "lz4", "zstd"), as the chunk headers say
+    compressions: dict[str, int] = field(default_factory=dict)
 
     def topics(self) -> dict[str, int]:
         """Message count per topic."""
@@ -399,6 +401,8 @@ def _read_record(op: int, body: memoryview, length: int, sink: _Sink) -> None:
             chunk = Chunk.read(ReadDataStream(io.BytesIO(body)))
         except Exception as exc:
             raise DamagedChunk(f"its header cannot be read ({type(exc).__name__})") from None
+        kind = chunk.compression or "none"
+        sink.raw.compressions[kind] = sink.raw.compressions.get(kind, 0) + 1
         if chunk.uncompressed_crc:
             sink.crcs = True
         elif sink.crcs:  # a file writes CRCs for all its chunks or for none

@@ -258,6 +258,9 @@ class Run:
     #: dict with ``event``, ``t_ns`` (simulated time since the job's start) and,
     #: for a stop, ``t_rest_ns``, ``steps``, ``stop_distance``; empty if none
     events: tuple[dict[str, Any], ...] = ()
+    #: how the bag's MCAP chunks are compressed ("lz4", "zstd", "none"; several
+    #: comma-separated if they differ; "" if it holds no chunks, e.g. sqlite3)
+    compression: str = ""
 
     @property
     def complete(self) -> bool:
@@ -571,6 +574,7 @@ def _assemble(
         errors=errors,
         profile_config=profile_config,
         events=_decode_events(decoded.get(topic[CONTROL], []), plan.run_id),
+        compression=", ".join(sorted(raw.compressions)),
     )
 
 
