@@ -250,7 +250,7 @@ def test_three_profiles_in_one_table(bag: Any) -> None:
     assert "v 2048, a 8192, j 65536" in table.stdout and "v 2048, tau 0.1" in table.stdout
 
 
-@pytest.mark.parametrize("name", ["lin2k", "nlns", "trap", "slip"])
+@pytest.mark.parametrize("name", ["lin2k", "nlns", "trap", "slip", "abort"])
 def test_the_live_summary_and_analyze_give_one_eq7(bag: Any, name: str) -> None:
     """The sim node's live figures (its final report, 7 significant digits) and
     winder analyze's are one function's (winder.contract.eq7): the mean and the
