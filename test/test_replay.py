@@ -449,3 +449,22 @@ def test_resim_of_a_resim_names_each_source(ops_bag: Path, procs: Procs, tmp_pat
     (first,) = sorted(out.iterdir())
     config = json.loads(rosbags_read(second)["/winder/sim_config"][0][1].data)
     assert config["source_bag"] == str(first.resolve()) and config["model"] == "linear"
+
+
+@pytest.mark.parametrize("sig", ["SIGTERM", "SIGINT"])
+@pytest.mark.parametrize("mode", [["--start-paused"], ["--rate", "1"]])
+def test_a_signal_ends_the_player_paused_or_playing(
+    ops_bag: Path, procs: Procs, sig: str, mode: list[str]
+) -> None:
+    """SIGTERM or SIGINT, paused or playing: the player ends at once with
+    'interrupted' (status 130), no traceback."""
+    import signal
+
+    p = play(procs, ops_bag, *mode)
+    time.sleep(2.0)
+    t0 = time.monotonic()
+    p.send_signal(getattr(signal, sig))
+    out, err = p.communicate(timeout=20)
+    assert time.monotonic() - t0 < 5.0
+    assert p.returncode == 130, out + err
+    assert "interrupted" in err and "Traceback" not in err, err

@@ -29,6 +29,7 @@ from typing import Any
 
 import rclpy
 from rcl_interfaces.msg import SetParametersResult
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from std_srvs.srv import Trigger
@@ -57,6 +58,7 @@ class PlayResult:
     loops: int = 0
     wall_s: float = 0.0
     unacked: list[str] = field(default_factory=list)  #: topics whose readers did not acknowledge all
+    interrupted: bool = False  #: a signal (SIGINT, SIGTERM) ended the replay
 
 
 class Player:
@@ -180,6 +182,8 @@ class Player:
         while True:
             if poll is not None:
                 poll()
+            if not self.node.context.ok():  # SIGINT or SIGTERM: rclpy shut the context down
+                self.stopped = True
             with self.cond:
                 if self.stopped:
                     return False
@@ -214,7 +218,13 @@ class Player:
             for topic, t, data in self.plan.messages():
                 if not self._wait_until_due(t, poll):
                     break
-                self.pubs[topic.recorded].publish(data)
+                try:
+                    self.pubs[topic.recorded].publish(data)
+                except RCLError:
+                    if self.node.context.ok():
+                        raise
+                    self.stopped = True  # a signal shut the context down meanwhile
+                    break
                 result.published[topic.name] += 1
                 self.position_ns = max(self.position_ns, t)
                 now = time.monotonic()
@@ -232,7 +242,9 @@ class Player:
                 if loop:
                     continue
             break
-        result.unacked = self.wait_for_acks(ACK_TIMEOUT)
+        result.interrupted = not self.node.context.ok()
+        if not result.interrupted:
+            result.unacked = self.wait_for_acks(ACK_TIMEOUT)
         result.wall_s = time.monotonic() - wall0
         return result
 
@@ -315,7 +327,10 @@ def run_player(
         if terminal is not None and terminal.enabled:
             sys.stderr.write("keys: space pause/resume, n next message, + faster, - slower\n")
             poll = lambda: _keys(player, terminal)  # noqa: E731 - a closure over both
-        return player.play(loop=loop, progress=progress, poll=poll)
+        result = player.play(loop=loop, progress=progress, poll=poll)
+        if result.interrupted:
+            raise KeyboardInterrupt  # winder's main: "interrupted", exit status 130
+        return result
     except ExternalShutdownException:
         raise KeyboardInterrupt from None
     finally:
