@@ -206,6 +206,57 @@ def test_synthetic_records(model: str, J: float, D: float, load: float) -> None:
     assert a.mras_J_band[0] <= a.mras_J_last <= a.mras_J_band[1]
 
 
+def test_the_settled_estimate_is_the_last_quarter_by_hand() -> None:
+    """The settled MRAS figure of the table, the JSON and the figure: the mean
+    of the estimate over the last quarter of its updates, its min and max
+    there, its relative standard deviation, the time that quarter starts, and
+    the error of the mean against the recorded J, all computed here from the
+    estimate series with a plain loop."""
+    from winder.analysis.identify import Identification, identification_json
+
+    J, D = 1.5e-4, 0.004
+    a = identify_axis(_record("nonlinear", J, D, 0.0, 2000.0))
+    tr = a.trajectory
+    assert a.identifiable and tr is not None
+    n = len(tr.J)
+    start = n - max(1, n // 4)
+    for series, mean, band, true, err in (
+        (tr.J, a.mras_J, a.mras_J_band, J, a.mras_J_err),
+        (tr.D, a.mras_D, a.mras_D_band, D, a.mras_D_err),
+    ):
+        tail = [float(series[i]) for i in range(start, n) if math.isfinite(series[i])]
+        by_hand = sum(tail) / len(tail)
+        assert mean == pytest.approx(by_hand, rel=1e-12)
+        assert band == (min(tail), max(tail))
+        assert err == pytest.approx(by_hand / true - 1, rel=1e-9)
+    tail_j = [float(tr.J[i]) for i in range(start, n)]
+    m = sum(tail_j) / len(tail_j)
+    std = math.sqrt(sum((x - m) ** 2 for x in tail_j) / len(tail_j))
+    assert a.mras_spread == pytest.approx(std / m, rel=1e-9)
+    assert a.mras_settled_from == float(tr.t[start])
+    assert a.mras_J_last == float(tr.J[-1])
+    # the JSON carries the same figures
+    ident = Identification("x", "x", "nonlinear", 2000.0, 0.005, 3.0, True, {"fork": a})
+    out = json.loads(identification_json([ident]))[0]["axes"]["fork"]
+    assert out["mras_J"] == a.mras_J and out["mras_J_band"] == list(a.mras_J_band)
+    assert out["mras_settled_from"] == a.mras_settled_from and out["mras_spread"] == a.mras_spread
+    assert out["mras_J_err"] == a.mras_J_err
+
+
+def test_the_settled_estimate_of_a_known_series() -> None:
+    """Eight updates, one not yet a positive 1/J (NaN): the last two are the quarter."""
+    from winder.analysis.identify import Mras
+
+    t = np.arange(8.0)
+    J = np.array([np.nan, 5.0, 4.0, 3.0, 2.0, 1.1, 0.9, 1.2])
+    tr = Mras(t, J, 0.5 * J, np.zeros(8), 3.0)
+    assert tr.settle_start == 6
+    assert tr.settled[:3] == pytest.approx((1.05, 0.9, 1.2))
+    assert tr.spread == pytest.approx(0.15 / 1.05)
+    one = Mras(t[:3], J[:3], J[:3], np.zeros(3), 3.0)  # fewer than four updates: the last one
+    assert one.settle_start == 2 and one.settled[0] == 4.0
+
+
 @pytest.mark.ros
 def test_cli_identifies_several_bags_one_after_another(bag: Any) -> None:
     """`winder identify bags/rw400_*` with two bags: a table for each (it was
