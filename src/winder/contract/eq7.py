@@ -46,7 +46,8 @@ def layer_of_samples(plan: JobPlan, seg_now: npt.ArrayLike, y: npt.ArrayLike) ->
     winding[ok] = kinds[seg[ok]]
     yw = yy[winding]
     starts = np.array([plan.segments[i].start[1] for i in layer_ids], dtype=np.float64)
-    if np.all(np.diff(starts) > 0):  # the fork always turns forward: its ranges tile the axis
+    forward = all(plan.segments[i].delta[1] > 0 for i in layer_ids)
+    if forward and np.all(np.diff(starts) > 0):  # the fork always turns forward: its ranges tile the axis
         which = np.clip(np.searchsorted(starts, yw, side="right") - 1, 0, len(layer_ids) - 1)
     else:
         # coils wound backward (coil_overrides direction ccw): fork ranges overlap, so a
