@@ -12,44 +12,91 @@ directory, which rosbag2 tools ignore; for a lone ``.mcap`` file
   tracking error in steps;
 * ``operations.png`` (a run with operator commands) - the velocity of the
   moving axes around the commands, each marked where it takes effect;
-* ``winding.png`` - the unrolled winding path, a zoom into one stretch of it
-  with the signed distance of every commanded step and simulated sample to
-  the ideal line, and the per-turn mean deviation (eq. 7) in % of the wire;
-* ``identify.png`` - the MRAS estimates of J and D converging, against the
+* ``winding.png`` - eq. 7 over the whole job: the signed distance of the
+  simulated axes to each layer's ideal line against the turns wound, with the
+  band the commanded steps stay in; the mean deviation of every turn in % of
+  the wire; a zoom into the middle of the first layer (every commanded step
+  and sample) and one around the axes' largest deviation;
+* ``identify.png`` - the MRAS estimates of J and D converging, the band they
+  settle in over the last quarter of their updates, against the
   least-squares estimate and the recorded value.
+
+What is drawn is what the data hold. A long line is cut to what its pixel
+columns show (:func:`envelope`: in each column the first, lowest, highest and
+last sample, so a spike one sample wide stays), dense dots to one per
+occupied pixel (:func:`pixel_points`); nothing is subsampled blindly.
+Legends go into a corner that no curve crosses (:func:`place_legend`), else
+into a band above the data made for them.
+
+Drawing is matplotlib's Python code, some 40 ms per panel (ticks, labels,
+text) whatever the data: the layout is fixed (constrained or tight layout
+measures every label of every panel), PNG compression is the fastest level,
+and with two or more cores each figure is drawn in a process of its own.
 """
 
 from __future__ import annotations
 
 import math
+import textwrap
 from pathlib import Path
 from typing import Any
 
 import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 import numpy.typing as npt
+from matplotlib.axes import Axes
+from matplotlib.backend_bases import RendererBase
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.legend import Legend
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch
+from matplotlib.path import Path as MplPath
+from matplotlib.ticker import MaxNLocator
+from matplotlib.transforms import Bbox
 
-from winder.analysis.digest import ZOOM_STEPS, Digest
+from winder.analysis.digest import ZOOM_STEPS, Digest, turn_index
 from winder.analysis.identify import Identification
-from winder.analysis.metrics import Analysis, digest_run, paired_error, winding_samples
+from winder.analysis.metrics import Analysis, digest_run, paired_error
+from winder.contract.eq7 import layer_of_samples, sample_deviation
+from winder.contract.stream import JobPlan
 from winder.motion.job import AXES
 from winder.record.reader import Run
 
-__all__ = ["plot_analysis", "plot_identification", "plots_dir"]
+__all__ = [
+    "envelope",
+    "envelope_indices",
+    "pixel_points",
+    "place_legend",
+    "plot_analysis",
+    "plot_identification",
+    "plots_dir",
+]
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
 
 CMD, ACT, IDEAL = "tab:blue", "tab:orange", "k"
 #: joint units and the scale to show them in
 SHOW = {"feed": (1e3, "mm"), "fork": (1.0, "rad"), "pole": (1.0, "rad")}
-MAX_POINTS = 40_000
+DPI = 100
 #: fixed margins (fractions of the figure): matplotlib's constrained layout
 #: measured every tick label of every panel and took most of the plotting time
 MARGINS = {"left": 0.06, "right": 0.985, "bottom": 0.06, "wspace": 0.22}
 #: PNG compression: level 1 writes the figures several times faster than the
 #: default 6 for files about a third larger
 PNG = {"compress_level": 1}
+#: at most this many intervals between tick labels on a linear axis (matplotlib
+#: picks up to 9 on a wide panel; every tick is five artists to make, lay out
+#: and draw, a millisecond each: a fifth of the drawing time went into ticks)
+TICK_BINS = 4
+#: settings every figure here is drawn with: titles at a fixed height (matplotlib
+#: otherwise measures the tick labels of every panel to lift them)
+RC: dict[Any, Any] = {"axes.titley": 1.0, "axes.titlepad": 5.0}
+#: artists a legend may cover: marks of a time or place (event lines, layer ends),
+#: not data
+BACKGROUND = "background"
+CORNERS: tuple[Any, ...] = ("upper left", "upper right", "lower left", "lower right")
 
 
 def plots_dir(run_path: Path) -> Path:
@@ -58,23 +105,196 @@ def plots_dir(run_path: Path) -> Path:
     return p / "plots" if p.is_dir() else p.with_name(p.stem + "_plots")
 
 
-def _thin(*arrays: npt.NDArray[np.float64], n: int = MAX_POINTS) -> list[npt.NDArray[np.float64]]:
-    step = max(1, arrays[0].size // n)
-    return [a[::step] for a in arrays]
+# -- what a pixel shows ---------------------------------------------------------------
 
 
-def _legend(ax: Any, **kw: Any) -> None:
-    """The legend in a band above the data (the y range is raised for it),
-    in one row: it never hides a curve, however dense the data."""
+def _columns(x: FloatArray, columns: int) -> IntArray:
+    """The column (0 .. columns-1) of each x, columns of equal width over x's range."""
+    lo, hi = float(x[0]), float(x[-1])
+    if not hi > lo:
+        return np.zeros(x.size, np.int64)
+    col = ((x - lo) * (columns / (hi - lo))).astype(np.int64)
+    return np.minimum(col, columns - 1)
+
+
+def envelope_indices(x: npt.ArrayLike, y: npt.ArrayLike, columns: int) -> IntArray:
+    """The samples a line through (x, y) needs at ``columns`` pixel columns
+    across x's range: in each column its first and last sample and its lowest
+    and highest (the first of equal ones), in their order (M4 aggregation,
+    Jugel et al., VLDB 2014). Drawn, they give the picture of every sample:
+    the line enters and leaves each column where it did, and spans the same
+    height in it. NaN samples count as neither lowest nor highest. ``x`` must
+    not decrease (a time, a position along the job)."""
+    xx = np.asarray(x, dtype=np.float64)
+    yy = np.asarray(y, dtype=np.float64)
+    if xx.shape != yy.shape or xx.ndim != 1:
+        raise ValueError(f"x and y have shapes {xx.shape} and {yy.shape}: must be equal and 1-D")
+    if columns < 1:
+        raise ValueError(f"columns={columns!r} is invalid: must be >= 1")
+    n = xx.size
+    if n and not (np.isfinite(xx[0]) and np.isfinite(xx[-1]) and np.all(np.diff(xx) >= 0)):
+        raise ValueError("x must be finite and must not decrease")
+    if n <= 4 * columns:
+        return np.arange(n, dtype=np.int64)
+    col = _columns(xx, columns)
+    starts = np.flatnonzero(np.diff(col, prepend=-1))
+    counts = np.diff(np.append(starts, n))
+    ends = starts + counts - 1
+    index = np.arange(n, dtype=np.int64)
+    keep = [starts, ends]
+    for fill, reduce in ((np.inf, np.minimum), (-np.inf, np.maximum)):
+        v = np.where(np.isnan(yy), fill, yy)
+        best = np.repeat(reduce.reduceat(v, starts), counts)
+        keep.append(np.minimum.reduceat(np.where(v == best, index, n), starts))
+    out: IntArray = np.unique(np.concatenate(keep))
+    return out
+
+
+def envelope(x: npt.ArrayLike, y: npt.ArrayLike, columns: int) -> tuple[FloatArray, FloatArray]:
+    """(x, y) cut to what ``columns`` pixel columns show (:func:`envelope_indices`)."""
+    idx = envelope_indices(x, y, columns)
+    return np.asarray(x, dtype=np.float64)[idx], np.asarray(y, dtype=np.float64)[idx]
+
+
+def pixel_points(x: npt.ArrayLike, y: npt.ArrayLike, columns: int, rows: int) -> IntArray:
+    """The first sample in each occupied cell of a ``columns`` x ``rows`` grid
+    over the data's range, in their order: dots a pixel wide, drawn only
+    there, look like all of them. NaN samples are left out."""
+    xx = np.asarray(x, dtype=np.float64)
+    yy = np.asarray(y, dtype=np.float64)
+    ok = np.flatnonzero(np.isfinite(xx) & np.isfinite(yy))
+    if ok.size <= columns * rows // 4 or ok.size < 2:
+        return ok.astype(np.int64)
+
+    def cell(v: FloatArray, k: int) -> IntArray:
+        lo, hi = float(v.min()), float(v.max())
+        c = ((v - lo) * (k / (hi - lo))).astype(np.int64) if hi > lo else np.zeros(v.size, np.int64)
+        return np.minimum(c, k - 1)
+
+    _, first = np.unique(cell(xx[ok], columns) * rows + cell(yy[ok], rows), return_index=True)
+    out: IntArray = ok[np.sort(first)].astype(np.int64)
+    return out
+
+
+def _width(ax: Axes) -> int:
+    return max(1, math.ceil(ax.bbox.width))
+
+
+def _line(ax: Axes, x: npt.ArrayLike, y: npt.ArrayLike, *fmt: str, **kw: Any) -> list[Line2D]:
+    """A line without markers through every sample, cut to the panel's pixel columns."""
+    xe, ye = envelope(x, y, _width(ax))
+    return ax.plot(xe, ye, *fmt, **kw)
+
+
+def _dots(ax: Axes, x: FloatArray, y: FloatArray, **kw: Any) -> list[Line2D]:
+    """Dots of every sample, one per occupied pixel of the panel."""
+    idx = pixel_points(x, y, _width(ax), max(1, math.ceil(ax.bbox.height)))
+    return ax.plot(x[idx], y[idx], ".", **kw)
+
+
+# -- legends that hide nothing ------------------------------------------------------------
+
+
+class _Obstacles:
+    """What a legend must not cover in an axes, in display coordinates: its
+    lines (NaN breaks them), areas (filled paths), dots (centres and radius)
+    and texts. Artists with the gid :data:`BACKGROUND` are left out."""
+
+    def __init__(self, ax: Axes, renderer: RendererBase) -> None:
+        ax.get_xlim(), ax.get_ylim()  # matplotlib autoscales lazily: the limits are final from here
+        self.paths: list[tuple[MplPath, bool]] = []
+        self.dots: list[tuple[FloatArray, float]] = []
+        self.texts = [t.get_window_extent(renderer) for t in ax.texts if t.get_visible()]
+        for line in ax.lines:
+            if line.get_gid() == BACKGROUND or not line.get_visible():
+                continue
+            v = line.get_transform().transform(line.get_xydata())
+            if line.get_linestyle() in ("None", "none", "", " "):
+                r = max(float(line.get_markersize()), 1.0) * DPI / 72 / 2
+                self.dots.append((v[np.all(np.isfinite(v), axis=1)], r))
+            else:
+                self.paths.append((_nan_broken(v), False))
+        for patch in ax.patches:
+            if patch.get_gid() != BACKGROUND and patch.get_visible():
+                self.paths.append((patch.get_transform().transform_path(patch.get_path()), True))
+        for coll in ax.collections:
+            if coll.get_gid() != BACKGROUND and coll.get_visible():
+                tr = coll.get_transform()
+                self.paths += [(tr.transform_path(p), True) for p in coll.get_paths()]
+
+    def hit(self, box: Bbox) -> bool:
+        """Whether ``box`` covers any of them."""
+        if any(box.overlaps(t) for t in self.texts):
+            return True
+        for v, r in self.dots:
+            x, y = v[:, 0], v[:, 1]
+            if np.any((x >= box.x0 - r) & (x <= box.x1 + r) & (y >= box.y0 - r) & (y <= box.y1 + r)):
+                return True
+        return any(np.asarray(p.vertices).size and p.intersects_bbox(box, filled=f) for p, f in self.paths)
+
+
+def _nan_broken(v: FloatArray) -> MplPath:
+    """A polyline through the rows of ``v``, broken where a row is not finite."""
+    ok = np.all(np.isfinite(v), axis=1)
+    if ok.all():
+        return MplPath(v)
+    codes = np.full(v.shape[0], MplPath.LINETO, dtype=MplPath.code_type)
+    codes[0] = MplPath.MOVETO
+    codes[1:][~ok[:-1]] = MplPath.MOVETO
+    return MplPath(v[ok], codes[ok]) if ok.any() else MplPath(np.zeros((0, 2)))
+
+
+def place_legend(ax: Axes, renderer: RendererBase, **kw: Any) -> Legend | None:
+    """The axes' legend where it covers no curve, dot or area (artists with the
+    gid :data:`BACKGROUND` excepted): the first free corner; else the top of
+    the y range is raised to make a band for it over the data (and the
+    corners tried again). Call it once the limits are final."""
     handles, labels = ax.get_legend_handles_labels()
     if not handles:
-        return
-    lo, hi = ax.get_ylim()
-    ax.set_ylim(lo, hi + 0.3 * (hi - lo))
-    per_row = 3 if sum(len(x) for x in labels) < 90 else 1
-    if per_row == 1:
-        ax.set_ylim(lo, hi + (0.3 + 0.12 * len(handles)) * (hi - lo))
-    ax.legend(loc="upper left", ncol=min(len(handles), per_row), fontsize=8, framealpha=0.9, **kw)
+        return None
+    opts: dict[str, Any] = {"fontsize": 8, "framealpha": 0.9, **kw}
+    leg = ax.legend(handles, labels, loc="upper left", **opts)
+    for attempt in range(2):
+        obstacles = _Obstacles(ax, renderer)
+        for ncol in dict.fromkeys((1, min(len(handles), 3))):
+            leg.set_ncols(ncol)
+            for loc in CORNERS:
+                leg.set_loc(loc)
+                if not obstacles.hit(leg.get_window_extent(renderer).padded(2)):
+                    return leg
+        if attempt == 0:
+            # a band above the data as high as the legend in up to three columns
+            leg.set_ncols(min(len(handles), 3))
+            leg.set_loc("upper left")
+            box = leg.get_window_extent(renderer)
+            if box.width > ax.bbox.width:
+                leg.set_ncols(1)
+                box = leg.get_window_extent(renderer)
+            lo, hi = ax.get_ylim()
+            room = max(ax.bbox.height - box.height - 12, 0.2 * ax.bbox.height)
+            ax.set_ylim(lo, hi + (hi - lo) * (box.height + 12) / room)
+    leg.set_loc("upper left")
+    return leg
+
+
+# -- common parts ------------------------------------------------------------------------
+
+
+def _figure(size: tuple[float, float]) -> tuple[Figure, RendererBase]:
+    fig = Figure(figsize=size, dpi=DPI)
+    canvas = FigureCanvasAgg(fig)
+    # FigureCanvasAgg.get_renderer is not annotated in matplotlib's stubs
+    return fig, canvas.get_renderer()  # type: ignore[no-untyped-call]
+
+
+def _save(fig: Figure, path: Path) -> Path:
+    for ax in fig.axes:
+        for axis in (ax.xaxis, ax.yaxis):
+            loc = axis.get_major_locator()
+            if isinstance(loc, MaxNLocator):
+                loc.set_params(nbins=TICK_BINS)
+    fig.savefig(path, dpi=DPI, pil_kwargs=PNG)
+    return path
 
 
 def _title(run: Run) -> str:
@@ -87,9 +307,7 @@ def _title(run: Run) -> str:
     )
 
 
-def _first_ramp(
-    d: Digest, axis: str, t: npt.NDArray[np.float64], v: npt.NDArray[np.float64]
-) -> tuple[float, float] | None:
+def _first_ramp(d: Digest, axis: str, t: FloatArray, v: FloatArray) -> tuple[float, float] | None:
     """Time window around the first acceleration of ``axis``: from just before
     its first step until shortly after its commanded speed first levels off
     (``t``, ``v``: its command over the segment of that first step)."""
@@ -108,7 +326,7 @@ def _first_ramp(
     return t0 - 0.03 * max(t1 - t0, 0.1), t1
 
 
-def _mark_events(ax: Any, run: Run, label: bool) -> None:
+def _mark_events(ax: Axes, run: Run, label: bool) -> None:
     """The operator's commands on a time axis: a pause shaded from the moment
     it takes effect to the resume (the rest dotted), an abort and an override
     as lines."""
@@ -119,28 +337,41 @@ def _mark_events(ax: Any, run: Run, label: bool) -> None:
         kind = e.get("event")
         if kind in ("pause", "abort"):
             color = "black" if kind == "pause" else "tab:red"
-            ax.axvline(t, color=color, lw=1.0, label=f"{kind} takes effect" if label else None)
+            ax.axvline(
+                t, color=color, lw=1.0, label=f"{kind} takes effect" if label else None, gid=BACKGROUND
+            )
             ax.axvline(e.get("t_rest_ns", e["t_ns"]) / 1e9, color=color, lw=0.8, ls=":",
-                       label="at rest" if label and kind == "pause" else None)  # fmt: skip
+                       label="at rest" if label and kind == "pause" else None, gid=BACKGROUND)  # fmt: skip
             pause = e if kind == "pause" else None
         elif kind == "resume":
-            ax.axvline(t, color="tab:green", lw=1.0, label="resume" if label else None)
+            ax.axvline(t, color="tab:green", lw=1.0, label="resume" if label else None, gid=BACKGROUND)
             if pause is not None:
-                ax.axvspan(pause["t_ns"] / 1e9, t, color="tab:gray", alpha=0.12)
+                ax.axvspan(pause["t_ns"] / 1e9, t, color="tab:gray", alpha=0.12, gid=BACKGROUND)
             pause = None
         elif kind == "override":
-            ax.axvline(t, color="tab:purple", lw=1.0, ls="--",
-                       label=f"override x{e.get('factor', 1.0):g}" if label else None)  # fmt: skip
+            name = f"override x{e.get('factor', 1.0):g}" if label else None
+            ax.axvline(t, color="tab:purple", lw=1.0, ls="--", label=name, gid=BACKGROUND)
     if pause is not None:
-        ax.axvspan(pause["t_ns"] / 1e9, max(end, pause["t_ns"] / 1e9), color="tab:gray", alpha=0.12)
+        ax.axvspan(
+            pause["t_ns"] / 1e9, max(end, pause["t_ns"] / 1e9), color="tab:gray", alpha=0.12, gid=BACKGROUND
+        )
+
+
+# -- motion.png ---------------------------------------------------------------------------
 
 
 def _motion(run: Run, d: Digest, out: Path) -> Path:
     st = run.states
     acc = np.asarray(np.gradient(st.vel, st.t, axis=0)) if len(st) >= 3 else np.zeros((0, 3))
     jerk = np.asarray(np.gradient(acc, st.t, axis=0)) if len(st) >= 3 else np.zeros((0, 3))
-    fig, axes = plt.subplots(4, 3, figsize=(15, 12))
-    fig.subplots_adjust(**MARGINS, top=0.89, hspace=0.4)
+    fig, renderer = _figure((15, 12))
+    gs = fig.add_gridspec(4, 3, **MARGINS, top=0.89, hspace=0.4)
+    axes = np.empty((4, 3), dtype=object)
+    for c in range(3):
+        axes[0, c] = fig.add_subplot(gs[0, c])
+        axes[1, c] = fig.add_subplot(gs[1, c])
+        for r in (2, 3):  # the zoom rows share their time window
+            axes[r, c] = fig.add_subplot(gs[r, c], sharex=axes[1, c])
     names = ("velocity", "acceleration", "jerk")
     rate = run.sim_config.publish_rate if run.sim_config else math.nan
     for c, axis in enumerate(AXES):
@@ -149,10 +380,9 @@ def _motion(run: Run, d: Digest, out: Path) -> Path:
         t, v, a, j = d.traces[axis].first_move()
         ax = axes[0, c]
         if len(st):
-            ta, va = _thin(st.t, st.vel[:, c])
-            ax.plot(ta, va * scale, color=ACT, lw=0.6, label="simulated axis")
+            _line(ax, st.t, st.vel[:, c] * scale, color=ACT, lw=0.6, label="simulated axis")
         if vc.size:
-            ax.plot(tc, vc * scale, ".", color=CMD, ms=1.0, label="command")
+            _dots(ax, tc, vc * scale, color=CMD, ms=1.0, label="command")
         ax.set_title(f"{axis}: whole run", fontsize=10)
         _mark_events(ax, run, label=c == 0)
         ax.set_ylabel(f"{axis} velocity ({unit}/s)")
@@ -160,6 +390,8 @@ def _motion(run: Run, d: Digest, out: Path) -> Path:
         window = _first_ramp(d, axis, t, v) if v.size else None
         for r, (cmd, act) in enumerate(((v, st.vel[:, c]), (a, acc[:, c]), (j, jerk[:, c]))):
             ax = axes[r + 1, c]
+            if r < 2:
+                ax.tick_params(labelbottom=False)
             if window is None:
                 ax.text(0.5, 0.5, f"the {axis} axis does not move", ha="center", transform=ax.transAxes)
                 continue
@@ -175,7 +407,7 @@ def _motion(run: Run, d: Digest, out: Path) -> Path:
                 ms=2.5,
                 label=f"simulated axis, sampled at {rate:g} Hz",
             )
-            ax.plot(t[mc], cmd[mc] * scale, "-", color=CMD, lw=1.4, label="command (from the step times)")
+            _line(ax, t[mc], cmd[mc] * scale, "-", color=CMD, lw=1.4, label="command (from the step times)")
             ax.set_xlim(lo, hi)
             if r == 2 and np.any(mc):
                 lim = 2.5 * max(float(np.max(np.abs(cmd[mc]))), 1e-12) * scale
@@ -187,8 +419,8 @@ def _motion(run: Run, d: Digest, out: Path) -> Path:
         axes[3, c].set_xlabel("time (s)")
     for ax in axes.flat:
         ax.grid(True, lw=0.3)
-    _legend(axes[0, 0], markerscale=6)
-    _legend(axes[1, 0])
+    place_legend(axes[0, 0], renderer, markerscale=6)
+    place_legend(axes[1, 0], renderer)
     fig.suptitle(
         _title(run) + "\ncommand: the ideal interpolated motion from each segment's step times (not "
         "estimated over the first and last few steps of a move, where the speed is near 0)\n"
@@ -196,10 +428,10 @@ def _motion(run: Run, d: Digest, out: Path) -> Path:
         "acceleration and jerk show the step ripple as far as it is sampled (jerk axis clipped)",
         fontsize=10,
     )
-    path = out / "motion.png"
-    fig.savefig(path, dpi=100, pil_kwargs=PNG)
-    plt.close(fig)
-    return path
+    return _save(fig, out / "motion.png")
+
+
+# -- operations.png -------------------------------------------------------------------------
 
 
 def _operations(run: Run, d: Digest, out: Path) -> Path:
@@ -210,45 +442,54 @@ def _operations(run: Run, d: Digest, out: Path) -> Path:
     end = float(st.t[-1]) if len(st) else max(times)
     lo, hi = max(min(times) - 0.5, 0.0), min(max(times) + 2.0, end)
     moving = [c for c, axis in enumerate(AXES) if len(st) and np.ptp(st.pos[:, c]) > 0]
-    fig, axes = plt.subplots(max(len(moving), 1), 1, figsize=(11, 3.2 * max(len(moving), 1)), squeeze=False)
+    rows = max(len(moving), 1)
+    fig, _ = _figure((13, 1.0 + 3.0 * rows))
+    top = 1 - 0.85 / (1.0 + 3.0 * rows)
+    gs = fig.add_gridspec(rows, 1, left=0.07, right=0.79, bottom=0.5 / (1.0 + 3.0 * rows), top=top)
+    first: Axes | None = None
     for row, c in enumerate(moving):
         axis = AXES[c]
         scale, unit = SHOW[axis]
-        ax = axes[row, 0]
+        ax = fig.add_subplot(gs[row, 0], sharex=first)
+        first = first or ax
         m = (st.t >= lo) & (st.t <= hi)
-        ax.plot(st.t[m], st.vel[m, c] * scale, color=ACT, lw=0.7, label="simulated axis")
+        _line(ax, st.t[m], st.vel[m, c] * scale, color=ACT, lw=0.7, label="simulated axis")
         tc, vc, _, _ = d.traces[axis].whole_run()
         mc = (tc >= lo) & (tc <= hi)
-        ax.plot(tc[mc], vc[mc] * scale, ".", color=CMD, ms=1.5, label="command (from the step times)")
+        _dots(ax, tc[mc], vc[mc] * scale, color=CMD, ms=1.5, label="command (from the step times)")
         _mark_events(ax, run, label=row == 0)
         ax.set_xlim(lo, hi)
         ax.set_ylabel(f"{axis} velocity ({unit}/s)")
         ax.grid(True, lw=0.3)
-    axes[-1, 0].set_xlabel("time since the run's start (s, simulated)")
-    axes[0, 0].legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, markerscale=4)
+        if row == 0:  # beside the panels: nothing under it
+            ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, markerscale=4)
+        if row < len(moving) - 1:
+            ax.tick_params(labelbottom=False)
+        else:
+            ax.set_xlabel("time since the run's start (s, simulated)")
     fig.suptitle(
         _title(run) + "\noperator commands: where each takes effect, the rest it brakes to", fontsize=10
     )
-    fig.tight_layout()
-    path = out / "operations.png"
-    fig.savefig(path, dpi=100, pil_kwargs=PNG)
-    plt.close(fig)
-    return path
+    return _save(fig, out / "operations.png")
+
+
+# -- tracking.png --------------------------------------------------------------------------
 
 
 def _tracking(run: Run, d: Digest, out: Path) -> Path:
     cm, st = run.commands, run.states
-    fig, axes = plt.subplots(3, 3, figsize=(15, 9.5))
-    fig.subplots_adjust(**MARGINS, top=0.92, hspace=0.32)
+    fig, renderer = _figure((15, 9.5))
+    gs = fig.add_gridspec(3, 3, **MARGINS, top=0.92, hspace=0.32)
+    axes = np.array([[fig.add_subplot(gs[r, c]) for c in range(3)] for r in range(3)], dtype=object)
+    for c in range(3):
+        axes[2, c].sharex(axes[0, c])
     js = run.plan.joint_step
     i_s, diff = paired_error(run)
     for c, axis in enumerate(AXES):
         scale, unit = SHOW[axis]
         ax = axes[0, c]
-        t1, p1 = _thin(cm.t, cm.pos[:, c])
-        t2, p2 = _thin(st.t, st.pos[:, c])
-        ax.plot(t1, p1 * scale, color=CMD, lw=1.2, label="command")
-        ax.plot(t2, p2 * scale, color=ACT, lw=0.8, ls="--", label="simulated axis")
+        _line(ax, cm.t, cm.pos[:, c] * scale, color=CMD, lw=1.2, label="command")
+        _line(ax, st.t, st.pos[:, c] * scale, color=ACT, lw=0.8, ls="--", label="simulated axis")
         ax.set_ylabel(f"{axis} position ({unit})")
         ax.set_title(axis)
         # zoom: the start of the axis' first move, from the step rows (exact staircase)
@@ -270,8 +511,7 @@ def _tracking(run: Run, d: Digest, out: Path) -> Path:
         ax.set_xlabel("time (s)")
         ax = axes[2, c]
         err = diff[:, c] / js[c]
-        te, ee = _thin(st.t[i_s], err)
-        ax.plot(te, ee, color="tab:red", lw=0.6)
+        _line(ax, st.t[i_s], err, color="tab:red", lw=0.6)
         peak = float(np.max(np.abs(err))) if err.size else math.nan
         ax.set_title(f"tracking error command - axis: max |e| = {peak:.3f} steps", fontsize=9)
         ax.set_ylabel("tracking error (steps)")
@@ -284,80 +524,121 @@ def _tracking(run: Run, d: Digest, out: Path) -> Path:
                 ax.text(0.01, 0.02, "dotted: +-1/2 tooth pitch", transform=ax.transAxes, fontsize=8)
         for a in axes[:, c]:
             a.grid(True, lw=0.3)
-    _legend(axes[0, 0])
-    _legend(axes[1, 0])
+    place_legend(axes[0, 0], renderer)
+    place_legend(axes[1, 0], renderer)
     axes[0, 0].set_xlabel("time (s)")
     fig.suptitle(_title(run), fontsize=10)
-    path = out / "tracking.png"
-    fig.savefig(path, dpi=100, pil_kwargs=PNG)
-    plt.close(fig)
-    return path
+    return _save(fig, out / "tracking.png")
+
+
+# -- winding.png ----------------------------------------------------------------------------
+
+
+def _layers(plan: JobPlan) -> dict[int, tuple[float, int]]:
+    """Each layer segment: the turns wound before it (all layers of all coils
+    in winding order) and its own turns."""
+    spr = plan.job.fork_steps_per_rev
+    out: dict[int, tuple[float, int]] = {}
+    done = 0.0
+    for i, s in enumerate(plan.segments):
+        if s.kind == "layer":
+            turns = abs(s.delta[1]) // spr
+            out[i] = (done, turns)
+            done += turns
+    return out
+
+
+def _per_turn_command(d: Digest, layers: dict[int, tuple[float, int]]) -> tuple[FloatArray, FloatArray]:
+    """(turn centre in winding order, mean distance of the commanded steps of that turn)."""
+    xs, ys = [], []
+    for i in sorted(d.layers):
+        lay = d.layers[i]
+        seen = np.flatnonzero(lay.turn_count > 0)
+        xs.append(layers[i][0] + seen + 0.5)
+        ys.append(lay.turn_sum[seen] / lay.turn_count[seen])
+    return (np.concatenate(xs), np.concatenate(ys)) if xs else (np.zeros(0), np.zeros(0))
+
+
+def _signed_samples(run: Run, d: Digest) -> tuple[IntArray, FloatArray]:
+    """For every joint sample: the layer it is measured against (-1: none) and
+    its eq. 7 distance to that layer's line (:func:`winder.contract.eq7.sample_deviation`),
+    signed by the side of the line it is on, m; NaN outside the layers."""
+    plan = run.plan
+    js = plan.joint_step
+    n = len(run.states)
+    if n == 0 or d.sample_segment.size != n:
+        return np.full(n, -1, np.int64), np.full(n, np.nan)
+    x = run.states.pos[:, 0] / js[0]
+    y = run.states.pos[:, 1] / js[1]
+    layer = layer_of_samples(plan, d.sample_segment, y)
+    dist = sample_deviation(plan, layer, x, y)
+    for i in (int(v) for v in np.unique(layer[layer >= 0])):
+        m = layer == i
+        s = plan.segments[i]
+        cross = s.delta[0] * (y[m] - s.start[1]) - (x[m] - s.start[0]) * s.delta[1]
+        dist[m] = np.where(cross < 0, -dist[m], dist[m])
+    return layer, dist
 
 
 def _winding(run: Run, analysis: Analysis, d: Digest, out: Path) -> Path:
     plan = run.plan
-    lx, ly = plan.step_lengths[0], plan.step_lengths[1]
-    js = plan.joint_step
-    spr = plan.job.fork_steps_per_rev
-    fig = plt.figure(figsize=(15, 9.5))
-    gs = fig.add_gridspec(2, 2, **MARGINS, top=0.92, hspace=0.3)
-    ax0 = fig.add_subplot(gs[0, 0])
-    ax1 = fig.add_subplot(gs[0, 1])
-    ax2 = fig.add_subplot(gs[1, :])
-    layers = [(i, s) for i, s in enumerate(plan.segments) if s.kind == "layer"]
-    # overview: eq. 7 of every layer (the whole path unrolled is a solid band at this scale)
-    per_layer = [("command", CMD, analysis.command.layers)]
-    if analysis.actual is not None:
-        per_layer.append(("simulated axes", ACT, analysis.actual.layers))
-    for k, (label, color, rows) in enumerate(per_layer):
-        if not rows:
-            continue
-        x = np.arange(len(rows)) + (k - 0.5) * 0.15
-        ax0.plot(x, [r.mean * 1e6 for r in rows], "o", color=color, ms=4, label=f"{label}: mean")
-        ax0.plot(x, [r.max * 1e6 for r in rows], "^", color=color, ms=4, mfc="none", label=f"{label}: max")
-        ax0.set_xticks(np.arange(len(rows)), [f"{r.pole + 1}:{r.layer + 1}" for r in rows], fontsize=7)
-    ax0.set_xlabel("coil:layer, in winding order")
-    ax0.set_ylabel("distance to the ideal line (um)")
-    ax0.set_title("eq. 7 of each layer: mean and max distance of steps and samples", fontsize=10)
-    ax0.set_ylim(bottom=0)
-    _legend(ax0)
-    ax0.grid(True, lw=0.3)
-    # zoom: a quarter turn in the middle of the first layer, signed distance to the line
-    if layers:
-        i, s = layers[0]
-        norm = math.hypot(s.delta[0] * lx, s.delta[1] * ly)
-        zoom = d.layers[i].zoom
-        assert zoom is not None
-        y_lo, y_hi = zoom
-        if d.layers[i].zoom_rows:
-            fork, dist = np.hstack(d.layers[i].zoom_rows)
-            ax1.plot(fork / spr, dist * 1e6, ".-", color=CMD, lw=0.5, ms=3, label="commanded steps")
-        st = run.states
-        if len(st):
-            x = st.pos[:, 0] / js[0] - s.start[0]
-            y = st.pos[:, 1] / js[1] - s.start[1]
-            m = (y + s.start[1] >= y_lo) & (y + s.start[1] <= y_hi)
-            dist = (s.delta[0] * y[m] - x[m] * s.delta[1]) * lx * ly / norm
-            ax1.plot(
-                (y[m] + s.start[1]) / spr, dist * 1e6, "o-", color=ACT, ms=3, lw=0.8, label="simulated axes"
-            )
-        ax1.axhline(0, color=IDEAL, lw=0.8, label="ideal line")
-        ax1.set_xlabel("fork position (turns)")
-        ax1.set_ylabel("signed distance to the ideal line (um)")
-        ax1.set_title(
-            f"zoom: 1/8 turn in the middle of layer 1 (a feed step is {lx * 1e6:g} um)", fontsize=10
-        )
-        _legend(ax1)
-        ax1.grid(True, lw=0.3)
-    # per turn: eq. 7 over each turn, in % of the wire diameter
     wire = plan.job.wire_diameter
-    for label, color, per_turn in (
-        ("command", CMD, _per_turn_command(d)),
-        ("simulated axes", ACT, _per_turn_axes(run, d)),
+    layers = _layers(plan)
+    fig, renderer = _figure((15, 9.5))
+    gs = fig.add_gridspec(2, 3, **MARGINS, top=0.91, hspace=0.3)
+    ax_job = fig.add_subplot(gs[0, :2])
+    ax_turn = fig.add_subplot(gs[1, :2], sharex=ax_job)
+    ax_mid = fig.add_subplot(gs[0, 2])
+    ax_worst = fig.add_subplot(gs[1, 2])
+    layer, signed = _signed_samples(run, d)
+    cmd_max = {r.segment: r.max for r in analysis.command.layers}
+
+    # the whole job: the signed distance of every sample against the turns wound
+    for i, (before, turns) in layers.items():
+        if i in cmd_max:
+            ax_job.fill_between(
+                [before, before + turns],
+                -cmd_max[i] * 1e6,
+                cmd_max[i] * 1e6,
+                color=CMD,
+                alpha=0.15,
+                lw=0,
+                label="commanded steps: within +- the layer's eq. 7 max" if i == min(cmd_max) else None,
+            )
+        ax_job.axvline(before + turns, color="0.6", lw=0.6, gid=BACKGROUND)
+    pos = _turns_wound(run, layer, layers)
+    m = np.flatnonzero(layer >= 0)
+    if m.size:
+        order = m[np.argsort(pos[m], kind="stable")]
+        _line(
+            ax_job,
+            pos[order],
+            signed[order] * 1e6,
+            color=ACT,
+            lw=0.6,
+            label="simulated axes (each pixel column: its lowest to highest sample)",
+        )
+    ax_job.axhline(0, color=IDEAL, lw=0.8, label="ideal line")
+    ax_job.set_ylabel("signed distance to the ideal line (um)")
+    ax_job.tick_params(labelbottom=False)
+    c, a = analysis.command, analysis.actual
+    ax_job.set_title(
+        f"eq. 7 over the whole job (vertical lines: layer ends): command mean {c.mean * 1e6:.3f} um, "
+        f"max {c.max * 1e6:.3f} um"
+        + (f"; axes mean {a.mean * 1e6:.3f} um, max {a.max * 1e6:.3f} um" if a else ""),
+        fontsize=10,
+    )
+    ax_job.grid(True, lw=0.3)
+
+    # per turn: eq. 7 over each turn, in % of the wire diameter
+    ax_turn.axhline(0.1, color="0.5", lw=3.0, alpha=0.5, label="0.1 % (the paper's RW400 measurement)")
+    for label, color, (x, per_turn) in (
+        ("command", CMD, _per_turn_command(d, layers)),
+        ("simulated axes", ACT, _per_turn_axes(run, layer, signed, layers)),
     ):
         if per_turn.size:
-            ax2.plot(
-                np.arange(1, per_turn.size + 1),
+            ax_turn.plot(
+                x,
                 100 * per_turn / wire,
                 ".-",
                 color=color,
@@ -366,59 +647,134 @@ def _winding(run: Run, analysis: Analysis, d: Digest, out: Path) -> Path:
                 label=f"{label}: worst {100 * per_turn.max() / wire:.4f} %, "
                 f"mean {100 * per_turn.mean() / wire:.4f} %",
             )
-    ax2.axhline(0.1, color="k", ls=":", lw=0.8, label="0.1 % (the paper's RW400 measurement)")
-    ax2.set_xlabel("turn (all layers of all coils in winding order)")
-    ax2.set_ylabel("mean deviation of the turn (% of wire diameter)")
-    c = analysis.command
-    a = analysis.actual
-    ax2.set_title(
-        f"eq. 7 per turn; whole job: command mean {c.mean * 1e6:.3f} um, max {c.max * 1e6:.3f} um"
-        + (f"; axes mean {a.mean * 1e6:.3f} um, max {a.max * 1e6:.3f} um" if a else ""),
+    for before, turns in layers.values():
+        ax_turn.axvline(before + turns, color="0.6", lw=0.6, gid=BACKGROUND)
+    ax_turn.set_xlabel("turns wound (all layers of all coils in winding order)")
+    ax_turn.set_ylabel("mean deviation of the turn (% of wire diameter)")
+    ax_turn.set_title("eq. 7 of each turn", fontsize=10)
+    ax_turn.set_ylim(bottom=0)
+    ax_turn.grid(True, lw=0.3)
+
+    _zoom_middle(run, d, ax_mid)
+    _zoom_worst(run, analysis, layer, signed, ax_worst)
+    if layers:
+        total = max(b + t for b, t in layers.values())
+        ax_job.set_xlim(-0.01 * total, 1.01 * total)
+    for ax in (ax_job, ax_turn, ax_mid, ax_worst):
+        place_legend(ax, renderer)
+    fig.suptitle(_title(run), fontsize=10)
+    return _save(fig, out / "winding.png")
+
+
+def _turns_wound(run: Run, layer: IntArray, layers: dict[int, tuple[float, int]]) -> FloatArray:
+    """For every joint sample measured against a layer: the turns wound when
+    it was taken (the turns before its layer and its fork position in it,
+    held inside the layer); NaN for the others."""
+    plan = run.plan
+    n = len(plan.segments)
+    before, turns, start = np.zeros(n), np.zeros(n), np.zeros(n)
+    for i, (b, t) in layers.items():
+        before[i], turns[i], start[i] = b, t, plan.segments[i].start[1]
+    out = np.full(layer.size, np.nan)
+    m = layer >= 0
+    if np.any(m):
+        lay = layer[m]
+        y = run.states.pos[m, 1] / plan.joint_step[1]
+        out[m] = before[lay] + np.clip(np.abs(y - start[lay]) / plan.job.fork_steps_per_rev, 0, turns[lay])
+    return out
+
+
+def _zoom_middle(run: Run, d: Digest, ax: Axes) -> None:
+    """An eighth of a turn in the middle of the first layer: every commanded
+    step and sample, signed distance to the line."""
+    plan = run.plan
+    spr = plan.job.fork_steps_per_rev
+    lx, ly = plan.step_lengths[0], plan.step_lengths[1]
+    js = plan.joint_step
+    first = next((i for i, s in enumerate(plan.segments) if s.kind == "layer"), None)
+    if first is None or first not in d.layers or d.layers[first].zoom is None:
+        ax.text(0.5, 0.5, "no layer wound", ha="center", transform=ax.transAxes)
+        return
+    s = plan.segments[first]
+    norm = math.hypot(s.delta[0] * lx, s.delta[1] * ly)
+    zoom = d.layers[first].zoom
+    assert zoom is not None
+    y_lo, y_hi = zoom
+    if d.layers[first].zoom_rows:
+        fork, dist = np.hstack(d.layers[first].zoom_rows)
+        ax.plot(fork / spr, dist * 1e6, ".-", color=CMD, lw=0.5, ms=3, label="commanded steps")
+    st = run.states
+    if len(st):
+        x = st.pos[:, 0] / js[0] - s.start[0]
+        y = st.pos[:, 1] / js[1] - s.start[1]
+        m = (y + s.start[1] >= y_lo) & (y + s.start[1] <= y_hi)
+        dist = (s.delta[0] * y[m] - x[m] * s.delta[1]) * lx * ly / norm
+        ax.plot((y[m] + s.start[1]) / spr, dist * 1e6, "o-", color=ACT, ms=3, lw=0.8, label="simulated axes")
+    ax.axhline(0, color=IDEAL, lw=0.8, label="ideal line")
+    ax.set_xlabel("fork position (turns)")
+    ax.set_ylabel("signed distance to the ideal line (um)")
+    ax.set_title(f"zoom: 1/8 turn mid layer 1 (a feed step is {lx * 1e6:g} um)", fontsize=10)
+    ax.grid(True, lw=0.3)
+
+
+def _zoom_worst(run: Run, analysis: Analysis, layer: IntArray, signed: FloatArray, ax: Axes) -> None:
+    """The samples around the axes' largest distance to the line, in time."""
+    st = run.states
+    if not np.any(np.isfinite(signed)):
+        ax.text(0.5, 0.5, "no joint samples while a layer is wound", ha="center", transform=ax.transAxes)
+        return
+    k = int(np.nanargmax(np.abs(signed)))
+    tk = float(st.t[k])
+    m = np.abs(st.t - tk) <= 0.4
+    seg = run.plan.job.segments()
+    lay = int(layer[k])
+    cmd = next((r.max for r in analysis.command.layers if r.segment == lay), math.nan)
+    if math.isfinite(cmd):
+        ax.axhspan(-cmd * 1e6, cmd * 1e6, color=CMD, alpha=0.15, lw=0, label="the layer's commanded steps")
+    ax.plot(st.t[m], signed[m] * 1e6, ".-", color=ACT, lw=0.8, ms=3, label="simulated axes")
+    ax.axhline(0, color=IDEAL, lw=0.8, label="ideal line")
+    ax.set_xlim(tk - 0.4, tk + 0.4)
+    fork = np.abs(st.vel[:, 1])
+    share = 100 * fork[k] / max(float(fork.max()), 1e-300)
+    ax.set_title(
+        f"zoom: the axes' largest distance, {abs(signed[k]) * 1e6:.2f} um, in coil {seg[lay].pole + 1} "
+        f"layer {seg[lay].layer + 1}\n(t = {tk:.3f} s; the fork at {share:.0f} % of its top speed)",
         fontsize=10,
     )
-    ax2.set_ylim(bottom=0)
-    _legend(ax2)
-    ax2.grid(True, lw=0.3)
-    fig.suptitle(_title(run), fontsize=10)
-    path = out / "winding.png"
-    fig.savefig(path, dpi=100, pil_kwargs=PNG)
-    plt.close(fig)
-    return path
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("signed distance to the ideal line (um)")
+    ax.grid(True, lw=0.3)
 
 
-def _per_turn_command(d: Digest) -> npt.NDArray[np.float64]:
-    """Mean distance of the commanded steps per turn, in winding order."""
-    means = [d.layers[i].turn_means() for i in sorted(d.layers) if d.layers[i].points]
-    return np.concatenate(means) if means else np.zeros(0)
-
-
-def _per_turn_axes(run: Run, d: Digest) -> npt.NDArray[np.float64]:
-    """Mean distance of the joint samples per turn, in winding order, each
-    measured against the layer whose fork range holds it."""
+def _per_turn_axes(
+    run: Run, layer: IntArray, dist: FloatArray, layers: dict[int, tuple[float, int]]
+) -> tuple[FloatArray, FloatArray]:
+    """(turn centre in winding order, mean distance of the joint samples of
+    that turn), each sample measured against the layer whose fork range holds it."""
     plan = run.plan
-    lx, ly = plan.step_lengths[0], plan.step_lengths[1]
     spr = plan.job.fork_steps_per_rev
-    seg, x, y = winding_samples(run, d)
-    out = []
-    for i in (int(v) for v in np.unique(seg)):
-        s = plan.segments[i]
-        m = seg == i
-        xr, yr = x[m] - s.start[0], y[m] - s.start[1]
-        dist = (
-            np.abs(s.delta[0] * yr - xr * s.delta[1]) * lx * ly / math.hypot(s.delta[0] * lx, s.delta[1] * ly)
-        )
-        turns = abs(s.delta[1]) // spr  # this layer's (its coil's)
-        tid = np.clip(np.ceil(np.abs(yr) / spr) - 1, 0, turns - 1).astype(np.int64)
-        sums, counts = np.bincount(tid, weights=dist), np.bincount(tid)
-        out.append(sums[counts > 0] / counts[counts > 0])
-    return np.concatenate(out) if out else np.zeros(0)
+    y = run.states.pos[:, 1] / plan.joint_step[1] if len(run.states) else np.zeros(0)
+    xs, ys = [], []
+    for i in (int(v) for v in np.unique(layer[layer >= 0])):
+        m = layer == i
+        before, turns = layers[i]
+        tid = turn_index(np.abs(y[m] - plan.segments[i].start[1]), spr, turns)
+        sums, counts = np.bincount(tid, weights=np.abs(dist[m])), np.bincount(tid)
+        seen = np.flatnonzero(counts > 0)
+        xs.append(before + seen + 0.5)
+        ys.append(sums[seen] / counts[seen])
+    return (np.concatenate(xs), np.concatenate(ys)) if xs else (np.zeros(0), np.zeros(0))
+
+
+# -- all figures of a run -------------------------------------------------------------------
 
 
 def plot_analysis(
     run: Run, analysis: Analysis, out: Path | None = None, digested: Digest | None = None
 ) -> list[Path]:
-    """Write motion.png, tracking.png and winding.png; return their paths.
-    ``digested``: the run's :func:`winder.analysis.metrics.digest_run`, if made already."""
+    """Write motion.png, tracking.png and winding.png (and operations.png for a
+    run with operator commands); return their paths. ``digested``: the run's
+    :func:`winder.analysis.metrics.digest_run`, if made already."""
     d = digested if digested is not None else digest_run(run)
     out = plots_dir(run.path) if out is None else Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -439,13 +795,14 @@ _JOB: tuple[Run, Analysis, Digest, Path] | None = None
 def _draw(name: str) -> Path:
     assert _JOB is not None
     run, analysis, d, out = _JOB
-    if name == "motion":
-        return _motion(run, d, out)
-    if name == "tracking":
-        return _tracking(run, d, out)
-    if name == "winding":
-        return _winding(run, analysis, d, out)
-    return _operations(run, d, out)
+    with matplotlib.rc_context(RC):
+        if name == "motion":
+            return _motion(run, d, out)
+        if name == "tracking":
+            return _tracking(run, d, out)
+        if name == "winding":
+            return _winding(run, analysis, d, out)
+        return _operations(run, d, out)
 
 
 def _draw_all(figures: list[str]) -> list[Path]:
@@ -460,84 +817,83 @@ def _draw_all(figures: list[str]) -> list[Path]:
         return [_draw(name) for name in figures]
     from concurrent.futures import ProcessPoolExecutor
 
-    with ProcessPoolExecutor(min(cores, len(figures)), mp_context=mp.get_context("fork")) as pool:
+    # a process per figure even on two cores: the figures take unequal times
+    # (motion.png the longest), and the system shares the cores out evenly
+    with ProcessPoolExecutor(len(figures), mp_context=mp.get_context("fork")) as pool:
         return list(pool.map(_draw, figures))
 
 
+# -- identify.png ----------------------------------------------------------------------------
+
+
 def plot_identification(run: Run, ident: Identification, out: Path | None = None) -> list[Path]:
-    """Write identify.png: the MRAS convergence of J and D per axis."""
+    """Write identify.png: the MRAS convergence of J and D per axis, the band
+    it settles in, least squares and the recorded value."""
     out = plots_dir(run.path) if out is None else Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    fig, axes = plt.subplots(2, 3, figsize=(15, 7.5), sharex="col")
-    fig.subplots_adjust(**MARGINS, top=0.9, hspace=0.15)
+    with matplotlib.rc_context(RC):
+        return [_identification(ident, out)]
+
+
+def _identification(ident: Identification, out: Path) -> Path:
+    fig, _ = _figure((15, 8))
+    gs = fig.add_gridspec(2, 3, **MARGINS, top=0.82, hspace=0.32)
     for c, axis in enumerate(AXES):
         a = ident.axes[axis]
+        top = fig.add_subplot(gs[0, c])
         for r, (key, true, ls) in enumerate((("J", a.J_true, a.ls_J), ("D", a.D_true, a.ls_D))):
-            ax = axes[r, c]
-            ax.axhspan(0.99, 1.01, color="0.85", label="+-1 %")
-            ax.axhline(1.0, color="k", lw=0.8)
+            ax = top if r == 0 else fig.add_subplot(gs[1, c], sharex=top)
+            head = f"{axis}: {key} = {true:.4g} {'kg m²' if key == 'J' else 'N m s/rad'}"
             if not a.identifiable:
-                ax.text(
-                    0.5,
-                    0.5,
-                    a.reason.replace(": ", ":\n", 1),
-                    ha="center",
-                    va="center",
-                    transform=ax.transAxes,
-                    fontsize=9,
-                    wrap=True,
-                )
-                ax.set_ylim(0.9, 1.1)
-            else:
-                tr = a.trajectory
-                assert tr is not None
-                est = getattr(tr, key)
-                ax.plot(
-                    tr.t, est / true, color=CMD, lw=1.0, label=f"MRAS (gain {ident.gain:g}): {key} / recorded"
-                )
-                settled = a.mras_J if key == "J" else a.mras_D
-                band = a.mras_J_band if key == "J" else a.mras_D_band
-                t0 = float(tr.t[tr.t.size - max(1, tr.t.size // 4)]) if tr.t.size else 0.0
-                ax.fill_between(
-                    [t0, float(tr.t[-1]) if tr.t.size else 0.0],
-                    band[0] / true,
-                    band[1] / true,
-                    color=CMD,
-                    alpha=0.2,
-                    label=f"last quarter: mean {100 * (settled / true - 1):+.2f} %, "
-                    f"{100 * (band[0] / true - 1):+.1f}..{100 * (band[1] / true - 1):+.1f} %",
-                )
-                ax.axhline(
-                    ls / true,
-                    color=ACT,
-                    ls="--",
-                    lw=1.2,
-                    label=f"least squares: {100 * (ls / true - 1):+.3f} %",
-                )
-                final = est[-1] / true
-                lo = min(0.9, final - 0.02, ls / true - 0.02)
-                hi = max(1.1, final + 0.02, ls / true + 0.02)
-                ax.set_ylim(lo, hi)
-                if r == 0 and a.mras_time_1pct is not None:
-                    ax.axvline(
-                        a.mras_time_1pct,
-                        color="tab:green",
-                        ls=":",
-                        lw=1.0,
-                        label=f"within 1 % from update {a.mras_iterations_1pct}",
-                    )
-                _legend(ax)
+                why = "\n".join(textwrap.wrap(a.reason, 48))
+                ax.text(0.5, 0.5, why, ha="center", va="center", transform=ax.transAxes, fontsize=9)
+                ax.set_xticks([])
+                ax.set_yticks([])
+                ax.set_title(head, fontsize=10)
+                continue
+            ax.axhspan(0.99, 1.01, color="0.85")
+            ax.axhline(1.0, color="k", lw=0.8)
             ax.set_ylabel(f"{key} estimate / recorded {key}")
             ax.grid(True, lw=0.3)
-        axes[0, c].set_title(f"{axis}: J = {a.J_true:.4g} kg m², D = {a.D_true:.4g} N m s/rad", fontsize=10)
-        axes[1, c].set_xlabel("time in the run (s)")
+            tr = a.trajectory
+            assert tr is not None
+            est = getattr(tr, key) / true
+            settled = (a.mras_J if key == "J" else a.mras_D) / true
+            lo, hi = (x / true for x in (a.mras_J_band if key == "J" else a.mras_D_band))
+            t0 = a.mras_settled_from if a.mras_settled_from is not None else float(tr.t[-1])
+            t1 = float(tr.t[-1])
+            ok = np.isfinite(est)
+            _line(ax, tr.t[ok], est[ok], color=CMD, lw=0.8)
+            ax.fill_between([t0, t1], lo, hi, color="tab:green", alpha=0.25, lw=0)
+            ax.plot([t0, t1], [settled, settled], color="tab:green", lw=2.0)
+            ax.axhline(ls / true, color=ACT, ls="--", lw=1.2)
+            if r == 0 and a.mras_time_1pct is not None:
+                ax.axvline(a.mras_time_1pct, color="tab:purple", ls=":", lw=1.2)
+            # the band, least squares and +-10 % in view; the start from b = 0 runs off it
+            ax.set_ylim(min(0.9, lo, ls / true) - 0.02, max(1.1, hi, ls / true) + 0.02)
+            spread = f", std {100 * a.mras_spread:.2g} %" if key == "J" else ""
+            ax.set_title(
+                f"{head}; least squares {100 * (ls / true - 1):+.3f} %\nMRAS settled "
+                f"{100 * (settled - 1):+.3g} % (min .. max {100 * (lo - 1):+.3g} .. "
+                f"{100 * (hi - 1):+.3g} %{spread})",
+                fontsize=9,
+            )
+        if a.identifiable:
+            fig.axes[-1].set_xlabel("time in the run (s)")
+        top.tick_params(labelbottom=False)
+    handles = [
+        Line2D([], [], color=CMD, lw=1.0, label=f"MRAS estimate (gain {ident.gain:g}), from b = 0"),
+        Patch(color="tab:green", alpha=0.4, label="its last quarter of updates: min .. max"),
+        Line2D([], [], color="tab:green", lw=2.0, label="... and mean (the settled estimate)"),
+        Line2D([], [], color=ACT, ls="--", lw=1.2, label="least squares"),
+        Patch(color="0.85", label="recorded +-1 %"),
+        Line2D([], [], color="tab:purple", ls=":", lw=1.2, label="J within 1 % for good from here"),
+    ]
+    fig.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, 0.935), ncols=3, fontsize=9)
     fig.suptitle(
         f"{ident.label}: {ident.model} model, joint states at {ident.publish_rate:g} Hz, "
         f"window {ident.window * 1e3:.3g} ms - MRAS (thesis 001 §2.4, Landau's law, extended to D) "
-        "from b = 0 vs least squares",
+        "vs least squares",
         fontsize=10,
     )
-    path = out / "identify.png"
-    fig.savefig(path, dpi=100, pil_kwargs=PNG)
-    plt.close(fig)
-    return [path]
+    return _save(fig, out / "identify.png")
