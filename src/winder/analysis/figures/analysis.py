@@ -91,8 +91,9 @@ PNG = {"compress_level": 1}
 #: and draw, a millisecond each: a fifth of the drawing time went into ticks)
 TICK_BINS = 4
 #: settings every figure here is drawn with: titles at a fixed height (matplotlib
-#: otherwise measures the tick labels of every panel to lift them)
-RC: dict[Any, Any] = {"axes.titley": 1.0, "axes.titlepad": 5.0}
+#: otherwise measures the tick labels of every panel to lift them), a thin grid
+#: made with the ticks (ax.grid() afterwards goes over every tick again)
+RC: dict[Any, Any] = {"axes.titley": 1.0, "axes.titlepad": 5.0, "axes.grid": True, "grid.linewidth": 0.3}
 #: artists a legend may cover: marks of a time or place (event lines, layer ends),
 #: not data
 BACKGROUND = "background"
@@ -417,8 +418,6 @@ def _motion(run: Run, d: Digest, out: Path) -> Path:
             if r == 0:
                 ax.set_title(f"{axis}: its first acceleration (zoom)", fontsize=10)
         axes[3, c].set_xlabel("time (s)")
-    for ax in axes.flat:
-        ax.grid(True, lw=0.3)
     place_legend(axes[0, 0], renderer, markerscale=6)
     place_legend(axes[1, 0], renderer)
     fig.suptitle(
@@ -460,7 +459,6 @@ def _operations(run: Run, d: Digest, out: Path) -> Path:
         _mark_events(ax, run, label=row == 0)
         ax.set_xlim(lo, hi)
         ax.set_ylabel(f"{axis} velocity ({unit}/s)")
-        ax.grid(True, lw=0.3)
         if row == 0:  # beside the panels: nothing under it
             ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, markerscale=4)
         if row < len(moving) - 1:
@@ -522,8 +520,6 @@ def _tracking(run: Run, d: Digest, out: Path) -> Path:
                 for s in (-half, half):
                     ax.axhline(s, color="k", ls=":", lw=0.8)
                 ax.text(0.01, 0.02, "dotted: +-1/2 tooth pitch", transform=ax.transAxes, fontsize=8)
-        for a in axes[:, c]:
-            a.grid(True, lw=0.3)
     place_legend(axes[0, 0], renderer)
     place_legend(axes[1, 0], renderer)
     axes[0, 0].set_xlabel("time (s)")
@@ -628,7 +624,6 @@ def _winding(run: Run, analysis: Analysis, d: Digest, out: Path) -> Path:
         + (f"; axes mean {a.mean * 1e6:.3f} um, max {a.max * 1e6:.3f} um" if a else ""),
         fontsize=10,
     )
-    ax_job.grid(True, lw=0.3)
 
     # per turn: eq. 7 over each turn, in % of the wire diameter
     ax_turn.axhline(0.1, color="0.5", lw=3.0, alpha=0.5, label="0.1 % (the paper's RW400 measurement)")
@@ -653,7 +648,6 @@ def _winding(run: Run, analysis: Analysis, d: Digest, out: Path) -> Path:
     ax_turn.set_ylabel("mean deviation of the turn (% of wire diameter)")
     ax_turn.set_title("eq. 7 of each turn", fontsize=10)
     ax_turn.set_ylim(bottom=0)
-    ax_turn.grid(True, lw=0.3)
 
     _zoom_middle(run, d, ax_mid)
     _zoom_worst(run, analysis, layer, signed, ax_worst)
@@ -714,7 +708,6 @@ def _zoom_middle(run: Run, d: Digest, ax: Axes) -> None:
     ax.set_xlabel("fork position (turns)")
     ax.set_ylabel("signed distance to the ideal line (um)")
     ax.set_title(f"zoom: 1/8 turn mid layer 1 (a feed step is {lx * 1e6:g} um)", fontsize=10)
-    ax.grid(True, lw=0.3)
 
 
 def _zoom_worst(run: Run, analysis: Analysis, layer: IntArray, signed: FloatArray, ax: Axes) -> None:
@@ -743,7 +736,6 @@ def _zoom_worst(run: Run, analysis: Analysis, layer: IntArray, signed: FloatArra
     )
     ax.set_xlabel("time (s)")
     ax.set_ylabel("signed distance to the ideal line (um)")
-    ax.grid(True, lw=0.3)
 
 
 def _per_turn_axes(
@@ -854,7 +846,6 @@ def _identification(ident: Identification, out: Path) -> Path:
             ax.axhspan(0.99, 1.01, color="0.85")
             ax.axhline(1.0, color="k", lw=0.8)
             ax.set_ylabel(f"{key} estimate / recorded {key}")
-            ax.grid(True, lw=0.3)
             tr = a.trajectory
             assert tr is not None
             est = getattr(tr, key) / true
