@@ -801,6 +801,7 @@ def _draw_all(figures: list[str]) -> list[Path]:
     """Each figure drawn in a process of its own when the machine has cores to
     spare (forked: the run is shared, not copied), else one after another.
     Drawing is matplotlib's Python code, one core per figure."""
+    import gc
     import multiprocessing as mp
     import os
 
@@ -810,9 +811,15 @@ def _draw_all(figures: list[str]) -> list[Path]:
     from concurrent.futures import ProcessPoolExecutor
 
     # a process per figure even on two cores: the figures take unequal times
-    # (motion.png the longest), and the system shares the cores out evenly
-    with ProcessPoolExecutor(len(figures), mp_context=mp.get_context("fork")) as pool:
-        return list(pool.map(_draw, figures))
+    # (motion.png the longest), and the system shares the cores out evenly.
+    # Frozen, the parent's objects stay out of the children's garbage
+    # collections, which would otherwise write to (and so copy) their pages.
+    gc.freeze()
+    try:
+        with ProcessPoolExecutor(len(figures), mp_context=mp.get_context("fork")) as pool:
+            return list(pool.map(_draw, figures))
+    finally:
+        gc.unfreeze()
 
 
 # -- identify.png ----------------------------------------------------------------------------
