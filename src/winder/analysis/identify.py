@@ -710,7 +710,7 @@ def format_identification(ident: Identification) -> str:
         tr = a.trajectory
         first = tr.settle_start + 1 if tr is not None else 0
         conv = (
-            f"J within 1 % for good from update {a.mras_iterations_1pct} (t = {a.mras_time_1pct:.3f} s)"
+            f"J within 1 % for good after update {a.mras_iterations_1pct} (t = {a.mras_time_1pct:.3f} s)"
             if a.mras_iterations_1pct is not None
             else "J never within 1 % for good"
         )
