@@ -243,6 +243,19 @@ def test_the_settled_estimate_is_the_last_quarter_by_hand() -> None:
     assert out["mras_J_err"] == a.mras_J_err
 
 
+def test_an_error_that_rounds_to_zero_prints_without_a_sign() -> None:
+    from winder.analysis.identify import _pct
+
+    assert [_pct(x) for x in (-1e-9, 0.0, 1e-9, -2e-5, 0.01234, math.nan)] == [
+        "0.000 %",
+        "0.000 %",
+        "0.000 %",
+        "-0.002 %",
+        "+1.234 %",
+        "-",
+    ]
+
+
 def test_the_settled_estimate_of_a_known_series() -> None:
     """Eight updates, one not yet a positive 1/J (NaN): the last two are the quarter."""
     from winder.analysis.identify import Mras

@@ -672,7 +672,11 @@ def identify(run: Run, gain: float = GAIN, window: float = WINDOW) -> Identifica
 
 
 def _pct(x: float) -> str:
-    return "-" if not math.isfinite(x) else f"{100 * x:+.3f} %"
+    """A relative error in %, signed; one that rounds to zero is 0.000 %, never -0.000 %."""
+    if not math.isfinite(x):
+        return "-"
+    text = f"{100 * x:+.3f}"
+    return f"{'0.000' if float(text) == 0.0 else text} %"
 
 
 def _g(x: float) -> str:
