@@ -275,7 +275,13 @@ def start_run(node: Any, values: dict[str, Any]) -> Any:
         req = SetParametersAtomically.Request()
         req.parameters = [Parameter(k, value=v).to_parameter_msg() for k, v in values.items()]
         future = client.call_async(req)
-        spin_until(node, future.done, 30, "the start_run reply")
+        try:  # a DDS service reply can be lost while its topic is still matching: ask again
+            spin_until(node, future.done, 5, "the start_run reply")
+        except AssertionError:
+            client.remove_pending_request(future)
+            if time.monotonic() > t_end:
+                raise
+            continue
         result = future.result().result
         if result.successful or "not ready" not in result.reason or time.monotonic() > t_end:
             return result

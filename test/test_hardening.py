@@ -780,6 +780,12 @@ def test_a_start_while_a_job_runs_is_refused_and_the_job_completes(
     assert not second.success and "is running" in second.message, second.message
     spin_until(ros, lambda: done_count() >= 1, 60, "the first job to complete")
     third = start()
+    t_end = time.monotonic() + 10
+    while not third.success and "not ready" in third.message and time.monotonic() < t_end:
+        # "done" and the sim node's "ready" travel on two topics: the interp node may hear
+        # the one after this test heard the other; the contract is to ask again
+        time.sleep(0.2)
+        third = start()
     assert third.success, third.message
     spin_until(ros, lambda: len(list(bags.glob("*/metadata.yaml"))) == 2, 60, "the second bag")
     for meta in sorted(bags.glob("*/metadata.yaml")):
