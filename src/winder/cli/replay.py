@@ -95,12 +95,10 @@ def cmd_play(args: argparse.Namespace) -> int:
     return 0
 
 
-#: sim settings a re-simulation takes from the recording unless given
-_RECORDED = ("model", "publish_rate", "settle_time")
-
-
 def _recorded_sim(run: Any) -> dict[str, Any]:
     """The sim node's settings the recording says the run had."""
+    from winder.contract.params import MOTOR_FIELDS
+
     cfg = run.sim_config
     if cfg is None:
         return {}
@@ -110,7 +108,7 @@ def _recorded_sim(run: Any) -> dict[str, Any]:
         "settle_time": cfg.settle_time,
     }
     for axis, a in cfg.axes.items():
-        for key in ("Zr", "L", "i_a", "J", "D", "motor_step_angle", "load_torque"):
+        for key in MOTOR_FIELDS:  # the fields the sim node records per axis
             base[f"{axis}.{key}"] = getattr(a, key)
     return base
 

@@ -34,6 +34,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from std_srvs.srv import Trigger
 
+from winder.contract.topics import TOPIC_JOB
 from winder.record.replay import PlayPlan, PlayTopic
 from winder.ros.qos import profile
 
@@ -311,9 +312,7 @@ def run_player(
     player = None
     terminal = None
     try:
-        ns = plan.topics[next(iter(plan.topics))].name
-        node_ns = _namespace_of(plan, ns)
-        player = Player(plan, rate=rate, node_namespace=node_ns, start_paused=start_paused)
+        player = Player(plan, rate=rate, node_namespace=_namespace_of(plan), start_paused=start_paused)
         if wait_subscribers > 0:
             missing = player.wait_for_subscribers(wait_subscribers)
             if missing:
@@ -341,11 +340,12 @@ def run_player(
         rclpy.try_shutdown()
 
 
-def _namespace_of(plan: PlayPlan, _name: str) -> str:
+def _namespace_of(plan: PlayPlan) -> str:
     """The namespace the player node lives in: the played cell's."""
+    job = "/" + TOPIC_JOB
     for t in plan.topics.values():
-        if t.recorded.endswith("/winder/job"):
-            return t.name[: -len("/winder/job")]
+        if t.recorded.endswith(job):
+            return t.name[: -len(job)]
     return ""
 
 

@@ -123,9 +123,9 @@ def resimulate(
                 if rec.path is not None:
                     pub_path.publish(_path_of(rec.path, run_id))
                 if rec.profile_config is not None:
-                    pub_profile.publish(_string(_event_of(rec.profile_config, run_id)))
+                    pub_profile.publish(_string(_relabelled(rec.profile_config, run_id)))
                 for raw in rec.events:
-                    pub_control.publish(_string(_event_of(raw, run_id)))
+                    pub_control.publish(_string(_relabelled(raw, run_id)))
                 failure = _stream(node, procs, rec, pub_steps, done, timeout)
             if not failure:
                 t_end = time.monotonic() + timeout
@@ -152,7 +152,7 @@ def _path_of(raw: bytes, run_id: str) -> JointTrajectory:
     return path
 
 
-def _event_of(raw: bytes, run_id: str) -> str:
+def _relabelled(raw: bytes, run_id: str) -> str:
     """A recorded JSON message of the run (String CDR: an operator event, the
     ramp configuration) for the new run: the same, with the new run id."""
     from rclpy.serialization import deserialize_message
