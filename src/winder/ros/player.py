@@ -268,10 +268,15 @@ class Player:
             self.cond.notify_all()
 
     def close(self) -> None:
+        """Stop the service thread, then destroy the node. A node destroyed
+        while that thread still waits on it crashes the process (seen once,
+        SIGSEGV, at a Ctrl-C mid-replay): if the thread has not ended, the
+        node is left for the process' exit."""
         self.stop()
-        self.executor.shutdown(timeout_sec=1.0)
-        self.thread.join(timeout=2.0)
-        self.node.destroy_node()
+        self.executor.shutdown(timeout_sec=5.0)
+        self.thread.join(timeout=5.0)
+        if not self.thread.is_alive():
+            self.node.destroy_node()
 
 
 def played_topics(plan: PlayPlan) -> list[PlayTopic]:
