@@ -1,6 +1,6 @@
 """The import rules of docs/ARCHITECTURE.md, read from the code itself.
 
-* Arrows only go down the layers: ``spec`` < ``motion`` < ``axis`` <
+* Arrows only go down the layers: ``spec`` < ``shaping`` < ``motion`` < ``axis`` <
   ``contract`` < ``record`` < ``analysis`` < ``ros`` < ``cli``; a module may
   import its own layer and those below, never one above.
 * Nothing under ``winder/`` imports a node package.
@@ -21,7 +21,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 SRC = ROOT / "src" / "winder"
-LAYERS = ("spec", "motion", "axis", "contract", "record", "analysis", "ros", "cli")
+LAYERS = ("spec", "shaping", "motion", "axis", "contract", "record", "analysis", "ros", "cli")
 NODE_PACKAGES = ("winder_interp", "winder_profile", "winder_sim")
 ROS_PACKAGES = (
     "rclpy",

@@ -43,7 +43,15 @@ from std_msgs.msg import Int32MultiArray, Int64MultiArray, String
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from winder.contract.params import OPERATION_SPECS, PROFILE_SPECS, SegmentTiming, check_profile, plan_timing
+from winder.contract.params import (
+    OPERATION_SPECS,
+    PROFILE_SPECS,
+    UNSHAPED,
+    SegmentTiming,
+    check_profile,
+    plan_timing,
+    shaping_report,
+)
 from winder.contract.stream import STEP_COLUMNS, TIMED_COLUMNS, JobPlan, StreamChecker, parse_job_description
 from winder.contract.timeline import Command, CommandError, Timeline, parse_schedule
 from winder.contract.topics import (
@@ -162,7 +170,8 @@ class ProfileNode(ManagedNode):
             return
         if job.ramp is not None:  # the run brings its ramp: it is checked here as a setting would be
             try:
-                values = check_all(PROFILE_SPECS, job.ramp)
+                # a ramp from before shapers existed is an unshaped one
+                values = check_all(PROFILE_SPECS, {**UNSHAPED, **job.ramp})
                 missing = sorted(set(PROFILE_SPECS) - set(values))
                 if missing:
                     raise SpecError(f"the ramp lacks {', '.join(missing)}")
@@ -201,14 +210,19 @@ class ProfileNode(ManagedNode):
             **values,
             "ramp_source": source,
             "job_duration_s": duration_ns / 1e9,
+            **shaping_report(timing),
         }
         self.pub_config.publish(String(data=json.dumps(config)))
         self.pub_path.publish(self.path_message(job, timing, self.get_clock().now().to_msg()))
         self.checker = StreamChecker(job)
         self.timed = 0
         self.error = ""
+        shaped = ""
+        if config.get("shaped"):
+            shaped = f", {values['shaper']} shaper at {values['shaper_freq']:g} Hz"
         self.get_logger().info(
-            f"job {job.job_id}: {values['profile']} ramps, {len(timing)} segments, {duration_ns / 1e9:.3f} s"
+            f"job {job.job_id}: {values['profile']} ramps{shaped}, {len(timing)} segments, "
+            f"{duration_ns / 1e9:.3f} s"
         )
         override = self.settings.values()["feed_override"]
         commands = [Command(0, "override", override)] if override != 1.0 else []

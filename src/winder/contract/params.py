@@ -19,7 +19,8 @@ import numpy as np
 import numpy.typing as npt
 
 from winder.motion.job import AXES, FIELD_SPECS, Job, Segment
-from winder.motion.profile import KINDS, LIMITS, Profile, plan
+from winder.motion.profile import KINDS, LIMITS, plan
+from winder.motion.shaped import Motion, ShapedProfile, shape
 from winder.spec import Spec, SpecError
 
 __all__ = [
@@ -31,6 +32,7 @@ __all__ = [
     "PROFILE_SPECS",
     "RAMP_SOURCES",
     "SIM_SPECS",
+    "UNSHAPED",
     "SegmentTiming",
     "bag_directory",
     "check_interp",
@@ -40,6 +42,7 @@ __all__ = [
     "plan_segment",
     "plan_timing",
     "run_ramp",
+    "shaping_report",
     "stop_place",
     "stop_points",
 ]
@@ -81,6 +84,8 @@ INTERP_SPECS = {
 }
 
 PROFILE_KINDS = KINDS
+#: the profile node's input shapers: none, or one of winder.shaping.KINDS
+SHAPER_CHOICES = ("none", "zv", "mzv", "zvd", "ei", "2hump_ei")
 PROFILE_SPECS = _table(
     Spec("profile", str, "scurve", "velocity ramp of every segment", choices=PROFILE_KINDS),
     Spec("v_max", float, 2048.0, "peak step rate of the major axis", "steps/s", 0.0, 1e7, low_open=True),
@@ -106,7 +111,38 @@ PROFILE_SPECS = _table(
         1e7,
     ),
     Spec("dwell", float, 0.0, "pause between segments", "s", 0.0, 3600.0),
+    Spec(
+        "shaper",
+        str,
+        "none",
+        "input shaper of every move's time law (winder.shaping): the steps stay where they are, their "
+        "times avoid exciting the resonance shaper_freq; the move lasts the shaper's duration longer",
+        choices=SHAPER_CHOICES,
+    ),
+    Spec(
+        "shaper_freq",
+        float,
+        44.5,
+        "resonance the shaper is designed for (default: the paper motor's w_n = 279 rad/s)",
+        "Hz",
+        0.0,
+        10000.0,
+        low_open=True,
+    ),
+    Spec(
+        "shaper_damping",
+        float,
+        0.52,
+        "damping ratio of that resonance (default: the paper motor's)",
+        "",
+        0.0,
+        0.95,
+    ),
 )
+
+#: The shaper settings of an unshaped ramp: what a ramp written before
+#: shapers existed (a job description, a job file, a bag) means.
+UNSHAPED = {name: PROFILE_SPECS[name].default for name in ("shaper", "shaper_freq", "shaper_damping")}
 
 #: The profile node's operation settings, beside its ramp: they act on a run
 #: while it goes on and never travel with a job.
@@ -360,14 +396,15 @@ def check_interp(values: dict[str, Any]) -> None:
 MAX_JOB_SECONDS = 7 * 24 * 3600.0
 
 
-def plan_segment(values: dict[str, Any], steps: int) -> Profile:
-    """The profile of one segment of ``steps`` steps with the profile settings;
-    ValueError (one line) if the limits cannot plan it or it would last longer
-    than :data:`MAX_JOB_SECONDS`."""
+def plan_segment(values: dict[str, Any], steps: int) -> Motion:
+    """The profile of one segment of ``steps`` steps with the profile settings,
+    shaped by ``shaper`` (absent: none); ValueError (one line) if the limits
+    cannot plan it or it would last longer than :data:`MAX_JOB_SECONDS`."""
     kind = values["profile"]
     kw: dict[str, Any] = {"v_max": values["v_max"], "v_start": values["v_start"], "v_end": values["v_start"]}
     kw.update({name: values[name] for name in LIMITS[kind]})
     limits = ", ".join(f"{k}={v:g}" for k, v in kw.items() if k != "v_end")
+    profile: Motion
     try:
         profile = plan(kind, float(steps), **kw)
     except (ZeroDivisionError, OverflowError):
@@ -375,6 +412,9 @@ def plan_segment(values: dict[str, Any], steps: int) -> Profile:
             f"profile={kind} with {limits}: the limits are too far apart to plan a {steps}-step move "
             "in floating point"
         ) from None
+    kind_s = values.get("shaper", "none")
+    if kind_s != "none":
+        profile = shape(profile, kind_s, values["shaper_freq"], values["shaper_damping"])
     if not math.isfinite(profile.duration) or profile.duration > MAX_JOB_SECONDS:
         raise ValueError(
             f"profile={kind} with {limits}: a {steps}-step move takes {profile.duration:.3g} s, "
@@ -385,7 +425,7 @@ def plan_segment(values: dict[str, Any], steps: int) -> Profile:
 
 def plan_job(
     values: dict[str, Any], segment_steps: Sequence[int]
-) -> tuple[list[Profile], npt.NDArray[np.int64], int]:
+) -> tuple[list[Motion], npt.NDArray[np.int64], int]:
     """The profiles of a job's segments, each segment's start time (ns) and the
     job's duration (ns, without the last dwell). Segments of equal length share
     one plan (a job of 10^5 layers plans two or three moves, not 10^5).
@@ -417,7 +457,7 @@ class SegmentTiming:
 
     t0_ns: int
     ends: tuple[int, ...]
-    profiles: tuple[Profile, ...]
+    profiles: tuple[Motion, ...]
     starts_ns: tuple[int, ...]
 
     @property
@@ -483,6 +523,30 @@ def plan_timing(
             )
     total = timings[-1].t0_ns + timings[-1].duration_ns if timings else 0
     return timings, total
+
+
+def shaping_report(timings: Sequence[SegmentTiming]) -> dict[str, Any]:
+    """What a shaped ramp does to a job, for the ramp configuration it
+    publishes: the shaper's impulses and, over every move, the peak velocity,
+    acceleration and jerk of the shaped motion (steps/s, /s^2, /s^3: never
+    above the ramp's limits, usually below) beside the unshaped plan's. Empty
+    for an unshaped ramp."""
+    moves = {id(p): p for t in timings for p in t.profiles}.values()
+    shaped = [p for p in moves if isinstance(p, ShapedProfile)]
+    if not shaped:
+        return {}
+    first = shaped[0]
+    peaks = [p.peaks for p in shaped]
+    unshaped = [ShapedProfile(p.base, [1.0], [0.0]).peaks for p in shaped]
+    return {
+        "shaped": {
+            "amplitudes": first.amplitudes.tolist(),
+            "times_s": first.times.tolist(),
+            "shaper_duration_s": first.shaper_duration,
+            "peak": {k: max(q[k] for q in peaks) for k in ("v", "a", "j")},
+            "peak_unshaped": {k: max(q[k] for q in unshaped) for k in ("v", "a", "j")},
+        }
+    }
 
 
 def check_profile(values: dict[str, Any]) -> None:

@@ -34,8 +34,8 @@ import numpy as np
 import numpy.typing as npt
 
 from winder.contract.params import SegmentTiming
-from winder.motion.profile import Profile
 from winder.motion.retime import continue_tail, from_rest, motion_state, stop_tail
+from winder.motion.shaped import Motion
 from winder.spec import SpecError
 
 __all__ = [
@@ -98,7 +98,7 @@ def parse_schedule(text: str) -> list[Command]:
 class _Piece:
     t0: int  # ns: when it starts
     p0: float  # where it starts, in steps since the move's start
-    profile: Profile  # times from t0, positions from p0
+    profile: Motion  # times from t0, positions from p0
     kind: str = "plan"  # plan, stop, override, resume
 
 
@@ -107,7 +107,7 @@ class _Move:
     seg: int
     k0: int  # steps of the segment before the move: it covers k0+1 .. k1
     k1: int
-    profile: Profile  # as planned, from rest to rest
+    profile: Motion  # as planned, from rest to rest
     gap_ns: int  # the planned rest after it (a dwell, a programmed stop's pause)
     pieces: list[_Piece] = field(default_factory=list)
     waiting: bool = False  # it waits for a resume: not started yet

@@ -31,15 +31,19 @@ from __future__ import annotations
 import math
 
 from winder.motion.profile import _EXP_DOWN, _POLY, EXP_CUT, Profile, _phi1, plan
+from winder.motion.shaped import Motion, ShapedProfile, base_of, shaped_like
 
 __all__ = ["continue_tail", "from_rest", "motion_state", "stop_tail"]
 
 _Seg = tuple[float, ...]
 
 
-def motion_state(profile: Profile, t: float) -> tuple[float, float, float]:
+def motion_state(profile: Motion, t: float) -> tuple[float, float, float]:
     """Position, velocity and acceleration of ``profile`` at ``t`` (s); at its
     start the acceleration it starts with (a tail may start accelerating)."""
+    if isinstance(profile, ShapedProfile):  # it starts at rest, with the first impulse's share
+        p, v, a, _ = profile.sample(max(t, 0.0))
+        return float(p), float(v), float(a)
     if t <= 0.0:
         return 0.0, profile.v_start, float(profile._segs[0][3]) if profile._segs else 0.0
     p, v, a, _ = profile.sample(t)
@@ -119,11 +123,13 @@ def _exp_fall(like: Profile, v: float, v_to: float, v_max: float, eps: float) ->
     return (tau * (ya - yb), 0.0, v, a0, -a0 / tau, _EXP_DOWN, b, tau), dist
 
 
-def stop_tail(profile: Profile, t: float, *, exp_cut: float = EXP_CUT) -> Profile:
-    """The time-optimal stop from the state of ``profile`` at ``t`` (s) to its
+def stop_tail(motion: Motion, t: float, *, exp_cut: float = EXP_CUT) -> Profile:
+    """The time-optimal stop from the state of ``motion`` at ``t`` (s) to its
     end velocity; positions from the cut (0), ``distance`` is the stop
-    distance, ``duration`` the stop time."""
-    _, v, a = motion_state(profile, t)
+    distance, ``duration`` the stop time. A shaped move stops from its
+    (shaped) state with its ramp's limits, unshaped: at once."""
+    _, v, a = motion_state(motion, t)
+    profile = base_of(motion)
     v1 = profile.v_end
     if profile.kind == "exponential":
         seg, dist = _exp_fall(profile, v, v1, float(profile.v_max or v), exp_cut)
@@ -134,22 +140,25 @@ def stop_tail(profile: Profile, t: float, *, exp_cut: float = EXP_CUT) -> Profil
     return _profile(profile, segs, max(end, 0.0), float(profile.v_max or v))
 
 
-def from_rest(profile: Profile, distance: float, v_max: float, *, exp_cut: float = EXP_CUT) -> Profile:
+def from_rest(motion: Motion, distance: float, v_max: float, *, exp_cut: float = EXP_CUT) -> Motion:
     """A move of ``distance`` from rest to rest (the start/stop rate) with
-    ``profile``'s kind and limits and the peak ``v_max``."""
-    return plan(
+    ``motion``'s kind, limits and shaper and the peak ``v_max``."""
+    profile = base_of(motion)
+    return shaped_like(motion, plan(
         profile.kind, distance, v_max=v_max, a_max=profile.a_max, j_max=profile.j_max,
         tau=profile.tau, v_start=profile.v_end, v_end=profile.v_end, exp_cut=exp_cut,
-    )  # fmt: skip
+    ))  # fmt: skip
 
 
 def continue_tail(
-    profile: Profile, t: float, distance: float, v_max: float, *, exp_cut: float = EXP_CUT
+    motion: Motion, t: float, distance: float, v_max: float, *, exp_cut: float = EXP_CUT
 ) -> Profile | None:
-    """The rest of a move from the state of ``profile`` at ``t`` (s): ``distance``
+    """The rest of a move from the state of ``motion`` at ``t`` (s): ``distance``
     more to its end velocity, now with the peak ``v_max``; None if no
-    continuation with a jerk-limited change of speed fits (keep the plan)."""
-    _, v, a = motion_state(profile, t)
+    continuation with a jerk-limited change of speed fits (keep the plan).
+    From a shaped move's state the rest is unshaped."""
+    _, v, a = motion_state(motion, t)
+    profile = base_of(motion)
     v1 = profile.v_end
     if not distance > 0.0 or v_max < v1:
         return None
