@@ -436,6 +436,9 @@ def build_parser() -> argparse.ArgumentParser:
     from winder.cli.replay import register as register_replay  # play, resim (issue 21)
 
     register_replay(sub)
+    from winder.cli.resonance import register as register_resonance  # resonance, tune (issue 15)
+
+    register_resonance(sub)
     return parser
 
 
