@@ -141,3 +141,34 @@ def test_tuned_limits_lose_no_step_in_the_cell_and_the_margin_is_real(tmp_path: 
     )  # the job time tune printed, plus the settle time
     assert run(1.1)[0] == 0
     assert run(1.5)[0] > 0  # beyond the margin the motor does slip: the check above can fail
+
+
+@pytest.mark.ros
+def test_a_shaped_cell_run_keeps_every_step_in_place(tmp_path: Path) -> None:
+    from conftest import next_domain, rosbags_read
+    from test_nodes import SMALL_JOB, job_args, timed_rows, winder_run
+
+    runs = {}
+    for label, extra in (
+        ("plain", []),
+        ("zvd", ["--shaper", "zvd", "--shaper-freq", "30", "--shaper-damping", "0.05"]),
+    ):
+        work = tmp_path / label
+        work.mkdir()
+        r = winder_run(work, next_domain(), *job_args(SMALL_JOB), *extra)
+        assert r.returncode == 0, r.stdout + r.stderr
+        (bag_dir,) = (work / "bags").iterdir()
+        bag = rosbags_read(bag_dir)
+        runs[label] = (timed_rows(bag), json.loads(bag["/winder/profile_config"][0][1].data))
+    (plain, plain_config), (shaped, config) = runs["plain"], runs["zvd"]
+    assert np.array_equal(plain[:, 1:], shaped[:, 1:])  # the same steps, in the same order
+    assert np.all(np.diff(shaped[:, 0]) > 0)  # strictly increasing times
+    assert config["shaper"] == "zvd" and config["shaped"]["shaper_duration_s"] == pytest.approx(
+        duration("zvd", 30.0, 0.05)
+    )
+    assert (
+        config["shaped"]["peak"]["a"] <= config["a_max"] and config["shaped"]["peak"]["j"] <= config["j_max"]
+    )
+    segments = int(plain[-1, 1]) + 1
+    added = config["job_duration_s"] - plain_config["job_duration_s"]  # one shaper per move
+    assert added == pytest.approx(segments * duration("zvd", 30.0, 0.05), abs=segments * 2e-9)
