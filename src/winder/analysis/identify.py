@@ -527,6 +527,13 @@ class AxisIdentification:
     #: s of the run: the first of the updates the settled estimate is the mean of
     mras_settled_from: float | None = None
 
+    #: the resonance of the identified axis: w_n = sqrt(K/J), zeta = D/(2 sqrt(K J)) with the
+    #: least-squares J, D and the recorded stiffness K = Z_r^2 L i_a^2 / 2 (what `winder tune`
+    #: and the profile node's shaper_freq / shaper_damping take)
+    f_n: float = math.nan  #: Hz
+    zeta: float = math.nan
+    f_n_true: float = math.nan  #: of the recorded motor
+    zeta_true: float = math.nan
     ls_J_err: float = math.nan  #: relative error against the recorded value
     ls_D_err: float = math.nan
     mras_J_err: float = math.nan
@@ -559,6 +566,8 @@ def identify_axis(
     nan = math.nan
     base: dict[str, Any] = dict(axis=rec.axis, steps_moved=moved, windows=windows)
     base.update(J_true=rec.motor.J, D_true=rec.motor.D)
+    k = rec.motor.Zr * rec.motor.peak_torque  # N m / rad
+    base.update(resonance(k, rec.motor.J, rec.motor.D, "_true"))
     empty: dict[str, Any] = dict(
         ls_J=nan,
         ls_D=nan,
@@ -593,6 +602,7 @@ def identify_axis(
         return AxisIdentification(identifiable=False, reason=why, **base, **empty)
     traj = mras(eq, gain)
     paper = mras(eq, gain, damping=False)
+    found = resonance(k, J, D)
     mJ, j_lo, j_hi, mD, d_lo, d_hi = traj.settled
     it = traj.iterations_within(rec.motor.J)
 
@@ -625,7 +635,17 @@ def identify_axis(
         mras_J_err=err(mJ, rec.motor.J),
         mras_D_err=err(mD, rec.motor.D),
         paper_mras_J_err=err(paper.final[0], rec.motor.J),
+        f_n=found["f_n"],
+        zeta=found["zeta"],
     )
+
+
+def resonance(k: float, J: float, D: float, suffix: str = "") -> dict[str, float]:
+    """f_n (Hz) and zeta of an axis of stiffness ``k`` with ``J`` and ``D``."""
+    if not (k > 0 and J > 0 and math.isfinite(D)):
+        return {f"f_n{suffix}": math.nan, f"zeta{suffix}": math.nan}
+    wn = math.sqrt(k / J)
+    return {f"f_n{suffix}": wn / (2 * math.pi), f"zeta{suffix}": max(D, 0.0) / (2 * math.sqrt(k * J))}
 
 
 def identify(run: Run, gain: float = GAIN, window: float = WINDOW) -> Identification:
@@ -724,6 +744,10 @@ def format_identification(ident: Identification) -> str:
             f"last update J {_pct(a.mras_J_last / a.J_true - 1)}"
         )
         lines.append(f"{'':5s} {conv}; the thesis' J-only law: J {_pct(a.paper_mras_J_err)}")
+        lines.append(
+            f"{'':5s} resonance (least squares): f_n {a.f_n:.2f} Hz, zeta {a.zeta:.3f}  "
+            f"(recorded motor: {a.f_n_true:.2f} Hz, {a.zeta_true:.3f}); shaper_freq / shaper_damping"
+        )
     lines += [f"note: {n}" for n in ident.notes]
     return "\n".join(lines)
 
