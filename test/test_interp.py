@@ -17,6 +17,7 @@ from winder.motion.interp import (
     interpolate,
     line_distance,
     min_deviation,
+    path_mismatch,
     point_by_point,
 )
 
@@ -270,3 +271,97 @@ def test_line_distance_is_the_perpendicular_distance_to_the_moved_line(
             (abs(dx * (y - origin[1])) + abs((x - origin[0]) * dy)) * lx * ly / math.hypot(dx * lx, dy * ly)
         )
         assert abs(gr - ref) <= 1e-15 * size + 1e-12 * ref
+
+
+def first_off(pos: np.ndarray, path: np.ndarray) -> int:
+    """The oracle: index of the first row that differs from ``path``, or -1."""
+    off = np.flatnonzero(np.any(pos != path, axis=1))
+    return int(off[0]) if off.size else -1
+
+
+#: how a corrupted value differs: near the path, by 2**j (its products wrap
+#: onto the right ones modulo 2**64), or anything at all
+CHANGE = st.one_of(
+    st.tuples(st.just("add"), st.integers(-3, 3)),
+    st.tuples(st.just("add"), st.integers(31, 63).map(lambda j: 2**j)),
+    st.tuples(st.just("set"), st.integers(-(2**63), 2**63 - 1)),
+)
+MOVE = st.one_of(st.integers(-6, 6), st.integers(-(2**40), 2**40))
+
+
+@settings(max_examples=400, deadline=None)
+@given(
+    st.integers(2, 4),
+    st.lists(MOVE, min_size=2, max_size=2),
+    st.lists(st.integers(-(2**31), 2**31), min_size=4, max_size=4),
+    st.data(),
+)
+def test_path_mismatch_agrees_with_interpolate(
+    n_axes: int, moves: list[int], starts: list[int], data: st.DataObject
+) -> None:
+    """path_mismatch (no division) against rows of interpolate, on the path and
+    off it in up to three values, near or wild: the same first bad row. Moves
+    beyond MAX_STEPS are refused by both."""
+    axes = data.draw(st.permutations(range(n_axes)))[:2]
+    delta = [0] * n_axes
+    for ax, v in zip(axes, moves, strict=True):
+        delta[ax] = v
+    start = starts[:n_axes]
+    if any(abs(v) > MAX_STEPS for v in delta):
+        with pytest.raises(ValueError, match="invalid"):
+            interpolate(start, delta, first=0, stop=0)
+        with pytest.raises(ValueError, match="invalid"):
+            path_mismatch(start, delta, 0, np.empty((0, n_axes), np.int64))
+        return
+    a = max(abs(v) for v in delta)
+    n = data.draw(st.integers(0, min(a, 200)))
+    first = data.draw(st.one_of(st.integers(0, a - n), st.just(a - n)))  # the end, where products are largest
+    path = interpolate(start, delta, first=first, stop=first + n)
+    pos = path.copy()
+    assert path_mismatch(start, delta, first, pos) == -1
+    if n == 0:
+        return
+    for _ in range(data.draw(st.integers(1, 3))):
+        row, col = data.draw(st.integers(0, n - 1)), data.draw(st.integers(0, n_axes - 1))
+        how, v = data.draw(CHANGE)
+        value = v if how == "set" else int(pos[row, col]) + v
+        pos[row, col] = (value + 2**63) % 2**64 - 2**63  # as int64 wraps
+    assert path_mismatch(start, delta, first, pos) == first_off(pos, path)
+    # whole chunks moved along the path: a window shifted by a few steps
+    shift = data.draw(st.integers(-3, 3))
+    if 0 <= first + shift <= a - n:
+        other = interpolate(start, delta, first=first + shift, stop=first + shift + n)
+        assert path_mismatch(start, delta, first, other) == first_off(other, path)
+
+
+def test_path_mismatch_every_single_change_of_small_moves() -> None:
+    """Every row of every move up to 6 x 6 steps (and one of 3 axes), each of
+    its values changed by +-1, +-2 or 2**61..2**63 (wrapping onto the right
+    products): the first bad row, as the oracle says."""
+    changes = [1, -1, 2, -2, 2**61, 2**62, 2**63]
+    for dx in range(-6, 7):
+        for dy in range(-6, 7):
+            start, delta = [7, -3, 11], [dx, 0, dy]
+            path = interpolate(start, delta)
+            a = path.shape[0]
+            for first in range(a):
+                window = path[first:]
+                assert path_mismatch(start, delta, first, window) == -1
+                for row in range(window.shape[0]):
+                    for col in range(3):
+                        for c in changes:
+                            pos = window.copy()
+                            pos[row, col] = (int(pos[row, col]) + c + 2**63) % 2**64 - 2**63
+                            assert path_mismatch(start, delta, first, pos) == first_off(pos, window)
+
+
+def test_path_mismatch_window_and_move_as_interpolate() -> None:
+    pos = interpolate([0, 0], [5, 3])
+    assert path_mismatch([0, 0], [5, 3], 0, pos) == -1
+    assert path_mismatch((0, 0), (5, 3), 2, pos[2:]) == -1
+    assert path_mismatch([0, 0], [5, 3], 1, pos[2:]) == 0
+    assert path_mismatch([1, 2, 3], [0, 0, 0], 0, np.zeros((1, 3), np.int64)) == 0  # no path
+    with pytest.raises(ValueError, match="at most 2"):
+        path_mismatch([0, 0, 0], [1, 1, 1], 0, np.zeros((1, 3), np.int64))
+    with pytest.raises(ValueError, match="stop=6 is invalid"):
+        path_mismatch([0, 0], [5, 3], 1, pos)

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from winder.motion.interp import interpolate
+from winder.motion.interp import interpolate, path_mismatch
 from winder.motion.job import AXES, Job
 
 __all__ = [
@@ -361,8 +361,8 @@ class StreamChecker:
             return self._reject(
                 "bad", f"segment {segment}: {n} rows from step {k0} lie outside its steps 1..{seg.steps}"
             )
-        path = interpolate(seg.start, seg.delta, first=k0 - 1, stop=k0 - 1 + n)
-        if not np.array_equal(pos, path):
+        if path_mismatch(seg.start, seg.delta, k0 - 1, pos) >= 0:  # the closed form, row by row
+            path = interpolate(seg.start, seg.delta, first=k0 - 1, stop=k0 - 1 + n)
             off = np.flatnonzero(np.any(pos != path, axis=1))
             i = int(off[0])
             return self._reject(

@@ -27,6 +27,7 @@ block by block so that the temporaries stay in the CPU cache.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -41,6 +42,7 @@ __all__ = [
     "interpolate",
     "line_distance",
     "min_deviation",
+    "path_mismatch",
     "point_by_point",
 ]
 
@@ -209,6 +211,84 @@ def interpolate(
     for col, ax in enumerate(axes[: plane.shape[1]]):
         out[:, ax] += plane[:, col]
     return out
+
+
+def path_mismatch(
+    start: Sequence[int] | npt.NDArray[np.integer[Any]],
+    delta: Sequence[int] | npt.NDArray[np.integer[Any]],
+    first: int,
+    pos: npt.ArrayLike,
+) -> int:
+    """Index of the first row of ``pos`` (n, axes) that differs from row
+    ``first + i`` of :func:`interpolate` ``(start, delta)``, or -1 if none does.
+
+    The same verdict as comparing with ``interpolate(start, delta, first=first,
+    stop=first + n)``, without forming the path or dividing: in the mirrored
+    first octant (a = |major|, b = |minor|) the k-th row has the major axis at
+    k and the minor at m_k = floor((2*k*b + a - 1) / (2*a)) (module doc), i.e.
+    exactly when 0 <= m_k <= b and 0 <= 2*k*b + a - 1 - 2*a*m_k < 2*a; an axis
+    that does not move stays at its start. With m_k in 0..b every term is
+    below 2**63 (|delta| <= MAX_STEPS), so int64 is exact; a row with m_k
+    outside (a wild value, whose difference may wrap) is off the path whatever
+    its wrapped r. ValueError as :func:`interpolate` for a bad move or window.
+    """
+    p = np.asarray(pos)
+    s = [int(v) for v in start]
+    d = [int(v) for v in delta]
+    if len(s) != len(d):
+        raise ValueError(f"start ({len(s)}) and delta ({len(d)}) must be vectors of equal length")
+    if p.ndim != 2 or p.shape[1] != len(d):
+        raise ValueError(f"pos has shape {p.shape}: must be (n, {len(d)})")
+    moving = [i for i, v in enumerate(d) if v]
+    if len(moving) > 2:
+        raise ValueError(f"delta={d} moves {len(moving)} axes: at most 2 may move at once")
+    for i in moving:
+        _check_delta(f"delta[{i}]", d[i])
+    n = p.shape[0]
+    if not moving:  # the path has no rows: any row differs
+        return 0 if n else -1
+    major = max(moving, key=lambda i: (abs(d[i]), -i))  # the first of the longest, as interpolate
+    a = abs(d[major])
+    if not 0 <= first <= a - n:
+        raise ValueError(f"start={first}, stop={first + n} is invalid: need 0 <= start <= stop <= {a}")
+    if n == 0:
+        return -1
+    p = p.astype(np.int64, copy=False)
+    idx = _iota(n)
+    # the major axis at its start + k (or - k), k = first + 1 + idx
+    k1 = first + 1
+    if d[major] > 0:
+        bad = (p[:, major] - idx) != s[major] + k1
+    else:
+        bad = (p[:, major] + idx) != s[major] - k1
+    for ax in range(len(d)):
+        if ax == major:
+            continue
+        b = abs(d[ax])
+        if b == 0:
+            bad |= p[:, ax] != s[ax]
+            continue
+        m: npt.NDArray[np.int64] = p[:, ax] - s[ax] if d[ax] > 0 else s[ax] - p[:, ax]
+        bad |= m.view(np.uint64) > np.uint64(b)  # m outside 0..b
+        r = idx * (2 * b)  # r = 2*k*b + a - 1 - 2*a*m
+        r += 2 * b * k1 + a - 1
+        m *= 2 * a
+        r -= m
+        bad |= r.view(np.uint64) >= np.uint64(2 * a)
+    hit = int(np.argmax(bad))
+    return hit if bad[hit] else -1
+
+
+_IOTA = np.arange(0, dtype=np.int64)
+
+
+def _iota(n: int) -> npt.NDArray[np.int64]:
+    """0, 1, ... n - 1, read-only, kept from call to call."""
+    global _IOTA
+    if _IOTA.size < n:
+        _IOTA = np.arange(max(n, 2 * _IOTA.size), dtype=np.int64)
+        _IOTA.flags.writeable = False
+    return _IOTA[:n]
 
 
 def _abs_f(
