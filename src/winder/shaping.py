@@ -26,6 +26,29 @@ the design point (ZVD also none in the first derivative against frequency:
 more robust, twice as long); EI and 2-hump EI trade a residual of ``V`` at
 the design point for a wider band below ``V``. :func:`residual` gives the
 vibration left, relative to the unshaped command's, at any frequency.
+
+Sources, and where they differ. The residual is Singer and Seering's
+percentage vibration (as Newman, Hong and Vaughan 2018 restate it). ZV, ZVD
+and this MZV are exact for every ``zeta``: scaling impulse ``i`` by
+``exp(zeta w t_i)`` turns the damped problem into the undamped one, so they
+leave no vibration at the design point (Klipper's ``shaper_defs.py`` has the
+same ZV and ZVD; its present MZV, a general ``n``-impulse solve, gives these
+amplitudes and times for ``n = 3``). The EI and 2-hump EI rows are
+Singhose's *undamped* closed forms (the 2-hump ``X`` from the multi-hump EI
+paper, Singhose et al., J. Dyn. Sys. Meas. Control 1997) with the damping
+carried by the same ``K`` scaling, as earlier Klipper releases and
+Snapmaker's Marlin-based firmware write them. At ``zeta = 0`` they are exactly Singhose's shapers (EI: ``V``
+at the design point, a hump with zero slope there; 2-hump EI: 0 at the
+design point between two humps of height ``V``). For ``zeta > 0`` the
+published damped EI and 2-hump EI are Singhose's curve fits in ``zeta`` and
+``V``, which present Klipper uses, and the forms here differ from them:
+their humps drop below ``V`` (EI at the design point: ``V K^2 / sum(a)``,
+4.2 % at ``zeta = 0.05``), their zeros lift off 0, and the band below ``V``
+is a little narrower (EI at ``zeta = 0.05``: 0.794 to 1.21 ``f_n`` against
+0.786 to 1.22; 2-hump EI: 0.633 to 1.38 against 0.619 to 1.40, with a
+0.5 % longer shaper). Kept because they are closed forms whose humps never
+exceed ``V``, and the rest of winder (shaped profiles,
+``winder resonance``) was measured with them.
 """
 
 from __future__ import annotations
@@ -47,34 +70,53 @@ def _bad(name: str, value: object, allowed: str) -> ValueError:
     return ValueError(f"{name}={value!r} is invalid: must be {allowed}")
 
 
-def _checked(kind: object, f_n: object, zeta: object, v_tol: object) -> tuple[str, float, float, float]:
-    if kind not in KINDS:
+def _number(
+    name: str, x: object, allowed: str, lo: float, hi: float, *, lo_open: bool, hi_open: bool
+) -> float:
+    """``x`` as a float if it is a real number (not a bool) in the interval, else the one-line ValueError."""
+    if isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, float, np.integer, np.floating)):
+        raise _bad(name, x, allowed)
+    v = float(x)
+    inside = (lo < v if lo_open else lo <= v) and (v < hi if hi_open else v <= hi)
+    if not (math.isfinite(v) and inside):
+        raise _bad(name, x, allowed)
+    return v
+
+
+def _kind(kind: object) -> str:
+    if not isinstance(kind, str) or kind not in KINDS:
         raise _bad("kind", kind, "one of " + ", ".join(repr(k) for k in KINDS))
-    out = []
-    for name, x, lo, hi, lo_open, hi_open in (
-        ("f_n", f_n, 0.0, math.inf, True, True),
-        ("zeta", zeta, 0.0, 1.0, False, True),
-        ("v_tol", v_tol, 0.0, 0.5, True, True),
-    ):
-        allowed = {
-            "f_n": "a finite number > 0 (Hz)",
-            "zeta": "a number in [0, 1) (an underdamped resonance)",
-            "v_tol": "a number in (0, 0.5)",
-        }[name]
-        if isinstance(x, bool) or not isinstance(x, (int, float, np.floating, np.integer)):
-            raise _bad(name, x, allowed)
-        v = float(x)
-        if not math.isfinite(v) or v < lo or v > hi or (lo_open and v == lo) or (hi_open and v == hi):
-            raise _bad(name, x, allowed)
-        out.append(v)
-    return str(kind), out[0], out[1], out[2]
+    return kind
+
+
+def _f(name: str, x: object) -> float:
+    v = _number(name, x, "a finite number > 0 (Hz)", 0.0, math.inf, lo_open=True, hi_open=True)
+    if not math.isfinite(1.0 / v):  # a subnormal frequency: its period overflows
+        raise _bad(name, x, "a finite number > 0 (Hz) whose period 1/f is finite")
+    return v
+
+
+def _zeta(name: str, x: object) -> float:
+    return _number(
+        name, x, "a number in [0, 1) (an underdamped resonance)", 0.0, 1.0, lo_open=False, hi_open=True
+    )
+
+
+def _v_tol(x: object) -> float:
+    return _number("v_tol", x, "a number in (0, 0.5)", 0.0, 0.5, lo_open=True, hi_open=True)
 
 
 def shaper(kind: str, f_n: float, zeta: float, *, v_tol: float = V_TOL) -> tuple[F64, F64]:
-    """(amplitudes, times) of the input shaper ``kind`` for the mode ``f_n``
-    (Hz), ``zeta``: positive amplitudes summing to 1, times from 0 (s),
-    increasing. ValueError (one line) for a bad argument."""
-    kind, f, z, v = _checked(kind, f_n, zeta, v_tol)
+    """(amplitudes, times) of the input shaper ``kind`` (one of :data:`KINDS`;
+    ``"none"``, no shaper, is refused) for the mode ``f_n`` (Hz), ``zeta`` in
+    [0, 1): positive amplitudes summing to 1, times from 0 (s), increasing.
+    ``v_tol`` in (0, 0.5) is the EI shapers' vibration tolerance (the others
+    ignore it). ValueError (one line, naming the parameter, its value and the
+    allowed range) for a bad argument."""
+    return _impulses(_kind(kind), _f("f_n", f_n), _zeta("zeta", zeta), _v_tol(v_tol))
+
+
+def _impulses(kind: str, f: float, z: float, v: float) -> tuple[F64, F64]:
     root = math.sqrt((1.0 - z) * (1.0 + z))
     k = math.exp(-z * math.pi / root)
     td = 1.0 / (f * root)
@@ -115,16 +157,30 @@ def residual(
     v_tol: float = V_TOL,
 ) -> F64:
     """Vibration left after the shaped command, relative to the unshaped
-    command's, for a mode at ``f_actual`` (Hz; an array gives an array) of
-    damping ``zeta_actual`` (default: the design's), with the shaper designed
-    for ``f_design``, ``zeta_design``:
-    ``exp(-zeta w t_N) |sum_i A_i exp(zeta w t_i) exp(i w_d t_i)|``."""
-    amps, times = shaper(kind, f_design, zeta_design, v_tol=v_tol)
-    z = zeta_design if zeta_actual is None else float(zeta_actual)
-    _checked(kind, 1.0, z, v_tol)
-    f = np.asarray(f_actual, dtype=np.float64)
-    if np.any(~np.isfinite(f)) or np.any(f <= 0.0):
-        raise _bad("f_actual", f_actual, "finite numbers > 0 (Hz)")
+    command's, for a mode at ``f_actual`` (Hz) of damping ``zeta_actual``
+    (default: the design's), with the shaper designed for ``f_design``,
+    ``zeta_design``: Singer and Seering's percentage vibration
+    ``exp(-zeta w t_N) |sum_i A_i exp(zeta w t_i) exp(i w_d t_i)|`` with
+    ``w = 2 pi f_actual``, ``w_d = w sqrt(1 - zeta^2)``, i.e. the ringing
+    amplitude the shaped step leaves after its last impulse over the amplitude
+    a single step would leave. Vectorised: an array of frequencies gives an
+    array of the same shape, a number a 0-d array (``float()`` it).
+    ValueError (one line) for a bad argument."""
+    zd = _zeta("zeta_design", zeta_design)
+    amps, times = _impulses(_kind(kind), _f("f_design", f_design), zd, _v_tol(v_tol))
+    z = zd if zeta_actual is None else _zeta("zeta_actual", zeta_actual)
+    try:
+        f = np.asarray(f_actual, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise _bad("f_actual", f_actual, "a finite number > 0 (Hz) or an array of them") from None
+    bad = ~np.isfinite(f) | (f <= 0.0)
+    if f.ndim == 0 and bad:
+        raise _bad("f_actual", f_actual, "a finite number > 0 (Hz)")
+    if np.any(bad):
+        i = tuple(int(k) for k in np.argwhere(bad)[0])
+        at = ", ".join(map(str, i))
+        count = f"{int(bad.sum())} of {f.size} are not"
+        raise _bad(f"f_actual[{at}]", float(f[i]), f"a finite number > 0 (Hz) ({count})")
     w = 2.0 * math.pi * f[..., None]
     wd = w * math.sqrt((1.0 - z) * (1.0 + z))
     decay = np.exp(z * w * (times - times[-1]))  # exp(-zeta w (t_N - t_i)) <= 1: no overflow
