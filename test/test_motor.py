@@ -33,6 +33,7 @@ from winder.axis import (
     StepperAxis,
     measured_velocity,
 )
+from winder.axis.linear import MODAL_WINDOW, _modal_terms
 from winder.motion.profile import plan
 
 PAPER = {"Zr": 40.0, "L": 0.01005, "i_a": 1.0, "J": 1.05 * 9.80665e-5, "D": 0.03}
@@ -542,6 +543,31 @@ def test_modal_and_scan_trackers_agree(case) -> None:
     wn = ax.natural_frequency
     np.testing.assert_allclose(out["modal"][0], out["scan"][0], rtol=0, atol=1e-11 * total)
     np.testing.assert_allclose(out["modal"][1], out["scan"][1], rtol=0, atol=1e-11 * total * wn)
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.floats(0.0, 1e4),
+    st.floats(1e-3, 1e5),
+    st.integers(0, 5000),
+    st.floats(1e-4, 1e3),
+    st.integers(0, 2**32 - 1),
+)
+def test_modal_terms_equal_the_complex_exp(sigma: float, wd: float, n: int, span: float, seed: int) -> None:
+    """The modal sum's terms a*exp(lambda*d) (phase table and Taylor series,
+    or the complex exp for a wide phase range) against numpy's complex exp of
+    the same rounded argument: within a few ulps of each term."""
+    rng = np.random.default_rng(seed)
+    lam = complex(-sigma, wd)
+    width = min(span, MODAL_WINDOW / sigma) if sigma > 0 else span
+    d = -np.sort(rng.uniform(0.0, width, n))
+    a = rng.choice([-1.0, 1.0], n) * rng.uniform(1e-6, 1.0)
+    out = np.empty(n, np.complex128)
+    _modal_terms(lam, d, a, out)
+    arg = np.empty(n, np.complex128)
+    arg.real, arg.imag = d * lam.real, d * lam.imag
+    ref = np.exp(arg) * a
+    np.testing.assert_allclose(out, ref, rtol=4e-15, atol=0)
 
 
 def test_modal_method_needs_an_under_damped_axis() -> None:
