@@ -251,6 +251,9 @@ def replay_split(bag: Path) -> None:
     path_raw = next((v[0] for k, v in raw.items() if k.endswith("winder/path")), None)
     ramp_raw = next((v[0] for k, v in raw.items() if k.endswith("winder/profile_config")), None)
 
+    from winder.ros.spin import keep_freed_memory
+
+    keep_freed_memory()  # as the node's main (winder.ros.spin) does
     rclpy.init(args=[])
     import winder_sim.sim_node as sim_module
 
