@@ -33,7 +33,7 @@ from winder.axis import (
     StepperAxis,
     measured_velocity,
 )
-from winder.axis.linear import MODAL_WINDOW, _modal_terms
+from winder.axis.linear import MODAL_WINDOW, _cumulative_at, _modal_terms, _sums_at
 from winder.motion.profile import plan
 
 PAPER = {"Zr": 40.0, "L": 0.01005, "i_a": 1.0, "J": 1.05 * 9.80665e-5, "D": 0.03}
@@ -568,6 +568,25 @@ def test_modal_terms_equal_the_complex_exp(sigma: float, wd: float, n: int, span
     arg.real, arg.imag = d * lam.real, d * lam.imag
     ref = np.exp(arg) * a
     np.testing.assert_allclose(out, ref, rtol=4e-15, atol=0)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.integers(0, 400), st.integers(1, 50), st.booleans(), st.integers(0, 2**32 - 1))
+def test_sums_at_points_equal_the_running_sum(n: int, m: int, whole: bool, seed: int) -> None:
+    """The modal tracker's sums at the samples (segment sums, then their
+    running sum) against the running sum over every element: exactly for
+    counts of +-1, to rounding for complex terms."""
+    rng = np.random.default_rng(seed)
+    at = np.sort(rng.integers(0, n + 1, m))
+    signs = rng.choice([-1.0, 1.0], n) if whole else rng.integers(-3, 4, n).astype(np.float64)
+    ref = np.concatenate([[0.0], np.cumsum(signs)])[at]
+    assert np.array_equal(_sums_at(signs, at), ref)
+    z = rng.normal(size=n) + 1j * rng.normal(size=n)
+    ref_z = np.concatenate([[0.0], np.cumsum(z)])[at]
+    np.testing.assert_allclose(_sums_at(z, at), ref_z, rtol=0, atol=1e-13 * (np.abs(z).sum() + 1))
+    if whole:  # steps of one angle: theta1 counted in integers, one rounding
+        unit = 2 * math.pi / 5120
+        assert np.array_equal(_cumulative_at(signs * unit, at), unit * ref)
 
 
 def test_modal_method_needs_an_under_damped_axis() -> None:

@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import cmath
 import math
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -141,7 +141,8 @@ class LinearTracker:
 
             q(s) = e**(lambda*(s - b)) * (q(b) + kappa * sum_{b <= t_k <= s} d_k*e**(-lambda*(t_k - b)))
 
-        one complex exponential per step and a running sum. The base time b
+        one complex exponential per step and a running sum, formed at the
+        samples only (segment sums between them, then a sum over those). The base time b
         moves to the first step after each window of ``MODAL_WINDOW / sigma``
         seconds, so no term exceeds e**MODAL_WINDOW. Every term is rounded
         relative to its own size and the factor e**(lambda*(s - b)) scales it
@@ -152,8 +153,8 @@ class LinearTracker:
         base, q = self._t, self._q
         if math.isinf(base):  # at rest (q = 0): any base up to the first event
             base = min(float(app_t[0]), float(ts[0])) if n else float(ts[0])
-        cmd_at = self._cmd + np.concatenate([[0.0], _cumulative(app_a)])  # after j steps
         k_all = np.searchsorted(app_t, ts, side="right")  # steps applied at each sample
+        cmd_at = self._cmd + _cumulative_at(app_a, np.append(k_all, n))  # theta1 there, and at the end
         theta = np.empty(ts.size)
         omega = np.empty(ts.size)
         lo = s_lo = 0
@@ -161,18 +162,14 @@ class LinearTracker:
             hi = int(np.searchsorted(app_t, base + self._span, side="right")) if lo < n else n
             # this window's samples: all those that need no later step
             s_hi = ts.size if hi == n else int(np.searchsorted(k_all, hi, side="right"))
-            # sums[j]: sum of d_k*e**(-lambda*(t_k - b)) over the window's first j steps;
-            # the state at b after them is q + kappa*sums[j] (formed at the samples only)
-            sums = np.empty(hi - lo + 1, np.complex128)
-            sums[0] = 0.0
-            if hi > lo:
-                u = sums[1:]
-                _modal_terms(lam, base - app_t[lo:hi], app_a[lo:hi], u)
-                np.cumsum(u, out=u)
+            # sums[i]: sum of d_k*e**(-lambda*(t_k - b)) over the window's steps up to
+            # sample i (the last: all of them); the state at b after them is q + kappa*sums[i]
+            u = np.empty(hi - lo, np.complex128)
+            _modal_terms(lam, base - app_t[lo:hi], app_a[lo:hi], u)
+            sums = _sums_at(u, np.append(k_all[s_lo:s_hi] - lo, hi - lo))
             if s_hi > s_lo:
-                k = k_all[s_lo:s_hi]
-                qs = (q + kappa * sums[k - lo]) * np.exp(lam * (ts[s_lo:s_hi] - base))
-                theta[s_lo:s_hi] = cmd_at[k] + qs.real
+                qs = (q + kappa * sums[:-1]) * np.exp(lam * (ts[s_lo:s_hi] - base))
+                theta[s_lo:s_hi] = cmd_at[s_lo:s_hi] + qs.real
                 omega[s_lo:s_hi] = (lam * qs).real
             q_end = q + kappa * complex(sums[-1])  # at b, after all of the window's steps
             if hi == n:
@@ -254,6 +251,32 @@ def _modal_terms(lam: complex, d: FloatArray, a: FloatArray, out: npt.NDArray[np
     mag *= a
     np.multiply(mag, cos, out=parts[:, 0])
     np.multiply(mag, sin, out=parts[:, 1])
+
+
+def _sums_at(x: npt.NDArray[Any], at: npt.NDArray[np.intp]) -> npt.NDArray[Any]:
+    """``sum(x[:i])`` for each ``i`` of the non-decreasing ``at`` (0..x.size):
+    the sums of the segments between those points, then a running sum over
+    them; numpy's cumsum over every element costs ten times more."""
+    out = np.zeros(at.size, x.dtype)
+    cuts = np.unique(at[at > 0])
+    if cuts.size == 0:
+        return out
+    seg = np.add.reduceat(x[: cuts[-1]], np.concatenate(([0], cuts[:-1])))
+    np.cumsum(seg, out=seg)  # seg[j] = sum(x[:cuts[j]])
+    first = int(np.searchsorted(at, 0, side="right"))  # the points at 0 keep their 0
+    out[first:] = seg[np.searchsorted(cuts, at[first:])]
+    return out
+
+
+def _cumulative_at(a: FloatArray, at: npt.NDArray[np.intp]) -> FloatArray:
+    """``sum(a[:i])`` for each ``i`` of ``at`` (see :func:`_sums_at`); exact
+    (one rounding) when all angles have the same magnitude, as :func:`_cumulative`."""
+    if a.size:
+        unit = abs(float(a[0]))
+        signs = a / unit if unit else a
+        if unit and np.all(np.abs(signs) == 1.0):
+            return unit * _sums_at(signs, at)  # counts of +-1: exact below 2**53 steps
+    return _sums_at(a, at)
 
 
 def _cumulative(a: FloatArray) -> FloatArray:
