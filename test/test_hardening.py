@@ -176,7 +176,17 @@ def _zombie(pid: int) -> bool:
 
 # -- malformed messages from a neighbour on the graph, through real DDS ---------
 
-CHUNK_FAULTS = ["empty", "span", "shift", "negate", "int32", "past_end", "huge_time", "negative_time"]
+CHUNK_FAULTS = [
+    "empty",
+    "span",
+    "shift",
+    "negate",
+    "int32",
+    "past_end",
+    "huge_time",
+    "negative_time",
+    "wrapping_time",
+]
 
 
 def damage(chunks: list[np.ndarray], fault: str, job: Any) -> tuple[list[np.ndarray], bool]:
@@ -201,7 +211,14 @@ def damage(chunks: list[np.ndarray], fault: str, job: Any) -> tuple[list[np.ndar
         bad[:, 2:] += 10**6
     else:  # step times out of range on the job's last chunk
         last = out[-1]
-        last[:, 0] = last[:, 0] + 2**62 if fault == "huge_time" else -last[:, 0]
+        if fault == "wrapping_time":
+            # from 1.5 * 2**62 to -1.5 * 2**62 in one step: a difference of the
+            # times wraps around to +2**62 in int64, the times decrease
+            half = last.shape[0] // 2
+            last[:half, 0] += 3 * 2**61
+            last[half:, 0] -= 3 * 2**61
+        else:
+            last[:, 0] = last[:, 0] + 2**62 if fault == "huge_time" else -last[:, 0]
         return out, True
     out.insert(3, bad)  # an extra chunk beside the good ones
     return out, False

@@ -605,7 +605,7 @@ class SimNode(ManagedNode):
             return None
         seg, pos = int(rows[0, 1]), rows[:, 2:]
         late = int(rows[-1, 0]) > MAX_STEP_NS
-        if late or np.any(np.diff(rows[:, 0]) <= 0) or rows[0, 0] <= self.last_step_ns:
+        if late or np.any(rows[1:, 0] <= rows[:-1, 0]) or rows[0, 0] <= self.last_step_ns:
             # in sequence by position but not in time: the steps cannot be
             # simulated; they count as missing, never silently integrated
             why = f"later than a job may last ({MAX_JOB_SECONDS:g} s)" if late else "do not increase"
