@@ -328,7 +328,7 @@ class _Sink:
         self.ids: dict[int, int] = {}  #: channel id in the file -> connection id in the RawBag
         self.kept: dict[int, bool] = {}  #: channel id in the file -> its messages are kept
         self.keep = keep
-        self.crcs = False  #: the file's chunks carry CRCs (winder's do, rosbags' do not)
+        self.crcs = False  #: the file's chunks carry CRCs (winder's uncompressed ones do, rosbags' do not)
 
     def add(self, rec: Schema | Channel | Message | tuple[int, int, bytes]) -> None:
         if isinstance(rec, tuple):  # a message inside a chunk, the most frequent case
@@ -405,7 +405,9 @@ def _read_record(op: int, body: memoryview, length: int, sink: _Sink) -> None:
         sink.raw.compressions[kind] = sink.raw.compressions.get(kind, 0) + 1
         if chunk.uncompressed_crc:
             sink.crcs = True
-        elif sink.crcs:  # a file writes CRCs for all its chunks or for none
+        elif sink.crcs and not chunk.compression:
+            # a file writes CRCs for all its chunks or for none; winder's own
+            # compressed chunks have none (their frames carry checksums)
             raise DamagedChunk("no CRC, in a file whose chunks carry one")
         records = list(_inner_records(_checked_chunk_data(chunk)))  # whole, or none of it
         for rec in records:
