@@ -3,6 +3,7 @@ watcher of child processes' memory.
 
     python bench/_dds.py pub --rows N    # publisher of the raw pair
     python bench/_dds.py sub --rows N    # subscriber of the raw pair
+    python bench/_dds.py relay --rows N  # middle of the raw chain (see below)
 
 The publisher sends ceil(N / 8192) Int32MultiArray chunks of (8192, 4) int32
 (what winder/steps carries) and as many Int64MultiArray chunks of (8192, 5)
@@ -13,6 +14,13 @@ published as bytes (``--form bytes``, as the nodes publish them). The subscriber
 ``raw=True`` (serialized bytes, no Python message objects) and counts bytes.
 Each prints one JSON line with its monotonic time stamps (one clock for all
 processes of the machine) and its peak resident memory (VmHWM).
+
+The raw chain is the DDS work of a cell with no work of its own: ``pub
+--steps-only`` sends the step chunks, ``relay`` takes each one and publishes
+a pre-serialized step-time chunk of as many rows (what the profile node does
+around its timing), ``sub --timed-only`` takes those (what the sim node takes).
+Its throughput is the most any cell of three processes and these two topics
+could reach on the machine.
 
 ROS_DOMAIN_ID and ROS_AUTOMATIC_DISCOVERY_RANGE come from the environment.
 """
@@ -164,7 +172,7 @@ def _messages(n: int, form: str) -> tuple[object, object]:
 
 
 def run_pub(
-    rows: int, timeout: float, form: str = "message", timed_only: bool = False
+    rows: int, timeout: float, form: str = "message", timed_only: bool = False, steps_only: bool = False
 ) -> dict[str, float | int]:
     import rclpy
     from rclpy.duration import Duration
@@ -181,7 +189,9 @@ def run_pub(
         sizes = chunk_rows(rows)
         built = {n: _messages(n, form) for n in set(sizes)}  # built once: DDS cost only
         t_end = time.monotonic() + timeout
-        while (p32.get_subscription_count() == 0 and not timed_only) or p64.get_subscription_count() == 0:
+        while (p32.get_subscription_count() == 0 and not timed_only) or (
+            p64.get_subscription_count() == 0 and not steps_only
+        ):
             if time.monotonic() > t_end:
                 raise TimeoutError("no subscriber")
             rclpy.spin_once(node, timeout_sec=0.01)
@@ -190,7 +200,8 @@ def run_pub(
             m32, m64 = built[n]
             if not timed_only:
                 p32.publish(m32)
-            p64.publish(m64)
+            if not steps_only:
+                p64.publish(m64)
         t_sent = time.monotonic()
         left = max(t_end - time.monotonic(), 1.0)
         acked = p32.wait_for_all_acked(Duration(seconds=left)) and p64.wait_for_all_acked(
@@ -231,9 +242,10 @@ def run_sub(rows: int, timeout: float, timed_only: bool = False) -> dict[str, fl
         got["bytes"] += len(raw)
 
     try:
-        node.create_subscription(
-            Int32MultiArray, TOPIC_STEPS, lambda r: on_msg("n32", r), QOS_STREAM, raw=True
-        )
+        if not timed_only:
+            node.create_subscription(
+                Int32MultiArray, TOPIC_STEPS, lambda r: on_msg("n32", r), QOS_STREAM, raw=True
+            )
         node.create_subscription(
             Int64MultiArray, TOPIC_TIMED, lambda r: on_msg("n64", r), QOS_STREAM, raw=True
         )
@@ -258,9 +270,56 @@ def run_sub(rows: int, timeout: float, timed_only: bool = False) -> dict[str, fl
         rclpy.try_shutdown()  # type: ignore[attr-defined]
 
 
+def run_relay(rows: int, timeout: float) -> dict[str, float | int]:
+    """Take each step chunk and publish a pre-serialized step-time chunk of as
+    many rows (the chunks queued behind it taken in one go, as the nodes do)."""
+    import rclpy
+    from rclpy.duration import Duration
+    from std_msgs.msg import Int32MultiArray, Int64MultiArray
+
+    from winder.ros.chunks import waiting
+    from winder.ros.qos import QOS_STREAM
+
+    t_proc = time.monotonic()
+    rclpy.init(args=[])
+    node = rclpy.create_node("raw_relay")
+    sizes = chunk_rows(rows)
+    timed = {n: _messages(n, "bytes")[1] for n in set(sizes)}
+    got = {"n": 0, "cpu0": 0.0, "cpu1": 0.0}
+    try:
+        p64 = node.create_publisher(Int64MultiArray, TOPIC_TIMED, QOS_STREAM)
+
+        def relay(raw: Any) -> None:
+            if got["n"] == 0:
+                got["cpu0"] = time.process_time()
+            for _ in (raw, *waiting(sub)):
+                if got["n"] < len(sizes):
+                    p64.publish(timed[sizes[int(got["n"])]])
+                got["n"] += 1
+            got["cpu1"] = time.process_time()
+
+        t_end = time.monotonic() + timeout
+        while p64.get_subscription_count() == 0 and time.monotonic() < t_end:
+            rclpy.spin_once(node, timeout_sec=0.01)  # the subscriber first: the publisher waits for us
+        sub = node.create_subscription(Int32MultiArray, TOPIC_STEPS, relay, QOS_STREAM, raw=True)
+        while got["n"] < len(sizes) and time.monotonic() < t_end:
+            rclpy.spin_once(node, timeout_sec=0.05)
+        acked = p64.wait_for_all_acked(Duration(seconds=max(t_end - time.monotonic(), 1.0)))
+        return {
+            "t_proc": t_proc,
+            "relayed": int(got["n"]),
+            "acked": int(acked),
+            "cpu_s": got["cpu1"] - got["cpu0"],
+            "hwm_kb": proc_status_kb(os.getpid(), "VmHWM") or 0,
+        }
+    finally:
+        node.destroy_node()  # type: ignore[no-untyped-call]
+        rclpy.try_shutdown()  # type: ignore[attr-defined]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("role", choices=("pub", "sub"))
+    ap.add_argument("role", choices=("pub", "sub", "relay"))
     ap.add_argument("--rows", type=int, required=True)
     ap.add_argument("--timeout", type=float, default=300.0)
     ap.add_argument("--form", choices=("message", "bytes"), default="message")
@@ -269,9 +328,12 @@ def main() -> None:
         action="store_true",
         help="only the step-time chunks (what crosses hosts in a split cell)",
     )
+    ap.add_argument("--steps-only", action="store_true", help="only the step chunks (to a relay)")
     args = ap.parse_args()
     if args.role == "pub":
-        out = run_pub(args.rows, args.timeout, args.form, args.timed_only)
+        out = run_pub(args.rows, args.timeout, args.form, args.timed_only, args.steps_only)
+    elif args.role == "relay":
+        out = run_relay(args.rows, args.timeout)
     else:
         out = run_sub(args.rows, args.timeout, args.timed_only)
     print(json.dumps(out), flush=True)
