@@ -266,6 +266,8 @@ class InterpNode(ManagedNode):
             return
         self.consumed = max(self.consumed, int(value))
         self.last_receipt_wall = time.monotonic()  # a repeated receipt: the sim node is alive
+        if self.pending is not None:
+            self.send_some()  # the window has room again: fill it now, not at the next tick
 
     def on_control(self, msg: String) -> None:
         """An abort of the running run (winder/control): stop sending it. The

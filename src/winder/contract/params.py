@@ -73,7 +73,7 @@ INTERP_SPECS = {
         Spec(
             "max_in_flight",
             int,
-            1 << 18,
+            1 << 20,
             "steps sent but not yet simulated, at most (when a sim node reports progress)",
             "steps",
             1,
