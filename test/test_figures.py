@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 import pytest
 import test_reader
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from winder.analysis.figures.analysis import (
@@ -108,6 +108,9 @@ def test_envelope_refuses_what_it_cannot_cut() -> None:
     st.integers(1, 20),
     st.integers(1, 20),
 )
+@example([(0.0, 0.0), (0.0, 2.225073858507e-311)] * 3, 1, 1)  # a subnormal range (k / range overflowed)
+@example([(0.0, 0.0), (1e-320, 3e-320), (5e-321, 0.0)] * 2, 2, 3)
+@example([(-1.7e308, 0.0), (1.7e308, 1.0), (0.0, 0.5)] * 2, 2, 2)  # a range beyond the largest float
 def test_pixel_points_keep_one_dot_per_occupied_pixel(
     pts: list[tuple[float, float]], nx: int, ny: int
 ) -> None:
@@ -119,8 +122,13 @@ def test_pixel_points_keep_one_dot_per_occupied_pixel(
         assert idx == list(range(len(pts)))
         return
 
-    def cell(v: float, lo: float, hi: float, k: int) -> int:
-        return 0 if not hi > lo else min(int((v - lo) * (k / (hi - lo))), k - 1)
+    def cell(v: float, lo: float, hi: float, k: int) -> int:  # k equal cells over [lo, hi]
+        v, lo, hi = float(v), float(lo), float(hi)
+        if not hi > lo:
+            return 0
+        if math.isfinite(hi - lo):
+            return min(math.floor((v - lo) / (hi - lo) * k), k - 1)
+        return min(math.floor((v / 2 - lo / 2) / (hi / 2 - lo / 2) * k), k - 1)  # hi - lo overflows
 
     cells = [
         (cell(a, x.min(), x.max(), nx), cell(b, y.min(), y.max(), ny)) for a, b in zip(x, y, strict=True)

@@ -168,9 +168,14 @@ def pixel_points(x: npt.ArrayLike, y: npt.ArrayLike, columns: int, rows: int) ->
         return ok.astype(np.int64)
 
     def cell(v: FloatArray, k: int) -> IntArray:
+        # the fraction of the range first, then the cell: k / (hi - lo) would
+        # overflow for a subnormal range; halved, a range beyond the largest
+        # float stays finite (and a subnormal one never gets there)
         lo, hi = float(v.min()), float(v.max())
-        c = ((v - lo) * (k / (hi - lo))).astype(np.int64) if hi > lo else np.zeros(v.size, np.int64)
-        return np.minimum(c, k - 1)
+        if not hi > lo:
+            return np.zeros(v.size, np.int64)
+        frac = (v - lo) / (hi - lo) if math.isfinite(hi - lo) else (v / 2 - lo / 2) / (hi / 2 - lo / 2)
+        return np.minimum((frac * k).astype(np.int64), k - 1)
 
     _, first = np.unique(cell(xx[ok], columns) * rows + cell(yy[ok], rows), return_index=True)
     out: IntArray = ok[np.sort(first)].astype(np.int64)
