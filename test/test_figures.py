@@ -34,12 +34,19 @@ from winder.motion.job import Job
 # -- the envelope: every pixel column keeps its first, last, lowest and highest sample ----------
 
 
+def cell_by_hand(v: float, lo: float, hi: float, k: int) -> int:
+    """The cell of v among k cells of equal width over [lo, hi], one value at a time."""
+    v, lo, hi = float(v), float(lo), float(hi)
+    if not hi > lo:
+        return 0
+    if math.isfinite(hi - lo):
+        return min(math.floor((v - lo) / (hi - lo) * k), k - 1)
+    return min(math.floor((v / 2 - lo / 2) / (hi / 2 - lo / 2) * k), k - 1)  # hi - lo overflows
+
+
 def columns_by_hand(x: list[float], columns: int) -> list[int]:
     """The pixel column of each sample: columns of equal width over x's range."""
-    lo, hi = x[0], x[-1]
-    if not hi > lo:
-        return [0] * len(x)
-    return [min(int((v - lo) * (columns / (hi - lo))), columns - 1) for v in x]
+    return [cell_by_hand(v, x[0], x[-1], columns) for v in x]
 
 
 def check_envelope(x: list[float], y: list[float], columns: int) -> None:
@@ -69,6 +76,8 @@ finite_y = st.floats(-1e6, 1e6, allow_nan=False)
     st.lists(st.tuples(st.floats(0, 1e3), st.one_of(finite_y, st.just(math.nan))), min_size=1, max_size=300),
     st.integers(1, 40),
 )
+@example([(0.0, 1.0), (1e-320, 2.0), (2e-320, -1.0), (3e-320, 0.5)] * 3, 2)  # a subnormal time range
+@example([(-1.7e308, 1.0), (0.0, 2.0), (1.7e308, -1.0)] * 5, 3)  # a range beyond the largest float
 def test_envelope_keeps_each_columns_extremes(samples: list[tuple[float, float]], columns: int) -> None:
     x = sorted(s[0] for s in samples)  # a time: it does not decrease (equal values allowed)
     y = [s[1] for s in samples]
@@ -122,16 +131,9 @@ def test_pixel_points_keep_one_dot_per_occupied_pixel(
         assert idx == list(range(len(pts)))
         return
 
-    def cell(v: float, lo: float, hi: float, k: int) -> int:  # k equal cells over [lo, hi]
-        v, lo, hi = float(v), float(lo), float(hi)
-        if not hi > lo:
-            return 0
-        if math.isfinite(hi - lo):
-            return min(math.floor((v - lo) / (hi - lo) * k), k - 1)
-        return min(math.floor((v / 2 - lo / 2) / (hi / 2 - lo / 2) * k), k - 1)  # hi - lo overflows
-
     cells = [
-        (cell(a, x.min(), x.max(), nx), cell(b, y.min(), y.max(), ny)) for a, b in zip(x, y, strict=True)
+        (cell_by_hand(a, x.min(), x.max(), nx), cell_by_hand(b, y.min(), y.max(), ny))
+        for a, b in zip(x, y, strict=True)
     ]
     first: dict[tuple[int, int], int] = {}
     for i, c in enumerate(cells):

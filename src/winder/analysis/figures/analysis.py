@@ -109,13 +109,20 @@ def plots_dir(run_path: Path) -> Path:
 # -- what a pixel shows ---------------------------------------------------------------
 
 
+def _cells(v: FloatArray, lo: float, hi: float, k: int) -> IntArray:
+    """The cell (0 .. k-1) of each v among k cells of equal width over [lo, hi].
+    The fraction of the range first, then the cell: k / (hi - lo) would
+    overflow for a subnormal range; a range beyond the largest float is halved
+    first (a subnormal one never gets there)."""
+    if not hi > lo:
+        return np.zeros(v.size, np.int64)
+    frac = (v - lo) / (hi - lo) if math.isfinite(hi - lo) else (v / 2 - lo / 2) / (hi / 2 - lo / 2)
+    return np.minimum((frac * k).astype(np.int64), k - 1)
+
+
 def _columns(x: FloatArray, columns: int) -> IntArray:
     """The column (0 .. columns-1) of each x, columns of equal width over x's range."""
-    lo, hi = float(x[0]), float(x[-1])
-    if not hi > lo:
-        return np.zeros(x.size, np.int64)
-    col = ((x - lo) * (columns / (hi - lo))).astype(np.int64)
-    return np.minimum(col, columns - 1)
+    return _cells(x, float(x[0]), float(x[-1]), columns)
 
 
 def envelope_indices(x: npt.ArrayLike, y: npt.ArrayLike, columns: int) -> IntArray:
@@ -168,14 +175,7 @@ def pixel_points(x: npt.ArrayLike, y: npt.ArrayLike, columns: int, rows: int) ->
         return ok.astype(np.int64)
 
     def cell(v: FloatArray, k: int) -> IntArray:
-        # the fraction of the range first, then the cell: k / (hi - lo) would
-        # overflow for a subnormal range; halved, a range beyond the largest
-        # float stays finite (and a subnormal one never gets there)
-        lo, hi = float(v.min()), float(v.max())
-        if not hi > lo:
-            return np.zeros(v.size, np.int64)
-        frac = (v - lo) / (hi - lo) if math.isfinite(hi - lo) else (v / 2 - lo / 2) / (hi / 2 - lo / 2)
-        return np.minimum((frac * k).astype(np.int64), k - 1)
+        return _cells(v, float(v.min()), float(v.max()), k)
 
     _, first = np.unique(cell(xx[ok], columns) * rows + cell(yy[ok], rows), return_index=True)
     out: IntArray = ok[np.sort(first)].astype(np.int64)
