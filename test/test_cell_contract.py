@@ -286,3 +286,48 @@ def start_run(node: Any, values: dict[str, Any]) -> Any:
         if result.successful or "not ready" not in result.reason or time.monotonic() > t_end:
             return result
         ros_spin(node, 0.3)
+
+
+def test_winder_run_ignores_other_cells_errors(tmp_path: Path, procs: Procs, ros: Any) -> None:
+    """``winder run`` fails a run on its own nodes' ERROR statuses only: a cell
+    without a namespace and one in /c1 both finish with exit 0 while other
+    cells' nodes (/c10 shares /c1's first letters) report ERRORs all along."""
+    import os
+    import subprocess
+
+    from conftest import BIN
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+    from test_nodes import SMALL_JOB, job_args
+
+    foreign = ros.create_publisher(DiagnosticArray, "/diagnostics", 10)
+    bad = [
+        DiagnosticStatus(level=DiagnosticStatus.ERROR, name=name, message="elsewhere")
+        for name in ("c10/sim_node: job", "cell9/interp_node: job", "c1/deeper/sim_node: job")
+    ]
+    env = {**os.environ, "ROS_DOMAIN_ID": str(procs.domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    runs = {
+        ns: subprocess.Popen(
+            [str(BIN / "winder"), "run", "--bag-dir", str(tmp_path / f"bags{ns}"), *job_args(SMALL_JOB)]
+            + (["--namespace", ns] if ns else []),
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            stdin=subprocess.DEVNULL,
+        )
+        for ns in ("", "/c1")
+    }
+    published = 0
+
+    def finished() -> bool:
+        nonlocal published
+        foreign.publish(DiagnosticArray(status=bad))
+        published += 1
+        return all(p.poll() is not None for p in runs.values())
+
+    spin_until(ros, finished, 240, "both runs to end")
+    assert published > 10  # the ERRORs went out while the runs were on the graph
+    for ns, p in runs.items():
+        out, err = p.communicate()
+        assert p.returncode == 0, (ns, out, err)
+        assert "ERROR reports" not in out and "elsewhere" not in out + err, (ns, out)
