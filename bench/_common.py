@@ -2,8 +2,21 @@
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Callable, Sequence
+
+
+def ros_env(domain: int) -> dict[str, str]:
+    """The environment of a process on ROS ``domain`` with localhost discovery
+    and winder's Fast DDS profile: the cell's nodes load it themselves, and the
+    bare rclpy processes of an anchor get it here, so that both run on the
+    same middleware settings (discovery timing, heartbeat period)."""
+    from winder.ros.dds import use_profile
+
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    use_profile(env)
+    return env
 
 
 def best_of(fn: Callable[[], object], repeat: int = 5, min_time: float = 0.0) -> float:

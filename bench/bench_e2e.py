@@ -10,7 +10,8 @@ records a bag); the time is from spawning the processes to the sim node's
 "done" summary. Raw DDS: ``bench/_dds.py`` spawns a publisher and a subscriber
 that move the same chunks (ceil(N / 8192) Int32MultiArray of 8192 x 4 int32
 plus as many Int64MultiArray of 8192 x 5 int64) over the same reliable
-keep-all QoS; the time is from spawning to the last chunk received. The
+keep-all QoS and the same Fast DDS profile as the nodes (winder's: discovery
+timing, heartbeat period); the time is from spawning to the last chunk received. The
 anchor publishes them pre-serialized, as the nodes do (the message form, where
 rclpy serializes each one, is more work and runs once per size for
 reference). Anchor and cell run back to back, as many times each, and the
@@ -55,7 +56,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from _common import table
+from _common import ros_env, table
 from _dds import ChildWatch
 
 from winder.motion.job import Job
@@ -181,7 +182,7 @@ def run_e2e(case: Case, timeout: float, keep: Path | None = None) -> dict[str, A
 def run_raw(rows: int, domain: int, timeout: float, form: str) -> dict[str, Any]:
     """The raw DDS pair on ``rows`` rows of each stream, chunks published as
     ``form`` (message objects or pre-serialized bytes)."""
-    env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    env = ros_env(domain)  # the cell's DDS settings: winder's profile
     cmd = [sys.executable, str(HERE / "_dds.py")]
     t0 = time.monotonic()
     sub = subprocess.Popen(
@@ -215,7 +216,7 @@ def run_raw(rows: int, domain: int, timeout: float, form: str) -> dict[str, Any]
 def run_chain(rows: int, domain: int, timeout: float) -> dict[str, Any]:
     """The raw chain (publisher -> relay -> subscriber, bytes form): the two
     DDS hops of a cell with no work of its own."""
-    env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    env = ros_env(domain)  # the cell's DDS settings: winder's profile
     cmd = [sys.executable, str(HERE / "_dds.py")]
     common = ["--rows", str(rows), "--timeout", str(timeout)]
     procs = [
@@ -562,7 +563,7 @@ def main() -> None:
                 f"\nWhere the sim node's time goes: the {what} job's chunks replayed into an in-process "
                 "SimNode"
             )
-            env = {**os.environ, "ROS_DOMAIN_ID": "232", "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+            env = ros_env(232)
             cmd = [sys.executable, __file__, "--replay", str(scratch / name)]
             print(subprocess.run(cmd, env=env, capture_output=True, text=True).stdout.rstrip())
     raw_cpu = results[-1][2]["cpu"] / results[-1][0].steps

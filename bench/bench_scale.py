@@ -1,7 +1,7 @@
 """Scale-out (issue 16): start-up, many cells on one graph, a cell across
 hosts. Each figure is a ratio against an anchor measured in the same run.
 
-    .venv/bin/python bench/bench_scale.py [--quick]
+    .venv/bin/python bench/bench_scale.py [--quick] [--parts startup,cells,hosts] [--cells 1,2,4,8]
 
 1. Start-up. ``winder run`` of a one-layer job, spawn to first step (the sim
    node's ``wall_start_ns`` in ``winder/sim_config``, the wall clock when the
@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import re
 import statistics
 import subprocess
@@ -41,12 +40,22 @@ import time
 from pathlib import Path
 from typing import Any
 
-from _common import table
+from _common import ros_env, table
 from _netns import Hosts
 
 HERE = Path(__file__).resolve().parent
 BIN = Path(sys.executable).parent
 QUICK = "--quick" in sys.argv
+
+
+def _option(name: str) -> str:
+    return sys.argv[sys.argv.index(name) + 1] if name in sys.argv[:-1] else ""
+
+
+#: --cells 2,2,8: the cell counts of part 2 (default 1,2,4,8; --quick 1,2,4)
+CELLS = tuple(int(c) for c in _option("--cells").split(",") if c)
+#: --parts startup,cells,hosts: which parts run (default all three)
+PARTS = set(_option("--parts").split(",")) - {""} or {"startup", "cells", "hosts"}
 #: ROS domains of this benchmark: clear of the tests' (20-69, 120-219), winder run's
 #: (100-199) and bench_e2e's (221-232); Fast DDS allows 0-232
 DOMAINS = iter(range(70, 100))
@@ -54,13 +63,8 @@ FAST = ["--v-max", "1e6", "--a-max", "1e9", "--j-max", "1e12"]
 
 
 def env_for(domain: int) -> dict[str, str]:
-    """A process on ``domain``, localhost discovery, winder's DDS profile (the
-    bare processes of the anchors too: the same discovery settings)."""
-    from winder.ros.dds import use_profile
-
-    env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
-    use_profile(env)
-    return env
+    """A process on ``domain``: localhost discovery, winder's DDS profile."""
+    return ros_env(domain)
 
 
 def summary_of(out: str) -> dict[str, str]:
@@ -72,6 +76,9 @@ def summary_of(out: str) -> dict[str, str]:
     m = re.search(r"bag\s+(\S+)", out)
     if m:
         got["bag"] = m[1]
+    m = re.search(r"ERROR reports\s+(.+)", out) or re.search(r"^winder run: (.+)$", out, re.M)
+    if m:
+        got["why"] = m[1].strip()
     return got
 
 
@@ -158,7 +165,7 @@ def many_cells(tmp: Path) -> None:
     from winder.record.raw import read_raw
     from winder.record.reader import read_run
 
-    counts = (1, 2, 4) if QUICK else (1, 2, 4, 8)
+    counts = CELLS or ((1, 2, 4) if QUICK else (1, 2, 4, 8))
     job = ["--turns-per-layer", "100", "--poles", "4", "--layers", "2", *FAST]  # 819 200 steps each
     rows = []
     base = 0.0
@@ -180,7 +187,11 @@ def many_cells(tmp: Path) -> None:
         for k, (p, out) in enumerate(zip(procs, outs, strict=True)):
             s = summary_of(out)
             if p.returncode != 0 or s.get("done") != s.get("total") or s.get("missing") != "0":
-                problems.append(f"/c{k}: status {p.returncode}, {s}")
+                why = (
+                    s.get("why")
+                    or f"{s.get('done', '?')} of {s.get('total', '?')} steps, missing {s.get('missing')}"
+                )
+                problems.append(f"/c{k}: exit {p.returncode}: {why}")
                 continue
             steps += int(s["done"])
             run = read_run(s["bag"])
@@ -325,9 +336,9 @@ def cell_across(hosts: Hosts, job: list[str], tmp: Path, extra: dict[str, str]) 
 def main() -> None:
     with tempfile.TemporaryDirectory(prefix="winder-scale-") as d:
         tmp = Path(d)
-        startup(tmp)
-        many_cells(tmp)
-        across_hosts(tmp)
+        for name, part in (("startup", startup), ("cells", many_cells), ("hosts", across_hosts)):
+            if name in PARTS:
+                part(tmp)
 
 
 if __name__ == "__main__":
