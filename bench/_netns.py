@@ -8,10 +8,14 @@ between machines (no shared memory, no loopback).
     hosts.env("a")                 # ROS discovery over the link: static peer = the other host
     hosts.shape(loss=0.01)         # packet loss (eBPF on the link), rate (tbf), delay (netem)
     hosts.down()
+    Hosts("s2", delay_ms=5)        # the same over a link that delays every packet 5 ms one way
 
 Needs root (or CAP_NET_ADMIN) and ``ip``; loss needs a kernel with BPF
 (a classifier program that drops each packet with probability p is loaded
-and pinned here, no compiler needed), delay needs ``sch_netem``. Every
+and pinned here, no compiler needed), ``shape(delay_ms=...)`` needs
+``sch_netem``. Where the kernel lacks netem, ``Hosts(tag, delay_ms=d)``
+joins the namespaces by two TUN devices and a relay process that delays
+every packet by d (bench/_delayline.py) instead of a veth link. Every
 method that cannot do its job on this machine returns the reason instead of
 raising, so a caller can report it.
 """
@@ -24,6 +28,7 @@ import os
 import shutil
 import struct
 import subprocess
+import sys
 import tempfile
 from pathlib import Path
 
@@ -93,13 +98,16 @@ def _bpf_drop_program(p: float, pin: Path) -> str:
 class Hosts:
     """Two network namespaces ``a`` and ``b`` joined by one veth link."""
 
-    def __init__(self, tag: str) -> None:
+    def __init__(self, tag: str, delay_ms: float = 0.0) -> None:
         self.names = {"a": f"w{tag}a", "b": f"w{tag}b"}
         self.devs = {"a": f"w{tag}a0", "b": f"w{tag}b0"}
         subnet = 76 + next(_subnets)
         self.addr = {"a": f"10.{subnet}.0.1", "b": f"10.{subnet}.0.2"}
         self.bpffs: Path | None = None
         self.is_up = False
+        #: one-way delay of the link (0: a veth link; else TUN devices and a relay)
+        self.delay_ms = delay_ms
+        self.relay: subprocess.Popen[str] | None = None
 
     def up(self) -> str:
         why = available()
@@ -107,16 +115,23 @@ class Hosts:
             return why
         self.down()
         a, b = self.names["a"], self.names["b"]
-        steps = [
-            ("netns", "add", a),
-            ("netns", "add", b),
-            ("link", "add", self.devs["a"], "type", "veth", "peer", "name", self.devs["b"]),
-        ]
+        steps: list[tuple[str, ...]] = [("netns", "add", a), ("netns", "add", b)]
+        if self.delay_ms:
+            why = self._start_relay()
+            if why:
+                self.down()
+                return why
+        else:
+            steps.append(("link", "add", self.devs["a"], "type", "veth", "peer", "name", self.devs["b"]))
         for host in "ab":
             ns, dev = self.names[host], self.devs[host]
+            if self.delay_ms:  # a point-to-point TUN device
+                address = ("addr", "add", self.addr[host], "peer", self.addr[self.other(host)], "dev", dev)
+            else:
+                address = ("addr", "add", f"{self.addr[host]}/24", "dev", dev)
             steps += [
                 ("link", "set", dev, "netns", ns),
-                ("-n", ns, "addr", "add", f"{self.addr[host]}/24", "dev", dev),
+                ("-n", ns, *address),
                 ("-n", ns, "link", "set", "lo", "up"),
                 ("-n", ns, "link", "set", dev, "up"),
                 ("-n", ns, "route", "add", "224.0.0.0/4", "dev", dev),  # DDS multicast discovery, if used
@@ -128,6 +143,19 @@ class Hosts:
                 return f"`ip {' '.join(step)}` failed: {r.stderr.strip()}"
         self.is_up = True
         return ""
+
+    def _start_relay(self) -> str:
+        """The delay line between the two TUN devices; "" or why not."""
+        self.relay = subprocess.Popen(
+            [sys.executable, str(Path(__file__).with_name("_delayline.py")), self.devs["a"], self.devs["b"],
+             str(self.delay_ms)],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+        )  # fmt: skip
+        assert self.relay.stdout is not None
+        said = self.relay.stdout.readline().strip()
+        return "" if said == "ready" else f"no delay line: {said or 'the relay did not start'}"
 
     def other(self, host: str) -> str:
         return "b" if host == "a" else "a"
@@ -192,8 +220,17 @@ class Hosts:
             _in(ns, "tc", "qdisc", "del", "dev", dev, "clsact")
 
     def down(self) -> None:
+        if self.relay is not None:
+            if self.relay.stdin is not None:
+                self.relay.stdin.close()  # the relay's signal to stop
+            try:
+                self.relay.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                self.relay.kill()
+                self.relay.wait()
+            self.relay = None
         for ns in self.names.values():
-            _ip("netns", "del", ns)  # takes its end of the veth link with it
+            _ip("netns", "del", ns)  # takes its end of the link with it
         if self.bpffs is not None:
             subprocess.run(["umount", str(self.bpffs)], capture_output=True, check=False)
             shutil.rmtree(self.bpffs, ignore_errors=True)

@@ -20,9 +20,10 @@ hosts. Each figure is a ratio against an anchor measured in the same run.
    discovery by static peers, so the step times cross the link over UDP.
    Steady steps/s (the sim node's job time) against raw DDS over the same link
    (bench/_dds.py: publisher on a, subscriber on b, the same chunks and QoS),
-   clean and with packet loss (0.1 %, 1 %), a 100 Mbit/s rate limit and, where
-   the kernel has netem, 1 ms and 5 ms delay; the stream checker's figures
-   (missing steps, gaps) from the run.
+   clean and with packet loss (0.1 %, 1 %), a 100 Mbit/s rate limit and 1 ms
+   and 5 ms one-way delay (netem where the kernel has it, else a delay line:
+   TUN devices and a relay process, bench/_delayline.py); the stream
+   checker's figures (missing steps, gaps) from the run.
 The fourth figure of issue 16, end-to-end throughput at 10^7 steps on one
 host, is bench/bench_e2e.py's.
 """
@@ -243,34 +244,51 @@ def across_hosts(tmp: Path) -> None:
             ("delay 1 ms", {"delay_ms": 1}),
             ("delay 5 ms", {"delay_ms": 5}),
         ]
-        from winder.ros.dds import LAN_PROFILE, PROFILE
 
         rows = []
         for name, shaping in cases:
             why = hosts.shape(**shaping)
+            link = hosts
+            if why and "delay_ms" in shaping:  # no netem here: a link through a delay line instead
+                link = Hosts("bd", delay_ms=shaping["delay_ms"])
+                why = link.up()
+                name += " (delay line)"
             if why:
                 rows.append([name, "-", "-", "-", "-", "-", why])
                 continue
-            for label, profile in (("default", PROFILE), ("lan", LAN_PROFILE)):
-                extra = {"FASTRTPS_DEFAULT_PROFILES_FILE": str(profile)}
-                raw = raw_across(hosts, steps, extra)
-                cell = cell_across(hosts, job, tmp, extra)
-                ratio = cell["rate"] / raw if raw else float("nan")
-                rows.append(
-                    [
-                        name,
-                        label,
-                        f"{raw / 1e6:.2f}" if raw else "incomplete",
-                        f"{cell['rate'] / 1e6:.2f}",
-                        f"{ratio:.2f}",
-                        f"{cell['done']}/{cell['total']}, missing {cell['missing']}, gaps {cell['gaps']}",
-                        f"{cell['link_mb']:.0f} MB over the link",
-                    ]
-                )
+            try:
+                rows += _across_rows(link, name, steps, job, tmp)
+            finally:
+                if link is not hosts:
+                    link.down()
         heads = ["link", "profile", "raw DDS M rows/s", "cell M steps/s", "x raw", "stream checker", "note"]
         print(table(heads, rows))
     finally:
         hosts.down()
+
+
+def _across_rows(hosts: Hosts, name: str, steps: int, job: list[str], tmp: Path) -> list[list[str]]:
+    """Raw DDS and the cell over ``hosts``' link, with each profile: one row each."""
+    from winder.ros.dds import LAN_PROFILE, PROFILE
+
+    rows = []
+    for label, profile in (("default", PROFILE), ("lan", LAN_PROFILE)):
+        extra = {"FASTRTPS_DEFAULT_PROFILES_FILE": str(profile)}
+        raw = raw_across(hosts, steps, extra)
+        cell = cell_across(hosts, job, tmp, extra)
+        ratio = cell["rate"] / raw if raw else float("nan")
+        rows.append(
+            [
+                name,
+                label,
+                f"{raw / 1e6:.2f}" if raw else "incomplete",
+                f"{cell['rate'] / 1e6:.2f}",
+                f"{ratio:.2f}",
+                f"{cell['done']}/{cell['total']}, missing {cell['missing']}, gaps {cell['gaps']}",
+                f"{cell['link_mb']:.0f} MB over the link",
+            ]
+        )
+    return rows
 
 
 def raw_across(hosts: Hosts, rows: int, extra: dict[str, str]) -> float:

@@ -1,7 +1,8 @@
 """A cell split across two hosts: network namespaces joined by a veth link
 (bench/_netns.py), the sim node on one, ``winder run --external sim`` on the
 other, discovery by static peers, so the step stream crosses the link over
-UDP as between machines. Where the machine forbids network namespaces the
+UDP as between machines: clean, at 1 % packet loss, and over a link that
+delays every packet 5 ms one way. Where the machine forbids network namespaces the
 tests say so and skip; two cells on one graph are tested always
 (test_reliability)."""
 
@@ -99,6 +100,79 @@ def test_a_split_cell_over_a_lossy_link_with_the_lan_profile(
     if why:
         pytest.skip(why)
     r, bags, link = split_run(hosts, procs, tmp_path, {"FASTRTPS_DEFAULT_PROFILES_FILE": str(LAN_PROFILE)})
+    check_complete(r, bags, link)
+
+
+@pytest.fixture
+def delayed_hosts() -> Iterator[Hosts]:
+    """Two hosts joined by a link that delays every packet 5 ms one way: netem
+    where the kernel has it, else TUN devices and a relay (bench/_delayline.py)."""
+    why = available()
+    if why:
+        pytest.skip(f"this machine cannot make network namespaces: {why}")
+    h = Hosts("tn")
+    if h.up() or h.shape(delay_ms=DELAY_MS):
+        h.down()
+        h = Hosts("td", delay_ms=DELAY_MS)
+        why = h.up()
+        if why:
+            pytest.skip(why)
+    try:
+        yield h
+    finally:
+        h.down()
+
+
+DELAY_MS = 5.0
+
+ECHO = """
+import socket, sys
+s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+s.bind(("0.0.0.0", 9931))
+print("up", flush=True)
+for _ in range(int(sys.argv[1])):
+    data, peer = s.recvfrom(100)
+    s.sendto(data, peer)
+"""
+
+PING = """
+import socket, sys, time
+s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+s.settimeout(5)
+for k in range(int(sys.argv[2])):
+    t = time.monotonic_ns()
+    s.sendto(str(k).encode(), (sys.argv[1], 9931))
+    assert s.recvfrom(100)[0] == str(k).encode()
+    print(time.monotonic_ns() - t)
+"""
+
+
+def test_the_delayed_link_delays_every_packet(delayed_hosts: Hosts) -> None:
+    """Every UDP round trip over the link takes at least twice the one-way delay."""
+    n = 20
+    echo = subprocess.Popen(
+        delayed_hosts.command("b", [sys.executable, "-c", ECHO, str(n)]), stdout=subprocess.PIPE, text=True
+    )
+    try:
+        assert echo.stdout is not None and echo.stdout.readline().strip() == "up"
+        r = subprocess.run(
+            delayed_hosts.command("a", [sys.executable, "-c", PING, delayed_hosts.addr["b"], str(n)]),
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        assert r.returncode == 0, r.stderr
+        rtts = [int(x) / 1e6 for x in r.stdout.split()]
+        assert len(rtts) == n and min(rtts) >= 2 * DELAY_MS, rtts
+    finally:
+        echo.kill()
+        echo.wait()
+
+
+def test_a_split_cell_over_a_delayed_link(delayed_hosts: Hosts, procs: Procs, tmp_path: Path) -> None:
+    """5 ms each way between the planner and the axes' node: the flow control's
+    window covers the round trip, every step arrives, nothing missing."""
+    r, bags, link = split_run(delayed_hosts, procs, tmp_path, {})
     check_complete(r, bags, link)
 
 
