@@ -127,6 +127,9 @@ class Hosts:
             ns, dev = self.names[host], self.devs[host]
             if self.delay_ms:  # a point-to-point TUN device
                 address = ("addr", "add", self.addr[host], "peer", self.addr[self.other(host)], "dev", dev)
+                # a queue long enough that a burst waits for the relay instead of
+                # being dropped (500 packets by default): the link delays, it does not lose
+                steps.append(("link", "set", dev, "txqueuelen", "100000"))
             else:
                 address = ("addr", "add", f"{self.addr[host]}/24", "dev", dev)
             steps += [
