@@ -28,19 +28,32 @@ pytestmark = pytest.mark.ros
 JOB = ["--job-id", "split", "--turns-per-layer", "10", "--poles", "2", "--layers", "2"]
 
 
-@pytest.fixture
-def hosts() -> Iterator[Hosts]:
+def linked_hosts(tag: str, delay_ms: float = 0.0) -> Iterator[Hosts]:
+    """Two hosts, up for the test and down after it; the test is skipped,
+    with the reason, where the machine cannot make them."""
     why = available()
     if why:
         pytest.skip(f"this machine cannot make network namespaces: {why}")
-    h = Hosts("t")
+    h = Hosts(tag)
     why = h.up()
+    if not why and delay_ms:  # netem where the kernel has it, else a delay line
+        why = h.shape(delay_ms=delay_ms)
+        if why:
+            h.down()
+            h = Hosts(tag + "d", delay_ms=delay_ms)
+            why = h.up()
     if why:
+        h.down()
         pytest.skip(why)
     try:
         yield h
     finally:
         h.down()
+
+
+@pytest.fixture
+def hosts() -> Iterator[Hosts]:
+    yield from linked_hosts("t")
 
 
 def split_run(hosts: Hosts, procs: Procs, tmp_path: Path, extra: dict[str, str], *args: str) -> Any:
@@ -107,20 +120,7 @@ def test_a_split_cell_over_a_lossy_link_with_the_lan_profile(
 def delayed_hosts() -> Iterator[Hosts]:
     """Two hosts joined by a link that delays every packet 5 ms one way: netem
     where the kernel has it, else TUN devices and a relay (bench/_delayline.py)."""
-    why = available()
-    if why:
-        pytest.skip(f"this machine cannot make network namespaces: {why}")
-    h = Hosts("tn")
-    if h.up() or h.shape(delay_ms=DELAY_MS):
-        h.down()
-        h = Hosts("td", delay_ms=DELAY_MS)
-        why = h.up()
-        if why:
-            pytest.skip(why)
-    try:
-        yield h
-    finally:
-        h.down()
+    yield from linked_hosts("tn", DELAY_MS)
 
 
 DELAY_MS = 5.0
