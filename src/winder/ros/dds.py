@@ -1,6 +1,7 @@
 """The DDS settings every winder process starts with: winder's Fast DDS
-participant profile (``fastdds_profile.xml`` beside this file: discovery
-timing only), unless the user names a profile of their own or another rmw."""
+profile (``fastdds_profile.xml`` beside this file: discovery timing and the
+reliable writers' heartbeat period), unless the user names a profile of their
+own or another rmw."""
 
 from __future__ import annotations
 
