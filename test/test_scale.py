@@ -18,7 +18,7 @@ import pytest
 from conftest import BIN, Procs, rosbags_read
 from test_nodes import only_bag
 
-from winder.ros.dds import LAN_PROFILE
+from winder.ros.dds import LAN_PROFILE, PROFILE
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
 from _netns import Hosts, available
@@ -174,6 +174,50 @@ def test_a_split_cell_over_a_delayed_link(delayed_hosts: Hosts, procs: Procs, tm
     window covers the round trip, every step arrives, nothing missing."""
     r, bags, link = split_run(delayed_hosts, procs, tmp_path, {})
     check_complete(r, bags, link)
+
+
+LOAD = """
+import rclpy
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from std_msgs.msg import String
+rclpy.init()
+node = rclpy.create_node("profile_probe")
+node.create_publisher(String, "probe", QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+node.create_subscription(String, "probe", lambda m: None, 10)
+print("created")
+"""
+
+
+def load_profile(procs: Procs, profile: Path) -> subprocess.CompletedProcess[str]:
+    """A bare rclpy process that loads ``profile`` and makes a reliable writer and a reader."""
+    return subprocess.run(
+        [sys.executable, "-c", LOAD],
+        env={**procs.env, "FASTRTPS_DEFAULT_PROFILES_FILE": str(profile)},
+        capture_output=True,
+        text=True,
+        timeout=60,
+        stdin=subprocess.DEVNULL,
+    )
+
+
+@pytest.mark.parametrize("profile", [PROFILE, LAN_PROFILE], ids=["default", "lan"])
+def test_winder_dds_profiles_load_without_errors(profile: Path, procs: Procs) -> None:
+    """Fast DDS reads each profile whole: a misspelt element or a bad value is
+    an XMLPARSER error on stderr, and the profile (the heartbeat period with
+    it) would silently not apply."""
+    r = load_profile(procs, profile)
+    said = r.stdout + r.stderr  # Fast DDS logs to either, depending on its consumer
+    assert r.returncode == 0 and r.stdout.strip().endswith("created"), said
+    assert "XMLPARSER" not in said and "Error" not in said, said
+
+
+def test_a_misspelt_profile_is_reported(procs: Procs, tmp_path: Path) -> None:
+    """The check above can fail: the same profile with one element misspelt."""
+    bad = tmp_path / "bad.xml"
+    bad.write_text(PROFILE.read_text().replace("heartbeatPeriod>", "heartbeatPeriode>"))
+    r = load_profile(procs, bad)
+    said = r.stdout + r.stderr
+    assert "XMLPARSER" in said and "heartbeatPeriode" in said, said
 
 
 def test_external_takes_only_nodes_that_can_run_elsewhere(tmp_path: Path) -> None:
