@@ -220,6 +220,33 @@ def test_a_misspelt_profile_is_reported(procs: Procs, tmp_path: Path) -> None:
     assert "XMLPARSER" in said and "heartbeatPeriode" in said, said
 
 
+@pytest.mark.parametrize(
+    ("profile", "said"),
+    [(None, "winder's default (shared memory and UDP, 64 kB datagrams); on a network that loses packets"),
+     (LAN_PROFILE, "winder's LAN profile (UDP only, datagrams within one MTU)")],
+    ids=["default", "lan"],
+)  # fmt: skip
+def test_external_sim_that_never_comes_is_named(procs: Procs, profile: Path | None, said: str) -> None:
+    """``winder run --external sim`` with no sim node on the graph: the DDS
+    profile in force is printed, and the run ends in one line naming what it
+    waited for, not a bare timeout."""
+    from test_reader import assert_one_line_error
+
+    env = dict(procs.env)
+    if profile is not None:
+        env["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(profile)
+    r = subprocess.run(
+        [str(BIN / "winder"), "run", "--external", "sim", *JOB, "--start-timeout", "3"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        stdin=subprocess.DEVNULL,
+    )
+    assert f"  DDS profile        {said}" in r.stdout, r.stdout
+    assert_one_line_error(r, "the job did not start within 3 s", "the sim node, which is not on this graph")
+
+
 def test_external_takes_only_nodes_that_can_run_elsewhere(tmp_path: Path) -> None:
     from test_reader import assert_one_line_error, run_cli
 

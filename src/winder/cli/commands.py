@@ -40,6 +40,16 @@ CELL_SPECS: dict[str, Spec] = {
     "timeout": Spec(
         "timeout", float, 3600.0, "give up after this much wall time", "s", 0.0, 1e7, low_open=True
     ),
+    "start_timeout": Spec(
+        "start_timeout",
+        float,
+        60.0,
+        "give up if the job has not started after this much wall time (a node missing from the graph)",
+        "s",
+        0.0,
+        1e7,
+        low_open=True,
+    ),
 }
 
 
@@ -227,7 +237,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     model = "the external sim node" if "sim" in external else f"{sim['model']} motor model"
     print(f"winder: job {job.job_id}, {job.total_steps} steps, {ramp}, {model}")
     if external:
+        from winder.ros.dds import describe_profile
+
         print(f"  not started here   {', '.join(NODE_NAMES[n] for n in sorted(external))} (--external)")
+        print(f"  DDS profile        {describe_profile()}")
     if sim["record"] and "sim" not in external:
         probe = next(p for p in (bag_dir, *bag_dir.parents) if p.exists())
         free = shutil.disk_usage(probe).free
@@ -242,6 +255,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         namespace=args.namespace,
         domain=domain,
         timeout=cell["timeout"],
+        start_timeout=cell["start_timeout"],
         external=external,
         progress=lambda frac, sim_t: bar.update(frac, f"sim {float(sim_t):7.2f} s"),
     )

@@ -204,6 +204,18 @@ class CellWatch:
         self._request: Future | None = None
         self._asked = 0.0
         self.accepted = False
+        self.not_ready = ""  #: the last 'not ready' reply to a start request
+
+    def waiting_for(self) -> str:
+        """What the start of the job still waits for, in words (when it never came)."""
+        if not self.start.service_is_ready():
+            return "the interp node's ~/start service"
+        if not self.heard_sim:
+            return (
+                "the sim node, which is not on this graph: is it running, on the same ROS_DOMAIN_ID, "
+                "discovery range (and static peers) as this host?"
+            )
+        return f"the cell to be ready ({self.not_ready or 'no reply to ~/start yet'})"
 
     def _on_diagnostics(self, msg: DiagnosticArray) -> None:
         for st in msg.status:
@@ -260,6 +272,7 @@ class CellWatch:
                 said = re.search(r"\brun (\S+) (?:started|is running)", reply.message)
                 self.run_id = self.run_id or (said.group(1) if said else "")
             elif reply is not None and "not ready" in reply.message:
+                self.not_ready = reply.message
                 self._request = None  # the consumer or the profile node is still coming up: ask again
             else:
                 return f"job refused: {reply.message if reply else 'no reply'}"
@@ -327,12 +340,15 @@ def _wait_for_job(
     node: Node,
     watch: CellWatch,
     procs: NodeProcesses,
-    timeout: float,
+    timeouts: tuple[float, float],
     progress: Callable[[float, str], None] | None,
     keys: Keys | None = None,
 ) -> str:
-    """Spin until the sim node's final report; the reason if it never came."""
-    t_end = time.monotonic() + timeout
+    """Spin until the sim node's final report; the reason if it never came
+    (the job not started within ``timeouts[0]`` s, or not done within ``timeouts[1]``)."""
+    start_timeout, timeout = timeouts
+    t0 = time.monotonic()
+    t_end = t0 + timeout
     while watch.summary is None:
         refused = watch.ask_to_start()
         if refused:
@@ -345,7 +361,11 @@ def _wait_for_job(
         dead = procs.dead()
         if dead:
             return dead
-        if time.monotonic() > t_end:
+        now = time.monotonic()
+        if not watch.accepted and now > t0 + min(start_timeout, timeout):
+            waited = min(start_timeout, timeout)
+            return f"the job did not start within {waited:g} s: waiting for {watch.waiting_for()}"
+        if now > t_end:
             return f"job did not finish within {timeout:g} s"
     return ""
 
@@ -374,10 +394,12 @@ def run_cell(
     timeout: float = 3600.0,
     progress: Callable[[float, str], None] | None = None,
     external: frozenset[str] = frozenset(),
+    start_timeout: float = 60.0,
 ) -> CellResult:
     """Start the three nodes with ``params[node]`` parameters (but those in
     ``external``, which run elsewhere on the graph), wait for the sim node to
-    report the job done, stop them with SIGINT, return the summary. The
+    report the job done, stop them with SIGINT, return the summary; give up
+    after ``timeout`` s, or ``start_timeout`` s if the job never started. The
     nodes' output goes to ``result.log_dir``, removed after a clean run."""
     log_dir = Path(tempfile.mkdtemp(prefix="winder-cell-"))
     with cell_environment(domain) as env:
@@ -388,7 +410,7 @@ def run_cell(
         try:
             watch = CellWatch(node, namespace)
             _spawn(procs, params, namespace, external)
-            failure = _wait_for_job(node, watch, procs, timeout, progress, keys)
+            failure = _wait_for_job(node, watch, procs, (start_timeout, timeout), progress, keys)
         except ExternalShutdownException:
             raise KeyboardInterrupt from None  # Ctrl-C: the caller reports it
         finally:

@@ -9,7 +9,7 @@ import os
 from collections.abc import MutableMapping
 from pathlib import Path
 
-__all__ = ["LAN_PROFILE", "PROFILE", "PROFILE_KEYS", "use_profile"]
+__all__ = ["LAN_PROFILE", "PROFILE", "PROFILE_KEYS", "describe_profile", "use_profile"]
 
 PROFILE = Path(__file__).with_name("fastdds_profile.xml")
 #: for a cell split across hosts over a lossy network: UDP only, datagrams within one MTU
@@ -32,3 +32,22 @@ def use_profile(environ: MutableMapping[str, str] | None = None) -> str:
     for key in PROFILE_KEYS:
         env[key] = str(PROFILE)
     return str(PROFILE)
+
+
+def describe_profile(environ: MutableMapping[str, str] | None = None) -> str:
+    """One line on the DDS settings a cell started from ``environ`` (default:
+    this process' environment, left unchanged) will run on, for ``winder run``
+    to print when part of the cell runs on another host."""
+    env = dict(os.environ if environ is None else environ)
+    chosen = use_profile(env)
+    if not chosen:
+        return f"none of winder's ({env.get('RMW_IMPLEMENTATION')})"
+    path = Path(chosen)
+    if path == PROFILE:
+        return (
+            "winder's default (shared memory and UDP, 64 kB datagrams); on a network that "
+            "loses packets select the LAN profile on every host (README: Deploying a cell)"
+        )
+    if path == LAN_PROFILE:
+        return "winder's LAN profile (UDP only, datagrams within one MTU)"
+    return f"{chosen} (yours)"
