@@ -531,6 +531,12 @@ def test_extreme_in_range_parameters_are_refused_and_the_node_lives(
     name, value, _ = ROS_EXTREMES[executable][0]
     start = {name: value, **({"autostart": False} if executable == "interp_node" else {})}
     p = procs.start(executable, *ros_args(start, "")[1:])
+    # the node logs the refused override as it starts: wait for that line before
+    # the calls (a full `make test` once read the log before it was there)
+    t_end = time.monotonic() + 30
+    while not procs.log(p).strip():
+        assert p.poll() is None and time.monotonic() < t_end, procs.log(p)
+        time.sleep(0.05)
     for name, value, refused in ROS_EXTREMES[executable]:
         [result] = set_params(ros, executable, {name: value})
         assert result.successful != refused, (name, value, result.reason)
