@@ -56,6 +56,8 @@ ERRORS = (-0.2, -0.1, 0.0, 0.1, 0.2)
 class TestMove:
     """The move and how it is watched (steps, steps/s, /s^2, /s^3; s; Hz)."""
 
+    __test__ = False  # a test move, not a pytest test class
+
     steps: int = 40_000
     v_max: float = 40_000.0
     a_max: float = 1e7
