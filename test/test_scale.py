@@ -8,6 +8,7 @@ tests say so and skip; two cells on one graph are tested always
 
 from __future__ import annotations
 
+import signal
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -18,6 +19,7 @@ import pytest
 from conftest import BIN, Procs, rosbags_read
 from test_nodes import only_bag
 
+from winder.motion.job import Job
 from winder.ros.dds import LAN_PROFILE, PROFILE
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
@@ -245,6 +247,75 @@ def test_external_sim_that_never_comes_is_named(procs: Procs, profile: Path | No
     )
     assert f"  DDS profile        {said}" in r.stdout, r.stdout
     assert_one_line_error(r, "the job did not start within 3 s", "the sim node, which is not on this graph")
+
+
+class DiscoveryServer:
+    """``winder discovery-server`` as a process (in a host of ``hosts``, or here)."""
+
+    def __init__(self, env: dict[str, str], address: str, port: int, hosts: Hosts | None = None) -> None:
+        argv = [str(BIN / "winder"), "discovery-server", "--address", address, "--port", str(port)]
+        self.p = subprocess.Popen(
+            hosts.command("b", argv) if hosts else argv,
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            stdin=subprocess.DEVNULL,
+        )
+        assert self.p.stdout is not None
+        self.said = [self.p.stdout.readline() for _ in range(3)]  # winder's two lines, the server's first
+        assert "Server is running" in self.said[2], self.said
+
+    def stop(self) -> None:
+        self.p.send_signal(signal.SIGINT)
+        self.p.wait(timeout=20)
+
+
+def test_a_cell_found_by_a_discovery_server(procs: Procs, tmp_path: Path) -> None:
+    """Discovery through Fast DDS's discovery server (ROS_DISCOVERY_SERVER): the
+    cell completes; with the server gone the same cell cannot find itself, so
+    it was the server that joined the nodes."""
+    port = 11811 + procs.domain
+    server = DiscoveryServer(procs.env, "127.0.0.1", port)
+    assert server.said[1].strip() == f"export ROS_DISCOVERY_SERVER='127.0.0.1:{port}'", server.said
+    env = {**procs.env, "ROS_DISCOVERY_SERVER": f"127.0.0.1:{port}"}
+    run = [str(BIN / "winder"), "run", *JOB, "--bag-dir", str(tmp_path / "bags")]
+    options: dict[str, Any] = {"env": env, "capture_output": True, "text": True, "timeout": 200}
+    try:
+        r = subprocess.run(run, stdin=subprocess.DEVNULL, **options)
+    finally:
+        server.stop()
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert f"discovery by the discovery server 127.0.0.1:{port} (ROS_DISCOVERY_SERVER)" in r.stdout
+    bag = rosbags_read(only_bag(tmp_path))
+    total = Job(job_id="split", turns_per_layer=10, poles=2, layers=2).total_steps
+    assert sum(len(m.data) // 5 for _, m in bag["/winder/step_times"]) == total
+
+    from test_reader import assert_one_line_error
+
+    alone = subprocess.run([*run, "--start-timeout", "5"], stdin=subprocess.DEVNULL, **options)
+    assert_one_line_error(alone, "the job did not start within 5 s")
+
+
+def test_a_split_cell_found_by_a_discovery_server(hosts: Hosts, procs: Procs, tmp_path: Path) -> None:
+    """Two hosts, no static peers, no multicast: the discovery server on the
+    axes' host joins them."""
+    port = 11811 + procs.domain
+    server = DiscoveryServer(hosts.env("b", procs.env), hosts.addr["b"], port, hosts)
+    try:
+        extra = {"ROS_STATIC_PEERS": "", "ROS_DISCOVERY_SERVER": f"{hosts.addr['b']}:{port}"}
+        r, bags, link = split_run(hosts, procs, tmp_path, extra)
+    finally:
+        server.stop()
+    check_complete(r, bags, link)
+
+
+def test_discovery_server_settings_are_checked() -> None:
+    from test_reader import assert_one_line_error, run_cli
+
+    assert_one_line_error(run_cli("discovery-server", "--port", "0"), "port=0 is invalid", "[1, 65535]")
+    assert_one_line_error(run_cli("discovery-server", "--id", "256"), "id=256 is invalid", "[0, 255]")
+    assert_one_line_error(run_cli("discovery-server", "--address", "host"), "address='host' is invalid")
 
 
 def test_external_takes_only_nodes_that_can_run_elsewhere(tmp_path: Path) -> None:

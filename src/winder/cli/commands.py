@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import shutil
 import sys
 import time
@@ -247,6 +248,9 @@ def cmd_run(args: argparse.Namespace) -> int:
         room = f"{free / 2**30:.1f} GiB" if free >= 2**30 else f"{free / 2**20:.1f} MiB"
         print(f"  recording into     {bag_dir}  ({room} free)")
     domain, discovery, source = cell_network()
+    server = os.environ.get("ROS_DISCOVERY_SERVER", "").strip()
+    if server:  # Fast DDS makes every participant a client of the server(s) named there
+        discovery = f"by the discovery server {server} (ROS_DISCOVERY_SERVER)"
     print(f"  ROS domain         {domain} ({source}), discovery {discovery}")
     bar = Progress(1.0, "winding")
     t0 = time.monotonic()
@@ -346,6 +350,42 @@ def cmd_ctl(args: argparse.Namespace) -> int:
     return 0 if ok else 1
 
 
+#: Settings of ``winder discovery-server``.
+SERVER_SPECS: dict[str, Spec] = {
+    "port": Spec("port", int, 11811, "UDP port the server listens on", "", 1, 65535),
+    "id": Spec("id", int, 0, "the server's id (its place in ROS_DISCOVERY_SERVER's list)", "", 0, 255),
+}
+
+
+def cmd_discovery_server(args: argparse.Namespace) -> int:
+    """Fast DDS's discovery server from this install, in the foreground: the
+    alternative to multicast and static peers for a cell across hosts."""
+    import ipaddress
+
+    from winder.ros.dds import discovery_server_command
+
+    port = SERVER_SPECS["port"].parse(args.port)
+    server_id = SERVER_SPECS["id"].parse(args.id)
+    try:
+        ipaddress.IPv4Address(args.address)
+    except ValueError:
+        raise UserError(
+            f"address={args.address!r} is invalid: must be an IPv4 address of this host"
+        ) from None
+    try:
+        argv, env = discovery_server_command(args.address, port, server_id)
+    except FileNotFoundError as exc:
+        raise UserError(f"this install has no Fast DDS discovery server ({exc}); run 'make demo'") from None
+    host = "<this host's address>" if args.address == "0.0.0.0" else args.address
+    print(
+        f"winder: discovery server {server_id} on {args.address}:{port}; on every host of the cell:\n"
+        f"  export ROS_DISCOVERY_SERVER='{';' * server_id}{host}:{port}'",
+        flush=True,
+    )
+    os.execve(argv[0], argv, env)  # the server itself from here on: signals reach it directly
+    return 0  # not reached
+
+
 FIGURES = ("interp", "profile", "motor")
 
 
@@ -434,6 +474,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--namespace", default="", help="ROS namespace of the cell (/name[/name...])")
     p.add_argument("--timeout", default="10", help="seconds to wait for the cell's reply (default 10)")
     p.set_defaults(func=cmd_ctl)
+
+    p = sub.add_parser(
+        "discovery-server",
+        help="run Fast DDS's discovery server for a cell across hosts (see README: Deploying a cell)",
+    )
+    p.add_argument("--address", default="0.0.0.0", help="IPv4 address to listen on (default: all)")
+    p.add_argument("--port", default="11811", help="UDP port; [1, 65535]; default 11811")
+    p.add_argument("--id", default="0", help="server id; [0, 255]; default 0")
+    p.set_defaults(func=cmd_discovery_server)
 
     p = sub.add_parser("figures", help="reproduce the source papers' figures as PNG files")
     p.add_argument(

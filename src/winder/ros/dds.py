@@ -9,7 +9,15 @@ import os
 from collections.abc import MutableMapping
 from pathlib import Path
 
-__all__ = ["LAN_PROFILE", "PROFILE", "PROFILE_KEYS", "describe_profile", "use_profile"]
+__all__ = [
+    "DISCOVERY_SERVER_KEY",
+    "LAN_PROFILE",
+    "PROFILE",
+    "PROFILE_KEYS",
+    "describe_profile",
+    "discovery_server_command",
+    "use_profile",
+]
 
 PROFILE = Path(__file__).with_name("fastdds_profile.xml")
 #: for a cell split across hosts over a lossy network: UDP only, datagrams within one MTU
@@ -51,3 +59,27 @@ def describe_profile(environ: MutableMapping[str, str] | None = None) -> str:
     if path == LAN_PROFILE:
         return "winder's LAN profile (UDP only, datagrams within one MTU)"
     return f"{chosen} (yours)"
+
+
+#: where ``winder run`` finds a Fast DDS discovery server, when one is used
+DISCOVERY_SERVER_KEY = "ROS_DISCOVERY_SERVER"
+
+
+def discovery_server_command(address: str, port: int, server_id: int) -> tuple[list[str], dict[str, str]]:
+    """The argv and environment that run Fast DDS's discovery server from this
+    install (``fast-discovery-server`` beside the Python executable: the ROS
+    wheels ship it without a library path, so the libraries of the venv and of
+    the ``ros_fastrtps`` wheel are named here). Raises FileNotFoundError if the
+    install has no server."""
+    import sys
+    import sysconfig
+
+    binary = Path(sys.executable).parent / "fast-discovery-server"
+    if not binary.exists():
+        raise FileNotFoundError(str(binary))
+    libs = [Path(sys.prefix) / "lib", *Path(sysconfig.get_paths()["purelib"]).glob("ros_fastrtps*.libs")]
+    env = dict(os.environ)
+    env["LD_LIBRARY_PATH"] = os.pathsep.join(
+        [str(p) for p in libs] + ([env["LD_LIBRARY_PATH"]] if env.get("LD_LIBRARY_PATH") else [])
+    )
+    return [str(binary), "-i", str(server_id), "-l", address, "-p", str(port)], env
