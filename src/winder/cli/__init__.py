@@ -1,4 +1,4 @@
-"""The ``winder`` command: ``run``, ``interp``, ``analyze``, ``identify``, ``bag``, ``figures``."""
+"""The ``winder`` command (``winder --help`` lists every subcommand: run, ctl, analyze, play, tune...)."""
 
 from winder.cli.commands import main
 
