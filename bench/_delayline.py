@@ -3,16 +3,17 @@ TUN devices (layer 3, no packet information) and this process between them,
 which hands every IP packet read from one to the other ``delay_ms`` later,
 in order, in both directions.
 
-    python bench/_delayline.py NAME_A NAME_B DELAY_MS [MTU]
+    python bench/_delayline.py NAME_A NAME_B DELAY_MS
 
 It creates the devices, prints ``ready`` and then relays until stdin closes
 or SIGTERM; the caller moves each device into its network namespace and
 gives it an address (bench/_netns.py, ``Hosts(..., delay_ms=...)``). The
 file descriptors stay bound to the devices when they change namespace.
-A packet waits in memory here, not in a bounded qdisc queue, so nothing is
-dropped for want of room: the delay is all this link adds. The relay is one
-Python process on one core; the benchmark compares the cell against raw DDS
-over the same relay, so its own ceiling hits both alike.
+A packet waits in memory here for its time, and the devices' transmit
+queues are set long (100 000 packets, bench/_netns.py) so that a burst
+waits for the relay instead of being dropped: the delay is all this link
+adds. The relay is one Python process on one core; the benchmark compares
+the cell against raw DDS over the same relay, so its ceiling hits both alike.
 """
 
 from __future__ import annotations

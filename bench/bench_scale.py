@@ -63,11 +63,6 @@ DOMAINS = iter(range(70, 100))
 FAST = ["--v-max", "1e6", "--a-max", "1e9", "--j-max", "1e12"]
 
 
-def env_for(domain: int) -> dict[str, str]:
-    """A process on ``domain``: localhost discovery, winder's DDS profile."""
-    return ros_env(domain)
-
-
 def summary_of(out: str) -> dict[str, str]:
     """The figures of ``winder run``'s summary lines."""
     got: dict[str, str] = {}
@@ -112,7 +107,7 @@ else:
 
 def bare_pair(domain: int) -> float:
     """Spawn to the first message between two bare rclpy processes (s)."""
-    env = env_for(domain)
+    env = ros_env(domain)
     t0 = time.time_ns()
     pub = subprocess.Popen([sys.executable, "-c", PAIR, "pub"], env=env, stdout=subprocess.DEVNULL)
     sub = subprocess.run([sys.executable, "-c", PAIR, "sub"], env=env, capture_output=True, text=True)
@@ -126,7 +121,7 @@ def winder_start(domain: int, bags: Path, job: list[str]) -> tuple[float, float]
     t0 = time.time_ns()
     r = subprocess.run(
         [str(BIN / "winder"), "run", *job, "--bag-dir", str(bags)],
-        env=env_for(domain),
+        env=ros_env(domain),
         capture_output=True,
         text=True,
         timeout=300,
@@ -176,7 +171,7 @@ def many_cells(tmp: Path) -> None:
         procs = [
             subprocess.Popen(
                 [str(BIN / "winder"), "run", "--namespace", f"/c{k}", *job, "--bag-dir", str(tmp / f"n{n}")],
-                env=env_for(domain),
+                env=ros_env(domain),
                 stdout=subprocess.PIPE,
                 stderr=subprocess.STDOUT,
                 text=True,
@@ -297,7 +292,7 @@ def raw_across(hosts: Hosts, rows: int, extra: dict[str, str]) -> float:
     dds = [sys.executable, str(HERE / "_dds.py")]
     sub = subprocess.Popen(
         hosts.command("b", [*dds, "sub", "--rows", str(rows), "--timeout", "120", "--timed-only"]),
-        env={**hosts.env("b", env_for(domain)), **extra},
+        env={**hosts.env("b", ros_env(domain)), **extra},
         stdout=subprocess.PIPE,
         text=True,
     )
@@ -305,7 +300,7 @@ def raw_across(hosts: Hosts, rows: int, extra: dict[str, str]) -> float:
         hosts.command(
             "a", [*dds, "pub", "--rows", str(rows), "--timeout", "120", "--form", "bytes", "--timed-only"]
         ),
-        env={**hosts.env("a", env_for(domain)), **extra},
+        env={**hosts.env("a", ros_env(domain)), **extra},
         capture_output=True,
         text=True,
         timeout=300,
@@ -323,7 +318,7 @@ def cell_across(hosts: Hosts, job: list[str], tmp: Path, extra: dict[str, str]) 
     bags = tmp / f"across{domain}"
     sim = subprocess.Popen(
         hosts.command("b", [str(BIN / "sim_node"), "--ros-args", "-p", f"bag_dir:={bags}"]),
-        env={**hosts.env("b", env_for(domain)), **extra},
+        env={**hosts.env("b", ros_env(domain)), **extra},
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )
@@ -331,7 +326,7 @@ def cell_across(hosts: Hosts, job: list[str], tmp: Path, extra: dict[str, str]) 
         rx0 = hosts.rx_bytes("b")
         r = subprocess.run(
             hosts.command("a", [str(BIN / "winder"), "run", "--external", "sim", *job, "--timeout", "120"]),
-            env={**hosts.env("a", env_for(domain)), **extra},
+            env={**hosts.env("a", ros_env(domain)), **extra},
             capture_output=True,
             text=True,
             timeout=600,

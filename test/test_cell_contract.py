@@ -292,7 +292,6 @@ def test_winder_run_ignores_other_cells_errors(tmp_path: Path, procs: Procs, ros
     """``winder run`` fails a run on its own nodes' ERROR statuses only: a cell
     without a namespace and one in /c1 both finish with exit 0 while other
     cells' nodes (/c10 shares /c1's first letters) report ERRORs all along."""
-    import os
     import subprocess
 
     from conftest import BIN
@@ -304,12 +303,11 @@ def test_winder_run_ignores_other_cells_errors(tmp_path: Path, procs: Procs, ros
         DiagnosticStatus(level=DiagnosticStatus.ERROR, name=name, message="elsewhere")
         for name in ("c10/sim_node: job", "cell9/interp_node: job", "c1/deeper/sim_node: job")
     ]
-    env = {**os.environ, "ROS_DOMAIN_ID": str(procs.domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
     runs = {
         ns: subprocess.Popen(
             [str(BIN / "winder"), "run", "--bag-dir", str(tmp_path / f"bags{ns}"), *job_args(SMALL_JOB)]
             + (["--namespace", ns] if ns else []),
-            env=env,
+            env=procs.env,
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
             text=True,

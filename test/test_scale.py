@@ -118,14 +118,15 @@ def test_a_split_cell_over_a_lossy_link_with_the_lan_profile(
     check_complete(r, bags, link)
 
 
+DELAY_MS = 5.0
+
+
 @pytest.fixture
 def delayed_hosts() -> Iterator[Hosts]:
     """Two hosts joined by a link that delays every packet 5 ms one way: netem
     where the kernel has it, else TUN devices and a relay (bench/_delayline.py)."""
     yield from linked_hosts("tn", DELAY_MS)
 
-
-DELAY_MS = 5.0
 
 ECHO = """
 import socket, sys

@@ -229,6 +229,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         return 0
     try:
         from winder.ros.cell import cell_network, run_cell
+        from winder.ros.dds import DISCOVERY_SERVER_KEY
     except ImportError as exc:
         raise UserError(f"the ROS 2 node packages are not installed ({exc}); run 'make demo'") from None
     bag_dir = bag_directory(sim["bag_dir"]) if "sim" not in external else Path(sim["bag_dir"])
@@ -248,9 +249,9 @@ def cmd_run(args: argparse.Namespace) -> int:
         room = f"{free / 2**30:.1f} GiB" if free >= 2**30 else f"{free / 2**20:.1f} MiB"
         print(f"  recording into     {bag_dir}  ({room} free)")
     domain, discovery, source = cell_network()
-    server = os.environ.get("ROS_DISCOVERY_SERVER", "").strip()
+    server = os.environ.get(DISCOVERY_SERVER_KEY, "").strip()
     if server:  # Fast DDS makes every participant a client of the server(s) named there
-        discovery = f"by the discovery server {server} (ROS_DISCOVERY_SERVER)"
+        discovery = f"by the discovery server {server} ({DISCOVERY_SERVER_KEY})"
     print(f"  ROS domain         {domain} ({source}), discovery {discovery}")
     bar = Progress(1.0, "winding")
     t0 = time.monotonic()
@@ -362,7 +363,7 @@ def cmd_discovery_server(args: argparse.Namespace) -> int:
     alternative to multicast and static peers for a cell across hosts."""
     import ipaddress
 
-    from winder.ros.dds import discovery_server_command
+    from winder.ros.dds import DISCOVERY_SERVER_KEY, discovery_server_command
 
     port = SERVER_SPECS["port"].parse(args.port)
     server_id = SERVER_SPECS["id"].parse(args.id)
@@ -379,7 +380,7 @@ def cmd_discovery_server(args: argparse.Namespace) -> int:
     host = "<this host's address>" if args.address == "0.0.0.0" else args.address
     print(
         f"winder: discovery server {server_id} on {args.address}:{port}; on every host of the cell:\n"
-        f"  export ROS_DISCOVERY_SERVER='{';' * server_id}{host}:{port}'",
+        f"  export {DISCOVERY_SERVER_KEY}='{';' * server_id}{host}:{port}'",
         flush=True,
     )
     os.execve(argv[0], argv, env)  # the server itself from here on: signals reach it directly

@@ -348,7 +348,8 @@ def _wait_for_job(
     (the job not started within ``timeouts[0]`` s, or not done within ``timeouts[1]``)."""
     start_timeout, timeout = timeouts
     t0 = time.monotonic()
-    t_end = t0 + timeout
+    waited = min(start_timeout, timeout)
+    t_start, t_end = t0 + waited, t0 + timeout
     while watch.summary is None:
         refused = watch.ask_to_start()
         if refused:
@@ -362,8 +363,7 @@ def _wait_for_job(
         if dead:
             return dead
         now = time.monotonic()
-        if not watch.accepted and now > t0 + min(start_timeout, timeout):
-            waited = min(start_timeout, timeout)
+        if not watch.accepted and now > t_start:
             return f"the job did not start within {waited:g} s: waiting for {watch.waiting_for()}"
         if now > t_end:
             return f"job did not finish within {timeout:g} s"

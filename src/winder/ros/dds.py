@@ -6,7 +6,7 @@ own or another rmw."""
 from __future__ import annotations
 
 import os
-from collections.abc import MutableMapping
+from collections.abc import Mapping, MutableMapping
 from pathlib import Path
 
 __all__ = [
@@ -42,7 +42,7 @@ def use_profile(environ: MutableMapping[str, str] | None = None) -> str:
     return str(PROFILE)
 
 
-def describe_profile(environ: MutableMapping[str, str] | None = None) -> str:
+def describe_profile(environ: Mapping[str, str] | None = None) -> str:
     """One line on the DDS settings a cell started from ``environ`` (default:
     this process' environment, left unchanged) will run on, for ``winder run``
     to print when part of the cell runs on another host."""
