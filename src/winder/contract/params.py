@@ -24,6 +24,7 @@ from winder.motion.shaped import Motion, ShapedProfile, shape
 from winder.spec import Spec, SpecError
 
 __all__ = [
+    "CONSUMER_SPECS",
     "INTERP_SPECS",
     "MAX_JOB_SECONDS",
     "MOTOR_FIELDS",
@@ -35,6 +36,7 @@ __all__ = [
     "UNSHAPED",
     "SegmentTiming",
     "bag_directory",
+    "check_consumer",
     "check_interp",
     "check_profile",
     "check_sim",
@@ -193,6 +195,23 @@ MOTOR_FIELDS = _table(
 #: MCAP chunk compressions of the sim node's bags (see winder.record.bag).
 BAG_COMPRESSIONS = ("zstd", "lz4", "none")
 
+#: The settings every step consumer has (winder.ros.consumer.StepConsumer):
+#: recording and the stall watch.
+CONSUMER_SPECS = _table(
+    Spec("bag_dir", str, "bags", "directory for recordings", pattern=r".+", pattern_text="a directory path"),
+    Spec("record", bool, True, "record each job into an MCAP bag"),
+    Spec(
+        "bag_compression",
+        str,
+        "lz4",
+        "MCAP chunk compression of the bag (lz4: fast, about a third of the size; zstd: a tenth, "
+        "at twice the CPU)",
+        choices=BAG_COMPRESSIONS,
+    ),
+    Spec("stall_timeout", float, 2.0, "wall time without steps before a stall is reported", "s", 0.1, 3600.0),
+    STALL_ABORT,
+)
+
 SIM_SPECS = {
     **_table(
         Spec("model", str, "linear", "motor model", choices=("linear", "nonlinear")),
@@ -201,30 +220,9 @@ SIM_SPECS = {
         Spec(
             "real_time_factor", float, 1.0, "simulated seconds per wall second when real_time", "", 1e-3, 1e3
         ),
-        Spec(
-            "bag_dir", str, "bags", "directory for recordings", pattern=r".+", pattern_text="a directory path"
-        ),
-        Spec("record", bool, True, "record each job into an MCAP bag"),
-        Spec(
-            "bag_compression",
-            str,
-            "lz4",
-            "MCAP chunk compression of the bag (lz4: fast, about a third of the size; zstd: a tenth, "
-            "at twice the CPU)",
-            choices=BAG_COMPRESSIONS,
-        ),
         Spec("settle_time", float, 0.05, "simulated time after the last step", "s", 0.0, 60.0),
-        Spec(
-            "stall_timeout",
-            float,
-            2.0,
-            "wall time without steps before a stall is reported",
-            "s",
-            0.1,
-            3600.0,
-        ),
-        STALL_ABORT,
     ),
+    **CONSUMER_SPECS,
     **{
         f"{axis}.{name}": Spec(
             f"{axis}.{name}",
@@ -579,13 +577,19 @@ def bag_directory(text: str) -> Path:
     return path
 
 
+def check_consumer(values: dict[str, Any]) -> None:
+    """Cross-field check of every consumer: the bag directory must be
+    writable when recording."""
+    if values["record"]:
+        bag_directory(values["bag_dir"])
+
+
 def check_sim(values: dict[str, Any]) -> None:
     """Cross-field check: each axis must be a valid motor; the bag directory
     must be writable when recording."""
     from winder.axis import StepperAxis
 
-    if values["record"]:
-        bag_directory(values["bag_dir"])
+    check_consumer(values)
 
     for axis in AXES:
         try:

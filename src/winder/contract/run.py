@@ -1,0 +1,414 @@
+"""A run's bookkeeping on the consumer side, ROS-free: operator events, programmed
+stops, the abort point, and the job report.
+
+Every step consumer (the simulator, a hardware driver: :class:`winder.ros.consumer.StepConsumer`)
+keeps the same books about the run it executes:
+
+* :class:`ControlEvent`: one operator event of ``winder/control`` (pause,
+  resume, abort, override), parsed and checked: :func:`parse_control` refuses
+  anything that is not a well-formed event, in one line.
+* :class:`RunLedger`: what the run has executed and what it must do next:
+  the programmed stops met in the stream (:class:`ProgrammedStop`), the
+  operator's pause (:class:`Hold`) and abort (:class:`AbortPoint`), and the
+  state transitions (:class:`Transition`) to announce as execution reaches
+  their time. An event that contradicts what was already executed (an abort
+  claiming fewer steps than were executed) is refused, never acted on.
+* :class:`JobReport`: the consumer's job status, live and final, as typed
+  fields with one conversion to the status' key/values and back.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field, fields
+from enum import Enum
+from typing import Any
+
+from winder.contract.params import stop_place
+from winder.contract.stream import JobPlan
+from winder.contract.topics import status_values
+
+__all__ = [
+    "EVENT_KINDS",
+    "AbortPoint",
+    "ControlEvent",
+    "EventError",
+    "Hold",
+    "JobReport",
+    "ProgrammedStop",
+    "RunLedger",
+    "StopPhase",
+    "Transition",
+    "parse_control",
+]
+
+#: the operator events of ``winder/control``
+EVENT_KINDS = ("pause", "resume", "abort", "override")
+#: a control message longer than this is no event
+MAX_EVENT_BYTES = 4096
+
+
+class EventError(ValueError):
+    """A ``winder/control`` message that is not an event of this run, or one
+    that contradicts what the run already did (one line, the reason)."""
+
+
+@dataclass(frozen=True)
+class ControlEvent:
+    """One operator event as the profile node publishes it when it takes
+    effect: ``t_ns`` when it takes effect, ``t_rest_ns`` when the axes are at
+    rest (pause, abort), ``steps`` the steps of the run up to that rest,
+    ``(segment, step)`` where the rest is, ``factor`` a feed override's."""
+
+    kind: str
+    run_id: str
+    t_ns: int
+    t_rest_ns: int
+    steps: int | None = None
+    segment: int = -1
+    step: int = 0
+    factor: float | None = None
+
+
+def _int(doc: dict[str, Any], key: str, default: int | None = None) -> int | None:
+    value = doc.get(key, default)
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise EventError(f"{key}={value!r} is invalid: must be an integer")
+    return value
+
+
+def parse_control(text: str) -> ControlEvent:
+    """The event in a ``winder/control`` message's JSON text; EventError (one
+    line naming the key) for anything else."""
+    if len(text) > MAX_EVENT_BYTES:
+        raise EventError(f"a control message of {len(text)} bytes is no event (at most {MAX_EVENT_BYTES})")
+    try:
+        doc = json.loads(text)
+    except (ValueError, RecursionError) as exc:
+        raise EventError(f"not JSON: {exc}") from None
+    if not isinstance(doc, dict):
+        raise EventError("not a JSON object")
+    kind = doc.get("event")
+    if kind not in EVENT_KINDS:
+        raise EventError(f"event={kind!r} is invalid: must be one of {', '.join(EVENT_KINDS)}")
+    run_id = doc.get("run_id")
+    if not isinstance(run_id, str):
+        raise EventError(f"run_id={run_id!r} is invalid: must be a string")
+    t_ns = _int(doc, "t_ns")
+    if t_ns is None or t_ns < 0:
+        raise EventError(f"t_ns={doc.get('t_ns')!r} is invalid: must be an integer >= 0")
+    rest = _int(doc, "t_rest_ns", t_ns)
+    assert rest is not None
+    if rest < t_ns:
+        raise EventError(f"t_rest_ns={rest} is invalid: must be >= t_ns ({t_ns})")
+    steps = _int(doc, "steps")
+    if kind in ("pause", "abort") and (steps is None or steps < 0):
+        raise EventError(
+            f"steps={doc.get('steps')!r} is invalid: a {kind} names the steps up to its rest (>= 0)"
+        )
+    factor = doc.get("factor")
+    if kind == "override":
+        if isinstance(factor, bool) or not isinstance(factor, (int, float)) or not math.isfinite(factor):
+            raise EventError(f"factor={factor!r} is invalid: an override names a finite factor")
+        factor = float(factor)
+    else:
+        factor = None
+    segment = _int(doc, "segment", -1)
+    step = _int(doc, "step", 0)
+    assert segment is not None and step is not None
+    return ControlEvent(kind, run_id, t_ns, rest, steps, segment, step, factor)
+
+
+class StopPhase(str, Enum):
+    """Where the run is with respect to a programmed stop."""
+
+    AHEAD = "ahead"  #: met in the stream, execution has not reached it
+    PAUSED = "paused"  #: the axes rest there (announced)
+    RESUMED = "resumed"  #: the run went on (announced)
+
+
+@dataclass
+class ProgrammedStop:
+    """A programmed stop of the job met in the stream: the axes rest from the
+    stop's step (``t_stop_ns``) to the next step (``t_resume_ns``, None until
+    that step comes)."""
+
+    t_stop_ns: int
+    t_resume_ns: int | None
+    place: tuple[int, int, int]  #: (coil, layer, turn), from 1
+    phase: StopPhase = StopPhase.AHEAD
+
+    @property
+    def label(self) -> str:
+        return f"{self.place[0]}:{self.place[2]}"
+
+
+@dataclass(frozen=True)
+class Hold:
+    """An operator's pause: the axes rest at ``rest_ns`` after ``steps`` steps."""
+
+    rest_ns: int
+    steps: int
+
+
+@dataclass(frozen=True)
+class AbortPoint:
+    """An operator's abort: the run ends at rest (``rest_ns``) after ``steps`` steps."""
+
+    rest_ns: int
+    steps: int
+
+
+@dataclass(frozen=True)
+class Transition:
+    """A state of the cell to announce on ``winder/state`` once execution
+    reaches ``t_ns``; ``place`` is (coil, layer, turn) (0s where not known)."""
+
+    t_ns: int
+    state: str  #: one of winder.contract.topics.CELL_STATES
+    text: str
+    place: tuple[int, int, int]
+    #: a programmed stop's transition (its job status says which stop), else an operator's
+    stop: str = ""
+
+
+@dataclass
+class RunLedger:
+    """What a consumer knows of the run it executes (see the module doc).
+
+    The consumer tells it what it executed (:meth:`executed`) and what came
+    (:meth:`note_rows`, :meth:`apply`); it answers what to announce
+    (:meth:`due`), whether the axes rest (:attr:`at_rest`) and whether the run
+    ended by an abort (:attr:`aborted`)."""
+
+    plan: JobPlan
+    executed_steps: int = 0  #: steps executed (the consumer's count)
+    missing_steps: int = 0  #: steps known missing (never executed, counted as done for flow control)
+    stops: list[ProgrammedStop] = field(default_factory=list)
+    hold: Hold | None = None
+    abort: AbortPoint | None = None
+    #: the operator state announced last ("" while running)
+    op_state: str = ""
+    _pending: list[Transition] = field(default_factory=list)
+    _places: dict[tuple[int, int], tuple[int, int, int]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.plan.stops:
+            segs = self.plan.job.segments()
+            self._places = {(g, k): stop_place(self.plan.job, segs[g], k) for g, k in self.plan.stops}
+
+    # -- what came --------------------------------------------------------
+    @property
+    def accounted(self) -> int:
+        """Steps executed or known missing: what receipts acknowledge."""
+        return self.executed_steps + self.missing_steps
+
+    def executed(self, n: int) -> None:
+        self.executed_steps += n
+
+    def note_rows(self, seg: int, t_ns: list[int], step_index: list[int]) -> bool:
+        """Accepted rows of segment ``seg`` (their times and 1-based step
+        indexes): a stop waiting for its resume learns it from the first row,
+        a programmed stop among them is noted. True when a stop that waited
+        for ``~/resume`` (``stop_resume: call``) got its resume here."""
+        resumed = False
+        for p in self.stops:
+            if p.t_resume_ns is None and t_ns:
+                p.t_resume_ns = t_ns[0]
+                resumed = resumed or self.plan.stop_resume == "call"
+        if not self._places:
+            return resumed
+        for i, k in enumerate(step_index):
+            place = self._places.get((seg, k))
+            if place is not None:
+                resume = t_ns[i + 1] if i + 1 < len(t_ns) else None
+                self.stops.append(ProgrammedStop(t_ns[i], resume, place))
+        return resumed
+
+    def apply(self, event: ControlEvent) -> Transition | None:
+        """Book an event of this run; the transition it starts (already
+        queued for :meth:`due`), or None. EventError if it is not this run's
+        or contradicts what happened (an abort or pause claiming fewer steps
+        than were executed, or more than the job has)."""
+        if event.run_id != self.plan.run_id:
+            raise EventError(f"run_id={event.run_id!r} is not the running run {self.plan.run_id!r}")
+        total = self.plan.total_steps
+        if event.steps is not None and not self.executed_steps <= event.steps <= total:
+            raise EventError(
+                f"{event.kind} after steps={event.steps} is invalid: {self.executed_steps} steps are "
+                f"executed already and the job has {total}"
+            )
+        if self.abort is not None:
+            raise EventError(f"{event.kind} after the run's abort: it takes no more events")
+        where = self._where(event.segment, event.step)
+        first: Transition | None = None
+        if event.kind == "pause":
+            assert event.steps is not None
+            first = Transition(event.t_ns, "pausing", "pausing: braking to rest", where)
+            self._queue(
+                first, Transition(event.t_rest_ns, "paused", f"paused after {event.steps} steps", where)
+            )
+            self.hold = Hold(event.t_rest_ns, event.steps)
+        elif event.kind == "resume":
+            first = Transition(event.t_ns, "running", "resumed", where)
+            self._queue(first)
+            self.hold = None
+        elif event.kind == "abort":
+            assert event.steps is not None
+            first = Transition(event.t_ns, "aborting", f"aborting: at rest after {event.steps} steps", where)
+            self._queue(first)
+            self.abort, self.hold = AbortPoint(event.t_rest_ns, event.steps), None
+        return first
+
+    def _queue(self, *ts: Transition) -> None:
+        self._pending.extend(ts)
+        self._pending.sort(key=lambda t: t.t_ns)
+
+    def _where(self, seg: int, step: int) -> tuple[int, int, int]:
+        """(coil, layer, turn) of step ``step`` of segment ``seg``; the coil
+        alone between layers; zeros if the segment is unknown."""
+        segs = self.plan.job.segments()
+        if not 0 <= seg < len(segs):
+            return (0, 0, 0)
+        if segs[seg].kind == "layer":
+            return stop_place(self.plan.job, segs[seg], max(step, 0))
+        return (segs[seg].pole + 1, 0, 0)
+
+    # -- what to do -------------------------------------------------------
+    def due(self, upto_ns: int) -> list[Transition]:
+        """The transitions execution has reached at ``upto_ns``, in time order
+        (each once): programmed stops reached and left, operator states."""
+        out: list[Transition] = []
+        for p in self.stops:
+            if p.phase is StopPhase.AHEAD and p.t_stop_ns <= upto_ns:
+                p.phase = StopPhase.PAUSED
+                out.append(
+                    Transition(
+                        p.t_stop_ns, "paused", f"paused at turn {p.label} (coil:turn)", p.place, p.label
+                    )
+                )
+            if p.phase is StopPhase.PAUSED and p.t_resume_ns is not None and p.t_resume_ns <= upto_ns:
+                p.phase = StopPhase.RESUMED
+                out.append(
+                    Transition(
+                        p.t_resume_ns,
+                        "running",
+                        f"resumed after the stop at turn {p.label}",
+                        p.place,
+                        p.label,
+                    )
+                )
+        while self._pending and self._pending[0].t_ns <= upto_ns:
+            t = self._pending.pop(0)
+            self.op_state = "" if t.state == "running" else t.state
+            out.append(t)
+        out.sort(key=lambda t: t.t_ns)
+        return out
+
+    def reach_stops(self) -> list[Transition]:
+        """The stream stands still at a programmed stop it has not reached in
+        time yet (it waits for a resume): the axes are there, say so."""
+        ahead = [p.t_stop_ns for p in self.stops if p.phase is StopPhase.AHEAD]
+        return self.due(max(ahead)) if ahead else []
+
+    @property
+    def at_stop(self) -> bool:
+        """At a programmed stop (announced, not left)."""
+        return any(p.phase is StopPhase.PAUSED for p in self.stops)
+
+    @property
+    def waiting_for_resume(self) -> bool:
+        """At a programmed stop that waits for ``~/resume``: no steps come, and that is no stall."""
+        return self.plan.stop_resume == "call" and any(p.t_resume_ns is None for p in self.stops)
+
+    @property
+    def held(self) -> bool:
+        """Paused by the operator (rest time booked, no resume yet)."""
+        return self.hold is not None
+
+    @property
+    def at_rest(self) -> bool:
+        """Paused by the operator, every step up to the rest executed."""
+        return self.hold is not None and self.accounted >= self.hold.steps
+
+    @property
+    def aborted(self) -> bool:
+        """Aborted, and every step up to the rest executed."""
+        return self.abort is not None and self.accounted >= self.abort.steps
+
+
+def _num(text: str, kind: type) -> Any:
+    try:
+        return kind(text)
+    except ValueError:
+        return kind(float(text)) if kind is int else kind("nan")
+
+
+@dataclass
+class JobReport:
+    """A consumer's job status (``"<node>: job"`` on /diagnostics): the
+    common keys (:data:`winder.contract.topics.STATUS_KEYS`), the role, the
+    stream's account, and the backend's own keys (``extra``, e.g. the
+    simulator's lost steps and tracking error) after them."""
+
+    state: str
+    job_id: str = ""
+    run_id: str = ""
+    steps_done: int = 0
+    steps_total: int = 0
+    steps_missing: int = 0
+    gaps: int = 0
+    chunks_rejected: int = 0
+    #: execution time reached since the run's start (s): simulated time, or the hardware's
+    sim_time_s: float = 0.0
+    wall_time_s: float = 0.0
+    bag: str = ""
+    errors: int = 0
+    stalls: int = 0
+    extra: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def real_time_factor(self) -> float:
+        return self.sim_time_s / self.wall_time_s if self.wall_time_s > 0 else math.inf
+
+    def to_values(self) -> dict[str, object]:
+        """The status' key/values, in the contract's order."""
+        return status_values(
+            self.state,
+            self.job_id,
+            self.run_id,
+            self.steps_done,
+            self.steps_total,
+            role="consumer",
+            steps_missing=self.steps_missing,
+            gaps=self.gaps,
+            chunks_rejected=self.chunks_rejected,
+            sim_time_s=f"{self.sim_time_s:.6f}",
+            wall_time_s=f"{self.wall_time_s:.3f}",
+            real_time_factor=f"{self.real_time_factor:.3f}" if self.wall_time_s > 0 else "inf",
+            **self.extra,
+            bag=self.bag,
+            errors=self.errors,
+            stalls=self.stalls,
+        )
+
+    @classmethod
+    def from_values(cls, values: dict[str, str]) -> JobReport:
+        """A report from a status' key/values (as received or recorded);
+        missing keys take their defaults, unknown ones go to ``extra``."""
+        known = {f.name: f for f in fields(cls) if f.name != "extra"}
+        kwargs: dict[str, Any] = {}
+        extra: dict[str, str] = {}
+        skip = {"progress", "role", "real_time_factor"}
+        for key, text in values.items():
+            f = known.get(key)
+            if f is None:
+                if key not in skip:
+                    extra[key] = str(text)
+                continue
+            kind = {"int": int, "float": float}.get(str(f.type), str)
+            kwargs[key] = _num(str(text), kind) if kind is not str else str(text)
+        return cls(state=str(kwargs.pop("state", "")), extra=extra, **kwargs)

@@ -1,0 +1,834 @@
+"""``StepConsumer``: everything a node behind the step stream owes the cell,
+written once. The simulator (``sim_node``) and the ros2_control bridge
+(``bridge_node``) are subclasses; a hardware driver is one more.
+
+What the base does (docs/CONTRACT.md, "What a consumer must do"):
+
+* handshake: ``winder/ready`` (role ``consumer``): ``ready`` once the step
+  stream's publisher is matched and the node is active and its settings
+  valid, ``busy`` during a run, ``blocked`` / ``inactive`` / ``waiting``
+  otherwise; repeated every second;
+* run identity: a run starts with its description on ``winder/job``; chunks
+  and events that arrive before it are kept for it, others dropped;
+* stream checks (:class:`winder.contract.stream.StreamChecker`: gaps,
+  repeats, reordering; step times that do not increase or lie beyond a job's
+  longest duration), each reported once as an ERROR;
+* receipts on ``winder/progress`` (the interp node's flow control and its
+  sign that the job is over): steps executed plus steps known missing;
+* operator events on ``winder/control`` (pause, resume, abort, override) and
+  the job's programmed stops, booked in a :class:`winder.contract.run.RunLedger`
+  and announced on ``winder/state`` as execution reaches them; an abort ends
+  the run once its steps are executed;
+* the stall watch: no steps for ``stall_timeout`` s is reported, for
+  ``stall_abort`` s closes the run incomplete (so a consumer never wedges
+  the cell);
+* ``/diagnostics``: the ``<node>: job`` status every second, with the
+  contract's keys (:class:`winder.contract.run.JobReport`), and the final
+  report when the run closes;
+* recording (optional, parameter ``record``): a rosbag2/MCAP directory per
+  run holding the contract's topics and the backend's own, closed before
+  the final report is announced.
+
+What a backend implements (the hooks below; only :meth:`execute` is required):
+
+* :meth:`begin` - a run starts: set up the axes; return the configuration to
+  publish on ``winder/sim_config`` (or None: nothing is published, and nobody
+  waits for it);
+* :meth:`execute` - accepted timed rows, in order; execute them now or as
+  they fall due, calling :meth:`executed` (steps done) and :meth:`reached`
+  (execution time) as it goes;
+* :meth:`accepts_more`, :meth:`holding`, :meth:`work`, :meth:`pending` - for a
+  backend that paces: whether it takes the next chunk now, whether it holds
+  accepted rows not executed yet, its due work on each pump, and whether work
+  waits on the clock;
+* :meth:`settle` - every step is executed (or the abort's rest reached):
+  bring the axes to rest until the given time; the run closes when nothing is
+  pending;
+* :meth:`flush` - a new run arrives while this one settles: finish at once;
+* :meth:`details` - the backend's own status keys;
+* :meth:`end` - the run closed (report published): release its resources.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections import deque
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message, serialize_message
+from std_msgs.msg import Int64MultiArray, String
+from trajectory_msgs.msg import JointTrajectory
+
+from winder.contract.params import MAX_JOB_SECONDS, bag_directory
+from winder.contract.run import EventError, JobReport, RunLedger, Transition, parse_control
+from winder.contract.stream import TIMED_COLUMNS, JobPlan, StreamChecker, parse_job_description
+from winder.contract.topics import (
+    TOPIC_CONTROL,
+    TOPIC_DIAGNOSTICS,
+    TOPIC_JOB,
+    TOPIC_PATH,
+    TOPIC_PROFILE_CONFIG,
+    TOPIC_PROGRESS,
+    TOPIC_SIM_CONFIG,
+    TOPIC_STATE,
+    TOPIC_STEP_TIMES,
+    in_namespace,
+    status_values,
+)
+from winder.record.bag import BagRecorder, new_bag_path, run_bag_path, signals_held
+from winder.ros.chunks import TIMED_CDR, waiting
+from winder.ros.diagnostics import ERROR, OK, WARN, Diagnostics
+from winder.ros.managed import ManagedNode
+from winder.ros.qos import QOS_DIAGNOSTICS, QOS_EVENTS, QOS_LATCHED, QOS_STATE, QOS_STREAM
+from winder.ros.ready import Announcer
+from winder.ros.settings import Settings
+from winder.ros.timers import steady_timer
+from winder.spec import Spec
+
+__all__ = ["CONSUMER_TOPICS", "StepConsumer"]
+
+#: s of wall time the steps wait for the job's path and profile config (so the bag has them first)
+PATH_WAIT = 2.0
+#: As fast as possible, chunks are gathered and handed over together (one
+#: backend call for many costs less): up to BATCH_CHUNKS of them, at most
+#: BATCH_STEPS steps, waiting at most BATCH_WAIT wall seconds for the first.
+BATCH_STEPS = 1 << 16
+BATCH_CHUNKS = 8
+BATCH_WAIT = 0.01
+#: Step times beyond the longest a job may last are refused, not executed.
+MAX_STEP_NS = round(MAX_JOB_SECONDS * 1e9)
+#: the contract's topics every consumer's bag holds: key -> (name, type)
+CONSUMER_TOPICS = {
+    "job": (TOPIC_JOB, "std_msgs/msg/String"),
+    "path": (TOPIC_PATH, "trajectory_msgs/msg/JointTrajectory"),
+    "step_times": (TOPIC_STEP_TIMES, "std_msgs/msg/Int64MultiArray"),
+    "sim_config": (TOPIC_SIM_CONFIG, "std_msgs/msg/String"),
+    "profile_config": (TOPIC_PROFILE_CONFIG, "std_msgs/msg/String"),
+    "diagnostics": (TOPIC_DIAGNOSTICS, "diagnostic_msgs/msg/DiagnosticArray"),
+    "state": (TOPIC_STATE, "diagnostic_msgs/msg/DiagnosticStatus"),
+    "control": (TOPIC_CONTROL, "std_msgs/msg/String"),
+}
+
+
+def one_line(exc: BaseException) -> str:
+    return (str(exc).splitlines() or [type(exc).__name__])[0]
+
+
+class StepConsumer(ManagedNode):
+    """The consumer half of the cell (see the module doc). ``specs`` must
+    hold :data:`winder.contract.params.CONSUMER_SPECS`; ``topics`` are the
+    backend's own recorded topics, key -> (name, type)."""
+
+    def __init__(
+        self,
+        name: str,
+        specs: dict[str, Spec],
+        check: Callable[[dict[str, Any]], None],
+        *,
+        hardware_id: str,
+        topics: dict[str, tuple[str, str]] | None = None,
+    ) -> None:
+        super().__init__(name)
+        self.settings = Settings(self, specs, check)
+        self.diag = Diagnostics(self, hardware_id)
+        self.hardware_id = hardware_id
+        self.pub_progress = self.create_publisher(KeyValue, TOPIC_PROGRESS, QOS_STATE)
+        self.pub_cell_state = self.create_publisher(DiagnosticStatus, TOPIC_STATE, QOS_LATCHED)
+        self.pub_config = (
+            self.create_publisher(String, TOPIC_SIM_CONFIG, QOS_LATCHED) if self.configures else None
+        )
+        self.ready = Announcer(self, "consumer")
+        # a job description starts a run now: volatile, so a consumer that
+        # (re)starts never takes the last run's latched description for a new
+        # run; "ready" waits for this subscription's match too (announce())
+        self.sub_job = self.create_subscription(
+            String,
+            TOPIC_JOB,
+            self.on_job,
+            QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE),
+            raw=True,
+            event_callbacks=SubscriptionEventCallbacks(matched=lambda _info: self.announce()),
+        )
+        self.create_subscription(JointTrajectory, TOPIC_PATH, self.on_path, QOS_LATCHED, raw=True)
+        self.create_subscription(String, TOPIC_PROFILE_CONFIG, self.on_profile_config, QOS_LATCHED, raw=True)
+        self.sub_control = self.create_subscription(
+            String, TOPIC_CONTROL, self.on_control, QOS_EVENTS, raw=True
+        )
+        self.sub_times = self.create_subscription(
+            Int64MultiArray,
+            TOPIC_STEP_TIMES,
+            self.on_step_times,
+            QOS_STREAM,
+            raw=True,
+            # the handshake follows the stream's connection as it happens, not by polling
+            event_callbacks=SubscriptionEventCallbacks(matched=lambda _info: self.announce()),
+        )
+        self.create_subscription(
+            DiagnosticArray, TOPIC_DIAGNOSTICS, self.on_diagnostics, QOS_DIAGNOSTICS, raw=True
+        )
+        # pump() runs on events (a chunk, a job) and, while work waits on the
+        # clock (pacing, batching), every 5 ms; idle, only the 1 Hz report runs
+        self.pump_timer = steady_timer(self, 0.005, self.pump)
+        steady_timer(self, 0.5, self.watch)
+        steady_timer(self, 1.0, self.report)
+        self.bag_topics = {
+            key: (name if name.startswith("/") else self.resolve_topic_name(name), kind)
+            for key, (name, kind) in {**CONSUMER_TOPICS, **(topics or {})}.items()
+        }
+        self.plan: JobPlan | None = None
+        self.reset()
+        self.early: list[bytes] = []
+        self.early_events: deque[bytes] = deque(maxlen=100)  # winder/control of a run not started here yet
+        self.path_raw: bytes | None = None
+        self.profile_raw: bytes | None = None
+        self.last_report: JobReport | None = None
+        self.last_level, self.last_text = OK, ""
+        self.cell_state("idle", "no job yet")
+        if self.settings.blocked():
+            self.diag.publish(
+                "job", ERROR, str(self.settings.blocked()), status_values("blocked", role="consumer")
+            )
+
+    #: whether this consumer publishes ``winder/sim_config`` (:meth:`begin` returns it)
+    configures = True
+
+    # -- the hooks (see the module doc) -----------------------------------------
+    def begin(self, plan: JobPlan, values: dict[str, Any]) -> dict[str, object] | None:
+        """A run starts with these settings; the winder/sim_config document, or None."""
+        return None
+
+    def execute(self, rows: npt.NDArray[np.int64]) -> None:
+        """Execute accepted timed rows ``[t_ns, segment, axes...]`` (now or when due)."""
+        raise NotImplementedError
+
+    def accepts_more(self) -> bool:
+        """Whether the next chunk may be handed to :meth:`execute` now."""
+        return True
+
+    def batches(self) -> bool:
+        """Whether chunks are gathered and handed over many at a time (as fast as possible)."""
+        return False
+
+    def holding(self) -> bool:
+        """Accepted rows wait in the backend, not executed yet."""
+        return False
+
+    def work(self) -> None:
+        """The backend's due work, on every pump (pacing out what is due)."""
+
+    def pending(self) -> bool:
+        """Work waits on the clock: keep pumping every 5 ms; no stall."""
+        return False
+
+    def settle(self, until_ns: int) -> None:
+        """No more steps come: bring the axes to rest until ``until_ns``."""
+
+    def flush(self) -> None:
+        """A new run arrives while this one settles: finish what is pending at once."""
+
+    def details(self) -> dict[str, object]:
+        """The backend's own status keys (after the contract's)."""
+        return {}
+
+    def end(self) -> None:
+        """The run closed and is reported: release its resources."""
+
+    def resume_pacing(self) -> None:
+        """A programmed stop that waited for ``~/resume`` got its steps: pacing goes on from now."""
+
+    def paces(self) -> bool:
+        """Whether execution follows the wall clock now (a real-time run)."""
+        return False
+
+    # -- lifecycle (winder.ros.managed) ----------------------------------------
+    def in_run(self) -> bool:
+        return self.plan is not None
+
+    def blocked_reason(self) -> str | None:
+        return self.settings.blocked()
+
+    def lifecycle_changed(self) -> None:
+        self.announce()
+
+    def reset(self) -> None:
+        """Forget the last run."""
+        self.plan = None
+        self.ledger: RunLedger | None = None
+        self.checker: StreamChecker | None = None
+        self.bag: BagRecorder | None = None
+        self.t_ns = 0  # execution time reached (ns) since the run's start
+        self.wall0_ns = time.time_ns()  # wall-clock time of the run's start: the bag's time base
+        self.inbox: deque[bytes] = deque()  # received chunks waiting to be executed
+        self.inbox_since = time.monotonic()
+        self.record_failure = ""  # why the bag stopped recording (a full disk), if it did
+        self.last_step_ns = -1
+        self.path_recorded = False
+        self.profile_recorded = False
+        self.job_wall = time.monotonic()
+        self.finishing = False
+        self.last_chunk_wall = time.monotonic()
+        self.start_wall = time.monotonic()
+        self.stalled = False
+        self.stalls = 0
+        self.errors: list[str] = []
+        self.foreign = 0  # control messages of the run refused
+
+    # -- a run starts -----------------------------------------------------------
+    def on_job(self, raw: bytes) -> None:
+        msg = deserialize_message(raw, String)
+        try:
+            plan = parse_job_description(msg.data)
+        except ValueError as exc:
+            self.error(f"job description rejected: {exc}")
+            return
+        if not self.active:
+            self.error(f"job {plan.job_id} refused: {self.inactive_reason()}")
+            return
+        if self.plan is not None and self.finishing:
+            # every step of the last run is executed, it only settles: it closes complete now
+            self.flush()
+            self.finish(complete=True)
+        elif self.plan is not None:
+            self.error(
+                f"job {plan.job_id} arrived while {self.plan.job_id} runs: "
+                "the running job is closed incomplete"
+            )
+            self.finish(complete=False)
+        blocked = self.settings.blocked()
+        if blocked:
+            self.error(f"job {plan.job_id} refused: {blocked}")
+            return
+        values = self.settings.values()
+        self.reset()
+        self.plan = plan
+        self.ledger = RunLedger(plan)
+        self.checker = StreamChecker(plan)
+        self.announce()
+        config = self.begin(plan, values)
+        config_raw = b""
+        if config is not None and self.pub_config is not None:
+            doc = {**config, "run_id": plan.run_id, "wall_start_ns": self.wall0_ns}
+            if plan.source_bag:  # a re-simulation (winder resim) names the recording its steps come from
+                doc.update(source_bag=plan.source_bag, source_run_id=plan.source_run_id)
+            msg_config = String(data=json.dumps(doc))
+            self.pub_config.publish(msg_config)
+            config_raw = serialize_message(msg_config)
+        if values["record"]:
+            self.open_bag(plan, values, raw, config_raw)
+        self.job_wall = time.monotonic()
+        self.record_path()
+        self.record_profile_config()
+        self.get_logger().info(
+            f"run {plan.run_id or '-'}: job {plan.job_id}, {plan.total_steps} steps"
+            + (f", recording to {self.bag.path}" if self.bag else "")
+        )
+        self.cell_state("running", f"run {plan.run_id or plan.job_id} started", where=(1, 1, 0))
+        self.report()  # the run is on: its status at once, not at the next second
+        events, self.early_events = list(self.early_events), deque(maxlen=100)
+        for event in events:  # the run's own events that came before its description; others dropped
+            self.handle_control(event, early=True)
+        early, self.early = self.early, []
+        for chunk in early:  # in order, before any taken from the queue
+            self.receive(chunk)
+        self.pump()
+
+    def open_bag(self, plan: JobPlan, values: dict[str, Any], job_raw: bytes, config_raw: bytes) -> None:
+        try:
+            directory = bag_directory(values["bag_dir"])
+            path = (
+                run_bag_path(directory, plan.run_id) if plan.run_id else new_bag_path(directory, plan.job_id)
+            )
+            self.bag = BagRecorder(
+                path,
+                {name: kind for name, kind in self.bag_topics.values()},
+                compression=values["bag_compression"],
+            )
+        except (OSError, ValueError) as exc:  # the disk changed since bag_dir was accepted
+            self.error(f"job {plan.job_id} runs unrecorded: cannot open a bag: {one_line(exc)}")
+            return
+        self.record("job", 0, job_raw)
+        if config_raw:
+            self.record("sim_config", 0, config_raw)
+
+    def on_path(self, raw: bytes) -> None:
+        self.path_raw = raw
+        self.record_path()
+
+    def on_profile_config(self, raw: bytes) -> None:
+        self.profile_raw = raw
+        self.record_profile_config()
+
+    def record_profile_config(self) -> None:
+        """Record the ramp the profile node planned this run with, once."""
+        if self.plan is None or self.profile_raw is None or self.profile_recorded:
+            return
+        try:
+            doc = json.loads(deserialize_message(self.profile_raw, String).data)
+            ids = (doc.get("job_id"), doc.get("run_id", ""))
+        except (ValueError, AttributeError, RecursionError):
+            return
+        if ids != (self.plan.job_id, self.plan.run_id):
+            return  # an earlier run's ramp; this run's is on its way
+        self.profile_recorded = True
+        self.record("profile_config", self.t_ns, self.profile_raw)
+
+    def record_path(self) -> None:
+        """Record the current run's path once. Job and path travel on two
+        topics that match independently, so either may arrive first."""
+        if self.plan is None or self.path_raw is None or self.path_recorded:
+            return
+        try:
+            path = deserialize_message(self.path_raw, JointTrajectory)
+        except Exception:
+            return
+        if path.header.frame_id != (self.plan.run_id or self.plan.job_id):
+            return  # an earlier run's path; this run's is on its way
+        self.path_recorded = True
+        self.record("path", self.t_ns, self.path_raw)
+
+    # -- operator events --------------------------------------------------------
+    def on_control(self, raw: bytes) -> None:
+        self.handle_control(raw)
+        self.pump()
+
+    def handle_control(self, raw: bytes, *, early: bool = False) -> None:
+        """An operator event (winder/control) of the running run: booked,
+        recorded, its states announced as execution reaches them. Events of a
+        run not started here yet are kept for it; anything that does not
+        parse, or contradicts the run, changes nothing (reported once)."""
+        try:
+            event = parse_control(deserialize_message(raw, String).data)
+        except (EventError, Exception):
+            return
+        if self.plan is None or self.ledger is None or event.run_id != self.plan.run_id:
+            # the profile node may speak of a run before its description is
+            # here (a schedule is published as the run starts): kept for it
+            if not early:
+                self.early_events.append(raw)
+            return
+        try:
+            self.ledger.apply(event)
+        except EventError as exc:
+            self.foreign += 1
+            if self.foreign == 1:
+                self.get_logger().warning(f"winder/control: event refused: {exc}")
+            return
+        self.record("control", self.t_ns, raw)  # when it was heard; its own times are inside
+        if event.kind == "override":
+            self.get_logger().info(f"feed override {event.factor} from {event.t_ns / 1e9:.6f} s")
+
+    def take_control(self) -> None:
+        """Operator events already here, before any step is executed: the
+        executor may serve a busy step stream first, and an event must not
+        come after the steps it times (the profile node sends it first)."""
+        for raw in waiting(self.sub_control):
+            self.handle_control(raw)
+
+    # -- the step stream --------------------------------------------------------
+    def on_step_times(self, raw: bytes) -> None:
+        self.receive(raw)
+        for more in waiting(self.sub_times):  # the chunks queued behind it, in one go
+            self.receive(more)
+        self.pump()
+
+    def receive(self, raw: bytes) -> None:
+        if self.plan is None or self.checker is None or self.finishing:
+            self.early.append(raw)
+            return
+        self.last_chunk_wall = time.monotonic()
+        if self.stalled:
+            self.stalled = False
+            self.get_logger().info("step stream resumed")
+        self.record("step_times", self.t_ns, raw)  # the bag keeps the stream as it arrived
+        if not self.inbox:
+            self.inbox_since = time.monotonic()
+        self.inbox.append(raw)
+
+    def accept(self, raw: bytes) -> npt.NDArray[np.int64] | None:
+        """The rows of a chunk that may be executed, or None (reported)."""
+        assert self.checker is not None and self.ledger is not None
+        try:
+            rows = TIMED_CDR.decode(raw)
+        except ValueError as exc:
+            self.error(f"bad step_times chunk: {exc}")
+            return None
+        verdict = self.checker.check_rows(rows, TIMED_COLUMNS)  # positions tell gaps, repeats, reordering
+        if verdict.kind != "ok":
+            self.error(verdict.message)
+        if not verdict.accept:
+            self.checker.rejected_steps += rows.shape[0]
+            return None
+        seg = int(rows[0, 1])
+        late = int(rows[-1, 0]) > MAX_STEP_NS
+        if late or np.any(rows[1:, 0] <= rows[:-1, 0]) or rows[0, 0] <= self.last_step_ns:
+            # in sequence by position but not in time: the steps cannot be
+            # executed; they count as missing, never silently run
+            why = f"later than a job may last ({MAX_JOB_SECONDS:g} s)" if late else "do not increase"
+            self.error(f"segment {seg}: step times {why}; {rows.shape[0]} steps dropped")
+            self.checker.done -= rows.shape[0]
+            self.checker.missing += rows.shape[0]
+            return None
+        self.last_step_ns = int(rows[-1, 0])
+        self.checked(seg, rows)
+        if self.ledger.note_rows(
+            seg,
+            rows[:, 0].tolist(),
+            self.checker.step_index(seg, rows[:, 2:]).tolist() if self.plan_stops else [],
+        ):
+            self.resume_pacing()
+        return rows
+
+    @property
+    def plan_stops(self) -> bool:
+        return self.plan is not None and bool(self.plan.stops)
+
+    def checked(self, seg: int, rows: npt.NDArray[np.int64]) -> None:
+        """Accepted rows, before they are executed (the simulator measures their deviation)."""
+
+    def pump(self) -> None:
+        """Do the work that is due; keep the 5 ms timer running while work
+        waits on the clock (pacing, batching, the path), stop it when there
+        is none: an idle node wakes only for its 1 Hz report."""
+        self.take_control()
+        if self.plan is not None:
+            self._work()
+        if self.plan is not None and (self.inbox or self.holding() or self.pending() or self.finishing):
+            if self.pump_timer.is_canceled():
+                self.pump_timer.reset()
+        else:
+            self.pump_timer.cancel()
+
+    def _work(self) -> None:
+        now = time.monotonic()
+        if (
+            self.inbox
+            and not (self.path_recorded and self.profile_recorded)
+            and now - self.job_wall < PATH_WAIT
+        ):
+            return  # hold the steps briefly: the bag should have path and ramp before they run
+        batching = self.batches()
+        gather = batching and 0 < len(self.inbox) < BATCH_CHUNKS and now - self.inbox_since < BATCH_WAIT
+        while self.inbox and not gather and not self.finishing and self.accepts_more():
+            batch: list[npt.NDArray[np.int64]] = []
+            size = 0
+            while self.inbox and size < BATCH_STEPS:
+                rows = self.accept(self.inbox.popleft())
+                if rows is not None:
+                    batch.append(rows)
+                    size += rows.shape[0]
+                if not batching:
+                    break
+            if batch:
+                self.execute(np.concatenate(batch) if len(batch) > 1 else batch[0])
+            self.receipt()
+        if not self.inbox:  # the run's last chunk may have been dropped, not executed
+            self.settle_if_complete()
+        self.work()
+        if self.plan is not None and self.finishing and not self.pending():
+            self.finish(complete=True)
+        if self.record_failure and self.plan is not None:
+            self.finish(complete=False)
+
+    def settle_if_complete(self) -> None:
+        """Once every step of the run is executed or counted missing (or the
+        abort's rest is reached): the axes settle, then the run closes."""
+        if self.checker is None or self.ledger is None or self.finishing or self.holding():
+            return
+        self.ledger.missing_steps = self.checker.missing
+        if not (self.checker.complete or self.ledger.aborted):
+            return
+        self.settle(max(self.last_step_ns, 0))
+        self.finishing = True
+
+    # -- what the backend tells -------------------------------------------------
+    def executed(self, n: int) -> None:
+        """``n`` more steps of the run are executed."""
+        if self.ledger is not None:
+            self.ledger.executed(n)
+
+    def reached(self, t_ns: int) -> None:
+        """Execution reached ``t_ns`` (since the run's start): announce what is due."""
+        self.t_ns = t_ns
+        if self.ledger is not None:
+            for t in self.ledger.due(t_ns):
+                self.transition(t)
+
+    def transition(self, t: Transition) -> None:
+        """A state of the run reached: on winder/state, and (a programmed stop) on /diagnostics."""
+        assert self.plan is not None
+        if not t.stop:
+            self.cell_state(t.state, f"run {self.plan.run_id}: {t.text}", where=t.place, t_ns=t.t_ns)
+            return
+        self.cell_state(t.state, t.text, where=t.place, t_ns=t.t_ns)
+        values = self.job_report("running").to_values()
+        values["state"] = t.state
+        values["stop"] = t.stop
+        self.publish_status("job", OK, f"run {self.plan.run_id}: {t.text}", values, t_ns=t.t_ns)
+
+    @property
+    def at_rest(self) -> bool:
+        """Paused by the operator, every step up to the rest executed."""
+        return self.ledger is not None and self.ledger.at_rest and not self.finishing
+
+    # -- reports ------------------------------------------------------------------
+    def job_report(self, state: str) -> JobReport:
+        assert self.plan is not None and self.checker is not None
+        return JobReport(
+            state,
+            self.plan.job_id,
+            self.plan.run_id,
+            self.ledger.executed_steps if self.ledger else 0,
+            self.plan.total_steps,
+            steps_missing=self.checker.missing,
+            gaps=self.checker.gaps,
+            chunks_rejected=self.checker.rejected,
+            sim_time_s=self.t_ns / 1e9,
+            wall_time_s=time.monotonic() - self.start_wall,
+            bag=str(self.bag.path.resolve()) if self.bag else "",
+            errors=len(self.errors),
+            stalls=self.stalls,
+            extra={k: str(v) for k, v in self.details().items()},
+        )
+
+    def aborted(self) -> bool:
+        """The run was aborted and every step up to the rest is executed."""
+        return self.ledger is not None and self.ledger.aborted and not self.record_failure
+
+    def final_report(self, complete: bool) -> tuple[JobReport, int, str]:
+        """The run's final status: report, level and message. A run whose
+        recording failed is not complete, whatever the stream did."""
+        assert self.plan is not None
+        if self.ledger is not None and self.checker is not None:
+            self.ledger.missing_steps = self.checker.missing
+        aborted = self.aborted()
+        complete = complete and not self.record_failure and not aborted
+        report = self.job_report("done" if complete else ("aborted" if aborted else "incomplete"))
+        faults = self.faults()
+        ok = (complete or aborted) and not self.errors and not faults
+        level = OK if ok else (WARN if complete or aborted else ERROR)
+        state = "complete" if complete else ("aborted, the axes at rest" if aborted else "incomplete")
+        text = f"job {self.plan.job_id}: {state}, {report.steps_done}/{self.plan.total_steps} steps"
+        if self.errors:
+            text += f", {len(self.errors)} stream errors (first: {self.errors[0]})"
+        if faults:
+            text += f", {faults}"
+        return report, level, text
+
+    def faults(self) -> str:
+        """What the backend saw go wrong in a run that executed every step
+        (the simulator: lost steps), in words; "" if nothing."""
+        return ""
+
+    def finish(self, complete: bool) -> None:
+        """End the run: final report into the bag, close it, then announce it.
+        Signals wait meanwhile, so a Ctrl-C cannot split the three."""
+        if self.plan is None:
+            return
+        self.take_control()  # the run's last events go into its bag
+        with signals_held():
+            self._finish(complete)
+
+    def _finish(self, complete: bool) -> None:
+        assert self.plan is not None
+        report, level, text = self.final_report(complete)
+        job = self.plan.job
+        ended = {"done": "done", "aborted": "aborted"}.get(report.state, "failed")
+        final_coil = job.coil(job.poles - 1)
+        last = (job.poles, final_coil.layers, job.turns_of(job.poles - 1)) if ended == "done" else (0, 0, 0)
+        self.cell_state(ended, text, where=last)
+        final = self.diag.status("job", level, text, report.to_values())
+        if self.bag is not None:
+            # the final report goes into the bag too, and the bag is closed
+            # before anyone hears "done": whoever stops us then finds it complete
+            self.record("diagnostics", self.t_ns, serialize_message(final))
+            try:
+                self.bag.close()
+            except (RuntimeError, OSError) as exc:  # what reached the file stays readable
+                self.recording_failed(exc)
+                report, level, text = self.final_report(complete)  # no longer complete
+                final = self.diag.status("job", level, text, report.to_values())
+        if self.context.ok():
+            self.get_logger().info(text + (f"; bag {self.bag.path}" if self.bag else ""))
+        self.last_report, self.last_level, self.last_text = report, level, text
+        self.plan = None
+        self.finishing = False
+        self.bag = None
+        self.end()
+        if self.context.ok():  # at Ctrl-C the context is already shut down
+            self.announce()  # ready first: whoever hears "done" can start the next run at once
+            self.diag.pub.publish(final)
+
+    def cell_state(
+        self, state: str, text: str, where: tuple[int, int, int] = (0, 0, 0), t_ns: int | None = None
+    ) -> None:
+        """winder/state: the cell's state at a transition, latched, and into the bag."""
+        plan = self.plan
+        t = self.t_ns if t_ns is None else t_ns
+        coil, layer, turn = where
+        values = {
+            "state": state,
+            "job_id": plan.job_id if plan else "",
+            "run_id": plan.run_id if plan else "",
+            "coil": coil,
+            "layer": layer,
+            "turn": turn,
+            "sim_time_s": f"{t / 1e9:.6f}",
+        }
+        msg = DiagnosticStatus(
+            level=bytes([ERROR if state == "failed" else OK]),
+            name=f"{self.get_fully_qualified_name().lstrip('/')}: state",
+            message=text,
+            hardware_id=self.hardware_id,
+            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()],
+        )
+        if plan is not None:
+            self.record("state", t, serialize_message(msg))
+        if self.context.ok():
+            self.pub_cell_state.publish(msg)
+
+    def record(self, key: str, t_ns: int, data: bytes, *, exact: bool = False) -> None:
+        """One message into the run's bag, if it records. A failed write (a
+        full disk) stops the recording; pump() then closes the run incomplete."""
+        if self.bag is None or not self.bag.is_open or self.record_failure:
+            return
+        try:
+            self.bag.write(self.bag_topics[key][0], self.wall0_ns + t_ns, data, exact=exact)
+        except RuntimeError as exc:
+            self.recording_failed(exc)
+
+    def recording_failed(self, exc: BaseException) -> None:
+        if self.record_failure:
+            return
+        cause = exc.__cause__ or exc
+        errno_ = getattr(cause, "errno", None)
+        why = {28: "disk full", 27: "file size limit reached"}.get(errno_ or 0, one_line(cause))
+        self.record_failure = why
+        self.error(f"recording stopped: {why}; what was written stays readable, the job is closed incomplete")
+
+    def error(self, why: str) -> None:
+        self.errors.append(why)
+        self.get_logger().error(why)
+        plan = self.plan
+        self.publish_status(
+            "stream",
+            ERROR,
+            why,
+            {"job_id": plan.job_id if plan else "", "run_id": plan.run_id if plan else ""},
+        )
+
+    def on_diagnostics(self, raw: bytes) -> None:
+        """Record the statuses of this cell's nodes: another cell's are its own bag's."""
+        if self.bag is None:
+            return
+        try:
+            names = [st.name for st in deserialize_message(raw, DiagnosticArray).status]
+        except Exception:
+            return
+        own = self.get_fully_qualified_name().lstrip("/") + ":"
+        if all(n.startswith(own) for n in names):
+            return  # this node records its own statuses as it publishes them (publish_status)
+        if any(in_namespace(n, self.get_namespace()) for n in names):
+            self.record("diagnostics", self.t_ns, raw)
+
+    def publish_status(
+        self, task: str, level: int, text: str, values: dict[str, object], *, t_ns: int | None = None
+    ) -> None:
+        """A status of this node on /diagnostics, and into the run's bag at
+        once: an ERROR raised just before the run closes is in its bag too."""
+        status = self.diag.status(task, level, text, values)
+        self.record("diagnostics", self.t_ns if t_ns is None else t_ns, serialize_message(status))
+        self.diag.pub.publish(status)
+
+    def watch(self) -> None:
+        """The stall watch (every 0.5 s)."""
+        if self.plan is None or self.ledger is None or self.finishing:
+            return
+        busy = bool(self.inbox) or self.holding() or self.pending()
+        if (self.ledger.waiting_for_resume or self.ledger.held) and not busy:
+            self.last_chunk_wall = time.monotonic()
+            for t in self.ledger.reach_stops():  # the axes are at the stop: say so
+                self.transition(t)
+            return
+        if busy:
+            self.last_chunk_wall = time.monotonic()  # work already here: not a stall
+            return
+        idle = time.monotonic() - self.last_chunk_wall
+        settings = self.settings.values()
+        done = f"{self.ledger.executed_steps}/{self.plan.total_steps}"
+        if idle > settings["stall_abort"]:
+            self.error(f"step stream stalled for {idle:.1f} s at {done} steps: job closed incomplete")
+            self.finish(complete=False)
+            return
+        if not self.stalled and idle > settings["stall_timeout"]:
+            # reported at once and while it lasts (report()); a stall that ends
+            # with nothing lost does not fail the run, so it is not an error()
+            self.stalled = True
+            self.stalls += 1
+            why = f"step stream stalled: no steps for {idle:.1f} s at {done} steps"
+            self.get_logger().warning(why)
+            self.publish_status(
+                "stream", ERROR, why, {"job_id": self.plan.job_id, "run_id": self.plan.run_id}
+            )
+
+    def receipt(self) -> None:
+        """The steps of the run executed so far, or known missing, on
+        winder/progress: the interp node's flow control (at most max_in_flight
+        steps sent and not yet executed) and its sign that the run is over;
+        repeated by report(), the sign this node is alive while it paces a
+        real-time run. Refused chunks do not count: they were never the run's."""
+        if self.plan is not None and self.checker is not None and self.ledger is not None:
+            self.ledger.missing_steps = self.checker.missing
+            self.pub_progress.publish(
+                KeyValue(key=self.plan.run_id or self.plan.job_id, value=str(self.ledger.accounted))
+            )
+
+    def announce(self) -> None:
+        """Tell the interp node whether a run can start here (winder/ready):
+        ready once the step times' and the job description's publishers are
+        matched, so neither the run's description nor a chunk of it can go
+        out before this node hears it."""
+        if self.plan is not None:
+            state = "busy"
+        elif self.settings.blocked():
+            state = "blocked"
+        elif not self.active:
+            state = "inactive"
+        else:
+            heard = self.sub_times.get_publisher_count() > 0 and self.sub_job.get_publisher_count() > 0
+            state = "ready" if heard else "waiting"
+        self.ready.announce(state)
+
+    def report(self) -> None:
+        """The 1 Hz report: readiness again, and the job status."""
+        self.announce()
+        self.ready.repeat()
+        if self.plan is None or self.ledger is None:
+            if self.last_report is not None:  # keep telling how the last run ended, as a status does
+                self.diag.publish("job", self.last_level, self.last_text, self.last_report.to_values())
+            else:
+                why = self.settings.blocked()
+                values = status_values("blocked" if why else "idle", role="consumer")
+                self.diag.publish("job", ERROR if why else OK, why or "idle: waiting for a job", values)
+            return
+        self.receipt()
+        state = "stalled" if self.stalled else ("paused" if self.ledger.at_stop else "running")
+        if self.ledger.op_state and not self.stalled:
+            state = self.ledger.op_state
+        self.publish_status(
+            "job",
+            ERROR if self.stalled else OK,
+            f"run {self.plan.run_id or self.plan.job_id}: {state}",
+            self.job_report(state).to_values(),
+        )
+
+    def shutdown(self) -> None:
+        """Close the bag of a running run (Ctrl-C): readable, marked incomplete."""
+        if self.plan is not None and self.bag is not None:
+            self.finish(complete=False)
