@@ -51,7 +51,7 @@ def main() -> None:
 
     given = load_job_file(ROOT / "jobs" / "rw400.yaml")
     job = Job(**given["interp_node"])
-    axes = axes_of(given["sim_node"])
+    axes = axes_of(given["consumer"])
     ramp = dict(given["profile_node"])
     ramp.setdefault("shaper", "none")
     from winder.contract.params import PROFILE_SPECS

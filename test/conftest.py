@@ -19,7 +19,7 @@ from typing import Any
 import pytest
 from rosbags.highlevel import AnyReader
 
-from winder.contract.topics import status_name
+from winder.contract.topics import has_role
 from winder.ros.dds import use_profile
 
 use_profile()  # this process' probes discover the nodes as fast as the nodes each other
@@ -156,11 +156,20 @@ def rosbags_read(path: Path) -> dict[str, list[tuple[int, Any]]]:
     return out
 
 
-def final_report(bag: dict[str, list[tuple[int, Any]]]) -> dict[str, str]:
-    """The values of the last "sim_node: job" status recorded on /diagnostics."""
+def is_consumer(name: str, values: dict[str, str], namespace: str | None = "") -> bool:
+    """A job status of the step consumer of the cell in ``namespace`` (None:
+    of any cell), found by its role: the values say ``role: consumer`` (one
+    that names no role: the stock node name, sim_node)."""
+    if namespace is None:
+        namespace = name.split(":", 1)[0].rpartition("/")[0]
+    return has_role(name, values, "consumer", namespace)
+
+
+def final_report(bag: dict[str, list[tuple[int, Any]]], namespace: str = "") -> dict[str, str]:
+    """The values of the consumer's last job status recorded on /diagnostics."""
     return [
-        {kv.key: kv.value for kv in st.values}
+        values
         for _, arr in bag["/diagnostics"]
         for st in arr.status
-        if st.name == status_name("sim_node")
+        if is_consumer(st.name, values := {kv.key: kv.value for kv in st.values}, namespace)
     ][-1]

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import pytest
 import test_reader
-from conftest import final_report, rosbags_read
+from conftest import final_report, is_consumer, rosbags_read
 from mcap.reader import make_reader
 from test_reader import assert_one_line_error, joint_arrays, run_cli, step_rows
 
@@ -259,10 +259,10 @@ def test_the_live_summary_and_analyze_give_one_eq7(bag: Any, name: str) -> None:
     path = bag(name)
     res = analyze(read_run(path))
     reports = [  # the sim node's job statuses, in any namespace, as rosbags decodes them
-        {kv.key: kv.value for kv in st.values}
+        values
         for _, arr in rosbags_read(path)["/diagnostics"]
         for st in arr.status
-        if st.name.endswith("sim_node: job")
+        if is_consumer(st.name, values := {kv.key: kv.value for kv in st.values}, None)
     ]
     live = reports[-1]
     assert res.actual is not None
@@ -458,13 +458,8 @@ def test_export_csv_holds_every_message_and_step(bag: Any, tmp_path: Path, name:
 
 
 def final_report_of(ref: dict[str, list[tuple[int, Any]]], ns: str) -> dict[str, str]:
-    """The last job status of the sim node of the cell in ``ns``."""
-    return [
-        {kv.key: kv.value for kv in st.values}
-        for _, arr in ref["/diagnostics"]
-        for st in arr.status
-        if st.name == f"{ns.strip('/')}/sim_node: job".lstrip("/")
-    ][-1]
+    """The last job status of the step consumer of the cell in ``ns``."""
+    return final_report(ref, ns)
 
 
 def test_export_refuses_what_it_cannot_write_whole(bag: Any, tmp_path: Path) -> None:

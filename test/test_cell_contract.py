@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import Procs, final_report, rosbags_read, spin_until
+from conftest import Procs, final_report, is_consumer, rosbags_read, spin_until
 
 from winder.analysis.metrics import analyze
 from winder.contract.stream import RUN_ID
@@ -68,7 +68,7 @@ def test_the_same_job_twice_gives_two_runs_on_one_clock(tmp_path: Path, procs: P
 
     def done(run_id: str) -> bool:
         return any(
-            n == "sim_node: job" and v.get("run_id") == run_id and v.get("state") == "done"
+            is_consumer(n, v) and v.get("run_id") == run_id and v.get("state") == "done"
             for n, _, v in statuses
         )
 
@@ -151,16 +151,25 @@ def ros_spin(node: Any, seconds: float) -> None:
 
 def test_the_readme_controller_runs_a_cell(tmp_path: Path, procs: Procs) -> None:
     """docs/cell_controller.py, the README's example of a line controller,
-    against the three node executables started one by one: it starts the job,
-    follows its run id and exits 0 with the run done and its bag named."""
+    against the three node executables started one by one, the consumer under
+    another node name: it starts the job, follows its run id to the
+    consumer's final report (found by its role) and exits 0 with the run done
+    and its bag named. With no cell on the graph it gives up after its
+    timeout, in one line, exit 2."""
     import subprocess
     import sys
 
+    script = Path(__file__).resolve().parents[1] / "docs" / "cell_controller.py"
+    t0 = time.monotonic()
+    alone = subprocess.run(
+        [sys.executable, str(script), "", "2"], env=procs.env, capture_output=True, text=True, timeout=60
+    )
+    assert alone.returncode == 2 and time.monotonic() - t0 < 30, alone.stdout + alone.stderr
+    assert alone.stdout.strip() == "cell_controller: no interp_node/start service within 2 s", alone.stdout
     bags = tmp_path / "bags"
-    procs.start("sim_node", "-p", f"bag_dir:={bags}")
+    procs.start("sim_node", "-r", "__node:=axes", "-p", f"bag_dir:={bags}")
     procs.start("profile_node")
     procs.start("interp_node", *SMALL, "-p", "autostart:=false")
-    script = Path(__file__).resolve().parents[1] / "docs" / "cell_controller.py"
     out = subprocess.run(
         [sys.executable, str(script)], env=procs.env, capture_output=True, text=True, timeout=120
     )

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import BIN, Procs, rosbags_read
+from conftest import BIN, Procs, is_consumer, rosbags_read
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from test_nodes import SMALL_JOB, job_args, only_bag, timed_rows, winder_run
@@ -244,7 +244,7 @@ def test_sim_node_reports_a_malformed_chunk_and_closes_the_job(
         ends = [
             v
             for _, name, v in fake.statuses
-            if "sim_node: job" in name and v.get("state") in ("done", "incomplete")
+            if is_consumer(name.split(" | ")[0], v) and v.get("state") in ("done", "incomplete")
         ]
         return ends[-1] if ends else None
 
@@ -356,9 +356,12 @@ def heard_diagnostics(ros: Any) -> list[tuple[str, str, dict[str, str]]]:
 def test_a_restarted_node_leaves_the_cell_able_to_run_the_next_job(
     tmp_path: Path, procs: Procs, ros: Any, victim: str
 ) -> None:
-    """A node killed mid-job and started again: the sim node closes the job
-    incomplete (bag closed, final report), the interp node gives it up, and
-    the next start runs a whole job through the same cell."""
+    """A node killed mid-job and started again, and the next start runs a
+    whole job through the same cell. A killed profile node: the sim node
+    closes the job incomplete (bag closed, final report), the interp node
+    gives it up. A killed sim node: its bag is cut short, the interp node
+    gives the job up, and the restarted sim node never takes the dead run's
+    description for a new run of its own."""
     from conftest import spin_until
     from std_srvs.srv import Trigger
 
@@ -382,42 +385,51 @@ def test_a_restarted_node_leaves_the_cell_able_to_run_the_next_job(
     )
     client = ros.create_client(Trigger, "/interp_node/start")
     spin_until(ros, client.service_is_ready, 30, "the start service")
-    spin_until(ros, lambda: any(n == "sim_node: job" for n, _, _ in seen), 30, "the sim node")
+    spin_until(ros, lambda: any(is_consumer(n, v) for n, _, v in seen), 30, "the sim node")
     client.call_async(Trigger.Request())
     spin_until(ros, lambda: any(v.get("state") == "running" for _, _, v in seen), 60, "the job to run")
+    first_run = next(v["run_id"] for _, _, v in seen if v.get("state") == "running" and v.get("run_id"))
     nodes[victim].kill()
     nodes[victim].wait()
     nodes[victim] = procs.start(victim, *args[victim])
 
     def closed() -> bool:
-        return any(n == "sim_node: job" and v.get("state") == "incomplete" for n, _, v in seen)
+        return any(is_consumer(n, v) and v.get("state") == "incomplete" for n, _, v in seen)
 
     def aborted() -> bool:
         return any(n == "interp_node: job" and "aborted" in m for n, m, _ in seen)
 
-    spin_until(
-        ros, lambda: closed() and aborted(), 60, "the sim node to close the job, the interp to drop it"
-    )
-    # the bag of the sim node that saw the stall is closed, with its final report
-    # (a killed sim node's own bag is cut short: the reader recovers it)
-    time.sleep(0.5)
-    finished = [b for b in sorted(bags.iterdir()) if (b / "metadata.yaml").exists()]
-    assert finished, sorted(bags.iterdir())
-    assert final_status_of(finished[-1])["state"] == "incomplete"
-    # the stall's ERROR reports are in the bag, and winder analyze says so
     from winder.analysis.metrics import analyze
     from winder.record.reader import read_run
 
-    run = read_run(finished[-1])
-    assert any("stalled" in e for e in run.errors), run.errors
-    assert any("stalled" in e for e in analyze(run).error_list)  # listed after the table, each with its time
+    if victim == "sim_node":
+        spin_until(ros, aborted, 60, "the interp node to drop the job")
+        time.sleep(3.0)  # longer than stall_abort: a stale run would have been taken and closed by now
+        assert not closed(), "the restarted sim node took the dead run's description for a run"
+        assert not any(is_consumer(n, v) and v.get("state") == "running" for n, _, v in seen[-20:])
+        # the killed node's bag is cut short (SIGKILL: whatever reached the disk);
+        # the restarted node opened none of its own for the dead run
+        assert [b.name for b in bags.iterdir()] == [first_run]
+    else:
+        spin_until(
+            ros, lambda: closed() and aborted(), 60, "the sim node to close the job, the interp to drop it"
+        )
+        # the bag of the sim node that saw the stall is closed, with its final report
+        time.sleep(0.5)
+        finished = [b for b in sorted(bags.iterdir()) if (b / "metadata.yaml").exists()]
+        assert finished, sorted(bags.iterdir())
+        assert final_status_of(finished[-1])["state"] == "incomplete"
+        # the stall's ERROR reports are in the bag, and winder analyze says so
+        run = read_run(finished[-1])
+        assert any("stalled" in e for e in run.errors), run.errors
+        assert any("stalled" in e for e in analyze(run).error_list)  # listed after the table
     # the next job runs through the same (restarted) cell
     seen.clear()
     future = client.call_async(Trigger.Request())
     spin_until(ros, future.done, 30, "the start reply")
     assert future.result().success, future.result().message
     spin_until(
-        ros, lambda: any(v.get("state") == "done" for n, _, v in seen if n == "sim_node: job"), 120, "job 2"
+        ros, lambda: any(v.get("state") == "done" for n, _, v in seen if is_consumer(n, v)), 120, "job 2"
     )
     assert all(p.poll() is None for p in nodes.values())
 
@@ -475,7 +487,7 @@ def test_a_full_disk_mid_job_closes_the_job_and_keeps_what_was_written(
         procs.start("interp_node")  # the default job: far more than 1 MiB of bag
 
         def closed() -> dict[str, str] | None:
-            ends = [(m, v) for n, m, v in seen if n == "sim_node: job" and v.get("state") == "incomplete"]
+            ends = [(m, v) for n, m, v in seen if is_consumer(n, v) and v.get("state") == "incomplete"]
             return ends[-1] if ends else None
 
         spin_until(ros, lambda: closed() is not None, 120, f"the job to close on the full disk ({kind})")
@@ -733,7 +745,7 @@ def test_pacing_a_real_time_job_is_not_a_stall(tmp_path: Path, procs: Procs, ros
     procs.start("interp_node", *SMALL_INTERP)  # all of it in flight at once
 
     def final() -> dict[str, str] | None:
-        ends = [v for n, _, v in seen if n == "sim_node: job" and v.get("state") == "done"]
+        ends = [v for n, _, v in seen if is_consumer(n, v) and v.get("state") == "done"]
         return ends[-1] if ends else None
 
     spin_until(ros, lambda: final() is not None, 60, "the job to finish")
@@ -784,7 +796,7 @@ def test_a_start_while_a_job_runs_is_refused_and_the_job_completes(
     procs.start("interp_node", *SMALL_INTERP, "-p", "turns_per_layer:=20", "-p", "autostart:=false")
     client = ros.create_client(Trigger, "/interp_node/start")
     spin_until(ros, client.service_is_ready, 30, "the start service")
-    spin_until(ros, lambda: any(n == "sim_node: job" for n, _, _ in seen), 30, "the sim node")
+    spin_until(ros, lambda: any(is_consumer(n, v) for n, _, v in seen), 30, "the sim node")
 
     def start() -> Any:
         future = client.call_async(Trigger.Request())
@@ -792,12 +804,12 @@ def test_a_start_while_a_job_runs_is_refused_and_the_job_completes(
         return future.result()
 
     def done_count() -> int:
-        return sum(1 for n, _, v in seen if n == "sim_node: job" and v.get("state") == "done")
+        return sum(1 for n, _, v in seen if is_consumer(n, v) and v.get("state") == "done")
 
     first = start()
     assert first.success, first.message
     spin_until(
-        ros, lambda: any(v.get("state") == "running" for n, _, v in seen if n == "sim_node: job"), 30, "run"
+        ros, lambda: any(v.get("state") == "running" for n, _, v in seen if is_consumer(n, v)), 30, "run"
     )
     second = start()
     assert not second.success and "is running" in second.message, second.message

@@ -20,7 +20,7 @@ import pytest
 from conftest import Procs
 from ruamel.yaml import YAML
 
-from winder.contract.jobfile import JobFileError, load_job_file
+from winder.contract.jobfile import SECTION_ALIASES, JobFileError, load_job_file
 from winder.record.reader import read_run
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -51,8 +51,8 @@ def test_three_job_files_ship_and_load_as_written() -> None:
     for path in JOBS:
         want = flat(YAML(typ="safe").load(path.read_text()))
         got = load_job_file(path)
-        for node, values in want.items():
-            assert got[node] == pytest.approx(values), (path.name, node)
+        for node, values in want.items():  # the sim_node section is the consumer's
+            assert got[SECTION_ALIASES.get(node, node)] == pytest.approx(values), (path.name, node)
 
 
 @pytest.mark.parametrize("path", JOBS, ids=[p.stem for p in JOBS])
@@ -85,6 +85,21 @@ BAD = [
     ),
     ("/**:\n  ros__parameters: {flux: 1}\n", "no winder node has a setting 'flux'"),
     (
+        "consumer:\n  ros__parameters: {fork: {J: -1}}\n",
+        "consumer.ros__parameters.fork.J: fork.J=-1 is invalid",
+    ),
+    ("consumer:\n  ros__parameters: {flux: 1}\n", "consumer has no setting 'flux'"),
+    (
+        "sim_node:\n  ros__parameters: {model: linear}\nconsumer:\n  ros__parameters: {model: nonlinear}\n",
+        "sections 'sim_node' and 'consumer' both hold the step consumer's settings",
+    ),
+    (
+        "consumer:\n  ros__parameters: {model: linear}\n"
+        "/cell1/sim_node:\n  ros__parameters: {publish_rate: 9.0}\n",
+        "sections 'consumer' and '/cell1/sim_node' both hold the step consumer's settings",
+    ),
+    ("axes:\n  ros__parameters: {model: linear}\n", "section 'axes': not a winder node"),
+    (
         "interp_node:\n  ros__parameters: {turns_per_layer: 100, coil_length: 0.01}\n",
         "interp_node: turns_per_layer=100 is invalid",
     ),
@@ -107,6 +122,41 @@ def test_a_bad_job_file_is_refused_in_one_line(tmp_path: Path, text: str, why: s
     )
     assert out.returncode == 2 and "Traceback" not in out.stderr
     assert len(out.stderr.strip().splitlines()) == 1 and why in out.stderr, out.stderr
+
+
+def test_the_consumer_section_by_either_name(tmp_path: Path) -> None:
+    """``consumer`` (name-free) and ``sim_node`` (the stock node's name, which
+    ``ros2 run ... --params-file`` applies) are one section: the loader
+    returns it under "consumer", checked against the same settings; a
+    namespace in front is allowed, and ``/**`` values reach it too."""
+    for section in ("consumer", "sim_node", "/cell1/consumer", "/cell1/sim_node"):
+        path = tmp_path / "job.yaml"
+        path.write_text(
+            f"{section}:\n  ros__parameters: {{model: nonlinear, fork: {{J: 2.0e-4}}}}\n"
+            "/**:\n  ros__parameters: {publish_rate: 500.0}\n"
+        )
+        got = load_job_file(path)
+        assert set(got) == {"interp_node", "profile_node", "consumer"}
+        assert got["consumer"] == {"model": "nonlinear", "fork.J": 2.0e-4, "publish_rate": 500.0}, section
+
+
+def test_a_job_files_switches_are_not_dropped(tmp_path: Path) -> None:
+    """A yes/no setting in a job file (record: false, real_time: true) stands
+    when the command line does not give the flag: a flag not given is no
+    value (it used to be the default, which silently beat the file's)."""
+    from winder.cli.commands import build_parser, job_file, values_from_args
+    from winder.contract.params import SIM_SPECS
+
+    path = tmp_path / "job.yaml"
+    path.write_text("consumer:\n  ros__parameters: {record: false, real_time: true}\n")
+    args = build_parser().parse_args(["run", str(path)])
+    sim = values_from_args(args, SIM_SPECS, job_file(args)["consumer"])
+    assert sim["record"] is False and sim["real_time"] is True
+    args = build_parser().parse_args(["run", str(path), "--no-record"])
+    assert values_from_args(args, SIM_SPECS, job_file(args)["consumer"])["record"] is False
+    args = build_parser().parse_args(["run"])
+    sim = values_from_args(args, SIM_SPECS, {})
+    assert sim["record"] is True and sim["real_time"] is False  # the defaults, with no file
 
 
 def test_a_missing_or_huge_job_file_is_refused(tmp_path: Path) -> None:

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import Procs, rosbags_read, spin_until
+from conftest import Procs, is_consumer, rosbags_read, spin_until
 from test_nodes import SMALL_JOB, expected_end, job_args, only_bag, timed_rows, winder_run
 
 from winder.contract.stream import describe_job
@@ -24,13 +24,14 @@ pytestmark = pytest.mark.ros
 
 
 def final_status(bag: dict[str, list[tuple[int, Any]]], prefix: str = "") -> dict[str, str]:
+    """The consumer's last job status in the bag (of the cell in the namespace ``prefix``)."""
     finals = [
-        {kv.key: kv.value for kv in s.values}
+        values
         for _, m in bag["/diagnostics"]
         for s in m.status
-        if s.name == f"{prefix}sim_node: job" and any(kv.key == "state" for kv in s.values)
+        if is_consumer(s.name, values := {kv.key: kv.value for kv in s.values}, prefix) and "state" in values
     ]
-    assert finals, "no sim_node status in the bag"
+    assert finals, "no status of the step consumer in the bag"
     return finals[-1]
 
 

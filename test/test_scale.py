@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from conftest import BIN, Procs, rosbags_read
+from conftest import BIN, Procs, final_report, rosbags_read
 from test_nodes import only_bag
 
 from winder.motion.job import Job
@@ -86,15 +86,10 @@ def split_run(hosts: Hosts, procs: Procs, tmp_path: Path, extra: dict[str, str],
 
 def check_complete(r: Any, bags: Path, link_bytes: int) -> None:
     assert r.returncode == 0, r.stdout + r.stderr
-    assert "not started here   sim_node (--external)" in r.stdout
+    assert "not started here   step consumer (--external sim)" in r.stdout
     bag = rosbags_read(only_bag(bags.parent))
     rows = sum(len(m.data) // 5 for _, m in bag["/winder/step_times"])
-    final = [
-        {kv.key: kv.value for kv in st.values}
-        for _, arr in bag["/diagnostics"]
-        for st in arr.status
-        if st.name == "sim_node: job"
-    ][-1]
+    final = final_report(bag)
     assert final["state"] == "done" and int(final["steps_missing"]) == 0 and int(final["gaps"]) == 0
     assert rows == int(final["steps_total"])
     # the step times crossed the link: at least their payload (8 bytes x 5 columns per step)
@@ -247,7 +242,9 @@ def test_external_sim_that_never_comes_is_named(procs: Procs, profile: Path | No
         stdin=subprocess.DEVNULL,
     )
     assert f"  DDS profile        {said}" in r.stdout, r.stdout
-    assert_one_line_error(r, "the job did not start within 3 s", "the sim node, which is not on this graph")
+    assert_one_line_error(
+        r, "the job did not start within 3 s", "the step consumer (sim_node or a hardware driver), which"
+    )
 
 
 class DiscoveryServer:
@@ -323,9 +320,10 @@ def test_external_takes_only_nodes_that_can_run_elsewhere(tmp_path: Path) -> Non
     from test_reader import assert_one_line_error, run_cli
 
     assert_one_line_error(run_cli("run", "--external", "interp", "--check"), "external='interp' is invalid")
-    assert_one_line_error(
-        run_cli("run", "--external", "sim", "--fork.J", "2e-4", "--check"),
-        "fork.J is a setting of the sim_node, which runs elsewhere",
-    )
-    ok = run_cli("run", "--external", "sim,profile", "--check")
-    assert ok.returncode == 0, ok.stderr
+    # settings of an external node are set on it (test_external_settings.py), checked here as any
+    bad = run_cli("run", "--external", "sim", "--fork.J", "-1", "--check")
+    assert_one_line_error(bad, "fork.J=-1.0 is invalid")
+    given = ["--fork.J", "2e-4", "--v-max", "900"]
+    for options in (["--external", "sim,profile"], ["--external", "sim,profile", *given]):
+        ok = run_cli("run", *options, "--check")
+        assert ok.returncode == 0, ok.stderr

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import Procs, rosbags_read
+from conftest import Procs, is_consumer, rosbags_read
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -132,10 +132,10 @@ def test_a_run_stopped_at_turn_2_has_the_uninterrupted_steps(tmp_path: Path, pro
     # the paused and resumed transitions are in the bag, in that order
     raw = rosbags_read(stopped_bag)
     states = [
-        {kv.key: kv.value for kv in s.values}
+        values
         for _, m in raw["/diagnostics"]
         for s in m.status
-        if s.name == "sim_node: job"
+        if is_consumer(s.name, values := {kv.key: kv.value for kv in s.values})
     ]
     marks = [(v["state"], v.get("stop")) for v in states if v.get("stop")]
     assert marks == [("paused", "1:2"), ("running", "1:2")], marks
@@ -177,17 +177,17 @@ def test_a_stop_that_waits_for_resume_holds_until_winder_ctl_resume(
     procs.start("interp_node", *job, *stop)
 
     def sim_state() -> str:
-        states = [v.get("state", "") for v in seen if v["name"] == "sim_node: job"]
+        states = [v.get("state", "") for v in seen if is_consumer(v["name"], v)]
         return states[-1] if states else ""
 
     spin_until(ros, lambda: sim_state() == "paused", 60, "the sim node to rest at the stop")
-    done_before = max(int(v.get("steps_done", 0)) for v in seen if v["name"] == "sim_node: job")
+    done_before = max(int(v.get("steps_done", 0)) for v in seen if is_consumer(v["name"], v))
     ros_spin(ros, 4.0)
     assert sim_state() == "paused"
     assert not [v for v in seen if v["name"] == "sim_node: stream"], (
         "a stall was reported at a programmed stop"
     )
-    assert max(int(v.get("steps_done", 0)) for v in seen if v["name"] == "sim_node: job") == done_before
+    assert max(int(v.get("steps_done", 0)) for v in seen if is_consumer(v["name"], v)) == done_before
     out = subprocess.run(
         [str(WINDER), "ctl", "resume"], env=procs.env, capture_output=True, text=True, timeout=60
     )

@@ -76,6 +76,8 @@ from winder.ros.spin import spin
 from winder.ros.timers import steady_timer
 from winder.spec import SpecError, check_all
 
+#: this node's part in the cell (winder.contract.topics.ROLES), in every job status
+ROLE = "profile"
 #: How long steps wait for the consumer's winder/sim_config of a run (which
 #: says whether it runs in real time) before they go out without look-ahead.
 MODE_WAIT = 1.0
@@ -109,6 +111,7 @@ class ProfileNode(ManagedNode):
         self.create_service(Trigger, "~/abort", lambda _q, r: self.reply(r, *self.command("abort")))
         self.pub_control = self.create_publisher(String, TOPIC_CONTROL, QOS_EVENTS)
         self.create_subscription(String, TOPIC_SIM_CONFIG, self.on_sim_config, QOS_LATCHED)
+        self.sim_config_topic = self.resolve_topic_name(TOPIC_SIM_CONFIG)
         self.sub_clock: Subscription | None = None  # only while a real-time run is timed
         self.last_sim_config: String | None = None
 
@@ -328,8 +331,18 @@ class ProfileNode(ManagedNode):
 
     def mode_ready(self) -> bool:
         """Whether the run's look-ahead is known: the consumer's sim_config for
-        it came, or MODE_WAIT passed without one (then there is none)."""
-        if not self.mode_known and time.monotonic() - self.job_wall > MODE_WAIT:
+        it came, or nobody publishes one (a consumer that does not pace in
+        real time need not: it is not waited for), or MODE_WAIT passed
+        without one (then there is none, and that is said once)."""
+        if (
+            not self.mode_known
+            and self.pub.get_subscription_count() > 0
+            and self.count_publishers(self.sim_config_topic) == 0
+        ):
+            # the consumer is on the graph (it reads the step times) and
+            # publishes no configuration: it does not pace, so nothing to wait for
+            self.mode_known = True
+        elif not self.mode_known and time.monotonic() - self.job_wall > MODE_WAIT:
             self.mode_known = True
             self.get_logger().warning(
                 f"no {TOPIC_SIM_CONFIG} for this run within {MODE_WAIT:g} s: "
@@ -474,7 +487,7 @@ class ProfileNode(ManagedNode):
     def values(self, state: str) -> dict[str, object]:
         """This node's job status values in ``state`` (the common keys first)."""
         if self.plan is None:
-            return status_values(state, profile=self.settings.values()["profile"])
+            return status_values(state, role=ROLE, profile=self.settings.values()["profile"])
         profile = self.ramp_kind or self.settings.values()["profile"]
         return status_values(
             state,
@@ -482,6 +495,7 @@ class ProfileNode(ManagedNode):
             self.plan.run_id,
             self.timed,
             self.plan.total_steps,
+            role=ROLE,
             profile=profile,
             gaps=self.checker.gaps if self.checker else 0,
             job_duration_s=f"{self.job_duration_ns() / 1e9:.6f}",

@@ -589,7 +589,7 @@ def _steps(a: Analysis) -> str:
     and in the job, and why the first falls short of the last."""
     if a.steps_simulated < 0:
         cut = "cut short, " if a.recovered else ""
-        return f"{a.steps_recorded} recorded, of {a.steps_total} ({cut}no report of the sim node)"
+        return f"{a.steps_recorded} recorded, of {a.steps_total} ({cut}no report of the step consumer)"
     text = f"{a.steps_simulated} simulated, {a.steps_recorded} recorded, of {a.steps_total}"
     if a.steps_simulated >= a.steps_total:
         return text

@@ -28,6 +28,7 @@ from winder.contract.params import (
     plan_timing,
     stop_points,
 )
+from winder.contract.run import JobReport
 from winder.contract.topics import check_namespace
 from winder.motion.interp import dda, deviation_stats, interpolate, min_deviation, point_by_point
 from winder.motion.job import FIELD_SPECS, Job
@@ -68,13 +69,15 @@ def add_spec_arguments(
         if name in skip:
             continue
         flag = "--" + name.replace("_", "-")
+        # a flag not given is None, as any option not given: a job file's value stands
         if spec.kind is bool and spec.default is False:
-            group.add_argument(flag, dest=name, action="store_true", help=spec.description)
+            group.add_argument(flag, dest=name, action="store_true", default=None, help=spec.description)
         elif spec.kind is bool:
             group.add_argument(
                 "--no-" + name.replace("_", "-"),
                 dest=name,
                 action="store_false",
+                default=None,
                 help=f"do not {spec.description}",
             )
         else:
@@ -101,11 +104,25 @@ def values_from_args(
     return out
 
 
+def given_values(args: argparse.Namespace, specs: dict[str, Spec], base: dict[str, Any]) -> dict[str, Any]:
+    """Only the settings given: ``base`` (a job file's section, checked
+    already) and the options given on the command line over it, checked;
+    no defaults (what a node that runs elsewhere is to be told, keeping its
+    own values for the rest)."""
+    out = {name: value for name, value in base.items() if name in specs}
+    for name, spec in specs.items():
+        raw = getattr(args, name, None)
+        if raw is not None:
+            out[name] = spec.parse(raw) if isinstance(raw, str) else spec.check(raw)
+    return out
+
+
 def job_file(args: argparse.Namespace) -> dict[str, dict[str, Any]]:
-    """The settings of the job file named on the command line, per node (none: empty)."""
+    """The settings of the job file named on the command line, per node
+    (none: empty): ``interp_node``, ``profile_node`` and ``consumer``."""
     path = getattr(args, "job_file", None)
     if not path:
-        return {"interp_node": {}, "profile_node": {}, "sim_node": {}}
+        return {"interp_node": {}, "profile_node": {}, "consumer": {}}
     from winder.contract.jobfile import load_job_file
 
     return load_job_file(path)
@@ -214,11 +231,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     stops = stop_points(job, extra["stops"])
     pause = float(extra["stop_pause"])
     _, duration_ns = plan_timing(profile, [s.steps for s in segments], stops, pause)  # the job as a whole
-    sim = values_from_args(args, SIM_SPECS, given["sim_node"])
-    check_sim(sim)
+    external = external_nodes(args)
+    sim = values_from_args(args, SIM_SPECS, given["consumer"])
+    check_sim({**sim, "record": False} if "sim" in external else sim)  # a remote bag_dir is its host's
     cell = values_from_args(args, CELL_SPECS)
     args.namespace = check_namespace(args.namespace)
-    external = external_nodes(args)
     if args.check:
         steps = sum(s.steps for s in segments)
         print(
@@ -235,13 +252,27 @@ def cmd_run(args: argparse.Namespace) -> int:
     bag_dir = bag_directory(sim["bag_dir"]) if "sim" not in external else Path(sim["bag_dir"])
     sim["bag_dir"] = str(bag_dir)
     params = {"interp": {**job.to_dict(), **extra}, "profile": {**profile, **operation}, "sim": sim}
+    # a node that runs elsewhere is told only what was given (job file, options), through
+    # its parameter services before the job starts; it keeps its own values for the rest
+    remote_specs = {
+        "sim": (SIM_SPECS, given["consumer"]),
+        "profile": (PROFILE_SPECS | OPERATION_SPECS, given["profile_node"]),
+    }
+    for name in external:
+        params[name] = given_values(args, *remote_specs[name])
     ramp = "the external profile node's ramp" if "profile" in external else f"{profile['profile']} profile"
-    model = "the external sim node" if "sim" in external else f"{sim['model']} motor model"
+    model = "the external step consumer" if "sim" in external else f"{sim['model']} motor model"
     print(f"winder: job {job.job_id}, {job.total_steps} steps, {ramp}, {model}")
     if external:
         from winder.ros.dds import describe_profile
 
-        print(f"  not started here   {', '.join(NODE_NAMES[n] for n in sorted(external))} (--external)")
+        names = ", ".join(EXTERNAL[n] for n in sorted(external))
+        print(f"  not started here   {names} (--external {','.join(sorted(external))})")
+        for name in sorted(external):
+            if params[name]:
+                told = ", ".join(f"{k}={v}" for k, v in params[name].items())
+                label = {"sim": "external consumer", "profile": "external profile"}[name]
+                print(f"  {label:<18} {told}  (set through its parameter services before the job)")
         print(f"  DDS profile        {describe_profile()}")
     if sim["record"] and "sim" not in external:
         probe = next(p for p in (bag_dir, *bag_dir.parents) if p.exists())
@@ -268,33 +299,33 @@ def cmd_run(args: argparse.Namespace) -> int:
     return report_run(result, time.monotonic() - t0)
 
 
-#: the nodes ``winder run --external`` may leave to another host, and their executables
-NODE_NAMES = {"profile": "profile_node", "sim": "sim_node"}
+#: the parts of the cell ``winder run --external`` may leave to another host, in words
+#: (each found there by its role, whatever its node name)
+EXTERNAL = {"profile": "profile node", "sim": "step consumer"}
 
 
 def external_nodes(args: argparse.Namespace) -> frozenset[str]:
-    """The nodes named by ``--external`` (they run elsewhere on the graph);
-    settings of theirs given on this command line would silently not apply,
-    so they are refused (a job file's sections for them are theirs to load:
-    ``--ros-args --params-file JOB_FILE`` where they run)."""
+    """The nodes named by ``--external`` (they run elsewhere on the graph).
+    Their settings given here (job file sections, options) are not dropped:
+    ``winder run`` sets them on those nodes through their parameter services
+    before the job starts (:class:`winder.ros.cell.RemoteSettings`)."""
     text = getattr(args, "external", None) or ""
     names = frozenset(n.strip() for n in text.split(",") if n.strip())
-    bad = sorted(names - set(NODE_NAMES))
+    bad = sorted(names - set(EXTERNAL))
     if bad:
         raise UserError(
             f"external={text!r} is invalid: {bad[0]!r} is not a node winder run can leave to another "
-            f"host (choose from {', '.join(NODE_NAMES)}, comma-separated; the interp node holds the job)"
+            f"host (choose from {', '.join(EXTERNAL)}, comma-separated; the interp node holds the job)"
         )
-    for name, specs in (("sim", SIM_SPECS), ("profile", PROFILE_SPECS)):
-        if name not in names:
-            continue
-        set_here = [k for k, spec in specs.items() if getattr(args, k, None) not in (None, spec.default)]
-        if set_here:
-            raise UserError(
-                f"{set_here[0]} is a setting of the {NODE_NAMES[name]}, which runs elsewhere (--external "
-                f"{name}): set it where that node runs (--ros-args -p {set_here[0]}:=...)"
-            )
     return names
+
+
+def _number(summary: dict[str, str], key: str, fmt: str, scale: float = 1.0) -> str:
+    """A report's number as text, "-" if it is missing or not a number."""
+    try:
+        return format(float(summary[key]) * scale, fmt)
+    except (KeyError, ValueError):
+        return "-"
 
 
 def report_run(result: Any, wall: float, command: str = "run") -> int:
@@ -303,27 +334,33 @@ def report_run(result: Any, wall: float, command: str = "run") -> int:
     s = result.summary
     if not s:
         raise UserError(f"the cell did not finish: {result.message} (node logs in {result.log_dir})")
-    print(f"  run                {s.get('run_id') or '-'}")
-    print(f"  state              {s['state']}")
+    r = JobReport.from_values(s)
+    x = r.extra  # beyond the contract's keys, what the consumer reports (a hardware driver's may not)
+    print(f"  run                {r.run_id or '-'}")
+    print(f"  state              {r.state}")
     print(
-        f"  steps              {s['steps_done']} of {s['steps_total']}"
-        f"  (missing {s['steps_missing']}, gaps {s['gaps']})"
+        f"  steps              {r.steps_done} of {r.steps_total}  (missing {r.steps_missing}, gaps {r.gaps})"
     )
-    print(f"  simulated time     {float(s['sim_time_s']):.3f} s")
-    print(f"  real-time factor   {float(s['real_time_factor']):.1f} x  (simulation), run took {wall:.1f} s")
-    print(
-        f"  mean deviation     command {float(s['mean_deviation_command_m']) * 1e6:.3f} um, "
-        f"axes {float(s['mean_deviation_actual_m']) * 1e6:.3f} um  (eq. 7)"
-    )
-    print(f"  max tracking error {float(s['max_tracking_error_steps']):.3f} steps")
-    print(f"  lost steps         {s['lost_steps']}")
-    print(f"  bag                {s['bag']}")
+    if "sim_time_s" in s:
+        print(f"  simulated time     {r.sim_time_s:.3f} s")
+    rtf = f"{r.real_time_factor:.1f}" if math.isfinite(r.real_time_factor) else "-"
+    print(f"  real-time factor   {rtf} x  (simulation), run took {wall:.1f} s")
+    if "mean_deviation_command_m" in x or "mean_deviation_actual_m" in x:
+        print(
+            f"  mean deviation     command {_number(x, 'mean_deviation_command_m', '.3f', 1e6)} um, "
+            f"axes {_number(x, 'mean_deviation_actual_m', '.3f', 1e6)} um  (eq. 7)"
+        )
+    if "max_tracking_error_steps" in x:
+        print(f"  max tracking error {_number(x, 'max_tracking_error_steps', '.3f')} steps")
+    if "lost_steps" in x:
+        print(f"  lost steps         {x['lost_steps']}")
+    print(f"  bag                {r.bag or '-'}")
     if result.errors:
         print(f"  ERROR reports      {len(result.errors)}, first: {result.errors[0]}")
-    if s["state"] == "aborted" and not int(s["errors"]) and not result.errors:
+    if r.state == "aborted" and not r.errors and not result.errors:
         print(f"winder {command}: {result.message}", file=sys.stderr)
         return 3
-    if not result.ok or int(s["errors"]) or result.errors:
+    if not result.ok or r.errors or result.errors:
         logs = f" (node logs in {result.log_dir})" if result.log_dir else ""
         print(f"winder {command}: {result.message}{logs}", file=sys.stderr)
         return 1
@@ -413,8 +450,8 @@ class _Parser(argparse.ArgumentParser):
 STOP_SPECS = {name: INTERP_SPECS[name] for name in ("stops", "stop_pause", "stop_resume", "schedule")}
 
 JOB_FILE_HELP = (
-    "a job file (a ROS 2 parameters file: interp_node, profile_node and sim_node sections; "
-    "see jobs/); options given here override its values"
+    "a job file (a ROS 2 parameters file: interp_node, profile_node and consumer (or sim_node) "
+    "sections; see jobs/); options given here override its values"
 )
 
 
@@ -440,8 +477,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--external",
         default=None,
         metavar="NODES",
-        help="nodes that run elsewhere on the graph (another host) and are not started here: sim, "
-        "profile or both, comma-separated (see README: Deploying a cell)",
+        help="nodes that run elsewhere on the graph (another host) and are not started here: sim (the "
+        "step consumer: the sim node or a hardware driver, found by its role whatever its node name), "
+        "profile or both, comma-separated. Their settings given here (options, the job file's consumer "
+        "or sim_node and profile_node sections) are set on them through their parameter services "
+        "before the job starts; a setting they refuse ends the run unstarted, naming it (see README: "
+        "Deploying a cell)",
     )
     g.add_argument(
         "--check",

@@ -159,7 +159,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
         raise ValueError("--apply needs a JOB_FILE to write the tuned ramp into")
     given = job_file(args)
     job = Job(**given["interp_node"])
-    sim, notes = _axes_from(args, given["sim_node"])
+    sim, notes = _axes_from(args, given["consumer"])
     axes = axes_of(sim)
     bar = Progress(1, "winder tune")
     result = tune(job, given["profile_node"], axes, margin=margin, progress=lambda d, t: bar.update(d / t))

@@ -15,8 +15,20 @@ Sections, one per node (a namespace in front is allowed: ``/cell1/sim_node``;
   length) and the machine's resolution (fork and pole steps per revolution,
   feed step, flyer radius);
 * ``profile_node``: the ramp;
-* ``sim_node``: the motors (``fork: {J: 2.0e-4, D: 0.03}`` is ``fork.J``,
-  ``fork.D``) and the simulation.
+* ``consumer`` (or ``sim_node``, its stock node name; not both): the step
+  consumer's settings, the motors (``fork: {J: 2.0e-4, D: 0.03}`` is
+  ``fork.J``, ``fork.D``) and the simulation. The section is the consumer's
+  by its role, whatever the consumer's node name: :func:`load_job_file`
+  returns it under ``"consumer"``, and ``winder run`` gives it to the
+  consumer it starts, or sets it on an external one (``--external sim``)
+  through that node's parameter services.
+
+``ros2 run ... --params-file`` is ROS's own loader: it applies only the
+sections named after the node (or ``/**``). A ``consumer:`` section is
+applied by ``winder run`` only; for ``ros2 run`` name the section after the
+node (``sim_node:``, as the files in ``jobs/`` do), or use ``/**`` for a
+consumer running under another name (``-r __node:=axes``; a section named
+``axes:`` is not a winder section and is refused here).
 
 :func:`load_job_file` checks every value as the nodes would, and the
 sections together (the coil fits, the ramp can plan its moves); an error
@@ -38,14 +50,20 @@ from winder.contract.params import (
 )
 from winder.spec import Spec, SpecError
 
-__all__ = ["NODE_SPECS", "JobFileError", "load_job_file"]
+__all__ = ["NODE_SPECS", "SECTION_ALIASES", "JobFileError", "load_job_file"]
 
-#: the sections of a job file and the settings each may hold (job_file itself excluded)
+#: the sections of a job file and the settings each may hold (job_file itself
+#: excluded); the keys of what :func:`load_job_file` returns
 NODE_SPECS: dict[str, dict[str, Spec]] = {
     "interp_node": {n: s for n, s in INTERP_SPECS.items() if n != "job_file"},
     "profile_node": PROFILE_SPECS,
-    "sim_node": SIM_SPECS,
+    "consumer": SIM_SPECS,
 }
+#: other names a section may have: ``sim_node``, the stock consumer's node
+#: name (so that ``ros2 run winder_sim sim_node --params-file`` applies it too)
+SECTION_ALIASES = {"sim_node": "consumer"}
+#: the section names a job file may use, for messages
+SECTION_NAMES = "interp_node, profile_node, consumer (or sim_node) or /**"
 #: a job file larger than this is not a job file
 MAX_BYTES = 1 << 20
 
@@ -96,15 +114,22 @@ def _sections(path: Path, doc: Any) -> dict[str, dict[str, Any]]:
     if not isinstance(doc, dict) or not doc:
         raise JobFileError(
             f"{path}: a job file is a ROS 2 parameters file: a map of node names "
-            "(interp_node, profile_node, sim_node or /**) to their ros__parameters"
+            f"({SECTION_NAMES}) to their ros__parameters"
         )
     out = {}
+    consumer: list[str] = []  # the consumer's sections, as written
     for key, body in doc.items():
-        node = str(key).rstrip("/").rsplit("/", 1)[-1] if str(key) != "/**" else "/**"
+        node = _section_node(str(key))
         if node not in NODE_SPECS and node != "/**":
-            raise JobFileError(
-                f"{path}: section {key!r}: not a winder node (interp_node, profile_node, sim_node or /**)"
-            )
+            raise JobFileError(f"{path}: section {key!r}: not a winder node ({SECTION_NAMES})")
+        if node == "consumer":
+            consumer.append(str(key))
+            written = {_written(k) for k in consumer}
+            if len(written) > 1:
+                raise JobFileError(
+                    f"{path}: sections {consumer[0]!r} and {consumer[-1]!r} both hold the step consumer's "
+                    "settings: keep one (consumer, or sim_node)"
+                )
         if not isinstance(body, dict) or set(body) != {"ros__parameters"}:
             raise JobFileError(f"{path}: section {key!r} must hold exactly one key, ros__parameters")
         params = body["ros__parameters"]
@@ -114,6 +139,17 @@ def _sections(path: Path, doc: Any) -> dict[str, dict[str, Any]]:
         _flatten("", params, flat)
         out[str(key)] = flat
     return out
+
+
+def _written(key: str) -> str:
+    """The node name a section key names (``/cell1/sim_node``: ``sim_node``)."""
+    return key.rstrip("/").rsplit("/", 1)[-1] if key != "/**" else "/**"
+
+
+def _section_node(key: str) -> str:
+    """The key of :data:`NODE_SPECS` a section key stands for (``/**`` for itself)."""
+    node = _written(key)
+    return SECTION_ALIASES.get(node, node)
 
 
 def _check(path: Path, where: str, spec: Spec, value: Any) -> Any:
@@ -127,11 +163,14 @@ def _check(path: Path, where: str, spec: Spec, value: Any) -> Any:
 
 def load_job_file(path: str | Path) -> dict[str, dict[str, Any]]:
     """The settings a job file gives each node, checked: ``{"interp_node":
-    {...}, "profile_node": {...}, "sim_node": {...}}`` (only what the file
-    sets). Raises :class:`JobFileError` (a ValueError) with a one-line reason."""
+    {...}, "profile_node": {...}, "consumer": {...}}`` (only what the file
+    sets; the consumer's from its ``consumer`` or ``sim_node`` section).
+    Raises :class:`JobFileError` (a ValueError) with a one-line reason."""
     p = Path(path).expanduser()
     sections = _sections(p, _read(p))
     out: dict[str, dict[str, Any]] = {node: {} for node in NODE_SPECS}
+    names = {node: node for node in NODE_SPECS}  # each node's section as the file names it
+    names.update({_section_node(k): _written(k) for k in sections if k != "/**"})
     # /** first: a node's own section has the last word, as in ROS
     for key in sorted(sections, key=lambda k: k != "/**"):
         for name, value in sections[key].items():
@@ -141,25 +180,25 @@ def load_job_file(path: str | Path) -> dict[str, dict[str, Any]]:
                 if not takers:
                     raise JobFileError(f"{p}: {where}: no winder node has a setting {name!r}")
             else:
-                node = key.rstrip("/").rsplit("/", 1)[-1]
+                node = _section_node(key)
                 if name not in NODE_SPECS[node]:
-                    raise JobFileError(f"{p}: {where}: {node} has no setting {name!r}")
+                    raise JobFileError(f"{p}: {where}: {_written(key)} has no setting {name!r}")
                 takers = [node]
             for node in takers:
                 out[node][name] = _check(p, where, NODE_SPECS[node][name], value)
-    _check_together(p, out)
+    _check_together(p, out, names)
     return out
 
 
-def _check_together(path: Path, given: dict[str, dict[str, Any]]) -> None:
+def _check_together(path: Path, given: dict[str, dict[str, Any]], names: dict[str, str]) -> None:
     """The cross-field rules of each node, on the file's values over the defaults."""
-    checks = {"interp_node": check_interp, "profile_node": check_profile, "sim_node": check_sim}
+    checks = {"interp_node": check_interp, "profile_node": check_profile, "consumer": check_sim}
     for node, check in checks.items():
         values = {n: s.default for n, s in NODE_SPECS[node].items()}
         values.update(given[node])
-        if node == "sim_node":
-            values["record"] = False  # the bag directory is the sim node's to probe, on its machine
+        if node == "consumer":
+            values["record"] = False  # the bag directory is the consumer's to probe, on its machine
         try:
             check(values)
         except SpecError as exc:
-            raise JobFileError(f"{path}: {node}: {exc}") from None
+            raise JobFileError(f"{path}: {names[node]}: {exc}") from None

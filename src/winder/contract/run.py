@@ -341,10 +341,19 @@ class RunLedger:
 
 
 def _num(text: str, kind: type) -> Any:
+    """``text`` as an int or a float; what is not one reads as 0 (an int) or
+    NaN (a float): a report from elsewhere never raises here."""
     try:
         return kind(text)
     except ValueError:
-        return kind(float(text)) if kind is int else kind("nan")
+        pass
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if kind is int:
+        return int(value) if math.isfinite(value) else 0
+    return value
 
 
 @dataclass

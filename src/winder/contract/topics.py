@@ -13,6 +13,7 @@ stays global, as diagnostic tools expect it; status names carry the namespace. T
 from __future__ import annotations
 
 import re
+from collections.abc import Collection, Mapping
 
 TOPIC_JOB = "winder/job"
 TOPIC_PATH = "winder/path"
@@ -102,8 +103,22 @@ READY_STATES = ("ready", "waiting", "busy", "blocked", "inactive")
 #: that a controller reads one schema: ``state`` (:data:`JOB_STATES`), the
 #: ``job_id`` and ``run_id`` of the run it speaks of ("" before the first),
 #: the node's ``steps_done`` of ``steps_total`` and their ratio ``progress``.
-#: Nodes add their own keys after these (the sim node: lost steps, bag...).
+#: Right after them comes :data:`ROLE_KEY`; then the node's own keys (the sim
+#: node: lost steps, bag...).
 STATUS_KEYS = ("state", "job_id", "run_id", "steps_done", "steps_total", "progress")
+#: The key after :data:`STATUS_KEYS` that names the node's part in the cell,
+#: one of :data:`ROLES`: ``interp`` (the job and its steps), ``profile`` (the
+#: step times) or ``consumer`` (the node that subscribes to
+#: ``winder/step_times`` and executes the steps: the sim node, a ros2_control
+#: bridge, a hardware driver). A controller finds a node's status by its role,
+#: never by its node name, which a launch may remap (``-r __node:=axes``).
+#: Statuses recorded before roles existed carry none: :func:`has_role` falls
+#: back on the stock node names (:data:`LEGACY_NAMES`) for them.
+ROLE_KEY = "role"
+ROLES = ("interp", "profile", "consumer")
+#: The node name each role had before roles existed (older bags, and a node
+#: that does not name its role yet).
+LEGACY_NAMES = {"interp": "interp_node", "profile": "profile_node", "consumer": "sim_node"}
 #: idle: no run yet; running: a run in progress; pausing / paused: braking
 #: for a pause / at rest (a pause, or a programmed stop), going on after a
 #: resume; aborting: braking for an abort; stalled: running, but its step
@@ -117,11 +132,21 @@ JOB_STATES = (
 
 
 def status_values(
-    state: str, job_id: str = "", run_id: str = "", done: int = 0, total: int = 0, **extra: object
+    state: str,
+    job_id: str = "",
+    run_id: str = "",
+    done: int = 0,
+    total: int = 0,
+    *,
+    role: str = "",
+    **extra: object,
 ) -> dict[str, object]:
-    """The key/values of a ``job`` status: :data:`STATUS_KEYS` first, then ``extra``."""
+    """The key/values of a ``job`` status: :data:`STATUS_KEYS` first, then
+    ``role`` (:data:`ROLE_KEY`, when given), then ``extra``."""
     if state not in JOB_STATES:
         raise ValueError(f"state={state!r} is invalid: must be one of {', '.join(JOB_STATES)}")
+    if role and role not in ROLES:
+        raise ValueError(f"role={role!r} is invalid: must be one of {', '.join(ROLES)}")
     values: dict[str, object] = {
         "state": state,
         "job_id": job_id,
@@ -130,5 +155,36 @@ def status_values(
         "steps_total": total,
         "progress": f"{done / total:.4f}" if total else "0.0000",
     }
+    if role:
+        values[ROLE_KEY] = role
     values.update(extra)
     return values
+
+
+def status_node(name: str) -> str:
+    """The node of a status name, without its namespace: ``"axes"`` for
+    ``"cell1/axes: job"``."""
+    return name.split(":", 1)[0].rsplit("/", 1)[-1]
+
+
+def has_role(
+    name: str,
+    values: Mapping[str, object],
+    role: str,
+    namespace: str,
+    nodes: Collection[str] = (),
+    task: str = TASK_JOB,
+) -> bool:
+    """Whether the status ``name`` with ``values`` is the ``task`` status of
+    the node in ``namespace`` (itself, not a deeper one) that has ``role``:
+    its values say so (:data:`ROLE_KEY`); a status that names no role is
+    taken by its node's name, the stock one (:data:`LEGACY_NAMES`) or one of
+    ``nodes`` (names known to have the role by other means: the graph, the
+    bag's ``winder/state``)."""
+    if not name.endswith(f": {task}") or not in_namespace(name, namespace):
+        return False
+    said = values.get(ROLE_KEY)
+    if said:
+        return said == role
+    node = status_node(name)
+    return node == LEGACY_NAMES.get(role) or node in nodes

@@ -5,7 +5,8 @@ A recording is what the sim node writes (:mod:`winder.record.bag`): a rosbag2
 directory ``<job_id>_<UTC stamp>/`` with ``metadata.yaml`` and one MCAP file.
 :func:`read_run` returns a :class:`Run`: the job plan, the motor set-up the
 simulation used, the timed step rows, the commanded and simulated joint
-samples and the sim node's final report.
+samples and the consumer's final report (the sim node's, or a hardware
+driver's in its place: found by its role, whatever its node name).
 
 The steps: :mod:`winder.record.raw` walks the file(s) into a :class:`RawBag`
 of undecoded messages (cut-short and damaged recordings too, see there); here
@@ -47,9 +48,11 @@ from winder.contract.topics import (
     TOPIC_JOINT_STATES,
     TOPIC_PROFILE_CONFIG,
     TOPIC_SIM_CONFIG,
+    TOPIC_STATE,
     TOPIC_STEP_TIMES,
+    has_role,
     in_namespace,
-    status_name,
+    status_node,
 )
 from winder.motion.job import AXES
 from winder.record.raw import BagError, RawBag, _typestore, read_raw, recover
@@ -76,7 +79,7 @@ IntArray = npt.NDArray[np.int64]
 JOB, SIM_CONFIG, STEP_TIMES = TOPIC_JOB, TOPIC_SIM_CONFIG, TOPIC_STEP_TIMES
 JOINT_COMMANDS, JOINT_STATES = TOPIC_JOINT_COMMANDS, TOPIC_JOINT_STATES
 PROFILE_CONFIG, DIAGNOSTICS = TOPIC_PROFILE_CONFIG, TOPIC_DIAGNOSTICS
-CONTROL = TOPIC_CONTROL
+CONTROL, STATE = TOPIC_CONTROL, TOPIC_STATE
 
 
 # -- decoding ---------------------------------------------------------------------
@@ -226,10 +229,10 @@ class Run:
 
     ``step_rows``: the timed step rows (:class:`StepSource`), streamed;
     :attr:`steps` holds them all in one array (for small runs). ``report``: the
-    sim node's last job status (key -> value text: state, steps_done,
+    consumer's last job status (key -> value text: state, steps_done,
     lost_steps, real_time_factor, ...), empty if none was recorded.
-    ``complete``: the bag was closed, no chunk of it was damaged, and the sim
-    node reported the job done. ``damaged``: the chunks skipped because their
+    ``complete``: the bag was closed, no chunk of it was damaged, and the
+    consumer reported the job done. ``damaged``: the chunks skipped because their
     CRC or compression showed damage (their messages are not in the run).
     """
 
@@ -410,7 +413,7 @@ def _joint_samples_slow(datas: list[bytes], topic: str) -> Samples:
 #: are few); step chunks and joint samples are streamed
 #: DiagnosticStatus.ERROR
 ERROR_LEVEL = 2
-_KEPT = ("/" + JOB, "/" + SIM_CONFIG, "/" + PROFILE_CONFIG, "/" + CONTROL)
+_KEPT = ("/" + JOB, "/" + SIM_CONFIG, "/" + PROFILE_CONFIG, "/" + CONTROL, "/" + STATE)
 _JOINT_BATCH = 8192
 
 
@@ -430,7 +433,7 @@ def read_run(path: str | Path, namespace: str | None = None) -> Run:
     ns = _pick_namespace(raw.path, counts, namespace)
     topic = {
         key: f"{ns}/{key}"
-        for key in (JOB, SIM_CONFIG, PROFILE_CONFIG, CONTROL, STEP_TIMES, JOINT_COMMANDS, JOINT_STATES)
+        for key in (JOB, SIM_CONFIG, PROFILE_CONFIG, CONTROL, STATE, STEP_TIMES, JOINT_COMMANDS, JOINT_STATES)
     }
     decoded = _decode(raw, topic)
     streamed = _stream_pass(raw, topic)
@@ -553,9 +556,12 @@ def _assemble(
     notes = list(raw.notes)
     sim_config = _decode_sim_config(raw.path, decoded[topic[SIM_CONFIG]], topic[SIM_CONFIG], notes)
     profile_config = _decode_profile_config(decoded[topic[PROFILE_CONFIG]], topic[PROFILE_CONFIG], notes)
-    wall0 = sim_config.wall_start_ns if sim_config else 0
-    report, profile, errors = _decode_diagnostics(decoded[DIAGNOSTICS], ns, decoded[_DIAGNOSTIC_TIMES], wall0)
-    origin = sim_config.clock_origin_ns / 1e9 if sim_config else 0.0
+    wall0, origin_ns = _time_base(decoded[topic[SIM_CONFIG]])
+    consumer = {status_node(m.name) for m in decoded[topic[STATE]]}  # who announced the cell's state
+    report, profile, errors = _decode_diagnostics(
+        decoded[DIAGNOSTICS], ns, decoded[_DIAGNOSTIC_TIMES], wall0, consumer
+    )
+    origin = origin_ns / 1e9
     return Run(
         path=raw.path,
         namespace=ns,
@@ -613,9 +619,30 @@ def _decode_sim_config(bag: Path, msgs: list[Any], topic: str, notes: list[str])
         notes.append(f"no {topic} message: motor parameters unknown")
         return None
     try:
+        doc = json.loads(msgs[0].data)
+    except (ValueError, TypeError, RecursionError) as exc:
+        raise BagError(f"{bag}: {topic} is not JSON: {exc}") from None
+    if isinstance(doc, dict) and "model" not in doc and "axes" not in doc:
+        # a consumer that is no simulator (a hardware driver) configures its
+        # run's time base and pacing only: no motor model to read
+        notes.append(f"{topic} names no motor model (a hardware consumer): motor parameters unknown")
+        return None
+    try:
         return SimConfig.from_json(msgs[0].data)
     except (ValueError, KeyError, TypeError) as exc:
         raise BagError(f"{bag}: {topic} is not a sim configuration: {exc}") from None
+
+
+def _time_base(msgs: list[Any]) -> tuple[int, int]:
+    """(wall_start_ns, clock_origin_ns) of the run from the consumer's first
+    configuration (any consumer's, simulator or not); zeros if unknown."""
+    try:
+        doc = json.loads(msgs[0].data) if msgs else {}
+        wall0, origin = doc.get("wall_start_ns", 0), doc.get("clock_origin_ns", 0)
+    except (ValueError, TypeError, AttributeError, RecursionError):
+        return 0, 0
+    ok = all(isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in (wall0, origin))
+    return (wall0, origin) if ok else (0, 0)
 
 
 def _decode_profile_config(msgs: list[Any], topic: str, notes: list[str]) -> dict[str, Any]:
@@ -631,25 +658,29 @@ def _decode_profile_config(msgs: list[Any], topic: str, notes: list[str]) -> dic
 
 
 def _decode_diagnostics(
-    msgs: list[Any], ns: str, times: list[int], wall0: int
+    msgs: list[Any], ns: str, times: list[int], wall0: int, consumer: set[str] | None = None
 ) -> tuple[dict[str, str], str, tuple[str, ...]]:
-    """The sim node's last job status, the profile kind the profile node's
-    status names (older bags say it only there) and the ERROR statuses of the
-    cell in ``ns`` (each different one once, in order, with the simulated
-    time it was first recorded at: the log time less the job's wall start)."""
-    sim_status, profile_status = (
-        status_name("sim_node", namespace=ns),
-        status_name("profile_node", namespace=ns),
-    )
+    """The consumer's last job status (the final report), the profile kind
+    the profile node's status names (older bags say it only there) and the
+    ERROR statuses of the cell in ``ns`` (each different one once, in order,
+    with the simulated time it was first recorded at: the log time less the
+    job's wall start).
+
+    Nodes are found by their role (:func:`winder.contract.topics.has_role`),
+    not their names: the consumer's status says ``role: consumer``; one
+    recorded before roles existed is the consumer's if its node announced the
+    cell's state (``consumer``: the node names on ``winder/state``, which the
+    consumer publishes) or is named ``sim_node``."""
+    nodes = consumer or set()
     report: dict[str, str] = {}
     profile = ""
     errors: dict[str, str] = {}
     for arr, t in zip(msgs, times, strict=True):
         for st in arr.status:
             values = {kv.key: kv.value for kv in st.values}
-            if st.name == sim_status and "state" in values:
+            if "state" in values and has_role(st.name, values, "consumer", ns, nodes):
                 report = values
-            elif st.name == profile_status and "profile" in values:
+            elif "profile" in values and has_role(st.name, values, "profile", ns):
                 profile = values["profile"]
             level = st.level if isinstance(st.level, int) else int.from_bytes(bytes(st.level), "little")
             text = f"{st.name}: {st.message}"

@@ -29,18 +29,26 @@ from typing import Any
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.srv import SetParametersAtomically
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 from std_srvs.srv import Trigger
 
-from winder.contract.topics import TOPIC_DIAGNOSTICS, in_namespace, status_name
+from winder.contract.run import JobReport
+from winder.contract.topics import ROLE_KEY, TASK_JOB, TOPIC_DIAGNOSTICS, has_role, in_namespace
 from winder.ros.dds import PROFILE_KEYS, use_profile
 from winder.ros.diagnostics import ERROR
+from winder.ros.graph import consumers, fully_qualified, profile_nodes
 from winder.ros.terminal import KeyReader
 
+#: the executable ``winder run`` starts for each part of the cell
 NODES = {"interp": "interp_node", "profile": "profile_node", "sim": "sim_node"}
+#: the role (winder.contract.topics.ROLES) of each part, by which it is found
+#: on the graph and in /diagnostics whatever its node name
+NODE_ROLES = {"interp": "interp", "profile": "profile", "sim": "consumer"}
 #: Start order: the sim node first; the others wait for their readers, so the
 #: job starts only when the whole chain is connected.
 START_ORDER = ("sim", "profile", "interp")
@@ -172,21 +180,104 @@ class NodeProcesses:
                 p.wait()
 
 
+#: what each role is called in messages
+ROLE_WORDS = {"consumer": "the step consumer", "profile": "the profile node"}
+#: Seconds between two looks at the graph for the consumer's node name.
+GRAPH_POLL = 0.5
+
+
+class RemoteSettings:
+    """Settings for a node of the cell that runs elsewhere on the graph
+    (``winder run --external``), found by its role (:mod:`winder.ros.graph`)
+    and set through its standard ``set_parameters_atomically`` service, all
+    or none, before the job starts. :meth:`step` moves it on; ``done`` once
+    set; a refusal (the node refused a value, a read-only or undeclared
+    parameter) is returned as a one-line reason naming the settings. While
+    the graph shows no node, or two, in the role, it waits (``waiting`` says
+    for what; a node killed outright stays on the graph for a while)."""
+
+    def __init__(self, node: Node, namespace: str, role: str, values: dict[str, Any]) -> None:
+        self.node = node
+        self.namespace = namespace
+        self.role = role
+        self.values = dict(values)
+        self.what = ROLE_WORDS[role]
+        self.target = ""  #: the node's fully qualified name, once found
+        self.client: Any = None
+        self.future: Future | None = None
+        self.asked = 0.0
+        self.done = not self.values
+        self.waiting = f"{self.what} on the graph, to set {', '.join(self.values)}"
+
+    def step(self) -> str | None:
+        if self.done:
+            return None
+        if self.client is None:
+            find = consumers if self.role == "consumer" else profile_nodes
+            found = find(self.node, self.namespace)
+            if not found:
+                return None
+            if len(found) > 1:  # two consumers, or one that died and is not off the graph yet: wait
+                names = ", ".join(fully_qualified(*f) for f in found)
+                self.waiting = (
+                    f"one node as {self.what}, to set {', '.join(self.values)} on it: the graph shows "
+                    f"{len(found)} in this cell ({names})"
+                )
+                return None
+            self.target = fully_qualified(*found[0])
+            service = f"{self.target}/set_parameters_atomically"
+            self.client = self.node.create_client(SetParametersAtomically, service)
+            self.waiting = f"{service}, to set {', '.join(self.values)}"
+        if self.future is None or (not self.future.done() and time.monotonic() - self.asked > START_RETRY):
+            if not self.client.service_is_ready():
+                return None
+            if self.future is not None:  # the reply was lost while the service matched: ask again
+                self.client.remove_pending_request(self.future)
+            request = SetParametersAtomically.Request(
+                parameters=[Parameter(k, value=v).to_parameter_msg() for k, v in self.values.items()]
+            )
+            self.future, self.asked = self.client.call_async(request), time.monotonic()
+            return None
+        if not self.future.done():
+            return None
+        reply = self.future.result()
+        result = reply.result if reply is not None else None
+        if result is not None and result.successful:
+            self.done = True
+            return None
+        why = (result.reason if result is not None else "") or "no reason given"
+        why = why.splitlines()[0] if why.strip() else "no reason given"
+        named = [k for k in self.values if re.search(rf"(?<![\w.]){re.escape(k)}(?![\w.])", why)]
+        names = "" if named else f" ({', '.join(self.values)})"
+        return f"job not started: {self.what} {self.target} refused the settings of this run{names}: {why}"
+
+
 class CellWatch:
     """What this process hears of the cell on /diagnostics, and its start call.
 
-    ``heard_sim``: the sim node's job status got through (so no report can be
-    missed once the job starts); ``job_seen``: the interp node reports the job
-    sending; ``summary``: the sim node's final job report (``done``,
-    ``aborted`` or ``incomplete``); ``errors``: ERROR statuses of the cell's nodes.
+    The consumer (the node that executes the steps: the sim node, or a
+    hardware driver in its place) is found by its role, never by its node
+    name: its job status says ``role: consumer``, and one that says no role
+    is taken by the name the graph shows in the consumer's part
+    (:func:`winder.ros.graph.consumers`), or the stock name ``sim_node``.
+
+    ``heard_consumer``: the consumer's job status can reach us (so no report
+    can be missed once the job starts); ``job_seen``: the interp node reports
+    the job sending; ``summary``: the consumer's final job report (``done``,
+    ``aborted`` or ``incomplete``); ``errors``: ERROR statuses of the cell's
+    nodes. ``remote``: settings for nodes that run elsewhere (role -> values),
+    set before the job starts (:class:`RemoteSettings`).
     """
 
-    def __init__(self, node: Node, namespace: str) -> None:
+    def __init__(
+        self, node: Node, namespace: str, remote: dict[str, dict[str, Any]] | None = None
+    ) -> None:
         self.node = node
+        self.namespace = namespace
         self.ns = namespace.strip("/")
-        self.sim_status = status_name("sim_node", namespace=namespace)
-        self.interp_status = status_name("interp_node", namespace=namespace)
-        self.heard_sim = False
+        self.consumer_nodes: set[str] = set()  #: node names the graph shows as the cell's consumer
+        self._looked = 0.0
+        self.heard_consumer = False
         self.job_seen = False
         self.progress = 0.0
         self.sim_time = "0"
@@ -194,6 +285,7 @@ class CellWatch:
         self.message = ""
         self.run_id = ""  #: the run started (from the start reply or the interp node's status)
         self.errors: list[str] = []
+        self.remote = [RemoteSettings(node, namespace, role, v) for role, v in (remote or {}).items() if v]
         node.create_subscription(
             DiagnosticArray,
             TOPIC_DIAGNOSTICS,
@@ -210,22 +302,38 @@ class CellWatch:
         """What the start of the job still waits for, in words (when it never came)."""
         if not self.start.service_is_ready():
             return "the interp node's ~/start service"
-        if not self.heard_sim:
+        if not self.heard_consumer:
             return (
-                "the sim node, which is not on this graph: is it running, on the same ROS_DOMAIN_ID, "
-                "discovery range (and static peers) as this host?"
+                "the step consumer (sim_node or a hardware driver), which is not on this graph: is it "
+                "running, on the same ROS_DOMAIN_ID, discovery range (and static peers) as this host?"
             )
+        pending = next((r for r in self.remote if not r.done), None)
+        if pending is not None:
+            return pending.waiting
         return f"the cell to be ready ({self.not_ready or 'no reply to ~/start yet'})"
+
+    def _look(self, force: bool = False) -> None:
+        """The consumer's node name(s) from the graph (at most every GRAPH_POLL s)."""
+        now = time.monotonic()
+        if force or now - self._looked >= GRAPH_POLL:
+            self._looked = now
+            self.consumer_nodes |= {name for name, _ in consumers(self.node, self.namespace)}
 
     def _on_diagnostics(self, msg: DiagnosticArray) -> None:
         for st in msg.status:
             values = {kv.key: kv.value for kv in st.values}
-            if st.name == self.sim_status:
-                self.heard_sim = True
-            if st.name == self.interp_status and values.get("run_id"):
+            consumer = has_role(st.name, values, "consumer", self.ns, self.consumer_nodes)
+            unnamed = not values.get(ROLE_KEY) and st.name.endswith(f": {TASK_JOB}")
+            if not consumer and unnamed and in_namespace(st.name, self.ns):
+                self._look()  # a job status of this cell's that names no role: is its node the consumer?
+                consumer = has_role(st.name, values, "consumer", self.ns, self.consumer_nodes)
+            if consumer:
+                self.heard_consumer = True
+            asked = self._request is not None  # a run the interp node had before we asked is not ours
+            if asked and has_role(st.name, values, "interp", self.ns) and values.get("run_id"):
                 self.job_seen = True  # the start request got through
                 self.run_id = self.run_id or values["run_id"]
-            if st.name == self.sim_status and values.get("run_id") and values["run_id"] == self.run_id:
+            if consumer and values.get("run_id") and values["run_id"] == self.run_id:
                 self.progress = float(values.get("progress", 0.0))
                 self.sim_time = values.get("sim_time_s", "0")
                 if values.get("state") in ("done", "aborted", "incomplete"):
@@ -239,24 +347,34 @@ class CellWatch:
                 if report not in self.errors:  # a status repeats every second while it lasts
                     self.errors.append(report)
 
-    def _sim_reports_here(self) -> bool:
-        """The sim node's /diagnostics writer is matched with this process'
+    def _consumer_reports_here(self) -> bool:
+        """The consumer's /diagnostics writer is matched with this process'
         reader (the graph shows it), so its job reports reach us: no need to
         wait for its first 1 Hz status to know."""
+        self._look(force=True)
         ns = "/" + self.ns if self.ns else "/"
         return any(
-            info.node_name == "sim_node" and info.node_namespace == ns
+            info.node_name in self.consumer_nodes and info.node_namespace == ns
             for info in self.node.get_publishers_info_by_topic(TOPIC_DIAGNOSTICS)
         )
 
     def ask_to_start(self) -> str | None:
-        """One step of starting the job: call ``~/start`` once the cell is
-        listening, ask again if the reply is lost, and return the reason if the
-        job was refused (None while starting or once started)."""
+        """One step of starting the job: set the remote nodes' settings, call
+        ``~/start`` once the cell is listening, ask again if the reply is
+        lost, and return the reason if the job was refused (None while
+        starting or once started)."""
         self.accepted = self.accepted or self.job_seen
-        if not self.heard_sim and self.start.service_is_ready():
-            self.heard_sim = self._sim_reports_here()
-        if self.accepted or not (self.start.service_is_ready() and self.heard_sim):
+        if self.accepted:
+            return None
+        if not self.heard_consumer and self.start.service_is_ready():
+            self.heard_consumer = self._consumer_reports_here()
+        for remote in self.remote:
+            refused = remote.step()
+            if refused:
+                return refused
+        if not (self.start.service_is_ready() and self.heard_consumer):
+            return None
+        if not all(r.done for r in self.remote):
             return None
         req = self._request
         if req is None or (not req.done() and time.monotonic() - self._asked > START_RETRY):
@@ -344,7 +462,7 @@ def _wait_for_job(
     progress: Callable[[float, str], None] | None,
     keys: Keys | None = None,
 ) -> str:
-    """Spin until the sim node's final report; the reason if it never came
+    """Spin until the consumer's final report; the reason if it never came
     (the job not started within ``timeouts[0]`` s, or not done within ``timeouts[1]``)."""
     start_timeout, timeout = timeouts
     t0 = time.monotonic()
@@ -379,7 +497,7 @@ def _result(watch: CellWatch, failure: str, log_dir: Path) -> CellResult:
     result.errors = list(watch.errors)
     if watch.errors and not result.message:
         result.message = watch.errors[0]
-    if result.ok and not watch.errors and not int(result.summary.get("errors", "0")):
+    if result.ok and not watch.errors and not JobReport.from_values(result.summary).errors:
         # a clean run's logs say nothing the summary does not: leave no litter in /tmp
         shutil.rmtree(log_dir, ignore_errors=True)
         result.log_dir = None
@@ -397,9 +515,11 @@ def run_cell(
     start_timeout: float = 60.0,
 ) -> CellResult:
     """Start the three nodes with ``params[node]`` parameters (but those in
-    ``external``, which run elsewhere on the graph), wait for the sim node to
-    report the job done, stop them with SIGINT, return the summary; give up
-    after ``timeout`` s, or ``start_timeout`` s if the job never started. The
+    ``external``, which run elsewhere on the graph: their ``params`` are set
+    on them through their parameter services before the job starts, and a
+    refusal ends the run unstarted), wait for the consumer to report the job
+    done, stop them with SIGINT, return the summary; give up after
+    ``timeout`` s, or ``start_timeout`` s if the job never started. The
     nodes' output goes to ``result.log_dir``, removed after a clean run."""
     log_dir = Path(tempfile.mkdtemp(prefix="winder-cell-"))
     with cell_environment(domain) as env:
@@ -408,7 +528,8 @@ def run_cell(
         node = rclpy.create_node("winder_cell", namespace=namespace or "/")
         keys = Keys(node, namespace)
         try:
-            watch = CellWatch(node, namespace)
+            remote = {NODE_ROLES[key]: dict(params.get(key, {})) for key in external}
+            watch = CellWatch(node, namespace, remote)
             _spawn(procs, params, namespace, external)
             failure = _wait_for_job(node, watch, procs, (start_timeout, timeout), progress, keys)
         except ExternalShutdownException:
