@@ -4,7 +4,8 @@ In:  parameters (the fields of winder.motion.job.Job, the ramp a run may bring
      (ramp.*), autostart, chunk_steps), services ~/start (std_srvs/Trigger:
      start a run with the settings as they are) and ~/start_run
      (rcl_interfaces/SetParametersAtomically: set the run's settings and start
-     it, in one call, all or nothing), winder/ready, winder/progress.
+     it, in one call, all or nothing; a ramp.* value in it makes the run bring
+     that ramp, ramp.source job), winder/ready, winder/progress.
 Out: winder/job (std_msgs/String, JSON job description with the run id, latched),
      winder/steps (std_msgs/Int32MultiArray chunks), /diagnostics.
 
@@ -38,11 +39,14 @@ from winder.ros.chunks import STEPS_CDR
 from winder.ros.diagnostics import ERROR, OK, Diagnostics
 from winder.ros.managed import ManagedNode
 from winder.ros.qos import QOS_EVENTS, QOS_LATCHED, QOS_STATE, QOS_STREAM
-from winder.ros.ready import Readiness
+from winder.ros.ready import FRESH, Readiness
 from winder.ros.settings import Settings
 from winder.ros.spin import spin
 from winder.ros.timers import steady_timer
 from winder.spec import SpecError
+
+#: this node's part in the cell (winder.contract.topics.ROLES), in every job status
+ROLE = "interp"
 
 
 class InterpNode(ManagedNode):
@@ -64,7 +68,7 @@ class InterpNode(ManagedNode):
         self.create_subscription(KeyValue, TOPIC_PROGRESS, self.on_progress, QOS_STATE)
         self.create_subscription(String, TOPIC_CONTROL, self.on_control, QOS_EVENTS)
         # the start handshake: consumer and profile node ready (an autostart waits for it)
-        self.readiness = Readiness(self, on_change=self.wake)
+        self.readiness = Readiness(self, on_change=self.on_ready)
         # tick() sends a running job's chunks every 20 ms; idle, only the 1 Hz report runs
         self.tick_timer = steady_timer(self, 0.02, self.tick)
         steady_timer(self, 1.0, self.report)
@@ -81,8 +85,13 @@ class InterpNode(ManagedNode):
         self.aborted = ""  # why the running job was given up, if it was
         self.operator_abort = False  # it was aborted on purpose (~/abort, a schedule)
         self.last_receipt_wall = 0.0
+        # a consumer that ignores an abort (docs/CONTRACT.md, 4.1 item 8) must not wedge the cell
+        self.ended_wall = 0.0  # when the last run ended here by an abort or a give-up (0: it did not)
+        self.progress_wall = 0.0  # when the consumer last took a step of the run
+        self.busy_wall = 0.0  # since when the consumer says busy on winder/ready (0: it does not)
+        self.abort_ignored = ""  # the report on it, made once per run
         if self.settings.blocked():
-            self.diag.publish("job", ERROR, str(self.settings.blocked()), {})
+            self.diag.publish("job", ERROR, str(self.settings.blocked()), status_values("blocked", role=ROLE))
         self.start_lifecycle()
 
     # -- lifecycle (winder.ros.managed) ----------------------------------------
@@ -126,15 +135,22 @@ class InterpNode(ManagedNode):
     ) -> SetParametersAtomically.Response:
         """Set up and start a run in one call: the request's parameters (job
         fields, ramp.*) are set all together or not at all, and the run starts
-        with them. Nothing is set when the cell cannot start a run now (a run
-        going on, a node not ready); the reason is in ``result.reason``, the
-        start reply in it when the run starts."""
+        with them. A ``ramp.*`` value means the run brings its ramp: the call
+        sets ``ramp.source`` to ``job`` too, unless it names ``ramp.source``
+        itself (``profile_node`` with a ``ramp.*`` value is refused: the value
+        would not ramp the run). Nothing is set when the cell cannot start a
+        run now (a run going on, a node not ready); the reason is in
+        ``result.reason``, the start reply in it when the run starts."""
         why = self.cannot_start()
         if why:
             resp.result = SetParametersResult(successful=False, reason=why)
             return resp
         try:
             params = [Parameter.from_parameter_msg(p) for p in req.parameters]
+            params, refused = with_run_ramp(params)
+            if refused:
+                resp.result = SetParametersResult(successful=False, reason=refused)
+                return resp
             result = self.set_parameters_atomically(params)
         except Exception as exc:  # an undeclared name, a type rclpy cannot take
             result = SetParametersResult(successful=False, reason=f"run not set up: {exc}".splitlines()[0])
@@ -155,8 +171,44 @@ class InterpNode(ManagedNode):
                 f"job {self.job.job_id} run {self.run_id} is running ({self.consumed}/{self.job.total_steps} "
                 f"steps taken, {self.sent} sent): start refused, the running job goes on"
             )
-        waiting = self.readiness.missing()
+        reported = bool(self.abort_ignored)
+        if self.ignores_abort() and not reported:
+            self.report()  # the ERROR at once, before the start it lets through
+        waiting = self.readiness.missing(excused=("consumer",) if self.abort_ignored else ())
         return f"job not started: {waiting}" if waiting else ""
+
+    def on_ready(self) -> None:
+        """A change on winder/ready: note since when the consumer says busy."""
+        if self.readiness.states.get("consumer") != "busy":
+            self.busy_wall = 0.0
+        elif not self.busy_wall:
+            self.busy_wall = time.monotonic()
+        self.wake()
+
+    def ignores_abort(self) -> bool:
+        """Whether the consumer ignores the end of the last run: the run ended
+        here (an abort, or given up after stall_abort) and the consumer still
+        says busy, with no step taken, for longer than stall_abort. Reported
+        once (a log line, then the job status is an ERROR until the next
+        start); from then on that busy does not hold a start: the next job
+        description replaces the run at the consumer."""
+        if self.abort_ignored:
+            return True
+        now = time.monotonic()
+        if self.job is None or not self.ended_wall or not self.busy_wall:
+            return False
+        if self.readiness.states.get("consumer") != "busy" or now - self.readiness.heard["consumer"] > FRESH:
+            return False  # not busy, or not heard from lately: nothing to excuse
+        stuck = now - max(self.ended_wall, self.busy_wall, self.progress_wall)
+        if stuck <= self.settings.values()["stall_abort"]:
+            return False
+        self.abort_ignored = (
+            f"the consumer ignores the abort of run {self.run_id}: still busy {now - self.ended_wall:.1f} s "
+            "after it ended (docs/CONTRACT.md); its busy no longer holds a start: the next job replaces "
+            "the run"
+        )
+        self.get_logger().error(f"consumer state busy: {self.abort_ignored}")
+        return True
 
     def wake(self) -> None:
         """Something happened that may let work go on: run tick() now and on its timer."""
@@ -174,7 +226,7 @@ class InterpNode(ManagedNode):
         self.send_some()
         if self.pending is None and self.running():  # all sent, not all taken yet
             self.abort_if_stalled()
-        if not self.running():
+        if not self.running() and self.pending is None:
             self.tick_timer.cancel()  # nothing to do until a start or a readiness change
 
     # -- work ------------------------------------------------------------
@@ -196,7 +248,7 @@ class InterpNode(ManagedNode):
             return False, self.cannot_start()
         blocked = self.settings.blocked()
         if blocked:
-            self.diag.publish("job", ERROR, blocked, status_values("blocked"))
+            self.diag.publish("job", ERROR, blocked, status_values("blocked", role=ROLE))
             return False, blocked
         waiting = self.cannot_start()
         if waiting:
@@ -205,7 +257,7 @@ class InterpNode(ManagedNode):
         try:
             job = Job(**{k: values[k] for k in FIELD_SPECS})
         except SpecError as exc:
-            self.diag.publish("job", ERROR, f"job rejected: {exc}", status_values("blocked"))
+            self.diag.publish("job", ERROR, f"job rejected: {exc}", status_values("blocked", role=ROLE))
             return False, f"job rejected: {exc}"
         self.runs += 1
         self.job = job
@@ -215,7 +267,8 @@ class InterpNode(ManagedNode):
         self.finished = False
         self.aborted = ""
         self.operator_abort = False
-        self.started_wall = self.last_receipt_wall = time.monotonic()
+        self.started_wall = self.last_receipt_wall = self.progress_wall = time.monotonic()
+        self.ended_wall, self.abort_ignored = 0.0, ""
         stops = stop_points(job, values["stops"]) if values["stops"] else []
         text = describe_job(
             job,
@@ -264,15 +317,18 @@ class InterpNode(ManagedNode):
                 throttle_duration_sec=5.0,
             )
             return
+        if int(value) > self.consumed:
+            self.progress_wall = time.monotonic()  # a step taken: not stuck on the run
         self.consumed = max(self.consumed, int(value))
         self.last_receipt_wall = time.monotonic()  # a repeated receipt: the sim node is alive
         if self.pending is not None:
             self.send_some()  # the window has room again: fill it now, not at the next tick
 
     def on_control(self, msg: String) -> None:
-        """An abort of the running run (winder/control): stop sending it. The
-        profile node brings the axes to rest and the sim node closes the run
-        aborted; events of other runs, or not JSON, change nothing."""
+        """An abort of the running run (winder/control): send it up to the
+        abort's ``steps`` (the profile node brakes on them), nothing beyond.
+        The profile node brings the axes to rest and the sim node closes the
+        run aborted; events of other runs, or not JSON, change nothing."""
         try:
             event = json.loads(msg.data)
         except (json.JSONDecodeError, RecursionError):
@@ -282,12 +338,30 @@ class InterpNode(ManagedNode):
         if event.get("run_id") != self.run_id or self.aborted:
             return
         steps = event.get("steps")
-        self.pending = None
+        self.pending = self.up_to(steps) if isinstance(steps, int) else None
+        self.ended_wall = time.monotonic()
         self.operator_abort = True
         total = self.job.total_steps
         self.aborted = f"run {self.run_id} aborted: the axes stop after {steps} of {total} steps"
         self.get_logger().info(self.aborted)
         self.report()
+
+    def up_to(self, steps: int) -> Iterator[npt.NDArray[np.int32]] | None:
+        """The chunks still to send of a run that ends after ``steps`` (an
+        abort: the profile node brakes on steps not sent yet, when the window
+        held them back), nothing beyond; None if they are all sent."""
+        rest, sent = self.pending, self.sent
+        if rest is None or sent >= steps:
+            return None
+
+        def cut(rest: Iterator[npt.NDArray[np.int32]], sent: int) -> Iterator[npt.NDArray[np.int32]]:
+            for rows in rest:
+                yield rows[: steps - sent]
+                sent += rows.shape[0]
+                if sent >= steps:
+                    return
+
+        return cut(rest, sent)
 
     def send_some(self) -> None:
         if self.pending is None or self.pub_steps.get_subscription_count() == 0:
@@ -324,6 +398,7 @@ class InterpNode(ManagedNode):
         self.get_logger().error(why)
         self.pending = None
         self.aborted = why
+        self.ended_wall = self.ended_wall or time.monotonic()
         self.report()
 
     def report(self) -> None:
@@ -332,30 +407,55 @@ class InterpNode(ManagedNode):
             return
         blocked = self.settings.blocked()
         if blocked:  # repeated, as a status is: late listeners hear it too
-            self.diag.publish("job", ERROR, blocked, status_values("blocked"))
+            self.diag.publish("job", ERROR, blocked, status_values("blocked", role=ROLE))
             return
         if self.job is None:
-            self.diag.publish("job", OK, "idle: no job started", status_values("idle"))
+            self.diag.publish("job", OK, "idle: no job started", status_values("idle", role=ROLE))
             return
         total = self.job.total_steps
+        ignored = self.ignores_abort()  # checked every second: reported once, as soon as it holds
         state = "incomplete" if self.aborted else ("running" if self.running() else "done")
         if self.operator_abort:
             state = "aborted"
         sending = "sending" if self.pending is not None else "all sent"
         self.diag.publish(
             "job",
-            ERROR if self.aborted and not self.operator_abort else OK,
-            self.aborted or f"run {self.run_id}: {sending}, {self.sent}/{total} steps",
+            ERROR if (self.aborted and not self.operator_abort) or ignored else OK,
+            self.abort_ignored or self.aborted or f"run {self.run_id}: {sending}, {self.sent}/{total} steps",
             status_values(
                 state,
                 self.job.job_id,
                 self.run_id,
                 self.sent,
                 total,
+                role=ROLE,
                 steps_taken=self.consumed,
                 elapsed_s=f"{time.monotonic() - self.started_wall:.3f}",
             ),
         )
+
+
+def with_run_ramp(params: list[Parameter]) -> tuple[list[Parameter], str]:
+    """A ``~/start_run`` request's parameters with what its ramp values
+    mean: any ``ramp.*`` value given (``ramp.profile: trapezoid``) makes the
+    run bring its ramp, so ``ramp.source: job`` is added when the request
+    does not name the source; a request that names ``ramp.source`` other
+    than ``job`` beside ramp values is refused (the reason, "" if none), as
+    its ramp would silently not apply."""
+    named = {p.name: p for p in params}
+    ramp = [p.name for p in params if p.name.startswith("ramp.") and p.name != "ramp.source"]
+    if not ramp:
+        return params, ""
+    source = named.get("ramp.source")
+    if source is None:
+        return [*params, Parameter("ramp.source", value="job")], ""
+    if source.value != "job":
+        return params, (
+            f"run not set up: {ramp[0]} given but ramp.source is {source.value!r}: the run would ramp "
+            "with the profile node's settings, not the ramp given; set ramp.source: job (or leave it "
+            "out) to run with the ramp given"
+        )
+    return params, ""
 
 
 def main(args: list[str] | None = None) -> None:

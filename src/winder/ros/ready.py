@@ -11,12 +11,13 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from typing import Any
 
 from diagnostic_msgs.msg import KeyValue
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
+from rclpy.qos import QoSProfile
 
 from winder.contract.topics import READY_ROLES, READY_STATES, TOPIC_READY
 from winder.ros.qos import QOS_LATCHED
@@ -44,6 +45,12 @@ class Announcer:
             self.pub.publish(KeyValue(key=self.role, value=self.state))
 
 
+#: the handshake's reader: latched as the announcers are, but deeper: keep-last
+#: counts the samples of every writer together, so at depth 1 one role's
+#: announcement replaced another's not taken yet (a consumer's "busy" lost
+#: behind the profile node's repeated "ready", and a start let through)
+QOS_READER = QoSProfile(depth=10, reliability=QOS_LATCHED.reliability, durability=QOS_LATCHED.durability)
+
 #: an announcement older than this (s) no longer counts: the announcers repeat
 #: theirs every second, so silence means the node is gone (a node killed
 #: outright stays in the DDS graph, its latched "ready" with it, for ~20 s)
@@ -65,7 +72,7 @@ class Readiness:
             KeyValue,
             TOPIC_READY,
             self._on_ready,
-            QOS_LATCHED,
+            QOS_READER,
             event_callbacks=SubscriptionEventCallbacks(matched=self._on_matched),
         )
 
@@ -86,8 +93,10 @@ class Readiness:
             if self.on_change is not None:
                 self.on_change()
 
-    def missing(self) -> str:
-        """Why a job cannot start now ("" if every role said ready)."""
+    def missing(self, excused: Collection[str] = ()) -> str:
+        """Why a job cannot start now ("" if every role said ready). A role in
+        ``excused`` that says ``busy`` does not hold a start (the interp node's
+        verdict on a consumer still busy on a run it aborted)."""
         now = time.monotonic()
         waiting = []
         for r in READY_ROLES:
@@ -96,6 +105,6 @@ class Readiness:
                 waiting.append(f"{r} not heard from")
             elif silent > FRESH:
                 waiting.append(f"{r} silent for {silent:.1f} s")
-            elif self.states[r] != "ready":
+            elif self.states[r] != "ready" and not (r in excused and self.states[r] == "busy"):
                 waiting.append(f"{r} {self.states[r]}")
         return f"not ready: {', '.join(waiting)} (winder/ready)" if waiting else ""

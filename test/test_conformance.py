@@ -1,0 +1,773 @@
+"""Conformance of a step consumer to the cell contract (docs/CONTRACT.md, §4).
+
+Every test starts the real ``interp_node`` and ``profile_node`` and the
+consumer under test as separate processes over DDS, on a ``ROS_DOMAIN_ID``
+of the test's own (LOCALHOST discovery; one no other test picks, see
+:data:`DOMAINS`), and watches the cell the way a
+controller does: ``winder/ready``, ``winder/state``, ``winder/progress``,
+``winder/control``, ``/diagnostics`` and the services. The consumer's
+statuses are found by their role (``role: consumer`` in the cell's
+namespace), never by a node name; several tests run it as ``axes``
+(``--ros-args -r __node:=axes``).
+
+Subjects (``CONSUMERS``): ``sim_node`` (in real time), ``bridge_node`` (the
+ros2_control bridge, driving test/ros2_control_standin.py), and any
+executable named by the environment::
+
+    WINDER_CONSUMER="my_driver --ros-args -p port:=/dev/ttyUSB0" \\
+        .venv/bin/python -m pytest test/test_conformance.py
+
+``WINDER_CONSUMER`` is a command line (split like a shell's; a bare first
+word is looked up in the venv's bin, then on PATH); the optional
+``WINDER_CONSUMER_EXTRA`` holds the command lines of processes it needs
+beside it, separated by ``;`` (started before it, stopped after it). The
+consumer must execute the steps at their times (real time, as a drive
+does): pause, abort, a start while busy, a stall and a kill all act on a
+run while it goes on. Each subject gets, after its own arguments,
+``--ros-args`` with the consumer settings of the contract (``bag_dir``,
+``record``, ``stall_timeout``, ``stall_abort``; ``params.CONSUMER_SPECS``)
+and, in some tests, ``-r __node:=axes``.
+
+Adding a consumer (the ros2_control bridge, a driver) is one
+:class:`ConsumerSpec` in ``CONSUMERS``: its command line, its parameters for
+these tests, and the processes it needs.
+
+The checks, each a test: the handshake; a whole job; pause and resume;
+abort, then ready and a second job; a start refused while busy; a stall
+reported and the run closed; a killed and restarted consumer; the status
+keys, the final report and the names. The last two tests are of the interp
+node: a consumer written from the README alone that ignores aborts
+(``test/consumers/naive_consumer.py``) must not wedge the cell, and an abort
+whose braking steps the interp node had not sent yet still ends aborted.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import json
+import os
+import re
+import shlex
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from itertools import pairwise
+from pathlib import Path
+from typing import Any
+
+import pytest
+from conftest import BIN, Procs, spin_until
+
+from winder.contract.topics import CELL_STATE_KEYS, ROLE_KEY, STATUS_KEYS, in_namespace
+
+pytestmark = pytest.mark.ros
+
+HERE = Path(__file__).parent
+#: the consumer's job status keys after ``role`` that every consumer reports (CONTRACT.md §3.7)
+CONSUMER_KEYS = (
+    *("steps_missing", "gaps", "chunks_rejected", "sim_time_s", "wall_time_s", "real_time_factor"),
+    *("bag", "errors", "stalls"),
+)
+FINAL = ("done", "aborted", "incomplete")
+#: a quick job (4096 steps, 1.2 s at the ramp below) and one long enough to act on (8192, 2.2 s)
+JOB = {"job_id": "conf", "turns_per_layer": 4, "layers": 1, "poles": 1, "fork_steps_per_rev": 1024}
+LONG_JOB = {**JOB, "turns_per_layer": 8}
+RAMP = {"v_max": 4096.0, "a_max": 32768.0, "j_max": 524288.0}
+#: the consumer's stall watch, small; the interp node gives a run up later than the consumer closes it
+CONSUMER_STALL = {"stall_timeout": 1.0, "stall_abort": 2.0}
+INTERP_STALL_ABORT = 3.0
+#: slack on the bounds the contract sets, for two shared cores
+SLACK = 1.5
+
+
+#: The domains of this module's tests: none that another test (conftest: 20-69,
+#: 120-219), a benchmark (70-99) or `winder run` (100-199) picks, so a cell here
+#: never hears the nodes of a test running beside it (another pytest process on
+#: the machine: its profile node would time this cell's steps too); a lock file
+#: per domain keeps two runs of this module apart.
+DOMAINS = range(1, 20)
+
+
+@contextmanager
+def own_domain(timeout: float = 120.0) -> Iterator[int]:
+    """A domain of :data:`DOMAINS` no other process of this module holds, held until the end."""
+    start = os.getpid() % len(DOMAINS)
+    end = time.monotonic() + timeout
+    while True:
+        for i in range(len(DOMAINS)):
+            domain = DOMAINS[(start + i) % len(DOMAINS)]
+            lock = (Path(tempfile.gettempdir()) / f"winder-conformance-domain-{domain}.lock").open("w")
+            try:
+                fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                lock.close()
+                continue
+            try:
+                yield domain
+            finally:
+                lock.close()
+            return
+        assert time.monotonic() < end, f"every domain of {DOMAINS} held by another run for {timeout} s"
+        time.sleep(0.5)
+
+
+@pytest.fixture
+def procs(tmp_path: Path) -> Iterator[Procs]:
+    """conftest's ``procs`` on a domain of :data:`DOMAINS` (the ``ros`` probe joins it)."""
+    log_dir = tmp_path / "logs"
+    log_dir.mkdir()
+    with own_domain() as domain:
+        ps = Procs(domain, log_dir)
+        try:
+            yield ps
+        finally:
+            ps.stop_all()
+
+
+@dataclass(frozen=True)
+class ConsumerSpec:
+    """A consumer under test: its command line (a bare first word is an
+    executable of the venv's bin, as ``ros2 run`` finds it), its parameters
+    for these tests, and the processes it needs beside it (started first)."""
+
+    id: str
+    command: tuple[str, ...]
+    params: dict[str, str] = field(default_factory=dict)
+    extra: tuple[tuple[str, ...], ...] = ()
+
+
+#: the ros2_control stand-in's joints (test/ros2_control_standin.py), out of the cell's axis order
+BRIDGE_JOINTS = {"pole_joint": "pole", "flyer": "fork", "feed_screw": "feed"}
+CONSUMERS = [
+    ConsumerSpec("sim_node", ("sim_node",), {"real_time": "true"}),
+    ConsumerSpec(
+        "bridge_node",
+        ("bridge_node",),
+        {
+            "joints": f"[{','.join(BRIDGE_JOINTS)}]",
+            "axes": f"[{','.join(BRIDGE_JOINTS.values())}]",
+            "job_origin": "start_position",  # a run after an abort or a stall starts where the joints stopped
+            # the stand-in is a Python process on two busy cores: its joints lag (test_bridge's limits)
+            "joint_state_timeout": "0.5",
+            "max_following_error.fork": "5.0",
+            "max_following_error.pole": "1.0",
+            "max_following_error.feed": "0.01",
+        },
+        extra=((sys.executable, str(HERE / "ros2_control_standin.py"), "--joints", ",".join(BRIDGE_JOINTS)),),
+    ),
+]
+if os.environ.get("WINDER_CONSUMER", "").strip():
+    CONSUMERS.append(
+        ConsumerSpec(
+            "WINDER_CONSUMER",
+            tuple(shlex.split(os.environ["WINDER_CONSUMER"])),
+            extra=tuple(
+                tuple(shlex.split(c))
+                for c in os.environ.get("WINDER_CONSUMER_EXTRA", "").split(";")
+                if c.strip()
+            ),
+        )
+    )
+
+
+#: the consumer written from the README alone (not a subject: it ignores aborts on purpose)
+NAIVE = ConsumerSpec("naive_consumer", (sys.executable, str(HERE / "consumers" / "naive_consumer.py")))
+
+
+@pytest.fixture(params=CONSUMERS, ids=[c.id for c in CONSUMERS])
+def consumer(request: pytest.FixtureRequest) -> ConsumerSpec:
+    spec: ConsumerSpec = request.param
+    return spec
+
+
+def resolve(argv: tuple[str, ...]) -> list[str]:
+    """The command line with its executable found: the venv's first, then PATH."""
+    first = argv[0]
+    if "/" not in first:
+        first = str(BIN / first) if (BIN / first).exists() else shutil.which(first) or first
+    return [first, *argv[1:]]
+
+
+def launch(procs: Procs, argv: list[str], tag: str) -> subprocess.Popen[bytes]:
+    """A process of the test's cell, logged and stopped at teardown like the nodes' (conftest.Procs)."""
+    log = procs.log_dir / f"{tag}-{len(procs.procs)}.log"
+    p = subprocess.Popen(
+        argv, env=procs.env, stdout=log.open("wb"), stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL
+    )
+    procs.procs.append((p, log))
+    return p
+
+
+def params(values: dict[str, Any]) -> list[str]:
+    return [
+        a for k, v in values.items() for a in ("-p", f"{k}:={str(v).lower() if isinstance(v, bool) else v}")
+    ]
+
+
+@dataclass
+class Status:
+    t: float  # monotonic time heard
+    level: int
+    name: str
+    message: str
+    values: dict[str, str]
+
+
+class Cell:
+    """One cell on the test's domain: interp and profile node, the consumer
+    under test, and the probe (the ``ros`` fixture's node) hearing what a
+    controller hears."""
+
+    def __init__(self, procs: Procs, ros: Any, tmp_path: Path) -> None:
+        from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+        from std_msgs.msg import String
+        from std_srvs.srv import Trigger
+
+        self.procs, self.ros = procs, ros
+        self.bags = tmp_path / "bags"
+        self.statuses: list[Status] = []
+        self.states: list[tuple[float, str, dict[str, str]]] = []  # winder/state: (heard, name, values)
+        self.ready: list[tuple[float, str]] = []  # the consumer's winder/ready: (heard, value)
+        self.receipts: list[tuple[float, str, int]] = []  # winder/progress: (heard, run id, steps)
+        self.events: list[dict[str, Any]] = []  # winder/control
+        reliable = ReliabilityPolicy.RELIABLE
+        latched = QoSProfile(depth=100, reliability=reliable, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        plain = QoSProfile(depth=1000, reliability=reliable)
+
+        def on_diag(msg: Any) -> None:
+            now = time.monotonic()
+            for s in msg.status:
+                values = {kv.key: kv.value for kv in s.values}
+                self.statuses.append(Status(now, s.level[0], s.name, s.message, values))
+
+        def on_state(msg: Any) -> None:
+            self.states.append((time.monotonic(), msg.name, {kv.key: kv.value for kv in msg.values}))
+
+        def on_ready(msg: Any) -> None:
+            if msg.key == "consumer":
+                self.ready.append((time.monotonic(), msg.value))
+
+        def on_progress(msg: Any) -> None:
+            if msg.value.isdigit():
+                self.receipts.append((time.monotonic(), msg.key, int(msg.value)))
+
+        def on_control(msg: Any) -> None:
+            self.events.append(json.loads(msg.data))
+
+        ros.create_subscription(DiagnosticArray, "/diagnostics", on_diag, plain)
+        ros.create_subscription(DiagnosticStatus, "/winder/state", on_state, latched)
+        ros.create_subscription(KeyValue, "/winder/ready", on_ready, latched)
+        ros.create_subscription(KeyValue, "/winder/progress", on_progress, plain)
+        ros.create_subscription(String, "/winder/control", on_control, latched)
+        self.Trigger = Trigger
+        self.clients = {
+            name: ros.create_client(Trigger, f"/{node}/{name}")
+            for node, name in (
+                ("interp_node", "start"),
+                ("profile_node", "pause"),
+                ("profile_node", "resume"),
+                ("profile_node", "abort"),
+            )
+        }
+        self.consumer: subprocess.Popen[bytes] | None = None
+        self.consumer_argv: list[str] = []
+        self.profile: subprocess.Popen[bytes] | None = None
+        self.interp: subprocess.Popen[bytes] | None = None
+
+    # -- processes --------------------------------------------------------------
+    def start_consumer(
+        self, spec: ConsumerSpec, *, name: str = "", stall: dict[str, float] | None = None
+    ) -> subprocess.Popen[bytes]:
+        """The consumer under test (and, the first time, what it needs beside it)."""
+        if not self.consumer_argv:
+            for i, argv in enumerate(spec.extra):
+                launch(self.procs, resolve(argv), f"extra{i}")
+            settings = {"bag_dir": self.bags, "record": True, **(stall or CONSUMER_STALL), **spec.params}
+            ros_args = ["--ros-args", *(["-r", f"__node:={name}"] if name else []), *params(settings)]
+            self.consumer_argv = [*resolve(spec.command), *ros_args]
+        self.consumer = launch(self.procs, self.consumer_argv, "consumer")
+        return self.consumer
+
+    def start_upstream(self, job: dict[str, Any] = LONG_JOB, **interp: Any) -> None:
+        """The real profile and interp nodes (autostart off: the tests start each run)."""
+        self.profile = self.procs.start("profile_node", *params(RAMP))
+        settings = {**job, "autostart": False, "stall_abort": INTERP_STALL_ABORT, **interp}
+        self.interp = self.procs.start("interp_node", *params(settings))
+
+    def announcers(self) -> str:
+        """Who publishes winder/ready on the domain (a stray consumer of another test would)."""
+        infos = self.ros.get_publishers_info_by_topic("/winder/ready")
+        return "winder/ready publishers: " + ", ".join(
+            sorted(f"{i.node_namespace}/{i.node_name}" for i in infos)
+        )
+
+    def logs(self) -> str:
+        """The tail of every process' log, for a failure message."""
+        out = []
+        for p, path in self.procs.procs:
+            text = path.read_text(errors="replace").strip().splitlines()[-15:]
+            argv = p.args if isinstance(p.args, list) else [p.args]
+            out.append(f"--- {Path(str(argv[0])).name} ({path.name}, exit {p.poll()}):\n" + "\n".join(text))
+        return "\n".join(out)
+
+    # -- what the probe heard --------------------------------------------------
+    def wait(self, cond: Callable[[], object], timeout: float, what: str) -> None:
+        try:
+            spin_until(self.ros, cond, timeout, what)
+        except AssertionError as exc:
+            heard = [f"{s.name} [{s.level}] {s.message}" for s in self.statuses[-12:]]
+            states = [v.get("state") for _, _, v in self.states]
+            nodes = sorted(ns.rstrip("/") + "/" + n for n, ns in self.ros.get_node_names_and_namespaces())
+            raise AssertionError(
+                f"{exc}\nwinder/state: {states}\nconsumer winder/ready: {[v for _, v in self.ready][-10:]}\n"
+                f"nodes on the domain: {nodes}\n"
+                "last statuses:\n  " + "\n  ".join(heard) + "\n" + self.logs()
+            ) from None
+
+    def pause_for(self, seconds: float) -> None:
+        end = time.monotonic() + seconds
+        spin_until(self.ros, lambda: time.monotonic() > end, seconds + 5, f"{seconds} s")
+
+    def jobs(self, run_id: str | None = None) -> list[Status]:
+        """The consumer's job statuses (role consumer, the root namespace), of ``run_id`` if given."""
+        return [
+            s
+            for s in self.statuses
+            if s.name.endswith(": job")
+            and in_namespace(s.name, "")
+            and s.values.get(ROLE_KEY) == "consumer"
+            and (run_id is None or s.values.get("run_id") == run_id)
+        ]
+
+    def final(self, run_id: str) -> Status | None:
+        return next((s for s in self.jobs(run_id) if s.values.get("state") in FINAL), None)
+
+    def cell_states(self, run_id: str) -> list[str]:
+        return [v["state"] for _, _, v in self.states if v.get("run_id") == run_id]
+
+    def taken(self, run_id: str) -> int:
+        return max((n for _, key, n in self.receipts if key == run_id), default=0)
+
+    def node(self) -> str:
+        """The consumer's node, as its last job status names it (``axes``, ``cell1/axes``)."""
+        jobs = self.jobs()
+        return jobs[-1].name.split(":", 1)[0] if jobs else ""
+
+    def silence(self, t0: float, t1: float) -> str:
+        """The longest time between two statuses of the consumer heard in
+        [t0, t1]: its 1 Hz report not heard for much longer than a second
+        means the process did not run (a machine starved of CPU)."""
+        node = self.node()
+        heard = [t0, *(s.t for s in self.statuses if s.name.startswith(node + ":") and t0 <= s.t <= t1), t1]
+        gap = max(b - a for a, b in pairwise(heard))
+        return f"the longest silence of {node} in that time: {gap:.1f} s (its report is every 1 s)"
+
+    def ready_since(self, t: float) -> bool:
+        return any(v == "ready" and heard > t for heard, v in self.ready)
+
+    # -- services ---------------------------------------------------------------
+    def call(self, service: str, timeout: float = 15.0) -> Any:
+        client = self.clients[service]
+        self.wait(client.service_is_ready, 30, f"the service ~/{service}")
+        future = client.call_async(self.Trigger.Request())
+        self.wait(future.done, timeout, f"the reply of ~/{service}")
+        return future.result()
+
+    def start(self, timeout: float = 20.0) -> tuple[str, int]:
+        """~/start, asked again while the cell says "not ready" (the contract's
+        rule); the run id and its steps from the reply."""
+        end = time.monotonic() + timeout
+        while True:
+            reply = self.call("start")
+            if reply.success or "not ready" not in reply.message or time.monotonic() > end:
+                break
+            self.pause_for(0.2)
+        assert reply.success, f"~/start refused: {reply.message}\n{self.logs()}"
+        m = re.match(r"run (\S+) started: job \S+, (\d+) steps", reply.message)
+        assert m, reply.message
+        return m.group(1), int(m.group(2))
+
+    def running(self, run_id: str, steps: int = 1, timeout: float = 20.0) -> None:
+        """Wait until the run is running at the consumer and ``steps`` of it are acknowledged."""
+        self.wait(
+            lambda: "running" in self.cell_states(run_id) and self.taken(run_id) >= steps,
+            timeout,
+            f"run {run_id} running at the consumer (winder/state) with {steps} steps acknowledged",
+        )
+
+    def ends(self, run_id: str, timeout: float = 30.0) -> Status:
+        """Wait for the consumer's final report of the run."""
+        self.wait(
+            lambda: self.final(run_id) is not None, timeout, f"the consumer's final report of run {run_id}"
+        )
+        report = self.final(run_id)
+        assert report is not None
+        return report
+
+    def given_up(self, run_id: str) -> None:
+        """Wait for the interp node to give the run up (no receipt for its stall_abort)."""
+        self.wait(
+            lambda: any(
+                s.name == "interp_node: job"
+                and s.values.get("run_id") == run_id
+                and s.values["state"] == "incomplete"
+                for s in self.statuses
+            ),
+            INTERP_STALL_ABORT + 10,
+            f"the interp node to give run {run_id} up (its stall_abort {INTERP_STALL_ABORT} s)",
+        )
+
+    def handshake(self, timeout: float = 30.0) -> None:
+        """The cell is up: the consumer's job status heard and its ready."""
+        self.wait(
+            lambda: self.jobs() and self.ready[-1:] and self.ready[-1][1] == "ready",
+            timeout,
+            "the consumer's job status (role consumer) and its ready on winder/ready",
+        )
+
+
+@pytest.fixture
+def cell(procs: Procs, ros: Any, tmp_path: Path) -> Cell:
+    return Cell(procs, ros, tmp_path)
+
+
+def check_done(cell: Cell, run_id: str, total: int, report: Status) -> None:
+    """A complete run's final report (CONTRACT.md §3.7) and receipts."""
+    v = report.values
+    assert v["state"] == "done", f"run {run_id} ended {v['state']}: {report.message}"
+    assert int(v["steps_done"]) == int(v["steps_total"]) == total, v
+    assert v.get("steps_missing") == "0", v
+    assert v.get("errors", "0") == "0", f"stream errors in run {run_id}: {report.message}"
+    assert "bag" in v, f"the final report has no bag key: {v}"
+    if v["bag"]:  # the bag is closed before the report is announced
+        assert (Path(v["bag"]) / "metadata.yaml").exists(), f"bag {v['bag']} not closed at the final report"
+    cell.wait(lambda: cell.taken(run_id) == total, 5, f"the receipts of run {run_id} to reach {total}")
+
+
+# -- the checks ---------------------------------------------------------------------------
+
+
+def test_handshake(cell: Cell, consumer: ConsumerSpec) -> None:
+    """Alone, the consumer reports a job status with the common keys and role
+    consumer, and does not say ready; once the profile node's stream is
+    matched it says ready on winder/ready, repeated every second."""
+    cell.start_consumer(consumer, name="axes")
+    cell.wait(
+        lambda: any(s.name.endswith(": job") for s in cell.statuses), 30, "a job status of the consumer"
+    )
+    cell.pause_for(2.0)
+    jobs = [s for s in cell.statuses if s.name.endswith(": job")]
+    for s in jobs:
+        keys = list(s.values)
+        assert keys[: len(STATUS_KEYS)] == list(STATUS_KEYS), (
+            f"{s.name}: keys {keys}, want {STATUS_KEYS} first"
+        )
+        assert s.values.get(ROLE_KEY) == "consumer", f"{s.name}: no role: consumer ({s.values})"
+        assert keys[len(STATUS_KEYS)] == ROLE_KEY, f"{s.name}: role must follow the common keys: {keys}"
+        assert s.name == "axes: job", f"status named {s.name!r}: the node runs as axes"
+    assert not any(v == "ready" for _, v in cell.ready), f"ready with no stream matched: {cell.ready}"
+    t_up = time.monotonic()
+    cell.start_upstream()
+    cell.wait(lambda: cell.ready_since(t_up), 30, "the consumer's ready once the step stream is matched")
+    first = next(t for t, v in cell.ready if v == "ready")
+    cell.wait(
+        lambda: sum(1 for t, v in cell.ready if v == "ready" and t > first) >= 2,
+        5,
+        "the consumer's ready repeated every second",
+    )
+    assert {s.values["state"] for s in cell.jobs()} <= {"idle"}, [s.values for s in cell.jobs()]
+
+
+def test_a_whole_job(cell: Cell, consumer: ConsumerSpec) -> None:
+    """A small job to done: winder/state running -> done, receipts up to the
+    total, the final report done with every step and a bag key, ready again."""
+    cell.start_consumer(consumer, name="axes")
+    cell.start_upstream(JOB)
+    cell.handshake()
+    run_id, total = cell.start()
+    report = cell.ends(run_id)
+    check_done(cell, run_id, total, report)
+    assert cell.cell_states(run_id) == ["running", "done"], cell.cell_states(run_id)
+    busy = next((t for t, v in cell.ready if v == "busy"), None)
+    assert busy is not None, f"the consumer never said busy during the run: {cell.ready}"
+    cell.wait(lambda: cell.ready_since(busy), 5, "the consumer's ready after the run")
+
+
+def test_pause_and_resume(cell: Cell, consumer: ConsumerSpec) -> None:
+    """~/pause: pausing, paused (no step executed while at rest, no stall
+    reported); ~/resume: running; the run completes with every step."""
+    cell.start_consumer(consumer)
+    cell.start_upstream()
+    cell.handshake()
+    run_id, total = cell.start()
+    cell.running(run_id, 200)
+    reply = cell.call("pause")
+    assert reply.success and "pausing" in reply.message, reply.message
+    cell.wait(lambda: cell.cell_states(run_id)[-1:] == ["paused"], 10, "winder/state paused")
+    cell.pause_for(0.3)
+    at_rest = cell.taken(run_id)
+    cell.pause_for(1.5)  # longer than stall_timeout: a pause at rest is no stall
+    assert cell.taken(run_id) == at_rest, f"steps executed while paused: {at_rest} -> {cell.taken(run_id)}"
+    assert at_rest < total
+    reply = cell.call("resume")
+    assert reply.success and "resuming" in reply.message, reply.message
+    report = cell.ends(run_id)
+    check_done(cell, run_id, total, report)
+    assert cell.cell_states(run_id) == ["running", "pausing", "paused", "running", "done"]
+    node = cell.node()
+    stalls = [
+        s.message for s in cell.statuses if s.name.startswith(node + ":") and "stall" in s.message.lower()
+    ]
+    assert not stalls, f"a pause was reported as a stall: {stalls}"
+    assert report.values.get("stalls", "0") == "0", report.values
+
+
+def test_abort_then_ready_and_a_second_job(cell: Cell, consumer: ConsumerSpec) -> None:
+    """~/abort: aborting, aborted; the final report aborted after the abort's
+    steps; ready again, and a second job starts and completes."""
+    cell.start_consumer(consumer, name="axes")
+    cell.start_upstream()
+    cell.handshake()
+    run_id, total = cell.start()
+    cell.running(run_id, 200)
+    reply = cell.call("abort")
+    assert reply.success and "aborting" in reply.message, reply.message
+    report = cell.ends(run_id)
+    v = report.values
+    assert v["state"] == "aborted", f"run {run_id} ended {v['state']}: {report.message}"
+    [abort] = [e for e in cell.events if e.get("event") == "abort" and e.get("run_id") == run_id]
+    assert int(v["steps_done"]) + int(v["steps_missing"]) == abort["steps"] < total, (v, abort)
+    assert cell.cell_states(run_id) == ["running", "aborting", "aborted"], cell.cell_states(run_id)
+    cell.wait(
+        lambda: cell.ready_since(report.t - 1.0) and cell.ready[-1][1] == "ready",
+        5,
+        "the consumer's ready after the abort",
+    )
+    second, total2 = cell.start(timeout=10)
+    check_done(cell, second, total2, cell.ends(second))
+
+
+def test_a_start_while_busy_is_refused(cell: Cell, consumer: ConsumerSpec) -> None:
+    """~/start during a run: refused with the reason; the run goes on to done."""
+    cell.start_consumer(consumer)
+    cell.start_upstream()
+    cell.handshake()
+    run_id, total = cell.start()
+    cell.running(run_id, 200)
+    reply = cell.call("start")
+    assert not reply.success, f"a second start during run {run_id} was accepted: {reply.message}"
+    assert run_id in reply.message and "is running" in reply.message, reply.message
+    check_done(cell, run_id, total, cell.ends(run_id))
+
+
+def test_a_stall_is_reported_and_the_run_closed(cell: Cell, consumer: ConsumerSpec) -> None:
+    """The profile node stopped (SIGSTOP) mid-run: an ERROR mentioning the
+    stall within stall_timeout, the run closed incomplete after stall_abort
+    (winder/state failed); once the profile node goes on (SIGCONT), the
+    consumer is ready and the cell runs the next job."""
+    stall = {"stall_timeout": 0.5, "stall_abort": 2.0}
+    cell.start_consumer(consumer, stall=stall)
+    cell.start_upstream()
+    cell.handshake()
+    run_id, _ = cell.start()
+    cell.running(run_id, 500)
+    assert cell.profile is not None
+    node = cell.node()
+    cell.profile.send_signal(signal.SIGSTOP)
+    t_stop = time.monotonic()
+    try:
+
+        def stall_error() -> Status | None:
+            return next(
+                (
+                    s
+                    for s in cell.statuses
+                    if s.name.startswith(node + ":")
+                    and s.level == 2
+                    and "stall" in s.message.lower()
+                    and s.t > t_stop
+                ),
+                None,
+            )
+
+        cell.wait(
+            stall_error, stall["stall_timeout"] + 2 * SLACK, "an ERROR status of the consumer on the stall"
+        )
+        error = stall_error()
+        assert error is not None
+        assert error.t - t_stop <= stall["stall_timeout"] + SLACK, (
+            f"stall reported after {error.t - t_stop:.1f} s: {error.message!r}; "
+            f"{cell.silence(t_stop - 1.0, error.t)}"
+        )
+        report = cell.ends(run_id, stall["stall_abort"] + 3 * SLACK)
+        after = report.t - t_stop
+        assert report.values["state"] == "incomplete", f"run {run_id} ended {report.values['state']}"
+        assert stall["stall_abort"] - 0.2 <= after <= stall["stall_abort"] + 2 * SLACK, (
+            f"closed {after:.1f} s in"
+        )
+        assert int(report.values["steps_done"]) < int(report.values["steps_total"])
+        assert cell.cell_states(run_id)[-1:] == ["failed"], cell.cell_states(run_id)
+    finally:
+        cell.profile.send_signal(signal.SIGCONT)
+    cell.wait(
+        lambda: cell.ready_since(report.t - 1.0) and cell.ready[-1][1] == "ready",
+        10,
+        "the consumer's ready after the stalled run",
+    )
+    cell.given_up(run_id)  # the interp node's side of the run, after its stall_abort
+    second, total2 = cell.start(timeout=10)
+    check_done(cell, second, total2, cell.ends(second))
+
+
+def test_a_killed_consumer_restarted(cell: Cell, consumer: ConsumerSpec) -> None:
+    """SIGKILL the consumer mid-run and start it again: the interp node gives
+    the run up after its stall_abort, and the cell starts and completes a new job."""
+    proc = cell.start_consumer(consumer, name="axes")
+    cell.start_upstream()
+    cell.handshake()
+    run_id, _ = cell.start()
+    cell.running(run_id, 200)
+    proc.kill()
+    proc.wait()
+    cell.start_consumer(consumer)
+    cell.given_up(run_id)
+    second, total2 = cell.start(timeout=30)
+    check_done(cell, second, total2, cell.ends(second))
+
+
+def test_status_keys_final_report_and_names(cell: Cell, consumer: ConsumerSpec) -> None:
+    """Run as ``axes``: every job status has the common keys, then role
+    consumer; the final report has the contract's consumer keys and says
+    what the run was, and is repeated; statuses and winder/state are named
+    after the node it runs as."""
+    cell.start_consumer(consumer, name="axes")
+    cell.start_upstream(JOB)
+    cell.handshake()
+    run_id, total = cell.start()
+    report = cell.ends(run_id)
+    check_done(cell, run_id, total, report)
+    cell.wait(
+        lambda: len([s for s in cell.jobs(run_id) if s.values.get("state") == "done"]) >= 2,
+        5,
+        "the final report repeated",
+    )
+    for s in cell.jobs():
+        keys = list(s.values)
+        assert keys[: len(STATUS_KEYS) + 1] == [*STATUS_KEYS, ROLE_KEY], f"{s.name}: {keys}"
+        assert s.name == "axes: job", s.name
+        if s.values["state"] == "running":
+            assert s.values["run_id"] == run_id and s.values["steps_total"] == str(total), s.values
+    v = report.values
+    missing = [k for k in CONSUMER_KEYS if k not in v]
+    assert not missing, f"the final report lacks {missing}: {v}"
+    assert (v["job_id"], v["run_id"]) == (JOB["job_id"], run_id), v
+    assert (v["gaps"], v["chunks_rejected"], v["errors"], v["stalls"]) == ("0", "0", "0", "0"), v
+    assert v["progress"] == "1.0000", v
+    assert report.level == 0, f"a clean run's final report is not OK: [{report.level}] {report.message}"
+    assert report.message.startswith(f"job {JOB['job_id']}: complete, {total}/{total} steps"), report.message
+    names = {name for _, name, _ in cell.states}
+    assert names == {"axes: state"}, names
+    for _, _, values in cell.states:
+        assert list(values) == list(CELL_STATE_KEYS), values
+    assert not [s.name for s in cell.statuses if "sim_node" in s.name], "a status still named sim_node"
+
+
+# -- the interp node and a consumer that ignores aborts ---------------------------------------
+
+
+def test_a_consumer_that_ignores_the_abort_does_not_wedge_the_cell(cell: Cell) -> None:
+    """test/consumers/naive_consumer.py follows the README but not
+    winder/control: after ~/abort it stays busy. A start is refused at first
+    ("consumer busy"); once it has said busy for the interp node's
+    stall_abort after the run ended, the interp node reports it once (ERROR
+    status, log line) and the next start goes ahead: the naive consumer takes
+    the new run and completes it."""
+    stall_abort = 1.5
+    cell.start_consumer(NAIVE)
+    # the consumer acknowledges steps as it executes them: a small window keeps
+    # the run being timed while it goes on, so ~/abort has something to stop
+    cell.start_upstream(stall_abort=stall_abort, max_in_flight=1024, chunk_steps=256)
+    cell.handshake()
+    run_id, total = cell.start()
+    cell.wait(
+        lambda: any(s.values["state"] == "running" for s in cell.jobs(run_id)) and cell.taken(run_id) >= 200,
+        20,
+        f"run {run_id} running at the naive consumer",
+    )
+    reply = cell.call("abort")
+    assert reply.success and "aborting" in reply.message, reply.message
+
+    def interp_aborted() -> Status | None:
+        return next(
+            (
+                s
+                for s in cell.statuses
+                if s.name == "interp_node: job"
+                and s.values.get("run_id") == run_id
+                and s.values.get("state") == "aborted"
+            ),
+            None,
+        )
+
+    cell.wait(interp_aborted, 10, f"the interp node to end run {run_id} on the abort")
+    ended = interp_aborted()
+    assert ended is not None
+    refused = cell.call("start")
+    assert not refused.success and "consumer busy" in refused.message, (
+        f"{refused.message}\n{cell.announcers()}\n{cell.logs()}"
+    )
+    assert cell.taken(run_id) < total and cell.jobs(run_id)[-1].values["state"] == "running"
+
+    def verdict() -> list[Status]:
+        return [
+            s
+            for s in cell.statuses
+            if s.name == "interp_node: job" and s.level == 2 and "ignores the abort" in s.message
+        ]
+
+    cell.wait(verdict, stall_abort + 3 * SLACK, "the interp node's ERROR on the ignored abort")
+    first = verdict()[0]
+    assert (first.values["run_id"], first.values["state"]) == (run_id, "aborted"), first.values
+    want = f"the consumer ignores the abort of run {run_id}: still busy"
+    assert want in first.message and "docs/CONTRACT.md" in first.message, first.message
+    assert first.t - ended.t >= stall_abort - 1.0, f"reported {first.t - ended.t:.1f} s after the run ended"
+    assert cell.ready[-1][1] == "busy", cell.ready[-5:]  # the consumer still says busy
+    second, total2 = cell.start(timeout=5)
+    cell.wait(
+        lambda: any(s.values.get("state") == "done" for s in cell.jobs(second)),
+        20,
+        f"the naive consumer to complete run {second}",
+    )
+    cell.wait(lambda: cell.taken(second) == total2, 5, f"the receipts of run {second} to reach {total2}")
+    assert cell.interp is not None
+    lines = [ln for ln in cell.procs.log(cell.interp).splitlines() if "ignores the abort" in ln]
+    assert len(lines) == 1 and "ERROR" in lines[0] and run_id in lines[0], lines
+
+
+def test_an_abort_ends_aborted_when_its_braking_steps_were_not_sent_yet(cell: Cell) -> None:
+    """As fast as possible, an abort takes effect at the last step the profile
+    node has timed and brakes on steps after it; with a window smaller than
+    the job the interp node has not sent them yet. It sends them (up to the
+    abort's steps, nothing beyond): the sim node ends the run aborted at rest,
+    not incomplete after a stall."""
+    cell.start_consumer(
+        ConsumerSpec("sim_node", ("sim_node",)), stall={"stall_timeout": 1.0, "stall_abort": 5.0}
+    )
+    cell.start_upstream({**JOB, "turns_per_layer": 400}, max_in_flight=16384, chunk_steps=4096)
+    cell.handshake()
+    run_id, total = cell.start()
+    cell.wait(lambda: cell.taken(run_id) >= 4096, 20, f"run {run_id} under way")
+    reply = cell.call("abort")
+    assert reply.success and "aborting" in reply.message, reply.message
+    report = cell.ends(run_id)
+    [abort] = [e for e in cell.events if e.get("event") == "abort" and e.get("run_id") == run_id]
+    v = report.values
+    assert v["state"] == "aborted", f"run {run_id} ended {v['state']}: {report.message}"
+    assert int(v["steps_done"]) == abort["steps"] < total and v["steps_missing"] == "0", (v, abort)
