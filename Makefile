@@ -5,7 +5,8 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.winder-installed
-SETUPS := pyproject.toml src/setup.py winder_interp/setup.py winder_profile/setup.py winder_sim/setup.py
+SETUPS := pyproject.toml src/setup.py winder_interp/setup.py winder_profile/setup.py winder_sim/setup.py \
+	  winder_bridge/setup.py
 
 .PHONY: demo test bench figures venv clean
 
@@ -16,14 +17,14 @@ $(STAMP): $(SETUPS)
 	@echo "winder: installing into $(VENV) (ROS 2 Jazzy wheels, numpy, mcap, rosbags, test tools)"
 	$(BIN)/python -m pip install -q --disable-pip-version-check --upgrade pip
 	$(BIN)/python -m pip install -q --disable-pip-version-check -e '.[ros,test]' \
-		-e ./winder_interp -e ./winder_profile -e ./winder_sim
+		-e ./winder_interp -e ./winder_profile -e ./winder_sim -e ./winder_bridge
 	@touch $(STAMP)
 
 demo: $(STAMP)
 	$(BIN)/winder run
 
 test: $(STAMP)
-	$(BIN)/ruff check src winder_interp winder_profile winder_sim test bench
+	$(BIN)/ruff check src winder_interp winder_profile winder_sim winder_bridge test bench
 	$(BIN)/mypy
 	$(BIN)/python -m pytest
 

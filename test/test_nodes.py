@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import BIN, Procs, rosbags_read, spin_until
+from conftest import BIN, Procs, final_report, is_consumer, rosbags_read, spin_until
 
 pytestmark = pytest.mark.ros
 
@@ -141,7 +141,7 @@ def test_cell_records_every_step_once_in_order(tmp_path: Path, procs: Procs, pro
         s
         for _, m in bag["/diagnostics"]
         for s in m.status
-        if s.name == "sim_node: job" and any(kv.key == "state" and kv.value == "done" for kv in s.values)
+        if is_consumer(s.name, v := {kv.key: kv.value for kv in s.values}) and v.get("state") == "done"
     ]
     assert finals, "no completion report in the bag"
     values = {kv.key: kv.value for kv in finals[-1].values}
@@ -298,8 +298,7 @@ def test_sigint_mid_job_leaves_a_readable_bag(tmp_path: Path, procs: Procs) -> N
     duration = json.loads(bag["/winder/profile_config"][0][1].data)["job_duration_s"]
     assert 0 < clock[-1] < duration / 2
     assert rows[-1, 0] * 1e-9 <= clock[-1] + 0.05 + 0.01
-    finals = [s for _, m in bag["/diagnostics"] for s in m.status if s.name == "sim_node: job"]
-    values = {kv.key: kv.value for kv in finals[-1].values}
+    values = final_report(bag)
     assert values["state"] == "incomplete"
     assert "Traceback" not in procs.log(sim)
 
@@ -328,18 +327,20 @@ def test_colcon_build_installs_runnable_executables(tmp_path: Path, procs: Procs
         stdin=subprocess.DEVNULL,
     )
     assert r.returncode == 0, r.stdout + r.stderr
-    assert "4 packages finished" in r.stdout
+    assert "5 packages finished" in r.stdout
     import os
 
     from ament_index_python.packages import get_package_prefix
 
     os.environ["AMENT_PREFIX_PATH"] = os.pathsep.join(
-        str(ws / "install" / p) for p in ("winder", "winder_interp", "winder_profile", "winder_sim")
+        str(ws / "install" / p)
+        for p in ("winder", "winder_interp", "winder_profile", "winder_sim", "winder_bridge")
     )
     for pkg, exe in [
         ("winder_interp", "interp_node"),
         ("winder_profile", "profile_node"),
         ("winder_sim", "sim_node"),
+        ("winder_bridge", "bridge_node"),
     ]:
         prefix = Path(get_package_prefix(pkg))
         path = prefix / "lib" / pkg / exe

@@ -341,10 +341,14 @@ def report_run(result: Any, wall: float, command: str = "run") -> int:
     print(
         f"  steps              {r.steps_done} of {r.steps_total}  (missing {r.steps_missing}, gaps {r.gaps})"
     )
+    simulated = "lost_steps" in x  # the simulator's report; a hardware consumer's runs in real time
     if "sim_time_s" in s:
-        print(f"  simulated time     {r.sim_time_s:.3f} s")
-    rtf = f"{r.real_time_factor:.1f}" if math.isfinite(r.real_time_factor) else "-"
-    print(f"  real-time factor   {rtf} x  (simulation), run took {wall:.1f} s")
+        print(f"  {'simulated time' if simulated else 'run time':<18} {r.sim_time_s:.3f} s")
+    if simulated:
+        rtf = f"{r.real_time_factor:.1f}" if math.isfinite(r.real_time_factor) else "-"
+        print(f"  real-time factor   {rtf} x  (simulation), run took {wall:.1f} s")
+    else:
+        print(f"  run took           {wall:.1f} s")
     if "mean_deviation_command_m" in x or "mean_deviation_actual_m" in x:
         print(
             f"  mean deviation     command {_number(x, 'mean_deviation_command_m', '.3f', 1e6)} um, "

@@ -27,7 +27,15 @@ from typing import Generic, TypeVar
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["JointStateEncoder", "MultiArrayCodec", "encode_clocks"]
+__all__ = [
+    "CommandPayload",
+    "JointStateEncoder",
+    "JointStateReader",
+    "MultiArrayCodec",
+    "clock_payload",
+    "encode_clocks",
+    "joint_state_names",
+]
 
 _HEADER = b"\x00\x01\x00\x00"  # CDR little endian, no options
 
@@ -191,3 +199,121 @@ class MultiArrayCodec(Generic[IntT]):
             return str(dims)
         except (struct.error, ValueError):
             return f"{len(raw)} unreadable bytes"
+
+
+# -- a hardware bridge's messages (winder_bridge) ----------------------------------
+# The bridge's messages as CDR bytes, ROS-free: what it publishes 1000 times
+# a second is written into preallocated buffers, and what ros2_control
+# publishes is read without building message objects (rclpy's Python messages
+# cost tens of microseconds each; these cost a few).
+#
+# Layouts (XCDR1 little endian; offsets after the 4-byte encapsulation header;
+# primitives aligned to their size from there):
+#
+# * ``std_msgs/Float64MultiArray`` with an empty layout: uint32 dim count (0),
+#   uint32 data_offset (0), uint32 data count n, 4 bytes padding, n float64.
+# * ``rosgraph_msgs/Clock``: int32 sec, uint32 nanosec.
+# * ``sensor_msgs/JointState``: header (int32 sec, uint32 nanosec, string
+#   frame_id), string[] name, float64[] position, float64[] velocity,
+#   float64[] effort.
+
+_CLOCK = struct.Struct("<4siI")
+
+
+def clock_payload(t_ns: int) -> bytes:
+    """A ``rosgraph_msgs/Clock`` payload for ``t_ns`` (ns, >= 0)."""
+    sec, nsec = divmod(t_ns, 1_000_000_000)
+    return _CLOCK.pack(_HEADER, sec, nsec)
+
+
+class CommandPayload:
+    """A ``std_msgs/Float64MultiArray`` of ``n`` values with an empty layout
+    (what a ForwardCommandController reads): :attr:`values` is a float64 view
+    into the payload, so writing it and :meth:`bytes` is the whole cost."""
+
+    def __init__(self, n: int) -> None:
+        self.buf = np.zeros(4 + 16 + 8 * n, dtype=np.uint8)
+        self.buf[:4] = np.frombuffer(_HEADER, np.uint8)
+        self.buf[4 + 8 : 4 + 12] = np.frombuffer(struct.pack("<I", n), np.uint8)
+        self.values: npt.NDArray[np.float64] = self.buf[4 + 16 :].view("<f8")
+
+    def bytes(self) -> bytes:
+        return self.buf.tobytes()
+
+
+def joint_state_names(body: memoryview) -> tuple[list[str], int]:
+    """The joint names of a little-endian CDR ``sensor_msgs/JointState`` (its
+    body, after the 4-byte encapsulation header) and the offset, aligned to
+    4, of the position array's length that follows them; struct.error if
+    the body is cut short."""
+    off = 8  # stamp
+    (flen,) = struct.unpack_from("<I", body, off)
+    off += 4 + flen
+    off += -off % 4
+    (count,) = struct.unpack_from("<I", body, off)
+    off += 4
+    names = []
+    for _ in range(count):
+        off += -off % 4
+        (slen,) = struct.unpack_from("<I", body, off)
+        names.append(bytes(body[off + 4 : off + 3 + slen]).decode("utf-8", "replace"))
+        off += 4 + slen
+    return names, off + (-off % 4)
+
+
+class JointStateReader:
+    """Reads ``sensor_msgs/JointState`` payloads for a fixed list of joints.
+
+    :meth:`read` returns the stamp (ns) and, for each wanted joint, its
+    measured position (NaN where the message does not name it). The
+    message's layout (frame id, names, position count) is parsed once and
+    reused while the bytes before the positions stay the same, as they do
+    from a joint_state_broadcaster; unknown names are ignored."""
+
+    def __init__(self, joints: Sequence[str]) -> None:
+        self.joints = list(joints)
+        self._prefix = b""  # bytes 12 (after the stamp) .. position data of the known layout
+        self._pos_at = 0  # payload offset of the position data
+        self._count = 0  # positions in the message
+        self._index = np.zeros(len(self.joints), np.int64)  # message index of each wanted joint
+        self._present = np.zeros(len(self.joints), bool)
+
+    def read(self, raw: bytes) -> tuple[int, npt.NDArray[np.float64]] | None:
+        """(stamp ns, positions of the wanted joints, NaN if absent), or None
+        if the payload is not a JointState with one position per name."""
+        if len(raw) < 12 or raw[1] != 1:
+            return None
+        known = self._prefix and raw.startswith(self._prefix, 12) and len(raw) >= self._end
+        if not known and not self._parse(raw):
+            return None
+        sec, nsec = struct.unpack_from("<iI", raw, 4)
+        data = np.frombuffer(raw, "<f8", self._count, self._pos_at)
+        out = np.full(len(self.joints), np.nan)
+        out[self._present] = data[self._index[self._present]]
+        return sec * 1_000_000_000 + nsec, out
+
+    @property
+    def _end(self) -> int:
+        return self._pos_at + 8 * self._count
+
+    def _parse(self, raw: bytes) -> bool:
+        body = memoryview(raw)[4:]
+        try:
+            names, off = joint_state_names(body)
+            (npos,) = struct.unpack_from("<I", body, off)
+            off += 4
+            count = len(names)
+        except struct.error:
+            return False
+        if npos != count:
+            return False
+        if npos:
+            off += -off % 8
+        if 4 + off + 8 * npos > len(raw):
+            return False
+        self._pos_at, self._count = 4 + off, npos
+        self._prefix = bytes(raw[12 : self._pos_at])
+        where = {name: i for i, name in enumerate(names)}
+        self._present = np.array([j in where for j in self.joints], bool)
+        self._index = np.array([where.get(j, 0) for j in self.joints], np.int64)
+        return True

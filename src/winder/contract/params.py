@@ -596,3 +596,152 @@ def check_sim(values: dict[str, Any]) -> None:
             StepperAxis(**{k: values[f"{axis}.{k}"] for k in ("Zr", "L", "i_a", "J", "D")})
         except ValueError as exc:
             raise SpecError(f"{axis} axis: {exc}") from None
+
+
+# -- the ros2_control bridge (winder_bridge) ----------------------------------------------
+
+
+@dataclass(frozen=True)
+class _NamesSpec(Spec):
+    """A setting that is a list of names (a ROS string array parameter):
+    non-empty, each name non-empty and without blanks, no name twice, each
+    one of ``choices`` if given. ``kind`` stays ``str`` (the parameter is
+    declared with dynamic typing, so it holds the string array it is given)."""
+
+    def range_text(self) -> str:
+        each = f"one of {', '.join(self.choices)}" if self.choices else "a name without blanks"
+        return f"a list of distinct names (string array), each {each}"
+
+    def check(self, value: Any) -> Any:
+        must = f"must be {self.range_text()}"
+        if isinstance(value, str) or not isinstance(value, (list, tuple)) or not value:
+            raise SpecError(f"{self.name}={value!r} is invalid: {must}")
+        seen: set[str] = set()
+        for item in value:
+            if not isinstance(item, str) or not item or any(c.isspace() for c in item):
+                why = f"{item!r} is no name"
+            elif self.choices and item not in self.choices:
+                why = f"{item!r} is not one of {', '.join(self.choices)}"
+            elif item in seen:
+                why = f"{item!r} is given twice"
+            else:
+                seen.add(item)
+                continue
+            raise SpecError(f"{self.name}={list(value)!r} is invalid: {why}; {must}")
+        return list(value)
+
+    def parse(self, text: str) -> Any:
+        """Comma-separated names, as typed on a command line."""
+        return self.check([t.strip() for t in text.split(",")] if text.strip() else [])
+
+
+#: The unit, default and largest value of each axis' following-error limit
+#: (winder.motion.job: feed in m, fork and pole in rad).
+_FOLLOWING_ERROR = {"feed": ("m", 1e-3, 1.0), "fork": ("rad", 0.2, 100.0), "pole": ("rad", 0.05, 100.0)}
+
+#: The settings of the ros2_control bridge (winder_bridge's bridge_node): the
+#: consumer's, and how it drives a forward_command_controller and watches the
+#: joint states. Read when a run starts; a change applies from the next run.
+BRIDGE_SPECS = {
+    **_table(
+        Spec(
+            "rate", float, 1000.0, "rate of the position commands sent to the controller", "Hz", 10.0, 10000.0
+        ),
+        Spec(
+            "controller",
+            str,
+            "forward_position_controller",
+            "the forward_command_controller/ForwardCommandController the commands go to: topic "
+            "<controller>/commands, relative to this node's namespace (the controller manager's)",
+            pattern=r"[A-Za-z][A-Za-z0-9_]*",
+            pattern_text="a controller name (letters, digits and _, starting with a letter)",
+        ),
+        _NamesSpec(
+            "joints",
+            str,
+            list(AXES),
+            "the controller's joints, in its order: each command holds their positions in that order",
+        ),
+        _NamesSpec(
+            "axes",
+            str,
+            list(AXES),
+            "the cell axis each of joints drives (same length as joints, every axis once)",
+            choices=AXES,
+        ),
+        Spec(
+            "job_origin",
+            str,
+            "zero",
+            "where a job's step 0 is: zero = joint position 0 (commands are steps times step length; a "
+            "run starts only with the joints at the job's start); start_position = where the joints are "
+            "measured when the run starts (commands are that plus the steps since the start times step "
+            "length)",
+            choices=("zero", "start_position"),
+        ),
+        Spec(
+            "joint_state_timeout",
+            float,
+            0.1,
+            "a run without a measured position of a joint (joint_states) for this long is a servo fault",
+            "s",
+            0.005,
+            10.0,
+        ),
+        Spec(
+            "command_delay",
+            float,
+            0.02,
+            "how long a command takes to show in the measured position (transport both ways, the "
+            "controller manager's cycle, the drive's dead time): a measured position among the positions "
+            "commanded over this stretch before its stamp has no following error",
+            "s",
+            0.0,
+            1.0,
+        ),
+        Spec(
+            "settle_time",
+            float,
+            0.2,
+            "after the last step, the final position is commanded (and watched) this long before the run "
+            "closes",
+            "s",
+            0.0,
+            60.0,
+        ),
+    ),
+    **{
+        f"max_following_error.{axis}": Spec(
+            f"max_following_error.{axis}",
+            float,
+            _FOLLOWING_ERROR[axis][1],
+            f"{axis} axis: the largest following error (how far the measured position is from the "
+            "positions commanded over command_delay before its stamp) before the run stops with a servo "
+            "fault",
+            _FOLLOWING_ERROR[axis][0],
+            0.0,
+            _FOLLOWING_ERROR[axis][2],
+            low_open=True,
+        )
+        for axis in AXES
+    },
+    **CONSUMER_SPECS,
+}
+
+
+def check_bridge(values: dict[str, Any]) -> None:
+    """Cross-field check of the bridge: ``joints`` and ``axes`` pair up one to
+    one and name every axis of the cell once; the bag directory must be
+    writable when recording."""
+    check_consumer(values)
+    joints, axes = values["joints"], values["axes"]
+    if len(axes) != len(joints):
+        raise SpecError(
+            f"axes={axes!r} is invalid: must name one axis for each of joints ({len(joints)}: {joints!r})"
+        )
+    missing = [a for a in AXES if a not in axes]
+    if missing:
+        raise SpecError(
+            f"axes={axes!r} is invalid: every axis of the cell ({', '.join(AXES)}) must be driven; "
+            f"{', '.join(missing)} is not"
+        )

@@ -39,6 +39,7 @@ from typing import Any, Protocol
 import numpy as np
 import numpy.typing as npt
 
+from winder.contract.cdr import joint_state_names
 from winder.contract.stream import TIMED_COLUMNS, JobPlan, parse_job_description
 from winder.contract.topics import (
     TOPIC_CONTROL,
@@ -323,17 +324,7 @@ def _joint_layout(data: bytes) -> tuple[list[str], int, int] | None:
     if len(data) < 16 or data[1] != 1:
         return None
     body = memoryview(data)[4:]
-    off = 8  # stamp
-    (flen,) = struct.unpack_from("<I", body, off)
-    off = align(off + 4 + flen, 4)
-    (count,) = struct.unpack_from("<I", body, off)
-    off += 4
-    names = []
-    for _ in range(count):
-        off = align(off, 4)
-        (slen,) = struct.unpack_from("<I", body, off)
-        names.append(bytes(body[off + 4 : off + 3 + slen]).decode("utf-8", "replace"))
-        off += 4 + slen
+    names, off = joint_state_names(body)
     offsets = []
     for _ in range(2):  # position, velocity
         off = align(off, 4)

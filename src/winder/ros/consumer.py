@@ -175,7 +175,7 @@ class StepConsumer(ManagedNode):
         )
         # pump() runs on events (a chunk, a job) and, while work waits on the
         # clock (pacing, batching), every 5 ms; idle, only the 1 Hz report runs
-        self.pump_timer = steady_timer(self, 0.005, self.pump)
+        self.pump_timer = steady_timer(self, self.pump_period, self.pump)
         steady_timer(self, 0.5, self.watch)
         steady_timer(self, 1.0, self.report)
         self.bag_topics = {
@@ -198,6 +198,11 @@ class StepConsumer(ManagedNode):
 
     #: whether this consumer publishes ``winder/sim_config`` (:meth:`begin` returns it)
     configures = True
+    #: s between pumps while work waits on the clock (a backend with a pacing
+    #: thread of its own needs the pump less often)
+    pump_period = 0.005
+    #: chunks kept for a run whose description has not come yet, at most
+    EARLY_CHUNKS = 4096
 
     # -- the hooks (see the module doc) -----------------------------------------
     def begin(self, plan: JobPlan, values: dict[str, Any]) -> dict[str, object] | None:
@@ -246,6 +251,15 @@ class StepConsumer(ManagedNode):
     def paces(self) -> bool:
         """Whether execution follows the wall clock now (a real-time run)."""
         return False
+
+    def missing(self) -> str:
+        """Why the backend cannot take a run now (its hardware is not there),
+        in words; "" if it can. Announced as "waiting"."""
+        return ""
+
+    def closing(self) -> None:
+        """The run is about to close: stop executing, account for what was
+        executed (:meth:`executed`, :meth:`reached`), record what is pending."""
 
     # -- lifecycle (winder.ros.managed) ----------------------------------------
     def in_run(self) -> bool:
@@ -334,10 +348,36 @@ class StepConsumer(ManagedNode):
         events, self.early_events = list(self.early_events), deque(maxlen=100)
         for event in events:  # the run's own events that came before its description; others dropped
             self.handle_control(event, early=True)
-        early, self.early = self.early, []
+        early, self.early = self.fresh(plan, self.early), []
         for chunk in early:  # in order, before any taken from the queue
             self.receive(chunk)
         self.pump()
+
+    def fresh(self, plan: JobPlan, early: list[bytes]) -> list[bytes]:
+        """The chunks of the new run among those that came while no run was
+        going on. Chunks carry no run id, and one writer's are delivered in
+        order: those of a run closed early (an abort, a stall, a fault) that
+        were still on their way come first; the new run's begin with a chunk
+        whose first row is its first step. Everything before that is dropped
+        (said once); with no such chunk, all of them."""
+        start = None
+        if plan.segments:
+            first = np.asarray(plan.segments[0].start, np.int64)
+            for i in range(len(early) - 1, -1, -1):
+                try:
+                    rows = TIMED_CDR.decode(early[i])
+                except ValueError:
+                    continue
+                if rows.shape[0] and rows[0, 1] == 0 and np.abs(rows[0, 2:] - first).max() == 1:
+                    start = i
+                    break
+        stale = len(early) if start is None else start
+        if stale:
+            self.get_logger().warning(
+                f"run {plan.run_id or plan.job_id}: {stale} step chunks of an earlier run, still on "
+                "their way when it closed, dropped"
+            )
+        return early[stale:]
 
     def open_bag(self, plan: JobPlan, values: dict[str, Any], job_raw: bytes, config_raw: bytes) -> None:
         try:
@@ -440,6 +480,8 @@ class StepConsumer(ManagedNode):
 
     def receive(self, raw: bytes) -> None:
         if self.plan is None or self.checker is None or self.finishing:
+            if len(self.early) >= self.EARLY_CHUNKS:
+                self.early.pop(0)  # a closed run's stream still coming: the oldest can only be stale
             self.early.append(raw)
             return
         self.last_chunk_wall = time.monotonic()
@@ -631,6 +673,7 @@ class StepConsumer(ManagedNode):
         Signals wait meanwhile, so a Ctrl-C cannot split the three."""
         if self.plan is None:
             return
+        self.closing()
         self.take_control()  # the run's last events go into its bag
         with signals_held():
             self._finish(complete)
@@ -762,13 +805,10 @@ class StepConsumer(ManagedNode):
         idle = time.monotonic() - self.last_chunk_wall
         settings = self.settings.values()
         done = f"{self.ledger.executed_steps}/{self.plan.total_steps}"
-        if idle > settings["stall_abort"]:
-            self.error(f"step stream stalled for {idle:.1f} s at {done} steps: job closed incomplete")
-            self.finish(complete=False)
-            return
         if not self.stalled and idle > settings["stall_timeout"]:
             # reported at once and while it lasts (report()); a stall that ends
-            # with nothing lost does not fail the run, so it is not an error()
+            # with nothing lost does not fail the run, so it is not an error().
+            # Reported before a close too: a watch that comes late still says it
             self.stalled = True
             self.stalls += 1
             why = f"step stream stalled: no steps for {idle:.1f} s at {done} steps"
@@ -776,6 +816,9 @@ class StepConsumer(ManagedNode):
             self.publish_status(
                 "stream", ERROR, why, {"job_id": self.plan.job_id, "run_id": self.plan.run_id}
             )
+        if idle > settings["stall_abort"]:
+            self.error(f"step stream stalled for {idle:.1f} s at {done} steps: job closed incomplete")
+            self.finish(complete=False)
 
     def receipt(self) -> None:
         """The steps of the run executed so far, or known missing, on
@@ -802,7 +845,7 @@ class StepConsumer(ManagedNode):
             state = "inactive"
         else:
             heard = self.sub_times.get_publisher_count() > 0 and self.sub_job.get_publisher_count() > 0
-            state = "ready" if heard else "waiting"
+            state = "ready" if heard and not self.missing() else "waiting"
         self.ready.announce(state)
 
     def report(self) -> None:

@@ -305,11 +305,11 @@ def _save(fig: Figure, path: Path) -> Path:
 
 def _title(run: Run) -> str:
     j = run.plan.job
-    model = run.sim_config.model if run.sim_config else "?"
+    model = f"{run.sim_config.model} motor model" if run.sim_config else "no motor model"
     state = "complete" if run.complete else ("cut short, recovered" if run.recovered else "incomplete")
     return (
         f"{run.label}: {j.poles} poles x {j.layers} layers x {j.turns_per_layer} turns, "
-        f"{run.profile or '?'} profile, {model} motor model ({state})"
+        f"{run.profile or '?'} profile, {model} ({state})"
     )
 
 
@@ -775,7 +775,10 @@ def plot_analysis(
     d = digested if digested is not None else digest_run(run)
     out = plots_dir(run.path) if out is None else Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    figures = ["motion", "tracking", "winding"] + (["operations"] if run.events else [])
+    # tracking.png compares the commands with the axes' samples: a run
+    # without joint samples (a hardware consumer records its own topics) has none to draw
+    tracking = ["tracking"] if run.states.t.size else []
+    figures = ["motion", *tracking, "winding"] + (["operations"] if run.events else [])
     global _JOB
     _JOB = (run, analysis, d, out)
     try:

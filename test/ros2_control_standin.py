@@ -1,0 +1,138 @@
+"""A stand-in for a ros2_control system, for the bridge's tests (ros2_control
+itself cannot be installed here, docs/BRIDGE.md). One process, three nodes
+named and namespaced as ros2_control makes them, behaving as documented:
+
+* ``controller_manager``: the update loop at ``--rate`` Hz on the steady
+  clock: read (the hardware's state interfaces), update (the controllers),
+  write (nothing to do for a mock);
+* ``<controller>`` (forward_command_controller/ForwardCommandController):
+  subscribes ``~/commands`` (std_msgs/Float64MultiArray, reliable, as
+  rclcpp's SystemDefaultsQoS); each update writes the last command received
+  into the joints' position command interfaces; a command whose size is not
+  the number of joints is rejected with an error log and ignored;
+* ``joint_state_broadcaster``: publishes sensor_msgs/JointState on
+  ``joint_states`` (relative: ``/<ns>/joint_states``) with the joints' names,
+  position, velocity and effort at each update, stamped with the update's
+  time (system clock, ROS time without use_sim_time);
+* the hardware, mock_components/GenericSystem: each read copies the position
+  command interfaces into the state interfaces (``--offset JOINT=VALUE``:
+  ``position_state_following_offset`` of one joint); beyond the mock,
+  ``--lag JOINT=TAU`` gives a joint a first-order lag of TAU s and
+  ``--stuck JOINT`` freezes one, ``--silent-after S`` stops the broadcaster
+  S s after the first command (a dead state stream).
+
+    python ros2_control_standin.py --joints a,b,c [--controller NAME] [--rate HZ] [...] [--ros-args ...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+
+import rclpy
+from rclpy.clock import Clock
+from rclpy.clock_type import ClockType
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+
+
+def pairs(items: list[str], kind: type) -> dict[str, float]:
+    out = {}
+    for item in items:
+        name, _, value = item.partition("=")
+        out[name] = kind(value)
+    return out
+
+
+def main() -> None:
+    argv = rclpy.utilities.remove_ros_args(sys.argv)[1:]
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--joints", required=True)
+    ap.add_argument("--controller", default="forward_position_controller")
+    ap.add_argument("--rate", type=float, default=250.0)
+    ap.add_argument("--initial", action="append", default=[], metavar="JOINT=VALUE")
+    ap.add_argument("--offset", action="append", default=[], metavar="JOINT=VALUE")
+    ap.add_argument("--lag", action="append", default=[], metavar="JOINT=TAU")
+    ap.add_argument("--stuck", action="append", default=[], metavar="JOINT")
+    ap.add_argument("--silent-after", type=float, default=math.inf)
+    args = ap.parse_args(argv)
+    joints = args.joints.split(",")
+    initial, offset, lag = pairs(args.initial, float), pairs(args.offset, float), pairs(args.lag, float)
+
+    rclpy.init(args=sys.argv)
+    cm = rclpy.create_node("controller_manager")
+    ctrl = rclpy.create_node(args.controller)
+    jsb = rclpy.create_node("joint_state_broadcaster")
+    log = ctrl.get_logger()
+
+    command = [initial.get(j, 0.0) for j in joints]  # the position command interfaces
+    state = list(command)  # the position state interfaces
+    velocity = [0.0] * len(joints)
+    last_msg: list[list[float] | None] = [None]
+    first_command = [math.inf]
+    refused = [0.0]
+
+    def on_commands(msg: Float64MultiArray) -> None:
+        if len(msg.data) != len(joints):
+            now = time.monotonic()
+            if now - refused[0] > 1.0:  # RCLCPP_ERROR_THROTTLE, 1 s
+                refused[0] = now
+                log.error(
+                    f"command size ({len(msg.data)}) does not match number of interfaces ({len(joints)})"
+                )
+            return
+        last_msg[0] = list(msg.data)
+        if first_command[0] == math.inf:
+            first_command[0] = time.monotonic()
+            log.info(f"first command: {list(msg.data)}")
+
+    reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+    ctrl.create_subscription(Float64MultiArray, "~/commands", on_commands, reliable)
+    pub = jsb.create_publisher(JointState, "joint_states", reliable)
+    dt = 1.0 / args.rate
+    last = [time.monotonic()]
+
+    def update() -> None:
+        now = time.monotonic()
+        period, last[0] = now - last[0], now
+        # read: the mock copies commands into states (with the extras of this stand-in)
+        for i, j in enumerate(joints):
+            before = state[i]
+            if j in args.stuck:
+                pass
+            elif j in lag:
+                state[i] += (command[i] + offset.get(j, 0.0) - state[i]) * (1 - math.exp(-period / lag[j]))
+            else:
+                state[i] = command[i] + offset.get(j, 0.0)
+            velocity[i] = (state[i] - before) / period if period > 0 else 0.0
+        # update: the broadcaster publishes the states, the forward controller writes its command
+        if now - first_command[0] < args.silent_after:
+            msg = JointState(
+                name=joints, position=list(state), velocity=list(velocity), effort=[0.0] * len(joints)
+            )
+            msg.header.stamp = cm.get_clock().now().to_msg()
+            pub.publish(msg)
+        if last_msg[0] is not None:
+            command[:] = last_msg[0]
+
+    cm.create_timer(dt, update, clock=Clock(clock_type=ClockType.STEADY_TIME))
+    ex = SingleThreadedExecutor()
+    for n in (cm, ctrl, jsb):
+        ex.add_node(n)
+    cm.get_logger().info(f"stand-in up: joints {joints}, {args.controller}, {args.rate:g} Hz")
+    try:
+        ex.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        for n in (cm, ctrl, jsb):
+            n.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,415 @@
+"""The ros2_control bridge (winder_bridge's bridge_node), as real processes.
+
+ros2_control cannot be installed here (docs/BRIDGE.md): the controller
+manager, the forward position controller, the joint state broadcaster and
+the mock hardware are played by ``test/ros2_control_standin.py``, which
+behaves as their documentation says (one process, the same node and topic
+names). The interp and profile nodes are the real ones.
+
+Oracles: the step rows recorded in the bag (what the profile node sent) and
+the job's step lengths, worked with here by hand: the command at each tick
+is the last row due times the step length, exactly; the wire helpers are
+checked against rclpy's own serialization, the pacer against a loop.
+"""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from conftest import Procs, final_report, rosbags_read, spin_until
+
+from winder.motion.job import Job
+
+pytestmark = pytest.mark.ros
+
+STANDIN = Path(__file__).with_name("ros2_control_standin.py")
+#: the controller's joints, in its order, and the cell axis each drives (not the cell's order)
+JOINTS = ["pole_joint", "flyer", "feed_screw"]
+AXES_OF = ["pole", "fork", "feed"]
+JOB = {"turns_per_layer": 4, "layers": 1, "poles": 2, "fork_steps_per_rev": 512, "job_id": "br"}
+#: the ramp; a look-ahead of 0.2 s (not 0.05) so that steps are not late on two busy shared cores
+RAMP = {"v_max": "4000.0", "a_max": "40000.0", "j_max": "1000000.0", "lookahead": "0.2"}
+COMMANDS = "/forward_position_controller/commands"
+
+
+def start_standin(procs: Procs, *args: str) -> subprocess.Popen[bytes]:
+    """The ros2_control stand-in, stopped with the test's other processes."""
+    log = procs.log_dir / f"standin-{len(procs.procs)}.log"
+    p = subprocess.Popen(
+        [sys.executable, str(STANDIN), "--joints", ",".join(JOINTS), *args],
+        env=procs.env,
+        stdout=log.open("wb"),
+        stderr=subprocess.STDOUT,
+        stdin=subprocess.DEVNULL,
+    )
+    procs.procs.append((p, log))
+    return p
+
+
+def start_cell(procs: Procs, bags: Path, *bridge_params: str) -> subprocess.Popen[bytes]:
+    """bridge_node (joints mapped out of the cell's order), profile_node and
+    interp_node (autostart); the bridge process."""
+    bridge = procs.start(
+        "bridge_node",
+        "-p",
+        f"bag_dir:={bags}",
+        "-p",
+        "joint_state_timeout:=0.5",  # the stand-in is a Python process on two busy cores
+        "-p",
+        f"joints:=[{','.join(JOINTS)}]",
+        "-p",
+        f"axes:=[{','.join(AXES_OF)}]",
+        *bridge_params,
+    )
+    procs.start("profile_node", *[a for k, v in RAMP.items() for a in ("-p", f"{k}:={v}")])
+    procs.start("interp_node", *[a for k, v in JOB.items() for a in ("-p", f"{k}:={v}")])
+    return bridge
+
+
+def wait_for_bags(bags: Path, n: int, timeout: float = 60.0) -> list[Path]:
+    """The first ``n`` closed bags (metadata.yaml written), oldest first."""
+    t_end = time.monotonic() + timeout
+    while time.monotonic() < t_end:
+        done = sorted(m.parent for m in bags.glob("*/metadata.yaml"))
+        if len(done) >= n:
+            return done
+        time.sleep(0.2)
+    raise AssertionError(f"no {n} closed bag(s) in {bags} within {timeout} s")
+
+
+def start_again(ros: Any) -> str:
+    """Call the interp node's ~/start until a run starts (the cell settles first); its reply."""
+    from std_srvs.srv import Trigger
+
+    client = ros.create_client(Trigger, "/interp_node/start")
+    spin_until(ros, client.service_is_ready, 30, "interp_node/start")
+    reply = ""
+    t_end = time.monotonic() + 30
+    while "started" not in reply and time.monotonic() < t_end:
+        future = client.call_async(Trigger.Request())
+        spin_until(ros, future.done, 10, "the start reply")
+        reply = future.result().message
+        if "started" not in reply:
+            time.sleep(0.5)
+    assert "started" in reply, reply
+    return reply
+
+
+def step_rows(raw: dict[str, list[tuple[int, Any]]]) -> np.ndarray:
+    chunks = []
+    for _, msg in raw["/winder/step_times"]:
+        dims = msg.layout.dim
+        chunks.append(np.asarray(msg.data, dtype=np.int64).reshape(dims[0].size, dims[1].size))
+    return np.vstack(chunks)
+
+
+def step_lengths() -> np.ndarray:
+    """Each joint's travel per step (m or rad), by hand from the job fields."""
+    per_axis = {
+        "feed": 1e-5,  # feed_step, the default
+        "fork": 2 * math.pi / JOB["fork_steps_per_rev"],
+        "pole": 2 * math.pi / 1024,  # pole_steps_per_rev, the default
+    }
+    return np.array([per_axis[a] for a in AXES_OF])
+
+
+def commands(raw: dict[str, list[tuple[int, Any]]]) -> tuple[np.ndarray, np.ndarray]:
+    """Log times (ns) and positions of every command recorded."""
+    t = np.array([t for t, _ in raw[COMMANDS]], dtype=np.int64)
+    pos = np.array([np.asarray(m.data) for _, m in raw[COMMANDS]])
+    return t, pos
+
+
+def check_commands(raw: dict[str, list[tuple[int, Any]]], report: dict[str, str]) -> np.ndarray:
+    """Every command is the step counts of one row (or the start) times the
+    step lengths, exactly; the rows they come from never go back, and never
+    lie ahead of the command's time (t_ns <= its run time: log time less
+    wall_start_ns). If no step came after its time (the bridge counts them),
+    each command is exactly the last row due at its time. The row index
+    (0 = the start) of each command."""
+    rows, wall0 = step_rows(raw), sim_config(raw)["wall_start_ns"]
+    t_log, pos = commands(raw)
+    assert np.all(np.diff(t_log) > 0)
+    which = {"feed": 2, "fork": 3, "pole": 4}
+    counts = np.vstack([np.zeros((1, 3), np.int64), rows[:, [which[a] for a in AXES_OF]]])
+    # (pole, fork) strictly increases from row to row in this job: each command names its row
+    index = {tuple(c): k for k, c in enumerate(counts.tolist())}
+    steps = np.rint(pos / step_lengths()).astype(np.int64)
+    k = np.array([index[tuple(c)] for c in steps.tolist()])
+    np.testing.assert_array_equal(pos, counts[k] * step_lengths())  # exact: counts times step length
+    due = np.searchsorted(rows[:, 0], t_log - wall0, side="right")  # the last row due at each command
+    assert np.all(np.diff(k) >= 0) and np.all(k <= due)  # never back, never ahead of time
+    if report["late_steps"] == "0":
+        np.testing.assert_array_equal(k, due)
+    return k
+
+
+def sim_config(raw: dict[str, list[tuple[int, Any]]]) -> dict[str, Any]:
+    import json
+
+    [(_, msg)] = raw["/winder/sim_config"]
+    doc: dict[str, Any] = json.loads(msg.data)
+    return doc
+
+
+# -- the wire helpers and the pacer, against independent oracles ---------------
+
+
+def test_payloads_are_what_rclpy_serializes() -> None:
+    from rclpy.serialization import deserialize_message, serialize_message
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+
+    from winder.contract.cdr import CommandPayload, JointStateReader, clock_payload
+
+    cmd = CommandPayload(3)
+    cmd.values[:] = [1.5, -2.25, math.pi]
+    theirs, ours = serialize_message(Float64MultiArray(data=[1.5, -2.25, math.pi])), cmd.bytes()
+    assert len(ours) == len(theirs) and ours[20:] == theirs[20:]  # 16..20: padding (left unset by rclpy)
+    assert ours[:16] == theirs[:16] and ours[16:20] == bytes(4)
+    assert list(deserialize_message(ours, Float64MultiArray).data) == [1.5, -2.25, math.pi]
+    msg = Clock()
+    msg.clock.sec, msg.clock.nanosec = 12, 345_678_901
+    assert clock_payload(12_345_678_901) == serialize_message(msg)
+
+    reader = JointStateReader(JOINTS)
+    for frame, names in [("", ["feed_screw", "x", "flyer", "pole_joint"]), ("base_link", ["flyer", "yy"])]:
+        js = JointState(name=names, position=[float(i) + 0.5 for i in range(len(names))])
+        js.header.frame_id = frame
+        js.header.stamp.sec, js.header.stamp.nanosec = 7, 9
+        for _ in range(2):  # the layout parsed, then reused
+            got = reader.read(serialize_message(js))
+            assert got is not None
+            stamp, pos = got
+            assert stamp == 7_000_000_009
+            want = [names.index(j) + 0.5 if j in names else math.nan for j in JOINTS]
+            np.testing.assert_array_equal(pos, want)
+    assert reader.read(serialize_message(JointState(name=["flyer"], position=[]))) is None
+
+
+def test_pacer_commands_the_last_row_due() -> None:
+    from winder.contract.pacing import Pacer
+
+    rng = np.random.default_rng(3)
+    n = 5000
+    rows = np.zeros((n, 5), np.int64)
+    rows[:, 0] = np.cumsum(rng.integers(1, 2_000_000, n))
+    rows[:, 2:] = np.cumsum(rng.integers(-1, 2, (n, 3)), axis=0)
+    cols, lengths = [4, 3, 2], step_lengths()  # pole, fork, feed: AXES_OF
+    pacer = Pacer(cols, np.zeros(3, np.int64), lengths, capacity=64)
+    ticks = np.sort(rng.integers(0, int(rows[-1, 0]) + 10, 3000))
+    fed, executed = 0, 0
+    for t in ticks:
+        while fed < n and rows[fed, 0] <= t + 3_000_000:  # rows arrive a little ahead, in chunks of 7
+            pacer.add(rows[fed : fed + 7])
+            fed = min(fed + 7, n)
+        pacer.advance(int(t))
+        executed += pacer.take_due()
+        due = [i for i in range(fed) if rows[i, 0] <= t]  # the oracle: a loop over the rows
+        want = rows[due[-1], cols] if due else np.zeros(3, np.int64)
+        assert executed == len(due)
+        assert list(pacer.position) == [int(s) * float(k) for s, k in zip(want, lengths, strict=True)]
+
+
+# -- the cell with the stand-in ---------------------------------------------------
+
+
+def test_whole_job_commands_the_exact_steps_in_time(tmp_path: Path, procs: Procs, ros: Any) -> None:
+    """A whole job: done, the commands and measured states in the bag, each
+    command the steps of the last row due at its time times the step
+    lengths, exactly (so never ahead of its time and never back), the last
+    one the job's end; the cell's clock from 0, increasing. A second run of
+    the job, with the joints at the first one's end (job_origin zero), does
+    not start: no command, a servo fault saying where the joints are."""
+    bags = tmp_path / "bags"
+    standin = start_standin(procs)
+    bridge = start_cell(
+        procs,
+        bags,
+        *("-p", "max_following_error.fork:=5.0", "-p", "max_following_error.pole:=1.0"),
+        *("-p", "max_following_error.feed:=0.01"),
+    )
+    [bag] = wait_for_bags(bags, 1)
+    raw = rosbags_read(bag)
+    report = final_report(raw)
+    assert report["state"] == "done", report["servo_fault"] or report
+    assert report["errors"] == "0" and report["servo_fault"] == "", report
+    assert report["steps_done"] == report["steps_total"] == str(Job(**JOB).total_steps)
+
+    k = check_commands(raw, report)
+    assert k[-1] == step_rows(raw).shape[0]  # the job's last row, held while settling
+    t_log, pos = commands(raw)
+    job = Job(**JOB)
+    end = job.segments()[-1]
+    final = [end.start[i] + end.delta[i] for i in (2, 1, 0)]  # pole, fork, feed
+    assert pos[-1].tolist() == [s * k for s, k in zip(final, step_lengths().tolist(), strict=True)]
+    assert len(t_log) > 0.5 * (t_log[-1] - t_log[0]) / 1e6  # about 1 kHz (two shared cores)
+
+    states = raw["/joint_states"]
+    assert len(states) > 50
+    assert list(states[-1][1].name) == JOINTS
+    np.testing.assert_allclose(states[-1][1].position, pos[-1], rtol=0, atol=1e-12)  # the mock follows
+    clock = np.array([m.clock.sec * 10**9 + m.clock.nanosec for _, m in raw["/clock"]])
+    assert sim_config(raw)["clock_origin_ns"] == 0  # the node's first run
+    assert clock[0] == 0 and np.all(np.diff(clock) > 0)  # from the arming tick on
+    for p in (bridge, standin):
+        assert p.poll() is None
+    assert "Traceback" not in procs.log(bridge)
+    assert "does not match number of interfaces" not in procs.log(standin)
+    # winder's own reader and winder analyze take the bridge's bag: no motor
+    # model in its sim_config (said in a note), the consumer's final report
+    from winder.analysis.metrics import analyze
+    from winder.record.reader import read_run
+
+    run = read_run(bag)
+    assert run.sim_config is None and any("no motor model" in n for n in run.notes), run.notes
+    assert run.report["state"] == "done" and run.report["role"] == "consumer" and run.closed
+    assert analyze(run).error_list == []
+
+    start_again(ros)
+    second = wait_for_bags(bags, 2)[1]
+    raw2 = rosbags_read(second)
+    report2 = final_report(raw2)
+    assert report2["state"] == "incomplete" and report2["steps_done"] == "0", report2
+    assert (
+        "the run cannot start: joint flyer (fork axis) is at 50.2655 rad, the job starts at 0 rad"
+        in (report2["servo_fault"])
+    ), report2
+    assert not raw2.get(COMMANDS) and not raw2.get("/clock")  # nothing commanded, the clock not started
+
+
+@pytest.mark.parametrize(
+    ("fault", "joint", "words", "words2"),
+    [
+        (("--stuck", "feed_screw"), "feed_screw", "following error", "following error"),
+        (("--silent-after", "0.4"), "", "joint_state_timeout", "cannot start: no joint_states"),
+    ],
+    ids=["stuck_joint", "silent_joint_states"],
+)
+def test_servo_fault_stops_the_cell(
+    tmp_path: Path, procs: Procs, ros: Any, fault: tuple[str, str], joint: str, words: str, words2: str
+) -> None:
+    """A stuck joint (or a broadcaster gone quiet): an ERROR naming the joint,
+    the run closed incomplete with a readable bag, the commands held from
+    the fault on, the profile node told to abort, the interp node ready for
+    a new start, and that next run clean (no stale step of the first)."""
+    bags = tmp_path / "bags"
+    start_standin(procs, *fault)
+    bridge = start_cell(
+        procs,
+        bags,
+        *("-p", "max_following_error.fork:=5.0", "-p", "max_following_error.pole:=1.0"),
+        *("-p", "job_origin:=start_position"),
+    )
+    [bag] = wait_for_bags(bags, 1)
+    raw = rosbags_read(bag)
+    report = final_report(raw)
+    assert report["state"] == "incomplete", report
+    assert 0 < int(report["steps_done"]) < int(report["steps_total"])
+    fault_text = report["servo_fault"]
+    assert words in fault_text and "servo fault: joint" in fault_text, fault_text
+    if joint:
+        assert f"joint {joint} (feed axis)" in fault_text
+        assert "max_following_error.feed = 0.001 m" in fault_text
+    servo = [
+        st
+        for _, arr in raw["/diagnostics"]
+        for st in arr.status
+        if st.name == "bridge_node: servo" and st.level == 2
+    ]
+    assert len(servo) == 1 and servo[0].message == fault_text
+    assert "\n" not in fault_text
+    assert [m.values[0].value for _, m in raw["/winder/state"]] == ["running", "failed"]
+    # no jump up to the fault (the job starts at 0, where the stand-in's joints are): every
+    # command is the steps of a row due at its time; then they hold
+    check_commands(raw, report)
+
+    log = procs.log(bridge)
+    t_end = time.monotonic() + 20
+    while "profile_node/abort: run" not in log and time.monotonic() < t_end:
+        time.sleep(0.2)
+        log = procs.log(bridge)
+    assert "/profile_node/abort: run" in log and "aborting" in log, log
+
+    # the interp node stopped sending: a new start is taken
+    start_again(ros)
+    # that run (from where the joints stopped: job_origin start_position) faults the same way,
+    # with a clean stream: the first run's late chunks were not taken for it
+    second = wait_for_bags(bags, 2)[1]
+    report2 = final_report(rosbags_read(second))
+    assert report2["state"] == "incomplete" and words2 in report2["servo_fault"], report2
+    assert (report2["gaps"], report2["chunks_rejected"], report2["steps_missing"]) == ("0", "0", "0"), report2
+    assert "Traceback" not in procs.log(bridge)
+
+
+def test_bad_settings_are_refused_in_one_line(tmp_path: Path, procs: Procs, ros: Any) -> None:
+    """Bad values at start: each reported in one line naming the setting, the
+    value and what is allowed (the node runs on, blocked); at run time:
+    refused with such a reason, cross-field rules included."""
+    from test_nodes import set_params
+
+    bad = {
+        "rate": "0.5",
+        "controller": "9lives",
+        "joints": "[flyer,flyer,pole_joint]",
+        "axes": "[feed,fork,spindle]",
+        "max_following_error.feed": "-0.001",
+        "joint_state_timeout": "0.0",
+        "command_delay": "2.0",
+    }
+    args = [a for k, v in bad.items() for a in ("-p", f"{k}:={v}")]
+    p = procs.start("bridge_node", "-p", f"bag_dir:={tmp_path / 'bags'}", *args)
+    t_end = time.monotonic() + 30
+    while time.monotonic() < t_end and not all(f"{n}=" in procs.log(p) for n in bad):
+        time.sleep(0.2)
+    lines = procs.log(p).splitlines()
+    for name in bad:
+        [line] = [x for x in lines if f"{name}=" in x and "invalid" in x]
+        assert "must" in line or "is not" in line, line
+    assert any("given twice" in x for x in lines)
+    assert any("'spindle' is not one of feed, fork, pole" in x for x in lines)
+
+    for values in (
+        {"rate": 20000.0},
+        {"joints": ["a", "b"]},  # two joints for three axes
+        {"axes": ["feed", "feed", "pole"]},
+        {"joints": "flyer"},  # not a list
+        {"max_following_error.fork": 0.0},
+    ):
+        [res] = set_params(ros, "bridge_node", values)
+        [name] = values
+        assert not res.successful, values
+        assert name in res.reason and "\n" not in res.reason, res.reason
+    [res] = set_params(ros, "bridge_node", {"joints": ["j_pole", "j_fork", "j_feed"]})
+    assert res.successful, res.reason
+    assert p.poll() is None and "Traceback" not in procs.log(p)
+    assert not (tmp_path / "bags").exists()
+
+
+def test_sigint_mid_run_closes_a_readable_bag(tmp_path: Path, procs: Procs) -> None:
+    """Ctrl-C during a run: the process exits 0, the bag is closed (metadata
+    written) with the run incomplete and every command sent so far in it."""
+    bags = tmp_path / "bags"
+    start_standin(procs)
+    bridge = start_cell(
+        procs, bags, *("-p", "max_following_error.fork:=5.0", "-p", "max_following_error.pole:=1.0")
+    )
+    t_end = time.monotonic() + 60
+    while "run armed" not in procs.log(bridge) and time.monotonic() < t_end:
+        time.sleep(0.1)
+    time.sleep(0.5)
+    assert procs.stop(bridge) == 0
+    [bag] = wait_for_bags(bags, 1, timeout=5)
+    raw = rosbags_read(bag)
+    report = final_report(raw)
+    assert report["state"] == "incomplete" and 0 < int(report["steps_done"]) < int(report["steps_total"])
+    assert int(report["commands_sent"]) == len(raw[COMMANDS]) > 100
+    assert "Traceback" not in procs.log(bridge)

@@ -1,0 +1,20 @@
+from setuptools import find_packages, setup
+
+package_name = "winder_bridge"
+
+setup(
+    name=package_name,
+    version="0.1.0",
+    packages=find_packages(exclude=["test"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
+        ("share/" + package_name, ["package.xml"]),
+    ],
+    install_requires=["setuptools"],
+    zip_safe=True,
+    maintainer="winder developers",
+    maintainer_email="winder-dev@example.com",
+    description="The winder cell's steps to ros2_control hardware (forward_command_controller)",
+    license="Apache-2.0",
+    entry_points={"console_scripts": ["bridge_node = winder_bridge.bridge_node:main"]},
+)

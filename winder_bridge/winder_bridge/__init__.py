@@ -1,0 +1,1 @@
+"""The winder cell to ros2_control hardware: position commands, servo fault watch."""

@@ -1,0 +1,642 @@
+"""bridge_node: the cell's timed steps -> ros2_control hardware, in real time.
+
+A :class:`winder.ros.consumer.StepConsumer`: the base does everything the
+cell asks of a consumer (handshake, stream checks, receipts, operator events,
+programmed stops, stall watch, winder/state, the job status and final
+report, the bag); this node paces the accepted steps out to a
+``forward_command_controller/ForwardCommandController`` and watches the
+measured joint states.
+
+Out: ``<controller>/commands`` (std_msgs/Float64MultiArray, at ``rate`` Hz
+during a run: each joint's commanded position in SI units, the step count of
+the last row due times the joint's step length), ``clock`` (the cell's clock,
+200 Hz at most, never backwards over the node's life), winder/sim_config
+(``real_time: true``, ``clock_origin_ns``: the profile node sends steps only
+its look-ahead ahead of that clock). In: ``joint_states``
+(sensor_msgs/JointState from a joint_state_broadcaster; joints by name,
+unknown names ignored). Both topics are relative: in the namespace of this
+node, which must be the controller manager's (ros2_control puts a controller
+``X`` of the controller manager in ``/ns`` at ``/ns/X``, so it listens on
+``/ns/X/commands``, and the broadcaster publishes ``/ns/joint_states``). All
+three are recorded into the run's bag.
+
+Time: a run's time starts when the bridge arms it: every joint has been
+measured since the run's start (with ``job_origin`` zero: within
+``max_following_error`` of the job's start position), the controller
+listens, and the run's first steps are here (until then the profile node
+sends only its look-ahead); the cell's clock is then ``clock_origin_ns`` +
+the steady time since. Nothing is commanded before, so a run never starts
+with a jump. Steps that come after their time (a profile node starved of
+CPU) go out at once and are counted (``late_steps`` in the job status).
+
+Servo fault: a measured position further than ``max_following_error.<axis>``
+from every position commanded over the ``command_delay`` before its stamp
+(the time a command takes to show in the measurement), or no measured
+position of a joint for ``joint_state_timeout`` s, stops the run at once:
+no further command (the controller holds the last one), an ERROR status
+naming the joint, the error and the limit, the profile node's ``~/abort``
+called (so the interp node stops sending and is ready for a new start), and
+the run closed incomplete with its bag.
+
+Threads: the hardware side runs in a thread of its own, on the steady clock:
+during a run, a tick every 1/``rate`` s sends the command, and every 5 ms
+the clock and takes the measured states that came (checks them, queues them
+for the bag); between runs it only looks every 0.1 s whether joint states still come (the
+hardware is there: ``ready``). The joint states are taken from a subscription
+of a helper node that no executor waits on (``<node>_io``), so neither they
+nor the commands wake the executor: rclpy's executor costs 0.1-0.5 ms of CPU
+per wake-up with a consumer's dozens of entities, a 1 kHz timer or a 100 Hz
+subscription in it alone would be over the budget (bench/bench_bridge.py).
+The thread shares the pacer, the command history and the record queue with
+the executor under one lock, and hands a fault to the executor through a
+guard condition; everything else (the base's bookkeeping, the bag, the
+fault's report) runs in the executor, woken by the step stream and every
+0.1 s while rows wait (``pump_period``).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import deque
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import rclpy
+from rclpy.client import Client
+from rclpy.task import Future
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import Trigger
+
+from winder.contract.cdr import CommandPayload, JointStateReader, clock_payload
+from winder.contract.pacing import CommandHistory, Pacer, following_error
+from winder.contract.params import BRIDGE_SPECS, check_bridge
+from winder.contract.stream import JobPlan
+from winder.contract.topics import TOPIC_CLOCK, TOPIC_STEP_TIMES
+from winder.motion.job import AXES
+from winder.ros.chunks import waiting
+from winder.ros.consumer import StepConsumer
+from winder.ros.diagnostics import ERROR
+from winder.ros.qos import QOS_CLOCK, QOS_STATE
+from winder.ros.spin import spin
+from winder.ros.timers import steady_timer
+
+#: the measured joint states (joint_state_broadcaster's default topic, relative)
+TOPIC_MEASURED = "joint_states"
+#: the cell's clock goes out at this rate at most (the profile node measures
+#: its look-ahead against it; 200 Hz is what the sim node publishes)
+CLOCK_PERIOD_NS = 5_000_000
+#: a measurement stamped further than this from this host's clock is compared
+#: with the commands before it arrived (its stamp is on another clock)
+STAMP_TRUST_NS = 1_000_000_000
+#: between runs, the thread looks this often whether joint states still come
+IDLE_POLL = 0.1
+#: the hardware counts as there (winder/ready) while joint_states came within this
+HARDWARE_FRESH_NS = 1_000_000_000
+#: a run waits this long (or joint_state_timeout if longer) for the joint
+#: states and the controller before it is refused; nothing moves meanwhile
+ARM_WAIT_NS = 2_000_000_000
+#: the profile node's ~/abort is asked again after this long without an answer, this often at most
+ABORT_RETRY = 1.0
+ABORT_TRIES = 5
+#: rows held at most (accepted, not due): further chunks wait in the inbox
+MAX_HELD = 1 << 16
+#: The bridge's own recorded topics (the commands topic follows ``controller``).
+BRIDGE_TOPICS = {
+    "commands": ("forward_position_controller/commands", "std_msgs/msg/Float64MultiArray"),
+    "joint_states": (TOPIC_MEASURED, "sensor_msgs/msg/JointState"),
+    "clock": (TOPIC_CLOCK, "rosgraph_msgs/msg/Clock"),
+}
+# Commands and measured states: reliable, volatile, keep-last 100 (QOS_STATE),
+# which matches ros2_control's SystemDefaultsQoS (reliable) on both topics.
+
+
+class BridgeNode(StepConsumer):
+    #: the base's pump only accounts for what the command thread executed
+    #: (receipts, the run's transitions, the bag): ten times a second is enough
+    pump_period = 0.1
+
+    def __init__(self) -> None:
+        super().__init__(
+            "bridge_node", BRIDGE_SPECS, check_bridge, hardware_id="winder_bridge", topics=BRIDGE_TOPICS
+        )
+        values = self.settings.values()
+        # The hardware side: a helper node no executor spins holds the joint
+        # states' subscription (taken by the command thread) and the commands'
+        # and clock's publishers (used by it), so that none of them wakes or
+        # weighs on the executor. Their names are resolved here, with this
+        # node's namespace and remappings.
+        self.io = rclpy.create_node(
+            f"{self.get_name()}_io",
+            namespace=self.get_namespace(),
+            context=self.context,
+            use_global_arguments=False,
+            enable_rosout=False,
+            start_parameter_services=False,
+        )
+        self.controller = ""
+        self.pub_cmd = self.commands_publisher(values["controller"])
+        self.pub_clock = self.io.create_publisher(Clock, self.resolve_topic_name(TOPIC_CLOCK), QOS_CLOCK)
+        self.bag_topics["joint_states"] = (
+            self.resolve_topic_name(TOPIC_MEASURED),
+            BRIDGE_TOPICS["joint_states"][1],
+        )
+        self.sub_states = self.io.create_subscription(
+            JointState, self.bag_topics["joint_states"][0], lambda _m: None, QOS_STATE, raw=True
+        )
+        self.guard = self.create_guard_condition(self.on_alarm)
+        self.reader = JointStateReader(values["joints"])
+        self.abort_clients: dict[str, Client] = {}
+        self.abort_client: Client | None = None
+        self.abort_future: Future | None = None
+        self.abort_timer: Any = None
+        self.abort_tries = 0
+        # shared with the command thread, under self.lock
+        self.lock = threading.Lock()
+        self.running = False  # a run is on: the thread ticks
+        self.armed = False  # its time runs: the thread commands
+        self.faulted = False
+        self.pacer: Pacer | None = None
+        self.outbox: deque[tuple[str, int, bytes, bool]] = deque()  # (bag key, run time, payload, exact)
+        self.heard_ns = 0  # monotonic time of the last joint_states message
+        self.clock_ns = -1  # the last clock published in this node's life
+        self.alarm: tuple[str, dict[str, object]] | None = None  # a fault for the executor
+        self.go = threading.Event()  # set while a run is on
+        self.quit = False
+        self.missing_said = ""
+        self.new_run(values)
+        self.thread = threading.Thread(target=self.command_loop, name="bridge-commands", daemon=True)
+        self.thread.start()
+        self.start_lifecycle()
+
+    def commands_publisher(self, controller: str) -> Any:
+        """The publisher of ``<controller>/commands`` (a new one if the controller changed)."""
+        if controller == self.controller:
+            return self.pub_cmd
+        if self.controller:
+            self.io.destroy_publisher(self.pub_cmd)
+        self.controller = controller
+        topic = self.resolve_topic_name(f"{controller}/commands")
+        self.bag_topics["commands"] = (topic, BRIDGE_TOPICS["commands"][1])
+        return self.io.create_publisher(Float64MultiArray, topic, QOS_STATE)
+
+    def new_run(self, values: dict[str, Any]) -> None:
+        """A run's settings and state before it starts (also: the node's, before any run)."""
+        self.rate = float(values["rate"])
+        self.period_ns = round(1e9 / self.rate)
+        self.timeout_ns = round(values["joint_state_timeout"] * 1e9)
+        self.delay_ns = round(values["command_delay"] * 1e9)
+        self.origin_here = values["job_origin"] == "start_position"
+        self.settle_ns = round(values["settle_time"] * 1e9)
+        self.joints: list[str] = list(values["joints"])
+        self.axes: list[str] = list(values["axes"])
+        self.limits = np.array([values[f"max_following_error.{a}"] for a in self.axes])
+        self.units = [BRIDGE_SPECS[f"max_following_error.{a}"].unit for a in self.axes]
+        if self.reader.joints != self.joints:
+            self.reader = JointStateReader(self.joints)
+        self.cmd = CommandPayload(len(self.joints))
+        self.payload = self.cmd.bytes()  # the command in force
+        self.history = CommandHistory(np.zeros(len(self.joints)))
+        self.last_seen = np.zeros(len(self.joints), np.int64)  # monotonic ns of each joint's last measurement
+        self.measured = np.full(len(self.joints), np.nan)  # and its position
+        self.origin_ns = 0
+        self.begin_ns = time.monotonic_ns()
+        self.t0_ns = 0  # monotonic time of the run's start (armed)
+        self.t_tick = 0  # run time of the last command
+        self.next_clock = 0  # run time from which the next clock goes out
+        self.settle_until: int | None = None
+        self.fault_text = ""
+        self.max_error = np.zeros(len(self.joints))
+        self.ticks = 0
+        self.max_gap_ns = 0
+        self.states_in_run = 0
+        self.bad_states = 0
+        self.why_not_armed = "no joint_states yet"
+        self.late_rows = 0
+        self.max_late_ns = 0
+
+    # -- the consumer's hooks ---------------------------------------------------
+    def begin(self, plan: JobPlan, values: dict[str, Any]) -> dict[str, object]:
+        self.stop_pacing()
+        self.pub_cmd = self.commands_publisher(values["controller"])
+        which = [AXES.index(a) for a in values["axes"]]
+        start = np.array([plan.segments[0].start[i] if plan.segments else 0 for i in which], np.int64)
+        pacer = Pacer([2 + i for i in which], start, np.array([plan.joint_step[i] for i in which]))
+        with self.lock:
+            self.new_run(values)
+            self.pacer = pacer
+            self.history = CommandHistory(pacer.position.copy())
+            self.outbox.clear()
+            self.alarm = None
+            self.faulted = False
+            # the run starts on the cell's clock a clock period after the last one published
+            self.origin_ns = 0 if self.clock_ns < 0 else self.clock_ns + CLOCK_PERIOD_NS
+            self.running = True
+        self.go.set()
+        self.abort_client = self.profile_abort_client() or self.abort_client  # the run's profile node
+        return {
+            "real_time": True,
+            "clock_origin_ns": self.origin_ns,
+            "rate": self.rate,
+            "controller_topic": self.bag_topics["commands"][0],
+            "joint_states_topic": self.bag_topics["joint_states"][0],
+            "joints": dict(zip(self.joints, self.axes, strict=True)),  # joint -> the cell axis it drives
+            "job_origin": "start_position" if self.origin_here else "zero",
+            "max_following_error": dict(zip(self.joints, self.limits.tolist(), strict=True)),
+            "command_delay": self.delay_ns / 1e9,
+            "joint_state_timeout": self.timeout_ns / 1e9,
+            "settle_time": self.settle_ns / 1e9,
+        }
+
+    def paces(self) -> bool:
+        return True
+
+    def accepts_more(self) -> bool:
+        return self.pacer is None or self.pacer.held < MAX_HELD
+
+    def execute(self, rows: npt.NDArray[np.int64]) -> None:
+        with self.lock:
+            assert self.pacer is not None
+            if self.armed and rows[0, 0] < self.t_tick:  # came after their time: they go out now
+                self.late_rows += int(np.count_nonzero(rows[:, 0] < self.t_tick))
+                self.max_late_ns = max(self.max_late_ns, self.t_tick - int(rows[0, 0]))
+            self.pacer.add(rows)
+
+    def holding(self) -> bool:
+        pacer = self.pacer
+        return pacer is not None and (pacer.held > 0 or pacer.due > 0)
+
+    def pending(self) -> bool:
+        """Waiting to arm, or settling."""
+        if self.plan is None or self.fault_text:
+            return False
+        return not self.armed or (self.settle_until is not None and self.t_tick < self.settle_until)
+
+    def work(self) -> None:
+        if self.plan is None or self.fault_text:
+            return
+        self.account()
+        if not self.inbox:
+            self.settle_if_complete()
+
+    def settle(self, until_ns: int) -> None:
+        self.settle_until = until_ns + self.settle_ns
+
+    def flush(self) -> None:
+        self.stop_pacing()
+
+    def closing(self) -> None:
+        """Commands stop (the controller holds the last one); what the thread
+        executed is accounted and every message is in the bag before the base
+        closes it."""
+        self.stop_pacing()
+        if self.plan is not None:
+            self.account()
+
+    def end(self) -> None:
+        with self.lock:
+            self.pacer = None
+
+    def faults(self) -> str:
+        return self.fault_text
+
+    def details(self) -> dict[str, object]:
+        errors = {
+            f"max_following_error.{j}": f"{e:.6g}" for j, e in zip(self.joints, self.max_error, strict=True)
+        }
+        return {
+            "rate_hz": f"{self.rate:g}",
+            "commands_sent": self.ticks,
+            "max_command_gap_ms": f"{self.max_gap_ns / 1e6:.3f}",
+            "joint_states_received": self.states_in_run,
+            "late_steps": self.late_rows,
+            "max_step_lateness_ms": f"{self.max_late_ns / 1e6:.3f}",
+            **errors,
+            "servo_fault": self.fault_text,
+        }
+
+    def account(self) -> None:
+        """Tell the base what the command thread executed (receipts on
+        winder/progress, the run's transitions) and record what went out."""
+        with self.lock:
+            if self.pacer is None:
+                return
+            n, t = self.pacer.take_due(), self.t_tick
+        self.drain()
+        if n:
+            self.executed(n)
+        if not self.context.ok():  # Ctrl-C: the run closes, nothing more is published
+            self.t_ns = t
+            return
+        if n:
+            self.receipt()
+        self.reached(t)
+
+    def drain(self) -> None:
+        """Everything the thread queued for the bag, in time order."""
+        out = self.outbox
+        while out:
+            key, t, payload, exact = out.popleft()
+            self.record(key, t, payload, exact=exact)
+
+    # -- readiness --------------------------------------------------------------
+    def missing(self) -> str:
+        """The hardware is not there (no joint_states for a while, or nobody
+        subscribes to the commands): a run is not started into the void."""
+        if self.plan is None and self.abort_client is None:
+            self.abort_client = self.profile_abort_client()  # early: its replies match by a fault
+        why = self.hardware_missing()
+        if why != self.missing_said:
+            self.missing_said = why
+            if why:
+                self.get_logger().info(f"waiting for the hardware: {why}")
+        return why
+
+    def hardware_missing(self) -> str:
+        if time.monotonic_ns() - self.heard_ns > HARDWARE_FRESH_NS:
+            return f"no {self.bag_topics['joint_states'][0]} for {HARDWARE_FRESH_NS / 1e9:g} s"
+        if self.pub_cmd.get_subscription_count() == 0:
+            return f"nobody subscribes to {self.bag_topics['commands'][0]}"
+        return ""
+
+    # -- the command thread --------------------------------------------------------
+    def command_loop(self) -> None:
+        """A tick every ``period_ns`` of the steady clock while a run is on;
+        between runs, a look at the joint states every IDLE_POLL s."""
+        while not self.quit:
+            if not self.go.wait(IDLE_POLL):
+                with self.lock:
+                    for _ in waiting(self.sub_states):
+                        self.heard_ns = time.monotonic_ns()
+                continue
+            due = time.monotonic_ns()
+            while self.go.is_set() and not self.quit:
+                due += self.period_ns
+                wait = due - time.monotonic_ns()
+                if wait > 0:
+                    time.sleep(wait / 1e9)
+                elif wait < -self.period_ns:
+                    due = time.monotonic_ns()  # fell behind: go on from now, no burst of ticks
+                try:
+                    with self.lock:
+                        self.tick()
+                except Exception as exc:  # the context is shutting down
+                    if self.context.ok():
+                        self.get_logger().error(f"command thread: {exc}")
+                    self.go.clear()
+
+    def tick(self) -> None:
+        """(Under the lock.) One command: the rows due now set the positions;
+        every CLOCK_PERIOD_NS the clock, and the measured states that came
+        (and before the run's time starts: each tick, and its start); all
+        queued for the bag."""
+        if not self.running or self.faulted:
+            return
+        now = time.monotonic_ns()
+        t = now - self.t0_ns
+        look = not self.armed or t >= self.next_clock  # every CLOCK_PERIOD_NS (to the tick) once armed
+        if look:  # a take costs ~20 us even when nothing came: not every tick
+            for raw in waiting(self.sub_states):
+                self.heard_ns = now
+                self.measurement(raw, now)
+            if self.faulted:
+                return
+        if not self.armed:
+            self.try_arm(now)
+            if not self.armed:
+                return
+            t, look = 0, True
+        assert self.pacer is not None
+        if self.ticks:
+            self.max_gap_ns = max(self.max_gap_ns, t - self.t_tick)
+        if self.pacer.advance(t) or not self.ticks:  # the positions changed: a new command
+            self.cmd.values[:] = self.pacer.position
+            self.payload = self.cmd.bytes()
+            self.history.push(time.time_ns(), self.pacer.position)
+        if look:
+            self.next_clock = t + CLOCK_PERIOD_NS - self.period_ns // 2
+            self.clock_ns = self.origin_ns + t
+            clock = clock_payload(self.clock_ns)
+            self.pub_clock.publish(clock)
+            self.outbox.append(("clock", t, clock, True))
+        self.pub_cmd.publish(self.payload)
+        self.outbox.append(("commands", t, self.payload, True))
+        self.t_tick = t
+        self.ticks += 1
+        late = now - int(self.last_seen.min()) if look else 0
+        if late > self.timeout_ns:
+            j = int(np.argmin(self.last_seen))
+            self.raise_fault(
+                f"servo fault: joint {self.joints[j]} ({self.axes[j]} axis): no measured position on "
+                f"{self.bag_topics['joint_states'][0]} for {late / 1e6:.1f} ms, beyond "
+                f"joint_state_timeout = {self.timeout_ns / 1e9:g} s",
+                {"joint": self.joints[j], "axis": self.axes[j], "silent_s": f"{late / 1e9:.3f}"},
+            )
+
+    def measurement(self, raw: bytes, now: int) -> None:
+        """(Under the lock.) One joint_states message of the run: recorded;
+        before the run's time starts, checked against the job's start; then
+        against the commands (following error)."""
+        got = self.reader.read(raw)
+        if got is None:
+            self.bad_states += 1
+            if self.bad_states == 1:
+                self.get_logger().warning(
+                    f"{self.bag_topics['joint_states'][0]}: a message that is not a JointState with one "
+                    "position per name: ignored"
+                )
+            return
+        stamp, pos = got
+        seen = ~np.isnan(pos)
+        self.last_seen[seen] = now
+        self.measured[seen] = pos[seen]
+        self.outbox.append(("joint_states", self.t_tick, raw, False))
+        self.states_in_run += 1
+        wall = time.time_ns()
+        when = stamp if abs(stamp - wall) < STAMP_TRUST_NS else wall
+        low, high = self.history.span(when - self.delay_ns, when)
+        if not self.armed:
+            if not self.origin_here:
+                self.check_start(pos, seen, low)
+            return
+        error = np.where(seen, following_error(low, high, np.where(seen, pos, low)), 0.0)
+        size = np.abs(error)
+        np.maximum(self.max_error, size, out=self.max_error)
+        if (size > self.limits).any():
+            j = int(np.argmax(size / self.limits))
+            unit = self.units[j]
+            self.raise_fault(
+                f"servo fault: joint {self.joints[j]} ({self.axes[j]} axis): following error "
+                f"{error[j]:+.6g} {unit} beyond max_following_error.{self.axes[j]} = {self.limits[j]:g} "
+                f"{unit} (measured {pos[j]:.6g}, commanded {low[j]:.6g} to {high[j]:.6g} over command_delay)",
+                {
+                    "joint": self.joints[j],
+                    "axis": self.axes[j],
+                    "following_error": f"{error[j]:.6g}",
+                    "limit": f"{self.limits[j]:g}",
+                    "unit": unit,
+                },
+            )
+
+    def check_start(
+        self, pos: npt.NDArray[np.float64], seen: npt.NDArray[np.bool_], start: npt.NDArray[np.float64]
+    ) -> None:
+        """(Under the lock.) With ``job_origin`` zero the joints must be at the
+        job's start (within max_following_error): else the run would begin
+        with a jump, and it does not start."""
+        off = np.where(seen, np.abs(pos - np.where(seen, start, pos)), 0.0)
+        if (off > self.limits).any():
+            j = int(np.argmax(off / self.limits))
+            unit = self.units[j]
+            self.raise_fault(
+                f"servo fault: the run cannot start: joint {self.joints[j]} ({self.axes[j]} axis) is at "
+                f"{pos[j]:.6g} {unit}, the job starts at {start[j]:.6g} {unit}, more than "
+                f"max_following_error.{self.axes[j]} = {self.limits[j]:g} {unit} apart (bring the axes to "
+                "the job's start, or set job_origin start_position)",
+                {"joint": self.joints[j], "axis": self.axes[j], "at": f"{pos[j]:.6g}", "unit": unit},
+            )
+
+    def try_arm(self, now: int) -> None:
+        """(Under the lock.) Start the run's time once every joint was
+        measured since its start, the controller listens and the run's first
+        steps are here (they are timed from it); refuse the run if the joints
+        or the controller are not there within ARM_WAIT_NS."""
+        if (self.last_seen <= self.begin_ns).any():
+            missing = [j for j, s in zip(self.joints, self.last_seen, strict=True) if s <= self.begin_ns]
+            self.why_not_armed = f"no joint_states for {', '.join(missing)}"
+        elif self.pub_cmd.get_subscription_count() == 0:
+            topic = self.bag_topics["commands"][0]
+            self.why_not_armed = f"nobody subscribes to {topic} (is {self.controller} loaded and active?)"
+        else:
+            self.why_not_armed = ""
+        if self.why_not_armed:
+            wait = max(self.timeout_ns, ARM_WAIT_NS)
+            if now - self.begin_ns > wait:
+                self.raise_fault(
+                    f"servo fault: the run cannot start: {self.why_not_armed} within {wait / 1e9:g} s", {}
+                )
+            return
+        if self.pacer is None or self.pacer.held == 0:
+            return  # the axes are ready; the steps are on their way (the stall watch minds them)
+        if self.origin_here:  # the job starts where the joints are
+            self.pacer.set_origin(self.measured)
+            self.history = CommandHistory(self.pacer.position.copy())
+        self.t0_ns = now
+        self.next_clock = 0
+        self.armed = True
+        self.get_logger().info(
+            f"run armed: commanding {', '.join(self.joints)} at {self.rate:g} Hz "
+            f"on {self.bag_topics['commands'][0]}"
+        )
+
+    def raise_fault(self, text: str, values: dict[str, object]) -> None:
+        """(Under the lock, in the thread.) No further command at once; the
+        executor reports the fault and closes the run (on_alarm)."""
+        if self.faulted:
+            return
+        self.faulted = True
+        self.armed = False
+        self.alarm = (text, values)
+        self.guard.trigger()
+
+    def stop_pacing(self) -> None:
+        """No further tick; one under way finishes first."""
+        self.go.clear()
+        with self.lock:
+            self.running = False
+            self.armed = False
+
+    # -- faults ------------------------------------------------------------------
+    def on_alarm(self) -> None:
+        """The command thread raised a servo fault."""
+        with self.lock:
+            alarm, self.alarm = self.alarm, None
+        if alarm is not None:
+            self.servo_fault(*alarm)
+
+    def servo_fault(self, text: str, values: dict[str, object]) -> None:
+        """Stop the run: commands hold, the fault reported, the profile node
+        told to abort (the rest of the cell stops sending), the run closed."""
+        if self.plan is None or self.fault_text:
+            return
+        self.stop_pacing()
+        self.fault_text = text
+        self.get_logger().error(text)
+        self.publish_status(
+            "servo", ERROR, text, {"job_id": self.plan.job_id, "run_id": self.plan.run_id, **values}
+        )
+        self.tell_profile_to_abort()
+        self.finish(complete=False)
+
+    def profile_abort_client(self) -> Client | None:
+        """The ``~/abort`` service of the cell's profile node: the node in this
+        node's namespace that publishes winder/step_times (found by its role,
+        not its name)."""
+        infos = self.get_publishers_info_by_topic(self.resolve_topic_name(TOPIC_STEP_TIMES))
+        mine = sorted(
+            {(i.node_namespace, i.node_name) for i in infos if i.node_namespace == self.get_namespace()}
+        )
+        if not mine:
+            return None
+        if len(mine) > 1:
+            self.get_logger().warning(f"several nodes publish {TOPIC_STEP_TIMES}: {mine}; aborting {mine[0]}")
+        ns, name = mine[0]
+        service = f"{ns.rstrip('/')}/{name}/abort"
+        if service not in self.abort_clients:
+            self.abort_clients[service] = self.create_client(Trigger, service)
+        return self.abort_clients[service]
+
+    def tell_profile_to_abort(self) -> None:
+        client = self.abort_client or self.profile_abort_client()
+        if client is None:
+            self.get_logger().error(
+                f"no node in {self.get_namespace()} publishes {TOPIC_STEP_TIMES}: no profile node to abort"
+            )
+            return
+        if not client.service_is_ready():
+            self.get_logger().warning(f"{client.srv_name} not ready: the abort request may be lost")
+        self.abort_tries = 0
+        self.ask_abort(client)
+
+    def ask_abort(self, client: Client) -> None:
+        """One abort request; asked again after ABORT_RETRY s without an answer
+        (a DDS service may drop a reply while its response topic still matches)."""
+        if self.abort_timer is not None:
+            self.destroy_timer(self.abort_timer)
+            self.abort_timer = None
+        if self.abort_future is not None and not self.abort_future.done():
+            client.remove_pending_request(self.abort_future)
+            if self.abort_tries >= ABORT_TRIES:
+                self.get_logger().error(f"{client.srv_name}: no answer to {ABORT_TRIES} abort requests")
+                return
+        self.abort_tries += 1
+        future = client.call_async(Trigger.Request())
+        future.add_done_callback(lambda f: self.abort_answered(client.srv_name, f))
+        self.abort_future = future
+        self.abort_timer = steady_timer(self, ABORT_RETRY, lambda: self.ask_abort(client))
+
+    def abort_answered(self, service: str, future: Future) -> None:
+        if self.abort_timer is not None:
+            self.destroy_timer(self.abort_timer)
+            self.abort_timer = None
+        resp = future.result()
+        if resp is None:
+            self.get_logger().error(f"{service}: no answer")
+        elif resp.success:
+            self.get_logger().info(f"{service}: {resp.message}")
+        else:
+            self.get_logger().warning(f"{service} refused: {resp.message}")
+
+    def shutdown(self) -> None:
+        super().shutdown()
+        self.quit = True
+        self.go.set()
+        self.thread.join(timeout=1.0)
+        self.io.destroy_node()
+
+
+def main(args: list[str] | None = None) -> None:
+    spin(BridgeNode, args)
