@@ -127,7 +127,11 @@ def stop(procs: list[subprocess.Popen[bytes]]) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
-    quick = ap.parse_args().quick
+    ap.add_argument(
+        "--no-record", action="store_true", help="the bridge records no bag (what recording costs)"
+    )
+    args = ap.parse_args()
+    quick = args.quick
     span = 4.0 if quick else 10.0
     work = Path(tempfile.mkdtemp(prefix="winder-bench-bridge-"))
     env = {**ros_env(DOMAIN), "PYTHONUNBUFFERED": "1"}
@@ -142,6 +146,7 @@ def main() -> None:
             f"bag_dir:={work / 'bags'}",
             # the stand-in is a Python process on shared cores: limits for its lag, not a drive's
             *("-p", "max_following_error.fork:=5.0", "-p", "joint_state_timeout:=0.5"),
+            *(("-p", "record:=false") if args.no_record else ()),
         ],
         "ros2_control stand-in": [
             sys.executable,
@@ -179,7 +184,13 @@ def main() -> None:
             raise SystemExit("bench_bridge: the run did not start:\n" + (work / "bridge.log").read_text())
         time.sleep(1.0)
         run = window(procs, span)
-        while not list((work / "bags").glob("*/metadata.yaml")) and time.monotonic() < t_end + 120:
+
+        def ended() -> bool:
+            if args.no_record:
+                return b": complete," in (work / "bridge.log").read_bytes()
+            return bool(list((work / "bags").glob("*/metadata.yaml")))
+
+        while not ended() and time.monotonic() < t_end + 120:
             time.sleep(0.2)
         # the anchors, with the cell idle again (its stand-in still publishing joint states)
         extra = start(anchors, env, log)
@@ -199,7 +210,7 @@ def main() -> None:
         "real-time run, then the anchors (the cell idle)"
     )
     print(table(["process", "idle %", "run %", "/ timer anchor"], rows))
-    status = final_status(work / "bags")
+    status = {} if args.no_record else final_status(work / "bags")
     print(
         f"bridge: {status.get('commands_sent', '?')} commands in {status.get('wall_time_s', '?')} s, "
         f"largest gap {status.get('max_command_gap_ms', '?')} ms, "
