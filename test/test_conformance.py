@@ -749,6 +749,9 @@ def test_a_consumer_that_ignores_the_abort_does_not_wedge_the_cell(cell: Cell) -
     assert cell.interp is not None
     lines = [ln for ln in cell.procs.log(cell.interp).splitlines() if "ignores the abort" in ln]
     assert len(lines) == 1 and "ERROR" in lines[0] and run_id in lines[0], lines
+    # it publishes no winder/sim_config (it does not pace): nobody waits for one, nobody warns
+    assert cell.profile is not None
+    assert "sim_config" not in cell.procs.log(cell.profile), cell.procs.log(cell.profile)
 
 
 def test_an_abort_ends_aborted_when_its_braking_steps_were_not_sent_yet(cell: Cell) -> None:
