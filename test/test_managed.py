@@ -116,3 +116,40 @@ def test_an_orchestrator_brings_the_cell_up_in_order(tmp_path: Path, procs: Proc
         assert lc.transition(node, "shutdown")
         assert lc.state(node) == "finalized"
     assert all(p.poll() is None for p, _ in procs.procs), "a node died"
+
+
+def test_a_transition_the_state_does_not_have_is_refused_and_every_node_lives_on(
+    tmp_path: Path, procs: Procs, ros: Any
+) -> None:
+    """configure an active node, activate one twice, cleanup an active one, a
+    label that is no transition: each ~/change_state replies failure (with the
+    reason in the node's log) and leaves the state as it was, mid-run too;
+    rclpy's own handler let rcl's "Transition is not registered" end the node."""
+    from lifecycle_msgs.srv import ChangeState
+
+    bags = tmp_path / "bags"
+    sim = ("-p", f"bag_dir:={bags}", "-p", "real_time:=true", "-p", "real_time_factor:=1.0")
+    procs.start("sim_node", *sim)
+    procs.start("profile_node")
+    procs.start("interp_node", "-p", "turns_per_layer:=8", "-p", "poles:=1", "-p", "layers:=1")
+    lc = Lifecycle(ros)
+    assert [lc.state(n) for n in NODES] == ["active"] * 3
+    t_end = time.monotonic() + 60
+    while not list(bags.glob("*")) and time.monotonic() < t_end:
+        time.sleep(0.1)
+    assert list(bags.glob("*")) and not list(bags.glob("*/metadata.yaml")), "no run going on"
+    for node in NODES:  # mid-run
+        assert not lc.transition(node, "configure")
+        assert not lc.transition(node, "activate")
+        assert not lc.transition(node, "cleanup")
+        req = ChangeState.Request()
+        req.transition.label = "explode"
+        assert not lc.call(lc.change[node], req).success
+        assert lc.state(node) == "active"
+    assert all(p.poll() is None for p, _ in procs.procs), "a node died"
+    while not list(bags.glob("*/metadata.yaml")) and time.monotonic() < t_end:
+        time.sleep(0.2)
+    [meta] = list(bags.glob("*/metadata.yaml"))
+    assert read_run(meta.parent).complete  # the run went on to its end
+    for node, p in zip(NODES, (p for p, _ in procs.procs), strict=True):
+        assert "transition 'explode' refused: not valid from state active" in procs.log(p), node

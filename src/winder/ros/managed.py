@@ -24,9 +24,14 @@ services at start, and gates them itself, as the style guide asks):
   end); the run is never cut by a state change.
 * shutdown: a run still going is closed as at Ctrl-C (its bag readable,
   marked incomplete).
+* a transition the current state does not have (configure an active node,
+  a label that is no transition): refused (``success`` false), the reason
+  logged, the state unchanged; the node and its run go on.
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
@@ -43,6 +48,7 @@ class ManagedNode(LifecycleNode):
         super().__init__(name)
         self.active = False
         self.auto = False  # configuring itself at start (not managed)
+        self.guard_transitions()
         self.declare_parameter(
             "managed",
             False,
@@ -52,6 +58,34 @@ class ManagedNode(LifecycleNode):
                 read_only=True,
             ),
         )
+
+    def guard_transitions(self) -> None:
+        """``~/change_state`` for a transition the current state does not have
+        (configure an active node, activate an unconfigured one) replies
+        failure with the reason logged. rclpy's own handler lets rcl's
+        "Transition is not registered" escape the service callback, and the
+        executor ends the node, mid-run included."""
+        service = getattr(self, "_service_change_state", None)
+        if service is None:
+            return
+        handler = service.callback
+
+        def guarded(req: Any, resp: Any) -> Any:
+            available = self._state_machine.available_transitions
+            label = req.transition.label
+            valid = any((t[1] == label) if label else (t[0] == req.transition.id) for t in available)
+            if not valid:
+                asked = repr(label) if label else f"id {req.transition.id}"
+                names = ", ".join(sorted({str(t[1]) for t in available})) or "none"
+                self.get_logger().warning(
+                    f"change_state: transition {asked} refused: not valid from state "
+                    f"{self.lifecycle_state()} (valid: {names})"
+                )
+                resp.success = False
+                return resp
+            return handler(req, resp)
+
+        service.callback = guarded
 
     def start_lifecycle(self) -> None:
         if self.get_parameter("managed").value is True:
