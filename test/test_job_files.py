@@ -99,6 +99,18 @@ BAD = [
         "sections 'consumer' and '/cell1/sim_node' both hold the step consumer's settings",
     ),
     ("axes:\n  ros__parameters: {model: linear}\n", "section 'axes': not a winder node"),
+    # an alias that refers to the map holding it: a cycle, refused before anything walks it
+    ("interp_node: &r {ros__parameters: {x: *r}}\n", "an alias refers to a map or list that holds it"),
+    ("interp_node:\n  ros__parameters: &p {turns_per_layer: 3, more: *p}\n", "(a cycle)"),
+    # nine lines of nested aliases inside ros__parameters: 10**7 values once expanded
+    (
+        "interp_node:\n  ros__parameters:\n    a: &a [1,1,1,1,1,1,1,1,1,1]\n"
+        + "".join(
+            f"    {n}: &{n} [{','.join([f'*{m}'] * 10)}]\n" for m, n in zip("abcde", "bcdef", strict=True)
+        )
+        + "    g: [*f,*f,*f,*f,*f,*f,*f,*f,*f,*f]\n",
+        "more than 10000 values once its aliases are expanded",
+    ),
     (
         "interp_node:\n  ros__parameters: {turns_per_layer: 100, coil_length: 0.01}\n",
         "interp_node: turns_per_layer=100 is invalid",
@@ -255,6 +267,10 @@ def test_the_interp_node_takes_a_job_file_in_one_start_run_call(
     assert not refused.successful and str(bad) in refused.reason and "poles=0" in refused.reason, (
         refused.reason
     )
+    cycle = tmp_path / "recur.yaml"
+    cycle.write_text("interp_node: &r {ros__parameters: {x: *r}}\n")
+    refused = start(cycle)  # it ended the node (RecursionError) before aliases were bounded
+    assert not refused.successful and "(a cycle)" in refused.reason, refused.reason
     assert get_params(ros, "interp_node", ["job_file", "job_id"]) == ["", "rw400"]
     started = start(job)
     assert started.successful, started.reason

@@ -99,7 +99,7 @@ def _read(path: Path) -> Any:
     except (OSError, UnicodeDecodeError) as exc:
         raise JobFileError(f"{path}: cannot be read: {str(exc).splitlines()[0]}") from None
     try:
-        return YAML(typ="safe", pure=True).load(text)
+        doc = YAML(typ="safe", pure=True).load(text)
     except YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}" if mark is not None else ""
@@ -107,6 +107,42 @@ def _read(path: Path) -> Any:
         raise JobFileError(f"{path}: not YAML{where}: {problem}") from None
     except Exception as exc:  # a YAML bomb, a recursion: not a job file
         raise JobFileError(f"{path}: not a job file: {type(exc).__name__}") from None
+    _bounded(path, doc)
+    return doc
+
+
+#: what a job file may hold once its aliases are expanded: values in all,
+#: and maps or lists nested in one another (a job file has a few dozen
+#: settings, three levels deep)
+MAX_VALUES = 10_000
+MAX_DEPTH = 16
+
+
+def _bounded(path: Path, doc: Any) -> None:
+    """JobFileError unless the document, its aliases expanded, is a tree of
+    at most MAX_VALUES values and MAX_DEPTH levels: an alias that refers to
+    a map holding it (a cycle) or aliases nested into a bomb, anywhere in
+    the file, are refused before anything walks them."""
+    seen = 0
+    stack: list[tuple[Any, int, frozenset[int]]] = [(doc, 0, frozenset())]
+    while stack:
+        node, depth, above = stack.pop()
+        seen += 1
+        if seen > MAX_VALUES:
+            raise JobFileError(
+                f"{path}: not a job file: more than {MAX_VALUES} values once its aliases are expanded"
+            )
+        if not isinstance(node, (dict, list)):
+            continue
+        if id(node) in above:
+            raise JobFileError(
+                f"{path}: not a job file: an alias refers to a map or list that holds it (a cycle)"
+            )
+        if depth >= MAX_DEPTH:
+            raise JobFileError(f"{path}: not a job file: nested deeper than {MAX_DEPTH} levels")
+        inner = above | {id(node)}
+        children = node.values() if isinstance(node, dict) else node
+        stack.extend((child, depth + 1, inner) for child in children)
 
 
 def _sections(path: Path, doc: Any) -> dict[str, dict[str, Any]]:
