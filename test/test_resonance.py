@@ -172,3 +172,41 @@ def test_a_shaped_cell_run_keeps_every_step_in_place(tmp_path: Path) -> None:
     segments = int(plain[-1, 1]) + 1
     added = config["job_duration_s"] - plain_config["job_duration_s"]  # one shaper per move
     assert added == pytest.approx(segments * duration("zvd", 30.0, 0.05), abs=segments * 2e-9)
+
+
+def test_tune_apply_writes_the_file_the_nodes_read_as_it_was(tmp_path: Path) -> None:
+    """winder tune --apply: the file a symlink names is written (the link
+    stays a link), its mode kept; the values go into the section the profile
+    node reads (/cell1/profile_node here, not a new root section) and into
+    /** where it holds one of them; comments stay; a read-only file is refused."""
+    import os
+    import stat
+
+    from winder.cli.resonance import TUNED_KEYS, _apply
+    from winder.contract.jobfile import load_job_file
+
+    real = tmp_path / "real.yaml"
+    real.write_text(
+        "# the line's job\n"
+        "/cell1/interp_node:\n  ros__parameters: {turns_per_layer: 4, layers: 1, poles: 1}\n"
+        "/cell1/profile_node:\n  ros__parameters:\n    v_max: 1000.0  # steps/s\n"
+        "/**:\n  ros__parameters: {a_max: 5000.0}\n"
+    )
+    os.chmod(real, 0o640)
+    link = tmp_path / "job.yaml"
+    link.symlink_to(real)
+    ramp = {"profile": "scurve", "v_max": 3000.0, "a_max": 40000.0, "j_max": 3.0e7, "shaper": "none"}
+    ramp.update({"shaper_freq": 40.0, "shaper_damping": 0.5})
+    assert set(ramp) == set(TUNED_KEYS)
+    written = _apply(link, ramp)
+    assert written == ["/cell1/profile_node", "/**"]
+    assert link.is_symlink() and link.resolve() == real
+    assert stat.S_IMODE(real.stat().st_mode) == 0o640
+    text = real.read_text()
+    assert "# the line's job" in text and "# steps/s" in text and "\nprofile_node:" not in text
+    loaded = load_job_file(link)
+    assert loaded["profile_node"]["v_max"] == 3000.0 and loaded["profile_node"]["a_max"] == 40000.0
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # no temp file left
+    os.chmod(real, 0o444)
+    with pytest.raises(ValueError, match=r"read-only \(mode 0444\)"):
+        _apply(link, ramp)

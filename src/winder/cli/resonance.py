@@ -125,26 +125,81 @@ def _axes_from(args: argparse.Namespace, sim: dict[str, Any]) -> tuple[dict[str,
     return out, notes
 
 
-def _apply(path: Path, ramp: dict[str, Any]) -> None:
-    """Write the tuned ramp into the job file's profile_node section,
-    comments kept, atomically."""
-    from ruamel.yaml import YAML
+def _writable(path: Path) -> tuple[Path, os.stat_result]:
+    """The file ``path`` names (a symlink followed) and its status; ValueError
+    (one line) if it cannot be read or is read-only."""
+    import stat
 
+    target = path.resolve()
+    try:
+        st = target.stat()
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot be read: {exc.strerror or exc}") from None
+    if not st.st_mode & (stat.S_IWUSR | stat.S_IWGRP | stat.S_IWOTH):
+        raise ValueError(
+            f"{path}: read-only (mode {stat.S_IMODE(st.st_mode):04o}): --apply does not write it"
+        )
+    return target, st
+
+
+def _apply(path: Path, ramp: dict[str, Any]) -> list[str]:
+    """Write the tuned ramp into the job file, comments kept, atomically
+    (temp file + rename), and return the sections written. The file a
+    symlink names is the one written (the link stays); its mode is kept; a
+    read-only file is refused. The values go where the profile node reads
+    them: every section of the file that names it (``profile_node``,
+    ``/cell1/profile_node``), and ``/**`` where it already holds one of them;
+    with none, a ``profile_node`` section in the namespace of the file's other
+    sections. ValueError (one line) for anything that cannot be written."""
+    import contextlib
+    import stat
+
+    from ruamel.yaml import YAML
+    from ruamel.yaml.error import YAMLError
+
+    from winder.contract.jobfile import section_node
+
+    target, st = _writable(path)
     yaml = YAML()
     yaml.preserve_quotes = True
-    doc = yaml.load(path.read_text())
-    section = doc.setdefault("profile_node", {}).setdefault("ros__parameters", {})
-    for key in TUNED_KEYS:
-        value = ramp[key]
-        section[key] = float(f"{value:.6g}") if isinstance(value, float) else value
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    try:
+        doc = yaml.load(target.read_text())
+    except (OSError, YAMLError) as exc:
+        raise ValueError(f"{path}: cannot be read: {str(exc).splitlines()[0]}") from None
+    keys = [str(k) for k in doc]
+    sections = [k for k in keys if section_node(k) == "profile_node"]
+    shared = [
+        k for k in keys if k == "/**" and any(t in doc[k].get("ros__parameters", {}) for t in TUNED_KEYS)
+    ]
+    if not sections:
+        prefix = next((k.rsplit("/", 1)[0] + "/" for k in keys if k != "/**" and "/" in k.strip("/")), "")
+        sections = [f"{prefix}profile_node"]
+    for key in sections + shared:
+        section = doc.setdefault(key, {}).setdefault("ros__parameters", {})
+        for name in TUNED_KEYS:
+            value = ramp[name]
+            section[name] = float(f"{value:.6g}") if isinstance(value, float) else value
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent)
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot write next to it: {exc.strerror or exc}") from None
     try:
         with os.fdopen(fd, "w") as fh:
             yaml.dump(doc, fh)
-        os.replace(tmp, path)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.chmod(tmp, stat.S_IMODE(st.st_mode))
+        if hasattr(os, "chown"):
+            with contextlib.suppress(PermissionError):  # not ours to give away: the file stays ours
+                os.chown(tmp, st.st_uid, st.st_gid)
+        os.replace(tmp, target)
+    except OSError as exc:
+        Path(tmp).unlink(missing_ok=True)
+        raise ValueError(f"{path}: cannot be written: {exc.strerror or exc}; the file is unchanged") from None
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+    return sections + shared
 
 
 def cmd_tune(args: argparse.Namespace) -> int:
@@ -157,6 +212,8 @@ def cmd_tune(args: argparse.Namespace) -> int:
     margin = _fraction("margin", args.margin)
     if args.apply and not args.job_file:
         raise ValueError("--apply needs a JOB_FILE to write the tuned ramp into")
+    if args.apply:
+        _writable(Path(args.job_file))  # before the tuning, not after it
     given = job_file(args)
     job = Job(**given["interp_node"])
     sim, notes = _axes_from(args, given["consumer"])
@@ -203,8 +260,8 @@ def cmd_tune(args: argparse.Namespace) -> int:
         )
         print(f"plot: {path}")
     if args.apply:
-        _apply(Path(args.job_file), result.ramp)
-        print(f"applied: {args.job_file} (profile_node: {', '.join(TUNED_KEYS)})")
+        written = _apply(Path(args.job_file), result.ramp)
+        print(f"applied: {args.job_file} ({', '.join(written)}: {', '.join(TUNED_KEYS)})")
     return 0
 
 

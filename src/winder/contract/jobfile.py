@@ -50,7 +50,7 @@ from winder.contract.params import (
 )
 from winder.spec import Spec, SpecError
 
-__all__ = ["NODE_SPECS", "SECTION_ALIASES", "JobFileError", "load_job_file"]
+__all__ = ["NODE_SPECS", "SECTION_ALIASES", "JobFileError", "load_job_file", "section_node"]
 
 #: the sections of a job file and the settings each may hold (job_file itself
 #: excluded); the keys of what :func:`load_job_file` returns
@@ -155,7 +155,7 @@ def _sections(path: Path, doc: Any) -> dict[str, dict[str, Any]]:
     out = {}
     consumer: list[str] = []  # the consumer's sections, as written
     for key, body in doc.items():
-        node = _section_node(str(key))
+        node = section_node(str(key))
         if node not in NODE_SPECS and node != "/**":
             raise JobFileError(f"{path}: section {key!r}: not a winder node ({SECTION_NAMES})")
         if node == "consumer":
@@ -182,7 +182,7 @@ def _written(key: str) -> str:
     return key.rstrip("/").rsplit("/", 1)[-1] if key != "/**" else "/**"
 
 
-def _section_node(key: str) -> str:
+def section_node(key: str) -> str:
     """The key of :data:`NODE_SPECS` a section key stands for (``/**`` for itself)."""
     node = _written(key)
     return SECTION_ALIASES.get(node, node)
@@ -206,7 +206,7 @@ def load_job_file(path: str | Path) -> dict[str, dict[str, Any]]:
     sections = _sections(p, _read(p))
     out: dict[str, dict[str, Any]] = {node: {} for node in NODE_SPECS}
     names = {node: node for node in NODE_SPECS}  # each node's section as the file names it
-    names.update({_section_node(k): _written(k) for k in sections if k != "/**"})
+    names.update({section_node(k): _written(k) for k in sections if k != "/**"})
     # /** first: a node's own section has the last word, as in ROS
     for key in sorted(sections, key=lambda k: k != "/**"):
         for name, value in sections[key].items():
@@ -216,7 +216,7 @@ def load_job_file(path: str | Path) -> dict[str, dict[str, Any]]:
                 if not takers:
                     raise JobFileError(f"{p}: {where}: no winder node has a setting {name!r}")
             else:
-                node = _section_node(key)
+                node = section_node(key)
                 if name not in NODE_SPECS[node]:
                     raise JobFileError(f"{p}: {where}: {_written(key)} has no setting {name!r}")
                 takers = [node]
