@@ -58,12 +58,18 @@ class Procs:
         self.procs: list[tuple[subprocess.Popen[bytes], Path]] = []
 
     def start(self, executable: str, *ros_args: str) -> subprocess.Popen[bytes]:
-        log = self.log_dir / f"{executable}-{len(self.procs)}.log"
+        """One of the venv's node executables, with ``--ros-args`` when given."""
         args = [str(BIN / executable)]
         if ros_args:
             args += ["--ros-args", *ros_args]
+        return self.launch(args, executable)
+
+    def launch(self, argv: list[str], tag: str) -> subprocess.Popen[bytes]:
+        """Any process of the test's cell (a stand-in, a third-party consumer):
+        on the test's domain, logged as ``<tag>-<n>.log``, stopped at teardown."""
+        log = self.log_dir / f"{tag}-{len(self.procs)}.log"
         p = subprocess.Popen(
-            args,
+            argv,
             env=self.env,
             stdout=log.open("wb"),
             stderr=subprocess.STDOUT,

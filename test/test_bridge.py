@@ -41,16 +41,7 @@ COMMANDS = "/forward_position_controller/commands"
 
 def start_standin(procs: Procs, *args: str) -> subprocess.Popen[bytes]:
     """The ros2_control stand-in, stopped with the test's other processes."""
-    log = procs.log_dir / f"standin-{len(procs.procs)}.log"
-    p = subprocess.Popen(
-        [sys.executable, str(STANDIN), "--joints", ",".join(JOINTS), *args],
-        env=procs.env,
-        stdout=log.open("wb"),
-        stderr=subprocess.STDOUT,
-        stdin=subprocess.DEVNULL,
-    )
-    procs.procs.append((p, log))
-    return p
+    return procs.launch([sys.executable, str(STANDIN), "--joints", ",".join(JOINTS), *args], "standin")
 
 
 def start_cell(procs: Procs, bags: Path, *bridge_params: str) -> subprocess.Popen[bytes]:

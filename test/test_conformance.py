@@ -194,16 +194,6 @@ def resolve(argv: tuple[str, ...]) -> list[str]:
     return [first, *argv[1:]]
 
 
-def launch(procs: Procs, argv: list[str], tag: str) -> subprocess.Popen[bytes]:
-    """A process of the test's cell, logged and stopped at teardown like the nodes' (conftest.Procs)."""
-    log = procs.log_dir / f"{tag}-{len(procs.procs)}.log"
-    p = subprocess.Popen(
-        argv, env=procs.env, stdout=log.open("wb"), stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL
-    )
-    procs.procs.append((p, log))
-    return p
-
-
 def params(values: dict[str, Any]) -> list[str]:
     return [
         a for k, v in values.items() for a in ("-p", f"{k}:={str(v).lower() if isinstance(v, bool) else v}")
@@ -288,11 +278,11 @@ class Cell:
         """The consumer under test (and, the first time, what it needs beside it)."""
         if not self.consumer_argv:
             for i, argv in enumerate(spec.extra):
-                launch(self.procs, resolve(argv), f"extra{i}")
+                self.procs.launch(resolve(argv), f"extra{i}")
             settings = {"bag_dir": self.bags, "record": True, **(stall or CONSUMER_STALL), **spec.params}
             ros_args = ["--ros-args", *(["-r", f"__node:={name}"] if name else []), *params(settings)]
             self.consumer_argv = [*resolve(spec.command), *ros_args]
-        self.consumer = launch(self.procs, self.consumer_argv, "consumer")
+        self.consumer = self.procs.launch(self.consumer_argv, "consumer")
         return self.consumer
 
     def start_upstream(self, job: dict[str, Any] = LONG_JOB, **interp: Any) -> None:

@@ -323,15 +323,7 @@ def test_a_third_party_consumer_that_names_no_role(tmp_path: Path, procs: Procs)
 
     from test_reader import assert_one_line_error
 
-    log = (tmp_path / "driver.log").open("wb")
-    driver = subprocess.Popen(
-        [sys.executable, "-c", DRIVER, "--ros-args", "-r", "__node:=axes"],
-        env=procs.env,
-        stdout=log,
-        stderr=subprocess.STDOUT,
-        stdin=subprocess.DEVNULL,
-    )
-    procs.procs.append((driver, tmp_path / "driver.log"))
+    driver = procs.launch([sys.executable, "-c", DRIVER, "--ros-args", "-r", "__node:=axes"], "driver")
     small = ["--job-id", "third", "--turns-per-layer", "2", "--layers", "1", "--poles", "1"]
     run = [str(BIN / "winder"), "run", "--external", "sim", *small, "--timeout", "120"]
     options: dict[str, Any] = {"env": procs.env, "capture_output": True, "text": True, "timeout": 180}
