@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import math
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -185,7 +186,7 @@ def test_programmed_stops_are_found_in_the_stream_as_a_brute_force_walk_finds_th
             if f"{seg.pole + 1}:{coil_turn}" in chosen:
                 want.append((times[k], (seg.pole + 1, seg.layer + 1, coil_turn)))
     for seg, times in rows_by_seg:
-        ledger.note_rows(seg.index, times, list(range(1, len(times) + 1)))
+        ledger.note_rows(seg.index, np.array(times, np.int64), np.arange(1, len(times) + 1))
     got = [(p.t_stop_ns, p.place) for p in ledger.stops]
     assert sorted(set(got)) == sorted(set(want))
     assert all(p.t_resume_ns is not None and p.t_resume_ns > p.t_stop_ns for p in ledger.stops[:-1])

@@ -80,6 +80,7 @@ from winder.motion.job import AXES
 from winder.ros.chunks import waiting
 from winder.ros.consumer import StepConsumer
 from winder.ros.diagnostics import ERROR
+from winder.ros.graph import fully_qualified, profile_nodes
 from winder.ros.qos import QOS_CLOCK, QOS_STATE
 from winder.ros.spin import spin
 from winder.ros.timers import steady_timer
@@ -572,19 +573,15 @@ class BridgeNode(StepConsumer):
         self.finish(complete=False)
 
     def profile_abort_client(self) -> Client | None:
-        """The ``~/abort`` service of the cell's profile node: the node in this
-        node's namespace that publishes winder/step_times (found by its role,
-        not its name)."""
-        infos = self.get_publishers_info_by_topic(self.resolve_topic_name(TOPIC_STEP_TIMES))
-        mine = sorted(
-            {(i.node_namespace, i.node_name) for i in infos if i.node_namespace == self.get_namespace()}
-        )
+        """The ``~/abort`` service of the cell's profile node, found by its role
+        on the graph, not its name (winder.ros.graph.profile_nodes)."""
+        mine = profile_nodes(self, self.get_namespace())
         if not mine:
             return None
         if len(mine) > 1:
-            self.get_logger().warning(f"several nodes publish {TOPIC_STEP_TIMES}: {mine}; aborting {mine[0]}")
-        ns, name = mine[0]
-        service = f"{ns.rstrip('/')}/{name}/abort"
+            self.get_logger().warning(f"several profile nodes in this namespace: {mine}; aborting {mine[0]}")
+        name, ns = mine[0]
+        service = fully_qualified(name, ns) + "/abort"
         if service not in self.abort_clients:
             self.abort_clients[service] = self.create_client(Trigger, service)
         return self.abort_clients[service]
@@ -593,7 +590,8 @@ class BridgeNode(StepConsumer):
         client = self.abort_client or self.profile_abort_client()
         if client is None:
             self.get_logger().error(
-                f"no node in {self.get_namespace()} publishes {TOPIC_STEP_TIMES}: no profile node to abort"
+                f"no profile node in {self.get_namespace()} (none publishes {TOPIC_STEP_TIMES}): "
+                "nothing to abort"
             )
             return
         if not client.service_is_ready():

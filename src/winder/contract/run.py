@@ -25,6 +25,9 @@ from dataclasses import dataclass, field, fields
 from enum import Enum
 from typing import Any
 
+import numpy as np
+import numpy.typing as npt
+
 from winder.contract.params import stop_place
 from winder.contract.stream import JobPlan
 from winder.contract.topics import status_values
@@ -209,23 +212,30 @@ class RunLedger:
     def executed(self, n: int) -> None:
         self.executed_steps += n
 
-    def note_rows(self, seg: int, t_ns: list[int], step_index: list[int]) -> bool:
-        """Accepted rows of segment ``seg`` (their times and 1-based step
-        indexes): a stop waiting for its resume learns it from the first row,
-        a programmed stop among them is noted. True when a stop that waited
+    @property
+    def has_stops(self) -> bool:
+        """Whether the job has programmed stops (only then do rows need their step indexes)."""
+        return bool(self._places)
+
+    def note_rows(
+        self, seg: int, t_ns: npt.NDArray[np.int64], step_index: npt.NDArray[np.integer[Any]] | None = None
+    ) -> bool:
+        """Accepted rows of segment ``seg``: their times and, when the job
+        has programmed stops (:attr:`has_stops`), their 1-based step indexes.
+        A stop waiting for its resume learns it from the first row; a
+        programmed stop among the rows is noted. True when a stop that waited
         for ``~/resume`` (``stop_resume: call``) got its resume here."""
         resumed = False
         for p in self.stops:
-            if p.t_resume_ns is None and t_ns:
-                p.t_resume_ns = t_ns[0]
+            if p.t_resume_ns is None and t_ns.size:
+                p.t_resume_ns = int(t_ns[0])
                 resumed = resumed or self.plan.stop_resume == "call"
-        if not self._places:
+        if not self._places or step_index is None:
             return resumed
-        for i, k in enumerate(step_index):
-            place = self._places.get((seg, k))
-            if place is not None:
-                resume = t_ns[i + 1] if i + 1 < len(t_ns) else None
-                self.stops.append(ProgrammedStop(t_ns[i], resume, place))
+        wanted = [k for g, k in self._places if g == seg]
+        for i in np.nonzero(np.isin(step_index, wanted))[0].tolist():
+            resume = int(t_ns[i + 1]) if i + 1 < t_ns.size else None
+            self.stops.append(ProgrammedStop(int(t_ns[i]), resume, self._places[(seg, int(step_index[i]))]))
         return resumed
 
     def apply(self, event: ControlEvent) -> Transition | None:

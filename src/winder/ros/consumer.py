@@ -426,7 +426,7 @@ class StepConsumer(ManagedNode):
             return
         try:
             path = deserialize_message(self.path_raw, JointTrajectory)
-        except Exception:
+        except Exception:  # not a path: nothing of it is recorded
             return
         if path.header.frame_id != (self.plan.run_id or self.plan.job_id):
             return  # an earlier run's path; this run's is on its way
@@ -445,7 +445,7 @@ class StepConsumer(ManagedNode):
         parse, or contradicts the run, changes nothing (reported once)."""
         try:
             event = parse_control(deserialize_message(raw, String).data)
-        except (EventError, Exception):
+        except Exception:  # EventError, or not even a String: no event to act on
             return
         if self.plan is None or self.ledger is None or event.run_id != self.plan.run_id:
             # the profile node may speak of a run before its description is
@@ -519,17 +519,10 @@ class StepConsumer(ManagedNode):
             return None
         self.last_step_ns = int(rows[-1, 0])
         self.checked(seg, rows)
-        if self.ledger.note_rows(
-            seg,
-            rows[:, 0].tolist(),
-            self.checker.step_index(seg, rows[:, 2:]).tolist() if self.plan_stops else [],
-        ):
+        index = self.checker.step_index(seg, rows[:, 2:]) if self.ledger.has_stops else None
+        if self.ledger.note_rows(seg, rows[:, 0], index):
             self.resume_pacing()
         return rows
-
-    @property
-    def plan_stops(self) -> bool:
-        return self.plan is not None and bool(self.plan.stops)
 
     def checked(self, seg: int, rows: npt.NDArray[np.int64]) -> None:
         """Accepted rows, before they are executed (the simulator measures their deviation)."""
@@ -772,7 +765,7 @@ class StepConsumer(ManagedNode):
             return
         try:
             names = [st.name for st in deserialize_message(raw, DiagnosticArray).status]
-        except Exception:
+        except Exception:  # not ours to judge; nothing of it is recorded
             return
         own = self.get_fully_qualified_name().lstrip("/") + ":"
         if all(n.startswith(own) for n in names):

@@ -28,16 +28,11 @@ def _ns(namespace: str) -> str:
     return "/" + ns if ns else "/"
 
 
-def _topic(namespace: str, name: str) -> str:
-    ns = namespace.strip("/")
-    return f"/{ns}/{name}" if ns else f"/{name}"
-
-
 def _endpoints(node: Node, namespace: str, topic: str, publishers: bool) -> set[tuple[str, str]]:
     """The nodes in ``namespace`` with a publisher (or a subscription) on the
     cell's ``topic``, but ``node`` itself."""
     ns = _ns(namespace)
-    full = _topic(namespace, topic)
+    full = fully_qualified(topic, namespace)
     get = node.get_publishers_info_by_topic if publishers else node.get_subscriptions_info_by_topic
     infos = get(full)
     me = (node.get_name(), node.get_namespace())
@@ -64,6 +59,7 @@ def profile_nodes(node: Node, namespace: str) -> list[tuple[str, str]]:
 
 
 def fully_qualified(name: str, namespace: str) -> str:
-    """``/ns/name`` (``/name`` in the root namespace): where the node's services are."""
+    """``/ns/name`` (``/name`` in the root namespace): where a node's services
+    are, or a cell's topic."""
     ns = namespace.strip("/")
     return f"/{ns}/{name}" if ns else f"/{name}"
