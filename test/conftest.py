@@ -6,11 +6,13 @@ never hear each other or another graph on the machine.
 
 from __future__ import annotations
 
+import fcntl
 import itertools
 import os
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -25,22 +27,62 @@ from winder.ros.dds import use_profile
 use_profile()  # this process' probes discover the nodes as fast as the nodes each other
 
 BIN = Path(sys.executable).parent
-_domains = itertools.count((os.getpid() * 7) % 60)
 
 
-def next_domain() -> int:
-    """A ROS domain for one test's processes: 120-219, reused after a hundred
-    tests (whose processes are long gone by then)."""
-    return 120 + next(_domains) % 100
+def _pool() -> range:
+    """The ROS domains this test session may use: ``WINDER_TEST_DOMAINS=A-B``
+    (inclusive; 20-219 unless set). Domains 1-19 belong to the conformance
+    suite, which locks them the same way."""
+    text = os.environ.get("WINDER_TEST_DOMAINS", "20-219")
+    try:
+        low, high = (int(v) for v in text.split("-"))
+    except ValueError:
+        raise pytest.UsageError(f"WINDER_TEST_DOMAINS={text!r}: expected A-B, e.g. 20-219") from None
+    if not 0 <= low <= high <= 232 or high - low < 9:
+        raise pytest.UsageError(f"WINDER_TEST_DOMAINS={text!r}: need 10 or more domains within 0-232")
+    return range(low, high + 1)
 
 
-_long_domains = itertools.count()
+_held: dict[int, Any] = {}
+_cursor = itertools.count(os.getpid() * 7)
+
+
+def next_domain(timeout: float = 120.0) -> int:
+    """A ROS domain no other test process on this machine holds (a lock file
+    per domain in the temp directory), held until :func:`release_domain` or
+    the end of this process. Two pytest runs side by side never share one, so
+    their nodes never hear each other."""
+    pool = _pool()
+    end = time.monotonic() + timeout
+    while True:
+        for _ in range(len(pool)):
+            domain = pool[next(_cursor) % len(pool)]
+            if domain in _held:
+                continue
+            lock = (Path(tempfile.gettempdir()) / f"winder-test-domain-{domain}.lock").open("w")
+            try:
+                fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                lock.close()
+                continue
+            _held[domain] = lock
+            return domain
+        if time.monotonic() > end:
+            raise RuntimeError(f"every ROS domain of {pool} held by other test processes for {timeout} s")
+        time.sleep(0.5)
+
+
+def release_domain(domain: int) -> None:
+    """Hand a domain of :func:`next_domain` back (its processes are stopped)."""
+    lock = _held.pop(domain, None)
+    if lock is not None:
+        lock.close()
 
 
 def long_lived_domain() -> int:
-    """A domain of its own for processes that outlive one test (the session's
-    bag runs): 20-69, never one a test's next_domain() hands out."""
-    return 20 + next(_long_domains) % 50
+    """A domain for processes that outlive one test (the session's bag runs):
+    held until the end of the session."""
+    return next_domain()
 
 
 class Procs:
@@ -115,6 +157,7 @@ def procs(tmp_path: Path) -> Iterator[Procs]:
         yield ps
     finally:
         ps.stop_all()
+        release_domain(ps.domain)
 
 
 @pytest.fixture

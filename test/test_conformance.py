@@ -86,8 +86,8 @@ INTERP_STALL_ABORT = 3.0
 SLACK = 1.5
 
 
-#: The domains of this module's tests: none that another test (conftest: 20-69,
-#: 120-219), a benchmark (70-99) or `winder run` (100-199) picks, so a cell here
+#: The domains of this module's tests: none that another test (conftest: WINDER_TEST_DOMAINS,
+#: 20-219 by default), a benchmark (70-99) or `winder run` (100-199) picks, so a cell here
 #: never hears the nodes of a test running beside it (another pytest process on
 #: the machine: its profile node would time this cell's steps too); a lock file
 #: per domain keeps two runs of this module apart.

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import BIN
+from conftest import BIN, next_domain
 
 from winder.analysis.resonance import TestMove, motor_for, move_for, residual, residual_table
 from winder.shaping import duration
@@ -124,9 +124,7 @@ def test_tuned_limits_lose_no_step_in_the_cell_and_the_margin_is_real(tmp_path: 
         extra = []
         for key in ("v_max", "a_max", "j_max"):
             extra += [f"--{key.replace('_', '-')}", repr(ramp[key] * scale)]
-        import random
-
-        env = {"ROS_DOMAIN_ID": str(random.randint(120, 219)), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+        env = {"ROS_DOMAIN_ID": str(next_domain()), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
         out = winder(
             "run", str(job), "--model", "nonlinear", "--bag-dir", str(tmp_path / "bags"), *extra,
             cwd=tmp_path, env=env,
