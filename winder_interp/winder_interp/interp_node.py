@@ -38,6 +38,7 @@ from winder.motion.job import FIELD_SPECS, Job
 from winder.ros.chunks import STEPS_CDR
 from winder.ros.diagnostics import ERROR, OK, Diagnostics
 from winder.ros.managed import ManagedNode
+from winder.ros.peers import Peers, Solo
 from winder.ros.qos import QOS_EVENTS, QOS_LATCHED, QOS_STATE, QOS_STREAM
 from winder.ros.ready import FRESH, Readiness
 from winder.ros.settings import Settings
@@ -65,10 +66,15 @@ class InterpNode(ManagedNode):
         self.diag = Diagnostics(self, "winder_interp")
         self.create_service(Trigger, "~/start", self.on_start)
         self.create_service(SetParametersAtomically, "~/start_run", self.on_start_run)
-        self.create_subscription(KeyValue, TOPIC_PROGRESS, self.on_progress, QOS_STATE)
-        self.create_subscription(String, TOPIC_CONTROL, self.on_control, QOS_EVENTS)
+        # receipts and events count only from the cell's own consumer and profile node
+        self.peers = Peers(self)
+        self.solo = Solo(self, "interp", self.peers, self.leave)  # one interp node per cell
+        self.diag.foreign = self.peers.intruders.summary  # its statuses name what it refused
+        self.peers.on_new = lambda: self.report()  # at once, not at the next second
+        self.peers.subscribe(KeyValue, TOPIC_PROGRESS, self.on_progress, QOS_STATE)
+        self.peers.subscribe(String, TOPIC_CONTROL, self.on_control, QOS_EVENTS)
         # the start handshake: consumer and profile node ready (an autostart waits for it)
-        self.readiness = Readiness(self, on_change=self.on_ready)
+        self.readiness = Readiness(self, on_change=self.on_ready, peers=self.peers)
         # tick() sends a running job's chunks every 20 ms; idle, only the 1 Hz report runs
         self.tick_timer = steady_timer(self, 0.02, self.tick)
         steady_timer(self, 1.0, self.report)

@@ -37,6 +37,7 @@ import numpy.typing as npt
 from builtin_interfaces.msg import Duration
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.parameter import Parameter
+from rclpy.serialization import deserialize_message
 from rclpy.subscription import Subscription
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Int32MultiArray, Int64MultiArray, String
@@ -66,11 +67,13 @@ from winder.contract.topics import (
     status_values,
 )
 from winder.motion.job import AXES
-from winder.ros.chunks import STEPS_CDR, TIMED_CDR, waiting
+from winder.ros.chunks import STEPS_CDR, TIMED_CDR
 from winder.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from winder.ros.managed import ManagedNode
+from winder.ros.peers import Peers, Solo
 from winder.ros.qos import QOS_CLOCK, QOS_EVENTS, QOS_LATCHED, QOS_STREAM
 from winder.ros.ready import Announcer
+from winder.ros.sender import attributed, waiting
 from winder.ros.settings import Settings
 from winder.ros.spin import spin
 from winder.ros.timers import steady_timer
@@ -101,7 +104,12 @@ class ProfileNode(ManagedNode):
         self.pub_path = self.create_publisher(JointTrajectory, TOPIC_PATH, QOS_LATCHED)
         self.diag = Diagnostics(self, "winder_profile")
         self.ready = Announcer(self, "profile")  # the start handshake (winder/ready)
-        self.create_subscription(String, TOPIC_JOB, self.on_job, QOS_LATCHED)
+        # messages are acted on only when the cell's node owning the topic sent them
+        self.peers = Peers(self)
+        self.solo = Solo(self, "profile", self.peers, self.leave)  # one profile node per cell
+        self.diag.foreign = self.peers.intruders.summary  # its statuses name what it refused
+        self.peers.on_new = lambda: self.report()  # at once, not at the next second
+        attributed(self, String, TOPIC_JOB, self.on_job, QOS_LATCHED)
         self.sub_steps: Subscription | None = None  # created once the timed stream has a reader
         # connect() and announce() follow the streams' matching as it happens;
         # the 1 Hz report repeats both (and is the only timer)
@@ -110,7 +118,7 @@ class ProfileNode(ManagedNode):
         self.create_service(Trigger, "~/pause", lambda _q, r: self.reply(r, *self.command("pause")))
         self.create_service(Trigger, "~/abort", lambda _q, r: self.reply(r, *self.command("abort")))
         self.pub_control = self.create_publisher(String, TOPIC_CONTROL, QOS_EVENTS)
-        self.create_subscription(String, TOPIC_SIM_CONFIG, self.on_sim_config, QOS_LATCHED)
+        attributed(self, String, TOPIC_SIM_CONFIG, self.on_sim_config_raw, QOS_LATCHED)
         self.sim_config_topic = self.resolve_topic_name(TOPIC_SIM_CONFIG)
         self.sub_clock: Subscription | None = None  # only while a real-time run is timed
         self.last_sim_config: String | None = None
@@ -151,23 +159,27 @@ class ProfileNode(ManagedNode):
 
     def connect(self) -> None:
         if self.sub_steps is None and self.pub.get_subscription_count() > 0:
-            self.sub_steps = self.create_subscription(
+            self.sub_steps = attributed(
+                self,
                 Int32MultiArray,
                 TOPIC_STEPS,
                 self.on_steps,
                 QOS_STREAM,
-                raw=True,
                 event_callbacks=SubscriptionEventCallbacks(matched=lambda _info: self.announce()),
             )
             self.announce()
 
     # -- in --------------------------------------------------------------
-    def on_job(self, msg: String) -> None:
-        try:
-            job = parse_job_description(msg.data)
-        except ValueError as exc:
-            self.fail(f"job description rejected: {exc}")
+    def on_job(self, raw: bytes, gid: bytes) -> None:
+        if not self.peers.admit(TOPIC_JOB, gid):
             return
+        try:
+            job = parse_job_description(deserialize_message(raw, String).data)
+        except Exception as exc:  # ValueError, or not even a String
+            self.fail(f"job description rejected: {(str(exc).splitlines() or [type(exc).__name__])[0]}")
+            return
+        if self.plan is not None and job.run_id and job.run_id == self.plan.run_id:
+            return  # the running run's own description again: it cannot restart it
         if not self.active:
             self.fail(f"job {job.job_id} refused: {self.inactive_reason()}")
             return
@@ -240,11 +252,13 @@ class ProfileNode(ManagedNode):
         for raw in early:  # in order, before any taken from the queue
             self.time_chunk(raw)
 
-    def on_steps(self, raw: bytes) -> None:
-        self.time_chunk(raw)
+    def on_steps(self, raw: bytes, gid: bytes) -> None:
+        if self.peers.admit(TOPIC_STEPS, gid):
+            self.time_chunk(raw)
         if self.sub_steps is not None:
-            for more in waiting(self.sub_steps):  # the chunks queued behind it, in one go
-                self.time_chunk(more)
+            for more, sender in waiting(self.sub_steps):  # the chunks queued behind it, in one go
+                if self.peers.admit(TOPIC_STEPS, sender):
+                    self.time_chunk(more)
 
     def time_chunk(self, raw: bytes) -> None:
         if self.plan is None or self.checker is None:
@@ -349,6 +363,14 @@ class ProfileNode(ManagedNode):
                 "steps are sent without look-ahead"
             )
         return self.mode_known
+
+    def on_sim_config_raw(self, raw: bytes, gid: bytes) -> None:
+        if self.peers.admit(TOPIC_SIM_CONFIG, gid):
+            try:
+                msg = deserialize_message(raw, String)
+            except Exception:  # not a String: nothing to act on
+                return
+            self.on_sim_config(msg)
 
     def on_sim_config(self, msg: String) -> None:
         """The consumer's configuration of the run: a real-time run gets the
@@ -507,7 +529,11 @@ class ProfileNode(ManagedNode):
             self.ready.announce("blocked")
         elif not self.active:
             self.ready.announce("inactive")
-        elif self.sub_steps is not None and self.sub_steps.get_publisher_count() > 0:
+        elif (
+            self.sub_steps is not None
+            and self.sub_steps.get_publisher_count() > 0
+            and not self.peers.knows("interp", "consumer")  # it tells the cell's nodes from others
+        ):
             self.ready.announce("ready")
         else:
             self.ready.announce("waiting")

@@ -361,6 +361,10 @@ def report_run(result: Any, wall: float, command: str = "run") -> int:
     print(f"  bag                {r.bag or '-'}")
     if result.errors:
         print(f"  ERROR reports      {len(result.errors)}, first: {result.errors[0]}")
+    # messages from nodes that are not the cell's, refused: by each node of the cell, and this command
+    foreign = getattr(result, "intruders", "") or x.get("intruders", "")
+    if foreign:
+        print(f"  ignored, foreign   {foreign}")
     if r.state == "aborted" and not r.errors and not result.errors:
         print(f"winder {command}: {result.message}", file=sys.stderr)
         return 3

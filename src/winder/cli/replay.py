@@ -69,18 +69,25 @@ def cmd_play(args: argparse.Namespace) -> int:
 
     os.environ.setdefault("ROS_DOMAIN_ID", str(domain))
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", discovery)
+    from winder.ros.player import CellLiveError
+
     bar = Progress(1.0, "playing")
-    result = run_player(
-        plan,
-        rate=rate,
-        loop=args.loop,
-        start_paused=args.start_paused,
-        delay=delay,
-        wait_subscribers=wait,
-        progress=bar.update,
-        keys=True,
-    )
-    bar.close()
+    try:
+        result = run_player(
+            plan,
+            rate=rate,
+            loop=args.loop,
+            start_paused=args.start_paused,
+            delay=delay,
+            wait_subscribers=wait,
+            progress=bar.update,
+            keys=True,
+            force=args.force,
+        )
+    except CellLiveError as exc:
+        raise UserError(str(exc)) from None
+    finally:
+        bar.close()
     total = sum(result.published.values())
     print(
         f"  published {total} messages on {len(result.published)} topics in {result.wall_s:.2f} s"
@@ -226,6 +233,12 @@ def register(sub: argparse._SubParsersAction[Any]) -> None:
         help="publish the cell's topics in this namespace instead of the recorded one (/name[/name...])",
     )
     p.add_argument("--start-paused", action="store_true", help="start paused (space, ~/resume to go)")
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="play even where a live cell runs in the namespace played into (refused otherwise: "
+        "its run would take the recording for its own)",
+    )
     p.add_argument("--delay", default="0", metavar="S", help="wait S seconds before the first message")
     p.add_argument(
         "--wait-for-subscribers",

@@ -30,7 +30,7 @@ import numpy.typing as npt
 
 from winder.contract.params import stop_place
 from winder.contract.stream import JobPlan
-from winder.contract.topics import status_values
+from winder.contract.topics import PROCESS_KEYS, status_values
 
 __all__ = [
     "EVENT_KINDS",
@@ -421,7 +421,7 @@ class JobReport:
         known = {f.name: f for f in fields(cls) if f.name != "extra"}
         kwargs: dict[str, Any] = {}
         extra: dict[str, str] = {}
-        skip = {"progress", "role", "real_time_factor"}
+        skip = {"progress", "role", "real_time_factor", *PROCESS_KEYS}  # the sender's process is no report
         for key, text in values.items():
             f = known.get(key)
             if f is None:

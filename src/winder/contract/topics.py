@@ -115,6 +115,10 @@ STATUS_KEYS = ("state", "job_id", "run_id", "steps_done", "steps_total", "progre
 #: Statuses recorded before roles existed carry none: :func:`has_role` falls
 #: back on the stock node names (:data:`LEGACY_NAMES`) for them.
 ROLE_KEY = "role"
+#: The keys that end every status a winder node sends: the process that sent
+#: it (pid, host name, its start as wall-clock ns), so that two nodes of one
+#: name or role are told apart (``winder.ros.peers.Solo``).
+PROCESS_KEYS = ("pid", "host", "started_ns")
 ROLES = ("interp", "profile", "consumer")
 #: The node name each role had before roles existed (older bags, and a node
 #: that does not name its role yet).

@@ -17,6 +17,7 @@ import random
 import re
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import tempfile
@@ -34,14 +35,17 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
 from rclpy.task import Future
 from std_srvs.srv import Trigger
 
 from winder.contract.run import JobReport
-from winder.contract.topics import ROLE_KEY, TASK_JOB, TOPIC_DIAGNOSTICS, has_role, in_namespace
+from winder.contract.topics import ROLE_KEY, ROLES, TASK_JOB, TOPIC_DIAGNOSTICS, has_role, in_namespace
 from winder.ros.dds import PROFILE_KEYS, use_profile
 from winder.ros.diagnostics import ERROR
 from winder.ros.graph import consumers, fully_qualified, profile_nodes
+from winder.ros.peers import Peers
+from winder.ros.sender import SenderExecutor, attributed
 from winder.ros.terminal import KeyReader
 
 #: the executable ``winder run`` starts for each part of the cell
@@ -54,6 +58,9 @@ NODE_ROLES = {"interp": "interp", "profile": "profile", "sim": "consumer"}
 START_ORDER = ("sim", "profile", "interp")
 #: Seconds before an unanswered start request is asked again.
 START_RETRY = 5.0
+#: s a cell runner listens to /diagnostics before its first start call: every
+#: node reports once a second, so another cell's in the same namespace is heard
+OCCUPIED_WAIT = 1.2
 
 
 @dataclass
@@ -63,6 +70,8 @@ class CellResult:
     message: str = ""
     log_dir: Path | None = None
     errors: list[str] = field(default_factory=list)  #: every ERROR a node of the cell reported
+    #: messages on the cell's topics from nodes that are not the cell's (who, how many), "" if none
+    intruders: str = ""
 
 
 def find_executable(name: str) -> str:
@@ -270,9 +279,18 @@ class CellWatch:
     """
 
     def __init__(
-        self, node: Node, namespace: str, remote: dict[str, dict[str, Any]] | None = None
+        self,
+        node: Node,
+        namespace: str,
+        remote: dict[str, dict[str, Any]] | None = None,
+        own: Callable[[], set[str]] | None = None,
     ) -> None:
         self.node = node
+        #: the pids of the nodes this process started (None: it started none, they run elsewhere)
+        self.own = own
+        self.occupied = ""  #: another cell's node heard in this namespace, in words
+        self.foreign: dict[str, str] = {}  #: node -> what it refused from foreign senders
+        self.since = time.monotonic()
         self.namespace = namespace
         self.ns = namespace.strip("/")
         self.consumer_nodes: set[str] = set()  #: node names the graph shows as the cell's consumer
@@ -286,10 +304,16 @@ class CellWatch:
         self.run_id = ""  #: the run started (from the start reply or the interp node's status)
         self.errors: list[str] = []
         self.remote = [RemoteSettings(node, namespace, role, v) for role, v in (remote or {}).items() if v]
-        node.create_subscription(
+        self.external = set(remote or {})  #: roles whose nodes run elsewhere (not started here)
+        # a status counts only when the node it names sent it, and that node
+        # plays its part in this cell (winder.ros.peers): a stranger's status
+        # named like ours fools nobody
+        self.peers = Peers(node, namespace)
+        attributed(
+            node,
             DiagnosticArray,
             TOPIC_DIAGNOSTICS,
-            self._on_diagnostics,
+            self._on_raw,
             QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE),
         )
         self.start = node.create_client(Trigger, f"{namespace.rstrip('/')}/interp_node/start")
@@ -319,9 +343,29 @@ class CellWatch:
             self._looked = now
             self.consumer_nodes |= {name for name, _ in consumers(self.node, self.namespace)}
 
+    def _on_raw(self, raw: bytes, gid: bytes) -> None:
+        try:
+            msg = deserialize_message(raw, DiagnosticArray)
+        except Exception:  # not a DiagnosticArray: nothing to read
+            return
+        ours = [st for st in msg.status if in_namespace(st.name, self.ns)]
+        if not ours:
+            return  # another cell's (or nobody's): not this run's
+        nodes = {st.name.split(":", 1)[0].rsplit("/", 1)[-1] for st in ours}
+        if len(nodes) == 1 and self.peers.admit_from(TOPIC_DIAGNOSTICS, gid, nodes.pop()):
+            self._on_diagnostics(msg)
+        elif len(nodes) > 1:
+            self.peers.refuse(
+                TOPIC_DIAGNOSTICS, self.peers.sender(TOPIC_DIAGNOSTICS, gid), gid, "mixed statuses"
+            )
+
     def _on_diagnostics(self, msg: DiagnosticArray) -> None:
         for st in msg.status:
             values = {kv.key: kv.value for kv in st.values}
+            if self._stranger(st.name, values):
+                continue
+            if values.get("intruders"):  # what this node refused from foreign senders
+                self.foreign[st.name.split(":", 1)[0]] = values["intruders"]
             consumer = has_role(st.name, values, "consumer", self.ns, self.consumer_nodes)
             unnamed = not values.get(ROLE_KEY) and st.name.endswith(f": {TASK_JOB}")
             if not consumer and unnamed and in_namespace(st.name, self.ns):
@@ -346,6 +390,22 @@ class CellWatch:
                 report = f"{st.name}: {st.message}"
                 if report not in self.errors:  # a status repeats every second while it lasts
                     self.errors.append(report)
+
+    def _stranger(self, name: str, values: dict[str, str]) -> bool:
+        """A status of a node of this cell's roles that this process did not
+        start (another cell in the same namespace): noted, never taken as ours."""
+        if self.own is None or values.get(ROLE_KEY) not in ROLES or "pid" not in values:
+            return False
+        if values.get("host") == socket.gethostname() and values["pid"] in self.own():
+            return False
+        if values[ROLE_KEY] in self.external:
+            return False
+        self.occupied = self.occupied or (
+            f"another cell runs in namespace /{self.ns}: {name.split(':', 1)[0]} "
+            f"(pid {values['pid']} on {values.get('host', '?')}); start this one with --namespace "
+            "or another ROS_DOMAIN_ID"
+        )
+        return True
 
     def _consumer_reports_here(self) -> bool:
         """The consumer's /diagnostics writer is matched with this process'
@@ -374,6 +434,10 @@ class CellWatch:
                 return refused
         if not (self.start.service_is_ready() and self.heard_consumer):
             return None
+        if self.own is not None and time.monotonic() - self.since < OCCUPIED_WAIT:
+            return None  # every node of the namespace has said who it is (1 Hz) before we start
+        if self.occupied:
+            return f"job not started: {self.occupied}"
         if not all(r.done for r in self.remote):
             return None
         req = self._request
@@ -465,6 +529,8 @@ def _wait_for_job(
     """Spin until the consumer's final report; the reason if it never came
     (the job not started within ``timeouts[0]`` s, or not done within ``timeouts[1]``)."""
     start_timeout, timeout = timeouts
+    executor = SenderExecutor()  # the watch takes /diagnostics with each sender (winder.ros.sender)
+    executor.add_node(node)
     t0 = time.monotonic()
     waited = min(start_timeout, timeout)
     t_start, t_end = t0 + waited, t0 + timeout
@@ -472,7 +538,7 @@ def _wait_for_job(
         refused = watch.ask_to_start()
         if refused:
             return refused
-        rclpy.spin_once(node, timeout_sec=0.1)
+        executor.spin_once(timeout_sec=0.1)
         if keys is not None:
             keys.poll()
         if progress is not None:
@@ -495,6 +561,8 @@ def _result(watch: CellWatch, failure: str, log_dir: Path) -> CellResult:
         result.ok = watch.summary.get("state") == "done"
         result.message = watch.message
     result.errors = list(watch.errors)
+    refused = {**watch.foreign, "winder run": watch.peers.intruders.summary()}
+    result.intruders = "; ".join(f"{who}: {what}" for who, what in refused.items() if what)
     if watch.errors and not result.message:
         result.message = watch.errors[0]
     if result.ok and not watch.errors and not JobReport.from_values(result.summary).errors:
@@ -529,7 +597,8 @@ def run_cell(
         keys = Keys(node, namespace)
         try:
             remote = {NODE_ROLES[key]: dict(params.get(key, {})) for key in external}
-            watch = CellWatch(node, namespace, remote)
+            own = lambda: {str(p.pid) for p in procs.procs.values()}  # noqa: E731
+            watch = CellWatch(node, namespace, remote, own=own)
             _spawn(procs, params, namespace, external)
             failure = _wait_for_job(node, watch, procs, (start_timeout, timeout), progress, keys)
         except ExternalShutdownException:

@@ -82,12 +82,15 @@ from winder.contract.topics import (
     in_namespace,
     status_values,
 )
+from winder.contract.trust import Intruders
 from winder.record.bag import BagRecorder, new_bag_path, run_bag_path, signals_held
-from winder.ros.chunks import TIMED_CDR, waiting
+from winder.ros.chunks import TIMED_CDR
 from winder.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from winder.ros.managed import ManagedNode
+from winder.ros.peers import Peers, Solo
 from winder.ros.qos import QOS_DIAGNOSTICS, QOS_EVENTS, QOS_LATCHED, QOS_STATE, QOS_STREAM
 from winder.ros.ready import Announcer
+from winder.ros.sender import attributed, waiting
 from winder.ros.settings import Settings
 from winder.ros.timers import steady_timer
 from winder.spec import Spec
@@ -148,31 +151,31 @@ class StepConsumer(ManagedNode):
         # a job description starts a run now: volatile, so a consumer that
         # (re)starts never takes the last run's latched description for a new
         # run; "ready" waits for this subscription's match too (announce())
-        self.sub_job = self.create_subscription(
+        # every message acted on is taken with its publisher, and acted on only
+        # when that is the cell's node owning the topic (winder.ros.peers)
+        self.peers = Peers(self)
+        self.solo = Solo(self, "consumer", self.peers, self.leave)  # one consumer per cell
+        self.sub_job = attributed(
+            self,
             String,
             TOPIC_JOB,
             self.on_job,
             QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE),
-            raw=True,
             event_callbacks=SubscriptionEventCallbacks(matched=lambda _info: self.announce()),
         )
-        self.create_subscription(JointTrajectory, TOPIC_PATH, self.on_path, QOS_LATCHED, raw=True)
-        self.create_subscription(String, TOPIC_PROFILE_CONFIG, self.on_profile_config, QOS_LATCHED, raw=True)
-        self.sub_control = self.create_subscription(
-            String, TOPIC_CONTROL, self.on_control, QOS_EVENTS, raw=True
-        )
-        self.sub_times = self.create_subscription(
+        attributed(self, JointTrajectory, TOPIC_PATH, self.on_path, QOS_LATCHED)
+        attributed(self, String, TOPIC_PROFILE_CONFIG, self.on_profile_config, QOS_LATCHED)
+        self.sub_control = attributed(self, String, TOPIC_CONTROL, self.on_control, QOS_EVENTS)
+        self.sub_times = attributed(
+            self,
             Int64MultiArray,
             TOPIC_STEP_TIMES,
             self.on_step_times,
             QOS_STREAM,
-            raw=True,
             # the handshake follows the stream's connection as it happens, not by polling
             event_callbacks=SubscriptionEventCallbacks(matched=lambda _info: self.announce()),
         )
-        self.create_subscription(
-            DiagnosticArray, TOPIC_DIAGNOSTICS, self.on_diagnostics, QOS_DIAGNOSTICS, raw=True
-        )
+        attributed(self, DiagnosticArray, TOPIC_DIAGNOSTICS, self.on_diagnostics, QOS_DIAGNOSTICS)
         # pump() runs on events (a chunk, a job) and, while work waits on the
         # clock (pacing, batching), every 5 ms; idle, only the 1 Hz report runs
         self.pump_timer = steady_timer(self, self.pump_period, self.pump)
@@ -295,13 +298,16 @@ class StepConsumer(ManagedNode):
         self.foreign = 0  # control messages of the run refused
 
     # -- a run starts -----------------------------------------------------------
-    def on_job(self, raw: bytes) -> None:
-        msg = deserialize_message(raw, String)
-        try:
-            plan = parse_job_description(msg.data)
-        except ValueError as exc:
-            self.error(f"job description rejected: {exc}")
+    def on_job(self, raw: bytes, gid: bytes) -> None:
+        if not self.peers.admit(TOPIC_JOB, gid):
             return
+        try:
+            plan = parse_job_description(deserialize_message(raw, String).data)
+        except Exception as exc:  # ValueError, or not even a String
+            self.error(f"job description rejected: {one_line(exc)}")
+            return
+        if self.plan is not None and plan.run_id and plan.run_id == self.plan.run_id:
+            return  # the running run's own description again: it cannot restart it
         if not self.active:
             self.error(f"job {plan.job_id} refused: {self.inactive_reason()}")
             return
@@ -321,6 +327,7 @@ class StepConsumer(ManagedNode):
             return
         values = self.settings.values()
         self.reset()
+        self.peers.run = Intruders()
         self.plan = plan
         self.ledger = RunLedger(plan)
         self.checker = StreamChecker(plan)
@@ -397,11 +404,15 @@ class StepConsumer(ManagedNode):
         if config_raw:
             self.record("sim_config", 0, config_raw)
 
-    def on_path(self, raw: bytes) -> None:
+    def on_path(self, raw: bytes, gid: bytes) -> None:
+        if not self.peers.admit(TOPIC_PATH, gid):
+            return
         self.path_raw = raw
         self.record_path()
 
-    def on_profile_config(self, raw: bytes) -> None:
+    def on_profile_config(self, raw: bytes, gid: bytes) -> None:
+        if not self.peers.admit(TOPIC_PROFILE_CONFIG, gid):
+            return
         self.profile_raw = raw
         self.record_profile_config()
 
@@ -434,8 +445,9 @@ class StepConsumer(ManagedNode):
         self.record("path", self.t_ns, self.path_raw)
 
     # -- operator events --------------------------------------------------------
-    def on_control(self, raw: bytes) -> None:
-        self.handle_control(raw)
+    def on_control(self, raw: bytes, gid: bytes) -> None:
+        if self.peers.admit(TOPIC_CONTROL, gid):
+            self.handle_control(raw)
         self.pump()
 
     def handle_control(self, raw: bytes, *, early: bool = False) -> None:
@@ -468,14 +480,17 @@ class StepConsumer(ManagedNode):
         """Operator events already here, before any step is executed: the
         executor may serve a busy step stream first, and an event must not
         come after the steps it times (the profile node sends it first)."""
-        for raw in waiting(self.sub_control):
-            self.handle_control(raw)
+        for raw, gid in waiting(self.sub_control):
+            if self.peers.admit(TOPIC_CONTROL, gid):
+                self.handle_control(raw)
 
     # -- the step stream --------------------------------------------------------
-    def on_step_times(self, raw: bytes) -> None:
-        self.receive(raw)
-        for more in waiting(self.sub_times):  # the chunks queued behind it, in one go
-            self.receive(more)
+    def on_step_times(self, raw: bytes, gid: bytes) -> None:
+        if self.peers.admit(TOPIC_STEP_TIMES, gid):
+            self.receive(raw)
+        for more, sender in waiting(self.sub_times):  # the chunks queued behind it, in one go
+            if self.peers.admit(TOPIC_STEP_TIMES, sender):
+                self.receive(more)
         self.pump()
 
     def receive(self, raw: bytes) -> None:
@@ -629,8 +644,13 @@ class StepConsumer(ManagedNode):
             bag=str(self.bag.path.resolve()) if self.bag else "",
             errors=len(self.errors),
             stalls=self.stalls,
-            extra={k: str(v) for k, v in self.details().items()},
+            extra={**{k: str(v) for k, v in self.details().items()}, **self.intruder_keys()},
         )
+
+    def intruder_keys(self) -> dict[str, str]:
+        """The run's refused messages, if any: ``foreign_messages`` and who sent them."""
+        run = self.peers.run
+        return {"foreign_messages": str(run.total), "intruders": run.summary()} if run.total else {}
 
     def aborted(self) -> bool:
         """The run was aborted and every step up to the rest is executed."""
@@ -759,8 +779,9 @@ class StepConsumer(ManagedNode):
             {"job_id": plan.job_id if plan else "", "run_id": plan.run_id if plan else ""},
         )
 
-    def on_diagnostics(self, raw: bytes) -> None:
-        """Record the statuses of this cell's nodes: another cell's are its own bag's."""
+    def on_diagnostics(self, raw: bytes, gid: bytes) -> None:
+        """Record the statuses of this cell's nodes, each sent by the node it
+        names: another cell's are its own bag's, a stranger's none."""
         if self.bag is None:
             return
         try:
@@ -770,7 +791,13 @@ class StepConsumer(ManagedNode):
         own = self.get_fully_qualified_name().lstrip("/") + ":"
         if all(n.startswith(own) for n in names):
             return  # this node records its own statuses as it publishes them (publish_status)
-        if any(in_namespace(n, self.get_namespace()) for n in names):
+        ours = [n for n in names if in_namespace(n, self.get_namespace())]
+        if not ours:
+            return
+        # one node's statuses, sent by that node (a stranger's status named like ours is not)
+        node = ours[0].split(":", 1)[0].rsplit("/", 1)[-1]
+        alone = all(n.split(":", 1)[0].rsplit("/", 1)[-1] == node for n in ours)
+        if alone and self.peers.admit_from(TOPIC_DIAGNOSTICS, gid, node):
             self.record("diagnostics", self.t_ns, raw)
 
     def publish_status(
@@ -838,7 +865,9 @@ class StepConsumer(ManagedNode):
             state = "inactive"
         else:
             heard = self.sub_times.get_publisher_count() > 0 and self.sub_job.get_publisher_count() > 0
-            state = "ready" if heard and not self.missing() else "waiting"
+            # and it can tell the cell's own interp and profile node from anyone else
+            known = heard and not self.peers.knows("interp", "profile")
+            state = "ready" if known and not self.missing() else "waiting"
         self.ready.announce(state)
 
     def report(self) -> None:

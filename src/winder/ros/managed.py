@@ -36,13 +36,20 @@ from typing import Any
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
-__all__ = ["ManagedNode"]
+__all__ = ["LEFT_CELL", "ManagedNode"]
+
+#: the exit status of a node that refused to join its cell: 2, "bad input"
+#: in the README's table of exit codes (it was started where it cannot run)
+LEFT_CELL = 2
 
 
 class ManagedNode(LifecycleNode):
     """A winder node with the lifecycle interface (see the module doc).
     Subclasses call :meth:`start_lifecycle` at the end of ``__init__`` and
     implement :meth:`in_run`, :meth:`blocked_reason` and :meth:`lifecycle_changed`."""
+
+    #: the exit status of a node that left its cell (:meth:`leave`); 0 otherwise
+    exit_code = 0
 
     def __init__(self, name: str) -> None:
         super().__init__(name)
@@ -151,3 +158,11 @@ class ManagedNode(LifecycleNode):
             hook()
         self.lifecycle_changed()
         return super().on_shutdown(state)
+
+    def leave(self, why: str) -> None:
+        """Leave the cell at once (another node of this role already runs in
+        its namespace: :class:`winder.ros.peers.Solo`): one ERROR line, and
+        the process ends with :data:`LEFT_CELL`."""
+        self.get_logger().error(why)
+        self.exit_code = LEFT_CELL
+        self.context.try_shutdown()

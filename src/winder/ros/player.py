@@ -35,6 +35,7 @@ from rclpy.parameter import Parameter
 from std_srvs.srv import Trigger
 
 from winder.contract.topics import TOPIC_JOB
+from winder.contract.trust import SIGNS
 from winder.record.replay import PlayPlan, PlayTopic
 from winder.ros.qos import profile
 
@@ -306,8 +307,10 @@ def run_player(
     wait_subscribers: float,
     progress: Callable[[float, str], None] | None,
     keys: bool,
+    force: bool = False,
 ) -> PlayResult:
-    """Init rclpy, play, shut down. Ctrl-C ends the replay (KeyboardInterrupt)."""
+    """Init rclpy, play, shut down. Ctrl-C ends the replay (KeyboardInterrupt).
+    :class:`CellLiveError` if a live cell runs in the namespace played into (unless ``force``)."""
     from rclpy.executors import ExternalShutdownException
 
     from winder.ros.dds import use_profile
@@ -318,6 +321,14 @@ def run_player(
     terminal = None
     try:
         player = Player(plan, rate=rate, node_namespace=_namespace_of(plan), start_paused=start_paused)
+        live = [] if force else live_cell(player.node, _namespace_of(plan))
+        if live:
+            ns = _namespace_of(plan) or "/"
+            raise CellLiveError(
+                f"a live cell runs in {ns} ({', '.join(live)}) and reads the topics this bag would "
+                f"publish: its run would take the recording's messages for its own; play into another "
+                f"namespace (--namespace /replay), or give --force"
+            )
         if wait_subscribers > 0:
             missing = player.wait_for_subscribers(wait_subscribers)
             if missing:
@@ -343,6 +354,30 @@ def run_player(
         if player is not None:
             player.close()
         rclpy.try_shutdown()
+
+
+class CellLiveError(Exception):
+    """``winder play`` would publish onto a namespace where a live cell runs."""
+
+
+#: s the player looks at the graph for a live cell in its namespace before it plays
+LIVE_LOOK = 1.0
+
+
+def live_cell(node: Any, namespace: str, look: float = LIVE_LOOK) -> list[str]:
+    """The nodes of a live cell in ``namespace`` (the interp, profile and
+    consumer parts as the graph shows them; :data:`winder.contract.trust.SIGNS`),
+    looked for up to ``look`` s while discovery goes on; [] if none."""
+    from winder.ros.graph import fully_qualified
+    from winder.ros.peers import Peers
+
+    peers = Peers(node, namespace)
+    deadline = time.monotonic() + look
+    while True:
+        found = sorted({who for role in SIGNS for who in peers.holders(role)})
+        if found or time.monotonic() > deadline:
+            return [fully_qualified(*who) for who in found]
+        time.sleep(0.05)
 
 
 def _namespace_of(plan: PlayPlan) -> str:

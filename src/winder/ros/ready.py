@@ -18,9 +18,12 @@ from diagnostic_msgs.msg import KeyValue
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
+from rclpy.serialization import deserialize_message
 
 from winder.contract.topics import READY_ROLES, READY_STATES, TOPIC_READY
+from winder.ros.peers import Peers
 from winder.ros.qos import QOS_LATCHED
+from winder.ros.sender import attributed
 
 
 class Announcer:
@@ -63,18 +66,32 @@ class Readiness:
     job), and so is an announcement that has not been repeated for
     :data:`FRESH` seconds."""
 
-    def __init__(self, node: Node, on_change: Callable[[], None] | None = None) -> None:
+    def __init__(
+        self, node: Node, on_change: Callable[[], None] | None = None, peers: Peers | None = None
+    ) -> None:
         self.node = node
         self.states: dict[str, str] = {}
         self.heard: dict[str, float] = {}  # role -> monotonic time of its last announcement
         self.on_change = on_change
-        node.create_subscription(
+        # an announcement counts only from the cell's node in the role it names
+        self.peers = peers or Peers(node)
+        attributed(
+            node,
             KeyValue,
             TOPIC_READY,
-            self._on_ready,
+            self._on_raw,
             QOS_READER,
             event_callbacks=SubscriptionEventCallbacks(matched=self._on_matched),
         )
+
+    def _on_raw(self, raw: bytes, gid: bytes) -> None:
+        try:
+            msg = deserialize_message(raw, KeyValue)
+        except Exception:  # not a KeyValue: nothing to act on
+            return
+        known = msg.key in READY_ROLES and msg.value in READY_STATES
+        if known and self.peers.admit(TOPIC_READY, gid, msg.key):
+            self._on_ready(msg)
 
     def _on_matched(self, info: Any) -> None:
         """An announcer left (its node died or stopped): its last word, kept

@@ -26,7 +26,7 @@ from typing import Any
 import rclpy
 from diagnostic_msgs.msg import KeyValue
 from rclpy.executors import ExternalShutdownException
-from std_msgs.msg import Int64MultiArray, String
+from std_msgs.msg import Int32MultiArray, Int64MultiArray, String
 from trajectory_msgs.msg import JointTrajectory
 
 from winder.contract.qos import EVENTS, LATCHED, STATE, STREAM
@@ -40,11 +40,13 @@ from winder.contract.topics import (
     TOPIC_PROGRESS,
     TOPIC_READY,
     TOPIC_STEP_TIMES,
+    TOPIC_STEPS,
 )
 from winder.record.replay import PlayPlan
 from winder.ros.cell import CellResult, CellWatch, NodeProcesses, _result, cell_environment, ros_args
 from winder.ros.chunks import TIMED_CDR
 from winder.ros.qos import profile
+from winder.ros.sender import SenderExecutor
 
 __all__ = ["IN_FLIGHT", "Recorded", "resimulate"]
 
@@ -94,6 +96,7 @@ def resimulate(
         procs = NodeProcesses(env, log_dir)
         rclpy.init(args=[])
         node = rclpy.create_node("winder_resim", namespace=namespace or "/")
+        SenderExecutor().add_node(node)  # the watch takes /diagnostics with each sender
         failure = ""
         try:
             watch = CellWatch(node, namespace)
@@ -116,6 +119,10 @@ def resimulate(
             pub_profile = node.create_publisher(String, TOPIC_PROFILE_CONFIG, profile(LATCHED))
             pub_control = node.create_publisher(String, TOPIC_CONTROL, profile(EVENTS))
             pub_steps = node.create_publisher(Int64MultiArray, TOPIC_STEP_TIMES, profile(STREAM))
+            # this node plays the interp and the profile node for the sim node, which
+            # acts only on those parts' messages: it declares their endpoints
+            # (winder.contract.trust.SIGNS) though it sends no untimed steps
+            node.create_publisher(Int32MultiArray, TOPIC_STEPS, profile(STREAM))
             procs.start("sim_node", ros_args(sim_params, namespace))
             failure = _wait(node, procs, lambda: ready.get("consumer") == "ready", 60.0, "the sim node ready")
             if not failure:
@@ -130,7 +137,7 @@ def resimulate(
             if not failure:
                 t_end = time.monotonic() + timeout
                 while watch.summary is None and not failure:
-                    rclpy.spin_once(node, timeout_sec=0.1)
+                    spin_once(node, 0.1)
                     if progress is not None:
                         progress(watch.progress, watch.sim_time)
                     failure = procs.dead() or ("" if time.monotonic() < t_end else "no final report in time")
@@ -162,10 +169,16 @@ def _relabelled(raw: bytes, run_id: str) -> str:
     return json.dumps(event)
 
 
+def spin_once(node: Any, timeout: float) -> None:
+    """One round of the node's own executor (a :class:`SenderExecutor`)."""
+    assert node.executor is not None
+    node.executor.spin_once(timeout_sec=timeout)
+
+
 def _wait(node: Any, procs: NodeProcesses, cond: Callable[[], bool], timeout: float, what: str) -> str:
     t_end = time.monotonic() + timeout
     while not cond():
-        rclpy.spin_once(node, timeout_sec=0.05)
+        spin_once(node, 0.05)
         dead = procs.dead()
         if dead:
             return dead

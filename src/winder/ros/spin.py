@@ -45,6 +45,7 @@ def spin(factory: Callable[[], Node], args: list[str] | None = None) -> None:
     from rclpy.executors import ExternalShutdownException
 
     from winder.ros.dds import use_profile
+    from winder.ros.sender import SenderExecutor
 
     use_profile()
     keep_freed_memory()
@@ -52,7 +53,9 @@ def spin(factory: Callable[[], Node], args: list[str] | None = None) -> None:
     node = None
     try:
         node = factory()
-        rclpy.spin(node)
+        executor = SenderExecutor()  # takes attributed subscriptions with their publisher (winder.ros.sender)
+        executor.add_node(node)
+        executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except RCLError:
@@ -70,3 +73,6 @@ def spin(factory: Callable[[], Node], args: list[str] | None = None) -> None:
         # the signal handler may shut the context down at this very moment
         with contextlib.suppress(RCLError):
             rclpy.try_shutdown()
+    code = getattr(node, "exit_code", 0)
+    if code:
+        raise SystemExit(code)

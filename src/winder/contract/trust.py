@@ -1,0 +1,80 @@
+"""Who may change a run, ROS-free: which of the cell's roles owns each topic,
+how a role is recognised on the graph, and the count of what came from
+anyone else (docs/SECURITY.md). :class:`winder.ros.peers.Peers` applies it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from winder.contract.topics import (
+    TOPIC_CONTROL,
+    TOPIC_JOB,
+    TOPIC_PATH,
+    TOPIC_PROFILE_CONFIG,
+    TOPIC_PROGRESS,
+    TOPIC_SIM_CONFIG,
+    TOPIC_STATE,
+    TOPIC_STEP_TIMES,
+    TOPIC_STEPS,
+)
+
+__all__ = ["OWNERS", "ROLE_NAMES", "SIGNS", "Intruders"]
+
+#: The role whose node alone may publish each of the cell's topics that a
+#: node acts on (``winder/ready`` is owned by the role its key names, a
+#: ``/diagnostics`` status by the node its name names).
+OWNERS = {
+    TOPIC_JOB: "interp",
+    TOPIC_STEPS: "interp",
+    TOPIC_STEP_TIMES: "profile",
+    TOPIC_CONTROL: "profile",
+    TOPIC_PATH: "profile",
+    TOPIC_PROFILE_CONFIG: "profile",
+    TOPIC_SIM_CONFIG: "consumer",
+    TOPIC_PROGRESS: "consumer",
+    TOPIC_STATE: "consumer",
+}
+
+#: How each role shows on the graph, in the cell's namespace: the topics its
+#: node publishes, and those it reads. A node that merely publishes on a
+#: cell's topic (a forger, ``winder play``) plays no part; two nodes that
+#: both look like one role make the cell refuse to start until one leaves
+#: (:class:`winder.ros.peers.Peers`). ``winder resim`` plays the interp and
+#: the profile node at once and declares both parts' endpoints.
+SIGNS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
+    "interp": ((TOPIC_JOB, TOPIC_STEPS), ()),
+    "profile": ((TOPIC_STEP_TIMES, TOPIC_CONTROL, TOPIC_PATH), ()),
+    "consumer": ((TOPIC_PROGRESS,), (TOPIC_STEP_TIMES,)),
+}
+
+ROLE_NAMES = {"interp": "interp node", "profile": "profile node", "consumer": "step consumer"}
+
+
+@dataclass
+class Intruders:
+    """Messages refused, per foreign sender and topic."""
+
+    counts: dict[tuple[str, str], int] = field(default_factory=dict)
+
+    def count(self, sender: str, topic: str) -> bool:
+        """Count one refused message; True the first time this sender is
+        refused at all (the moment to report it)."""
+        first = not any(s == sender for s, _ in self.counts)
+        self.counts[sender, topic] = self.counts.get((sender, topic), 0) + 1
+        return first
+
+    @property
+    def total(self) -> int:
+        return sum(self.counts.values())
+
+    def senders(self) -> list[str]:
+        return sorted({s for s, _ in self.counts})
+
+    def summary(self) -> str:
+        """``"/intruder (12 on /winder/control)"``, one entry per sender, or ""."""
+        parts = []
+        for sender in self.senders():
+            topics = [(t, n) for (s, t), n in sorted(self.counts.items()) if s == sender]
+            parts.append(f"{sender} ({', '.join(f'{n} on {t}' for t, n in topics)})")
+        return "; ".join(parts)

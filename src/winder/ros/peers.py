@@ -1,0 +1,248 @@
+"""Only the cell acts on the cell: the verdict on a message's sender.
+
+ROS 2 without DDS Security authenticates nobody: any node on the domain may
+publish on a cell's topics. A winder node therefore acts on a message only
+when its publisher (the GID :mod:`winder.ros.sender` takes it with, looked
+up on the graph) is the cell's own node that owns the topic
+(:data:`winder.contract.trust.OWNERS`); anything else is counted, reported
+once per foreign node as a WARN naming it, and never acted on (docs/SECURITY.md).
+
+The cell's nodes are found by their part (:data:`winder.contract.trust.SIGNS`:
+the topics they publish and read in the cell's namespace), never by their
+names. The first node seen in a role is *pinned*: a second node that shows
+up in the role later (another cell started in the same namespace, an
+impersonator) is foreign while the pinned one is on the graph. A node that
+restarts under its own name and namespace is the same node.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import time
+from collections.abc import Callable
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from rclpy.serialization import deserialize_message
+from rclpy.subscription import Subscription
+
+from winder.contract.topics import PROCESS_KEYS, ROLE_KEY, TOPIC_DIAGNOSTICS, in_namespace
+from winder.contract.trust import OWNERS, ROLE_NAMES, SIGNS, Intruders
+from winder.ros.graph import fully_qualified
+from winder.ros.qos import QOS_DIAGNOSTICS
+from winder.ros.sender import attributed
+
+__all__ = ["Peers", "Solo"]
+
+#: what rmw puts for a node's name or namespace it has not learned yet
+UNKNOWN = "_UNKNOWN_"
+
+Who = tuple[str, str]  # (node name, namespace) as the graph reports them
+
+
+class Peers:
+    """The cell's own nodes as ``node`` sees them on the graph, and the
+    verdict on each message's sender (see the module doc). ``namespace``:
+    the cell's (the node's own by default)."""
+
+    def __init__(
+        self, node: Node, namespace: str | None = None, warn: Callable[[str], None] | None = None
+    ) -> None:
+        self.node = node
+        ns = (node.get_namespace() if namespace is None else namespace).strip("/")
+        self.ns = "/" + ns if ns else "/"
+        self.namespace = ns
+        self.me: Who = (node.get_name(), node.get_namespace())
+        self.pinned: dict[str, Who] = {}
+        self.gids: dict[bytes, Who] = {}  # publisher GID -> its node, as the graph reported it
+        self.intruders = Intruders()  # over the node's life: each sender reported once
+        self.run = Intruders()  # of the current run (the owner resets it): for its report
+        self.unnamed = 0  # messages from endpoints the graph did not name yet: not acted on
+        #: called when a new foreign sender is refused (the node says so in its status at once)
+        self.on_new: Callable[[], None] | None = None
+        self.warn = warn or (lambda text: node.get_logger().warning(text))
+
+    # -- the graph ----------------------------------------------------------------
+    def topic(self, name: str) -> str:
+        return name if name.startswith("/") else fully_qualified(name, self.namespace)
+
+    def sender(self, topic: str, gid: bytes) -> Who | None:
+        """The node that owns the publisher ``gid`` on ``topic``, or None
+        while the graph does not show it."""
+        who = self.gids.get(gid)
+        if who is None:
+            for info in self.node.get_publishers_info_by_topic(self.topic(topic)):
+                # an endpoint is on the graph before its node's name is (rmw
+                # says _NODE_NAME_UNKNOWN_ until the node's discovery info
+                # comes): not known yet, asked again next time
+                if UNKNOWN not in info.node_name and UNKNOWN not in info.node_namespace:
+                    self.gids[bytes(info.endpoint_gid)] = (info.node_name, info.node_namespace)
+            who = self.gids.get(gid)
+        return who
+
+    def _endpoints(self, topic: str, publishers: bool) -> set[Who]:
+        get = (
+            self.node.get_publishers_info_by_topic
+            if publishers
+            else self.node.get_subscriptions_info_by_topic
+        )
+        return {
+            (info.node_name, info.node_namespace)
+            for info in get(self.topic(topic))
+            if info.node_namespace == self.ns
+        }
+
+    def holders(self, role: str) -> set[Who]:
+        """The nodes in the cell's namespace that play ``role`` by their
+        endpoints (normally one; this node itself included)."""
+        publishes, reads = SIGNS[role]
+        found: set[Who] | None = None
+        for topic in publishes:
+            found = self._endpoints(topic, True) if found is None else found & self._endpoints(topic, True)
+        for topic in reads:
+            found = self._endpoints(topic, False) if found is None else found & self._endpoints(topic, False)
+        return found or set()
+
+    def owner(self, role: str) -> Who | None:
+        """The cell's node in ``role``: the pinned one while the graph shows
+        it, else the only one the graph shows (pinned from now), else None."""
+        pinned = self.pinned.get(role)
+        holders = self.holders(role)
+        if pinned is not None and pinned in holders:
+            return pinned
+        self.pinned.pop(role, None)
+        if len(holders) == 1:
+            self.pinned[role] = next(iter(holders))
+            return self.pinned[role]
+        return None
+
+    def knows(self, *roles: str) -> str:
+        """Why the cell's nodes in ``roles`` are not known yet ("" once each
+        shows up on the graph alone or pinned): a node is ready only when it
+        can tell its cell's messages from others'."""
+        missing = []
+        for role in roles:
+            if self.owner(role) is None:
+                holders = sorted(self.holders(role))
+                if holders:
+                    names = ", ".join(fully_qualified(*h) for h in holders)
+                    missing.append(f"{len(holders)} nodes play the {ROLE_NAMES[role]} in {self.ns} ({names})")
+                else:
+                    missing.append(f"no {ROLE_NAMES[role]} in {self.ns} on the graph")
+        return "; ".join(missing)
+
+    def subscribe(
+        self, msg_type: Any, topic: str, callback: Callable[[Any], None], qos: QoSProfile, **kwargs: Any
+    ) -> Subscription:
+        """A subscription of this node whose ``callback`` gets only the
+        messages of the cell's node that owns ``topic`` (:data:`OWNERS`),
+        deserialized; what does not deserialize is dropped."""
+
+        def take(raw: bytes, gid: bytes) -> None:
+            if not self.admit(topic, gid):
+                return
+            try:
+                msg = deserialize_message(raw, msg_type)
+            except Exception:  # not of the topic's type: nothing to act on
+                return
+            callback(msg)
+
+        return attributed(self.node, msg_type, topic, take, qos, **kwargs)
+
+    # -- the verdict --------------------------------------------------------------
+    def admit(self, topic: str, gid: bytes, role: str | None = None) -> bool:
+        """Whether the message on ``topic`` from publisher ``gid`` comes from
+        the cell's node that owns the topic (``role``; by default the owner
+        in :data:`OWNERS`). Anything else is counted and reported once per
+        foreign node."""
+        role = role or OWNERS[topic]
+        who = self.sender(topic, gid)
+        if who is not None and (who == self.pinned.get(role) or who == self.owner(role)):
+            return True
+        self.refuse(topic, who, gid, f"not the cell's {ROLE_NAMES[role]}")
+        return False
+
+    def admit_from(self, topic: str, gid: bytes, name: str) -> bool:
+        """Whether a message on ``topic`` that speaks for the node ``name``
+        of this cell (a ``<node>: job`` status) comes from that very node,
+        and that node plays a part in the cell."""
+        who = self.sender(topic, gid)
+        named = who is not None and who[0] == name and who[1] == self.ns
+        if named and any(who in (self.pinned.get(r), self.owner(r)) for r in SIGNS):
+            return True
+        self.refuse(topic, who, gid, f"it speaks for {fully_qualified(name, self.namespace)}")
+        return False
+
+    def refuse(self, topic: str, who: Who | None, gid: bytes, why: str) -> None:
+        if who is None:
+            # an endpoint the graph does not name yet (its node's discovery info
+            # is on its way): not acted on, and not blamed on anyone; the
+            # messages that matter before a run are repeated (readiness, 1 Hz)
+            self.unnamed += 1
+            return
+        sender = fully_qualified(*who)
+        self.run.count(sender, self.topic(topic))
+        if self.intruders.count(sender, self.topic(topic)):
+            self.warn(
+                f"{self.topic(topic)}: messages from {sender} ignored ({why}); "
+                "only the cell's own nodes change a run (docs/SECURITY.md)"
+            )
+            if self.on_new is not None:
+                self.on_new()
+
+
+class Solo:
+    """One node per role in a namespace. Every winder node's statuses end
+    with the process that sent them (pid, host, start time:
+    :data:`winder.contract.topics.PROCESS_KEYS`); when ``node`` hears a
+    status of its own role in its namespace from another process, sent by
+    the node the status names (no stranger can make it leave), the one that
+    started later leaves: ``leave`` is called once with one line naming the
+    other (the node says so and exits). The one that stays warns once."""
+
+    def __init__(self, node: Node, role: str, peers: Peers, leave: Callable[[str], None]) -> None:
+        self.node = node
+        self.role = role
+        self.peers = peers
+        self.leave = leave
+        self.me = (str(os.getpid()), socket.gethostname())
+        self.started_ns = time.time_ns()
+        self.left = False
+        self.warned: set[str] = set()
+        attributed(node, DiagnosticArray, TOPIC_DIAGNOSTICS, self._on_raw, QOS_DIAGNOSTICS)
+
+    def _on_raw(self, raw: bytes, gid: bytes) -> None:
+        if self.left:
+            return
+        try:
+            statuses = deserialize_message(raw, DiagnosticArray).status
+        except Exception:  # not a DiagnosticArray
+            return
+        for st in statuses:
+            values = {kv.key: kv.value for kv in st.values}
+            if values.get(ROLE_KEY) != self.role or not in_namespace(st.name, self.peers.namespace):
+                continue
+            pid, host, started = (values.get(k, "") for k in PROCESS_KEYS)
+            if (pid, host) == self.me or not started.isdigit():
+                continue
+            name = st.name.split(":", 1)[0].rsplit("/", 1)[-1]
+            who = self.peers.sender(TOPIC_DIAGNOSTICS, gid)
+            if who != (name, self.peers.ns):
+                continue  # a status forged by another node: it cannot make this one leave
+            other = f"{fully_qualified(name, self.peers.namespace)} (pid {pid} on {host})"
+            if (int(started), pid) < (self.started_ns, self.me[0]):
+                self.left = True
+                self.leave(
+                    f"another {ROLE_NAMES[self.role]} already runs in {self.peers.ns}: {other}; "
+                    "this one does not join (one cell per namespace: start it with another "
+                    "namespace or ROS_DOMAIN_ID)"
+                )
+                return
+            if other not in self.warned:
+                self.warned.add(other)
+                self.node.get_logger().warning(
+                    f"a second {ROLE_NAMES[self.role]} started in {self.peers.ns}: {other}; it will not join"
+                )

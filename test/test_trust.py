@@ -1,0 +1,203 @@
+"""Only the cell acts on the cell: real cells (``winder run``, the three node
+processes over DDS on the test's own domain) while a foreign node on the same
+domain and namespace forges what the cell's nodes act on, and while a second
+cell, a second node of a role, and a player try to join.
+
+Each run is compared with an undisturbed run of the same job: the same step
+stream (every recorded row equal), the same operator events, done; the
+intruder named in the summary and in the consumer's final report, and
+nothing of it in the bag.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from conftest import BIN, Procs, final_report, rosbags_read
+
+from winder.record.reader import read_run
+
+pytestmark = pytest.mark.ros
+
+INTRUDER = Path(__file__).parent / "consumers" / "intruder.py"
+#: a small job with operator events: a pause and a resume from the schedule, then an override
+JOB = ["--turns-per-layer", "30", "--layers", "2", "--poles", "2"]
+EVENTS = ["--schedule", "pause@1.0,resume@1.5,override@2.0=0.8"]
+
+
+def winder_run(
+    procs: Procs, bags: Path, *args: str, timeout: float = 240
+) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [str(BIN / "winder"), "run", "--bag-dir", str(bags), *args],
+        env=procs.env,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        stdin=subprocess.DEVNULL,
+    )
+
+
+def bag_of(out: str) -> Path:
+    found = re.search(r"^  bag +(\S+)", out, re.M)
+    assert found, out
+    return Path(found.group(1))
+
+
+def recorded(bag: Path) -> tuple[np.ndarray, list[dict[str, Any]], dict[str, list[tuple[int, Any]]]]:
+    """The run's timed step rows as recorded, its operator events without
+    their run id, and every message."""
+    msgs = rosbags_read(bag)
+    chunks = [np.asarray(m.data, np.int64).reshape(-1, 5) for _, m in msgs["/c1/winder/step_times"]]
+    rows = np.concatenate(chunks)
+
+    events = []
+    for _, m in msgs.get("/c1/winder/control", []):
+        doc = json.loads(m.data)
+        doc.pop("run_id")
+        events.append(doc)
+    return rows, events, msgs
+
+
+@pytest.mark.parametrize(
+    "forge",
+    [
+        "control",
+        "steps",
+        "job",
+        "ready,progress,sim_config",
+        "diagnostics,state",
+    ],
+)
+def test_forged_messages_change_nothing(tmp_path: Path, procs: Procs, forge: str) -> None:
+    clean = winder_run(procs, tmp_path / "clean", "--namespace", "/c1", *JOB, *EVENTS)
+    assert clean.returncode == 0, clean.stdout + clean.stderr
+    intruder = procs.launch(
+        [sys.executable, str(INTRUDER), "--forge", forge, "--ros-args", "-r", "__ns:=/c1"], "intruder"
+    )
+    r = winder_run(procs, tmp_path / "attacked", "--namespace", "/c1", *JOB, *EVENTS)
+    assert intruder.poll() is None, "the intruder stopped before the run"
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "  state              done" in r.stdout, r.stdout
+    assert "(missing 0, gaps 0)" in r.stdout, r.stdout
+    # the intruder did forge into this very run, and was named, not obeyed
+    assert "forging" in "".join(p.read_text() for p in procs.log_dir.glob("intruder*.log"))
+    assert "ignored, foreign" in r.stdout and "/c1/intruder" in r.stdout, r.stdout
+    rows_clean, events_clean, _ = recorded(bag_of(clean.stdout))
+    rows, events, msgs = recorded(bag_of(r.stdout))
+    assert np.array_equal(rows, rows_clean), "the recorded step stream differs from the undisturbed run's"
+    assert events == events_clean
+    report = final_report(msgs, "c1")
+    assert report["state"] == "done" and report["steps_done"] == report["steps_total"]
+    if forge not in ("diagnostics,state", "ready,progress,sim_config"):
+        # what reached the consumer was refused and counted in its report
+        assert "/c1/intruder" in report.get("intruders", ""), report
+    # nothing the intruder sent is in the bag: one job description, statuses only of the cell's nodes
+    assert len(msgs["/c1/winder/job"]) == 1
+    names = {st.name for _, arr in msgs["/diagnostics"] for st in arr.status}
+    assert all(n.split(":")[0] in ("c1/interp_node", "c1/profile_node", "c1/sim_node") for n in names), names
+    assert all(st.message != "forged" for _, st in msgs.get("/c1/winder/state", []))
+    run = read_run(bag_of(r.stdout))
+    assert run.complete and run.report["state"] == "done"
+
+
+def test_a_second_cell_in_the_namespace_is_refused(tmp_path: Path, procs: Procs) -> None:
+    first = subprocess.Popen(
+        [str(BIN / "winder"), "run", "--bag-dir", str(tmp_path / "a"), "--turns-per-layer", "400"],
+        env=procs.env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        stdin=subprocess.DEVNULL,
+    )
+    try:
+        time.sleep(3.0)  # the first cell runs
+        second = winder_run(procs, tmp_path / "b", timeout=120)
+        out, err = first.communicate(timeout=240)
+    finally:
+        if first.poll() is None:
+            first.kill()
+    assert second.returncode == 2, second.stdout + second.stderr
+    assert "another cell runs in namespace /" in second.stderr, second.stderr
+    assert "Traceback" not in second.stderr
+    assert not (tmp_path / "b").exists() or not any((tmp_path / "b").iterdir())
+    assert first.returncode == 0, out + err
+    assert "(missing 0, gaps 0)" in out and "  state              done" in out, out
+    assert read_run(bag_of(out)).complete
+
+
+def test_a_second_node_of_a_role_leaves(tmp_path: Path, procs: Procs) -> None:
+    first = subprocess.Popen(
+        [str(BIN / "winder"), "run", "--bag-dir", str(tmp_path / "a"), "--turns-per-layer", "400"],
+        env=procs.env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        stdin=subprocess.DEVNULL,
+    )
+    try:
+        time.sleep(3.0)
+        seconds = [procs.start(node, "-p", f"bag_dir:={tmp_path / 'b'}") for node in ("sim_node",)]
+        seconds += [procs.start(node) for node in ("profile_node", "interp_node")]
+        for p in seconds:
+            assert p.wait(timeout=30) == 2
+        out, err = first.communicate(timeout=240)
+    finally:
+        if first.poll() is None:
+            first.kill()
+    logs = "".join(p.read_text() for p in procs.log_dir.glob("*.log"))
+    for role in ("step consumer", "profile node", "interp node"):
+        assert f"another {role} already runs in /" in logs, logs
+    assert first.returncode == 0, out + err
+    assert "(missing 0, gaps 0)" in out and "  state              done" in out, out
+
+
+def test_play_into_a_live_cell_is_refused_and_forced_changes_nothing(tmp_path: Path, procs: Procs) -> None:
+    recorded_run = winder_run(procs, tmp_path / "rec", *JOB)
+    assert recorded_run.returncode == 0, recorded_run.stderr
+    bag = bag_of(recorded_run.stdout)
+    live = subprocess.Popen(
+        [str(BIN / "winder"), "run", "--bag-dir", str(tmp_path / "live"), "--turns-per-layer", "400"],
+        env=procs.env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        stdin=subprocess.DEVNULL,
+    )
+
+    def play(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(
+            [str(BIN / "winder"), "play", str(bag), *args],
+            env=procs.env,
+            capture_output=True,
+            text=True,
+            timeout=120,
+            stdin=subprocess.DEVNULL,
+        )
+
+    try:
+        time.sleep(3.0)
+        refused = play()
+        forced = play("--force", "--rate", "20")
+        out, err = live.communicate(timeout=240)
+    finally:
+        if live.poll() is None:
+            live.kill()
+    assert refused.returncode == 2, refused.stdout + refused.stderr
+    assert "a live cell runs in /" in refused.stderr and "--namespace" in refused.stderr, refused.stderr
+    assert "Traceback" not in refused.stderr
+    assert forced.returncode == 0, forced.stdout + forced.stderr
+    # the live run took nothing of the recording: done, every step, the player named
+    assert live.returncode == 0, out + err
+    assert "  state              done" in out and "(missing 0, gaps 0)" in out, out
+    assert "/winder_player" in out, out
+    live_bag = rosbags_read(bag_of(out))
+    assert len(live_bag["/winder/job"]) == 1
