@@ -63,6 +63,13 @@ class CellResult:
     message: str = ""
     log_dir: Path | None = None
     errors: list[str] = field(default_factory=list)  #: every ERROR a node of the cell reported
+    node_died: bool = False  #: the run ended because a node of the cell exited (killed, crashed)
+
+
+class NodeExit(str):
+    """The reason a run ended when a node of the cell exited: a ``str``, so
+    every caller keeps it as the failure text, and :func:`_result` tells it
+    apart from the other failures (``winder`` exits with its own code)."""
 
 
 def find_executable(name: str) -> str:
@@ -165,7 +172,7 @@ class NodeProcesses:
         """``"<name> exited with status N"`` for the first child that ended, else None."""
         for name, p in self.procs.items():
             if p.poll() is not None:
-                return f"{name} exited with status {p.returncode}"
+                return NodeExit(f"{name} exited with status {p.returncode}")
         return None
 
     def stop(self, grace: float = 15.0) -> None:
@@ -489,7 +496,7 @@ def _wait_for_job(
 
 
 def _result(watch: CellWatch, failure: str, log_dir: Path) -> CellResult:
-    result = CellResult(False, message=failure, log_dir=log_dir)
+    result = CellResult(False, message=failure, log_dir=log_dir, node_died=isinstance(failure, NodeExit))
     if watch.summary is not None:
         result.summary = watch.summary
         result.ok = watch.summary.get("state") == "done"
