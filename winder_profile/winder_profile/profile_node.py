@@ -107,6 +107,7 @@ class ProfileNode(ManagedNode):
         # messages are acted on only when the cell's node owning the topic sent them
         self.peers = Peers(self)
         self.solo = Solo(self, "profile", self.peers, self.leave)  # one profile node per cell
+        self.solo.on_settled = self.announce
         self.diag.foreign = self.peers.intruders.summary  # its statuses name what it refused
         self.peers.on_new = lambda: self.report()  # at once, not at the next second
         attributed(self, String, TOPIC_JOB, self.on_job, QOS_LATCHED)
@@ -172,6 +173,11 @@ class ProfileNode(ManagedNode):
     # -- in --------------------------------------------------------------
     def on_job(self, raw: bytes, gid: bytes) -> None:
         if not self.peers.admit(TOPIC_JOB, gid):
+            return
+        if not self.solo.settled():  # not sure yet to be the cell's only profile node
+            self.get_logger().warning(
+                "a job description before this node knows it is the cell's only profile node: ignored"
+            )
             return
         try:
             job = parse_job_description(deserialize_message(raw, String).data)
@@ -532,6 +538,7 @@ class ProfileNode(ManagedNode):
         elif (
             self.sub_steps is not None
             and self.sub_steps.get_publisher_count() > 0
+            and self.solo.settled()  # and it is the cell's only profile node
             and not self.peers.knows("interp", "consumer")  # it tells the cell's nodes from others
         ):
             self.ready.announce("ready")

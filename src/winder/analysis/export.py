@@ -15,23 +15,21 @@ decimal numbers, one row per message or step:
 * ``run.json``: the job, the motor set-up, the ramp and the sim node's final
   report, and the number of rows of each file.
 
-The files are written into a new directory next to ``DIR`` and renamed to
-``DIR`` only when all are complete: an interrupted export leaves nothing
-half-written. ``DIR`` must not exist yet.
+The files are written into a new directory next to ``DIR``, fsync'd and
+renamed to ``DIR`` only when all are complete: an interrupted export or a
+full disk leaves nothing half-written. ``DIR`` must not exist yet.
 """
 
 from __future__ import annotations
 
 import json
-import os
-import shutil
-import tempfile
 from dataclasses import asdict
 from pathlib import Path
 from typing import TextIO
 
 import numpy as np
 
+from winder.contract.files import new_directory
 from winder.motion.job import AXES
 from winder.record.reader import Run, Samples
 
@@ -96,17 +94,12 @@ def _errors(f: TextIO, run: Run) -> int:
 
 
 def export_csv(run: Run, out: Path) -> dict[str, int]:
-    """Write the CSV files of ``run`` into the new directory ``out``; the rows of each file."""
-    out = Path(out)
-    if out.exists():
-        raise FileExistsError(f"{out}: already exists; choose a new directory")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
-    try:
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o777 & ~umask)  # mkdtemp's 0700 would stay on DIR: a plain new directory's mode
-        rows: dict[str, int] = {}
+    """Write the CSV files of ``run`` into the new directory ``out``; the rows
+    of each file. The directory appears whole or not at all
+    (:func:`winder.contract.files.new_directory`): FileExistsError if it
+    exists, OutputError (one line) if it cannot be written."""
+    rows: dict[str, int] = {}
+    with new_directory(out) as tmp:
         for name in ("joint_states.csv", "joint_commands.csv", "step_times.csv", "events.csv", "errors.csv"):
             with open(tmp / name, "w", newline="") as f:
                 if name == "joint_states.csv":
@@ -133,8 +126,4 @@ def export_csv(run: Run, out: Path) -> dict[str, int]:
             "rows": rows,
         }
         (tmp / "run.json").write_text(json.dumps(meta, indent=2) + "\n")
-        os.rename(tmp, out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     return rows

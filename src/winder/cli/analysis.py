@@ -12,6 +12,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from winder.cli.exits import EXIT_BAD_INPUT, EXIT_OK
+
 __all__ = ["register"]
 
 
@@ -61,7 +63,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
             _say(written, args.json)
     except OSError as exc:
         raise ValueError(_os_error(exc)) from None
-    return 0
+    return EXIT_OK
 
 
 def cmd_identify(args: argparse.Namespace) -> int:
@@ -86,7 +88,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
                 _say([f"plot: {p}" for p in plot_identification(run, ident, out)], args.json)
     except OSError as exc:
         raise ValueError(_os_error(exc)) from None
-    return 0
+    return EXIT_OK
 
 
 def cmd_bag_recover(args: argparse.Namespace) -> int:
@@ -97,7 +99,7 @@ def cmd_bag_recover(args: argparse.Namespace) -> int:
         raw = read_raw(args.bag)
         if raw.closed and not raw.recovered:
             print(f"{raw.path}: complete ({len(raw.messages)} messages): nothing to recover")
-            return 0
+            return EXIT_OK
         out, saved = recover(args.bag, args.output)
     except OSError as exc:
         raise ValueError(_os_error(exc)) from None
@@ -108,7 +110,7 @@ def cmd_bag_recover(args: argparse.Namespace) -> int:
         f"recovered {saved} messages on {len(raw.topics())} topics, up to t = {last / 1e9:.3f} s "
         f"of simulated time, into {out}"
     )
-    return 0
+    return EXIT_OK
 
 
 def cmd_export(args: argparse.Namespace) -> int:
@@ -135,12 +137,12 @@ def cmd_export(args: argparse.Namespace) -> int:
     for name, n in rows.items():
         print(f"{out / name}  {n} row{'' if n == 1 else 's'}")
     print(f"{out / 'run.json'}  job, motors, ramp, final report")
-    return 0
+    return EXIT_OK
 
 
 def _bag_help(parser: argparse.ArgumentParser) -> int:
     parser.print_help()
-    return 2
+    return EXIT_BAD_INPUT
 
 
 def register(sub: argparse._SubParsersAction[Any]) -> None:

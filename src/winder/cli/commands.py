@@ -1,6 +1,7 @@
 """The ``winder`` command line.
 
-Every user error ends as one line on stderr and exit status 2; no traceback.
+Every error ends as one line on stderr and the exit status of its class
+(:mod:`winder.cli.exits`: 2 bad input, 5 an output not written, ...); no traceback.
 """
 
 from __future__ import annotations
@@ -17,6 +18,16 @@ from typing import Any, NoReturn
 
 import numpy as np
 
+from winder.cli.exits import (
+    EXIT_ABORTED,
+    EXIT_BAD_INPUT,
+    EXIT_FAILED,
+    EXIT_INTERRUPTED,
+    EXIT_NODE_DIED,
+    EXIT_OK,
+    EXIT_OUTPUT,
+)
+from winder.contract.files import OutputError
 from winder.contract.params import (
     INTERP_SPECS,
     OPERATION_SPECS,
@@ -56,7 +67,7 @@ CELL_SPECS: dict[str, Spec] = {
 
 
 class UserError(Exception):
-    """An error the user can fix; printed as one line, exit status 2."""
+    """An error the user can fix; printed as one line, exit status EXIT_BAD_INPUT."""
 
 
 def add_spec_arguments(
@@ -209,7 +220,7 @@ def cmd_interp(args: argparse.Namespace) -> int:
     print(f"  one turn, {x1} feed x {y1} fork steps, mean deviation (eq. 7):")
     for name, mean in turn.items():
         print(f"    {name:26s} {mean * 1e6:8.3f} um  ({mean / turn['min-deviation']:.2f} x)")
-    return 0
+    return EXIT_OK
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -243,7 +254,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             f"{duration_ns / 1e9:.3f} s with the {profile['profile']} profile; every setting is valid, "
             "nothing was started"
         )
-        return 0
+        return EXIT_OK
     try:
         from winder.ros.cell import cell_network, run_cell
         from winder.ros.dds import DISCOVERY_SERVER_KEY
@@ -330,10 +341,17 @@ def _number(summary: dict[str, str], key: str, fmt: str, scale: float = 1.0) -> 
 
 def report_run(result: Any, wall: float, command: str = "run") -> int:
     """The summary of a finished run (``winder run``, ``winder resim``) and
-    the exit status: 0 done, 3 aborted cleanly, 1 failed or with errors."""
+    the exit status (:mod:`winder.cli.exits`): done, aborted cleanly, a node
+    died before the run ended, or failed (with errors, or no final report)."""
     s = result.summary
     if not s:
-        raise UserError(f"the cell did not finish: {result.message} (node logs in {result.log_dir})")
+        print(
+            f"winder {command}: the cell did not finish: {result.message} (node logs in {result.log_dir})",
+            file=sys.stderr,
+        )
+        if getattr(result, "occupied", False):  # another cell in the namespace: started where it cannot run
+            return EXIT_BAD_INPUT
+        return EXIT_NODE_DIED if result.node_died else EXIT_FAILED
     r = JobReport.from_values(s)
     x = r.extra  # beyond the contract's keys, what the consumer reports (a hardware driver's may not)
     print(f"  run                {r.run_id or '-'}")
@@ -367,16 +385,16 @@ def report_run(result: Any, wall: float, command: str = "run") -> int:
         print(f"  ignored, foreign   {foreign}")
     if r.state == "aborted" and not r.errors and not result.errors:
         print(f"winder {command}: {result.message}", file=sys.stderr)
-        return 3
+        return EXIT_ABORTED
     if not result.ok or r.errors or result.errors:
         logs = f" (node logs in {result.log_dir})" if result.log_dir else ""
         print(f"winder {command}: {result.message}{logs}", file=sys.stderr)
-        return 1
-    return 0
+        return EXIT_FAILED
+    return EXIT_OK
 
 
 def cmd_ctl(args: argparse.Namespace) -> int:
-    """One command to a running cell: exit 0 if it was done, 1 if the cell said no."""
+    """One command to a running cell: EXIT_OK if it was done, EXIT_FAILED if the cell said no."""
     ns = check_namespace(args.namespace)
     timeout = CELL_SPECS["timeout"].parse(args.timeout)
     if (args.action == "override") != (args.value is not None):
@@ -393,7 +411,7 @@ def cmd_ctl(args: argparse.Namespace) -> int:
     else:
         ok, message = trigger(f"{ns}/profile_node/{args.action}", timeout=timeout)
     print(message if ok else f"winder ctl {args.action}: {message}", file=sys.stdout if ok else sys.stderr)
-    return 0 if ok else 1
+    return EXIT_OK if ok else EXIT_FAILED
 
 
 #: Settings of ``winder discovery-server``.
@@ -429,7 +447,7 @@ def cmd_discovery_server(args: argparse.Namespace) -> int:
         flush=True,
     )
     os.execve(argv[0], argv, env)  # the server itself from here on: signals reach it directly
-    return 0  # not reached
+    return EXIT_OK  # not reached
 
 
 FIGURES = ("interp", "profile", "motor")
@@ -444,14 +462,14 @@ def cmd_figures(args: argparse.Namespace) -> int:
         module = importlib.import_module(f"winder.analysis.figures.{name}")
         for path in module.make(out):
             print(path)
-    return 0
+    return EXIT_OK
 
 
 class _Parser(argparse.ArgumentParser):
     """argparse with one-line errors (``--help`` still shows the usage)."""
 
     def error(self, message: str) -> NoReturn:
-        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
 #: the interp node's programmed-stop and schedule settings, which winder run takes too
@@ -567,15 +585,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     func: Callable[[argparse.Namespace], int] | None = getattr(args, "func", None)
     if func is None:
         parser.print_help()
-        return 2
+        return EXIT_BAD_INPUT
     try:
         return func(args)
+    except OutputError as exc:
+        print(f"winder {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_OUTPUT
     except (SpecError, UserError, ValueError, FileNotFoundError) as exc:
         print(f"winder {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+        return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print(f"winder {args.command}: interrupted", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":

@@ -10,6 +10,8 @@ import math
 import sys
 from typing import Any
 
+from winder.cli.exits import EXIT_FAILED, EXIT_OK
+
 __all__ = ["register"]
 
 
@@ -98,8 +100,8 @@ def cmd_play(args: argparse.Namespace) -> int:
             f"winder play: not every subscriber acknowledged every message on: {', '.join(result.unacked)}",
             file=sys.stderr,
         )
-        return 1
-    return 0
+        return EXIT_FAILED
+    return EXIT_OK
 
 
 def _recorded_sim(run: Any) -> dict[str, Any]:

@@ -1,7 +1,8 @@
 """``winder resonance`` and ``winder tune`` (issue 15): what input shaping
 does to a move's residual vibration, and the fastest ramp a job's motors
 allow without losing a step. Registered into the ``winder`` parser by
-:func:`register`; user errors are ValueErrors (one line, exit status 2).
+:func:`register`; user errors are ValueErrors (one line, exit status 2), an
+output that cannot be written an OutputError (exit status 5).
 """
 
 from __future__ import annotations
@@ -10,9 +11,11 @@ import argparse
 import json
 import math
 import os
-import tempfile
 from pathlib import Path
 from typing import Any
+
+from winder.cli.exits import EXIT_OK
+from winder.contract.files import OutputError, atomic_file, write_text
 
 __all__ = ["register"]
 
@@ -86,7 +89,7 @@ def cmd_resonance(args: argparse.Namespace) -> int:
     for x in lines:
         print("  ".join(c.rjust(w) for c, w in zip(x, widths, strict=True)))
     if args.json:
-        Path(args.json).write_text(json.dumps([r.__dict__ for r in rows], indent=1))
+        write_text(args.json, json.dumps([r.__dict__ for r in rows], indent=1))
         print(f"table: {args.json}")
     if not args.no_plots:
         from winder.analysis.figures.resonance import plot_ringing, plot_sensitivity
@@ -101,7 +104,7 @@ def cmd_resonance(args: argparse.Namespace) -> int:
         }
         print(f"plot: {plot_ringing(traces, z, f_n, out / 'resonance_ringing.png')}")
         print(f"plot: {plot_sensitivity(f_n, zeta, out / 'resonance_shapers.png')}")
-    return 0
+    return EXIT_OK
 
 
 def _axes_from(args: argparse.Namespace, sim: dict[str, Any]) -> tuple[dict[str, Any], list[str]]:
@@ -144,22 +147,20 @@ def _writable(path: Path) -> tuple[Path, os.stat_result]:
 
 def _apply(path: Path, ramp: dict[str, Any]) -> list[str]:
     """Write the tuned ramp into the job file, comments kept, atomically
-    (temp file + rename), and return the sections written. The file a
+    (:func:`winder.contract.files.atomic_file`), and return the sections written. The file a
     symlink names is the one written (the link stays); its mode is kept; a
     read-only file is refused. The values go where the profile node reads
     them: every section of the file that names it (``profile_node``,
     ``/cell1/profile_node``), and ``/**`` where it already holds one of them;
     with none, a ``profile_node`` section in the namespace of the file's other
-    sections. ValueError (one line) for anything that cannot be written."""
-    import contextlib
-    import stat
-
+    sections. ValueError (one line) for a file that cannot be read,
+    OutputError for one that cannot be written."""
     from ruamel.yaml import YAML
     from ruamel.yaml.error import YAMLError
 
     from winder.contract.jobfile import section_node
 
-    target, st = _writable(path)
+    target, _ = _writable(path)
     yaml = YAML()
     yaml.preserve_quotes = True
     try:
@@ -180,25 +181,10 @@ def _apply(path: Path, ramp: dict[str, Any]) -> list[str]:
             value = ramp[name]
             section[name] = float(f"{value:.6g}") if isinstance(value, float) else value
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent)
-    except OSError as exc:
-        raise ValueError(f"{path}: cannot write next to it: {exc.strerror or exc}") from None
-    try:
-        with os.fdopen(fd, "w") as fh:
+        with atomic_file(target) as fh:  # its mode and owner kept
             yaml.dump(doc, fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.chmod(tmp, stat.S_IMODE(st.st_mode))
-        if hasattr(os, "chown"):
-            with contextlib.suppress(PermissionError):  # not ours to give away: the file stays ours
-                os.chown(tmp, st.st_uid, st.st_gid)
-        os.replace(tmp, target)
-    except OSError as exc:
-        Path(tmp).unlink(missing_ok=True)
-        raise ValueError(f"{path}: cannot be written: {exc.strerror or exc}; the file is unchanged") from None
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    except OutputError as exc:
+        raise OutputError(f"{exc}; the file is unchanged") from None
     return sections + shared
 
 
@@ -262,7 +248,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
     if args.apply:
         written = _apply(Path(args.job_file), result.ramp)
         print(f"applied: {args.job_file} ({', '.join(written)}: {', '.join(TUNED_KEYS)})")
-    return 0
+    return EXIT_OK
 
 
 def register(sub: Any) -> None:

@@ -26,7 +26,6 @@ import contextlib
 import io
 import mmap
 import re
-import shutil
 import struct
 import zlib
 from collections.abc import Callable, Collection, Generator, Iterator
@@ -37,6 +36,8 @@ from typing import Any
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
 from mcap.records import Channel, Chunk, Message, Schema
+
+from winder.contract.files import new_directory
 
 __all__ = ["BagError", "Connection", "RawBag", "read_raw", "recover"]
 
@@ -531,7 +532,8 @@ def recover(path: str | Path, out: str | Path | None = None) -> tuple[Path, int]
     """Write the readable messages of a cut-short recording as a new, closed
     rosbag2/MCAP directory (default ``<bag>_recovered`` beside it); return the
     directory and the number of messages saved. Never writes into an existing
-    directory; a failed write leaves nothing behind."""
+    directory; a failed write leaves nothing behind (the bag is made beside
+    ``out`` and renamed when closed; OutputError if it cannot be written)."""
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import get_types_from_msg
 
@@ -544,9 +546,10 @@ def recover(path: str | Path, out: str | Path | None = None) -> tuple[Path, int]
     if out.exists():
         raise BagError(f"{out}: already exists; remove it or choose another name")
     store = _typestore()
-    writer = Writer(out, version=9, storage_plugin=StoragePlugin.MCAP)
     saved = 0
-    try:
+    # built beside ``out`` and renamed when closed: an interrupt or a full disk leaves no half bag
+    with new_directory(out, create=False) as staging:
+        writer = Writer(staging, version=9, storage_plugin=StoragePlugin.MCAP)
         writer.open()
         conns: dict[int, Any] = {}
         by_topic: dict[tuple[str, str], Any] = {}
@@ -570,7 +573,4 @@ def recover(path: str | Path, out: str | Path | None = None) -> tuple[Path, int]
                 writer.write(conn, t, data)
                 saved += 1
         writer.close()
-    except BaseException:
-        shutil.rmtree(out, ignore_errors=True)
-        raise
     return out, saved

@@ -72,6 +72,14 @@ class CellResult:
     errors: list[str] = field(default_factory=list)  #: every ERROR a node of the cell reported
     #: messages on the cell's topics from nodes that are not the cell's (who, how many), "" if none
     intruders: str = ""
+    occupied: bool = False  #: refused: another cell's node plays a part in the namespace
+    node_died: bool = False  #: the run ended because a node of the cell exited (killed, crashed)
+
+
+class NodeExit(str):
+    """The reason a run ended when a node of the cell exited: a ``str``, so
+    every caller keeps it as the failure text, and :func:`_result` tells it
+    apart from the other failures (``winder`` exits with its own code)."""
 
 
 def find_executable(name: str) -> str:
@@ -174,7 +182,7 @@ class NodeProcesses:
         """``"<name> exited with status N"`` for the first child that ended, else None."""
         for name, p in self.procs.items():
             if p.poll() is not None:
-                return f"{name} exited with status {p.returncode}"
+                return NodeExit(f"{name} exited with status {p.returncode}")
         return None
 
     def stop(self, grace: float = 15.0) -> None:
@@ -288,6 +296,7 @@ class CellWatch:
         self.node = node
         #: the pids of the nodes this process started (None: it started none, they run elsewhere)
         self.own = own
+        self.started: set[str] = set()  #: names of the nodes this process started (set by run_cell)
         self.occupied = ""  #: another cell's node heard in this namespace, in words
         self.foreign: dict[str, str] = {}  #: node -> what it refused from foreign senders
         self.since = time.monotonic()
@@ -394,12 +403,15 @@ class CellWatch:
     def _stranger(self, name: str, values: dict[str, str]) -> bool:
         """A status of a node of this cell's roles that this process did not
         start (another cell in the same namespace): noted, never taken as ours."""
-        if self.own is None or values.get(ROLE_KEY) not in ROLES or "pid" not in values:
+        if self.own is None or "pid" not in values:
             return False
         if values.get("host") == socket.gethostname() and values["pid"] in self.own():
             return False
-        if values[ROLE_KEY] in self.external:
-            return False
+        node = name.split(":", 1)[0].rsplit("/", 1)[-1]
+        if values.get(ROLE_KEY) not in ROLES or values[ROLE_KEY] in self.external:
+            # any status (a stream ERROR names no role) of a node named like one this
+            # process started, from another process, is a stranger's too
+            return node in self.started
         self.occupied = self.occupied or (
             f"another cell runs in namespace /{self.ns}: {name.split(':', 1)[0]} "
             f"(pid {values['pid']} on {values.get('host', '?')}); start this one with --namespace "
@@ -555,12 +567,13 @@ def _wait_for_job(
 
 
 def _result(watch: CellWatch, failure: str, log_dir: Path) -> CellResult:
-    result = CellResult(False, message=failure, log_dir=log_dir)
+    result = CellResult(False, message=failure, log_dir=log_dir, node_died=isinstance(failure, NodeExit))
     if watch.summary is not None:
         result.summary = watch.summary
         result.ok = watch.summary.get("state") == "done"
         result.message = watch.message
     result.errors = list(watch.errors)
+    result.occupied = bool(watch.occupied) and watch.summary is None
     refused = {**watch.foreign, "winder run": watch.peers.intruders.summary()}
     result.intruders = "; ".join(f"{who}: {what}" for who, what in refused.items() if what)
     if watch.errors and not result.message:
@@ -599,6 +612,7 @@ def run_cell(
             remote = {NODE_ROLES[key]: dict(params.get(key, {})) for key in external}
             own = lambda: {str(p.pid) for p in procs.procs.values()}  # noqa: E731
             watch = CellWatch(node, namespace, remote, own=own)
+            watch.started = {NODES[key] for key in NODE_ROLES if key not in external}
             _spawn(procs, params, namespace, external)
             failure = _wait_for_job(node, watch, procs, (start_timeout, timeout), progress, keys)
         except ExternalShutdownException:

@@ -155,6 +155,7 @@ class StepConsumer(ManagedNode):
         # when that is the cell's node owning the topic (winder.ros.peers)
         self.peers = Peers(self)
         self.solo = Solo(self, "consumer", self.peers, self.leave)  # one consumer per cell
+        self.solo.on_settled = self.announce
         self.sub_job = attributed(
             self,
             String,
@@ -300,6 +301,11 @@ class StepConsumer(ManagedNode):
     # -- a run starts -----------------------------------------------------------
     def on_job(self, raw: bytes, gid: bytes) -> None:
         if not self.peers.admit(TOPIC_JOB, gid):
+            return
+        if not self.solo.settled():  # not sure yet to be the cell's only consumer
+            self.get_logger().warning(
+                "a job description before this node knows it is the cell's only consumer: ignored"
+            )
             return
         try:
             plan = parse_job_description(deserialize_message(raw, String).data)
@@ -866,7 +872,7 @@ class StepConsumer(ManagedNode):
         else:
             heard = self.sub_times.get_publisher_count() > 0 and self.sub_job.get_publisher_count() > 0
             # and it can tell the cell's own interp and profile node from anyone else
-            known = heard and not self.peers.knows("interp", "profile")
+            known = heard and self.solo.settled() and not self.peers.knows("interp", "profile")
             state = "ready" if known and not self.missing() else "waiting"
         self.ready.announce(state)
 

@@ -34,6 +34,7 @@ from winder.contract.trust import OWNERS, ROLE_NAMES, SIGNS, Intruders
 from winder.ros.graph import fully_qualified
 from winder.ros.qos import QOS_DIAGNOSTICS
 from winder.ros.sender import attributed
+from winder.ros.timers import steady_timer
 
 __all__ = ["Peers", "Solo"]
 
@@ -194,6 +195,10 @@ class Peers:
                 self.on_new()
 
 
+#: s a node listens for another node of its role before it takes a run
+JOIN_LISTEN = 1.2
+
+
 class Solo:
     """One node per role in a namespace. Every winder node's statuses end
     with the process that sent them (pid, host, start time:
@@ -212,7 +217,21 @@ class Solo:
         self.started_ns = time.time_ns()
         self.left = False
         self.warned: set[str] = set()
+        self.t0 = time.monotonic()
         attributed(node, DiagnosticArray, TOPIC_DIAGNOSTICS, self._on_raw, QOS_DIAGNOSTICS)
+        self.on_settled: Callable[[], None] | None = None
+        self._timer = steady_timer(node, JOIN_LISTEN, self._settle)
+
+    def _settle(self) -> None:
+        self._timer.cancel()
+        if self.on_settled is not None and not self.left:
+            self.on_settled()
+
+    def settled(self) -> bool:
+        """This node has listened for :data:`JOIN_LISTEN` s (every node
+        reports once a second) and heard no earlier node of its role: it may
+        take a run. Before, a job description is not acted on."""
+        return not self.left and time.monotonic() - self.t0 >= JOIN_LISTEN
 
     def _on_raw(self, raw: bytes, gid: bytes) -> None:
         if self.left:

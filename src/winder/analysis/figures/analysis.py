@@ -59,6 +59,7 @@ from winder.analysis.digest import ZOOM_STEPS, Digest, turn_index
 from winder.analysis.identify import Identification
 from winder.analysis.metrics import Analysis, digest_run, paired_error
 from winder.contract.eq7 import layer_of_samples, sample_deviation
+from winder.contract.files import atomic_file, output_dir
 from winder.contract.stream import JobPlan
 from winder.motion.job import AXES
 from winder.record.reader import Run
@@ -299,7 +300,8 @@ def _save(fig: Figure, path: Path) -> Path:
             loc = axis.get_major_locator()
             if isinstance(loc, MaxNLocator):
                 loc.set_params(nbins=TICK_BINS)
-    fig.savefig(path, dpi=DPI, pil_kwargs=PNG)
+    with atomic_file(path, "wb") as fh:
+        fig.savefig(fh, format="png", dpi=DPI, pil_kwargs=PNG)
     return path
 
 
@@ -773,8 +775,7 @@ def plot_analysis(
     run with operator commands); return their paths. ``digested``: the run's
     :func:`winder.analysis.metrics.digest_run`, if made already."""
     d = digested if digested is not None else digest_run(run)
-    out = plots_dir(run.path) if out is None else Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = output_dir(plots_dir(run.path) if out is None else Path(out))
     # tracking.png compares the commands with the axes' samples: a run
     # without joint samples (a hardware consumer records its own topics) has none to draw
     tracking = ["tracking"] if run.states.t.size else []
@@ -836,8 +837,7 @@ def _draw_all(figures: list[str]) -> list[Path]:
 def plot_identification(run: Run, ident: Identification, out: Path | None = None) -> list[Path]:
     """Write identify.png: the MRAS convergence of J and D per axis, the band
     it settles in, least squares and the recorded value."""
-    out = plots_dir(run.path) if out is None else Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = output_dir(plots_dir(run.path) if out is None else Path(out))
     with matplotlib.rc_context(RC):
         return [_identification(ident, out)]
 

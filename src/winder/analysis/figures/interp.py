@@ -22,6 +22,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from winder.contract.files import atomic_file, output_dir
 from winder.motion.interp import dda, deviation_stats, min_deviation, point_by_point
 
 FEED_STEP = 8.8e-6  # m
@@ -31,7 +32,7 @@ WIRE = 2.5e-3  # m
 
 
 def make(outdir: pathlib.Path) -> list[pathlib.Path]:
-    outdir.mkdir(parents=True, exist_ok=True)
+    output_dir(outdir)
     lx, ly = FEED_STEP, 2 * math.pi * RADIUS / FORK_STEPS
     x, y = round(WIRE / lx), FORK_STEPS
     paths = {
@@ -80,7 +81,8 @@ def make(outdir: pathlib.Path) -> list[pathlib.Path]:
     ax2.grid(alpha=0.3)
     fig.tight_layout()
     out = outdir / "interp_rw400.png"
-    fig.savefig(out, dpi=110)
+    with atomic_file(out, "wb") as fh:
+        fig.savefig(fh, format="png", dpi=110)
     plt.close(fig)
     return [out]
 

@@ -30,6 +30,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from winder.axis import SimResult, StepperAxis, measured_velocity
+from winder.contract.files import atomic_file, output_dir
 from winder.motion.profile import Profile, plan
 
 W_MAX = 20.0  # rad/s, the paper's target
@@ -70,7 +71,7 @@ def _simulate(axis: StepperAxis, times: np.ndarray, step: float, model: str) -> 
 def make(outdir: pathlib.Path) -> list[pathlib.Path]:
     """Write ``motor_startup.png`` into ``outdir``; return the paths written."""
     outdir = pathlib.Path(outdir)
-    outdir.mkdir(parents=True, exist_ok=True)
+    output_dir(outdir)
     paper = StepperAxis.paper()
     light = StepperAxis.paper(D=0.003)
     step = paper.full_step / MICRO
@@ -164,7 +165,8 @@ def make(outdir: pathlib.Path) -> list[pathlib.Path]:
         fontsize=12,
     )
     path = outdir / "motor_startup.png"
-    fig.savefig(path, dpi=110)
+    with atomic_file(path, "wb") as fh:
+        fig.savefig(fh, format="png", dpi=110)
     plt.close(fig)
     return [path]
 

@@ -23,6 +23,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.axes import Axes
 
+from winder.contract.files import atomic_file, output_dir
 from winder.motion.profile import Profile, plan
 
 ROWS = (("position", ""), ("velocity", "/s"), ("acceleration", "/s²"), ("jerk", "/s³"))
@@ -79,7 +80,8 @@ def _profile_figure(prof: Profile, title: str, path: pathlib.Path, unit: str) ->
         )  # fmt: skip
     axes[-1].set_xlabel("time [s]")
     axes[0].set_title(title, fontsize=11)
-    fig.savefig(path, dpi=110)
+    with atomic_file(path, "wb") as fh:
+        fig.savefig(fh, format="png", dpi=110)
     plt.close(fig)
     return path
 
@@ -131,7 +133,8 @@ def _startup_figure(path: pathlib.Path) -> pathlib.Path:
     axes[1].legend(loc="lower right", fontsize=8)
     axes[-1].set_xlabel("time [s]")
     axes[0].set_title("Paper 004: stepper start-up to ω_max = 20, S-curve vs exponential", fontsize=11)
-    fig.savefig(path, dpi=110)
+    with atomic_file(path, "wb") as fh:
+        fig.savefig(fh, format="png", dpi=110)
     plt.close(fig)
     return path
 
@@ -139,7 +142,7 @@ def _startup_figure(path: pathlib.Path) -> pathlib.Path:
 def make(outdir: pathlib.Path) -> list[pathlib.Path]:
     """Write the three profile figures into ``outdir``; return the paths written."""
     outdir = pathlib.Path(outdir)
-    outdir.mkdir(parents=True, exist_ok=True)
+    output_dir(outdir)
     sc = plan("scurve", 240.0, v_max=8.0, a_max=0.5, j_max=0.05)
     tc = plan("trapezoid", 210.0, v_max=8.0, a_max=0.5)
     return [

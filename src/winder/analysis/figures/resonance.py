@@ -15,16 +15,15 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from winder.analysis.resonance import Result
+from winder.contract.files import atomic_file
 from winder.shaping import KINDS, residual
 
 __all__ = ["plot_limits_sweep", "plot_ringing", "plot_sensitivity"]
 
 
 def _save(fig: Figure, path: Path) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".part")
-    fig.savefig(tmp, format="png", dpi=110, pil_kwargs={"compress_level": 1})
-    tmp.replace(path)
+    with atomic_file(path, "wb") as fh:  # its directory made if missing
+        fig.savefig(fh, format="png", dpi=110, pil_kwargs={"compress_level": 1})
     return path
 
 

@@ -1,0 +1,55 @@
+"""The exit status of every ``winder`` command: one table, the same for all.
+
+The README's "Exit codes" section shows this table; ``test/test_exit_codes.py``
+checks that the two agree and that each class really ends with its code.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "EXIT_ABORTED",
+    "EXIT_BAD_INPUT",
+    "EXIT_FAILED",
+    "EXIT_INTERRUPTED",
+    "EXIT_NODE_DIED",
+    "EXIT_OK",
+    "EXIT_OUTPUT",
+    "EXIT_TABLE",
+]
+
+EXIT_OK = 0
+EXIT_FAILED = 1
+EXIT_BAD_INPUT = 2
+EXIT_ABORTED = 3
+EXIT_NODE_DIED = 4
+EXIT_OUTPUT = 5
+EXIT_INTERRUPTED = 130
+
+#: code -> (name, when), in the README's words
+EXIT_TABLE: dict[int, tuple[str, str]] = {
+    EXIT_OK: ("ok", "the command did what it was asked; a run ended done"),
+    EXIT_FAILED: (
+        "run failed",
+        "a run ended incomplete or with errors, or did not start or finish in time; `winder ctl`: "
+        "the cell refused the command; `winder play`: a subscriber did not acknowledge every message",
+    ),
+    EXIT_BAD_INPUT: (
+        "bad input",
+        "an option, a job file or a recording that cannot be used; nothing was started or written",
+    ),
+    EXIT_ABORTED: (
+        "run aborted",
+        "an operator abort (`winder ctl abort`, the job's schedule) ended the run, the axes at rest, "
+        "no error",
+    ),
+    EXIT_NODE_DIED: (
+        "node died",
+        "a node of the cell exited (killed, crashed) before the run ended; its log is named",
+    ),
+    EXIT_OUTPUT: (
+        "output not written",
+        "a file or directory the command writes cannot be written (no permission, a file where a "
+        "directory should be, no space left); nothing half-written is left",
+    ),
+    EXIT_INTERRUPTED: ("interrupted", "Ctrl-C (SIGINT): the cell's nodes were stopped"),
+}
