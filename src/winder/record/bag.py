@@ -9,14 +9,16 @@ that Foxglove, ``ros2 bag`` and rosbags open the bag without winder installed.
 from __future__ import annotations
 
 import contextlib
+import os
 import queue
 import re
 import shutil
 import signal
 import threading
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 from rosbags.interfaces import Qos as BagQos
 from rosbags.interfaces import QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
@@ -27,7 +29,15 @@ from winder.contract.params import BAG_COMPRESSIONS
 from winder.contract.qos import Qos, qos_of
 from winder.record.mcap_storage import StreamingMcapStorage
 
-__all__ = ["BagRecorder", "bag_qos", "cdr_exact", "new_bag_path", "signals_held"]
+__all__ = [
+    "STATE_KEY",
+    "BagRecorder",
+    "bag_qos",
+    "cdr_exact",
+    "new_bag_path",
+    "remove_stale_staging",
+    "signals_held",
+]
 
 
 @contextlib.contextmanager
@@ -131,14 +141,100 @@ def bag_qos(q: Qos) -> BagQos:
 COMPRESSIONS = BAG_COMPRESSIONS
 
 
+#: metadata.yaml's ``custom_data`` key that says how far the bag got: ``recording``
+#: from its open on (what a bag whose writer was killed keeps), ``closed`` at its close
+STATE_KEY = "winder_bag"
+#: the staging directory of a bag being opened: ``.<bag name>.opening-<pid>``
+_STAGING = re.compile(r"^\.(?P<name>.+)\.opening-(?P<pid>[0-9]+)$")
+
+
+class _MetadataOnly:
+    """A storage stand-in that lets rosbags' ``Writer.close`` write metadata.yaml
+    (temp file + rename) while the real storage stays open: how the bag's
+    metadata is there from its open on, in the format rosbags writes at close."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def add_msgtype(self, connection: Any) -> None:  # pragma: no cover - never called
+        raise NotImplementedError
+
+    def add_connection(self, connection: Any, offered_qos_profiles: str) -> None:  # pragma: no cover
+        raise NotImplementedError
+
+    def write(self, connection: Any, timestamp: int, data: bytes | memoryview) -> None:  # pragma: no cover
+        raise NotImplementedError
+
+    def close(self, version: int, metadata: str) -> None:
+        del version, metadata  # the .mcap stays open; only metadata.yaml is written
+
+    def abort(self) -> None:  # pragma: no cover - never called
+        pass
+
+
 class _Writer(Writer):
     """rosbags' rosbag2 writer (metadata.yaml, connections) with winder's
-    .mcap storage, which does not copy the messages (winder.record.mcap_storage)."""
+    .mcap storage, which does not copy the messages (winder.record.mcap_storage).
+    The directory is created under a staging name and the .mcap named after
+    the bag's final name (``name``)."""
 
-    STORAGE_PLUGINS = {  # noqa: RUF012 - rosbags declares it a plain attribute
-        **Writer.STORAGE_PLUGINS,
-        StoragePlugin.MCAP: StreamingMcapStorage,
-    }
+    def __init__(self, path: Path, name: str) -> None:
+        super().__init__(path, version=9, storage_plugin=StoragePlugin.MCAP)
+        self.name = name
+
+    def open(self) -> None:
+        self.path.mkdir(mode=0o755)  # FileExistsError: never into an existing directory
+        self.storage = StreamingMcapStorage(self.path, self.compression_mode, self.name)
+
+    def write_metadata(self, state: str) -> None:
+        """metadata.yaml as it stands (counts as synced), atomically, saying ``state``."""
+        real, self.storage = self.storage, _MetadataOnly(self._storage().path)
+        self.set_custom_data(STATE_KEY, state)
+        try:
+            Writer.close(self)
+        finally:
+            self.storage = real
+
+    def _storage(self) -> StreamingMcapStorage:
+        assert isinstance(self.storage, StreamingMcapStorage)
+        return self.storage
+
+    def moved(self, path: Path) -> None:
+        """The directory was renamed to ``path`` (the open file goes with it)."""
+        self.path, self.metapath = path, path / "metadata.yaml"
+        storage = self._storage()
+        storage.path = path / storage.path.name
+
+
+def _fsync(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    return True
+
+
+def remove_stale_staging(directory: Path) -> list[Path]:
+    """Remove the staging directories under ``directory`` whose process is
+    gone (a writer SIGKILLed while it opened its bag); return them."""
+    removed = []
+    with contextlib.suppress(OSError):
+        for entry in directory.iterdir():
+            m = _STAGING.match(entry.name)
+            if m and entry.is_dir() and not entry.is_symlink() and not _alive(int(m["pid"])):
+                shutil.rmtree(entry, ignore_errors=True)
+                removed.append(entry)
+    return removed
 
 
 #: Payload bytes the writer thread may have queued before write() waits for it.
@@ -156,9 +252,18 @@ class BagRecorder:
     table, :func:`winder.contract.qos.qos_of`), recorded with it so that a
     player offers it again (a latched topic stays latched). The type hash of
     each topic (RIHS01) is recorded too.
-    Timestamps are integer nanoseconds of *simulated* time. :meth:`close` writes
-    metadata.yaml; :meth:`discard` removes the directory (a job that never ran
-    leaves nothing behind).
+    Timestamps are integer nanoseconds of *simulated* time.
+
+    The directory appears whole: it is made under a hidden staging name
+    (``.<name>.opening-<pid>``), with the connections, the messages of
+    ``first`` (the run's description) in a first chunk on disk, and a
+    metadata.yaml that says ``winder_bag: recording`` in its ``custom_data``,
+    then renamed. Whatever ends the writer after that (SIGKILL included), the
+    bag has its metadata and a readable head (``winder bag recover``); a
+    staging directory left by a killed writer is removed by the next bag
+    opened beside it. :meth:`close` writes the summary and metadata.yaml
+    again (temp file + rename, ``winder_bag: closed``); :meth:`discard`
+    removes the directory (a job that never ran leaves nothing behind).
 
     The file is written by a thread of its own: :meth:`write` queues the
     payload (bytes, not to be changed afterwards) and returns, while chunk
@@ -175,21 +280,12 @@ class BagRecorder:
         *,
         compression: str = "lz4",
         qos: Mapping[str, Qos] | None = None,
+        first: Sequence[tuple[str, int, bytes | memoryview]] = (),
     ) -> None:
         if compression not in COMPRESSIONS:
             raise ValueError(f"compression={compression!r} is invalid: must be one of {COMPRESSIONS}")
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
         self.compression = compression
-        writer = _Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
-        if compression != "none":  # chunk compression inside the .mcap
-            writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
-        writer.open()
-        assert isinstance(writer.storage, StreamingMcapStorage)
-        if compression != "none":
-            writer.storage.compression = compression
-        self._writer: Writer | None = writer
-        self._storage = writer.storage
         self._conns: dict[str, int] = {}  # topic -> channel id
         self._types: dict[str, str] = {}
         self.messages = 0
@@ -203,20 +299,58 @@ class BagRecorder:
         self._queued = 0  # payload bytes in the queue
         self._room = threading.Condition()
         self._error: BaseException | None = None
+        self._writer: _Writer | None = None
+        self._made = False  # the bag's directory is there under its name
+        parent = self.path.parent
+        parent.mkdir(parents=True, exist_ok=True)
+        remove_stale_staging(parent)
+        if self.path.exists():
+            raise FileExistsError(f"{self.path}: exists already; a bag is never written into it")
+        self._stage = parent / f".{self.path.name}.opening-{os.getpid()}"
         try:
-            for topic, msgtype in topics.items():
-                offered = (qos or {}).get(topic) or qos_of(topic)
-                profiles = [bag_qos(offered)] if offered is not None else []
-                conn = writer.add_connection(
-                    topic, msgtype, typestore=_TYPESTORE, offered_qos_profiles=profiles
-                )
-                self._conns[topic] = conn.id
-                self._types[topic] = msgtype
-        except Exception:
+            self._open(topics, qos, first)
+        except BaseException:  # a signal too: nothing half-made stays behind
             self.discard()
             raise
         self._thread = threading.Thread(target=self._drain, name="bag-writer", daemon=True)
         self._thread.start()
+
+    def _open(
+        self,
+        topics: dict[str, str],
+        qos: Mapping[str, Qos] | None,
+        first: Sequence[tuple[str, int, bytes | memoryview]],
+    ) -> None:
+        """The bag, made whole under a staging name, then renamed: its directory
+        never exists without metadata.yaml and a first chunk that holds
+        ``first`` (the run's description), so a writer killed at any moment
+        after leaves a bag that ``winder bag recover`` reads."""
+        writer = _Writer(self._stage, self.path.name)
+        if self.compression != "none":  # chunk compression inside the .mcap
+            writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
+        self._writer = writer
+        writer.open()
+        storage = writer._storage()
+        if self.compression != "none":
+            storage.compression = self.compression
+        self._storage = storage
+        for topic, msgtype in topics.items():
+            offered = (qos or {}).get(topic) or qos_of(topic)
+            profiles = [bag_qos(offered)] if offered is not None else []
+            conn = writer.add_connection(topic, msgtype, typestore=_TYPESTORE, offered_qos_profiles=profiles)
+            self._conns[topic] = conn.id
+            self._types[topic] = msgtype
+        for topic, t, data in first:
+            storage.write_id(*self._message(topic, t, data, exact=False))
+        storage.flush()
+        storage.bio.flush()
+        os.fsync(storage.bio.fileno())
+        self._sync(writer)
+        writer.write_metadata("recording")
+        os.rename(self._stage, self.path)  # the bag appears whole, with its metadata
+        self._made = True
+        writer.moved(self.path)
+        _fsync(self.path.parent)
 
     @property
     def is_open(self) -> bool:
@@ -229,20 +363,26 @@ class BagRecorder:
             raise RuntimeError(f"bag {self.path} is closed")
         if self._error is not None:
             raise RuntimeError(f"bag {self.path}: writing failed: {self._error}") from self._error
+        message = self._message(topic, t_ns, data, exact=exact)
+        # small messages go to the thread in batches: one hand-over per batch
+        self._batch.append(message)
+        self._batch_bytes += len(message[2])
+        if self._batch_bytes >= BATCH_BYTES or len(self._batch) >= BATCH_MESSAGES:
+            self._hand_over()
+
+    def _message(
+        self, topic: str, t_ns: int, data: bytes | memoryview, *, exact: bool
+    ) -> tuple[int, int, bytes | memoryview]:
+        """(channel id, log time, payload) of one message, counted."""
         t = max(int(t_ns), self.last_t)  # log time never goes backwards
         # (only small payloads: a trailing empty sequence means a short message,
         # and big step chunks end on their 8-byte data)
         if not exact and self._types[topic] in PADDABLE and len(data) < 65536:
             data = cdr_exact(data, self._types[topic])
-        n = len(data)
-        # small messages go to the thread in batches: one hand-over per batch
-        self._batch.append((self._conns[topic], t, data))
-        self._batch_bytes += n
-        if self._batch_bytes >= BATCH_BYTES or len(self._batch) >= BATCH_MESSAGES:
-            self._hand_over()
         self.last_t = t
         self.messages += 1
-        self.bytes += n
+        self.bytes += len(data)
+        return self._conns[topic], t, data
 
     def _hand_over(self) -> None:
         """Queue the batch for the writer thread (waits while the queue is full)."""
@@ -288,7 +428,8 @@ class BagRecorder:
                 self._stop()  # everything queued is in the file
                 if self._error is None:
                     self._sync(writer)
-                    writer.close()
+                    writer.set_custom_data(STATE_KEY, "closed")
+                    writer.close()  # the .mcap's summary, then metadata.yaml (temp file + rename)
                 else:  # what reached the file stays readable
                     with contextlib.suppress(Exception):
                         writer.close()
@@ -305,10 +446,13 @@ class BagRecorder:
             writer.min_timestamp, writer.max_timestamp = storage.first_t, storage.last_t
 
     def discard(self) -> None:
+        """Remove the bag (or what of it was made while it opened)."""
         if self._writer is not None:
             writer, self._writer = self._writer, None
             if hasattr(self, "_thread"):
                 self._stop()
             with contextlib.suppress(Exception):  # the directory goes anyway
-                writer.close()
-        shutil.rmtree(self.path, ignore_errors=True)
+                writer.abort()
+        if self._made:
+            shutil.rmtree(self.path, ignore_errors=True)
+        shutil.rmtree(self._stage, ignore_errors=True)

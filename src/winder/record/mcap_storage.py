@@ -82,8 +82,10 @@ class StreamingMcapStorage:
     until their chunk is closed and must not change meanwhile.
     """
 
-    def __init__(self, path: Path, compression: CompressionMode | None) -> None:
-        self.path = path / f"{path.name}.mcap"
+    def __init__(self, path: Path, compression: CompressionMode | None, name: str = "") -> None:
+        # ``name``: the file's stem, when the directory is opened under another
+        # name than the bag's (winder.record.bag stages it, then renames it)
+        self.path = path / f"{name or path.name}.mcap"
         self.compression = "zstd" if compression == CompressionMode.STORAGE else ""
         self.bio: BinaryIO = self.path.open("xb")
         self._crc = 0  # CRC-32 of the summary section, as it is written (see close())

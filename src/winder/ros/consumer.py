@@ -398,17 +398,19 @@ class StepConsumer(ManagedNode):
             path = (
                 run_bag_path(directory, plan.run_id) if plan.run_id else new_bag_path(directory, plan.job_id)
             )
+            # the run's description is in the bag from its first moment on: a
+            # node killed at any time after leaves a bag that tells which run it was
+            first = [(self.bag_topics["job"][0], self.wall0_ns, job_raw)]
+            if config_raw:
+                first.append((self.bag_topics["sim_config"][0], self.wall0_ns, config_raw))
             self.bag = BagRecorder(
                 path,
                 {name: kind for name, kind in self.bag_topics.values()},
                 compression=values["bag_compression"],
+                first=first,
             )
         except (OSError, ValueError) as exc:  # the disk changed since bag_dir was accepted
             self.error(f"job {plan.job_id} runs unrecorded: cannot open a bag: {one_line(exc)}")
-            return
-        self.record("job", 0, job_raw)
-        if config_raw:
-            self.record("sim_config", 0, config_raw)
 
     def on_path(self, raw: bytes, gid: bytes) -> None:
         if not self.peers.admit(TOPIC_PATH, gid):
@@ -900,6 +902,16 @@ class StepConsumer(ManagedNode):
         )
 
     def shutdown(self) -> None:
-        """Close the bag of a running run (Ctrl-C): readable, marked incomplete."""
-        if self.plan is not None and self.bag is not None:
-            self.finish(complete=False)
+        """Close the bag of a running run (Ctrl-C): readable, marked incomplete.
+        The bag is closed even when the run's books cannot be (the context
+        went down under them): its file must not stay without a summary."""
+        bag = self.bag
+        try:
+            if self.plan is not None and bag is not None:
+                self.finish(complete=False)
+        finally:
+            if bag is not None and bag.is_open:
+                try:
+                    bag.close()
+                except (RuntimeError, OSError) as exc:  # what reached the file stays readable
+                    self.get_logger().error(f"bag {bag.path}: {one_line(exc)}")

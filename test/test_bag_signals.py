@@ -1,0 +1,222 @@
+"""A bag is always readable or recoverable, whatever signal reaches the cell
+at whatever moment of a run (issue 31).
+
+Real cells (``winder run``, the three nodes) get SIGINT or SIGHUP on their
+process group (a Ctrl-C, a closed terminal), or SIGTERM or SIGKILL on the step
+consumer, before the run's bag opens, the moment it appears, mid-run, and
+around its close. Afterwards every bag directory of the run has its
+metadata.yaml and reads: closed ones with rosbags and the repo's reader, a
+SIGKILLed one through ``winder bag recover``. A directory that is not a bag
+is never left behind (at most a hidden staging directory of a SIGKILLed
+open, which the next run removes).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import random
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+from conftest import BIN, next_domain, release_domain, rosbags_read
+from test_reader import run_cli
+
+from winder.record.reader import BagError, read_raw, read_run
+
+pytestmark = pytest.mark.ros
+
+#: a job of 2048 steps, 1.4 s of simulated time, paced in real time: the bag is open about 1.6 s
+JOB = ["--job-id", "sig", "--turns-per-layer", "2", "--layers", "1", "--poles", "1", "--real-time"]
+#: runs per (phase, signal); WINDER_SIGNAL_REPEATS raises it to hunt a race
+REPEATS = int(os.environ.get("WINDER_SIGNAL_REPEATS", "2"))
+#: (signal, whom): the cell's process group as a terminal signals it, or the consumer alone
+SIGNALS = [
+    (signal.SIGINT, "group"),
+    (signal.SIGHUP, "group"),
+    (signal.SIGTERM, "consumer"),
+    (signal.SIGKILL, "consumer"),
+]
+PHASES = ["before", "open", "mid", "close"]
+
+
+def children(pid: int) -> dict[int, str]:
+    """The child processes of ``pid``: pid -> command line."""
+    out = {}
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            stat = Path(f"/proc/{entry}/stat").read_text()
+            ppid = int(stat.rsplit(")", 1)[1].split()[1])
+            if ppid == pid:
+                out[int(entry)] = Path(f"/proc/{entry}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+        except (OSError, ValueError, IndexError):
+            continue
+    return out
+
+
+class Cell:
+    """``winder run`` in a session of its own (its process group is the cell)."""
+
+    def __init__(self, tmp: Path, domain: int, bag_dir: Path) -> None:
+        env = {
+            **os.environ,
+            "ROS_DOMAIN_ID": str(domain),
+            "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+            "TMPDIR": str(tmp),
+        }
+        self.log = tmp / "winder-run.log"
+        self.p = subprocess.Popen(
+            [str(BIN / "winder"), "run", "--bag-dir", str(bag_dir), *JOB],
+            env=env,
+            stdout=self.log.open("wb"),
+            stderr=subprocess.STDOUT,
+            stdin=subprocess.DEVNULL,
+            start_new_session=True,
+        )
+        self.t0 = time.monotonic()
+
+    def consumer(self) -> int | None:
+        for pid, cmd in children(self.p.pid).items():
+            if "sim_node" in cmd:
+                return pid
+        return None
+
+    def signal(self, sig: int, whom: str) -> None:
+        if whom == "group":
+            os.killpg(self.p.pid, sig)
+            return
+        pid = self.consumer()
+        assert pid is not None, "the sim node is not running"
+        os.kill(pid, sig)
+
+    def wait(self, timeout: float = 40.0) -> None:
+        """Until winder run and every node of the cell have ended (killed after ``timeout``)."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            try:
+                os.killpg(self.p.pid, 0)
+            except ProcessLookupError:
+                self.p.wait()
+                return
+            self.p.poll()
+            time.sleep(0.05)
+        os.killpg(self.p.pid, signal.SIGKILL)
+        self.p.wait()
+        raise AssertionError(f"the cell did not end within {timeout} s:\n{self.log.read_text()}")
+
+
+def entries(bag_dir: Path) -> list[str]:
+    try:
+        return os.listdir(bag_dir)
+    except FileNotFoundError:
+        return []
+
+
+def wait_for(cond: object, timeout: float, spin: float = 0.0) -> bool:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if cond():  # type: ignore[operator]
+            return True
+        if spin:
+            time.sleep(spin)
+    return False
+
+
+def mcap_size(bag_dir: Path) -> int:
+    return sum(f.stat().st_size for f in bag_dir.glob("*/*.mcap"))
+
+
+def signal_at(cell: Cell, bag_dir: Path, phase: str, sig: int, whom: str, rng: random.Random) -> None:
+    """Send ``sig`` at ``phase`` of the run (see the module)."""
+    if phase == "before":  # somewhere in the start: nodes starting, handshake, job description
+        wait_for(lambda: cell.consumer() is not None, 20, 0.005)
+        time.sleep(rng.uniform(0.0, 2.5))
+    elif phase == "open":  # the moment anything appears in the bag directory: no sleep between looks
+        assert wait_for(lambda: entries(bag_dir), 30), cell.log.read_text()
+    elif phase == "mid":  # the run's first chunks are in the file
+        assert wait_for(lambda: mcap_size(bag_dir) > 30_000, 30, 0.001), cell.log.read_text()
+    else:  # around the end of the steps, when the final report is written and the bag closes
+        assert wait_for(lambda: entries(bag_dir), 30, 0.001), cell.log.read_text()
+        time.sleep(rng.uniform(1.3, 2.0))
+    if cell.p.poll() is not None and whom == "group":
+        return  # the run ended before the moment came: nothing to signal
+    with contextlib.suppress(AssertionError, ProcessLookupError):  # the consumer had already ended
+        cell.signal(sig, whom)
+
+
+def check_bags(bag_dir: Path, killed: bool, tmp: Path) -> str:
+    """Every bag of ``bag_dir`` readable (or recoverable, if the consumer was
+    SIGKILLed); returns what was found: "none", "closed" or "recovered"."""
+    found = "none"
+    for entry in sorted(entries(bag_dir)):
+        path = bag_dir / entry
+        if entry.startswith("."):
+            assert killed, f"{path}: a staging directory left by a run that was not SIGKILLed"
+            continue
+        assert (path / "metadata.yaml").is_file(), f"{path}: no metadata.yaml ({os.listdir(path)})"
+        try:
+            raw = read_raw(path)
+        except BagError as exc:
+            raise AssertionError(f"{path}: not readable: {exc}") from None
+        if raw.closed and not raw.recovered:
+            assert not raw.damaged, raw.damaged
+            run = read_run(path)
+            assert run.plan.run_id and run.report, path
+            rosbags_read(path)  # the reference reader opens it too
+            found = "closed"
+            continue
+        assert killed, f"{path}: cut short ({raw.notes}), but the consumer was not SIGKILLed"
+        out = tmp / f"{entry}_recovered"
+        r = run_cli("bag", "recover", str(path), "--output", str(out))
+        assert r.returncode == 0, r.stdout + r.stderr
+        assert rosbags_read(out)["/winder/job"], out
+        found = "recovered"
+    return found
+
+
+@pytest.mark.parametrize("phase", PHASES)
+@pytest.mark.parametrize(("sig", "whom"), SIGNALS, ids=[f"{s.name}-{w}" for s, w in SIGNALS])
+def test_a_signal_at_any_phase_leaves_a_readable_or_recoverable_bag(
+    tmp_path: Path, phase: str, sig: signal.Signals, whom: str
+) -> None:
+    rng = random.Random(f"{phase}-{sig}-{whom}")
+    domain = next_domain()
+    try:
+        seen = []
+        for i in range(REPEATS):
+            tmp = tmp_path / f"run{i}"
+            tmp.mkdir()
+            bag_dir = tmp / "bags"
+            cell = Cell(tmp, domain, bag_dir)
+            try:
+                signal_at(cell, bag_dir, phase, sig, whom, rng)
+                cell.wait()
+            finally:
+                if cell.p.poll() is None:
+                    os.killpg(cell.p.pid, signal.SIGKILL)
+                    cell.p.wait()
+            seen.append(check_bags(bag_dir, sig == signal.SIGKILL, tmp))
+            assert "Traceback" not in cell.log.read_text(), cell.log.read_text()
+    finally:
+        release_domain(domain)
+    print(f"{phase} {sig.name}->{whom}: {seen}")
+
+
+def test_the_next_run_removes_a_sigkilled_open(tmp_path: Path) -> None:
+    """A staging directory left by a consumer SIGKILLed while opening its bag
+    is removed by the next bag opened beside it (its process is gone)."""
+    from winder.record.bag import BagRecorder
+
+    bag_dir = tmp_path / "bags"
+    bag_dir.mkdir()
+    stale = bag_dir / ".run1.opening-999999999"  # no such process: pids stay below 2**22
+    stale.mkdir()
+    (stale / "run1.mcap").write_bytes(b"\x89MCAP0\r\n")
+    rec = BagRecorder(bag_dir / "run2", {"/winder/job": "std_msgs/msg/String"})
+    rec.close()
+    assert sorted(os.listdir(bag_dir)) == ["run2"]
