@@ -46,6 +46,18 @@ def winder_run(
     )
 
 
+def long_run(procs: Procs, bags: Path) -> subprocess.Popen[str]:
+    """``winder run`` of a job that lasts ~10 s, in the background: the live cell."""
+    return subprocess.Popen(
+        [str(BIN / "winder"), "run", "--bag-dir", str(bags), "--turns-per-layer", "400"],
+        env=procs.env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        stdin=subprocess.DEVNULL,
+    )
+
+
 def bag_of(out: str) -> Path:
     found = re.search(r"^  bag +(\S+)", out, re.M)
     assert found, out
@@ -110,14 +122,7 @@ def test_forged_messages_change_nothing(tmp_path: Path, procs: Procs, forge: str
 
 
 def test_a_second_cell_in_the_namespace_is_refused(tmp_path: Path, procs: Procs) -> None:
-    first = subprocess.Popen(
-        [str(BIN / "winder"), "run", "--bag-dir", str(tmp_path / "a"), "--turns-per-layer", "400"],
-        env=procs.env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        stdin=subprocess.DEVNULL,
-    )
+    first = long_run(procs, tmp_path / "a")
     try:
         time.sleep(3.0)  # the first cell runs
         second = winder_run(procs, tmp_path / "b", timeout=120)
@@ -135,14 +140,7 @@ def test_a_second_cell_in_the_namespace_is_refused(tmp_path: Path, procs: Procs)
 
 
 def test_a_second_node_of_a_role_leaves(tmp_path: Path, procs: Procs) -> None:
-    first = subprocess.Popen(
-        [str(BIN / "winder"), "run", "--bag-dir", str(tmp_path / "a"), "--turns-per-layer", "400"],
-        env=procs.env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        stdin=subprocess.DEVNULL,
-    )
+    first = long_run(procs, tmp_path / "a")
     try:
         time.sleep(3.0)
         seconds = [procs.start(node, "-p", f"bag_dir:={tmp_path / 'b'}") for node in ("sim_node",)]
@@ -164,14 +162,7 @@ def test_play_into_a_live_cell_is_refused_and_forced_changes_nothing(tmp_path: P
     recorded_run = winder_run(procs, tmp_path / "rec", *JOB)
     assert recorded_run.returncode == 0, recorded_run.stderr
     bag = bag_of(recorded_run.stdout)
-    live = subprocess.Popen(
-        [str(BIN / "winder"), "run", "--bag-dir", str(tmp_path / "live"), "--turns-per-layer", "400"],
-        env=procs.env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        stdin=subprocess.DEVNULL,
-    )
+    live = long_run(procs, tmp_path / "live")
 
     def play(*args: str) -> subprocess.CompletedProcess[str]:
         return subprocess.run(

@@ -30,7 +30,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, Any
 
-__all__ = ["OutputError", "atomic_file", "new_directory", "output_dir", "write_text"]
+__all__ = ["OutputError", "atomic_file", "fsync_path", "new_directory", "output_dir", "write_text"]
 
 
 class OutputError(Exception):
@@ -61,7 +61,8 @@ def _ours(exc: OSError, *paths: Path | str | None) -> bool:
     )
 
 
-def _fsync_dir(path: Path) -> None:
+def fsync_path(path: Path) -> None:
+    """fsync a file or a directory (a directory: so that a rename in it is on disk)."""
     fd = os.open(path, os.O_RDONLY)
     try:
         os.fsync(fd)
@@ -122,7 +123,7 @@ def atomic_file(path: str | Path, mode: str = "w", *, newline: str | None = None
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, target)
-        _fsync_dir(directory)
+        fsync_path(directory)
     except OSError as exc:
         tmp.unlink(missing_ok=True)
         if _ours(exc, tmp, target, directory):
@@ -168,11 +169,11 @@ def new_directory(path: str | Path, *, create: bool = True) -> Iterator[Path]:
                     os.fsync(fd)
                 finally:
                     os.close(fd)
-            _fsync_dir(Path(root))
+            fsync_path(Path(root))
         if target.exists() or target.is_symlink():  # made meanwhile: never replaced
             raise FileExistsError(f"{target}: already exists; choose a new directory")
         os.rename(work, target)
-        _fsync_dir(parent)
+        fsync_path(parent)
     except FileExistsError:
         shutil.rmtree(staging, ignore_errors=True)
         raise

@@ -25,6 +25,7 @@ from rosbags.interfaces import QosDurability, QosHistory, QosLiveliness, QosReli
 from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
+from winder.contract.files import fsync_path
 from winder.contract.params import BAG_COMPRESSIONS
 from winder.contract.qos import Qos, qos_of
 from winder.record.mcap_storage import StreamingMcapStorage
@@ -206,14 +207,6 @@ class _Writer(Writer):
         storage.path = path / storage.path.name
 
 
-def _fsync(path: Path) -> None:
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-
-
 def _alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)
@@ -350,7 +343,7 @@ class BagRecorder:
         os.rename(self._stage, self.path)  # the bag appears whole, with its metadata
         self._made = True
         writer.moved(self.path)
-        _fsync(self.path.parent)
+        fsync_path(self.path.parent)
 
     @property
     def is_open(self) -> bool:
