@@ -6,8 +6,11 @@ launch may remap (``sim_node --ros-args -r __node:=axes``).
   to ``/ns/winder/step_times`` and acknowledges on ``/ns/winder/progress``
   (the sim node, a ros2_control bridge, a hardware driver). A recorder that
   subscribes to every topic is no consumer: it acknowledges nothing.
-* the **profile node**: the node in ``/ns`` that subscribes to
-  ``/ns/winder/steps`` and publishes ``/ns/winder/step_times``.
+* the **profile node**: the node in ``/ns`` that publishes
+  ``/ns/winder/step_times``, ``/ns/winder/control`` and ``/ns/winder/path``.
+
+The parts are :data:`winder.contract.trust.SIGNS`: the same that decide whose
+messages a node acts on (:mod:`winder.ros.peers`).
 
 Each function returns ``(name, namespace)`` pairs, sorted, without the
 calling node itself; the graph is what this process has discovered so far,
@@ -18,9 +21,9 @@ from __future__ import annotations
 
 from rclpy.node import Node
 
-from winder.contract.topics import TOPIC_PROGRESS, TOPIC_STEP_TIMES, TOPIC_STEPS
+from winder.contract.trust import SIGNS
 
-__all__ = ["consumers", "fully_qualified", "profile_nodes"]
+__all__ = ["consumers", "fully_qualified", "profile_nodes", "role_holders"]
 
 
 def _ns(namespace: str) -> str:
@@ -30,32 +33,40 @@ def _ns(namespace: str) -> str:
 
 def _endpoints(node: Node, namespace: str, topic: str, publishers: bool) -> set[tuple[str, str]]:
     """The nodes in ``namespace`` with a publisher (or a subscription) on the
-    cell's ``topic``, but ``node`` itself."""
+    cell's ``topic`` (names the graph has learned only)."""
     ns = _ns(namespace)
-    full = fully_qualified(topic, namespace)
     get = node.get_publishers_info_by_topic if publishers else node.get_subscriptions_info_by_topic
-    infos = get(full)
-    me = (node.get_name(), node.get_namespace())
     return {
-        (info.node_name, info.node_namespace)
-        for info in infos
-        if info.node_namespace == ns and (info.node_name, info.node_namespace) != me
+        (i.node_name, i.node_namespace)
+        for i in get(fully_qualified(topic, namespace))
+        if i.node_namespace == ns
     }
+
+
+def role_holders(node: Node, namespace: str, role: str) -> set[tuple[str, str]]:
+    """The nodes in ``namespace`` that play ``role`` by their endpoints
+    (:data:`winder.contract.trust.SIGNS`), ``node`` itself included."""
+    publishes, reads = SIGNS[role]
+    found = [_endpoints(node, namespace, t, True) for t in publishes]
+    found += [_endpoints(node, namespace, t, False) for t in reads]
+    return set.intersection(*found) if found else set()
+
+
+def _others(node: Node, namespace: str, role: str) -> list[tuple[str, str]]:
+    return sorted(role_holders(node, namespace, role) - {(node.get_name(), node.get_namespace())})
 
 
 def consumers(node: Node, namespace: str) -> list[tuple[str, str]]:
     """The step consumers of the cell in ``namespace`` on ``node``'s graph
     (normally one): subscribed to its ``winder/step_times``, publishing its
     ``winder/progress``."""
-    readers = _endpoints(node, namespace, TOPIC_STEP_TIMES, publishers=False)
-    return sorted(readers & _endpoints(node, namespace, TOPIC_PROGRESS, publishers=True))
+    return _others(node, namespace, "consumer")
 
 
 def profile_nodes(node: Node, namespace: str) -> list[tuple[str, str]]:
     """The profile nodes of the cell in ``namespace`` (normally one):
-    subscribed to its ``winder/steps``, publishing its ``winder/step_times``."""
-    readers = _endpoints(node, namespace, TOPIC_STEPS, publishers=False)
-    return sorted(readers & _endpoints(node, namespace, TOPIC_STEP_TIMES, publishers=True))
+    publishing its ``winder/step_times``, ``winder/control`` and ``winder/path``."""
+    return _others(node, namespace, "profile")
 
 
 def fully_qualified(name: str, namespace: str) -> str:

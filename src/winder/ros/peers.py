@@ -31,7 +31,7 @@ from rclpy.subscription import Subscription
 
 from winder.contract.topics import PROCESS_KEYS, ROLE_KEY, TOPIC_DIAGNOSTICS, in_namespace
 from winder.contract.trust import OWNERS, ROLE_NAMES, SIGNS, Intruders
-from winder.ros.graph import fully_qualified
+from winder.ros.graph import fully_qualified, role_holders
 from winder.ros.qos import QOS_DIAGNOSTICS
 from winder.ros.sender import attributed
 from winder.ros.timers import steady_timer
@@ -84,28 +84,10 @@ class Peers:
             who = self.gids.get(gid)
         return who
 
-    def _endpoints(self, topic: str, publishers: bool) -> set[Who]:
-        get = (
-            self.node.get_publishers_info_by_topic
-            if publishers
-            else self.node.get_subscriptions_info_by_topic
-        )
-        return {
-            (info.node_name, info.node_namespace)
-            for info in get(self.topic(topic))
-            if info.node_namespace == self.ns
-        }
-
     def holders(self, role: str) -> set[Who]:
         """The nodes in the cell's namespace that play ``role`` by their
         endpoints (normally one; this node itself included)."""
-        publishes, reads = SIGNS[role]
-        found: set[Who] | None = None
-        for topic in publishes:
-            found = self._endpoints(topic, True) if found is None else found & self._endpoints(topic, True)
-        for topic in reads:
-            found = self._endpoints(topic, False) if found is None else found & self._endpoints(topic, False)
-        return found or set()
+        return role_holders(self.node, self.namespace, role)
 
     def owner(self, role: str) -> Who | None:
         """The cell's node in ``role``: the pinned one while the graph shows
