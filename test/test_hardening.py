@@ -881,3 +881,54 @@ def test_an_integer_for_a_double_setting_stays_a_double(procs: Procs, ros: Any) 
     assert res.successful, res.reason
     second = v_max()
     assert (second.type, second.double_value) == (ParameterType.PARAMETER_DOUBLE, 4000.0)
+
+
+#: a job of 4.1e11 steps: 4.1e4 s at the highest v_max a profile node takes
+#: (a bound the interp node can apply to any ramp), 4.1e6 s at 1e5 steps/s
+LONG_JOB = {"turns_per_layer": 100_000, "layers": 1_000, "poles": 4}
+
+
+@pytest.mark.ros
+def test_the_interp_node_refuses_a_job_too_long_as_check_does(procs: Procs, ros: Any) -> None:
+    """A job longer than a week, as winder run --check refuses it: given at
+    start, the interp node stays up and refuses to start it (one line naming
+    the job and the limit); through ~/start_run with the ramp carried, it is
+    refused and nothing is set; a job that fits then runs."""
+    from conftest import spin_until
+    from rclpy.task import Future
+    from std_srvs.srv import Trigger
+    from test_cell_contract import get_params, start_run
+
+    from winder.contract.params import PROFILE_SPECS
+
+    huge = {**LONG_JOB, "poles": 360, "feed_step": 1e-3}  # past a week even at v_max 1e7
+    flags = [f"--{k.replace('_', '-')}={v}" for k, v in huge.items()]
+    check = subprocess.run([str(BIN / "winder"), "run", "--check", *flags], capture_output=True, text=True)
+    assert check.returncode == 2 and "more than a job may last" in check.stderr, check.stderr
+    procs.start("sim_node", "-p", "record:=false")
+    procs.start("profile_node")
+    params = [a for k, v in huge.items() for a in ("-p", f"{k}:={v}")]
+    node = procs.start("interp_node", "-p", "autostart:=false", *params)
+    client = ros.create_client(Trigger, "/interp_node/start")
+    spin_until(ros, client.service_is_ready, 30, "the start service")
+    future: Future = client.call_async(Trigger.Request())
+    spin_until(ros, future.done, 30, "the start reply")
+    reply = future.result()
+    assert not reply.success and "is too long" in reply.message, reply.message
+    assert f"more than a job may last ({MAX_JOB_SECONDS:g} s)" in reply.message, reply.message
+    assert len(reply.message.splitlines()) == 1 and node.poll() is None
+
+    # the ramp carried with the job: timed exactly, as --check times it with that ramp
+    ramp = {f"ramp.{k}": s.default for k, s in PROFILE_SPECS.items()} | {"ramp.v_max": 1e5}
+    flags = [f"--{k.replace('_', '-')}={v}" for k, v in LONG_JOB.items()]
+    check = subprocess.run(
+        [str(BIN / "winder"), "run", "--check", *flags, "--v-max", "1e5"], capture_output=True, text=True
+    )
+    assert check.returncode == 2 and "more than a job may last" in check.stderr, check.stderr
+    refused = start_run(ros, {**LONG_JOB, **ramp, "ramp.source": "job"})
+    assert not refused.successful and "is too long" in refused.reason, refused.reason
+    assert "v_max=100000: more than a job may last" in refused.reason, refused.reason
+    assert get_params(ros, "interp_node", ["poles", "ramp.source"]) == [360, "profile_node"]  # nothing set
+    started = start_run(ros, {"turns_per_layer": 2, "layers": 1, "poles": 1})
+    assert started.successful, started.reason
+    assert node.poll() is None and "Traceback" not in procs.log(node)

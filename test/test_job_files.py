@@ -78,7 +78,7 @@ BAD = [
         "interp_node.ros__parameters.turns_per_layer: turns_per_layer=0 is invalid: must be in [1, 100000]",
     ),
     ("interp_node:\n  ros__parameters: {layers: [1, 2]}\n", "layers=[1, 2] is invalid"),
-    ("interp_node:\n  ros__parameters: {layers: null}\n", "layers=None is invalid"),
+    ("interp_node:\n  ros__parameters: {layers: null}\n", "layers='null' is invalid"),  # ROS: the text null
     (
         "sim_node:\n  ros__parameters: {fork: {J: -1}}\n",
         "sim_node.ros__parameters.fork.J: fork.J=-1 is invalid",
@@ -99,9 +99,10 @@ BAD = [
         "sections 'consumer' and '/cell1/sim_node' both hold the step consumer's settings",
     ),
     ("axes:\n  ros__parameters: {model: linear}\n", "section 'axes': not a winder node"),
-    # an alias that refers to the map holding it: a cycle, refused before anything walks it
-    ("interp_node: &r {ros__parameters: {x: *r}}\n", "an alias refers to a map or list that holds it"),
-    ("interp_node:\n  ros__parameters: &p {turns_per_layer: 3, more: *p}\n", "(a cycle)"),
+    # aliases: ROS refuses them in a parameters file, and so does the loader, before
+    # anything expands one (a cycle, an alias bomb: they ended interp_node or grew --check to GBs)
+    ("interp_node: &r {ros__parameters: {x: *r}}\n", "line 1: an alias (*r)"),
+    ("interp_node:\n  ros__parameters: &p {turns_per_layer: 3, more: *p}\n", "an alias (*p)"),
     # nine lines of nested aliases inside ros__parameters: 10**7 values once expanded
     (
         "interp_node:\n  ros__parameters:\n    a: &a [1,1,1,1,1,1,1,1,1,1]\n"
@@ -109,8 +110,13 @@ BAD = [
             f"    {n}: &{n} [{','.join([f'*{m}'] * 10)}]\n" for m, n in zip("abcde", "bcdef", strict=True)
         )
         + "    g: [*f,*f,*f,*f,*f,*f,*f,*f,*f,*f]\n",
-        "more than 10000 values once its aliases are expanded",
+        "line 4: an alias (*a): ROS 2 parameters files have none",
     ),
+    ("interp_node:\n  ros__parameters:\n    turns_per_layer:\n", "no value for 'turns_per_layer'"),
+    ("interp_node:\n  ros__parameters: {layers: 2, layers: 3}\n", "key 'layers' given twice"),
+    ("interp_node:\n  ros__parameters: {layers: 2}\n---\n{}\n", "a second YAML document"),
+    ("interp_node:\n  ros__parameters: {turns_per_layer: 0o17}\n", "turns_per_layer='0o17' is invalid"),
+    ("interp_node:\n  ros__parameters: {job_id: 017}\n", "job_id=15 is invalid"),
     (
         "interp_node:\n  ros__parameters: {turns_per_layer: 100, coil_length: 0.01}\n",
         "interp_node: turns_per_layer=100 is invalid",
@@ -270,7 +276,7 @@ def test_the_interp_node_takes_a_job_file_in_one_start_run_call(
     cycle = tmp_path / "recur.yaml"
     cycle.write_text("interp_node: &r {ros__parameters: {x: *r}}\n")
     refused = start(cycle)  # it ended the node (RecursionError) before aliases were bounded
-    assert not refused.successful and "(a cycle)" in refused.reason, refused.reason
+    assert not refused.successful and "an alias (*r)" in refused.reason, refused.reason
     assert get_params(ros, "interp_node", ["job_file", "job_id"]) == ["", "rw400"]
     started = start(job)
     assert started.successful, started.reason
@@ -318,3 +324,91 @@ def test_a_job_with_coil_overrides_runs_through_the_nodes(tmp_path: Path, procs:
     a = analyze(run)
     assert a.lost_steps == 0 and len(a.command.layers) == 5
     assert a.actual is not None and a.actual.mean < 2 * a.command.mean, (a.actual.mean, a.command.mean)
+
+
+#: scalars YAML 1.2 (ruamel's default) and ROS's parameters-file parser read
+#: differently, each in a setting of its type: (setting, scalar as written)
+TRICKY = [
+    ("turns_per_layer", "0o17"),  # YAML 1.2: 15; ROS: the text 0o17
+    ("turns_per_layer", "017"),  # YAML 1.2: 17; ROS (strtol): octal 15
+    ("turns_per_layer", "0x1F"),
+    ("turns_per_layer", "1_000"),  # YAML 1.2: 1000; ROS: a text
+    ("turns_per_layer", "1e3"),
+    ("turns_per_layer", "08"),  # ROS: not octal, the double 8.0
+    ("turns_per_layer", "~"),  # ROS: the text ~
+    ("turns_per_layer", "'12'"),
+    ("turns_per_layer", "yes"),  # ROS: true
+    ("wire_diameter", ".inf"),
+    ("wire_diameter", "0x1p-9"),  # ROS (strtod): a hex float
+    ("autostart", "no"),  # YAML 1.2: a text; ROS: false
+    ("autostart", "off"),
+    ("autostart", "'no'"),
+    ("job_id", "'12'"),
+    ("job_id", "017"),
+    ("job_id", "yes"),
+    ("job_id", "0o17"),
+]
+
+
+@pytest.mark.ros
+def test_check_and_the_node_read_every_scalar_the_same(tmp_path: Path, procs: Procs, ros: Any) -> None:
+    """Each tricky scalar in a job file: ``winder run --check`` and a real
+    interp_node given the file (``--params-file``: ROS's own parser) agree
+    on it: both refuse it, or both take the same value."""
+    from test_cell_contract import get_params
+
+    from winder.contract.params import INTERP_SPECS
+
+    cases = []
+    for i, (name, text) in enumerate(TRICKY):
+        path = tmp_path / f"s{i}.yaml"
+        path.write_text(f"/s{i}/interp_node:\n  ros__parameters:\n    {name}: {text}\n")
+        try:
+            value, refused = load_job_file(path)["interp_node"][name], ""
+        except JobFileError as exc:
+            value, refused = None, str(exc)
+        check = subprocess.run(
+            [str(WINDER), "run", "--check", str(path)], capture_output=True, text=True, timeout=60
+        )
+        assert check.returncode == (2 if refused else 0) and "Traceback" not in check.stderr, check.stderr
+        assert value != INTERP_SPECS[name].default, (name, text)  # a refusal shows as the default
+        procs.start("interp_node", "-r", f"__ns:=/s{i}", "--params-file", str(path))
+        cases.append((i, name, text, value, refused))
+    verdicts = {}
+    for i, name, text, value, refused in cases:
+        (got,) = get_params(ros, f"s{i}/interp_node", [name])
+        node_took = got != INTERP_SPECS[name].default
+        verdicts[text, name] = (not refused, value)
+        assert node_took == (not refused), (name, text, got, refused)
+        if node_took:
+            assert got == value and type(got) is type(value), (name, text, got, value)
+    # what ROS makes of them, as the table above says
+    assert verdicts["017", "turns_per_layer"] == (True, 15)
+    assert verdicts["0o17", "turns_per_layer"][0] is False
+    assert verdicts["1_000", "turns_per_layer"][0] is False
+    assert verdicts["08", "turns_per_layer"] == (True, 8)
+    assert verdicts["no", "autostart"] == (True, False)
+    assert verdicts["'12'", "job_id"] == (True, "12") and verdicts["0o17", "job_id"] == (True, "0o17")
+
+
+@pytest.mark.ros
+def test_winder_run_gives_the_nodes_the_values_it_checked(tmp_path: Path, procs: Procs) -> None:
+    """A text that ROS would read as a number or a bool (job_id '017', 'yes')
+    reaches the nodes as that text: winder run passed it unquoted (-p
+    job_id:=017, the integer 15), and the node refused the job --check took."""
+    for job_id in ("017", "yes"):
+        job = tmp_path / f"{job_id}.yaml"
+        small = "turns_per_layer: 2, layers: 1, poles: 1"
+        job.write_text(f"interp_node:\n  ros__parameters: {{job_id: '{job_id}', {small}}}\n")
+        bags = tmp_path / f"bags_{job_id}"
+        r = subprocess.run(
+            [str(WINDER), "run", str(job), "--bag-dir", str(bags), "--start-timeout", "30"],
+            capture_output=True,
+            text=True,
+            timeout=120,
+            env=procs.env,
+            stdin=subprocess.DEVNULL,
+        )
+        assert r.returncode == 0, r.stdout + r.stderr
+        (bag,) = bags.iterdir()
+        assert read_run(bag).job_id == job_id

@@ -37,6 +37,9 @@ names the file, the key path and the allowed range, in one line.
 
 from __future__ import annotations
 
+import math
+import re
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -50,7 +53,15 @@ from winder.contract.params import (
 )
 from winder.spec import Spec, SpecError
 
-__all__ = ["NODE_SPECS", "SECTION_ALIASES", "JobFileError", "load_job_file", "section_node"]
+__all__ = [
+    "NODE_SPECS",
+    "SECTION_ALIASES",
+    "JobFileError",
+    "load_job_file",
+    "ros_scalar",
+    "ros_text",
+    "section_node",
+]
 
 #: the sections of a job file and the settings each may hold (job_file itself
 #: excluded); the keys of what :func:`load_job_file` returns
@@ -81,7 +92,6 @@ def _flatten(prefix: str, value: Any, out: dict[str, Any]) -> None:
 
 
 def _read(path: Path) -> Any:
-    from ruamel.yaml import YAML
     from ruamel.yaml.error import YAMLError
 
     try:
@@ -99,16 +109,182 @@ def _read(path: Path) -> Any:
     except (OSError, UnicodeDecodeError) as exc:
         raise JobFileError(f"{path}: cannot be read: {str(exc).splitlines()[0]}") from None
     try:
-        doc = YAML(typ="safe", pure=True).load(text)
+        doc = _parse(path, text)
     except YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}" if mark is not None else ""
         problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
         raise JobFileError(f"{path}: not YAML{where}: {problem}") from None
-    except Exception as exc:  # a YAML bomb, a recursion: not a job file
+    except JobFileError:
+        raise
+    except Exception as exc:  # anything else the YAML parser raises: not a job file
         raise JobFileError(f"{path}: not a job file: {type(exc).__name__}") from None
     _bounded(path, doc)
     return doc
+
+
+# -- scalars as ROS reads them ------------------------------------------------------------
+#
+# A job file is a ROS 2 parameters file, and ROS reads one with its own rules
+# (rcl_yaml_param_parser, for --params-file and every -p name:=value): an
+# unquoted scalar is a bool if it is one of its words (yes/no/on/off/y/n as
+# well as true/false), else an integer if C's strtol(text, 0) takes all of it
+# (017 is octal 15, 0x1F is 31; 0o17 and 1_000 are not), else a double if
+# strtod takes all of it without overflow (1e3, .5, inf, 0x1p3, 08), else a
+# string; a quoted scalar or one tagged !!str is a string; ~ and null are the
+# strings they spell; aliases and empty values are refused. YAML 1.2 (ruamel's
+# default) reads 017 as 17, 0o17 as 15, 1_000 as 1000 and yes as a string: a
+# file checked that way winds another coil than the node given the same file.
+# The loader reads every scalar with ROS's rules instead, so ``winder run
+# --check``, the job_file parameter and ``--params-file`` see the same values.
+
+_TRUE = frozenset(["Y", "y", "yes", "Yes", "YES", "true", "True", "TRUE", "on", "On", "ON"])
+_FALSE = frozenset(["N", "n", "no", "No", "NO", "false", "False", "FALSE", "off", "Off", "OFF"])
+_SPECIAL_FLOATS = {
+    **dict.fromkeys((".nan", ".NaN", ".NAN"), math.nan),
+    **dict.fromkeys((".inf", ".Inf", ".INF"), math.inf),
+    **dict.fromkeys(("-.inf", "-.Inf", "-.INF"), -math.inf),
+}
+_STRTOL = re.compile(r"\s*([+-]?)(0[xX][0-9a-fA-F]+|0[0-7]*|[1-9][0-9]*)")
+_STRTOD_DEC = re.compile(r"\s*[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
+_STRTOD_HEX = re.compile(r"\s*([+-]?)(0[xX](?:[0-9a-fA-F]+\.?[0-9a-fA-F]*|\.[0-9a-fA-F]+)(?:[pP][+-]?\d+)?)")
+_STRTOD_WORD = re.compile(r"\s*([+-]?)(inf|infinity|nan(\([0-9A-Za-z_]*\))?)", re.IGNORECASE)
+_INT64 = (-(2**63), 2**63 - 1)
+STR_TAG = "tag:yaml.org,2002:str"
+
+
+def _strtol(text: str) -> int | None:
+    m = _STRTOL.fullmatch(text)
+    if m is None:
+        return None
+    digits = m.group(2)
+    base = 16 if digits[:2] in ("0x", "0X") else 8 if digits[0] == "0" else 10
+    value = int(digits, base)
+    value = -value if m.group(1) == "-" else value
+    return value if _INT64[0] <= value <= _INT64[1] else None  # else ERANGE: not an integer
+
+
+def _strtod(text: str) -> float | None:
+    if text in _SPECIAL_FLOATS:
+        return _SPECIAL_FLOATS[text]
+    if _STRTOD_DEC.fullmatch(text):
+        value = float(text)
+    elif m := _STRTOD_HEX.fullmatch(text):
+        value = float.fromhex(m.group(1) + m.group(2))
+    elif m := _STRTOD_WORD.fullmatch(text):
+        return float(m.group(1) + ("nan" if m.group(2).lower().startswith("nan") else "inf"))
+    else:
+        return None
+    if math.isinf(value) or 0.0 < abs(value) < sys.float_info.min:
+        return None  # overflow or underflow: strtod's ERANGE, a string to ROS
+    return value
+
+
+def ros_scalar(text: str, *, quoted: bool = False, tag: str | None = None) -> Any:
+    """A scalar of a parameters file as ROS reads it (rcl_yaml_param_parser):
+    bool, int, float or str (see the rules above)."""
+    if quoted or tag in (STR_TAG, "!!str"):
+        return text
+    if text in _TRUE:
+        return True
+    if text in _FALSE:
+        return False
+    as_int = _strtol(text)
+    if as_int is not None:
+        return as_int
+    as_float = _strtod(text)
+    return as_float if as_float is not None else text
+
+
+def ros_text(value: bool | int | float | str) -> str:
+    """A checked setting as the text of ``-p name:=TEXT`` that ROS reads back
+    as exactly ``value`` (:func:`ros_scalar`'s inverse): a string is quoted
+    (``job_id: "yes"`` stays the text yes, not true; ``"017"`` stays 017)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return "'" + value.replace("'", "''") + "'"
+    if isinstance(value, float) and not math.isfinite(value):
+        return ".nan" if math.isnan(value) else ".inf" if value > 0 else "-.inf"
+    return repr(value)
+
+
+def _parse(path: Path, text: str) -> Any:
+    """The document as ROS reads it: maps, lists and :func:`ros_scalar` values,
+    built from the parser's events (no YAML resolver, no constructor). An
+    alias, an empty value, a key that is not a plain text or given twice and
+    a second document are refused in one line, as ROS refuses them or cannot
+    mean them."""
+    from ruamel.yaml import YAML
+    from ruamel.yaml.events import (
+        AliasEvent,
+        DocumentStartEvent,
+        MappingEndEvent,
+        MappingStartEvent,
+        ScalarEvent,
+        SequenceEndEvent,
+        SequenceStartEvent,
+    )
+
+    def line(event: Any) -> str:
+        return f"line {event.start_mark.line + 1}"
+
+    stack: list[Any] = []  # open maps and lists; for a map, the key waiting for its value
+    keys: list[str | None] = []
+    root: Any = None
+    documents = 0
+
+    def add(value: Any, event: Any) -> None:
+        nonlocal root
+        if not stack:
+            root = value
+            return
+        top = stack[-1]
+        if isinstance(top, list):
+            top.append(value)
+        elif keys[-1] is None:
+            if not isinstance(value, str) or isinstance(event, (MappingStartEvent, SequenceStartEvent)):
+                raise JobFileError(f"{path}: {line(event)}: a key must be a name")
+            if value in top:
+                raise JobFileError(f"{path}: {line(event)}: key {value!r} given twice in one map")
+            keys[-1] = value
+        else:
+            top[keys[-1]] = value
+            keys[-1] = None
+
+    for event in YAML(typ="safe", pure=True).parse(text):
+        if isinstance(event, DocumentStartEvent):
+            documents += 1
+            if documents > 1:
+                raise JobFileError(f"{path}: {line(event)}: a second YAML document: a job file has one")
+        elif isinstance(event, AliasEvent):
+            raise JobFileError(
+                f"{path}: {line(event)}: an alias (*{event.anchor}): ROS 2 parameters files have none "
+                "(ROS refuses them); write the value out"
+            )
+        elif isinstance(event, ScalarEvent):
+            quoted = event.style in ("'", '"')
+            if stack and isinstance(stack[-1], dict) and keys[-1] is None:
+                add(event.value, event)  # a key: its text, as ROS takes it
+            elif event.value == "" and not quoted and event.tag is None and event.style is None:
+                where = f" for {keys[-1]!r}" if stack and isinstance(stack[-1], dict) else ""
+                raise JobFileError(
+                    f"{path}: {line(event)}: no value{where} (ROS refuses an empty value; write '' for "
+                    "an empty text)"
+                )
+            else:
+                add(ros_scalar(event.value, quoted=quoted, tag=event.tag), event)
+        elif isinstance(event, (MappingStartEvent, SequenceStartEvent)):
+            if len(stack) >= MAX_DEPTH:
+                raise JobFileError(f"{path}: not a job file: nested deeper than {MAX_DEPTH} levels")
+            container: Any = {} if isinstance(event, MappingStartEvent) else []
+            add(container, event)
+            stack.append(container)
+            keys.append(None)
+        elif isinstance(event, (MappingEndEvent, SequenceEndEvent)):
+            stack.pop()
+            keys.pop()
+    return root
 
 
 #: what a job file may hold once its aliases are expanded: values in all,

@@ -38,6 +38,7 @@ __all__ = [
     "bag_directory",
     "check_consumer",
     "check_interp",
+    "check_job_duration",
     "check_profile",
     "check_sim",
     "plan_job",
@@ -386,6 +387,37 @@ def check_interp(values: dict[str, Any]) -> None:
     ramp = run_ramp(values)
     if ramp is not None:
         check_profile(ramp)
+    check_job_duration(job, values)
+
+
+def check_job_duration(job: Job, values: dict[str, Any]) -> None:
+    """SpecError (one line) if ``job`` would last longer than a job may
+    (:data:`MAX_JOB_SECONDS`), as ``winder run --check`` refuses it: timed
+    with the ramp the interp node's settings carry (``ramp.source`` job),
+    exactly as the profile node will time it; with the profile node's own
+    ramp, which the interp node does not know, at the fastest any profile
+    node takes (every major-axis step at the highest ``v_max``), a bound no
+    ramp beats. The interp node applies it at start and to every change
+    (``~/start_run`` included), so it never starts a job no cell can run."""
+    segments = job.segments()
+    steps = [s.steps for s in segments]
+    stops = stop_points(job, values["stops"]) if values.get("stops") else []
+    pause = float(values.get("stop_pause", 0.0))
+    ramp = run_ramp(values)
+    if ramp is not None:
+        try:
+            plan_timing(ramp, steps, stops, pause)
+        except ValueError as exc:
+            raise SpecError(f"job {job.job_id} ({job.total_steps} steps) is too long: {exc}") from None
+        return
+    top = float(PROFILE_SPECS["v_max"].high or math.inf)
+    fastest = sum(steps) / top + len(stops) * pause
+    if fastest > MAX_JOB_SECONDS:
+        raise SpecError(
+            f"job {job.job_id} ({job.total_steps} steps) is too long: even at the highest v_max a profile "
+            f"node takes ({top:g} steps/s) it lasts {fastest:.4g} s, more than a job may last "
+            f"({MAX_JOB_SECONDS:g} s); wind fewer turns_per_layer, layers or poles per job"
+        )
 
 
 #: The longest a job may last, in simulated time: a week. Step times travel as

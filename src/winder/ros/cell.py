@@ -39,6 +39,7 @@ from rclpy.serialization import deserialize_message
 from rclpy.task import Future
 from std_srvs.srv import Trigger
 
+from winder.contract.jobfile import ros_text
 from winder.contract.run import JobReport
 from winder.contract.topics import ROLE_KEY, ROLES, TASK_JOB, TOPIC_DIAGNOSTICS, has_role, in_namespace
 from winder.ros.dds import PROFILE_KEYS, use_profile
@@ -98,14 +99,8 @@ def ros_args(params: dict[str, Any], namespace: str) -> list[str]:
     args = ["--ros-args"]
     if namespace:
         args += ["-r", f"__ns:={namespace}"]
-    for k, v in params.items():
-        if isinstance(v, bool):
-            text = "true" if v else "false"
-        elif isinstance(v, str):
-            text = v if v else "''"
-        else:
-            text = repr(v)
-        args += ["-p", f"{k}:={text}"]
+    for k, v in params.items():  # each read back by ROS as the value checked here (a text stays one)
+        args += ["-p", f"{k}:={ros_text(v)}"]
     return args
 
 
