@@ -83,6 +83,21 @@ CONFIGS: dict[str, list[str]] = {
         "--publish-rate",
         "2000",
     ],
+    # a feed motor too weak for its load (a fifth of its current, nonlinear model): it loses steps
+    "feedslip": [
+        "--job-id",
+        "feedslip",
+        "--model",
+        "nonlinear",
+        "--feed.i-a",
+        "0.3",
+        "--turns-per-layer",
+        "6",
+        "--poles",
+        "1",
+        "--publish-rate",
+        "2000",
+    ],
     # one coil: the pole axis never moves
     "pole1": ["--job-id", "pole1", "--turns-per-layer", "2", "--layers", "1", "--poles", "1"],
     # aborted a third of the way (the job lasts about 6.5 s): winder analyze counts what was simulated

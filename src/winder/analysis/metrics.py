@@ -172,6 +172,8 @@ class Analysis:
     #: each axis' motor as the simulation used it: J, D, Zr, L, i_a, motor_step_angle, load_torque (SI)
     motors: dict[str, dict[str, float]] = field(default_factory=dict)
     publish_rate: float = math.nan  #: joint-state rate, Hz of simulated time
+    #: the coil as wound (winder.analysis.wound): layers and defects; empty without joint samples
+    as_wound: dict[str, Any] = field(default_factory=dict)
     source: str = ""  #: a re-simulation: the bag and run its steps come from
     error_list: list[str] = field(default_factory=list)  #: every ERROR recorded, with its time
     compression: str = ""  #: the bag's MCAP chunk compression ("" if unknown)
@@ -481,6 +483,7 @@ def analyze(run: Run, stride_time: float = STRIDE_TIME, digested: Digest | None 
             for axis, a in (run.sim_config.axes.items() if run.sim_config else ())
         },
         publish_rate=run.sim_config.publish_rate if run.sim_config else math.nan,
+        as_wound=_as_wound(run, d),
         source=(
             f"{run.sim_config.source_bag} (run {run.sim_config.source_run_id or '-'})"
             if run.sim_config and run.sim_config.source_bag
@@ -503,6 +506,13 @@ def _clean(x: Any) -> Any:
     if isinstance(x, list):
         return [_clean(v) for v in x]
     return x
+
+
+def _as_wound(run: Run, d: Digest) -> dict[str, Any]:
+    from winder.analysis.wound import as_wound
+
+    wound = as_wound(run, segment_end=d.segment_end)
+    return wound.to_json() if wound is not None else {}
 
 
 def to_json(analyses: list[Analysis]) -> str:
@@ -663,6 +673,7 @@ def _rows(a: Analysis) -> list[tuple[str, str]]:
         ("eq.7 max, axes", f"{_f(act.max, 1e6)} um" if act else "-"),
         ("worst turn, axes", f"{_f(act.turn_max_pct, decimals=4)} % of wire" if act else "-"),
     ]
+    rows += _wound_rows(a.as_wound)
     for name, m in a.axes.items():
         u = m.unit
         rows += [
@@ -674,6 +685,35 @@ def _rows(a: Analysis) -> list[tuple[str, str]]:
             (f"{name}: final error", f"{_f(m.final_error_steps)} steps ({m.net_slips} pitches)"),
         ]
     return rows
+
+
+def _wound_rows(w: dict[str, Any]) -> list[tuple[str, str]]:
+    """The coil as wound, in three rows (winder.analysis.wound)."""
+    if not w:
+        return [("as wound", "- (no joint samples)")]
+    per_coil = w["turns_per_layer"]
+    same = all(c == per_coil[0] for c in per_coil)
+    laid = f"{'/'.join(map(str, per_coil[0]))} per layer" + (
+        f", each of {len(per_coil)} coils" if same else f" in coil 1 ({len(per_coil)} coils differ)"
+    )
+    errors = [lay["max_axial_error_m"] for lay in w["layers"] if lay["max_axial_error_m"] is not None]
+    worst = max(errors) if errors else math.nan
+    defects = w["defects"]
+    if defects:
+        kinds = {k: sum(1 for x in defects if x["kind"] == k) for k in ("gap", "overlap", "offset", "flange")}
+        first = defects[0]
+        said = ", ".join(f"{n} {k}" for k, n in kinds.items() if n)
+        found = (
+            f"{len(defects)} ({said}); first: {first['kind']} at coil {first['coil']} layer "
+            f"{first['layer']} turn {first['turn']}, {first['t_s']:.2f} s"
+        )
+    else:
+        found = f"none (tolerance {w['tolerance_m'] * 1e3:g} mm)"
+    return [
+        ("as wound: turns laid", laid),
+        ("as wound: largest axial error", f"{_f(worst, 1e3, decimals=4)} mm"),
+        ("as wound: defects", found),
+    ]
 
 
 #: the set-up rows of the table and the :func:`setup` keys each shows ("x." for

@@ -771,8 +771,8 @@ def _per_turn_axes(
 def plot_analysis(
     run: Run, analysis: Analysis, out: Path | None = None, digested: Digest | None = None
 ) -> list[Path]:
-    """Write motion.png, tracking.png and winding.png (and operations.png for a
-    run with operator commands); return their paths. ``digested``: the run's
+    """Write motion.png, tracking.png, winding.png and wound.png (and
+    operations.png for a run with operator commands); return their paths. ``digested``: the run's
     :func:`winder.analysis.metrics.digest_run`, if made already."""
     d = digested if digested is not None else digest_run(run)
     out = output_dir(plots_dir(run.path) if out is None else Path(out))
@@ -780,6 +780,7 @@ def plot_analysis(
     # without joint samples (a hardware consumer records its own topics) has none to draw
     tracking = ["tracking"] if run.states.t.size else []
     figures = ["motion", *tracking, "winding"] + (["operations"] if run.events else [])
+    figures += ["wound"] if run.states.t.size else []  # the cross-section needs the axes' samples
     global _JOB
     _JOB = (run, analysis, d, out)
     try:
@@ -793,6 +794,123 @@ def plot_analysis(
 _JOB: tuple[Run, Analysis, Digest, Path] | None = None
 
 
+#: the coils wound.png draws at most (one row each), and the colours of its turns
+WOUND_COILS = 4
+WOUND_COLOURS = {
+    "ok": "tab:blue",
+    "gap": "tab:orange",
+    "overlap": "tab:purple",
+    "offset": "tab:red",
+    "flange": "k",
+}
+#: what the legend calls each colour
+WOUND_WORDS = {
+    "ok": "laid in place",
+    "gap": "gap to the turn before",
+    "overlap": "overlaps the turn before",
+    "offset": "off its place",
+    "flange": "on the flange",
+}
+
+
+def _wound(run: Run, d: Digest, out: Path) -> Path:
+    """wound.png: the cross-section of the winding window, each turn a circle
+    of the wire's diameter where the simulated axes laid it (the axial place
+    measured, the layer's height), the defects coloured by kind; one row per
+    coil (the first WOUND_COILS)."""
+    from matplotlib.collections import EllipseCollection
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Rectangle
+
+    from winder.analysis.wound import as_wound
+
+    wound = as_wound(run, segment_end=d.segment_end)
+    assert wound is not None
+    wire = wound.wire_m * 1e3
+    width = wound.window_m * 1e3
+    # a turn with several defects shows the most telling: on the flange, then
+    # a gap or overlap (where a loss happened), then an offset (which lasts)
+    rank = {"flange": 0, "overlap": 1, "gap": 2, "offset": 3}
+    kind: dict[tuple[int, int, int], str] = {}
+    for fault in sorted(wound.defects, key=lambda f: -rank[f.kind]):
+        kind[fault.coil, fault.layer, fault.turn] = fault.kind
+    coils = sorted({t.coil for t in wound.turns})[:WOUND_COILS] or [1]
+    top = max((t.radial_m * 1e3 for t in wound.turns), default=wire / 2) + wire
+    aspect = top / max(width, wire)
+    row = min(max(11.5 * aspect + 0.9, 1.7), 6.0)  # inches per coil: the window at equal scale, and its title
+    fig, _ = _figure((13, 1.2 + row * len(coils)))
+    axes = [fig.add_subplot(len(coils), 1, i + 1) for i in range(len(coils))]
+    shown: set[str] = set()
+    for ax, coil in zip(axes, coils, strict=True):
+        turns = [t for t in wound.turns if t.coil == coil]
+        ax.add_patch(Rectangle((0, -wire * 0.6), width, wire * 0.6, color="0.85", lw=0, gid=BACKGROUND))
+        for x in (0.0, width):
+            ax.axvline(x, color="0.35", lw=2.0, gid=BACKGROUND)
+        for name, colour in WOUND_COLOURS.items():
+            mine = [t for t in turns if kind.get((t.coil, t.layer, t.turn), "ok") == name]
+            if not mine:
+                continue
+            xy = np.array([[t.axial_m * 1e3, t.radial_m * 1e3] for t in mine])
+            size = np.full(len(mine), wire)
+            ax.add_collection(
+                EllipseCollection(
+                    size,
+                    size,
+                    np.zeros(len(mine)),
+                    units="x",
+                    offsets=xy,
+                    offset_transform=ax.transData,
+                    facecolors=colour,
+                    edgecolors="white" if name == "ok" else colour,
+                    linewidths=0.4,
+                    alpha=0.9 if name == "ok" else 1.0,
+                )
+            )
+            shown.add(name)
+        ax.set_xlim(-wire, width + wire)
+        ax.set_ylim(-wire * 0.8, top + wire * 0.2)
+        ax.set_aspect("equal", adjustable="box")
+        ax.set_ylabel(f"coil {coil}\nheight (mm)")
+        laid = sum(lay.turns_laid for lay in wound.layers if lay.coil == coil)
+        planned = sum(lay.turns_planned for lay in wound.layers if lay.coil == coil)
+        faults = sum(1 for f in wound.defects if f.coil == coil)
+        ax.set_title(
+            f"coil {coil}: {laid} of {planned} turns laid, {faults} defects"
+            + (f" (tolerance {wound.tolerance_m * 1e3:g} mm)" if faults else ""),
+            fontsize=9,
+        )
+    axes[-1].set_xlabel("axial place in the window, from the start flange (mm)")
+    # EllipseCollection has no legend handle: a marker of each colour stands for it
+    handles = [
+        Line2D([], [], ls="", marker="o", ms=8, color=WOUND_COLOURS[name], label=WOUND_WORDS[name])
+        for name in WOUND_COLOURS
+        if name in shown
+    ]
+    axes[0].legend(
+        handles=handles,
+        loc="lower left",
+        bbox_to_anchor=(0.0, 1.12),
+        ncol=len(handles),
+        fontsize=8,
+        frameon=False,
+    )
+    more = len({t.coil for t in wound.turns}) - len(coils)
+    fig.suptitle(
+        _title(run)
+        + f"\nthe coil as wound: each turn where the simulated axes laid it, window {width:g} mm wide"
+        + (f" ({more} more coils not drawn)" if more > 0 else ""),
+        fontsize=10,
+    )
+    fig.subplots_adjust(
+        left=0.07,
+        right=0.985,
+        bottom=0.5 / (1.2 + row * len(coils)),
+        top=1 - 1.1 / (1.2 + row * len(coils)),
+        hspace=0.55,
+    )
+    return _save(fig, out / "wound.png")
+
+
 def _draw(name: str) -> Path:
     assert _JOB is not None
     run, analysis, d, out = _JOB
@@ -803,6 +921,8 @@ def _draw(name: str) -> Path:
             return _tracking(run, d, out)
         if name == "winding":
             return _winding(run, analysis, d, out)
+        if name == "wound":
+            return _wound(run, d, out)
         return _operations(run, d, out)
 
 

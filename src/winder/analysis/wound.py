@@ -1,0 +1,283 @@
+"""The coil as wound: where each turn was laid, from the simulated axes in a
+bag, against where it should lie.
+
+A turn of a layer is laid where the feed stands when the flyer is half way
+through it: for turn k of a layer (k from 0), the flyer angle
+``θ_k = θ_0 + dir·(k + ½)·2π`` of the layer's start. The measured place is the
+feed's position at the moment the measured flyer angle passes ``θ_k``
+(linear interpolation between joint samples); the intended place is the
+commanded line's at the same angle. Both are given as the distance of the
+wire's centre from the coil's start flange (the feed position where the
+coil's first layer starts), so the first turn of a helical layer is at d/2.
+
+Per layer it reports the turns laid, the largest axial error, and these
+defects (``tolerance``: 10 % of the wire diameter unless given):
+
+* ``gap`` / ``overlap``: neighbouring turns of a layer further apart, or
+  closer, than the wire diameter by more than the tolerance;
+* ``offset``: a turn laid further than the tolerance from its place;
+* ``flange``: a turn whose centre lies nearer a flange than half a wire
+  diameter less the tolerance (it climbs onto the flange), or beyond it.
+
+The window is ``bobbin.window_width`` when the job sets one, else the room the
+job's turns take (``turns_per_layer`` x d); layers stack at a radial pitch of
+d (helical lay), the centre of layer l at d/2 + (l - 1)·d above the core.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from winder.motion.job import Segment
+from winder.record.reader import Run
+
+__all__ = ["DEFECT_KINDS", "AsWound", "Defect", "LayerLaid", "TurnLaid", "as_wound"]
+
+FloatArray = npt.NDArray[np.float64]
+
+DEFECT_KINDS = ("gap", "overlap", "offset", "flange")
+#: the default tolerance, as a fraction of the wire diameter
+TOLERANCE = 0.10
+
+
+@dataclass(frozen=True)
+class TurnLaid:
+    coil: int  #: from 1
+    layer: int  #: from 1
+    turn: int  #: from 1, in the order wound
+    t_s: float  #: when the flyer was half way through it (s since the run's start)
+    axial_m: float  #: measured centre, from the coil's start flange
+    intended_m: float  #: where it should be
+    radial_m: float  #: centre of its layer above the core
+
+    @property
+    def error_m(self) -> float:
+        return self.axial_m - self.intended_m
+
+
+@dataclass(frozen=True)
+class Defect:
+    kind: str  #: one of DEFECT_KINDS
+    coil: int
+    layer: int
+    turn: int  #: the turn it concerns (a gap or overlap: the later of the two)
+    size_m: float  #: by how much (gap/overlap: spacing - d; offset: error; flange: how far past d/2)
+    t_s: float
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "kind": self.kind,
+            "coil": self.coil,
+            "layer": self.layer,
+            "turn": self.turn,
+            "size_m": self.size_m,
+            "t_s": self.t_s,
+        }
+
+
+@dataclass(frozen=True)
+class LayerLaid:
+    coil: int
+    layer: int
+    turns_planned: int
+    turns_laid: int
+    max_axial_error_m: float  #: NaN if no turn was laid
+    radial_m: float
+    defects: dict[str, int]  #: kind -> count
+
+    def to_json(self) -> dict[str, Any]:
+        err = self.max_axial_error_m
+        return {
+            "coil": self.coil,
+            "layer": self.layer,
+            "turns_planned": self.turns_planned,
+            "turns": self.turns_laid,
+            "max_axial_error_m": None if math.isnan(err) else err,
+            "radial_m": self.radial_m,
+            **{k: self.defects.get(k, 0) for k in DEFECT_KINDS},
+        }
+
+
+@dataclass
+class AsWound:
+    wire_m: float
+    window_m: float
+    tolerance_m: float
+    turns: list[TurnLaid] = field(default_factory=list)
+    layers: list[LayerLaid] = field(default_factory=list)
+    defects: list[Defect] = field(default_factory=list)
+
+    def turns_per_layer(self) -> list[list[int]]:
+        """Turns laid per layer, coil by coil."""
+        out: dict[int, list[int]] = {}
+        for lay in self.layers:
+            out.setdefault(lay.coil, []).append(lay.turns_laid)
+        return [out[c] for c in sorted(out)]
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "wire_diameter_m": self.wire_m,
+            "window_width_m": self.window_m,
+            "tolerance_m": self.tolerance_m,
+            "turns_per_layer": self.turns_per_layer(),
+            "layers": [lay.to_json() for lay in self.layers],
+            "defects": [d.to_json() for d in self.defects],
+        }
+
+
+def _segment_windows(run: Run) -> dict[int, tuple[float, float]]:
+    """Each segment's first and last step time (s), from the recorded rows."""
+    first: dict[int, int] = {}
+    last: dict[int, int] = {}
+    for rows in run.step_rows:
+        if rows.shape[0] == 0:
+            continue
+        segs = rows[:, 1]
+        for seg in np.unique(segs):
+            times = rows[segs == seg, 0]
+            s = int(seg)
+            first[s] = min(first.get(s, int(times[0])), int(times.min()))
+            last[s] = max(last.get(s, int(times[-1])), int(times.max()))
+    return {s: (first[s] / 1e9, last[s] / 1e9) for s in first}
+
+
+def _window_width(job: Any, turns: int) -> float:
+    for name in ("bobbin_window_width", "window_width", "coil_length"):
+        value = getattr(job, name, 0.0)
+        if isinstance(value, int | float) and value > 0:
+            return float(value)
+    return turns * float(job.wire_diameter)
+
+
+def _windows_from_ends(ends: dict[int, int]) -> dict[int, tuple[float, float]]:
+    """Each segment's time span (s), from the time of every segment's last
+    row (:attr:`winder.analysis.digest.Digest.segment_end`): from the end of
+    the segment before it (a little wide across a pause: harmless)."""
+    out: dict[int, tuple[float, float]] = {}
+    before = 0
+    for seg in sorted(ends):
+        out[seg] = (before / 1e9, ends[seg] / 1e9)
+        before = ends[seg]
+    return out
+
+
+def as_wound(
+    run: Run, tolerance: float | None = None, segment_end: dict[int, int] | None = None
+) -> AsWound | None:
+    """The turns as laid by the simulated axes of ``run`` (None without joint
+    samples). ``segment_end``: the digest's last row time per segment, if
+    made already (else the rows are read again)."""
+    states = run.states
+    if len(states) < 2:
+        return None
+    job = run.plan.job
+    d = float(job.wire_diameter)
+    tol = TOLERANCE * d if tolerance is None else float(tolerance)
+    feed_step = float(job.feed_step)
+    fork_rad = 2 * math.pi / job.fork_steps_per_rev
+    windows = _segment_windows(run) if segment_end is None else _windows_from_ends(segment_end)
+    t = states.t
+    feed = states.pos[:, 0]
+    fork = states.pos[:, 1]
+    layer_segments = [s for s in job.segments() if s.kind == "layer"]
+    coil_start: dict[int, tuple[float, int]] = {}  # coil -> (start flange feed position m, direction)
+    result = AsWound(wire_m=d, window_m=0.0, tolerance_m=tol)
+    for seg in layer_segments:
+        coil = job.coil(seg.pole)
+        n = coil.turns_per_layer
+        if seg.pole not in coil_start:
+            coil_start[seg.pole] = (seg.start[0] * feed_step, 1 if seg.delta[0] >= 0 else -1)
+        flange, coil_dir = coil_start[seg.pole]
+        width = _window_width(job, n)
+        result.window_m = max(result.window_m, width)
+        radial = d / 2 + seg.layer * d
+        laid = _lay(seg, n, t, feed, fork, windows.get(seg.index), feed_step, fork_rad)
+        turns = [
+            TurnLaid(
+                seg.pole + 1,
+                seg.layer + 1,
+                k + 1,
+                ts,
+                (f - flange) * coil_dir,
+                (fi - flange) * coil_dir,
+                radial,
+            )
+            for k, (ts, f, fi) in enumerate(laid)
+        ]
+        defects = _defects(turns, d, width, tol)
+        result.turns += turns
+        result.defects += defects
+        errors = [abs(tt.error_m) for tt in turns]
+        counts: dict[str, int] = {}
+        for df in defects:
+            counts[df.kind] = counts.get(df.kind, 0) + 1
+        result.layers.append(
+            LayerLaid(
+                seg.pole + 1,
+                seg.layer + 1,
+                n,
+                len(turns),
+                max(errors) if errors else math.nan,
+                radial,
+                counts,
+            )
+        )
+    return result
+
+
+def _lay(
+    seg: Segment,
+    n: int,
+    t: FloatArray,
+    feed: FloatArray,
+    fork: FloatArray,
+    window: tuple[float, float] | None,
+    feed_step: float,
+    fork_rad: float,
+) -> list[tuple[float, float, float]]:
+    """(time, measured feed m, intended feed m) at the middle of each turn of
+    ``seg`` the measured flyer reached."""
+    if window is None or n <= 0:
+        return []
+    t0, t1 = window
+    # the samples of this layer, with a sample's margin either side
+    lo = max(int(np.searchsorted(t, t0, side="right")) - 1, 0)
+    hi = min(int(np.searchsorted(t, t1, side="left")) + 2, t.size)
+    if hi - lo < 2:
+        return []
+    direction = 1 if seg.delta[1] >= 0 else -1
+    angle = np.maximum.accumulate(direction * fork[lo:hi])  # progress along the layer, non-decreasing
+    spr = abs(seg.delta[1]) / n  # fork steps per turn
+    mids = direction * (seg.start[1] + direction * (np.arange(n) + 0.5) * spr) * fork_rad
+    reached = mids <= angle[-1]
+    mids = mids[reached]
+    if mids.size == 0:
+        return []
+    # the first sample index at which each middle is reached, and the time between samples
+    when = np.interp(mids, angle, t[lo:hi])
+    measured = np.interp(when, t[lo:hi], feed[lo:hi])
+    k = np.arange(mids.size)
+    intended = (seg.start[0] + seg.delta[0] * (k + 0.5) / n) * feed_step
+    return list(zip(when.tolist(), measured.tolist(), intended.tolist(), strict=True))
+
+
+def _defects(turns: list[TurnLaid], d: float, width: float, tol: float) -> list[Defect]:
+    out: list[Defect] = []
+    for i, tt in enumerate(turns):
+        if abs(tt.error_m) > tol:
+            out.append(Defect("offset", tt.coil, tt.layer, tt.turn, tt.error_m, tt.t_s))
+        past = max(d / 2 - tt.axial_m, tt.axial_m - (width - d / 2))
+        if past > tol:
+            out.append(Defect("flange", tt.coil, tt.layer, tt.turn, past, tt.t_s))
+        if i > 0:
+            spacing = abs(tt.axial_m - turns[i - 1].axial_m) - d
+            if spacing > tol:
+                out.append(Defect("gap", tt.coil, tt.layer, tt.turn, spacing, tt.t_s))
+            elif spacing < -tol:
+                out.append(Defect("overlap", tt.coil, tt.layer, tt.turn, spacing, tt.t_s))
+    return out
