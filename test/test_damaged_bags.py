@@ -19,6 +19,7 @@ from test_reader import bag, run_cli  # noqa: F401 - bag is the session's fixtur
 
 from winder.record.bag import COMPRESSIONS, BagRecorder
 from winder.record.raw import BagError, RawBag, read_raw
+from winder.record.reader import read_run
 
 pytestmark = pytest.mark.ros  # the bags come from real runs of the three nodes
 
@@ -126,3 +127,72 @@ def test_a_file_that_only_starts_like_mcap_fails_fast(tmp_path: Path) -> None:
     with pytest.raises(BagError) as err:
         read_raw(junk)
     assert "\n" not in str(err.value)
+
+
+def chunk_spans(data: bytes) -> list[tuple[int, int]]:
+    """(start, end) of each chunk record, walking the file by record lengths up to DataEnd."""
+    spans, pos = [], 8
+    while data[pos] != 0x0F:
+        end = pos + 9 + int.from_bytes(data[pos + 1 : pos + 9], "little")
+        if data[pos] == 0x06:
+            spans.append((pos, end))
+        pos = end
+    return spans
+
+
+def recover_says(path: Path, *args: str) -> str:
+    r = run_cli("bag", "recover", str(path), *args)
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stdout + r.stderr
+    assert "complete (" not in r.stdout  # the old wording, whatever was missing
+    return r.stdout
+
+
+def test_recover_never_calls_a_damaged_bag_complete(bag: Any, tmp_path: Path) -> None:  # noqa: F811
+    """`winder bag recover` says what it saved and that it is incomplete, for a
+    truncated file, a cut last chunk, a damaged chunk and a whole file without
+    the run's final report; only a whole bag with its report is left alone."""
+    src = bag("lin2k")
+    whole = recover_says(src)
+    assert "the file is whole" in whole and "final report: done" in whole and "nothing to recover" in whole
+    total = read_run(src).plan.total_steps
+    mcap = next(src.glob("*.mcap"))
+    data = mcap.read_bytes()
+    spans = chunk_spans(data)
+    cuts = {
+        "truncated": len(data) * 2 // 3,
+        "last chunk cut": (spans[-1][0] + spans[-1][1]) // 2,  # the final report is in it
+    }
+    for what, cut in cuts.items():
+        d = tmp_path / what.replace(" ", "_")
+        d.mkdir()
+        shutil.copy(src / "metadata.yaml", d)
+        (d / mcap.name).write_bytes(data[:cut])
+        said = recover_says(d)
+        assert "recovered " in said and "into " in said, what
+        last = said.strip().splitlines()[-1]
+        assert last.startswith("incomplete: the file was cut short"), (what, said)
+        assert "no final report" in last and f" of {total} steps recorded" in last, (what, said)
+        # the recovered bag is whole, but still not the whole run
+        again = recover_says(d.with_name(d.name + "_recovered"))
+        assert again.startswith(f"{d}_recovered: incomplete: the file is whole"), again
+        assert "no final report" in again and "nothing more to recover" in again
+    flipped = tmp_path / "flipped"
+    shutil.copytree(src, flipped)
+    broken = bytearray(data)
+    start, end = spans[len(spans) // 2]
+    broken[(start + end) // 2] ^= 0x10
+    (flipped / mcap.name).write_bytes(bytes(broken))
+    said = recover_says(flipped)
+    assert f"damaged: chunk at byte {start} skipped" in said, said
+    assert "incomplete: 1 damaged chunk(s) skipped" in said, said
+    # closed, undamaged, and no final report: the consumer's statuses never recorded
+    raw = read_raw(src)
+    silent = tmp_path / "no_report"
+    rec = BagRecorder(silent, {c.topic: c.msgtype for c in raw.connections.values()}, compression="none")
+    for cid, t, payload in raw.messages:
+        if raw.connections[cid].topic != "/diagnostics":
+            rec.write(raw.connections[cid].topic, t, payload, exact=True)
+    rec.close()
+    said = recover_says(silent)
+    assert said.startswith(f"{silent}: incomplete: the file is whole") and "no final report" in said, said
+    assert not (tmp_path / "no_report_recovered").exists()

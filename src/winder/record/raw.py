@@ -545,6 +545,9 @@ def recover(path: str | Path, out: str | Path | None = None) -> tuple[Path, int]
         raise BagError(f"{out}: already exists; remove it or choose another name")
     store = _typestore()
     writer = Writer(out, version=9, storage_plugin=StoragePlugin.MCAP)
+    # the new bag says where it comes from, and that it is a recovered part (never a whole run)
+    writer.set_custom_data("winder_bag", "recovered")
+    writer.set_custom_data("winder_recovered_from", src.name)
     saved = 0
     try:
         writer.open()
