@@ -14,6 +14,7 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 from test_reader import bag, run_cli  # noqa: F401 - bag is the session's fixture of real runs
 
@@ -196,3 +197,73 @@ def test_recover_never_calls_a_damaged_bag_complete(bag: Any, tmp_path: Path) ->
     said = recover_says(silent)
     assert said.startswith(f"{silent}: incomplete: the file is whole") and "no final report" in said, said
     assert not (tmp_path / "no_report_recovered").exists()
+
+
+def refusal(call: Any) -> str | None:
+    try:
+        call()
+    except BagError as exc:
+        return str(exc)
+    return None
+
+
+def test_play_refuses_what_analyze_refuses(bag: Any, tmp_path: Path) -> None:  # noqa: F811
+    """Every damaged bag `winder analyze` refuses, `winder play` refuses with
+    the same line (it refuses more: a gap it cannot replay); a foreign bag, a
+    job description that is not one and a step chunk of the wrong shape are
+    refused by both commands in the same one line, exit 2, no traceback."""
+    from rosbags.rosbag2 import StoragePlugin
+    from rosbags.typesys import Stores, get_typestore
+    from test_reader import _write_bag, assert_one_line_error
+
+    from winder.record.replay import plan_play
+
+    clean = rewrite(read_raw(bag("lin2k")), tmp_path / "clean", "none")
+    mcap = next(clean.glob("*.mcap"))
+    data = mcap.read_bytes()
+    rng = random.Random("winder-play")
+    same = 0
+    for i in range(FLIPS + CUTS):
+        case = tmp_path / f"case{i}"
+        shutil.copytree(clean, case)
+        damaged = bytearray(data)
+        if i < FLIPS:
+            damaged[rng.randrange(8, len(damaged) - 8)] ^= 1 << rng.randrange(8)
+        else:
+            damaged = damaged[: rng.randrange(8, len(damaged))]
+        (case / mcap.name).write_bytes(bytes(damaged))
+        analyzed = refusal(lambda case=case: read_run(case))
+        played = refusal(lambda case=case: plan_play(case))
+        if analyzed is not None:
+            assert played == analyzed, (i, analyzed, played)
+            same += 1
+        shutil.rmtree(case)
+    store = get_typestore(Stores.ROS2_JAZZY)
+    String = store.types["std_msgs/msg/String"]
+    Ints = store.types["std_msgs/msg/Int64MultiArray"]
+    job = read_run(clean).plan.text
+    foreign = tmp_path / "foreign"
+    _write_bag(foreign, [("/chatter", "std_msgs/msg/String", 1, String(data="hi"))], StoragePlugin.MCAP)
+    bad_job = tmp_path / "bad_job"
+    not_json = String(data="{not json")
+    _write_bag(bad_job, [("/winder/job", "std_msgs/msg/String", 1, not_json)], StoragePlugin.MCAP)
+    bad_chunk = tmp_path / "bad_chunk"
+    no_layout = store.types["std_msgs/msg/MultiArrayLayout"](dim=[], data_offset=0)
+    chunk = Ints(layout=no_layout, data=np.arange(7))
+    _write_bag(
+        bad_chunk,
+        [("/winder/job", "std_msgs/msg/String", 1, String(data=job)),
+         ("/winder/step_times", "std_msgs/msg/Int64MultiArray", 2, chunk)],
+        StoragePlugin.MCAP,
+    )  # fmt: skip
+    for path, needles in [
+        (foreign, [str(foreign), "not a winder bag"]),
+        (bad_job, [str(bad_job), "/winder/job"]),
+        (bad_chunk, ["/winder/step_times", "chunk layout"]),  # (analyze's line does not name the bag)
+    ]:
+        a = run_cli("analyze", str(path), "--no-plots")
+        assert_one_line_error(a, *needles)
+        p = run_cli("play", str(path))
+        assert_one_line_error(p, *needles)
+        assert p.stderr == a.stderr.replace("winder analyze", "winder play"), (a.stderr, p.stderr)
+    print(f"{same} damaged bags refused by analyze, each by play in the same words")
