@@ -174,6 +174,7 @@ def check_bags(bag_dir: Path, killed: bool, tmp: Path) -> str:
         out = tmp / f"{entry}_recovered"
         r = run_cli("bag", "recover", str(path), "--output", str(out))
         assert r.returncode == 0, r.stdout + r.stderr
+        assert "incomplete: the file was cut short" in r.stdout, r.stdout
         assert rosbags_read(out)["/winder/job"], out
         found = "recovered"
     return found

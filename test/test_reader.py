@@ -492,3 +492,49 @@ def test_bad_bags_are_one_line_errors(tmp_path: Path, bag: Any) -> None:
     assert_one_line_error(run_cli("bag", "recover", str(noise_file)), "not an MCAP file")
     ok = run_cli("bag", "recover", str(bag("lin2k")))
     assert ok.returncode == 0 and "nothing to recover" in ok.stdout
+
+
+def test_the_reader_never_opens_a_file_outside_the_bag(bag: Any, tmp_path: Path) -> None:
+    """metadata.yaml naming ``../x``, an absolute path, or a file that is a
+    symlink out of the directory: refused in one line naming the path, by the
+    reader and by every command that reads a bag; nothing outside is read."""
+    src = bag("lin2k")
+    mcap = next(src.glob("*.mcap"))
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    shutil.copy(mcap, outside / "elsewhere.mcap")  # a readable bag file, just not this bag's
+    text = (src / "metadata.yaml").read_text()
+    cases: dict[str, tuple[Path, str]] = {}
+
+    def listing(name: str, listed: str) -> Path:
+        d = tmp_path / name
+        d.mkdir()
+        shutil.copy(mcap, d / mcap.name)
+        (d / "metadata.yaml").write_text(text.replace(mcap.name, listed))
+        return d
+
+    cases["dotdot"] = (listing("dotdot", "../outside/elsewhere.mcap"), "'../outside/elsewhere.mcap'")
+    absolute = str(outside / "elsewhere.mcap")
+    cases["absolute"] = (listing("absolute", absolute), repr(absolute))
+    link = listing("link", "link.mcap")
+    (link / "link.mcap").symlink_to(outside / "elsewhere.mcap")
+    cases["listed symlink"] = (link, "link.mcap")
+    unlisted = tmp_path / "unlisted"
+    unlisted.mkdir()
+    (unlisted / "x.mcap").symlink_to(outside / "elsewhere.mcap")  # no metadata: found by its suffix
+    cases["unlisted symlink"] = (unlisted, "x.mcap")
+    meta_link = tmp_path / "meta_link"
+    meta_link.mkdir()
+    shutil.copy(mcap, meta_link / mcap.name)
+    (outside / "metadata.yaml").write_text(text)
+    (meta_link / "metadata.yaml").symlink_to(outside / "metadata.yaml")
+    cases["metadata symlink"] = (meta_link, "metadata.yaml")
+    for what, (path, needle) in cases.items():
+        with pytest.raises(BagError) as err:
+            read_raw(path)
+        msg = str(err.value)
+        assert "\n" not in msg and needle in msg and "outside the bag's directory" in msg, (what, msg)
+        for command in (["analyze", "--no-plots"], ["bag", "recover"], ["play"], ["export"]):
+            r = run_cli(command[0], *command[1:], str(path))
+            assert_one_line_error(r, needle, "outside the bag's directory")
+    assert not list(tmp_path.glob("*_recovered")) and not list(tmp_path.glob("*_csv"))

@@ -69,6 +69,7 @@ class InterpNode(ManagedNode):
         # receipts and events count only from the cell's own consumer and profile node
         self.peers = Peers(self)
         self.solo = Solo(self, "interp", self.peers, self.leave)  # one interp node per cell
+        self.solo.on_settled = self.on_ready  # an autostart that waited for it goes now
         self.diag.foreign = self.peers.intruders.summary  # its statuses name what it refused
         self.peers.on_new = lambda: self.report()  # at once, not at the next second
         self.peers.subscribe(KeyValue, TOPIC_PROGRESS, self.on_progress, QOS_STATE)
@@ -180,6 +181,8 @@ class InterpNode(ManagedNode):
         reported = bool(self.abort_ignored)
         if self.ignores_abort() and not reported:
             self.report()  # the ERROR at once, before the start it lets through
+        if not self.solo.settled():  # another interp node may run here: it is not known yet
+            return "job not started: not ready: not yet known to be the cell's only interp node"
         waiting = self.readiness.missing(excused=("consumer",) if self.abort_ignored else ())
         return f"job not started: {waiting}" if waiting else ""
 
@@ -224,7 +227,7 @@ class InterpNode(ManagedNode):
 
     def tick(self) -> None:
         autostart = self.settings.values()["autostart"] and self.active
-        if not self.autostarted and autostart and not self.readiness.missing():
+        if not self.autostarted and autostart and not self.readiness.missing() and self.solo.settled():
             self.autostarted = True
             ok, why = self.start_job()
             if not ok:
@@ -408,7 +411,12 @@ class InterpNode(ManagedNode):
         self.report()
 
     def report(self) -> None:
-        if not self.autostarted and self.settings.values()["autostart"] and not self.readiness.missing():
+        if (
+            not self.autostarted
+            and self.settings.values()["autostart"]
+            and not self.readiness.missing()
+            and self.solo.settled()
+        ):
             self.wake()  # autostart switched on while the cell was ready already
             return
         blocked = self.settings.blocked()

@@ -91,14 +91,44 @@ def cmd_identify(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+#: the job states a consumer's final report ends a run with
+FINAL_STATES = ("done", "aborted", "incomplete")
+
+
+def _run_told(path: str) -> tuple[str, bool | None]:
+    """What a recording holds of its winder run, in words, and whether the
+    run's final report is in it (None: not a winder run, nothing to tell)."""
+    from winder.record.reader import read_run
+
+    try:
+        run = read_run(path)
+    except ValueError:  # not a winder bag, or several cells: only its messages are told
+        return "", None
+    state = run.report.get("state", "")
+    final = state in FINAL_STATES
+    told = f"run {run.run_id or run.job_id}: {run.steps_recorded} of {run.plan.total_steps} steps recorded, "
+    return told + (f"final report: {state}" if final else "no final report"), final
+
+
 def cmd_bag_recover(args: argparse.Namespace) -> int:
-    """Write the readable part of a cut-short recording as a complete bag."""
+    """Write the readable part of a cut-short or damaged recording as a closed
+    bag, and say what it holds and why it is incomplete. Complete means: the
+    file whole, no damaged chunk, and (a winder run) the run's final report."""
     from winder.record.reader import read_raw, recover
 
     try:
         raw = read_raw(args.bag)
-        if raw.closed and not raw.recovered:
-            print(f"{raw.path}: complete ({len(raw.messages)} messages): nothing to recover")
+        told, final = _run_told(args.bag)
+        total = sum(raw.counts.values())
+        if raw.closed and not raw.recovered and not raw.damaged:
+            if final is False:
+                print(
+                    f"{raw.path}: incomplete: the file is whole ({total} messages), but {told}: "
+                    "the recording ended before the run did; nothing more to recover"
+                )
+            else:
+                what = f"{total} messages" + (f"; {told}" if told else "")
+                print(f"{raw.path}: the file is whole ({what}): nothing to recover")
             return EXIT_OK
         out, saved = recover(args.bag, args.output)
     except OSError as exc:
@@ -106,10 +136,20 @@ def cmd_bag_recover(args: argparse.Namespace) -> int:
     last = max((t for _, t, _ in raw.messages), default=0)
     for note in raw.notes:
         print(f"note: {note}")
+    for damage in raw.damaged:
+        print(f"damaged: {damage}")
     print(
         f"recovered {saved} messages on {len(raw.topics())} topics, up to t = {last / 1e9:.3f} s "
         f"of simulated time, into {out}"
     )
+    why = []
+    if raw.recovered or not raw.closed:
+        why.append("the file was cut short")
+    if raw.damaged:
+        why.append(f"{len(raw.damaged)} damaged chunk(s) skipped")
+    if told:
+        why.append(told)
+    print(f"incomplete: {'; '.join(why)}")
     return EXIT_OK
 
 

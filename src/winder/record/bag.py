@@ -335,10 +335,10 @@ class BagRecorder:
             self._types[topic] = msgtype
         for topic, t, data in first:
             storage.write_id(*self._message(topic, t, data, exact=False))
-        storage.flush()
+        if first:  # the head a recovery needs: schemas, channels and these messages, in a chunk
+            self._sync(writer)  # (closes the chunk)
         storage.bio.flush()
         os.fsync(storage.bio.fileno())
-        self._sync(writer)
         writer.write_metadata("recording")
         os.rename(self._stage, self.path)  # the bag appears whole, with its metadata
         self._made = True

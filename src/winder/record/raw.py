@@ -42,6 +42,8 @@ from winder.contract.files import new_directory
 __all__ = ["BagError", "Connection", "RawBag", "read_raw", "recover"]
 
 MAGIC = b"\x89MCAP0\r\n"
+#: metadata.yaml larger than this is refused (rosbag2 writes a few kB per topic)
+METADATA_BYTES = 16 << 20
 
 
 class BagError(ValueError):
@@ -125,8 +127,42 @@ class RawBag:
                     scratch.messages = []
 
 
+def _inside(root: Path, path: Path, what: str) -> Path:
+    """``path`` if it stays inside the bag's directory ``root`` (symlinks
+    followed), else a BagError naming it: a bag never makes the reader open a
+    file elsewhere."""
+    try:
+        real = path.resolve()
+    except (OSError, RuntimeError) as exc:  # a symlink loop
+        raise BagError(f"{path}: {what} cannot be resolved: {exc}") from None
+    if not real.is_relative_to(root):
+        raise BagError(f"{path}: {what} leads outside the bag's directory {root} (to {real}): refused")
+    return path
+
+
+def _listed_files(meta: Path, text: str) -> list[str]:
+    """The file names metadata.yaml lists (``relative_file_paths`` and ``files[].path``)."""
+    from ruamel.yaml import YAML
+
+    try:
+        doc = YAML(typ="safe").load(text)
+        info = doc.get("rosbag2_bagfile_information", {}) if isinstance(doc, dict) else {}
+        names = list(info.get("relative_file_paths") or [])
+        names += [f.get("path") for f in info.get("files") or [] if isinstance(f, dict)]
+    except Exception:  # not YAML rosbag2 would write: the names it seems to list are checked all the same
+        names = re.findall(r"^\s*(?:-\s*)?(?:path:\s*)?(\S+\.(?:mcap|db3)\S*)\s*$", text, flags=re.M)
+    out: list[str] = []
+    for name in names:
+        if not isinstance(name, str) or not name:
+            raise BagError(f"{meta}: a listed file name {name!r} is not a file name")
+        if name not in out:
+            out.append(name)
+    return out
+
+
 def _bag_files(path: Path) -> tuple[Path, list[Path], bool]:
-    """(bag directory or file, the MCAP files to read, metadata.yaml present)."""
+    """(bag directory or file, the MCAP files to read, metadata.yaml present).
+    Every file read from a directory is inside it (see :func:`_inside`)."""
     if not path.exists():
         raise BagError(f"{path}: no such file or directory")
     if path.is_file():
@@ -135,19 +171,30 @@ def _bag_files(path: Path) -> tuple[Path, list[Path], bool]:
         return path, [path], (path.parent / "metadata.yaml").exists()
     if not path.is_dir():
         raise BagError(f"{path}: not a directory or a regular file")
+    root = path.resolve()
     meta = path / "metadata.yaml"
     files: list[Path] = []
     if meta.exists():
+        _inside(root, meta, "metadata.yaml")
+        if meta.stat().st_size > METADATA_BYTES:
+            raise BagError(f"{meta}: {meta.stat().st_size} bytes, more than a rosbag2 metadata file holds")
         text = meta.read_text(errors="replace")
+        listed = _listed_files(meta, text)
+        for name in listed:
+            if Path(name).is_absolute() or ".." in Path(name).parts:
+                raise BagError(
+                    f"{meta}: listed file {name!r} is outside the bag's directory: refused "
+                    "(only names relative to the bag, without '..', are read)"
+                )
+            _inside(root, path / name, f"listed file {name!r}")
         if re.search(r"storage_identifier:\s*sqlite3", text):
-            db3 = sorted(path.glob("*.db3"))
+            db3 = sorted(_inside(root, p, "file") for p in path.glob("*.db3"))
             if not db3:
                 raise BagError(f"{path}: metadata.yaml names an sqlite3 recording, but there is no .db3 file")
             return path, db3, True
-        listed = re.findall(r"^\s*(?:-\s*)?path:\s*(\S+)", text, flags=re.M)
-        files = [path / name for name in listed if (path / name).exists()]
+        files = [path / name for name in listed if name.endswith(".mcap") and (path / name).exists()]
     if not files:
-        files = sorted(p for p in path.glob("*.mcap") if p.is_file())
+        files = sorted(_inside(root, p, "file") for p in path.glob("*.mcap") if p.is_file())
     if not files:
         entries = [p.name for p in path.iterdir()]
         if not entries:
@@ -550,6 +597,9 @@ def recover(path: str | Path, out: str | Path | None = None) -> tuple[Path, int]
     # built beside ``out`` and renamed when closed: an interrupt or a full disk leaves no half bag
     with new_directory(out, create=False) as staging:
         writer = Writer(staging, version=9, storage_plugin=StoragePlugin.MCAP)
+        # the new bag says where it comes from, and that it is a recovered part (never a whole run)
+        writer.set_custom_data("winder_bag", "recovered")
+        writer.set_custom_data("winder_recovered_from", src.name)
         writer.open()
         conns: dict[int, Any] = {}
         by_topic: dict[tuple[str, str], Any] = {}

@@ -295,7 +295,8 @@ class Run:
         return self.path.name
 
 
-def _namespaces(topics: set[str]) -> list[str]:
+def job_namespaces(topics: set[str]) -> list[str]:
+    """The namespaces of the cells whose ``winder/job`` is among ``topics``."""
     return sorted({t[: -len("/" + JOB)] for t in topics if t == "/" + JOB or t.endswith("/" + JOB)})
 
 
@@ -434,7 +435,7 @@ def read_run(path: str | Path, namespace: str | None = None) -> Run:
 def _pick_namespace(bag: Path, counts: dict[str, int], namespace: str | None) -> str:
     """The namespace of the cell to read: ``namespace`` if given, else the only
     one whose job topic has a message."""
-    spaces = _namespaces({t for t, c in counts.items() if c > 0})
+    spaces = job_namespaces({t for t, c in counts.items() if c > 0})
     if namespace is not None:
         ns = "/" + namespace.strip("/") if namespace.strip("/") else ""
         if ns not in spaces:

@@ -5,7 +5,8 @@ which names, with which QoS, from which message on.
 counts, the channels and whether log time ever goes back), refuses a
 recording that cannot be replayed whole (:class:`~winder.record.raw.BagError`,
 one line, the same checks as ``winder analyze``: cut short or with damaged
-chunks) and returns a :class:`PlayPlan`; :meth:`PlayPlan.messages` then
+chunks, and whatever ``winder analyze`` refuses, in its words) and returns
+a :class:`PlayPlan`; :meth:`PlayPlan.messages` then
 yields the messages to publish, in log-time order, with the latched topics'
 last message before ``--start-offset`` first (what ``ros2 bag play
 --start-offset`` loses). The rclpy side is :mod:`winder.ros.player`.
@@ -177,6 +178,7 @@ def plan_play(
         except re.error as exc:
             raise ValueError(f"topic pattern {p!r} is invalid: {exc}") from None
     raw = read_raw(path, keep=lambda _t: False)
+    _check_as_analyze(path, raw.topics())  # first: what analyze refuses is refused in its words
     if raw.recovered or not raw.closed:
         raise BagError(
             f"{raw.path}: the recording was cut short ({'; '.join(raw.notes) or 'no footer'}); "
@@ -232,6 +234,18 @@ def plan_play(
             f"start_offset={start_offset:g} is invalid: the recording lasts {(last - first) / 1e9:.3f} s"
         )
     return PlayPlan(raw, chosen, recorded_ns, first, last, start, in_order, skipped)
+
+
+def _check_as_analyze(path: str | Path, counts: dict[str, int]) -> None:
+    """Refuse what ``winder analyze`` refuses, in its words: a bag that is not
+    a winder recording, or whose cell's messages do not decode (a job
+    description, configuration, joint state or step chunk that is not what
+    the nodes write). Each cell of a bag with several is checked."""
+    from winder.record.reader import job_namespaces, read_run
+
+    spaces: list[str | None] = [*job_namespaces({t for t, n in counts.items() if n})]
+    for ns in spaces or [None]:  # none: read_run says why it is not a winder bag
+        read_run(path, ns)
 
 
 def _span(raw: RawBag, topics: list[str]) -> tuple[int, int, bool]:

@@ -45,6 +45,7 @@ from winder.contract.topics import ROLE_KEY, ROLES, TASK_JOB, TOPIC_DIAGNOSTICS,
 from winder.ros.dds import PROFILE_KEYS, use_profile
 from winder.ros.diagnostics import ERROR
 from winder.ros.graph import consumers, fully_qualified, profile_nodes
+from winder.ros.managed import LEFT_CELL
 from winder.ros.peers import Peers
 from winder.ros.sender import SenderExecutor, attributed
 from winder.ros.terminal import KeyReader
@@ -172,6 +173,20 @@ class NodeProcesses:
             )
         self.procs[name] = p
         return p
+
+    def left_cell(self) -> str:
+        """Why a child left its cell at start (it exited with
+        :data:`winder.ros.managed.LEFT_CELL`: another node already plays its
+        part in the namespace), from the ERROR line of its log; "" if none did."""
+        for name, p in self.procs.items():
+            if p.poll() == LEFT_CELL:
+                try:
+                    lines = (self.log_dir / f"{name}.log").read_text(errors="replace").splitlines()
+                except OSError:
+                    lines = []
+                said = [line.split("]: ", 1)[-1] for line in lines if "already runs in" in line]
+                return said[-1] if said else f"{name} did not join: another node plays its part here"
+        return ""
 
     def dead(self) -> str | None:
         """``"<name> exited with status N"`` for the first child that ended, else None."""
@@ -414,6 +429,22 @@ class CellWatch:
         )
         return True
 
+    def _alone(self) -> bool:
+        """The graph shows this namespace holding only the nodes this process
+        started, each once, each in its part: no other cell here, known
+        without waiting for statuses."""
+        ns = "/" + self.ns if self.ns else "/"
+        names = self.node.get_node_names_and_namespaces()
+        if any(names.count((name, ns)) != 1 for name in self.started):
+            return False
+        for role in ROLES:
+            if role in self.external:
+                continue
+            holders = self.peers.holders(role)
+            if len(holders) != 1 or next(iter(holders))[0] not in self.started:
+                return False
+        return True
+
     def _consumer_reports_here(self) -> bool:
         """The consumer's /diagnostics writer is matched with this process'
         reader (the graph shows it), so its job reports reach us: no need to
@@ -441,7 +472,7 @@ class CellWatch:
                 return refused
         if not (self.start.service_is_ready() and self.heard_consumer):
             return None
-        if self.own is not None and time.monotonic() - self.since < OCCUPIED_WAIT:
+        if self.own is not None and time.monotonic() - self.since < OCCUPIED_WAIT and not self._alone():
             return None  # every node of the namespace has said who it is (1 Hz) before we start
         if self.occupied:
             return f"job not started: {self.occupied}"
@@ -550,6 +581,10 @@ def _wait_for_job(
             keys.poll()
         if progress is not None:
             progress(watch.progress, watch.sim_time)
+        left = procs.left_cell()
+        if left:  # a node of ours found another cell's node in its part and did not join
+            watch.occupied = watch.occupied or left
+            return f"job not started: {watch.occupied}"
         dead = procs.dead()
         if dead:
             return dead

@@ -198,6 +198,7 @@ class Solo:
         self.me = (str(os.getpid()), socket.gethostname())
         self.started_ns = time.time_ns()
         self.left = False
+        self.alone = False  # known to be the only node of its role here (settled())
         self.warned: set[str] = set()
         self.t0 = time.monotonic()
         attributed(node, DiagnosticArray, TOPIC_DIAGNOSTICS, self._on_raw, QOS_DIAGNOSTICS)
@@ -210,10 +211,26 @@ class Solo:
             self.on_settled()
 
     def settled(self) -> bool:
-        """This node has listened for :data:`JOIN_LISTEN` s (every node
-        reports once a second) and heard no earlier node of its role: it may
-        take a run. Before, a job description is not acted on."""
-        return not self.left and time.monotonic() - self.t0 >= JOIN_LISTEN
+        """Whether this node may take a run: it is alone in its role. Known
+        at once when the graph shows the cell's other parts (discovery has
+        run) and no other node in this part or under this name; else (a
+        node of the part on the graph, alive or the ghost of a killed one)
+        after listening :data:`JOIN_LISTEN` s to the statuses, which every
+        node sends once a second, without hearing an earlier one. Before, a
+        job description is not acted on."""
+        if self.left:
+            return False
+        if not self.alone:
+            self.alone = time.monotonic() - self.t0 >= JOIN_LISTEN or self._alone_on_graph()
+        return self.alone
+
+    def _alone_on_graph(self) -> bool:
+        me = (self.node.get_name(), self.node.get_namespace())
+        if self.node.get_node_names_and_namespaces().count(me) != 1:
+            return False  # another node under this very name (a second cell's, or a ghost)
+        if self.peers.holders(self.role) - {me}:
+            return False
+        return all(self.peers.owner(r) is not None for r in SIGNS if r != self.role)
 
     def _on_raw(self, raw: bytes, gid: bytes) -> None:
         if self.left:
