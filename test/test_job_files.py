@@ -231,8 +231,12 @@ def test_the_nodes_take_a_job_file_as_their_params_file(tmp_path: Path, procs: P
     procs.start("sim_node", "--params-file", str(job), "-p", f"bag_dir:={bags}")
     procs.start("profile_node", "--params-file", str(job))
     procs.start("interp_node", "--params-file", str(job))
+    # a bag has its metadata.yaml from its first moment: wait for the run's final report in it
     t_end = time.monotonic() + 60
-    while not list(bags.glob("*/metadata.yaml")) and time.monotonic() < t_end:
+    while time.monotonic() < t_end:
+        metas = list(bags.glob("*/metadata.yaml"))
+        if metas and read_run(metas[0].parent).report.get("state"):
+            break
         time.sleep(0.2)
     [meta] = list(bags.glob("*/metadata.yaml"))
     run = read_run(meta.parent)
@@ -275,8 +279,10 @@ def test_the_interp_node_takes_a_job_file_in_one_start_run_call(
     started = start(job)
     assert started.successful, started.reason
     run_id = re.match(r"run (\S+) started", started.reason).group(1)  # type: ignore[union-attr]
-    t_end = time.monotonic() + 60
-    while not (bags / run_id / "metadata.yaml").exists() and time.monotonic() < t_end:
+    t_end = time.monotonic() + 60  # the bag is there from its first moment: wait for its final report
+    while time.monotonic() < t_end and not (
+        (bags / run_id / "metadata.yaml").exists() and read_run(bags / run_id).report.get("state")
+    ):
         ros_spin(ros, 0.2)
     run = read_run(bags / run_id)
     assert run.complete and run.job_id == "filed" and run.plan.job.poles == 2
