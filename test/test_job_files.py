@@ -113,7 +113,7 @@ BAD = [
     ),
     (
         "interp_node:\n  ros__parameters: {turns_per_layer: 100, coil_length: 0.01}\n",
-        "interp_node: turns_per_layer=100 is invalid",
+        "interp_node: layer 1 needs 100 turns x 2.5 mm = 250.0 mm",
     ),
     (
         "profile_node:\n  ros__parameters: {profile: trapezoid, a_max: 1.0e-12}\n",
