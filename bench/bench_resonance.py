@@ -50,7 +50,7 @@ def main() -> None:
     print(table(["steps", "plain M steps/s", "shaped M steps/s", "shaped / plain time"], rows))
 
     given = load_job_file(ROOT / "jobs" / "rw400.yaml")
-    job = Job(**given["interp_node"])
+    job = Job.from_dict(given["interp_node"])
     axes = axes_of(given["consumer"])
     ramp = dict(given["profile_node"])
     ramp.setdefault("shaper", "none")

@@ -60,9 +60,16 @@ def test_winder_run_check_takes_a_job_file(path: Path) -> None:
     out = subprocess.run(
         [str(WINDER), "run", "--check", str(path)], capture_output=True, text=True, timeout=60
     )
-    job_id = flat(YAML(typ="safe").load(path.read_text()))["interp_node"]["job_id"]
+    job = flat(YAML(typ="safe").load(path.read_text()))["interp_node"]
+    if job.get("lay") == "orthocyclic":  # its motion (the crossover cam) is not implemented yet: refused
+        assert out.returncode == 2 and out.stdout == "", (out.stdout, out.stderr)
+        assert out.stderr.strip() == (
+            f"winder run: error: job {job['job_id']} cannot be wound yet: lay=orthocyclic (the crossover "
+            "cam of the flyer) is not implemented in the motion (winder check lays out its coil)"
+        )
+        return
     assert out.returncode == 0, out.stderr
-    assert f"job {job_id}:" in out.stdout
+    assert f"job {job['job_id']}:" in out.stdout
 
 
 BAD = [
@@ -119,7 +126,7 @@ BAD = [
     ("interp_node:\n  ros__parameters: {job_id: 017}\n", "job_id=15 is invalid"),
     (
         "interp_node:\n  ros__parameters: {turns_per_layer: 100, coil_length: 0.01}\n",
-        "interp_node: turns_per_layer=100 is invalid",
+        "interp_node: layer 1 needs 100 turns x 2.5 mm = 250.0 mm",
     ),
     (
         "profile_node:\n  ros__parameters: {profile: trapezoid, a_max: 1.0e-12}\n",
@@ -237,8 +244,12 @@ def test_the_nodes_take_a_job_file_as_their_params_file(tmp_path: Path, procs: P
     procs.start("sim_node", "--params-file", str(job), "-p", f"bag_dir:={bags}")
     procs.start("profile_node", "--params-file", str(job))
     procs.start("interp_node", "--params-file", str(job))
+    # a bag has its metadata.yaml from its first moment: wait for the run's final report in it
     t_end = time.monotonic() + 60
-    while not list(bags.glob("*/metadata.yaml")) and time.monotonic() < t_end:
+    while time.monotonic() < t_end:
+        metas = list(bags.glob("*/metadata.yaml"))
+        if metas and read_run(metas[0].parent).report.get("state"):
+            break
         time.sleep(0.2)
     [meta] = list(bags.glob("*/metadata.yaml"))
     run = read_run(meta.parent)
@@ -281,8 +292,10 @@ def test_the_interp_node_takes_a_job_file_in_one_start_run_call(
     started = start(job)
     assert started.successful, started.reason
     run_id = re.match(r"run (\S+) started", started.reason).group(1)  # type: ignore[union-attr]
-    t_end = time.monotonic() + 60
-    while not (bags / run_id / "metadata.yaml").exists() and time.monotonic() < t_end:
+    t_end = time.monotonic() + 60  # the bag is there from its first moment: wait for its final report
+    while time.monotonic() < t_end and not (
+        (bags / run_id / "metadata.yaml").exists() and read_run(bags / run_id).report.get("state")
+    ):
         ros_spin(ros, 0.2)
     run = read_run(bags / run_id)
     assert run.complete and run.job_id == "filed" and run.plan.job.poles == 2

@@ -186,7 +186,7 @@ def set_params(node: Any, target: str, values: dict[str, Any]) -> list[Any]:
         ("interp_node", "poles", 0, "Parameter poles out of range. Min: 1, Max: 360, value: 0"),
         ("interp_node", "poles", 2.5, "poles=2.5 is invalid: must be an integer in [1, 360]"),
         ("interp_node", "wire_diameter", "thick", "wire_diameter='thick' is invalid: must be a number"),
-        ("interp_node", "coil_length", 0.01, "at most 4 turns fit"),
+        ("interp_node", "bobbin.window_width", 0.01, "10.0 mm wide: 40.0 mm over (at most 4 turns fit)"),
         (
             "profile_node",
             "profile",
@@ -212,13 +212,13 @@ def test_bad_parameter_is_rejected_and_node_keeps_running(
     [res] = set_params(ros, executable, {name: value})
     assert not res.successful
     assert reason in res.reason
-    assert name in res.reason
+    assert name in res.reason or "the window is" in res.reason  # a coil too wide: its words name the window
     assert p.poll() is None, "node died on a bad parameter"
     # a good value is still accepted afterwards
     good = {
         "poles": 3,
         "wire_diameter": 0.002,
-        "coil_length": 0.0,
+        "bobbin.window_width": 0.05,
         "profile": "trapezoid",
         "a_max": 100.0,
         "j_max": 1000.0,

@@ -29,12 +29,12 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import Int32MultiArray, String
 from std_srvs.srv import Trigger
 
-from winder.contract.jobfile import load_job_file
+from winder.contract.jobfile import load_job_file_hashed
 from winder.contract.params import INTERP_SPECS, check_interp, run_ramp, stop_points
 from winder.contract.stream import describe_job, make_run_id
 from winder.contract.topics import TOPIC_CONTROL, TOPIC_JOB, TOPIC_PROGRESS, TOPIC_STEPS, status_values
 from winder.motion.interp import interpolate
-from winder.motion.job import FIELD_SPECS, Job
+from winder.motion.job import FIELD_SPECS, Job, motion_refusal
 from winder.ros.chunks import STEPS_CDR
 from winder.ros.diagnostics import ERROR, OK, Diagnostics
 from winder.ros.managed import ManagedNode
@@ -114,19 +114,27 @@ class InterpNode(ManagedNode):
 
     def with_job_file(self, params: list[Parameter]) -> list[Parameter]:
         """Setting ``job_file`` sets what the file says, in the same change:
-        the job from its interp_node section, and the ramp the run brings from
-        its profile_node section (``ramp.*``, ``ramp.source`` job). Values set
+        the job from its interp_node section, the ramp the run brings from
+        its profile_node section (``ramp.*``, ``ramp.source`` job) and the
+        file's sha256 (``job_file_sha256``, into the run's bag). Values set
         in the same change win over the file's. A file that cannot be used is
-        left to the check, which refuses the change with the file's reason."""
+        left to the check, which refuses the change with the file's reason.
+        A change of the job's fields without a job file (or a hash) clears
+        the hash: the job is no longer the file's."""
         named = {p.name for p in params}
         path = next((p.value for p in params if p.name == "job_file"), None)
         if not path or not isinstance(path, str):
+            hashed = bool(self.get_parameter("job_file_sha256").value)
+            if hashed and named & FIELD_SPECS.keys() and "job_file_sha256" not in named:
+                return [*params, Parameter("job_file_sha256", value="")]
             return params
         try:
-            given = load_job_file(path)
+            given, digest = load_job_file_hashed(path)
         except (SpecError, ValueError):
             return params
         extra = [Parameter(k, value=v) for k, v in given["interp_node"].items() if k not in named]
+        if "job_file_sha256" not in named:
+            extra.append(Parameter("job_file_sha256", value=digest))
         if given["profile_node"]:
             ramp = {"ramp.source": "job", **{f"ramp.{k}": v for k, v in given["profile_node"].items()}}
             extra += [Parameter(k, value=v) for k, v in ramp.items() if k not in named]
@@ -264,10 +272,14 @@ class InterpNode(ManagedNode):
             return False, waiting
         values = self.settings.values()
         try:
-            job = Job(**{k: values[k] for k in FIELD_SPECS})
+            job = Job.from_dict({k: values[k] for k in FIELD_SPECS})
         except SpecError as exc:
             self.diag.publish("job", ERROR, f"job rejected: {exc}", status_values("blocked", role=ROLE))
             return False, f"job rejected: {exc}"
+        refused = motion_refusal(job)
+        if refused:
+            self.diag.publish("job", ERROR, f"job rejected: {refused}", status_values("blocked", role=ROLE))
+            return False, f"job rejected: {refused}"
         self.runs += 1
         self.job = job
         self.run_id = make_run_id(job.job_id, self.runs)
@@ -287,6 +299,7 @@ class InterpNode(ManagedNode):
             values["stop_pause"],
             values["stop_resume"],
             values["schedule"],
+            values["job_file_sha256"],
         )
         self.pub_job.publish(String(data=text))
         self.pending = self.chunks(job, values["chunk_steps"])

@@ -180,6 +180,8 @@ class Analysis:
     #: the sim node's stream checks at the end (gaps, steps_missing, chunks_rejected,
     #: stalls, errors), as it reported them; empty without a report
     stream: dict[str, int] = field(default_factory=dict)
+    #: sha256 of the job file the run's job comes from ("" if none): its recipe
+    job_file_sha256: str = ""
 
 
 # -- eq. 7 -------------------------------------------------------------------------
@@ -449,7 +451,7 @@ def analyze(run: Run, stride_time: float = STRIDE_TIME, digested: Digest | None 
         job_id=run.job_id,
         run_id=run.run_id,
         job=(
-            f"{job.poles} poles x {job.layers} layers x {job.turns_per_layer} turns, "
+            f"{job.poles} poles x {job.layers} layers x {job.layer_turns} turns, "
             f"wire {job.wire_diameter * 1e3:g} mm"
             + (f", coils {job.coil_overrides}" if job.coil_overrides else "")
         ),
@@ -492,6 +494,7 @@ def analyze(run: Run, stride_time: float = STRIDE_TIME, digested: Digest | None 
         error_list=list(run.errors),
         compression=run.compression,
         stream={k: int(_num(run.report, k)) for k in STREAM_KEYS if math.isfinite(_num(run.report, k))},
+        job_file_sha256=run.plan.job_file_sha256,
     )
 
 
@@ -639,6 +642,7 @@ def _rows(a: Analysis) -> list[tuple[str, str]]:
         ("job id", a.job_id),
         ("job", a.job),
         ("run", a.run_id or "-"),
+        ("job file sha256", a.job_file_sha256 or "-"),
         ("re-simulation of", a.source or "-"),
         ("profile / motor model", f"{a.profile} / {a.model}"),
         ("ramp limits (major axis)", _ramp(a)),

@@ -42,7 +42,7 @@ from winder.contract.params import (
 from winder.contract.run import JobReport
 from winder.contract.topics import check_namespace
 from winder.motion.interp import dda, deviation_stats, interpolate, min_deviation, point_by_point
-from winder.motion.job import FIELD_SPECS, Job
+from winder.motion.job import FIELD_SPECS, Job, motion_refusal
 from winder.spec import Spec, SpecError
 
 __all__ = ["main"]
@@ -128,19 +128,26 @@ def given_values(args: argparse.Namespace, specs: dict[str, Spec], base: dict[st
     return out
 
 
-def job_file(args: argparse.Namespace) -> dict[str, dict[str, Any]]:
+def job_file(args: argparse.Namespace, *, check_fit: bool = True) -> dict[str, dict[str, Any]]:
     """The settings of the job file named on the command line, per node
     (none: empty): ``interp_node``, ``profile_node`` and ``consumer``."""
+    return job_file_hashed(args, check_fit=check_fit)[0]
+
+
+def job_file_hashed(
+    args: argparse.Namespace, *, check_fit: bool = True
+) -> tuple[dict[str, dict[str, Any]], str]:
+    """:func:`job_file` and the sha256 of the file's bytes ("" without a file)."""
     path = getattr(args, "job_file", None)
     if not path:
-        return {"interp_node": {}, "profile_node": {}, "consumer": {}}
-    from winder.contract.jobfile import load_job_file
+        return {"interp_node": {}, "profile_node": {}, "consumer": {}}, ""
+    from winder.contract.jobfile import load_job_file_hashed
 
-    return load_job_file(path)
+    return load_job_file_hashed(path, check_fit=check_fit)
 
 
 def job_from_args(args: argparse.Namespace, base: dict[str, Any] | None = None) -> Job:
-    return Job(**values_from_args(args, FIELD_SPECS, base))
+    return Job.from_dict(values_from_args(args, FIELD_SPECS, base))
 
 
 class Progress:
@@ -211,7 +218,7 @@ def cmd_interp(args: argparse.Namespace) -> int:
     }
     turn = {k: deviation_stats(p, x1, y1, step_lengths=(lx, ly)).mean for k, p in methods.items()}
     rate = done / elapsed if elapsed > 0 else float("inf")
-    print(f"job {job.job_id}: {job.poles} poles x {job.layers} layers x {job.turns_per_layer} turns")
+    print(f"job {job.job_id}: {job.poles} poles x {job.layers} layers x {job.layer_turns} turns")
     print(f"  segments           {len(segments)}")
     print(f"  steps              {done}  ({rate / 1e6:.1f} M steps/s)")
     print(f"  final position     feed {position[0]}  fork {position[1]}  pole {position[2]} steps")
@@ -226,8 +233,11 @@ def cmd_interp(args: argparse.Namespace) -> int:
 def cmd_run(args: argparse.Namespace) -> int:
     """Run the whole cell: three node processes, progress, summary."""
     # everything is checked here first: a bad value never starts a node or a bag
-    given = job_file(args)
+    given, digest = job_file_hashed(args)
     job = job_from_args(args, given["interp_node"])
+    refused = motion_refusal(job)
+    if refused:
+        raise UserError(refused)
     profile = values_from_args(args, PROFILE_SPECS, given["profile_node"])
     check_profile(profile)
     operation = values_from_args(args, OPERATION_SPECS, given["profile_node"])
@@ -239,6 +249,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         extra["stops"] = f"1:{args.stop_at_turn}"
     if args.auto_resume is not None:
         extra["stop_pause"] = STOP_SPECS["stop_pause"].parse(args.auto_resume)
+    if digest:
+        extra["job_file_sha256"] = digest  # the run's bag names its recipe
     stops = stop_points(job, extra["stops"])
     pause = float(extra["stop_pause"])
     _, duration_ns = plan_timing(profile, [s.steps for s in segments], stops, pause)  # the job as a whole
@@ -274,6 +286,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     ramp = "the external profile node's ramp" if "profile" in external else f"{profile['profile']} profile"
     model = "the external step consumer" if "sim" in external else f"{sim['model']} motor model"
     print(f"winder: job {job.job_id}, {job.total_steps} steps, {ramp}, {model}")
+    if digest:
+        print(f"  job file           {args.job_file}  (sha256 {digest})")
     if external:
         from winder.ros.dds import describe_profile
 
@@ -308,6 +322,129 @@ def cmd_run(args: argparse.Namespace) -> int:
     )
     bar.close()
     return report_run(result, time.monotonic() - t0)
+
+
+def cmd_check(args: argparse.Namespace) -> int:
+    """The coil as it will be laid: per layer the turns, radius and turn
+    length; then turns, build height against the window, fill factor, wire
+    length, resistance and the finish side (``--json``: one object). A job
+    whose coils do not fit: the report, then one line naming what overflows
+    and by how much, exit 2 (the words ``winder run`` and the interp node
+    refuse it in)."""
+    import json
+
+    from winder.motion.coil import report
+
+    given = job_file(args, check_fit=False)
+    job = Job.from_dict(values_from_args(args, FIELD_SPECS, given["interp_node"]), check_fit=False)
+    laid = job.winding
+    doc = {"job_id": job.job_id, **report(laid), "motion_refusal": motion_refusal(job)}
+    if args.json:
+        print(json.dumps(doc, indent=2))
+    else:
+        for line in check_lines(job, doc):
+            print(line)
+    why = laid.overflow()
+    if why:
+        print(f"winder check: error: {why}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    return EXIT_OK
+
+
+def _coil_numbers(numbers: Sequence[int]) -> str:
+    """1, 2, 3, 5 -> "1-3, 5"."""
+    out, start = [], numbers[0]
+    for a, b in zip(numbers, [*numbers[1:], None], strict=True):
+        if b != a + 1:
+            out.append(f"{start}" if start == a else f"{start}-{a}")
+            start = b if b is not None else a
+    return ", ".join(out)
+
+
+def check_lines(job: Job, doc: dict[str, Any]) -> list[str]:
+    """``winder check``'s text: the report :func:`cmd_check` prints."""
+    from winder.motion.coil import mm
+
+    def length(x: float | None, unit: str = "mm") -> str:
+        return "-" if x is None else (f"{mm(x)} mm" if unit == "mm" else f"{x:.4g} m")
+
+    b = job.bobbin
+    if b.core == "round":
+        core = f"a round core of {length(b.core_diameter)}" if b.core_given else "a round core"
+    else:
+        core = (
+            f"a rectangular core {length(b.core_width)} x {length(b.core_depth)}"
+            if b.core_given
+            else "a rectangular core"
+        )
+    if not b.core_given:
+        core += " (size not given: no turn lengths, wire length or resistance)"
+
+    w, h = doc["window_width_m"], doc["window_height_m"]
+    if w and h:
+        window = f"window {length(w)} wide x {length(h)} high"
+    elif w or h:
+        window = (
+            f"window {length(w)} wide (height unchecked)"
+            if w
+            else f"window {length(h)} high (width unchecked)"
+        )
+    else:
+        window = "window unchecked"
+    lines = [
+        f"job {job.job_id}: {_count(job.poles, 'coil')}, {doc['lay']} lay on {core}",
+        f"  wire {mm(job.wire_diameter)} mm (copper {mm(doc['bare_diameter_m'])} mm), {window}, radial pitch "
+        f"{mm(doc['radial_pitch_m'])} mm",
+    ]
+    groups: dict[str, list[int]] = {}
+    for coil in doc["coils"]:
+        groups.setdefault(json_key(coil["layers"]), []).append(coil["coil"])
+    for numbers in groups.values():
+        coil = doc["coils"][numbers[0] - 1]
+        which = (
+            "every coil"
+            if len(groups) == 1
+            else f"coil{'s' if len(numbers) > 1 else ''} {_coil_numbers(numbers)}"
+        )
+        lines.append(f"  {which}:")
+        lines.append("    layer  turns  radius mm  turn length mm")
+        for layer in coil["layers"]:
+            turn = "-" if layer["turn_length_m"] is None else f"{layer['turn_length_m'] * 1e3:.2f}"
+            lines.append(
+                f"    {layer['layer']:5d}  {layer['turns']:5d}  {layer['radius_m'] * 1e3:9.3f}  {turn:>14}"
+            )
+    height = doc["window_height_m"]
+    lines.append(
+        f"  turns          {doc['turns_per_coil']} per coil, {doc['total_turns']} in all"
+        + ("" if doc["uniform"] else " (coil 1's shown; the coils differ)")
+    )
+    lines.append(
+        f"  build height   {mm(doc['build_height_m'])} mm"
+        + (f" of a {mm(height)} mm window" if height else " (window height unchecked)")
+    )
+    fill = doc["fill_factor"]
+    lines.append(f"  fill factor    {'-' if fill is None else f'{fill:.3f}'} (copper area / window area)")
+    wire_m, ohm = doc["wire_length_m"], doc["resistance_ohm"]
+    coils = f"all {job.poles} coils" if job.poles > 1 else "1 coil"
+    lines.append(f"  wire length    {length(wire_m, 'm')} ({coils})")
+    series = " (all coils in series)" if job.poles > 1 else ""
+    lines.append(f"  resistance     {'-' if ohm is None else f'{ohm:.4g} ohm'} at 20 C{series}")
+    side = {"start": "the start flange", "far": "the far flange"}[doc["finish_side"]]
+    lines.append(f"  finish side    {side} ({len(doc['layers'])} layers)")
+    lines.append(f"  fits           {'yes' if doc['fits'] else 'NO: ' + doc['overflow']}")
+    if doc["motion_refusal"]:
+        lines.append(f"  note           {doc['motion_refusal']}")
+    return lines
+
+
+def _count(n: int, what: str) -> str:
+    return f"{n} {what}{'s' if n != 1 else ''}"
+
+
+def json_key(value: Any) -> str:
+    import json
+
+    return json.dumps(value, sort_keys=True)
 
 
 #: the parts of the cell ``winder run --external`` may leave to another host, in words
@@ -529,6 +666,16 @@ def build_parser() -> argparse.ArgumentParser:
         help="seconds of simulated time the axes rest at each programmed stop (--stop-pause S)",
     )
     p.set_defaults(func=cmd_run)
+
+    p = sub.add_parser(
+        "check",
+        help="lay out a job's coil in its bobbin: turns per layer, build height, fill factor, wire "
+        "length, resistance, finish side; a coil that does not fit exits 2",
+    )
+    p.add_argument("job_file", nargs="?", metavar="JOB_FILE", help=JOB_FILE_HELP)
+    add_spec_arguments(p, FIELD_SPECS, "winding job (defaults: the RW400 paper set-up)")
+    p.add_argument("--json", action="store_true", help="print the report as one JSON object")
+    p.set_defaults(func=cmd_check)
 
     p = sub.add_parser("ctl", help="send a command to a running cell: pause, resume, abort, override X")
     p.add_argument(

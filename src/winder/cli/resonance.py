@@ -201,7 +201,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
     if args.apply:
         _writable(Path(args.job_file))  # before the tuning, not after it
     given = job_file(args)
-    job = Job(**given["interp_node"])
+    job = Job.from_dict(given["interp_node"])
     sim, notes = _axes_from(args, given["consumer"])
     axes = axes_of(sim)
     bar = Progress(1, "winder tune")

@@ -37,6 +37,7 @@ names the file, the key path and the allowed range, in one line.
 
 from __future__ import annotations
 
+import hashlib
 import math
 import re
 import sys
@@ -58,15 +59,16 @@ __all__ = [
     "SECTION_ALIASES",
     "JobFileError",
     "load_job_file",
+    "load_job_file_hashed",
     "ros_scalar",
     "ros_text",
     "section_node",
 ]
 
-#: the sections of a job file and the settings each may hold (job_file itself
-#: excluded); the keys of what :func:`load_job_file` returns
+#: the sections of a job file and the settings each may hold (job_file and
+#: its hash excluded: a file cannot name itself); the keys of what :func:`load_job_file` returns
 NODE_SPECS: dict[str, dict[str, Spec]] = {
-    "interp_node": {n: s for n, s in INTERP_SPECS.items() if n != "job_file"},
+    "interp_node": {n: s for n, s in INTERP_SPECS.items() if n not in ("job_file", "job_file_sha256")},
     "profile_node": PROFILE_SPECS,
     "consumer": SIM_SPECS,
 }
@@ -91,7 +93,7 @@ def _flatten(prefix: str, value: Any, out: dict[str, Any]) -> None:
         out[prefix] = value
 
 
-def _read(path: Path) -> Any:
+def _read(path: Path) -> tuple[Any, str]:
     from ruamel.yaml.error import YAMLError
 
     try:
@@ -105,7 +107,8 @@ def _read(path: Path) -> Any:
     if size > MAX_BYTES:
         raise JobFileError(f"{path}: {size} bytes, more than a job file holds ({MAX_BYTES})")
     try:
-        text = path.read_text(encoding="utf-8")
+        data = path.read_bytes()
+        text = data.decode("utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise JobFileError(f"{path}: cannot be read: {str(exc).splitlines()[0]}") from None
     try:
@@ -120,7 +123,7 @@ def _read(path: Path) -> Any:
     except Exception as exc:  # anything else the YAML parser raises: not a job file
         raise JobFileError(f"{path}: not a job file: {type(exc).__name__}") from None
     _bounded(path, doc)
-    return doc
+    return doc, hashlib.sha256(data).hexdigest()
 
 
 # -- scalars as ROS reads them ------------------------------------------------------------
@@ -373,13 +376,24 @@ def _check(path: Path, where: str, spec: Spec, value: Any) -> Any:
         raise JobFileError(f"{path}: {where}: {exc}") from None
 
 
-def load_job_file(path: str | Path) -> dict[str, dict[str, Any]]:
+def load_job_file(path: str | Path, *, check_fit: bool = True) -> dict[str, dict[str, Any]]:
     """The settings a job file gives each node, checked: ``{"interp_node":
     {...}, "profile_node": {...}, "consumer": {...}}`` (only what the file
     sets; the consumer's from its ``consumer`` or ``sim_node`` section).
-    Raises :class:`JobFileError` (a ValueError) with a one-line reason."""
+    Raises :class:`JobFileError` (a ValueError) with a one-line reason.
+    ``check_fit=False``: a coil that does not fit its window is not refused
+    (``winder check`` reports it first)."""
+    return load_job_file_hashed(path, check_fit=check_fit)[0]
+
+
+def load_job_file_hashed(
+    path: str | Path, *, check_fit: bool = True
+) -> tuple[dict[str, dict[str, Any]], str]:
+    """:func:`load_job_file`, and the sha256 (hex) of the bytes it was read
+    from: the recipe a run is traced to (``job_file_sha256`` in its bag)."""
     p = Path(path).expanduser()
-    sections = _sections(p, _read(p))
+    doc, digest = _read(p)
+    sections = _sections(p, doc)
     out: dict[str, dict[str, Any]] = {node: {} for node in NODE_SPECS}
     names = {node: node for node in NODE_SPECS}  # each node's section as the file names it
     names.update({section_node(k): _written(k) for k in sections if k != "/**"})
@@ -398,13 +412,19 @@ def load_job_file(path: str | Path) -> dict[str, dict[str, Any]]:
                 takers = [node]
             for node in takers:
                 out[node][name] = _check(p, where, NODE_SPECS[node][name], value)
-    _check_together(p, out, names)
-    return out
+    _check_together(p, out, names, check_fit)
+    return out, digest
 
 
-def _check_together(path: Path, given: dict[str, dict[str, Any]], names: dict[str, str]) -> None:
+def _check_together(
+    path: Path, given: dict[str, dict[str, Any]], names: dict[str, str], check_fit: bool = True
+) -> None:
     """The cross-field rules of each node, on the file's values over the defaults."""
-    checks = {"interp_node": check_interp, "profile_node": check_profile, "consumer": check_sim}
+
+    def interp(values: dict[str, Any]) -> None:
+        check_interp(values, check_fit=check_fit)
+
+    checks = {"interp_node": interp, "profile_node": check_profile, "consumer": check_sim}
     for node, check in checks.items():
         values = {n: s.default for n, s in NODE_SPECS[node].items()}
         values.update(given[node])

@@ -296,6 +296,16 @@ INTERP_SPECS.update(
             pattern=r"^[^\x00]*$",
             pattern_text="a file path, or empty",
         ),
+        "job_file_sha256": Spec(
+            "job_file_sha256",
+            str,
+            "",
+            "sha256 of the job file's bytes the job comes from (set with job_file, and by winder run): "
+            "carried in the job description into the run's bag; a change of the job's fields without "
+            "a job file clears it",
+            pattern=r"([0-9a-f]{64})?",
+            pattern_text="64 lower-case hex digits, or empty",
+        ),
         "ramp.source": Spec(
             "ramp.source",
             str,
@@ -371,9 +381,11 @@ def stop_place(job: Job, segment: Segment, k: int) -> tuple[int, int, int]:
     return segment.pole + 1, segment.layer + 1, segment.layer * turns + within
 
 
-def check_interp(values: dict[str, Any]) -> None:
-    """Cross-field check of the interp node's settings (SpecError)."""
-    job = Job(**{k: v for k, v in values.items() if k in FIELD_SPECS})
+def check_interp(values: dict[str, Any], *, check_fit: bool = True) -> None:
+    """Cross-field check of the interp node's settings (SpecError): the job
+    (its coils fit their window, unless ``check_fit`` is False), its stops,
+    schedule, job file and ramp."""
+    job = Job.from_dict({k: v for k, v in values.items() if k in FIELD_SPECS}, check_fit=check_fit)
     if values.get("stops"):
         stop_points(job, values["stops"])
     if values.get("schedule"):

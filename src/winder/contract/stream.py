@@ -66,11 +66,14 @@ def describe_job(
     stop_pause: float = 0.0,
     stop_resume: str = "auto",
     schedule: str = "",
+    job_file_sha256: str = "",
 ) -> str:
     """JSON text of a job as the downstream nodes and the bag need it; the
     run it starts (``run_id``) travels with it, the ramp to time it with
     when the run brings its own (else null: the profile node's settings), and
-    its programmed stops ((segment, step index): rest ``stop_pause`` s there)."""
+    its programmed stops ((segment, step index): rest ``stop_pause`` s there);
+    and the sha256 of the job file it comes from ("" if none), so that the
+    run's bag names its recipe."""
     segs = job.segments()
     doc = {
         "format": FORMAT,
@@ -80,6 +83,7 @@ def describe_job(
         "stop_pause": stop_pause,
         "stop_resume": stop_resume,
         "schedule": schedule,
+        "job_file_sha256": job_file_sha256,
         "job": job.to_dict(),
         "axes": list(AXES),
         "joint_step": list(job.joint_step),
@@ -136,6 +140,8 @@ class JobPlan:
     #: a re-simulation (``winder resim``): the recording its steps come from, and that run's id
     source_bag: str = ""
     source_run_id: str = ""
+    #: sha256 of the job file the job comes from ("" if none, and in bags before it)
+    job_file_sha256: str = ""
 
     @property
     def job_id(self) -> str:
@@ -207,6 +213,9 @@ def parse_job_description(text: str) -> JobPlan:
         except ValueError as exc:
             raise ValueError(f"job description: {exc}") from None
     source_bag, source_run_id = _source(doc)
+    digest = doc.get("job_file_sha256", "")
+    if not isinstance(digest, str) or not re.fullmatch(r"([0-9a-f]{64})?", digest):
+        raise ValueError(f"job description: job_file_sha256 {json.dumps(digest)[:72]} is not a sha256 (hex)")
     total = sum(e.steps for e in expected)
     derived = {
         "total_steps": total,
@@ -231,6 +240,7 @@ def parse_job_description(text: str) -> JobPlan:
         schedule=schedule,
         source_bag=source_bag,
         source_run_id=source_run_id,
+        job_file_sha256=digest,
     )
 
 

@@ -8,6 +8,15 @@ every layer. Between coils the pole axis indexes the rotor by 360 deg / poles.
 (coils counted from 1; ``direction`` cw, the fork turning forward as for every
 other coil, or ccw, backward: the winding direction).
 
+The coil's geometry (``bobbin.*``, ``wire.bare_diameter``, ``lay``) is laid
+out by :mod:`winder.motion.coil`: a job whose coils do not fit their window
+is refused, in the words of :meth:`winder.motion.coil.Winding.overflow`.
+``turns_per_layer: auto`` winds as many turns as fit a layer. Setting names
+with a dot (``bobbin.window_width``) are the job's public names (ROS
+parameters, job files, ``--bobbin.window-width``); the dataclass fields are
+the part after the last dot, or the name with its dot made ``_``
+(:data:`ATTRIBUTES`).
+
 Axes, in this order everywhere in winder (``AXES``):
 
 * ``feed`` - linear, ``feed_step`` metres per step;
@@ -23,12 +32,22 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, fields, replace
+from dataclasses import InitVar, dataclass, fields, replace
 from typing import Any
 
+from winder.motion.coil import CORES, LAYS, Bobbin, Winding, layer_capacity, winding
 from winder.spec import Spec, SpecError
 
-__all__ = ["AXES", "FIELD_SPECS", "Coil", "Job", "JobError", "Segment", "parse_coil_overrides"]
+__all__ = [
+    "AXES",
+    "FIELD_SPECS",
+    "Coil",
+    "Job",
+    "JobError",
+    "Segment",
+    "motion_refusal",
+    "parse_coil_overrides",
+]
 
 AXES = ("feed", "fork", "pole")
 #: Steps of one axis in one segment, at most: positions travel as int32.
@@ -49,6 +68,24 @@ def _i(name: str, low: int, high: int, text: str, default: int) -> Spec:
     return Spec(name, int, default, text, "", low, high)
 
 
+#: ``turns_per_layer: auto``: as many turns as fit each layer
+AUTO = "auto"
+
+
+@dataclass(frozen=True)
+class _TurnsSpec(Spec):
+    """An integer setting that may also be ``auto`` (kept as the text)."""
+
+    def range_text(self) -> str:
+        return f"{super().range_text()} or {AUTO}"
+
+    def check(self, value: Any) -> Any:
+        return AUTO if value == AUTO else super().check(value)
+
+    def parse(self, text: str) -> Any:
+        return AUTO if text.strip() == AUTO else super().parse(text)
+
+
 #: Job fields with their allowed ranges. The numbers bound what a physical
 #: winding cell can be (a 10 m flyer or a 10 cm wire is a typing error).
 #: Defaults: the RW400 set-up of the 2016 paper (flyer radius 500 mm, wire
@@ -66,13 +103,119 @@ FIELD_SPECS: dict[str, Spec] = {
         ),
         _f("wire_diameter", 0.0, 0.02, "m", "wire diameter", 2.5e-3),
         _f("flyer_radius", 0.0, 5.0, "m", "flyer (fork) radius", 0.5),
-        _i("turns_per_layer", 1, 100_000, "turns in one layer", 20),
+        _TurnsSpec(
+            "turns_per_layer",
+            int,
+            20,
+            "turns in one layer (auto: as many as fit the layer, per bobbin.window_width and lay)",
+            "",
+            1,
+            100_000,
+        ),
         _i("layers", 1, 1_000, "layers per coil; the feed reverses at each layer", 2),
         _i("poles", 1, 360, "coils (poles); the pole axis indexes 360/poles deg between them", 4),
         _i("fork_steps_per_rev", 4, 2**24, "fork axis steps per revolution", 1024),
         _f("feed_step", 0.0, 1e-3, "m", "feed axis travel per step", 1e-5),
         _i("pole_steps_per_rev", 4, 2**24, "pole axis steps per revolution", 1024),
-        _f("coil_length", 0.0, 10.0, "m", "axial room for one layer (0 = unchecked)", 0.0, open_low=False),
+        _f(
+            "coil_length",
+            0.0,
+            10.0,
+            "m",
+            "deprecated name of bobbin.window_width (0 = not given)",
+            0.0,
+            open_low=False,
+        ),
+        _f(
+            "bobbin.window_width",
+            0.0,
+            10.0,
+            "m",
+            "axial room between the bobbin's flanges for a layer (0 = unchecked)",
+            0.0,
+            open_low=False,
+        ),
+        _f(
+            "bobbin.window_height",
+            0.0,
+            10.0,
+            "m",
+            "radial room above the core for the layers (0 = unchecked)",
+            0.0,
+            open_low=False,
+        ),
+        Spec(
+            "bobbin.core",
+            str,
+            "round",
+            "the core's section: round (bobbin.core_diameter) or rect (bobbin.core_width x "
+            "bobbin.core_depth)",
+            choices=CORES,
+        ),
+        _f(
+            "bobbin.core_diameter",
+            0.0,
+            10.0,
+            "m",
+            "round core's diameter (0 = not given)",
+            0.0,
+            open_low=False,
+        ),
+        _f(
+            "bobbin.core_width",
+            0.0,
+            10.0,
+            "m",
+            "rectangular core's width w (0 = not given)",
+            0.0,
+            open_low=False,
+        ),
+        _f(
+            "bobbin.core_depth",
+            0.0,
+            10.0,
+            "m",
+            "rectangular core's depth t (0 = not given)",
+            0.0,
+            open_low=False,
+        ),
+        _f(
+            "wire.bare_diameter",
+            0.0,
+            0.02,
+            "m",
+            "copper diameter of the wire, without insulation (0 = wire_diameter)",
+            0.0,
+            open_low=False,
+        ),
+        Spec(
+            "lay",
+            str,
+            "helical",
+            "how the turns are laid: helical (each turn one wire diameter on) or orthocyclic (each "
+            "layer in the grooves of the one below, crossing over within lay.crossover)",
+            choices=LAYS,
+        ),
+        _f("lay.crossover", 0.0, 360.0, "deg", "orthocyclic: the crossover zone, in flyer angle", 60.0),
+        _f(
+            "lay.crossover_at",
+            0.0,
+            360.0,
+            "deg",
+            "orthocyclic: flyer angle where the crossover zone starts, in [0, 360)",
+            0.0,
+            open_low=False,
+        ),
+        _f(
+            "reversal_dwell",
+            0.0,
+            1000.0,
+            "turns",
+            "turns wound in place at a flange before the layer reverses",
+            0.0,
+            open_low=False,
+        ),
+        _f("first_layer_speed", 0.0, 1.0, "", "speed of layer 1, a fraction of v_max", 1.0),
         Spec(
             "coil_overrides",
             str,
@@ -85,13 +228,22 @@ FIELD_SPECS: dict[str, Spec] = {
     )
 }
 
+#: the dataclass field of each job setting: the part after its last dot
+#: (``bobbin.window_width``: ``window_width``), but ``wire.bare_diameter``:
+#: ``bare_diameter`` and ``lay.crossover*``: ``crossover*``
+ATTRIBUTES = {name: name.rsplit(".", 1)[-1] for name in FIELD_SPECS}
+#: the job setting of each dataclass field
+SETTINGS = {attr: name for name, attr in ATTRIBUTES.items()}
+
 #: what a coil override may set: the field's spec (direction: cw or ccw)
 COIL_KEYS = ("turns_per_layer", "layers", "direction")
 
 
 @dataclass(frozen=True)
 class Coil:
-    """How one coil is wound: its turns per layer, layers and direction (+1 cw, -1 ccw)."""
+    """How one coil is wound: its turns per layer, layers and direction (+1
+    cw, -1 ccw). As asked (:func:`parse_coil_overrides`) ``turns_per_layer``
+    0 stands for auto; :meth:`Job.coil` gives the turns of its layer 1."""
 
     turns_per_layer: int
     layers: int
@@ -122,7 +274,8 @@ def parse_coil_overrides(text: str, poles: int, base: Coil) -> dict[int, Coil]:
                 values["direction"] = 1 if value == "cw" else -1
             elif key in ("turns_per_layer", "layers"):
                 try:
-                    values[key] = FIELD_SPECS[key].parse(value)
+                    parsed = FIELD_SPECS[key].parse(value)
+                    values[key] = 0 if parsed == AUTO else parsed
                 except SpecError as exc:
                     raise JobError(f"coil_overrides: coil {coil}: {exc}") from None
             else:
@@ -159,31 +312,80 @@ class Segment:
 @dataclass(frozen=True)
 class Job:
     """A winding job. Defaults: the RW400 set-up of the 2016 paper (flyer radius
-    500 mm, wire 2.50 mm, fork register 2**10), four poles of two layers."""
+    500 mm, wire 2.50 mm, fork register 2**10), four poles of two layers.
+
+    Fields are the job's settings (:data:`FIELD_SPECS`) by their
+    :data:`ATTRIBUTES` names; :meth:`from_dict` and :meth:`to_dict` use the
+    settings' names. ``check_fit=False`` builds a job whose coils need not
+    fit their window (``winder check`` reports such a job before it refuses
+    it); every other check still holds."""
 
     job_id: str = FIELD_SPECS["job_id"].default
     wire_diameter: float = FIELD_SPECS["wire_diameter"].default
     flyer_radius: float = FIELD_SPECS["flyer_radius"].default
-    turns_per_layer: int = FIELD_SPECS["turns_per_layer"].default
+    turns_per_layer: int | str = FIELD_SPECS["turns_per_layer"].default  #: or "auto"
     layers: int = FIELD_SPECS["layers"].default
     poles: int = FIELD_SPECS["poles"].default
     fork_steps_per_rev: int = FIELD_SPECS["fork_steps_per_rev"].default
     feed_step: float = FIELD_SPECS["feed_step"].default
     pole_steps_per_rev: int = FIELD_SPECS["pole_steps_per_rev"].default
-    coil_length: float = FIELD_SPECS["coil_length"].default
+    coil_length: float = FIELD_SPECS["coil_length"].default  #: deprecated: window_width
     coil_overrides: str = FIELD_SPECS["coil_overrides"].default
+    window_width: float = FIELD_SPECS["bobbin.window_width"].default
+    window_height: float = FIELD_SPECS["bobbin.window_height"].default
+    core: str = FIELD_SPECS["bobbin.core"].default
+    core_diameter: float = FIELD_SPECS["bobbin.core_diameter"].default
+    core_width: float = FIELD_SPECS["bobbin.core_width"].default
+    core_depth: float = FIELD_SPECS["bobbin.core_depth"].default
+    bare_diameter: float = FIELD_SPECS["wire.bare_diameter"].default
+    lay: str = FIELD_SPECS["lay"].default
+    crossover: float = FIELD_SPECS["lay.crossover"].default
+    crossover_at: float = FIELD_SPECS["lay.crossover_at"].default
+    reversal_dwell: float = FIELD_SPECS["reversal_dwell"].default
+    first_layer_speed: float = FIELD_SPECS["first_layer_speed"].default
+    check_fit: InitVar[bool] = True
 
-    def __post_init__(self) -> None:
+    def __post_init__(self, check_fit: bool) -> None:
         for f in fields(self):
-            object.__setattr__(self, f.name, check_field(f.name, getattr(self, f.name)))
-        base = Coil(self.turns_per_layer, self.layers, 1)
+            object.__setattr__(self, f.name, check_field(SETTINGS[f.name], getattr(self, f.name)))
+        self._check_geometry()
+        auto = self.turns_per_layer == AUTO
+        base = Coil(0 if auto else int(self.turns_per_layer), self.layers, 1)
         coils = parse_coil_overrides(self.coil_overrides, self.poles, base)
-        wound = tuple(coils.get(p, base) for p in range(self.poles))
+        asked = tuple(coils.get(p, base) for p in range(self.poles))
+        if any(c.turns_per_layer == 0 for c in asked) and self.bobbin.window_width <= 0:
+            raise JobError(
+                "turns_per_layer=auto is invalid without bobbin.window_width: give the window's width "
+                "(as many turns as fit it are wound)"
+            )
+        laid = winding(
+            self.bobbin,
+            self.wire_diameter,
+            self.bare_diameter or self.wire_diameter,
+            self.lay,
+            [(c.turns_per_layer or None, c.layers) for c in asked],
+        )
+        object.__setattr__(self, "_winding", laid)
+        wound = tuple(
+            replace(c, turns_per_layer=g.layers[0].turns) for c, g in zip(asked, laid.coils, strict=True)
+        )
         object.__setattr__(self, "_coils", wound)
+        first = layer_capacity(self.bobbin.window_width, self.wire_diameter, self.lay, 1) if auto else 0
+        object.__setattr__(self, "_base_turns", first if auto else base.turns_per_layer)
+        if check_fit and not laid.fits:
+            raise JobError(laid.overflow())
         for p, c in enumerate(wound):
-            if c != base:  # each coil's layers checked as the common one is below
+            if (
+                asked[p] != base and c.turns_per_layer > 0
+            ):  # each coil's layers checked as the common one is below
                 try:
-                    replace(self, turns_per_layer=c.turns_per_layer, layers=c.layers, coil_overrides="")
+                    replace(
+                        self,
+                        turns_per_layer=c.turns_per_layer,
+                        layers=c.layers,
+                        coil_overrides="",
+                        check_fit=False,
+                    )
                 except JobError as exc:
                     raise JobError(f"coil_overrides: coil {p + 1}: {exc}") from None
         steps_per_turn = self.wire_diameter / self.feed_step
@@ -198,26 +400,74 @@ class Job:
                 f"wire_diameter={self.wire_diameter:g} m is invalid: must be smaller than "
                 f"the flyer circumference {2 * math.pi * self.flyer_radius:g} m"
             )
-        if self.coil_length > 0 and self.turns_per_layer * self.wire_diameter > self.coil_length:
-            raise JobError(
-                f"turns_per_layer={self.turns_per_layer} is invalid: "
-                f"{self.turns_per_layer} turns of {self.wire_diameter:g} m wire need "
-                f"{self.turns_per_layer * self.wire_diameter:g} m, coil_length is "
-                f"{self.coil_length:g} m (at most {int(self.coil_length / self.wire_diameter)} turns fit)"
-            )
-        layer_length = self.turns_per_layer * self.wire_diameter
+        turns = self.layer_turns
+        layer_length = turns * self.wire_diameter
         feed_steps = layer_length / self.feed_step
         if not feed_steps < MAX_STEPS:  # also inf: a tiny feed_step overflows the ratio
             raise JobError(
-                f"feed_step={self.feed_step:g} m is invalid with turns_per_layer={self.turns_per_layer} of "
+                f"feed_step={self.feed_step:g} m is invalid with turns_per_layer={turns} of "
                 f"{self.wire_diameter:g} m wire: a layer would take {feed_steps:.3g} feed steps, "
                 f"more than 2**31 - 1 (feed_step must be at least {layer_length / MAX_STEPS:.3g} m)"
             )
         if self.layer_fork_steps > 2**31 - 1:
             raise JobError(
-                f"turns_per_layer={self.turns_per_layer} is invalid: a layer of "
+                f"turns_per_layer={turns} is invalid: a layer of "
                 f"{self.layer_fork_steps} fork steps exceeds 2**31 - 1 steps"
             )
+
+    def _check_geometry(self) -> None:
+        """The bobbin, wire and lay settings together (JobError, one line)."""
+        if self.window_width > 0 and self.coil_length > 0 and self.window_width != self.coil_length:
+            raise JobError(
+                f"coil_length={self.coil_length:g} m is invalid beside bobbin.window_width="
+                f"{self.window_width:g} m: coil_length is the deprecated name of bobbin.window_width; "
+                "give one"
+            )
+        if self.bare_diameter > self.wire_diameter:
+            raise JobError(
+                f"wire.bare_diameter={self.bare_diameter:g} m is invalid: must be at most wire_diameter="
+                f"{self.wire_diameter:g} m (the copper is inside the insulation)"
+            )
+        if self.core == "round" and (self.core_width > 0 or self.core_depth > 0):
+            raise JobError(
+                "bobbin.core=round is invalid with bobbin.core_width or bobbin.core_depth: a round core "
+                "has bobbin.core_diameter; set bobbin.core: rect for a rectangular one"
+            )
+        if self.core == "rect":
+            if self.core_diameter > 0:
+                raise JobError(
+                    "bobbin.core=rect is invalid with bobbin.core_diameter: a rectangular core has "
+                    "bobbin.core_width and bobbin.core_depth"
+                )
+            if (self.core_width > 0) != (self.core_depth > 0):
+                raise JobError(
+                    "bobbin.core=rect is invalid with only one of bobbin.core_width and bobbin.core_depth: "
+                    "give both (or neither)"
+                )
+        if self.crossover_at >= 360.0:
+            raise JobError(f"lay.crossover_at={self.crossover_at:g} is invalid: must be in [0, 360) deg")
+
+    # -- the coil as laid (winder.motion.coil) ------------------------------
+    @property
+    def bobbin(self) -> Bobbin:
+        return Bobbin(
+            self.window_width or self.coil_length,
+            self.window_height,
+            self.core,
+            self.core_diameter,
+            self.core_width,
+            self.core_depth,
+        )
+
+    @property
+    def winding(self) -> Winding:
+        """Every coil as laid in the bobbin (one per pole)."""
+        return self._winding  # type: ignore[attr-defined, no-any-return]
+
+    @property
+    def layer_turns(self) -> int:
+        """Turns of layer 1 of a coil without overrides (``turns_per_layer``, auto resolved)."""
+        return self._base_turns  # type: ignore[attr-defined, no-any-return]
 
     # -- derived quantities ------------------------------------------------
     @property
@@ -225,11 +475,11 @@ class Job:
         """Feed steps of one layer, rounded to the nearest step, halves up. The
         ratio is nudged by 1e-9 relative so that decimal inputs such as
         99 um / 6 um, which land a hair below .5 in binary, round as written."""
-        return self.feed_steps_of(self.turns_per_layer)
+        return self.feed_steps_of(self.layer_turns)
 
     @property
     def layer_fork_steps(self) -> int:
-        return self.turns_per_layer * self.fork_steps_per_rev
+        return self.layer_turns * self.fork_steps_per_rev
 
     @property
     def step_lengths(self) -> tuple[float, float, float]:
@@ -293,14 +543,17 @@ class Job:
         return sum(s.steps for s in self.segments())
 
     def to_dict(self) -> dict[str, Any]:
-        return {f.name: getattr(self, f.name) for f in fields(self)}
+        """The job's settings by their names (``bobbin.window_width``)."""
+        return {SETTINGS[f.name]: getattr(self, f.name) for f in fields(self)}
 
     @classmethod
-    def from_dict(cls, values: Mapping[str, Any]) -> Job:
+    def from_dict(cls, values: Mapping[str, Any], *, check_fit: bool = True) -> Job:
+        """The job of the settings ``values`` (by their names; the others at
+        their defaults)."""
         unknown = sorted(set(values) - set(FIELD_SPECS))
         if unknown:
             raise JobError(f"unknown job field {unknown[0]!r}: known fields are {', '.join(FIELD_SPECS)}")
-        return cls(**values)
+        return cls(**{ATTRIBUTES[k]: v for k, v in values.items()}, check_fit=check_fit)
 
 
 def check_field(name: str, value: Any) -> Any:
@@ -312,3 +565,26 @@ def check_field(name: str, value: Any) -> Any:
         return spec.check(value)
     except SpecError as exc:
         raise JobError(str(exc)) from None
+
+
+def motion_refusal(job: Job) -> str:
+    """Why the cell cannot wind ``job`` yet ("" if it can), in one line: the
+    settings that are declared and checked, and shape the coil's geometry,
+    but whose motion is not implemented (the orthocyclic cam of the flyer,
+    the reversal dwell, the slower first layer: issue 32). Winding them
+    helically, without the dwell or at full speed, would lay another coil
+    than the job asks for."""
+    missing = []
+    if job.lay == "orthocyclic":
+        missing.append("lay=orthocyclic (the crossover cam of the flyer)")
+    if job.reversal_dwell > 0:
+        missing.append(f"reversal_dwell={job.reversal_dwell:g} (the dwell at the flange)")
+    if job.first_layer_speed < 1.0:
+        missing.append(f"first_layer_speed={job.first_layer_speed:g} (the slower first layer)")
+    if not missing:
+        return ""
+    verb = "is" if len(missing) == 1 else "are"
+    return (
+        f"job {job.job_id} cannot be wound yet: {', '.join(missing)} {verb} not implemented in the "
+        "motion (winder check lays out its coil)"
+    )

@@ -310,7 +310,7 @@ def _title(run: Run) -> str:
     model = f"{run.sim_config.model} motor model" if run.sim_config else "no motor model"
     state = "complete" if run.complete else ("cut short, recovered" if run.recovered else "incomplete")
     return (
-        f"{run.label}: {j.poles} poles x {j.layers} layers x {j.turns_per_layer} turns, "
+        f"{run.label}: {j.poles} poles x {j.layers} layers x {j.layer_turns} turns, "
         f"{run.profile or '?'} profile, {model} ({state})"
     )
 
