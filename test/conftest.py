@@ -222,3 +222,20 @@ def final_report(bag: dict[str, list[tuple[int, Any]]], namespace: str = "") -> 
         for st in arr.status
         if is_consumer(st.name, values := {kv.key: kv.value for kv in st.values}, namespace)
     ][-1]
+
+
+def bag_closed(bag: Path) -> bool:
+    """Whether the consumer closed ``bag``: its metadata.yaml says
+    ``winder_bag: closed``. (metadata.yaml exists from a run's first moment,
+    saying ``recording``, so that a bag is readable whatever stops it.)"""
+    try:
+        return "winder_bag: closed" in (bag / "metadata.yaml").read_text()
+    except OSError:
+        return False
+
+
+def closed_bags(root: Path) -> list[Path]:
+    """The bag directories under ``root`` the consumer has closed, oldest name first."""
+    if not root.is_dir():
+        return []
+    return sorted(b for b in root.iterdir() if b.is_dir() and bag_closed(b))

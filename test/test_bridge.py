@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import Procs, final_report, rosbags_read, spin_until
+from conftest import Procs, closed_bags, final_report, rosbags_read, spin_until
 
 from winder.motion.job import Job
 
@@ -65,10 +65,10 @@ def start_cell(procs: Procs, bags: Path, *bridge_params: str) -> subprocess.Pope
 
 
 def wait_for_bags(bags: Path, n: int, timeout: float = 60.0) -> list[Path]:
-    """The first ``n`` closed bags (metadata.yaml written), oldest first."""
+    """The first ``n`` closed bags, oldest first."""
     t_end = time.monotonic() + timeout
     while time.monotonic() < t_end:
-        done = sorted(m.parent for m in bags.glob("*/metadata.yaml"))
+        done = closed_bags(bags)
         if len(done) >= n:
             return done
         time.sleep(0.2)

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import Procs, final_report, is_consumer, rosbags_read, spin_until
+from conftest import Procs, bag_closed, final_report, is_consumer, rosbags_read, spin_until
 
 from winder.analysis.metrics import analyze
 from winder.contract.stream import RUN_ID
@@ -214,7 +214,7 @@ def test_a_dead_consumer_is_not_ready(tmp_path: Path, procs: Procs, ros: Any) ->
     assert reply.success, reply.message
     run_id = re.match(r"run (\S+) started", reply.message).group(1)  # type: ignore[union-attr]
     t_end = time.monotonic() + 60
-    while not (bags / run_id / "metadata.yaml").exists() and time.monotonic() < t_end:
+    while not bag_closed(bags / run_id) and time.monotonic() < t_end:
         ros_spin(ros, 0.2)
     assert read_run(bags / run_id).complete
 
@@ -251,7 +251,7 @@ def test_start_run_sets_up_and_starts_in_one_call(tmp_path: Path, procs: Procs, 
     run_id = re.match(r"run (\S+) started", good.reason).group(1)  # type: ignore[union-attr]
     assert run_id.startswith("tap_")
     t_end = time.monotonic() + 60
-    while not (bags / run_id / "metadata.yaml").exists() and time.monotonic() < t_end:
+    while not bag_closed(bags / run_id) and time.monotonic() < t_end:
         ros_spin(ros, 0.2)
     run = read_run(bags / run_id)
     assert run.complete and run.plan.job.poles == 2

@@ -62,7 +62,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from conftest import BIN, Procs, spin_until
+from conftest import BIN, Procs, bag_closed, spin_until
 
 from winder.contract.topics import CELL_STATE_KEYS, ROLE_KEY, STATUS_KEYS, in_namespace
 
@@ -437,7 +437,7 @@ def check_done(cell: Cell, run_id: str, total: int, report: Status) -> None:
     assert v.get("errors", "0") == "0", f"stream errors in run {run_id}: {report.message}"
     assert "bag" in v, f"the final report has no bag key: {v}"
     if v["bag"]:  # the bag is closed before the report is announced
-        assert (Path(v["bag"]) / "metadata.yaml").exists(), f"bag {v['bag']} not closed at the final report"
+        assert bag_closed(Path(v["bag"])), f"bag {v['bag']} not closed at the final report"
     cell.wait(lambda: cell.taken(run_id) == total, 5, f"the receipts of run {run_id} to reach {total}")
 
 

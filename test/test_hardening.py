@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import BIN, Procs, is_consumer, rosbags_read
+from conftest import BIN, Procs, closed_bags, is_consumer, rosbags_read
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from test_nodes import SMALL_JOB, job_args, only_bag, timed_rows, winder_run
@@ -274,8 +274,11 @@ def final_status_of(bag_dir: Path) -> dict[str, str]:
 
 @pytest.mark.ros
 def test_nodes_survive_junk_jobs_chunks_and_receipts(tmp_path: Path, procs: Procs, ros: Any) -> None:
-    """Junk on winder/job, winder/steps, winder/step_times and winder/progress:
-    every node reports it in one line and stays alive; a good job runs after."""
+    """Junk on winder/job, winder/steps, winder/step_times and winder/progress
+    from nodes that are not the cell's (one topic each, so none looks like one
+    of the cell's parts): every node refuses it, says so once naming the
+    sender, and stays alive; a good job runs after. (Junk from the cell's own
+    part reaches the checks behind: test_sim_node_reports_a_malformed_chunk...)"""
     from conftest import spin_until
     from diagnostic_msgs.msg import DiagnosticArray, KeyValue
     from std_msgs.msg import Int32MultiArray, Int64MultiArray, String
@@ -293,10 +296,14 @@ def test_nodes_survive_junk_jobs_chunks_and_receipts(tmp_path: Path, procs: Proc
         procs.start("profile_node"),
         procs.start("interp_node", "-p", "autostart:=false", "-p", "turns_per_layer:=2", "-p", "poles:=1"),
     ]
-    pub_job = ros.create_publisher(String, "/winder/job", QOS_LATCHED)
-    pub_steps = ros.create_publisher(Int32MultiArray, "/winder/steps", QOS_STREAM)
-    pub_times = ros.create_publisher(Int64MultiArray, "/winder/step_times", QOS_STREAM)
-    pub_progress = ros.create_publisher(KeyValue, "/winder/progress", QOS_STATE)
+    import rclpy
+
+    topics = ("job", "steps", "times", "progress")
+    junk = {t: rclpy.create_node(f"junk_{t}", context=ros.context) for t in topics}
+    pub_job = junk["job"].create_publisher(String, "/winder/job", QOS_LATCHED)
+    pub_steps = junk["steps"].create_publisher(Int32MultiArray, "/winder/steps", QOS_STREAM)
+    pub_times = junk["times"].create_publisher(Int64MultiArray, "/winder/step_times", QOS_STREAM)
+    pub_progress = junk["progress"].create_publisher(KeyValue, "/winder/progress", QOS_STATE)
     spin_until(
         ros,
         lambda: pub_times.get_subscription_count() > 0 and pub_steps.get_subscription_count() > 0,
@@ -312,13 +319,21 @@ def test_nodes_survive_junk_jobs_chunks_and_receipts(tmp_path: Path, procs: Proc
     ]:
         pub_job.publish(String(data=text))
         time.sleep(0.2)
-    spin_until(ros, lambda: sum("job description rejected" in s for s in seen) >= 2, 30, "the rejections")
     pub_steps.publish(pack_steps(np.zeros((0, 4), np.int32)))
     pub_times.publish(pack_timed(np.zeros((0, 5), np.int64)))
     pub_progress.publish(KeyValue(key="rw400", value="lots"))
     pub_progress.publish(KeyValue(key="rw400", value="-5"))
-    time.sleep(1.0)
+    time.sleep(1.5)
     assert all(p.poll() is None for p in nodes), [procs.log(p) for p in nodes if p.poll() is not None]
+    logs = {name: procs.log(p) for name, p in zip(("sim", "profile", "interp"), nodes, strict=True)}
+    # each refused, named once: the job by the profile and sim nodes, the steps by the
+    # profile node, the timed steps by the sim node, the receipts by the interp node
+    for name, sender in [
+        ("sim", "/junk_job"), ("profile", "/junk_job"), ("profile", "/junk_steps"),
+        ("sim", "/junk_times"), ("interp", "/junk_progress"),
+    ]:  # fmt: skip
+        assert logs[name].count(f"messages from {sender} ignored") == 1, (name, sender, logs[name])
+    assert not any("job description rejected" in s for s in seen), "junk from a stranger was acted on"
     # a good job still runs through the same three nodes
     from rclpy.task import Future
     from std_srvs.srv import Trigger
@@ -416,7 +431,7 @@ def test_a_restarted_node_leaves_the_cell_able_to_run_the_next_job(
         )
         # the bag of the sim node that saw the stall is closed, with its final report
         time.sleep(0.5)
-        finished = [b for b in sorted(bags.iterdir()) if (b / "metadata.yaml").exists()]
+        finished = closed_bags(bags)
         assert finished, sorted(bags.iterdir())
         assert final_status_of(finished[-1])["state"] == "incomplete"
         # the stall's ERROR reports are in the bag, and winder analyze says so
@@ -769,12 +784,12 @@ def test_a_cell_with_use_sim_time_completes_its_job(tmp_path: Path, procs: Procs
     procs.start("interp_node", *SMALL_INTERP, *sim_time)
     t_end = time.monotonic() + 60
     while time.monotonic() < t_end:
-        bags = list((tmp_path / "bags").glob("*/metadata.yaml"))
+        bags = closed_bags(tmp_path / "bags")
         if bags:
             break
         time.sleep(0.2)
     assert bags, "no closed bag within 60 s"
-    report = final_report(rosbags_read(bags[0].parent))
+    report = final_report(rosbags_read(bags[0]))
     assert report["state"] == "done" and report["steps_done"] == report["steps_total"], report
 
 
@@ -822,9 +837,9 @@ def test_a_start_while_a_job_runs_is_refused_and_the_job_completes(
         time.sleep(0.2)
         third = start()
     assert third.success, third.message
-    spin_until(ros, lambda: len(list(bags.glob("*/metadata.yaml"))) == 2, 60, "the second bag")
-    for meta in sorted(bags.glob("*/metadata.yaml")):
-        report = final_report(rosbags_read(meta.parent))
+    spin_until(ros, lambda: len(closed_bags(bags)) == 2, 60, "the second bag")
+    for done in closed_bags(bags):
+        report = final_report(rosbags_read(done))
         assert report["state"] == "done" and report["steps_done"] == report["steps_total"], report
 
 
@@ -848,9 +863,9 @@ def test_a_plain_reader_is_not_the_sim(tmp_path: Path, procs: Procs, ros: Any) -
     assert not heard, "the job started for a plain reader"
     bags = tmp_path / "bags"
     procs.start("sim_node", "-p", f"bag_dir:={bags}")
-    spin_until(ros, lambda: bool(list(bags.glob("*/metadata.yaml"))), 60, "the job recorded by the sim node")
-    [meta] = list(bags.glob("*/metadata.yaml"))
-    report = final_report(rosbags_read(meta.parent))
+    spin_until(ros, lambda: bool(closed_bags(bags)), 60, "the job recorded by the sim node")
+    [done] = closed_bags(bags)
+    report = final_report(rosbags_read(done))
     assert report["state"] == "done" and report["steps_done"] == report["steps_total"] == "3072", report
     assert (
         sum(np.frombuffer(bytes(m.data), np.int64).size for m in heard) // 5 == 3072

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from conftest import Procs
+from conftest import Procs, closed_bags
 
 from winder.record.reader import read_run
 
@@ -94,9 +94,9 @@ def test_an_orchestrator_brings_the_cell_up_in_order(tmp_path: Path, procs: Proc
     assert list(bags.glob("*")), "the run did not start"
     assert not lc.transition("sim_node", "deactivate")
     assert lc.state("sim_node") == "active"
-    while not list(bags.glob("*/metadata.yaml")) and time.monotonic() < t_end:
+    while not closed_bags(bags) and time.monotonic() < t_end:
         time.sleep(0.2)
-    [meta] = list(bags.glob("*/metadata.yaml"))
+    [meta] = [b / "metadata.yaml" for b in closed_bags(bags)]
     run = read_run(meta.parent)
     assert run.complete and not run.errors, run.errors
 
@@ -137,7 +137,7 @@ def test_a_transition_the_state_does_not_have_is_refused_and_every_node_lives_on
     t_end = time.monotonic() + 60
     while not list(bags.glob("*")) and time.monotonic() < t_end:
         time.sleep(0.1)
-    assert list(bags.glob("*")) and not list(bags.glob("*/metadata.yaml")), "no run going on"
+    assert list(bags.glob("*")) and not closed_bags(bags), "no run going on"
     for node in NODES:  # mid-run
         assert not lc.transition(node, "configure")
         assert not lc.transition(node, "activate")
@@ -147,9 +147,9 @@ def test_a_transition_the_state_does_not_have_is_refused_and_every_node_lives_on
         assert not lc.call(lc.change[node], req).success
         assert lc.state(node) == "active"
     assert all(p.poll() is None for p, _ in procs.procs), "a node died"
-    while not list(bags.glob("*/metadata.yaml")) and time.monotonic() < t_end:
+    while not closed_bags(bags) and time.monotonic() < t_end:
         time.sleep(0.2)
-    [meta] = list(bags.glob("*/metadata.yaml"))
+    [meta] = [b / "metadata.yaml" for b in closed_bags(bags)]
     assert read_run(meta.parent).complete  # the run went on to its end
     for node, p in zip(NODES, (p for p, _ in procs.procs), strict=True):
         assert "transition 'explode' refused: not valid from state active" in procs.log(p), node

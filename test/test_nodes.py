@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import BIN, Procs, final_report, is_consumer, rosbags_read, spin_until
+from conftest import BIN, Procs, bag_closed, final_report, is_consumer, rosbags_read, spin_until
 
 pytestmark = pytest.mark.ros
 
@@ -86,7 +86,7 @@ def test_cell_records_every_step_once_in_order(tmp_path: Path, procs: Procs, pro
     assert not list((tmp_path / "tmp").iterdir())  # a clean run leaves no node logs behind
     bag_dir = only_bag(tmp_path)
     assert bag_dir.name.startswith("small_")
-    assert (bag_dir / "metadata.yaml").exists()
+    assert bag_closed(bag_dir)
     bag = rosbags_read(bag_dir)
     rows = timed_rows(bag)
     t, seg, pos = rows[:, 0], rows[:, 1], rows[:, 2:]
@@ -288,7 +288,7 @@ def test_sigint_mid_job_leaves_a_readable_bag(tmp_path: Path, procs: Procs) -> N
     time.sleep(2.0)  # mid-job: the whole job takes over a minute of simulated time
     assert procs.stop(sim, signal.SIGINT) == 0
     bag_dir = only_bag(tmp_path)
-    assert (bag_dir / "metadata.yaml").exists()
+    assert bag_closed(bag_dir)
     bag = rosbags_read(bag_dir)
     rows = timed_rows(bag)
     assert rows.shape[0] > 0

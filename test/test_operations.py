@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import Procs, rosbags_read
+from conftest import Procs, closed_bags, rosbags_read
 from test_operate import ruckig_stop
 
 from winder.analysis.metrics import analyze
@@ -177,9 +177,9 @@ def test_live_pause_override_resume_abort_in_real_time(tmp_path: Path, procs: Pr
     time.sleep(1.0)
     assert "aborting" in ctl(procs, "abort")
     t_end = time.monotonic() + 60
-    while not list(bags.glob("*/metadata.yaml")) and time.monotonic() < t_end:
+    while not closed_bags(bags) and time.monotonic() < t_end:
         time.sleep(0.2)
-    [meta] = list(bags.glob("*/metadata.yaml"))
+    [meta] = [b / "metadata.yaml" for b in closed_bags(bags)]
     run = read_run(meta.parent)
     assert run.report["state"] == "aborted" and not run.errors, run.errors
     raw = rosbags_read(meta.parent)

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import Procs, is_consumer, rosbags_read, spin_until
+from conftest import Procs, bag_closed, is_consumer, rosbags_read, spin_until
 from test_nodes import SMALL_JOB, expected_end, job_args, only_bag, timed_rows, winder_run
 
 from winder.contract.stream import describe_job
@@ -49,7 +49,7 @@ def test_signal_mid_job_closes_the_bag(tmp_path: Path, procs: Procs, sig: int) -
     time.sleep(1.5)
     assert procs.stop(sim, sig) == 0
     bag_dir = only_bag(tmp_path)
-    assert (bag_dir / "metadata.yaml").exists()
+    assert bag_closed(bag_dir)
     bag = rosbags_read(bag_dir)
     assert final_status(bag)["state"] == "incomplete"
     assert "Traceback" not in procs.log(sim)
@@ -60,7 +60,8 @@ class FakeProfile:
 
     def __init__(self, node: Any, job: Job) -> None:
         from diagnostic_msgs.msg import DiagnosticArray
-        from std_msgs.msg import Int64MultiArray, String
+        from std_msgs.msg import Int32MultiArray, Int64MultiArray, String
+        from trajectory_msgs.msg import JointTrajectory
 
         from winder.ros.qos import QOS_LATCHED, QOS_STREAM
 
@@ -68,6 +69,13 @@ class FakeProfile:
         self.job = job
         self.pub_job = node.create_publisher(String, "/winder/job", QOS_LATCHED)
         self.pub = node.create_publisher(Int64MultiArray, "/winder/step_times", QOS_STREAM)
+        # it stands in for the cell's interp and profile node, and the sim node acts only on
+        # theirs (docs/SECURITY.md): it has their parts' endpoints (winder.contract.trust.SIGNS)
+        self.parts = [
+            node.create_publisher(Int32MultiArray, "/winder/steps", QOS_STREAM),
+            node.create_publisher(String, "/winder/control", QOS_STREAM),
+            node.create_publisher(JointTrajectory, "/winder/path", QOS_LATCHED),
+        ]
         self.statuses: list[tuple[int, str, dict[str, str]]] = []
         node.create_subscription(DiagnosticArray, "/diagnostics", self._diag, 100)
         self.String = String

@@ -172,8 +172,10 @@ class ProfileNode(ManagedNode):
 
     # -- in --------------------------------------------------------------
     def on_job(self, raw: bytes, gid: bytes) -> None:
-        if not self.peers.admit(TOPIC_JOB, gid):
-            return
+        self.peers.deliver(TOPIC_JOB, gid, raw, self.take_job)
+
+    def take_job(self, raw: bytes) -> None:
+        """A run's description from the cell's interp node."""
         if not self.solo.settled():  # not sure yet to be the cell's only profile node
             self.get_logger().warning(
                 "a job description before this node knows it is the cell's only profile node: ignored"
@@ -259,12 +261,10 @@ class ProfileNode(ManagedNode):
             self.time_chunk(raw)
 
     def on_steps(self, raw: bytes, gid: bytes) -> None:
-        if self.peers.admit(TOPIC_STEPS, gid):
-            self.time_chunk(raw)
+        self.peers.deliver(TOPIC_STEPS, gid, raw, self.time_chunk)
         if self.sub_steps is not None:
             for more, sender in waiting(self.sub_steps):  # the chunks queued behind it, in one go
-                if self.peers.admit(TOPIC_STEPS, sender):
-                    self.time_chunk(more)
+                self.peers.deliver(TOPIC_STEPS, sender, more, self.time_chunk)
 
     def time_chunk(self, raw: bytes) -> None:
         if self.plan is None or self.checker is None:
@@ -371,12 +371,14 @@ class ProfileNode(ManagedNode):
         return self.mode_known
 
     def on_sim_config_raw(self, raw: bytes, gid: bytes) -> None:
-        if self.peers.admit(TOPIC_SIM_CONFIG, gid):
-            try:
-                msg = deserialize_message(raw, String)
-            except Exception:  # not a String: nothing to act on
-                return
-            self.on_sim_config(msg)
+        self.peers.deliver(TOPIC_SIM_CONFIG, gid, raw, self.take_sim_config)
+
+    def take_sim_config(self, raw: bytes) -> None:
+        try:
+            msg = deserialize_message(raw, String)
+        except Exception:  # not a String: nothing to act on
+            return
+        self.on_sim_config(msg)
 
     def on_sim_config(self, msg: String) -> None:
         """The consumer's configuration of the run: a real-time run gets the

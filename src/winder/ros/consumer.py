@@ -300,8 +300,10 @@ class StepConsumer(ManagedNode):
 
     # -- a run starts -----------------------------------------------------------
     def on_job(self, raw: bytes, gid: bytes) -> None:
-        if not self.peers.admit(TOPIC_JOB, gid):
-            return
+        self.peers.deliver(TOPIC_JOB, gid, raw, self.take_job)
+
+    def take_job(self, raw: bytes) -> None:
+        """A run's description from the cell's interp node."""
         if not self.solo.settled():  # not sure yet to be the cell's only consumer
             self.get_logger().warning(
                 "a job description before this node knows it is the cell's only consumer: ignored"
@@ -413,14 +415,16 @@ class StepConsumer(ManagedNode):
             self.error(f"job {plan.job_id} runs unrecorded: cannot open a bag: {one_line(exc)}")
 
     def on_path(self, raw: bytes, gid: bytes) -> None:
-        if not self.peers.admit(TOPIC_PATH, gid):
-            return
+        self.peers.deliver(TOPIC_PATH, gid, raw, self.take_path)
+
+    def take_path(self, raw: bytes) -> None:
         self.path_raw = raw
         self.record_path()
 
     def on_profile_config(self, raw: bytes, gid: bytes) -> None:
-        if not self.peers.admit(TOPIC_PROFILE_CONFIG, gid):
-            return
+        self.peers.deliver(TOPIC_PROFILE_CONFIG, gid, raw, self.take_profile_config)
+
+    def take_profile_config(self, raw: bytes) -> None:
         self.profile_raw = raw
         self.record_profile_config()
 
@@ -454,8 +458,7 @@ class StepConsumer(ManagedNode):
 
     # -- operator events --------------------------------------------------------
     def on_control(self, raw: bytes, gid: bytes) -> None:
-        if self.peers.admit(TOPIC_CONTROL, gid):
-            self.handle_control(raw)
+        self.peers.deliver(TOPIC_CONTROL, gid, raw, self.handle_control)
         self.pump()
 
     def handle_control(self, raw: bytes, *, early: bool = False) -> None:
@@ -489,16 +492,13 @@ class StepConsumer(ManagedNode):
         executor may serve a busy step stream first, and an event must not
         come after the steps it times (the profile node sends it first)."""
         for raw, gid in waiting(self.sub_control):
-            if self.peers.admit(TOPIC_CONTROL, gid):
-                self.handle_control(raw)
+            self.peers.deliver(TOPIC_CONTROL, gid, raw, self.handle_control)
 
     # -- the step stream --------------------------------------------------------
     def on_step_times(self, raw: bytes, gid: bytes) -> None:
-        if self.peers.admit(TOPIC_STEP_TIMES, gid):
-            self.receive(raw)
+        self.peers.deliver(TOPIC_STEP_TIMES, gid, raw, self.receive)
         for more, sender in waiting(self.sub_times):  # the chunks queued behind it, in one go
-            if self.peers.admit(TOPIC_STEP_TIMES, sender):
-                self.receive(more)
+            self.peers.deliver(TOPIC_STEP_TIMES, sender, more, self.receive)
         self.pump()
 
     def receive(self, raw: bytes) -> None:

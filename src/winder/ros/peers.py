@@ -20,6 +20,7 @@ from __future__ import annotations
 import os
 import socket
 import time
+from collections import deque
 from collections.abc import Callable
 from typing import Any
 
@@ -44,6 +45,10 @@ UNKNOWN = "_UNKNOWN_"
 Who = tuple[str, str]  # (node name, namespace) as the graph reports them
 
 
+#: s a message is held for the graph to name its publisher (:meth:`Peers.deliver`)
+HOLD = 2.0
+
+
 class Peers:
     """The cell's own nodes as ``node`` sees them on the graph, and the
     verdict on each message's sender (see the module doc). ``namespace``:
@@ -62,6 +67,9 @@ class Peers:
         self.intruders = Intruders()  # over the node's life: each sender reported once
         self.run = Intruders()  # of the current run (the owner resets it): for its report
         self.unnamed = 0  # messages from endpoints the graph did not name yet: not acted on
+        #: messages held while the graph does not name their publisher yet, per topic
+        self.held: dict[str, deque[tuple[float, bytes, bytes, Callable[[bytes], None], str | None]]] = {}
+        self._retry_timer: Any = None
         #: called when a new foreign sender is refused (the node says so in its status at once)
         self.on_new: Callable[[], None] | None = None
         self.warn = warn or (lambda text: node.get_logger().warning(text))
@@ -124,18 +132,78 @@ class Peers:
         messages of the cell's node that owns ``topic`` (:data:`OWNERS`),
         deserialized; what does not deserialize is dropped."""
 
-        def take(raw: bytes, gid: bytes) -> None:
-            if not self.admit(topic, gid):
-                return
+        def act(raw: bytes) -> None:
             try:
                 msg = deserialize_message(raw, msg_type)
             except Exception:  # not of the topic's type: nothing to act on
                 return
             callback(msg)
 
+        def take(raw: bytes, gid: bytes) -> None:
+            self.deliver(topic, gid, raw, act)
+
         return attributed(self.node, msg_type, topic, take, qos, **kwargs)
 
     # -- the verdict --------------------------------------------------------------
+    def verdict(self, topic: str, gid: bytes, role: str | None = None) -> bool | None:
+        """True: the message comes from the cell's node owning ``topic``
+        (``role``, by default the owner in :data:`OWNERS`); False: from
+        another node (counted, reported once per sender); None: the graph
+        does not name its publisher yet."""
+        role = role or OWNERS[topic]
+        who = self.sender(topic, gid)
+        if who is None:
+            return None
+        if who == self.pinned.get(role) or who == self.owner(role):
+            return True
+        self.refuse(topic, who, gid, f"not the cell's {ROLE_NAMES[role]}")
+        return False
+
+    def deliver(
+        self, topic: str, gid: bytes, raw: bytes, act: Callable[[bytes], None], role: str | None = None
+    ) -> None:
+        """``act(raw)`` if the message comes from the cell's node owning
+        ``topic`` (see :meth:`verdict`). A message whose publisher the graph
+        does not name yet (its node's discovery info is a little behind its
+        data) is held, with every later one of the topic behind it so that
+        their order stays, and judged again every 10 ms, for up to
+        :data:`HOLD` s; then it is refused as unnamed."""
+        held = self.held.get(topic)
+        if held:
+            held.append((time.monotonic(), gid, raw, act, role))
+            return
+        verdict = self.verdict(topic, gid, role)
+        if verdict:
+            act(raw)
+        elif verdict is None:
+            self.held[topic] = deque([(time.monotonic(), gid, raw, act, role)])
+            if self._retry_timer is None:
+                self._retry_timer = steady_timer(self.node, 0.01, self._retry)
+            elif self._retry_timer.is_canceled():
+                self._retry_timer.reset()
+
+    def _retry(self) -> None:
+        for topic, held in list(self.held.items()):
+            while held:
+                since, gid, raw, act, role = held[0]
+                verdict = self.verdict(topic, gid, role)
+                if verdict is None and time.monotonic() - since < HOLD:
+                    break
+                held.popleft()
+                if verdict:
+                    act(raw)
+                elif verdict is None:
+                    self.unnamed += 1
+                    if self.unnamed == 1:
+                        self.warn(
+                            f"{self.topic(topic)}: a message from a publisher the graph did not name "
+                            f"within {HOLD:g} s ignored (docs/SECURITY.md)"
+                        )
+            if not held:
+                del self.held[topic]
+        if not self.held and self._retry_timer is not None:
+            self._retry_timer.cancel()
+
     def admit(self, topic: str, gid: bytes, role: str | None = None) -> bool:
         """Whether the message on ``topic`` from publisher ``gid`` comes from
         the cell's node that owns the topic (``role``; by default the owner

@@ -89,9 +89,8 @@ class Readiness:
             msg = deserialize_message(raw, KeyValue)
         except Exception:  # not a KeyValue: nothing to act on
             return
-        known = msg.key in READY_ROLES and msg.value in READY_STATES
-        if known and self.peers.admit(TOPIC_READY, gid, msg.key):
-            self._on_ready(msg)
+        if msg.key in READY_ROLES and msg.value in READY_STATES:
+            self.peers.deliver(TOPIC_READY, gid, raw, lambda _raw: self._on_ready(msg), msg.key)
 
     def _on_matched(self, info: Any) -> None:
         """An announcer left (its node died or stopped): its last word, kept
