@@ -238,10 +238,10 @@ def _looked_at(path: Path) -> None:
 @pytest.mark.parametrize(
     ("name", "figures"),
     [
-        ("trap", ["motion", "tracking", "winding"]),
-        ("lin2k", ["motion", "tracking", "winding"]),  # 2 kHz: the envelope cuts the long lines
-        ("abort", ["motion", "tracking", "winding", "operations"]),  # an operator's command
-        ("pole1", ["motion", "tracking", "winding"]),  # an axis that never moves
+        ("trap", ["motion", "tracking", "winding", "wound"]),
+        ("lin2k", ["motion", "tracking", "winding", "wound"]),  # 2 kHz: the envelope cuts the long lines
+        ("abort", ["motion", "tracking", "winding", "operations", "wound"]),  # an operator's command
+        ("pole1", ["motion", "tracking", "winding", "wound"]),  # an axis that never moves
     ],
 )
 @pytest.mark.parametrize("processes", ["forked", "one"])

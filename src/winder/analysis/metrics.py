@@ -715,7 +715,7 @@ def _wound_rows(w: dict[str, Any]) -> list[tuple[str, str]]:
         found = f"none (tolerance {w['tolerance_m'] * 1e3:g} mm)"
     return [
         ("as wound: turns laid", laid),
-        ("as wound: largest axial error", f"{_f(worst, 1e3, decimals=4)} mm"),
+        ("as wound: max axial error", f"{_f(worst, 1e3, decimals=4)} mm"),
         ("as wound: defects", found),
     ]
 
