@@ -321,7 +321,12 @@ def run_player(
     terminal = None
     try:
         player = Player(plan, rate=rate, node_namespace=_namespace_of(plan), start_paused=start_paused)
-        live = [] if force else live_cell(player.node, _namespace_of(plan))
+        try:
+            live = [] if force else live_cell(player.node, _namespace_of(plan))
+        except RCLError:  # Ctrl-C shut the context down while it looked at the graph
+            if rclpy.ok():
+                raise
+            raise KeyboardInterrupt from None
         if live:
             ns = _namespace_of(plan) or "/"
             raise CellLiveError(
@@ -374,7 +379,8 @@ def live_cell(node: Any, namespace: str, look: float = LIVE_LOOK) -> list[str]:
     peers = Peers(node, namespace)
     deadline = time.monotonic() + look
     while True:
-        found = sorted({who for role in SIGNS for who in peers.holders(role)})
+        me = (node.get_name(), node.get_namespace())
+        found = sorted({who for role in SIGNS for who in peers.holders(role)} - {me})  # not the player
         if found or time.monotonic() > deadline:
             return [fully_qualified(*who) for who in found]
         time.sleep(0.05)

@@ -96,7 +96,8 @@ def resimulate(
         procs = NodeProcesses(env, log_dir)
         rclpy.init(args=[])
         node = rclpy.create_node("winder_resim", namespace=namespace or "/")
-        SenderExecutor().add_node(node)  # the watch takes /diagnostics with each sender
+        executor = SenderExecutor()  # the watch takes /diagnostics with each sender
+        executor.add_node(node)  # (node.executor is a weak reference: this one keeps it)
         failure = ""
         try:
             watch = CellWatch(node, namespace)
