@@ -486,8 +486,8 @@ def report_run(result: Any, wall: float, command: str = "run") -> int:
             f"winder {command}: the cell did not finish: {result.message} (node logs in {result.log_dir})",
             file=sys.stderr,
         )
-        if getattr(result, "occupied", False):  # another cell in the namespace: started where it cannot run
-            return EXIT_BAD_INPUT
+        if getattr(result, "occupied", False) or getattr(result, "refused", False):
+            return EXIT_BAD_INPUT  # another cell in the namespace, or a setting or start refused: nothing ran
         return EXIT_NODE_DIED if result.node_died else EXIT_FAILED
     r = JobReport.from_values(s)
     x = r.extra  # beyond the contract's keys, what the consumer reports (a hardware driver's may not)

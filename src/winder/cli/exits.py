@@ -35,7 +35,8 @@ EXIT_TABLE: dict[int, tuple[str, str]] = {
     ),
     EXIT_BAD_INPUT: (
         "bad input",
-        "an option, a job file or a recording that cannot be used; nothing was started or written",
+        "an option, a job file or a recording that cannot be used, a setting a node of the cell refused, "
+        "a namespace where another cell runs; nothing was started or written",
     ),
     EXIT_ABORTED: (
         "run aborted",

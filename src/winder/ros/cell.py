@@ -75,6 +75,7 @@ class CellResult:
     #: messages on the cell's topics from nodes that are not the cell's (who, how many), "" if none
     intruders: str = ""
     occupied: bool = False  #: refused: another cell's node plays a part in the namespace
+    refused: bool = False  #: the job was refused before it started (a node refused a setting or the start)
     node_died: bool = False  #: the run ended because a node of the cell exited (killed, crashed)
 
 
@@ -308,6 +309,7 @@ class CellWatch:
         self.own = own
         self.started: set[str] = set()  #: names of the nodes this process started (set by run_cell)
         self.occupied = ""  #: another cell's node heard in this namespace, in words
+        self.refused = ""  #: why the job was refused before it started (a setting, the start call)
         self.foreign: dict[str, str] = {}  #: node -> what it refused from foreign senders
         self.since = time.monotonic()
         self.namespace = namespace
@@ -575,6 +577,7 @@ def _wait_for_job(
     while watch.summary is None:
         refused = watch.ask_to_start()
         if refused:
+            watch.refused = refused
             return refused
         executor.spin_once(timeout_sec=0.1)
         if keys is not None:
@@ -604,6 +607,7 @@ def _result(watch: CellWatch, failure: str, log_dir: Path) -> CellResult:
         result.message = watch.message
     result.errors = list(watch.errors)
     result.occupied = bool(watch.occupied) and watch.summary is None
+    result.refused = bool(watch.refused) and watch.summary is None
     refused = {**watch.foreign, "winder run": watch.peers.intruders.summary()}
     result.intruders = "; ".join(f"{who}: {what}" for who, what in refused.items() if what)
     if watch.errors and not result.message:
