@@ -585,6 +585,9 @@ class StepConsumer(ManagedNode):
                     break
             if batch:
                 self.execute(np.concatenate(batch) if len(batch) > 1 else batch[0])
+                # the stall clock counts waiting for steps, not executing them: a batch the
+                # nonlinear model took seconds over is no stall of the stream
+                self.last_chunk_wall = time.monotonic()
             self.receipt()
         if not self.inbox:  # the run's last chunk may have been dropped, not executed
             self.settle_if_complete()
