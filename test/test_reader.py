@@ -219,8 +219,9 @@ def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
     )
 
 
-def assert_one_line_error(r: subprocess.CompletedProcess[str], *needles: str) -> None:
-    assert r.returncode == 2, r.stdout + r.stderr
+def assert_one_line_error(r: subprocess.CompletedProcess[str], *needles: str, code: int = 2) -> None:
+    """One line on stderr holding every needle, no traceback, exit ``code`` (2: bad input)."""
+    assert r.returncode == code, r.stdout + r.stderr
     assert "Traceback" not in r.stderr
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1, r.stderr

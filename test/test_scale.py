@@ -243,7 +243,10 @@ def test_external_sim_that_never_comes_is_named(procs: Procs, profile: Path | No
     )
     assert f"  DDS profile        {said}" in r.stdout, r.stdout
     assert_one_line_error(
-        r, "the job did not start within 3 s", "the step consumer (sim_node or a hardware driver), which"
+        r,
+        "the job did not start within 3 s",
+        "the step consumer (sim_node or a hardware driver), which",
+        code=1,  # the run failed: its job never started (winder.cli.exits)
     )
 
 
@@ -292,7 +295,7 @@ def test_a_cell_found_by_a_discovery_server(procs: Procs, tmp_path: Path) -> Non
     from test_reader import assert_one_line_error
 
     alone = subprocess.run([*run, "--start-timeout", "5"], stdin=subprocess.DEVNULL, **options)
-    assert_one_line_error(alone, "the job did not start within 5 s")
+    assert_one_line_error(alone, "the job did not start within 5 s", code=1)  # the run failed
 
 
 def test_a_split_cell_found_by_a_discovery_server(hosts: Hosts, procs: Procs, tmp_path: Path) -> None:
