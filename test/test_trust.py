@@ -47,15 +47,24 @@ def winder_run(
 
 
 def long_run(procs: Procs, bags: Path) -> subprocess.Popen[str]:
-    """``winder run`` of a job that lasts ~10 s, in the background: the live cell."""
+    """``winder run`` of a job that lasts ~10 s, in the background: the live cell
+    (its output into files beside the bags, read by :func:`finish`: a pipe
+    nobody reads while the test goes on could fill and stop it)."""
+    bags.mkdir(parents=True, exist_ok=True)
     return subprocess.Popen(
         [str(BIN / "winder"), "run", "--bag-dir", str(bags), "--turns-per-layer", "400"],
         env=procs.env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
+        stdout=(bags.parent / f"{bags.name}.out").open("w"),
+        stderr=(bags.parent / f"{bags.name}.err").open("w"),
         text=True,
         stdin=subprocess.DEVNULL,
     )
+
+
+def finish(run: subprocess.Popen[str], bags: Path, timeout: float = 240) -> tuple[str, str]:
+    """Wait for a :func:`long_run`; its stdout and stderr."""
+    run.wait(timeout=timeout)
+    return (bags.parent / f"{bags.name}.out").read_text(), (bags.parent / f"{bags.name}.err").read_text()
 
 
 def bag_of(out: str) -> Path:
@@ -126,7 +135,7 @@ def test_a_second_cell_in_the_namespace_is_refused(tmp_path: Path, procs: Procs)
     try:
         time.sleep(3.0)  # the first cell runs
         second = winder_run(procs, tmp_path / "b", timeout=120)
-        out, err = first.communicate(timeout=240)
+        out, err = finish(first, tmp_path / "a")
     finally:
         if first.poll() is None:
             first.kill()
@@ -149,7 +158,7 @@ def test_a_second_node_of_a_role_leaves(tmp_path: Path, procs: Procs) -> None:
         seconds += [procs.start(node) for node in ("profile_node", "interp_node")]
         for p in seconds:
             assert p.wait(timeout=30) == 2
-        out, err = first.communicate(timeout=240)
+        out, err = finish(first, tmp_path / "a")
     finally:
         if first.poll() is None:
             first.kill()
@@ -180,7 +189,7 @@ def test_play_into_a_live_cell_is_refused_and_forced_changes_nothing(tmp_path: P
         time.sleep(3.0)
         refused = play()
         forced = play("--force", "--rate", "20")
-        out, err = live.communicate(timeout=240)
+        out, err = finish(live, tmp_path / "live")
     finally:
         if live.poll() is None:
             live.kill()
