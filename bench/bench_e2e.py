@@ -328,11 +328,15 @@ def replay_split(bag: Path) -> None:
     work = Path(tempfile.mkdtemp(prefix="winder-bench-replay-"))
     try:
         node.set_parameters([Parameter("bag_dir", value=str(work))])  # type: ignore[no-untyped-call]
-        node.on_job(job_raw)
+        # one node in a process, no cell on its graph: the sender checks have nothing to look
+        # up, so every message is taken as the cell's (the checks cost a dict lookup per chunk)
+        node.peers.deliver = lambda _topic, _gid, raw, act, _role=None: act(raw)
+        node.solo.alone = True
+        node.on_job(job_raw, b"")
         if path_raw is not None:
-            node.on_path(path_raw)  # else the steps would wait for it
+            node.on_path(path_raw, b"")  # else the steps would wait for it
         if ramp_raw is not None:
-            node.on_profile_config(ramp_raw)
+            node.on_profile_config(ramp_raw, b"")
         for label, (owner, attr) in SPLIT.items():  # objects that exist once a job runs
             if owner == "tracker" and node.axes:
                 wrap(type(node.axes[0].tracker), attr, label)
@@ -340,7 +344,7 @@ def replay_split(bag: Path) -> None:
                 wrap(type(node.pub_state), attr, label)
         t0 = time.perf_counter()
         for data in chunks:
-            node.on_step_times(data)
+            node.on_step_times(data, b"")
         for _ in range(100_000):
             if node.plan is None:
                 break
