@@ -107,7 +107,8 @@ class ProfileNode(ManagedNode):
         # messages are acted on only when the cell's node owning the topic sent them
         self.peers = Peers(self)
         self.solo = Solo(self, "profile", self.peers, self.leave)  # one profile node per cell
-        self.solo.on_settled = self.announce
+        self.solo.on_settled = self.settled
+        self.job_waiting: bytes | None = None  # a job description that came before the node settled
         self.diag.foreign = self.peers.intruders.summary  # its statuses name what it refused
         self.peers.on_new = lambda: self.report()  # at once, not at the next second
         attributed(self, String, TOPIC_JOB, self.on_job, QOS_LATCHED)
@@ -174,12 +175,18 @@ class ProfileNode(ManagedNode):
     def on_job(self, raw: bytes, gid: bytes) -> None:
         self.peers.deliver(TOPIC_JOB, gid, raw, self.take_job)
 
+    def settled(self) -> None:
+        """The node knows it is the cell's only profile node: say ready, and
+        take a job description that came before."""
+        raw, self.job_waiting = self.job_waiting, None
+        if raw is not None:
+            self.take_job(raw)
+        self.announce()
+
     def take_job(self, raw: bytes) -> None:
         """A run's description from the cell's interp node."""
-        if not self.solo.settled():  # not sure yet to be the cell's only profile node
-            self.get_logger().warning(
-                "a job description before this node knows it is the cell's only profile node: ignored"
-            )
+        if not self.solo.settled():  # not sure yet to be the cell's only profile node: kept till it is
+            self.job_waiting = raw
             return
         try:
             job = parse_job_description(deserialize_message(raw, String).data)

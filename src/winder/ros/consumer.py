@@ -155,7 +155,8 @@ class StepConsumer(ManagedNode):
         # when that is the cell's node owning the topic (winder.ros.peers)
         self.peers = Peers(self)
         self.solo = Solo(self, "consumer", self.peers, self.leave)  # one consumer per cell
-        self.solo.on_settled = self.announce
+        self.solo.on_settled = self.settled
+        self.job_waiting: bytes | None = None  # a job description that came before the node settled
         self.sub_job = attributed(
             self,
             String,
@@ -302,12 +303,18 @@ class StepConsumer(ManagedNode):
     def on_job(self, raw: bytes, gid: bytes) -> None:
         self.peers.deliver(TOPIC_JOB, gid, raw, self.take_job)
 
+    def settled(self) -> None:
+        """The node knows it is the cell's only consumer (winder.ros.peers.Solo):
+        say ready, and take a job description that came before."""
+        raw, self.job_waiting = self.job_waiting, None
+        if raw is not None:
+            self.take_job(raw)
+        self.announce()
+
     def take_job(self, raw: bytes) -> None:
         """A run's description from the cell's interp node."""
-        if not self.solo.settled():  # not sure yet to be the cell's only consumer
-            self.get_logger().warning(
-                "a job description before this node knows it is the cell's only consumer: ignored"
-            )
+        if not self.solo.settled():  # not sure yet to be the cell's only consumer: kept till it is
+            self.job_waiting = raw
             return
         try:
             plan = parse_job_description(deserialize_message(raw, String).data)
