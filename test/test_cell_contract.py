@@ -266,8 +266,17 @@ def get_params(node: Any, target: str, names: list[str]) -> list[Any]:
 
     client = node.create_client(GetParameters, f"/{target}/get_parameters")
     spin_until(node, client.service_is_ready, 30, f"{target}/get_parameters")
-    future = client.call_async(GetParameters.Request(names=names))
-    spin_until(node, future.done, 30, "get_parameters reply")
+    # a DDS service reply can be lost while the reply topic still matches (README,
+    # Reliability): ask again after 10 s, three times at most
+    for attempt in range(3):
+        future = client.call_async(GetParameters.Request(names=names))
+        try:
+            spin_until(node, future.done, 10, "get_parameters reply")
+            break
+        except AssertionError:
+            client.remove_pending_request(future)
+            if attempt == 2:
+                raise
     return [parameter_value_to_python(v) for v in future.result().values]
 
 
