@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from conftest import BIN, Procs, rosbags_read
+from conftest import BIN, Procs, bag_closed, rosbags_read
 
 from winder.contract.topics import ROLE_KEY, STATUS_KEYS
 from winder.record.reader import read_run
@@ -198,7 +198,7 @@ def test_start_run_with_a_ramp_runs_that_ramp(tmp_path: Path, procs: Procs, ros:
     assert started.successful, started.reason
     run_id = re.match(r"run (\S+) started", started.reason).group(1)  # type: ignore[union-attr]
     t_end = time.monotonic() + 60
-    while not (bags / run_id / "metadata.yaml").exists() and time.monotonic() < t_end:
+    while not bag_closed(bags / run_id) and time.monotonic() < t_end:
         ros_spin(ros, 0.2)
     run = read_run(bags / run_id)
     assert run.complete and run.profile == "trapezoid" and run.profile_config["v_max"] == 3000.0

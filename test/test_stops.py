@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import Procs, is_consumer, rosbags_read
+from conftest import Procs, closed_bags, is_consumer, rosbags_read
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -193,9 +193,9 @@ def test_a_stop_that_waits_for_resume_holds_until_winder_ctl_resume(
     )
     assert out.returncode == 0 and "resumed after the stop" in out.stdout, out.stdout + out.stderr
     t_end = time.monotonic() + 60
-    while not list(bags.glob("*/metadata.yaml")) and time.monotonic() < t_end:
+    while not closed_bags(bags) and time.monotonic() < t_end:
         ros_spin(ros, 0.2)
-    [meta] = list(bags.glob("*/metadata.yaml"))
+    [meta] = [b / "metadata.yaml" for b in closed_bags(bags)]
     run = read_run(meta.parent)
     assert run.complete and not run.errors, run.errors
     layer = run.steps[run.steps[:, 1] == 0]
