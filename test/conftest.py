@@ -47,6 +47,18 @@ _held: dict[int, Any] = {}
 _cursor = itertools.count(os.getpid() * 7)
 
 
+def lock_domain(domain: int, kind: str) -> Any:
+    """The open lock file of ``domain`` for tests of ``kind`` (locked: no other
+    process holds it until it is closed), or None if another process holds it."""
+    lock = (Path(tempfile.gettempdir()) / f"winder-{kind}-domain-{domain}.lock").open("w")
+    try:
+        fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        lock.close()
+        return None
+    return lock
+
+
 def next_domain(timeout: float = 120.0) -> int:
     """A ROS domain no other test process on this machine holds (a lock file
     per domain in the temp directory), held until :func:`release_domain` or
@@ -59,11 +71,8 @@ def next_domain(timeout: float = 120.0) -> int:
             domain = pool[next(_cursor) % len(pool)]
             if domain in _held:
                 continue
-            lock = (Path(tempfile.gettempdir()) / f"winder-test-domain-{domain}.lock").open("w")
-            try:
-                fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except OSError:
-                lock.close()
+            lock = lock_domain(domain, "test")
+            if lock is None:
                 continue
             _held[domain] = lock
             return domain

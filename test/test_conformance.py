@@ -43,7 +43,6 @@ whose braking steps the interp node had not sent yet still ends aborted.
 
 from __future__ import annotations
 
-import fcntl
 import json
 import os
 import re
@@ -52,7 +51,6 @@ import shutil
 import signal
 import subprocess
 import sys
-import tempfile
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -62,7 +60,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from conftest import BIN, Procs, bag_closed, spin_until
+from conftest import BIN, Procs, bag_closed, lock_domain, spin_until
 
 from winder.contract.topics import CELL_STATE_KEYS, ROLE_KEY, STATUS_KEYS, in_namespace
 
@@ -102,11 +100,8 @@ def own_domain(timeout: float = 120.0) -> Iterator[int]:
     while True:
         for i in range(len(DOMAINS)):
             domain = DOMAINS[(start + i) % len(DOMAINS)]
-            lock = (Path(tempfile.gettempdir()) / f"winder-conformance-domain-{domain}.lock").open("w")
-            try:
-                fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except OSError:
-                lock.close()
+            lock = lock_domain(domain, "conformance")
+            if lock is None:
                 continue
             try:
                 yield domain

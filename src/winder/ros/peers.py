@@ -204,18 +204,6 @@ class Peers:
         if not self.held and self._retry_timer is not None:
             self._retry_timer.cancel()
 
-    def admit(self, topic: str, gid: bytes, role: str | None = None) -> bool:
-        """Whether the message on ``topic`` from publisher ``gid`` comes from
-        the cell's node that owns the topic (``role``; by default the owner
-        in :data:`OWNERS`). Anything else is counted and reported once per
-        foreign node."""
-        role = role or OWNERS[topic]
-        who = self.sender(topic, gid)
-        if who is not None and (who == self.pinned.get(role) or who == self.owner(role)):
-            return True
-        self.refuse(topic, who, gid, f"not the cell's {ROLE_NAMES[role]}")
-        return False
-
     def admit_from(self, topic: str, gid: bytes, name: str) -> bool:
         """Whether a message on ``topic`` that speaks for the node ``name``
         of this cell (a ``<node>: job`` status) comes from that very node, as

@@ -26,7 +26,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.subscription import Subscription
 
-__all__ = ["GID_SIZE", "SenderExecutor", "attributed", "gid_text", "waiting"]
+__all__ = ["GID_SIZE", "SenderExecutor", "attributed", "waiting"]
 
 #: RMW_GID_STORAGE_SIZE of Jazzy's rmw
 GID_SIZE = 16
@@ -166,11 +166,6 @@ def waiting(sub: Subscription, limit: int = 16) -> Iterator[tuple[bytes, bytes]]
         if got is None:
             return
         yield got
-
-
-def gid_text(gid: bytes | list[int]) -> str:
-    """A GID as the graph tools print it (``01.0f.aa...``)."""
-    return ".".join(f"{b:02x}" for b in bytes(gid))
 
 
 class SenderExecutor(SingleThreadedExecutor):
