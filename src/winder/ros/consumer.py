@@ -181,6 +181,10 @@ class StepConsumer(ManagedNode):
         # pump() runs on events (a chunk, a job) and, while work waits on the
         # clock (pacing, batching), every 5 ms; idle, only the 1 Hz report runs
         self.pump_timer = steady_timer(self, self.pump_period, self.pump)
+        # a chunk or event held until the graph named its sender is acted on
+        # later, from the peers' retry timer: the pump must run then too, or
+        # the chunk would wait in the inbox for the next event
+        self.peers.on_late = self.pump
         steady_timer(self, 0.5, self.watch)
         steady_timer(self, 1.0, self.report)
         self.bag_topics = {
