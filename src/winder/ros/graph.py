@@ -20,13 +20,34 @@ so a caller polls until the node it waits for shows up.
 from __future__ import annotations
 
 import os
+from typing import NamedTuple
 
 from rclpy.node import Node
 
 from winder.contract.trust import SIGNS
 from winder.ros.dds import DISCOVERY_SERVER_KEY
 
-__all__ = ["consumers", "fully_qualified", "profile_nodes", "role_holders"]
+__all__ = ["Who", "consumers", "fully_qualified", "participant", "profile_nodes", "role_holders"]
+
+
+class Who(NamedTuple):
+    """A node on the graph: its name, its namespace and its DDS participant
+    (the first 12 bytes of its endpoints' GIDs, hex). Two nodes of one name
+    in two processes (a second cell started in the same namespace) are two
+    participants: never taken for one another."""
+
+    name: str
+    namespace: str
+    participant: str
+
+    @property
+    def fq(self) -> str:
+        return fully_qualified(self.name, self.namespace)
+
+
+def participant(gid: bytes | list[int]) -> str:
+    """The DDS participant (process) of an endpoint's GID: its GUID prefix."""
+    return bytes(gid)[:12].hex()
 
 
 def _ns(namespace: str) -> str:
@@ -34,19 +55,19 @@ def _ns(namespace: str) -> str:
     return "/" + ns if ns else "/"
 
 
-def _endpoints(node: Node, namespace: str, topic: str, publishers: bool) -> set[tuple[str, str]]:
+def _endpoints(node: Node, namespace: str, topic: str, publishers: bool) -> set[Who]:
     """The nodes in ``namespace`` with a publisher (or a subscription) on the
     cell's ``topic`` (names the graph has learned only)."""
     ns = _ns(namespace)
     get = node.get_publishers_info_by_topic if publishers else node.get_subscriptions_info_by_topic
     return {
-        (i.node_name, i.node_namespace)
+        Who(i.node_name, i.node_namespace, participant(i.endpoint_gid))
         for i in get(fully_qualified(topic, namespace))
         if i.node_namespace == ns
     }
 
 
-def role_holders(node: Node, namespace: str, role: str) -> set[tuple[str, str]]:
+def role_holders(node: Node, namespace: str, role: str) -> set[Who]:
     """The nodes in ``namespace`` that play ``role`` by their endpoints
     (:data:`winder.contract.trust.SIGNS`), ``node`` itself included. A topic
     of the part on which the graph shows no endpoint at all, anywhere, is,
@@ -56,7 +77,7 @@ def role_holders(node: Node, namespace: str, role: str) -> set[tuple[str, str]]:
     topic of the part counts."""
     publishes, reads = SIGNS[role]
     partial = bool(os.environ.get(DISCOVERY_SERVER_KEY))  # a discovery server's client sees part of the graph
-    found: list[set[tuple[str, str]]] = []
+    found: list[set[Who]] = []
     for topics, publishers in ((publishes, True), (reads, False)):
         for topic in topics:
             full = fully_qualified(topic, namespace)
@@ -67,7 +88,8 @@ def role_holders(node: Node, namespace: str, role: str) -> set[tuple[str, str]]:
 
 
 def _others(node: Node, namespace: str, role: str) -> list[tuple[str, str]]:
-    return sorted(role_holders(node, namespace, role) - {(node.get_name(), node.get_namespace())})
+    me = (node.get_name(), node.get_namespace())
+    return sorted({(w.name, w.namespace) for w in role_holders(node, namespace, role)} - {me})
 
 
 def consumers(node: Node, namespace: str) -> list[tuple[str, str]]:

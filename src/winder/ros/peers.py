@@ -32,7 +32,7 @@ from rclpy.subscription import Subscription
 
 from winder.contract.topics import PROCESS_KEYS, ROLE_KEY, TOPIC_DIAGNOSTICS, in_namespace
 from winder.contract.trust import OWNERS, ROLE_NAMES, SIGNS, Intruders
-from winder.ros.graph import fully_qualified, role_holders
+from winder.ros.graph import Who, fully_qualified, participant, role_holders
 from winder.ros.qos import QOS_DIAGNOSTICS
 from winder.ros.sender import attributed
 from winder.ros.timers import steady_timer
@@ -42,7 +42,6 @@ __all__ = ["Peers", "Solo"]
 #: what rmw puts for a node's name or namespace it has not learned yet
 UNKNOWN = "_UNKNOWN_"
 
-Who = tuple[str, str]  # (node name, namespace) as the graph reports them
 
 
 #: s a message is held for the graph to name its publisher (:meth:`Peers.deliver`)
@@ -61,7 +60,6 @@ class Peers:
         ns = (node.get_namespace() if namespace is None else namespace).strip("/")
         self.ns = "/" + ns if ns else "/"
         self.namespace = ns
-        self.me: Who = (node.get_name(), node.get_namespace())
         self.pinned: dict[str, Who] = {}
         self.gids: dict[bytes, Who] = {}  # publisher GID -> its node, as the graph reported it
         self.intruders = Intruders()  # over the node's life: each sender reported once
@@ -72,6 +70,10 @@ class Peers:
         self._retry_timer: Any = None
         #: called when a new foreign sender is refused (the node says so in its status at once)
         self.on_new: Callable[[], None] | None = None
+        #: called after held messages were acted on (from the retry timer, not
+        #: the subscription's callback: work a node does after its callback must
+        #: be woken, as the consumer's pump)
+        self.on_late: Callable[[], None] | None = None
         self.warn = warn or (lambda text: node.get_logger().warning(text))
 
     # -- the graph ----------------------------------------------------------------
@@ -88,7 +90,8 @@ class Peers:
                 # says _NODE_NAME_UNKNOWN_ until the node's discovery info
                 # comes): not known yet, asked again next time
                 if UNKNOWN not in info.node_name and UNKNOWN not in info.node_namespace:
-                    self.gids[bytes(info.endpoint_gid)] = (info.node_name, info.node_namespace)
+                    gid_of = bytes(info.endpoint_gid)
+                    self.gids[gid_of] = Who(info.node_name, info.node_namespace, participant(gid_of))
             who = self.gids.get(gid)
         return who
 
@@ -119,7 +122,7 @@ class Peers:
             if self.owner(role) is None:
                 holders = sorted(self.holders(role))
                 if holders:
-                    names = ", ".join(fully_qualified(*h) for h in holders)
+                    names = ", ".join(h.fq for h in holders)
                     missing.append(f"{len(holders)} nodes play the {ROLE_NAMES[role]} in {self.ns} ({names})")
                 else:
                     missing.append(f"no {ROLE_NAMES[role]} in {self.ns} on the graph")
@@ -183,6 +186,7 @@ class Peers:
                 self._retry_timer.reset()
 
     def _retry(self) -> None:
+        acted = False
         for topic, held in list(self.held.items()):
             while held:
                 since, gid, raw, act, role = held[0]
@@ -192,6 +196,7 @@ class Peers:
                 held.popleft()
                 if verdict:
                     act(raw)
+                    acted = True
                 elif verdict is None:
                     self.unnamed += 1
                     if self.unnamed == 1:
@@ -203,6 +208,8 @@ class Peers:
                 del self.held[topic]
         if not self.held and self._retry_timer is not None:
             self._retry_timer.cancel()
+        if acted and self.on_late is not None:
+            self.on_late()
 
     def admit_from(self, topic: str, gid: bytes, name: str) -> bool:
         """Whether a message on ``topic`` that speaks for the node ``name``
@@ -213,7 +220,7 @@ class Peers:
         server. A stranger named like the cell's node is told apart by the
         process its statuses name: :class:`Solo`, ``winder run``.)"""
         who = self.sender(topic, gid)
-        if who is not None and who[0] == name and who[1] == self.ns:
+        if who is not None and who.name == name and who.namespace == self.ns:
             return True
         self.refuse(topic, who, gid, f"it speaks for {fully_qualified(name, self.namespace)}")
         return False
@@ -225,7 +232,9 @@ class Peers:
             # messages that matter before a run are repeated (readiness, 1 Hz)
             self.unnamed += 1
             return
-        sender = fully_qualified(*who)
+        sender = who.fq
+        if any(who.participant != w.participant and who[:2] == w[:2] for w in self.pinned.values()):
+            sender += " (other process)"
         self.run.count(sender, self.topic(topic))
         if self.intruders.count(sender, self.topic(topic)):
             self.warn(
@@ -287,7 +296,7 @@ class Solo:
         me = (self.node.get_name(), self.node.get_namespace())
         if self.node.get_node_names_and_namespaces().count(me) != 1:
             return False  # another node under this very name (a second cell's, or a ghost)
-        if self.peers.holders(self.role) - {me}:
+        if any((w.name, w.namespace) != me for w in self.peers.holders(self.role)):
             return False
         return all(self.peers.owner(r) is not None for r in SIGNS if r != self.role)
 
@@ -307,7 +316,7 @@ class Solo:
                 continue
             name = st.name.split(":", 1)[0].rsplit("/", 1)[-1]
             who = self.peers.sender(TOPIC_DIAGNOSTICS, gid)
-            if who != (name, self.peers.ns):
+            if who is None or (who.name, who.namespace) != (name, self.peers.ns):
                 continue  # a status forged by another node: it cannot make this one leave
             other = f"{fully_qualified(name, self.peers.namespace)} (pid {pid} on {host})"
             if (int(started), pid) < (self.started_ns, self.me[0]):

@@ -380,7 +380,7 @@ def live_cell(node: Any, namespace: str, look: float = LIVE_LOOK) -> list[str]:
     deadline = time.monotonic() + look
     while True:
         me = (node.get_name(), node.get_namespace())
-        found = sorted({who for role in SIGNS for who in peers.holders(role)} - {me})  # not the player
+        found = sorted({who[:2] for role in SIGNS for who in peers.holders(role)} - {me})  # not the player
         if found or time.monotonic() > deadline:
             return [fully_qualified(*who) for who in found]
         time.sleep(0.05)
