@@ -47,12 +47,14 @@ def winder_run(
 
 
 def long_run(procs: Procs, bags: Path) -> subprocess.Popen[str]:
-    """``winder run`` of a job that lasts ~10 s, in the background: the live cell
+    """``winder run`` of a job that lasts ~10 s (paced to the wall clock, so
+    that a fast machine does not end it before the test acts), in the background: the live cell
     (its output into files beside the bags, read by :func:`finish`: a pipe
     nobody reads while the test goes on could fill and stop it)."""
     bags.mkdir(parents=True, exist_ok=True)
     return subprocess.Popen(
-        [str(BIN / "winder"), "run", "--bag-dir", str(bags), "--turns-per-layer", "400"],
+        [str(BIN / "winder"), "run", "--bag-dir", str(bags), "--turns-per-layer", "400"]
+        + ["--real-time", "--real-time-factor", "160"],
         env=procs.env,
         stdout=(bags.parent / f"{bags.name}.out").open("w"),
         stderr=(bags.parent / f"{bags.name}.err").open("w"),

@@ -77,6 +77,10 @@ class Intruder(Node):
     def on_job(self, msg: String) -> None:
         if "intruder" not in msg.data:
             self.job_text = msg.data
+            try:  # the run's id as the run starts (its statuses say it up to 1 s later)
+                self.run_id = str(json.loads(msg.data)["run_id"]) or self.run_id
+            except (ValueError, KeyError, TypeError):
+                pass
 
     def tick(self) -> None:
         if not self.run_id:
