@@ -27,7 +27,7 @@ block by block so that the temporaries stay in the CPU cache.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -40,9 +40,11 @@ __all__ = [
     "dda",
     "deviation_stats",
     "interpolate",
+    "interpolate_pieces",
     "line_distance",
     "min_deviation",
     "path_mismatch",
+    "pieces_mismatch",
     "point_by_point",
 ]
 
@@ -277,6 +279,74 @@ def path_mismatch(
         bad |= r.view(np.uint64) >= np.uint64(2 * a)
     hit = int(np.argmax(bad))
     return hit if bad[hit] else -1
+
+
+def _piece_windows(
+    pieces: Sequence[Sequence[int]], first: int, stop: int
+) -> Iterator[tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], int, int, int]]:
+    """For the rows ``first..stop-1`` of a path of straight ``pieces`` (each
+    a delta; the rows of a piece follow those of the one before), each piece
+    they touch: (its start, its delta, its rows' first and stop within it,
+    and the offset of its first row in the window)."""
+    at = np.zeros(len(pieces[0]), np.int64)
+    done = 0
+    for piece in pieces:
+        d = np.asarray(piece, dtype=np.int64)
+        n = int(np.max(np.abs(d))) if d.size else 0
+        lo, hi = max(first - done, 0), min(stop - done, n)
+        if lo < hi:
+            yield at.copy(), d, lo, hi, done + lo - first
+        at += d
+        done += n
+        if done >= stop:
+            return
+
+
+def interpolate_pieces(
+    start: npt.ArrayLike, pieces: Sequence[Sequence[int]], *, first: int = 0, stop: int | None = None
+) -> IntPath:
+    """The minimum-deviation steps of a path of straight ``pieces`` (a cam:
+    each piece a delta, walked by :func:`interpolate` from where the one
+    before ended): rows ``first..stop-1`` of the path's rows, each piece
+    contributing as many rows as its major axis has steps. One piece is
+    :func:`interpolate`'s move exactly."""
+    s = np.asarray(start, dtype=np.int64)
+    if len(pieces) == 1:
+        return interpolate(s, pieces[0], first=first, stop=stop)
+    total = sum(max(abs(int(v)) for v in p) for p in pieces)
+    stop = total if stop is None else stop
+    if not 0 <= first <= stop <= total:
+        raise ValueError(f"start={first}, stop={stop} is invalid: need 0 <= start <= stop <= {total}")
+    out = np.empty((stop - first, s.size), dtype=np.int64)
+    for at, d, lo, hi, row in _piece_windows(pieces, first, stop):
+        out[row : row + hi - lo] = interpolate(s + at, d, first=lo, stop=hi)
+    return out
+
+
+def pieces_mismatch(
+    start: Sequence[int] | npt.NDArray[np.integer[Any]],
+    pieces: Sequence[Sequence[int]],
+    first: int,
+    pos: npt.ArrayLike,
+) -> int:
+    """:func:`path_mismatch` for a path of straight ``pieces``
+    (:func:`interpolate_pieces`): the first row of ``pos`` off the path's rows
+    from ``first`` on, or -1."""
+    if len(pieces) == 1:
+        return path_mismatch(start, pieces[0], first, pos)
+    p = np.asarray(pos)
+    s = np.asarray([int(v) for v in start], dtype=np.int64)
+    total = sum(max(abs(int(v)) for v in q) for q in pieces)
+    n = p.shape[0] if p.ndim == 2 else 0
+    if p.ndim != 2 or p.shape[1] != s.size:
+        raise ValueError(f"pos has shape {p.shape}: must be (n, {s.size})")
+    if not 0 <= first <= total - n:
+        raise ValueError(f"start={first}, stop={first + n} is invalid: need 0 <= start <= stop <= {total}")
+    for at, d, lo, hi, row in _piece_windows(pieces, first, first + n):
+        hit = path_mismatch((s + at).tolist(), d.tolist(), lo, p[row : row + hi - lo])
+        if hit >= 0:
+            return row + hit
+    return -1
 
 
 _IOTA = np.arange(0, dtype=np.int64)
