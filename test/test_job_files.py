@@ -61,13 +61,6 @@ def test_winder_run_check_takes_a_job_file(path: Path) -> None:
         [str(WINDER), "run", "--check", str(path)], capture_output=True, text=True, timeout=60
     )
     job = flat(YAML(typ="safe").load(path.read_text()))["interp_node"]
-    if job.get("lay") == "orthocyclic":  # its motion (the crossover cam) is not implemented yet: refused
-        assert out.returncode == 2 and out.stdout == "", (out.stdout, out.stderr)
-        assert out.stderr.strip() == (
-            f"winder run: error: job {job['job_id']} cannot be wound yet: lay=orthocyclic (the crossover "
-            "cam of the flyer) is not implemented in the motion (winder check lays out its coil)"
-        )
-        return
     assert out.returncode == 0, out.stderr
     assert f"job {job['job_id']}:" in out.stdout
 

@@ -33,8 +33,8 @@ from winder.contract.jobfile import load_job_file_hashed
 from winder.contract.params import INTERP_SPECS, check_interp, run_ramp, stop_points
 from winder.contract.stream import describe_job, make_run_id
 from winder.contract.topics import TOPIC_CONTROL, TOPIC_JOB, TOPIC_PROGRESS, TOPIC_STEPS, status_values
-from winder.motion.interp import interpolate
-from winder.motion.job import FIELD_SPECS, Job, motion_refusal
+from winder.motion.interp import interpolate_pieces
+from winder.motion.job import FIELD_SPECS, Job
 from winder.ros.chunks import STEPS_CDR
 from winder.ros.diagnostics import ERROR, OK, Diagnostics
 from winder.ros.managed import ManagedNode
@@ -276,10 +276,6 @@ class InterpNode(ManagedNode):
         except SpecError as exc:
             self.diag.publish("job", ERROR, f"job rejected: {exc}", status_values("blocked", role=ROLE))
             return False, f"job rejected: {exc}"
-        refused = motion_refusal(job)
-        if refused:
-            self.diag.publish("job", ERROR, f"job rejected: {refused}", status_values("blocked", role=ROLE))
-            return False, f"job rejected: {refused}"
         self.runs += 1
         self.job = job
         self.run_id = make_run_id(job.job_id, self.runs)
@@ -319,7 +315,7 @@ class InterpNode(ManagedNode):
         for seg in job.segments():
             for first in range(0, seg.steps, size):
                 stop = min(seg.steps, first + size)
-                pos = interpolate(seg.start, seg.delta, first=first, stop=stop)
+                pos = interpolate_pieces(seg.start, seg.pieces, first=first, stop=stop)
                 rows = np.empty((pos.shape[0], 1 + pos.shape[1]), dtype=np.int32)
                 rows[:, 0] = seg.index
                 rows[:, 1:] = pos

@@ -42,7 +42,7 @@ from winder.contract.params import (
 from winder.contract.run import JobReport
 from winder.contract.topics import check_namespace
 from winder.motion.interp import dda, deviation_stats, interpolate, min_deviation, point_by_point
-from winder.motion.job import FIELD_SPECS, Job, motion_refusal
+from winder.motion.job import FIELD_SPECS, Job
 from winder.spec import Spec, SpecError
 
 __all__ = ["main"]
@@ -235,9 +235,6 @@ def cmd_run(args: argparse.Namespace) -> int:
     # everything is checked here first: a bad value never starts a node or a bag
     given, digest = job_file_hashed(args)
     job = job_from_args(args, given["interp_node"])
-    refused = motion_refusal(job)
-    if refused:
-        raise UserError(refused)
     profile = values_from_args(args, PROFILE_SPECS, given["profile_node"])
     check_profile(profile)
     operation = values_from_args(args, OPERATION_SPECS, given["profile_node"])
@@ -253,7 +250,9 @@ def cmd_run(args: argparse.Namespace) -> int:
         extra["job_file_sha256"] = digest  # the run's bag names its recipe
     stops = stop_points(job, extra["stops"])
     pause = float(extra["stop_pause"])
-    _, duration_ns = plan_timing(profile, [s.steps for s in segments], stops, pause)  # the job as a whole
+    _, duration_ns = plan_timing(  # the job as a whole
+        profile, [s.steps for s in segments], stops, pause, [job.segment_speed(s) for s in segments]
+    )
     external = external_nodes(args)
     sim = values_from_args(args, SIM_SPECS, given["consumer"])
     check_sim({**sim, "record": False} if "sim" in external else sim)  # a remote bag_dir is its host's
@@ -338,7 +337,7 @@ def cmd_check(args: argparse.Namespace) -> int:
     given = job_file(args, check_fit=False)
     job = Job.from_dict(values_from_args(args, FIELD_SPECS, given["interp_node"]), check_fit=False)
     laid = job.winding
-    doc = {"job_id": job.job_id, **report(laid), "motion_refusal": motion_refusal(job)}
+    doc = {"job_id": job.job_id, **report(laid)}
     if args.json:
         print(json.dumps(doc, indent=2))
     else:
@@ -432,8 +431,6 @@ def check_lines(job: Job, doc: dict[str, Any]) -> list[str]:
     side = {"start": "the start flange", "far": "the far flange"}[doc["finish_side"]]
     lines.append(f"  finish side    {side} ({len(doc['layers'])} layers)")
     lines.append(f"  fits           {'yes' if doc['fits'] else 'NO: ' + doc['overflow']}")
-    if doc["motion_refusal"]:
-        lines.append(f"  note           {doc['motion_refusal']}")
     return lines
 
 

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from winder.motion.interp import interpolate, path_mismatch
+from winder.motion.interp import interpolate_pieces, pieces_mismatch
 from winder.motion.job import AXES, Job
 
 __all__ = [
@@ -111,6 +111,8 @@ class SegmentPlan:
     delta: tuple[int, ...]
     steps: int
     major: int  #: index of the axis with the most steps
+    #: the straight pieces of the move (a layer laid by a cam), else (delta,)
+    pieces: tuple[tuple[int, ...], ...] = ()
 
     @property
     def end(self) -> tuple[int, ...]:
@@ -197,7 +199,7 @@ def parse_job_description(text: str) -> JobPlan:
         ):
             raise ValueError(f"job description: segment {e.index} does not match its job fields")
         major = int(np.argmax(np.abs(e.delta)))
-        segs.append(SegmentPlan(e.kind, tuple(e.start), tuple(e.delta), e.steps, major))
+        segs.append(SegmentPlan(e.kind, tuple(e.start), tuple(e.delta), e.steps, major, e.pieces))
     stops, stop_pause = _stops(doc, expected)
     stop_resume = doc.get("stop_resume", "auto")
     if stop_resume not in ("auto", "call"):
@@ -371,8 +373,9 @@ class StreamChecker:
             return self._reject(
                 "bad", f"segment {segment}: {n} rows from step {k0} lie outside its steps 1..{seg.steps}"
             )
-        if path_mismatch(seg.start, seg.delta, k0 - 1, pos) >= 0:  # the closed form, row by row
-            path = interpolate(seg.start, seg.delta, first=k0 - 1, stop=k0 - 1 + n)
+        pieces = seg.pieces or (seg.delta,)
+        if pieces_mismatch(seg.start, pieces, k0 - 1, pos) >= 0:  # the closed form, row by row
+            path = interpolate_pieces(seg.start, pieces, first=k0 - 1, stop=k0 - 1 + n)
             off = np.flatnonzero(np.any(pos != path, axis=1))
             i = int(off[0])
             return self._reject(

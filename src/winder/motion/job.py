@@ -35,6 +35,8 @@ from collections.abc import Mapping
 from dataclasses import InitVar, dataclass, fields, replace
 from typing import Any
 
+import numpy as np
+
 from winder.motion.coil import CORES, LAYS, Bobbin, Winding, layer_capacity, winding
 from winder.spec import Spec, SpecError
 
@@ -45,7 +47,6 @@ __all__ = [
     "Job",
     "JobError",
     "Segment",
-    "motion_refusal",
     "parse_coil_overrides",
 ]
 
@@ -298,6 +299,15 @@ class Segment:
     delta: tuple[int, int, int]
     pole: int  #: coil being wound (or indexed to)
     layer: int  #: layer within the coil (-1 for an index move)
+    #: a layer laid by a cam of the flyer (orthocyclic, or with a reversal
+    #: dwell): its straight pieces, each a delta in steps (AXES order), the
+    #: fork the major axis of each, summing to ``delta``; () for one straight move
+    cam: tuple[tuple[int, int, int], ...] = ()
+
+    @property
+    def pieces(self) -> tuple[tuple[int, int, int], ...]:
+        """The straight pieces of the move: the cam's, or the one line ``delta``."""
+        return self.cam or (self.delta,)
 
     @property
     def end(self) -> tuple[int, int, int]:
@@ -409,11 +419,49 @@ class Job:
                 f"{self.wire_diameter:g} m wire: a layer would take {feed_steps:.3g} feed steps, "
                 f"more than 2**31 - 1 (feed_step must be at least {layer_length / MAX_STEPS:.3g} m)"
             )
+        self._check_cam()
         if self.layer_fork_steps > 2**31 - 1:
             raise JobError(
                 f"turns_per_layer={turns} is invalid: a layer of "
                 f"{self.layer_fork_steps} fork steps exceeds 2**31 - 1 steps"
             )
+
+    def _check_cam(self) -> None:
+        """The cam's pieces can be stepped with the fork as the major axis
+        (JobError, one line): the feed never outruns the flyer, so its step
+        rate stays below the fork's (at most ``v_max``) at any speed."""
+        spr = self.fork_steps_per_rev
+        if self.lay == "orthocyclic":
+            if self.crossover_at + self.crossover > 360.0:
+                raise JobError(
+                    f"lay.crossover_at={self.crossover_at:g} with lay.crossover={self.crossover:g} is "
+                    "invalid: the crossover zone must lie within a turn (crossover_at + crossover <= 360 deg)"
+                )
+            turns = max(self.layer_turns_of(p, 0) for p in range(self.poles))
+            k = np.arange(max(turns, 2), dtype=np.float64)
+            q = self.wire_diameter / (2 * self.feed_step) * (1 + 1e-9)
+            across = 0
+            for shift in (0, 1):  # the crossover of each layer kind (rounded to steps)
+                places = np.floor((2 * k + shift) * q + 0.5)
+                across = max(across, int(np.max(np.diff(places))))
+            zone = max(1, math.floor(self.crossover / 360.0 * spr + 0.5))
+            if across > zone:
+                need = math.ceil(across / spr * 3600.0) / 10.0
+                raise JobError(
+                    f"lay.crossover={self.crossover:g} deg is too short: the feed crosses {across} steps "
+                    f"({self.wire_diameter:g} m) in {zone} fork steps, faster than the flyer turns; the "
+                    f"shortest crossover zone that would do is {need:g} deg (or a coarser feed_step)"
+                )
+        elif self.dwell_fork_steps > 0:
+            for p in range(self.poles):
+                turns = self.layer_turns_of(p, 0)
+                if self.feed_steps_of(turns) > turns * spr:
+                    raise JobError(
+                        f"reversal_dwell={self.reversal_dwell:g} is invalid with feed_step="
+                        f"{self.feed_step:g} m: the feed is the major axis of a layer "
+                        f"({self.feed_steps_of(turns)} feed steps against {turns * spr} fork steps); "
+                        "a dwell needs the flyer to lead"
+                    )
 
     def _check_geometry(self) -> None:
         """The bobbin, wire and lay settings together (JobError, one line)."""
@@ -519,7 +567,9 @@ class Job:
         return round(pole * self.pole_steps_per_rev / self.poles)
 
     def segments(self) -> list[Segment]:
-        """The ordered straight moves of the job, in steps."""
+        """The ordered moves of the job, in steps: per coil its layers (each a
+        straight line, or a cam of the flyer: :meth:`layer_cam`), and the
+        pole index between coils."""
         out: list[Segment] = []
         pos = [0, 0, 0]
         direction = 1
@@ -529,14 +579,107 @@ class Job:
                 out.append(Segment(len(out), "index", tuple(pos), delta, pole, -1))  # type: ignore[arg-type]
                 pos[2] += delta[2]
             coil = self.coil(pole)
-            fork = coil.direction * coil.turns_per_layer * self.fork_steps_per_rev
+            origin, first = pos[0], direction
             for layer in range(coil.layers):
-                delta = (direction * self.feed_steps_of(coil.turns_per_layer), fork, 0)
-                out.append(Segment(len(out), "layer", tuple(pos), delta, pole, layer))  # type: ignore[arg-type]
+                cam = self.layer_cam(pole, layer, origin, first, pos[0])
+                net = (sum(p[0] for p in cam), sum(p[1] for p in cam), 0)
+                begin = (pos[0], pos[1], pos[2])
+                out.append(Segment(len(out), "layer", begin, net, pole, layer, cam if len(cam) > 1 else ()))
+                delta = net
                 pos[0] += delta[0]
                 pos[1] += delta[1]
                 direction = -direction
         return out
+
+    def layer_turns_of(self, pole: int, layer: int) -> int:
+        """Turns of layer ``layer`` (0-based) of coil ``pole`` (0-based): on an
+        orthocyclic coil wound ``auto`` the shifted layers may hold one less."""
+        geometry = self.winding.coils[pole].layers
+        return geometry[layer].turns if layer < len(geometry) else self.coil(pole).turns_per_layer
+
+    @property
+    def dwell_fork_steps(self) -> int:
+        """Fork steps of the reversal dwell at the end of each layer."""
+        return math.floor(self.reversal_dwell * self.fork_steps_per_rev + 0.5)
+
+    def turn_place(self, layer: int, k: int) -> int:
+        """Orthocyclic: the feed position (steps from the coil's first turn,
+        along the coil's first direction) of turn ``k`` (0-based, counted
+        from the start flange) of layer ``layer`` (0-based): the odd layers
+        (1, 3, ...) at ``k*d``, the shifted even ones at ``(k + 1/2)*d``;
+        rounded to the nearest step as :meth:`feed_steps_of`."""
+        halves = 2 * k + (layer % 2)
+        return math.floor(halves * self.wire_diameter / (2 * self.feed_step) * (1 + 1e-9) + 0.5)
+
+    def layer_cam(
+        self, pole: int, layer: int, origin: int, first: int, at: int
+    ) -> tuple[tuple[int, int, int], ...]:
+        """The straight pieces (feed, fork, pole deltas, steps) of layer
+        ``layer`` of coil ``pole``, whose first layer starts at feed
+        ``origin`` going ``first`` (+1/-1); the layer starts at feed ``at``.
+
+        * helical: the line of ``turns`` turns, one wire diameter on per
+          turn, then ``reversal_dwell`` turns of the flyer in place;
+        * orthocyclic, a cam of the flyer angle: the feed holds each turn
+          at its place (:meth:`turn_place`) and crosses over to the next within
+          the zone ``[crossover_at, crossover_at + crossover)`` of each turn
+          (degrees of the flyer, from the layer's start, whole turns of the
+          flyer from the coil's start); the last turn holds for the
+          reversal dwell, and in the last zone of the layer the wire climbs to
+          the next layer's first turn (half a wire diameter on or back). The
+          fork is the major axis of every piece (:meth:`_check_cam`)."""
+        coil = self.coil(pole)
+        turns = self.layer_turns_of(pole, layer)
+        spr = self.fork_steps_per_rev
+        dwell = self.dwell_fork_steps
+        sgn = coil.direction
+        going = first if layer % 2 == 0 else -first  # this layer's feed direction
+        if self.lay != "orthocyclic":
+            line = (going * self.feed_steps_of(turns), sgn * turns * spr, 0)
+            return (line, (0, sgn * dwell, 0)) if dwell else (line,)
+        # the places of this layer's turns in the order the flyer lays them
+        order = range(turns) if layer % 2 == 0 else range(turns - 1, -1, -1)
+        places = [origin + first * self.turn_place(layer, k) for k in order]
+        if layer + 1 < coil.layers:
+            nxt = self.layer_turns_of(pole, layer + 1)
+            k_next = 0 if (layer + 1) % 2 == 0 else nxt - 1
+            climb_to: int | None = origin + first * self.turn_place(layer + 1, k_next)
+        else:
+            climb_to = None
+        za = math.floor(self.crossover_at / 360.0 * spr + 0.5)
+        zc = max(1, math.floor(self.crossover / 360.0 * spr + 0.5))
+        end = turns * spr + dwell
+        pieces: list[tuple[int, int]] = []  # (feed, fork progress), merged below
+        feed, fork = at, 0
+
+        def go(to_feed: int, to_fork: int) -> None:
+            nonlocal feed, fork
+            if to_fork > fork or to_feed != feed:
+                pieces.append((to_feed - feed, to_fork - fork))
+                feed, fork = to_feed, to_fork
+
+        if places[0] != at:  # never: a layer starts where the last one climbed to
+            raise JobError(f"layer {layer + 1} of coil {pole + 1} starts off its first turn's place")
+        for r in range(turns - 1):
+            go(feed, r * spr + za)
+            go(places[r + 1], r * spr + za + zc)
+        if climb_to is not None:
+            r = (end - za - zc) // spr  # the last zone that ends within the layer
+            go(feed, r * spr + za)
+            go(climb_to, r * spr + za + zc)
+        go(feed, end)
+        merged: list[tuple[int, int]] = []
+        for df, dk in pieces:  # holds side by side are one hold
+            if merged and df == 0 and merged[-1][0] == 0:
+                merged[-1] = (0, merged[-1][1] + dk)
+            else:
+                merged.append((df, dk))
+        return tuple((df, sgn * dk, 0) for df, dk in merged)
+
+    def segment_speed(self, segment: Segment) -> float:
+        """The fraction of ``v_max`` a segment runs at: ``first_layer_speed``
+        on the first layer of every coil, else 1."""
+        return self.first_layer_speed if segment.kind == "layer" and segment.layer == 0 else 1.0
 
     @property
     def total_steps(self) -> int:
@@ -565,26 +708,3 @@ def check_field(name: str, value: Any) -> Any:
         return spec.check(value)
     except SpecError as exc:
         raise JobError(str(exc)) from None
-
-
-def motion_refusal(job: Job) -> str:
-    """Why the cell cannot wind ``job`` yet ("" if it can), in one line: the
-    settings that are declared and checked, and shape the coil's geometry,
-    but whose motion is not implemented (the orthocyclic cam of the flyer,
-    the reversal dwell, the slower first layer: issue 32). Winding them
-    helically, without the dwell or at full speed, would lay another coil
-    than the job asks for."""
-    missing = []
-    if job.lay == "orthocyclic":
-        missing.append("lay=orthocyclic (the crossover cam of the flyer)")
-    if job.reversal_dwell > 0:
-        missing.append(f"reversal_dwell={job.reversal_dwell:g} (the dwell at the flange)")
-    if job.first_layer_speed < 1.0:
-        missing.append(f"first_layer_speed={job.first_layer_speed:g} (the slower first layer)")
-    if not missing:
-        return ""
-    verb = "is" if len(missing) == 1 else "are"
-    return (
-        f"job {job.job_id} cannot be wound yet: {', '.join(missing)} {verb} not implemented in the "
-        "motion (winder check lays out its coil)"
-    )
