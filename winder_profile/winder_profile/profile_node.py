@@ -217,8 +217,13 @@ class ProfileNode(ManagedNode):
                 return
             values, source = self.settings.values(), "profile_node"
         try:
+            segments = job.job.segments()
             timing, duration_ns = plan_timing(
-                values, [s.steps for s in job.segments], job.stops, job.stop_pause
+                values,
+                [s.steps for s in segments],
+                job.stops,
+                job.stop_pause,
+                [job.job.segment_speed(s) for s in segments],
             )
         except ValueError as exc:
             self.fail(f"job {job.job_id} cannot be ramped: {exc}")

@@ -354,20 +354,25 @@ def stop_points(job: Job, text: str) -> list[tuple[int, int]]:
         if not 1 <= coil <= job.poles:
             raise SpecError(f"stops={text!r} is invalid: coil {coil} is not in [1, {job.poles}] (poles)")
         wound = job.coil(coil - 1)
-        per_coil = wound.turns_per_layer * wound.layers
+        per_layer = [job.layer_turns_of(coil - 1, layer) for layer in range(wound.layers)]
+        per_coil = sum(per_layer)
         if not 1 <= turn <= per_coil:
             raise SpecError(
                 f"stops={text!r} is invalid: turn {turn} of coil {coil} is not in [1, {per_coil}] "
                 f"({wound.layers} layers of {wound.turns_per_layer} turns)"
             )
-        layer, within = divmod(turn - 1, wound.turns_per_layer)
+        layer, within = 0, turn - 1
+        while within >= per_layer[layer]:
+            within -= per_layer[layer]
+            layer += 1
         seg = next(s for s in segs if s.kind == "layer" and s.pole == coil - 1 and s.layer == layer)
-        if abs(seg.delta[1]) < abs(seg.delta[0]) and within + 1 < wound.turns_per_layer:
+        if abs(seg.delta[1]) < abs(seg.delta[0]) and within + 1 < per_layer[layer]:
             raise SpecError(
                 f"stops={text!r} is invalid: turn {turn} ends inside a layer whose feed steps "
                 f"({abs(seg.delta[0])}) outnumber its fork steps: stop at a layer's end instead"
             )
-        last = within + 1 == wound.turns_per_layer  # the layer's end: its last step, whichever axis leads
+        # the layer's end (its last step, whichever axis leads, after the reversal dwell)
+        last = within + 1 == per_layer[layer]
         out.add((seg.index, seg.steps if last else (within + 1) * spr))
     return sorted(out)
 
@@ -376,9 +381,10 @@ def stop_place(job: Job, segment: Segment, k: int) -> tuple[int, int, int]:
     """(coil, layer, turn), from 1, of a programmed stop after step ``k`` of
     the layer ``segment``: the inverse of :func:`stop_points` (the turn is
     counted over the coil's layers)."""
-    turns = job.coil(segment.pole).turns_per_layer
-    within = turns if k == segment.steps else k // job.fork_steps_per_rev
-    return segment.pole + 1, segment.layer + 1, segment.layer * turns + within
+    turns = job.layer_turns_of(segment.pole, segment.layer)
+    before = sum(job.layer_turns_of(segment.pole, layer) for layer in range(segment.layer))
+    within = turns if k == segment.steps else min(k // job.fork_steps_per_rev, turns)
+    return segment.pole + 1, segment.layer + 1, before + within
 
 
 def check_interp(values: dict[str, Any], *, check_fit: bool = True) -> None:
@@ -418,12 +424,13 @@ def check_job_duration(job: Job, values: dict[str, Any]) -> None:
     ramp = run_ramp(values)
     if ramp is not None:
         try:
-            plan_timing(ramp, steps, stops, pause)
+            plan_timing(ramp, steps, stops, pause, [job.segment_speed(s) for s in segments])
         except ValueError as exc:
             raise SpecError(f"job {job.job_id} ({job.total_steps} steps) is too long: {exc}") from None
         return
     top = float(PROFILE_SPECS["v_max"].high or math.inf)
-    fastest = sum(steps) / top + len(stops) * pause
+    fastest = sum(n / (top * job.segment_speed(s)) for n, s in zip(steps, segments, strict=True))
+    fastest += len(stops) * pause
     if fastest > MAX_JOB_SECONDS:
         raise SpecError(
             f"job {job.job_id} ({job.total_steps} steps) is too long: even at the highest v_max a profile "
@@ -438,12 +445,19 @@ def check_job_duration(job: Job, values: dict[str, Any]) -> None:
 MAX_JOB_SECONDS = 7 * 24 * 3600.0
 
 
-def plan_segment(values: dict[str, Any], steps: int) -> Motion:
+def plan_segment(values: dict[str, Any], steps: int, speed: float = 1.0) -> Motion:
     """The profile of one segment of ``steps`` steps with the profile settings,
-    shaped by ``shaper`` (absent: none); ValueError (one line) if the limits
-    cannot plan it or it would last longer than :data:`MAX_JOB_SECONDS`."""
+    at ``speed`` times ``v_max`` (a job's ``first_layer_speed``), shaped by
+    ``shaper`` (absent: none); ValueError (one line) if the limits cannot plan
+    it or it would last longer than :data:`MAX_JOB_SECONDS`."""
     kind = values["profile"]
-    kw: dict[str, Any] = {"v_max": values["v_max"], "v_start": values["v_start"], "v_end": values["v_start"]}
+    v_max = values["v_max"] * speed
+    if values["v_start"] > v_max:
+        raise ValueError(
+            f"first_layer_speed={speed:g} is invalid with v_max={values['v_max']:g}: the first layer's "
+            f"speed {v_max:g} steps/s is below v_start={values['v_start']:g} steps/s"
+        )
+    kw: dict[str, Any] = {"v_max": v_max, "v_start": values["v_start"], "v_end": values["v_start"]}
     kw.update({name: values[name] for name in LIMITS[kind]})
     limits = ", ".join(f"{k}={v:g}" for k, v in kw.items() if k != "v_end")
     profile: Motion
@@ -494,13 +508,15 @@ class SegmentTiming:
 
     ``ends``: the step index at which each move ends (the last is the
     segment's step count); ``starts_ns``: each move's start after the
-    segment's start ``t0_ns``; ``duration_ns``: to the end of the last move.
+    segment's start ``t0_ns``; ``duration_ns``: to the end of the last move;
+    ``speed``: the fraction of ``v_max`` the segment runs at.
     """
 
     t0_ns: int
     ends: tuple[int, ...]
     profiles: tuple[Motion, ...]
     starts_ns: tuple[int, ...]
+    speed: float = 1.0
 
     @property
     def duration_ns(self) -> int:
@@ -527,20 +543,24 @@ def plan_timing(
     segment_steps: Sequence[int],
     stops: Sequence[tuple[int, int]] = (),
     pause: float = 0.0,
+    speeds: Sequence[float] | None = None,
 ) -> tuple[list[SegmentTiming], int]:
     """The timing of every segment of a job with the ramp ``values``, its
     programmed ``stops`` ((segment, step index) pairs: the axes come to rest
     there, with the same ramp as a segment end, and rest ``pause`` seconds)
-    and ``dwell`` between segments; and the job's duration (ns). Without stops
-    the steps' times are :func:`plan_job`'s. ValueError (one line) as there."""
+    and ``dwell`` between segments; and the job's duration (ns). ``speeds``:
+    each segment's fraction of ``v_max`` (:meth:`Job.segment_speed`; absent:
+    all 1). Without stops and speeds the steps' times are :func:`plan_job`'s.
+    ValueError (one line) as there."""
     at: dict[int, list[int]] = {}
     for seg, k in stops:
         at.setdefault(seg, []).append(k)
-    lengths: set[int] = set()
+    speed_of = list(speeds) if speeds is not None else [1.0] * len(segment_steps)
+    lengths: set[tuple[int, float]] = set()
     for i, n in enumerate(segment_steps):
         cuts = [0, *sorted(k for k in at.get(i, ()) if 0 < k < n), n]
-        lengths.update(b - a for a, b in itertools.pairwise(cuts) if b > a)
-    plans = {n: plan_segment(values, n) for n in sorted(lengths)}
+        lengths.update((b - a, speed_of[i]) for a, b in itertools.pairwise(cuts) if b > a)
+    plans = {key: plan_segment(values, *key) for key in sorted(lengths)}
     dwell_ns, pause_ns = round(values["dwell"] * 1e9), round(pause * 1e9)
     timings = []
     t0 = 0
@@ -550,11 +570,12 @@ def plan_timing(
         ends, profiles, starts = [], [], []
         start = 0
         for a, b in itertools.pairwise(cuts):
+            move = plans[(b - a, speed_of[i])]
             ends.append(b)
-            profiles.append(plans[b - a])
+            profiles.append(move)
             starts.append(start)
-            start += round(plans[b - a].duration * 1e9) + pause_ns
-        timing = SegmentTiming(t0, tuple(ends), tuple(profiles), tuple(starts))
+            start += round(move.duration * 1e9) + pause_ns
+        timing = SegmentTiming(t0, tuple(ends), tuple(profiles), tuple(starts), speed_of[i])
         timings.append(timing)
         rest = pause_ns if n in stops_here else 0  # a stop at a segment's end: the pause after it
         t0 += timing.duration_ns + dwell_ns + rest

@@ -110,6 +110,7 @@ class _Move:
     profile: Motion  # as planned, from rest to rest
     gap_ns: int  # the planned rest after it (a dwell, a programmed stop's pause)
     pieces: list[_Piece] = field(default_factory=list)
+    speed: float = 1.0  # its fraction of v_max (a job's first_layer_speed), under any override
     waiting: bool = False  # it waits for a resume: not started yet
     rest_at: float | None = None  # a stop left it here; the rest waits for a resume
 
@@ -139,7 +140,7 @@ class Timeline:
             k0 = 0
             for k1, profile, start in zip(timing.ends, timing.profiles, timing.starts_ns, strict=True):
                 t0 = timing.t0_ns + start
-                mv = _Move(seg, k0, k1, profile, 0, [_Piece(t0, 0.0, profile)])
+                mv = _Move(seg, k0, k1, profile, 0, [_Piece(t0, 0.0, profile)], speed=timing.speed)
                 if self.moves:
                     self.moves[-1].gap_ns = t0 - self.moves[-1].end_ns
                 self.by_seg.setdefault(seg, []).append(len(self.moves))
@@ -230,7 +231,7 @@ class Timeline:
         """Moves ``m`` on (not started) with the current override."""
         v = self.v_max * self.factor
         for mv in self.moves[m:]:
-            prof = mv.profile if self.factor == 1.0 else from_rest(mv.profile, float(mv.length), v)
+            prof = mv.profile if self.factor == 1.0 else from_rest(mv.profile, float(mv.length), v * mv.speed)
             mv.pieces = [_Piece(mv.pieces[0].t0, 0.0, prof)]
 
     # -- commands ----------------------------------------------------------
@@ -307,7 +308,7 @@ class Timeline:
             rest = mv.rest_at
             assert rest is not None
             mv.rest_at = None
-            prof = from_rest(mv.profile, mv.length - rest, self.v_max * self.factor)
+            prof = from_rest(mv.profile, mv.length - rest, self.v_max * self.factor * mv.speed)
             mv.pieces.append(_Piece(t, rest, prof, "resume"))
             self._shift_from(m + 1, mv.end_ns + mv.gap_ns)
             seg, step = mv.seg, mv.k0 + math.floor(rest * (1 + _SNAP) + _SNAP)
@@ -358,7 +359,9 @@ class Timeline:
             tau = (cmd.t_ns - pc.t0) / 1e9
             p, _, _ = motion_state(pc.profile, tau)
             pos = pc.p0 + p
-            tail = continue_tail(pc.profile, tau, mv.length - pos, v) if pc.kind != "stop" else None
+            tail = (
+                continue_tail(pc.profile, tau, mv.length - pos, v * mv.speed) if pc.kind != "stop" else None
+            )
             if tail is None:
                 note = "the move is braking for its end: the override applies from the next one"
             else:
