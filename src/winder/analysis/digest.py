@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from winder.contract.eq7 import step_deviation
+from winder.contract.eq7 import signed_path_distance, step_deviation
 from winder.contract.stream import JobPlan, SegmentPlan
 from winder.motion.job import AXES
 
@@ -305,7 +305,13 @@ class LayerStats:
             lo, hi = self.zoom
             m = (rows[:, 3] >= lo) & (rows[:, 3] <= hi)
             if np.any(m):
-                signed = (s.delta[0] * rel[m, 1] - rel[m, 0] * s.delta[1]) * self.scale
+                signed = signed_path_distance(
+                    s.start,
+                    s.pieces or (s.delta,),
+                    rows[m, 2],
+                    rows[m, 3],
+                    (plan.step_lengths[0], plan.step_lengths[1]),
+                )
                 self.zoom_rows.append(np.vstack([rows[m, 3].astype(np.float64), signed]))
 
 

@@ -1,14 +1,19 @@
 """The coil as wound: where each turn was laid, from the simulated axes in a
 bag, against where it should lie.
 
-A turn of a layer is laid where the feed stands when the flyer is half way
-through it: for turn k of a layer (k from 0), the flyer angle
-``θ_k = θ_0 + dir·(k + ½)·2π`` of the layer's start. The measured place is the
-feed's position at the moment the measured flyer angle passes ``θ_k``
-(linear interpolation between joint samples); the intended place is the
-commanded line's at the same angle. Both are given as the distance of the
-wire's centre from the coil's start flange (the feed position where the
-coil's first layer starts), so the first turn of a helical layer is at d/2.
+A turn of a layer is laid where the feed stands while the flyer lays it: on
+a helical layer when the flyer is half way through the turn (for turn k of a
+layer, k from 0, the flyer ``(k + 1/2)`` turns past the layer's start); on an
+orthocyclic layer, whose feed holds each turn and crosses over in a zone of
+the flyer angle, in the middle of the turn's hold (between the end of the
+crossover before it and the start of the one after it). The measured place
+is the feed's position at the moment the measured flyer angle passes that
+point (linear interpolation between joint samples); the intended place is
+the commanded cam's (the layer's straight pieces) at the same angle. Both are
+given as the distance of the wire's centre from the coil's start flange: the
+feed position where the coil's first layer starts (helical), half a wire
+diameter before the first turn's place (orthocyclic). The first turn of a
+layer against the start flange is at d/2.
 
 Per layer it reports the turns laid, the largest axial error, and these
 defects (``tolerance``: 10 % of the wire diameter unless given):
@@ -17,11 +22,14 @@ defects (``tolerance``: 10 % of the wire diameter unless given):
   closer, than the wire diameter by more than the tolerance;
 * ``offset``: a turn laid further than the tolerance from its place;
 * ``flange``: a turn whose centre lies nearer a flange than half a wire
-  diameter less the tolerance (it climbs onto the flange), or beyond it.
+  diameter less the tolerance (it climbs onto the flange), or beyond it;
+* ``crossover`` (orthocyclic): the feed moved by more than the tolerance
+  while the turn held, outside its crossover zone.
 
 The window is ``bobbin.window_width`` when the job sets one, else the room the
-job's turns take (``turns_per_layer`` x d); layers stack at a radial pitch of
-d (helical lay), the centre of layer l at d/2 + (l - 1)·d above the core.
+job's turns take (``turns_per_layer`` x d, plus d/2 on a shifted layer);
+layers stack at the lay's radial pitch (d helical, d·√3/2 orthocyclic), the
+centre of layer l at d/2 + (l - 1)·pitch above the core.
 """
 
 from __future__ import annotations
@@ -33,6 +41,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from winder.motion.coil import radial_pitch
 from winder.motion.job import Segment
 from winder.record.reader import Run
 
@@ -40,7 +49,7 @@ __all__ = ["DEFECT_KINDS", "AsWound", "Defect", "LayerLaid", "TurnLaid", "as_wou
 
 FloatArray = npt.NDArray[np.float64]
 
-DEFECT_KINDS = ("gap", "overlap", "offset", "flange")
+DEFECT_KINDS = ("gap", "overlap", "offset", "flange", "crossover")
 #: the default tolerance, as a fraction of the wire diameter
 TOLERANCE = 0.10
 
@@ -50,7 +59,7 @@ class TurnLaid:
     coil: int  #: from 1
     layer: int  #: from 1
     turn: int  #: from 1, in the order wound
-    t_s: float  #: when the flyer was half way through it (s since the run's start)
+    t_s: float  #: when the flyer laid it (half way through it, or its hold; s since the run's start)
     axial_m: float  #: measured centre, from the coil's start flange
     intended_m: float  #: where it should be
     radial_m: float  #: centre of its layer above the core
@@ -146,12 +155,14 @@ def _segment_windows(run: Run) -> dict[int, tuple[float, float]]:
     return {s: (first[s] / 1e9, last[s] / 1e9) for s in first}
 
 
-def _window_width(job: Any, turns: int) -> float:
+def _window_width(job: Any, turns: int, offset: float = 0.0) -> float:
+    """The window's width: the job's, else the room its ``turns`` take (a
+    shifted layer's ``offset`` included)."""
     for name in ("bobbin_window_width", "window_width", "coil_length"):
         value = getattr(job, name, 0.0)
         if isinstance(value, int | float) and value > 0:
             return float(value)
-    return turns * float(job.wire_diameter)
+    return turns * float(job.wire_diameter) + offset
 
 
 def _windows_from_ends(ends: dict[int, int]) -> dict[int, tuple[float, float]]:
@@ -185,18 +196,23 @@ def as_wound(
     feed = states.pos[:, 0]
     fork = states.pos[:, 1]
     layer_segments = [s for s in job.segments() if s.kind == "layer"]
+    ortho = getattr(job, "lay", "helical") == "orthocyclic"
+    pitch = radial_pitch(d, "orthocyclic" if ortho else "helical")
     coil_start: dict[int, tuple[float, int]] = {}  # coil -> (start flange feed position m, direction)
     result = AsWound(wire_m=d, window_m=0.0, tolerance_m=tol)
     for seg in layer_segments:
-        coil = job.coil(seg.pole)
-        n = coil.turns_per_layer
+        n = job.layer_turns_of(seg.pole, seg.layer)
         if seg.pole not in coil_start:
-            coil_start[seg.pole] = (seg.start[0] * feed_step, 1 if seg.delta[0] >= 0 else -1)
+            going = 1 if seg.delta[0] >= 0 else -1
+            if ortho and seg.delta[0] == 0:  # a one-turn layer: the first crossover names the way
+                going = next((1 if p[0] > 0 else -1 for p in seg.pieces if p[0]), 1)
+            coil_start[seg.pole] = (seg.start[0] * feed_step - (going * d / 2 if ortho else 0.0), going)
         flange, coil_dir = coil_start[seg.pole]
-        width = _window_width(job, n)
+        width = _window_width(job, n, d / 2 if ortho and seg.layer % 2 else 0.0)
         result.window_m = max(result.window_m, width)
-        radial = d / 2 + seg.layer * d
-        laid = _lay(seg, n, t, feed, fork, windows.get(seg.index), feed_step, fork_rad)
+        radial = d / 2 + seg.layer * pitch
+        marks = _marks(seg, n, job, ortho)
+        laid = _lay(seg, marks, t, feed, fork, windows.get(seg.index), feed_step, fork_rad)
         turns = [
             TurnLaid(
                 seg.pole + 1,
@@ -207,9 +223,15 @@ def as_wound(
                 (fi - flange) * coil_dir,
                 radial,
             )
-            for k, (ts, f, fi) in enumerate(laid)
+            for k, (ts, f, fi, _) in enumerate(laid)
         ]
         defects = _defects(turns, d, width, tol)
+        if ortho:
+            defects += [
+                Defect("crossover", tt.coil, tt.layer, tt.turn, moved, tt.t_s)
+                for tt, (_, _, _, moved) in zip(turns, laid, strict=True)
+                if abs(moved) > tol
+            ]
         result.turns += turns
         result.defects += defects
         errors = [abs(tt.error_m) for tt in turns]
@@ -230,18 +252,36 @@ def as_wound(
     return result
 
 
+def _marks(seg: Segment, n: int, job: Any, ortho: bool) -> FloatArray:
+    """Where each turn of layer ``seg`` is measured, in fork steps from the
+    layer's start: (start, middle, end) of the stretch the feed holds the
+    turn (orthocyclic) or the turn's middle three times (helical)."""
+    spr = float(job.fork_steps_per_rev)
+    k = np.arange(n, dtype=np.float64)
+    if not ortho:
+        mid = (k + 0.5) * spr
+        return np.stack([mid, mid, mid], axis=1)
+    za = math.floor(job.crossover_at / 360.0 * spr + 0.5)
+    zc = max(1, math.floor(job.crossover / 360.0 * spr + 0.5))
+    lo = np.maximum((k - 1) * spr + za + zc, 0.0)
+    hi = np.maximum(k * spr + za, lo)
+    return np.stack([lo, (lo + hi) / 2, hi], axis=1)
+
+
 def _lay(
     seg: Segment,
-    n: int,
+    marks: FloatArray,
     t: FloatArray,
     feed: FloatArray,
     fork: FloatArray,
     window: tuple[float, float] | None,
     feed_step: float,
     fork_rad: float,
-) -> list[tuple[float, float, float]]:
-    """(time, measured feed m, intended feed m) at the middle of each turn of
-    ``seg`` the measured flyer reached."""
+) -> list[tuple[float, float, float, float]]:
+    """(time, measured feed m, intended feed m, measured feed travel over the
+    hold m) of each turn of ``seg`` whose measuring point (``marks``' middle,
+    fork steps from the layer's start) the measured flyer reached."""
+    n = marks.shape[0]
     if window is None or n <= 0:
         return []
     t0, t1 = window
@@ -252,18 +292,22 @@ def _lay(
         return []
     direction = 1 if seg.delta[1] >= 0 else -1
     angle = np.maximum.accumulate(direction * fork[lo:hi])  # progress along the layer, non-decreasing
-    spr = abs(seg.delta[1]) / n  # fork steps per turn
-    mids = direction * (seg.start[1] + direction * (np.arange(n) + 0.5) * spr) * fork_rad
-    reached = mids <= angle[-1]
-    mids = mids[reached]
-    if mids.size == 0:
+    base = direction * seg.start[1] * fork_rad
+    at = base + marks * fork_rad
+    reached = at[:, 2] <= angle[-1]
+    if not reached.any():
         return []
-    # the first sample index at which each middle is reached, and the time between samples
-    when = np.interp(mids, angle, t[lo:hi])
+    at = at[reached]
+    when = np.interp(at, angle, t[lo:hi])
     measured = np.interp(when, t[lo:hi], feed[lo:hi])
-    k = np.arange(mids.size)
-    intended = (seg.start[0] + seg.delta[0] * (k + 0.5) / n) * feed_step
-    return list(zip(when.tolist(), measured.tolist(), intended.tolist(), strict=True))
+    # the cam as commanded: feed (steps) against fork progress, through the pieces' ends
+    knots_fork = np.concatenate([[0.0], np.cumsum([abs(p[1]) for p in seg.pieces])])
+    knots_feed = seg.start[0] + np.concatenate([[0.0], np.cumsum([p[0] for p in seg.pieces])])
+    intended = np.interp(marks[reached, 1], knots_fork, knots_feed) * feed_step
+    moved = measured[:, 2] - measured[:, 0]
+    return list(
+        zip(when[:, 1].tolist(), measured[:, 1].tolist(), intended.tolist(), moved.tolist(), strict=True)
+    )
 
 
 def _defects(turns: list[TurnLaid], d: float, width: float, tol: float) -> list[Defect]:

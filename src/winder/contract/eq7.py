@@ -4,7 +4,9 @@ commanded steps (:func:`step_deviation`) and of the simulated axes
 (:func:`layer_of_samples`, :func:`sample_deviation`).
 
 A commanded step counts if its row belongs to a layer segment; it is
-measured against that layer's line, exactly (integer arithmetic).
+measured against that layer's line, exactly (integer arithmetic). A layer
+laid by a cam (orthocyclic, a reversal dwell) is measured against the piece
+of its path whose fork range holds the point: the path it is meant to take.
 
 A joint sample counts while a layer is wound: the command at the sample (the
 last step row at or before it) is in a layer segment. It is measured against
@@ -18,13 +20,15 @@ its segment.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import numpy.typing as npt
 
 from winder.contract.stream import JobPlan
 from winder.motion.interp import line_distance
 
-__all__ = ["layer_of_samples", "sample_deviation", "step_deviation"]
+__all__ = ["layer_of_samples", "sample_deviation", "signed_path_distance", "step_deviation"]
 
 IntArray = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]
@@ -79,8 +83,50 @@ def sample_deviation(plan: JobPlan, layer: npt.ArrayLike, x: npt.ArrayLike, y: n
     for i in (int(v) for v in np.unique(lay[lay >= 0])):
         m = lay == i
         s = plan.segments[i]
-        rel = np.column_stack([xx[m] - s.start[0], yy[m] - s.start[1]])
-        out[m] = line_distance(rel, s.delta[0], s.delta[1], step_lengths=lengths)
+        out[m] = _path_distance(s.start, s.pieces or (s.delta,), xx[m], yy[m], lengths)
+    return out
+
+
+def _path_distance(
+    start: tuple[int, ...],
+    pieces: tuple[tuple[int, ...], ...],
+    x: npt.NDArray[np.floating] | npt.NDArray[np.integer],
+    y: npt.NDArray[np.floating] | npt.NDArray[np.integer],
+    lengths: tuple[float, float],
+) -> FloatArray:
+    """The eq. 5 distance (m) of points (x, y in steps) to a layer's path: its
+    one line, or the cam piece whose fork range holds each point."""
+    if len(pieces) == 1:
+        rel = np.column_stack([np.asarray(x, np.float64) - start[0], np.asarray(y, np.float64) - start[1]])
+        return line_distance(rel, pieces[0][0], pieces[0][1], step_lengths=lengths)
+    return np.abs(signed_path_distance(start, pieces, x, y, lengths))
+
+
+def signed_path_distance(
+    start: tuple[int, ...],
+    pieces: tuple[tuple[int, ...], ...],
+    x: npt.ArrayLike,
+    y: npt.ArrayLike,
+    lengths: tuple[float, float],
+) -> FloatArray:
+    """The distance (m) of points (x, y in steps of the feed and the fork) to
+    a layer's path (its one line, or the cam piece whose fork range holds
+    each point), signed by the side of it they are on: positive where
+    ``dx*(y - y0) - (x - x0)*dy`` is."""
+    xx, yy = np.asarray(x, np.float64), np.asarray(y, np.float64)
+    fork = np.concatenate([[0], np.cumsum([abs(p[1]) for p in pieces])])
+    feed = np.concatenate([[0], np.cumsum([p[0] for p in pieces])])
+    sign = 1 if sum(p[1] for p in pieces) >= 0 else -1
+    which = np.clip(np.searchsorted(fork, (yy - start[1]) * sign, side="right") - 1, 0, len(pieces) - 1)
+    out = np.zeros(xx.size)
+    for i in (int(v) for v in np.unique(which)):
+        dx, dy = pieces[i][0], pieces[i][1]
+        norm = math.hypot(dx * lengths[0], dy * lengths[1])
+        if norm == 0:
+            continue
+        m = which == i
+        cross = dx * (yy[m] - start[1] - sign * fork[i]) - (xx[m] - start[0] - feed[i]) * dy
+        out[m] = cross * (lengths[0] * lengths[1] / norm)
     return out
 
 
@@ -91,4 +137,6 @@ def step_deviation(plan: JobPlan, segment: int, pos: npt.ArrayLike) -> FloatArra
     s = plan.segments[segment]
     p = np.asarray(pos)[:, :2]
     lengths = (plan.step_lengths[0], plan.step_lengths[1])
+    if len(s.pieces) > 1:
+        return _path_distance(s.start, s.pieces, p[:, 0], p[:, 1], lengths)
     return line_distance(p, s.delta[0], s.delta[1], step_lengths=lengths, origin=(s.start[0], s.start[1]))

@@ -58,7 +58,7 @@ from matplotlib.transforms import Bbox
 from winder.analysis.digest import ZOOM_STEPS, Digest, turn_index
 from winder.analysis.identify import Identification
 from winder.analysis.metrics import Analysis, digest_run, paired_error
-from winder.contract.eq7 import layer_of_samples, sample_deviation
+from winder.contract.eq7 import layer_of_samples, sample_deviation, signed_path_distance
 from winder.contract.files import atomic_file, output_dir
 from winder.contract.stream import JobPlan
 from winder.motion.job import AXES
@@ -578,7 +578,9 @@ def _signed_samples(run: Run, d: Digest) -> tuple[IntArray, FloatArray]:
     for i in (int(v) for v in np.unique(layer[layer >= 0])):
         m = layer == i
         s = plan.segments[i]
-        cross = s.delta[0] * (y[m] - s.start[1]) - (x[m] - s.start[0]) * s.delta[1]
+        cross = signed_path_distance(
+            s.start, s.pieces or (s.delta,), x[m], y[m], (plan.step_lengths[0], plan.step_lengths[1])
+        )
         dist[m] = np.where(cross < 0, -dist[m], dist[m])
     return layer, dist
 
@@ -697,7 +699,6 @@ def _zoom_middle(run: Run, d: Digest, ax: Axes) -> None:
         ax.text(0.5, 0.5, "no layer wound", ha="center", transform=ax.transAxes)
         return
     s = plan.segments[first]
-    norm = math.hypot(s.delta[0] * lx, s.delta[1] * ly)
     zoom = d.layers[first].zoom
     assert zoom is not None
     y_lo, y_hi = zoom
@@ -709,7 +710,9 @@ def _zoom_middle(run: Run, d: Digest, ax: Axes) -> None:
         x = st.pos[:, 0] / js[0] - s.start[0]
         y = st.pos[:, 1] / js[1] - s.start[1]
         m = (y + s.start[1] >= y_lo) & (y + s.start[1] <= y_hi)
-        dist = (s.delta[0] * y[m] - x[m] * s.delta[1]) * lx * ly / norm
+        dist = signed_path_distance(
+            s.start, s.pieces or (s.delta,), x[m] + s.start[0], y[m] + s.start[1], (lx, ly)
+        )
         ax.plot((y[m] + s.start[1]) / spr, dist * 1e6, "o-", color=ACT, ms=3, lw=0.8, label="simulated axes")
     ax.axhline(0, color=IDEAL, lw=0.8, label="ideal line")
     ax.set_xlabel("fork position (turns)")
