@@ -251,9 +251,9 @@ def winder_run(
     )  # fmt: skip
 
 
-def analyze_json(bag: Path) -> dict[str, Any]:
+def analyze_json(bag: Path, plots: bool = False) -> dict[str, Any]:
     r = subprocess.run(
-        [str(BIN / "winder"), "analyze", str(bag), "--no-plots", "--json"],
+        [str(BIN / "winder"), "analyze", str(bag), "--json", *(() if plots else ("--no-plots",))],
         capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL,
     )  # fmt: skip
     assert r.returncode == 0, r.stderr
@@ -346,7 +346,8 @@ def test_a_feed_that_loses_steps_in_the_crossovers_shows_as_defects(procs: Procs
     )  # fmt: skip
     assert r.returncode in (0, 1), r.stdout + r.stderr
     [bag] = closed_bags(tmp_path / "bags")
-    report = analyze_json(bag)
+    report = analyze_json(bag, plots=True)  # wound.png too: every kind of defect has its colour
+    assert (bag / "plots" / "wound.png").stat().st_size > 0
     assert int(report["lost_steps"]) > 0
     defects = report["as_wound"]["defects"]
     assert defects, "a feed that lost steps laid no defect"
@@ -364,3 +365,10 @@ def test_a_feed_that_loses_steps_in_the_crossovers_shows_as_defects(procs: Procs
         first,
         turn_of_loss,
     )
+
+
+def test_every_defect_kind_has_a_colour_and_a_word_in_wound_png() -> None:
+    from winder.analysis.figures.analysis import WOUND_COLOURS, WOUND_WORDS
+    from winder.analysis.wound import DEFECT_KINDS
+
+    assert set(DEFECT_KINDS) <= set(WOUND_COLOURS) and set(DEFECT_KINDS) <= set(WOUND_WORDS)

@@ -805,6 +805,7 @@ WOUND_COLOURS = {
     "overlap": "tab:purple",
     "offset": "tab:red",
     "flange": "k",
+    "crossover": "tab:green",
 }
 #: what the legend calls each colour
 WOUND_WORDS = {
@@ -813,6 +814,7 @@ WOUND_WORDS = {
     "overlap": "overlaps the turn before",
     "offset": "off its place",
     "flange": "on the flange",
+    "crossover": "crossed over outside its zone",
 }
 
 
@@ -833,7 +835,7 @@ def _wound(run: Run, d: Digest, out: Path) -> Path:
     width = wound.window_m * 1e3
     # a turn with several defects shows the most telling: on the flange, then
     # a gap or overlap (where a loss happened), then an offset (which lasts)
-    rank = {"flange": 0, "overlap": 1, "gap": 2, "offset": 3}
+    rank = {"flange": 0, "overlap": 1, "gap": 2, "crossover": 3, "offset": 4}
     kind: dict[tuple[int, int, int], str] = {}
     for fault in sorted(wound.defects, key=lambda f: -rank[f.kind]):
         kind[fault.coil, fault.layer, fault.turn] = fault.kind
@@ -889,10 +891,11 @@ def _wound(run: Run, d: Digest, out: Path) -> Path:
         for name in WOUND_COLOURS
         if name in shown
     ]
-    axes[0].legend(
+    height = 1.2 + row * len(coils)
+    fig.legend(  # in inches from the top, below the two-line title: a tall window's axes must not lift it
         handles=handles,
-        loc="lower left",
-        bbox_to_anchor=(0.0, 1.12),
+        loc="upper left",
+        bbox_to_anchor=(0.07, 1 - 0.5 / height),
         ncol=len(handles),
         fontsize=8,
         frameon=False,
