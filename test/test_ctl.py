@@ -19,7 +19,7 @@ from typing import Any
 import pytest
 from conftest import Procs, closed_bags, spin_until
 
-from winder.cli.exits import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
+from winder.cli.exits import EXIT_ABORTED, EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from winder.record.reader import read_run
 
 pytestmark = pytest.mark.ros
@@ -254,3 +254,40 @@ def test_state_watch_prints_each_change_until_ctrl_c(procs: Procs, tmp_path: Pat
         if watch.poll() is None:
             watch.kill()
             watch.wait()
+
+
+def test_a_followed_run_that_is_aborted_ends_with_exit_3_and_a_busy_cell_refuses_a_start(
+    procs: Procs, tmp_path: Path
+) -> None:
+    """A real-time run followed with --wait: a second start while it runs is
+    the cell's refusal (exit 1, the interp node's reply); `winder ctl abort`
+    ends it, and the follower says so and exits 3 (the exit-code table's
+    "run aborted")."""
+    bags = tmp_path / "bags"
+    procs.start("sim_node", "-p", f"bag_dir:={bags}", "-p", "real_time:=true")
+    procs.start("profile_node")
+    procs.start("interp_node", "-p", "autostart:=false")
+    argv = ["start", "--set", "turns_per_layer=40", "--set", "poles=1", "--wait", "--timeout", "60"]
+    follow = subprocess.Popen(
+        [str(WINDER), "ctl", *argv],
+        env=procs.env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert follow.stdout is not None
+        run_id = follow.stdout.readline().split()[1]
+        code, _, err = ctl(procs, "start")
+        line = one_line(err)
+        assert code == EXIT_FAILED and f"run {run_id} is running" in line, err
+        code, out, err = ctl(procs, "abort")
+        assert code == EXIT_OK and "aborting" in out, out + err
+        out, err = follow.communicate(timeout=60)
+        assert follow.returncode == EXIT_ABORTED, out + err
+        assert out.strip().splitlines()[-1].startswith(f"run {run_id}: aborted"), out
+        assert f"run {run_id} ended aborted" in one_line(err), err
+    finally:
+        if follow.poll() is None:
+            follow.kill()
+            follow.wait()

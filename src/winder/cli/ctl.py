@@ -135,12 +135,12 @@ def start_code(reason: str) -> int:
 
 def cmd_start(args: argparse.Namespace) -> int:
     """Set up and start a run in one call (the interp node's ``~/start_run``)."""
-    values = run_values(args)
     ns = _namespace(args)
     timeout = _timeout(args)
     run_timeout = _run_timeout(args)
 
     def body(ctl: Any) -> int:
+        values = run_values(args)  # checked before anything goes on the graph
         with ctl.Session(timeout) as session:
             interp = ctl.find_role(session, ns, "interp", "interp node (the publisher of winder/job)")
             view = ctl.watch_cell(session, ns) if args.wait else None
@@ -248,9 +248,9 @@ def state_lines(view: Any) -> list[str]:
     ns = view.namespace or "/"
     lines = []
     if s:
-        where = " ".join(f"{k} {s[k]}" for k in ("coil", "layer", "turn") if s.get(k))
+        where = _where(s)
         run = f"run {s['run_id']} (job {s.get('job_id') or '-'})" if s.get("run_id") else "no run yet"
-        sim = f"  sim {float(s['sim_time_s']):.3f} s" if s.get("sim_time_s") else ""
+        sim = f"  sim {float(s['sim_time_s']):.3f} s" if s.get("sim_time_s") and s.get("run_id") else ""
         lines.append(f"cell {ns}  {s.get('state', '-')}  {run}" + (f"  {where}" if where else "") + sim)
     else:
         lines.append(f"cell {ns}  (no winder/state heard: no consumer on the graph?)")
@@ -264,15 +264,22 @@ def state_lines(view: Any) -> list[str]:
         node = name.split(":", 1)[0]
         role = v.get("role") or by_name.get(name, "-")
         total = v.get("steps_total") or "0"
-        steps = f"steps {v.get('steps_done', '0')}/{total}"
-        progress = f" ({100 * float(v.get('progress') or 0):.1f} %)" if total != "0" else ""
-        lines.append(
-            f"  {node:<22} {role:<9} {v.get('state', '-'):<10} {v.get('run_id') or '-'}  {steps}{progress}"
-        )
+        steps = ""
+        if total != "0":
+            share = 100 * float(v.get("progress") or 0)
+            steps = f"  steps {v.get('steps_done', '0')}/{total} ({share:.1f} %)"
+        lines.append(f"  {node:<22} {role:<9} {v.get('state', '-'):<10} {v.get('run_id') or '-'}{steps}")
     missing = [r for r in ("interp", "profile", "consumer") if r not in roles]
     if missing:
         lines.append(f"  no job status heard from: {', '.join(missing)}")
     return lines
+
+
+def _where(state: dict[str, str]) -> str:
+    """Coil, layer and turn of a run's state ("" before any run)."""
+    if not state.get("run_id"):
+        return ""
+    return " ".join(f"{k} {state[k]}" for k in ("coil", "layer", "turn") if state.get(k))
 
 
 def change_line(view: Any) -> str:
@@ -280,7 +287,7 @@ def change_line(view: Any) -> str:
     s = view.state
     roles = view.roles()
     c = roles["consumer"].values if "consumer" in roles else {}
-    where = " ".join(f"{k} {s[k]}" for k in ("coil", "layer", "turn") if s.get(k))
+    where = _where(s)
     progress = ""
     if c.get("steps_total") not in (None, "", "0"):
         progress = (

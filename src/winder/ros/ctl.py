@@ -355,6 +355,8 @@ def lifecycle_transition(session: Session, node: str, action: str) -> tuple[str,
 
 #: the start replies that mean "ask again": a node of the cell is still connecting
 NOT_READY = "job not started: not ready"
+#: states on winder/ready that asking again does not change (an orchestrator's, or a setting's)
+LASTING = (" inactive", " blocked")
 
 
 def find_role(session: Session, namespace: str, role: str, what: str) -> str:
@@ -398,7 +400,8 @@ def start_run(session: Session, interp: str, values: dict[str, Any]) -> str:
             ok, reason = bool(answer.success), one_line(answer.message)
         if ok:
             return reason
-        if not reason.startswith(NOT_READY) or time.monotonic() + 0.5 > session.deadline:
+        lasting = any(word in reason for word in LASTING)
+        if not reason.startswith(NOT_READY) or lasting or time.monotonic() + 0.5 > session.deadline:
             raise RefusedError(reason or "start refused (no reason given)")
         session.spin(0.5)
 
