@@ -113,12 +113,13 @@ class Session:
         if not self.context.ok():
             raise KeyboardInterrupt
 
-    def until(self, cond: Callable[[], bool], what: str) -> None:
-        """Spin until ``cond()``; :class:`UnansweredError` naming ``what`` at the deadline."""
+    def until(self, cond: Callable[[], bool], what: str, hint: str = "") -> None:
+        """Spin until ``cond()``; :class:`UnansweredError` naming ``what`` (and
+        the ``hint`` after it) at the deadline."""
         while not cond():
             left = self.deadline - time.monotonic()
             if left <= 0:
-                raise UnansweredError(f"no {what} within {self.timeout:g} s")
+                raise UnansweredError(f"no {what} within {self.timeout:g} s{hint}")
             self.spin(min(left, 0.05))
 
     # -- the graph -------------------------------------------------------------------
@@ -155,7 +156,7 @@ class Session:
         the service (not on the graph) or the reply (not come) at the deadline."""
         client = self.node.create_client(srv_type, service)
         try:
-            self.until(client.service_is_ready, f"service {service} ({graph_words()})")
+            self.until(client.service_is_ready, f"service {service}", f" ({graph_words()})")
             future = client.call_async(request)
             self.until(future.done, f"reply from {service}")
             return future.result()
@@ -497,9 +498,9 @@ def cell_state(session: Session, namespace: str) -> CellView:
 
     what = (
         f"state from the cell in {namespace or '/'} ({fully_qualified(TOPIC_STATE, namespace)}, and the "
-        f"nodes' job statuses on /diagnostics; {graph_words()}): is the cell running there?"
+        "nodes' job statuses on /diagnostics)"
     )
-    session.until(view.heard, what)
+    session.until(view.heard, what, f" ({graph_words()}): is the cell running there?")
     end = min(session.deadline, time.monotonic() + LISTEN)
     while not view.complete() and time.monotonic() < end:
         session.spin(min(0.05, end - time.monotonic()))
@@ -528,7 +529,7 @@ def trigger(service: str, timeout: float = 10.0) -> tuple[bool, str]:
         try:
             reply = session.call(Trigger, service, Trigger.Request())
         except UnansweredError as exc:
-            return False, f"{exc} (is the cell running, on this domain?)"
+            return False, f"{exc}: is the cell running there?"
     return bool(reply.success), str(reply.message)
 
 
@@ -545,7 +546,7 @@ def set_parameter(node: str, name: str, value: float, timeout: float = 10.0) -> 
         try:
             reply = session.call(SetParameters, f"{node}/set_parameters", request)
         except UnansweredError as exc:
-            return False, f"{exc} (is the cell running, on this domain?)"
+            return False, f"{exc}: is the cell running there?"
     result = reply.results[0]
     if not result.successful:
         return False, result.reason or f"{name} refused"
