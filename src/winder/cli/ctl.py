@@ -176,15 +176,10 @@ def wait_for_end(
     each time its state or progress changes, then the end state."""
     from winder.contract.topics import has_role
 
-    def consumer() -> dict[str, str]:
+    def status(role: str) -> dict[str, str]:
+        """The values of ``role``'s job status for this run ({} until heard)."""
         for st in view.statuses.values():
-            if has_role(st.name, st.values, "consumer", view.namespace) and st.values.get("run_id") == run_id:
-                return dict(st.values)
-        return {}
-
-    def interp() -> dict[str, str]:
-        for st in view.statuses.values():
-            if has_role(st.name, st.values, "interp", view.namespace) and st.values.get("run_id") == run_id:
+            if has_role(st.name, st.values, role, view.namespace) and st.values.get("run_id") == run_id:
                 return dict(st.values)
         return {}
 
@@ -199,7 +194,7 @@ def wait_for_end(
         if view.changed != seen:
             seen = view.changed
             heard = now
-        mine = consumer()
+        mine = status("consumer")
         if mine:
             line = (
                 f"  {mine.get('state', '-'):<10} steps {mine.get('steps_done', '?')} of "
@@ -214,7 +209,7 @@ def wait_for_end(
                 if state != "done":
                     return _fail(args, f"run {run_id} ended {state}", END_CODES[state])
                 return EXIT_OK
-        theirs = interp()
+        theirs = status("interp")
         if theirs.get("state") in ("incomplete", "aborted") and not given_up:
             given_up = now
         if given_up and now - given_up > 5.0:
