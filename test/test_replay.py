@@ -230,6 +230,45 @@ def test_play_delivers_every_message_in_order(
     assert now in stamps and now >= stamps[len(stamps) // 2], now
 
 
+def test_a_reader_on_the_graph_before_play_hears_the_first_message(
+    ops_bag: Path, procs: Procs, ros: Any
+) -> None:
+    """rosbag2 #109: without any option the player waits (bounded) until the
+    subscribers already on the graph match its publishers, so the volatile
+    topics' first messages reach them too, not only the latched ones.
+    ``--force`` skips the 1 s look for a live cell, which alone gave
+    discovery time enough; with ``--force --no-wait`` this reader got none
+    of the 6 /diagnostics messages."""
+    volatile = ("/winder/joint_states", "/winder/joint_commands", "/winder/step_times", "/diagnostics")
+    taker = Taker(ros, ops_bag, topics=volatile)
+    spin_until(ros, lambda: True, 0.2, "")
+    p = play(procs, ops_bag, "--rate", "20", "--force")
+    _, err = spin_while(ros, p, 120)
+    assert "unmatched" not in err, err
+    want = {t: m for t, m in expected(ops_bag).items() if t in volatile}
+    assert all(want.values())
+    same(taker.got, want)
+
+
+def test_no_wait_plays_at_once_and_a_bounded_wait_names_what_it_missed(
+    ops_bag: Path, procs: Procs, tmp_path: Path
+) -> None:
+    """--no-wait skips the wait; --wait-for-subscribers S with no reader ends
+    its wait after S s, says so in one line and plays anyway."""
+    t0 = time.monotonic()
+    p = play(procs, ops_bag, "--rate", "1000", "--no-wait", "--topics", "/winder/state")
+    out, err = p.communicate(timeout=60)
+    assert p.returncode == 0 and "published" in out, out + err
+    p = play(procs, ops_bag, "--rate", "1000", "--wait-for-subscribers", "1.5", "--topics", "/winder/state")
+    out, err = p.communicate(timeout=60)
+    assert p.returncode == 0 and "published" in out, out + err
+    assert "after 1.5 s still unmatched (playing anyway): no subscriber on any played topic" in err, err
+    assert time.monotonic() - t0 < 30
+    p = play(procs, ops_bag, "--no-wait", "--wait-for-subscribers", "2")
+    _, err = p.communicate(timeout=60)
+    assert p.returncode == 2 and "--no-wait" in err and len(err.strip().splitlines()) == 1, err
+
+
 def test_start_offset_keeps_the_latched_topics(ops_bag: Path, procs: Procs, ros: Any) -> None:
     """From 2 s on: every message from there, and the job, path, configs,
     cell state and operator events as they stood at 2 s."""

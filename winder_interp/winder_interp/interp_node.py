@@ -17,6 +17,7 @@ every status of the run reports it and the sim node names the run's bag after it
 from __future__ import annotations
 
 import json
+import os
 import time
 from collections.abc import Iterator
 
@@ -54,7 +55,7 @@ class InterpNode(ManagedNode):
     def __init__(self) -> None:
         super().__init__("interp_node")
         self.settings = Settings(self, INTERP_SPECS, check_interp)
-        self.add_pre_set_parameters_callback(self.with_job_file)
+        self.settings.add_pre_set(self.with_job_file)
         given = self.settings.values()["job_file"]
         if given:  # given at start (-p job_file:=...): load it as a change would
             result = self.set_parameters([Parameter("job_file", value=given)])[0]
@@ -120,9 +121,16 @@ class InterpNode(ManagedNode):
         in the same change win over the file's. A file that cannot be used is
         left to the check, which refuses the change with the file's reason.
         A change of the job's fields without a job file (or a hash) clears
-        the hash: the job is no longer the file's."""
+        the hash: the job is no longer the file's. A relative path is read
+        from this node's working directory and set as the absolute path it
+        names there (``winder ctl`` sends the caller's absolute path)."""
         named = {p.name for p in params}
         path = next((p.value for p in params if p.name == "job_file"), None)
+        if path and isinstance(path, str) and not os.path.isabs(os.path.expanduser(path)):
+            # relative: from this node's working directory, as ROS reads --params-file; the
+            # parameter keeps the absolute path, so a get and every error name the file tried
+            path = os.path.abspath(os.path.expanduser(path))
+            params = [Parameter("job_file", value=path) if p.name == "job_file" else p for p in params]
         if not path or not isinstance(path, str):
             hashed = bool(self.get_parameter("job_file_sha256").value)
             if hashed and named & FIELD_SPECS.keys() and "job_file_sha256" not in named:

@@ -527,27 +527,6 @@ def report_run(result: Any, wall: float, command: str = "run") -> int:
     return EXIT_OK
 
 
-def cmd_ctl(args: argparse.Namespace) -> int:
-    """One command to a running cell: EXIT_OK if it was done, EXIT_FAILED if the cell said no."""
-    ns = check_namespace(args.namespace)
-    timeout = CELL_SPECS["timeout"].parse(args.timeout)
-    if (args.action == "override") != (args.value is not None):
-        raise UserError(
-            "override takes a factor (winder ctl override 0.5); pause, resume and abort take none"
-        )
-    factor = OPERATION_SPECS["feed_override"].parse(args.value) if args.value is not None else 1.0
-    try:
-        from winder.ros.ctl import set_parameter, trigger
-    except ImportError as exc:
-        raise UserError(f"the ROS 2 packages are not installed ({exc}); run 'make demo'") from None
-    if args.action == "override":
-        ok, message = set_parameter(f"{ns}/profile_node", "feed_override", factor, timeout=timeout)
-    else:
-        ok, message = trigger(f"{ns}/profile_node/{args.action}", timeout=timeout)
-    print(message if ok else f"winder ctl {args.action}: {message}", file=sys.stdout if ok else sys.stderr)
-    return EXIT_OK if ok else EXIT_FAILED
-
-
 #: Settings of ``winder discovery-server``.
 SERVER_SPECS: dict[str, Spec] = {
     "port": Spec("port", int, 11811, "UDP port the server listens on", "", 1, 65535),
@@ -674,19 +653,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print the report as one JSON object")
     p.set_defaults(func=cmd_check)
 
-    p = sub.add_parser("ctl", help="send a command to a running cell: pause, resume, abort, override X")
-    p.add_argument(
-        "action",
-        choices=("pause", "resume", "abort", "override"),
-        help="pause: brake to rest (feed hold); resume: go on after a pause or a programmed stop that "
-        "waits for a call; abort: brake to rest and end the run; override X: scale v_max by X in "
-        "[0.05, 2] from now on",
-    )
-    p.add_argument("value", nargs="?", default=None, metavar="X", help="the override factor")
-    p.add_argument("--namespace", default="", help="ROS namespace of the cell (/name[/name...])")
-    p.add_argument("--timeout", default="10", help="seconds to wait for the cell's reply (default 10)")
-    p.set_defaults(func=cmd_ctl)
-
     p = sub.add_parser(
         "discovery-server",
         help="run Fast DDS's discovery server for a cell across hosts (see README: Deploying a cell)",
@@ -711,6 +677,9 @@ def build_parser() -> argparse.ArgumentParser:
     from winder.cli.replay import register as register_replay  # play, resim (issue 21)
 
     register_replay(sub)
+    from winder.cli.ctl import register as register_ctl  # ctl: start, state, param, lifecycle, pause...
+
+    register_ctl(sub)
     from winder.cli.resonance import register as register_resonance  # resonance, tune (issue 15)
 
     register_resonance(sub)

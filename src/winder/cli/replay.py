@@ -14,6 +14,9 @@ from winder.cli.exits import EXIT_FAILED, EXIT_OK
 
 __all__ = ["register"]
 
+#: seconds ``winder play`` waits by default for the readers on the graph to match its publishers
+WAIT_DEFAULT = 5.0
+
 
 def _number(name: str, text: str, low: float, high: float, *, low_open: bool = False) -> float:
     try:
@@ -36,7 +39,14 @@ def cmd_play(args: argparse.Namespace) -> int:
     rate = _number("rate", args.rate, 0.001, 1e6)
     offset = _number("start_offset", args.start_offset, 0.0, 1e7)
     delay = _number("delay", args.delay, 0.0, 3600.0)
-    wait = _number("wait_for_subscribers", args.wait_for_subscribers, 0.0, 3600.0)
+    # by default a bounded wait for the readers already on the graph (rosbag2 #109); given, it
+    # also waits for a first reader to come; --no-wait publishes at once, as ros2 bag play does
+    given = args.wait_for_subscribers is not None
+    if given and args.no_wait:
+        raise ValueError("--no-wait and --wait-for-subscribers exclude each other: give one")
+    wait = 0.0 if args.no_wait else WAIT_DEFAULT
+    if given:
+        wait = _number("wait_for_subscribers", args.wait_for_subscribers, 0.0, 3600.0)
     try:
         plan = plan_play(
             args.bag,
@@ -85,6 +95,7 @@ def cmd_play(args: argparse.Namespace) -> int:
             progress=bar.update,
             keys=True,
             force=args.force,
+            first_reader=given,
         )
     except CellLiveError as exc:
         raise UserError(str(exc)) from None
@@ -244,9 +255,17 @@ def register(sub: argparse._SubParsersAction[Any]) -> None:
     p.add_argument("--delay", default="0", metavar="S", help="wait S seconds before the first message")
     p.add_argument(
         "--wait-for-subscribers",
-        default="0",
+        default=None,
         metavar="S",
-        help="first wait up to S seconds until every subscriber on the graph is matched",
+        help="wait up to S seconds until a subscriber has come and every subscriber on the graph is "
+        "matched, then play (start the player before the readers); without it the player waits up to "
+        "5 s for the subscribers already on the graph to match, so they hear the first message",
+    )
+    p.add_argument(
+        "--no-wait",
+        action="store_true",
+        help="publish the first message at once, matched or not (as ros2 bag play does: a reader may "
+        "miss the first messages)",
     )
     p.set_defaults(func=cmd_play)
 

@@ -43,6 +43,10 @@ __all__ = ["PlayResult", "Player", "message_class"]
 
 #: seconds the player waits, at the end, for its subscribers to acknowledge everything
 ACK_TIMEOUT = 10.0
+#: seconds of discovery before the player trusts the graph's list of readers
+SETTLE = 1.0
+#: seconds the player gives a matched reader to match it in turn before the first message
+MATCH_GRACE = 0.1
 
 
 def message_class(msgtype: str) -> Any:
@@ -72,6 +76,7 @@ class Player:
     ) -> None:
         self.plan = plan
         self.node = rclpy.create_node("winder_player", namespace=node_namespace or "/")
+        self.created = time.monotonic()
         self.cond = threading.Condition()
         self.rate = rate
         self.paused = start_paused
@@ -163,9 +168,15 @@ class Player:
         return SetParametersResult(successful=True)
 
     # -- playing (the calling thread) -------------------------------------------------
-    def wait_for_subscribers(self, timeout: float) -> str:
+    def wait_for_subscribers(self, timeout: float, *, first_reader: bool = False) -> str:
         """Wait until every subscriber the graph shows on a played topic is
-        matched (at least one in all); the topics still unmatched, if any."""
+        matched by the player's publisher, so that a reader already on the
+        graph hears the first message (rosbag2 #109): at least
+        :data:`SETTLE` s after the node was made, so that discovery has shown
+        the readers there are (a graph with none: nothing to wait for), and
+        with ``first_reader`` until at least one reader is matched (a reader
+        started after the player). Bounded by ``timeout`` s; "" when matched,
+        else the topics still unmatched (or that no reader came)."""
         deadline = time.monotonic() + timeout
         while True:
             missing = [
@@ -174,8 +185,13 @@ class Player:
                 if self.pubs[t.recorded].get_subscription_count() < self.node.count_subscribers(t.name)
             ]
             any_reader = any(p.get_subscription_count() for p in self.pubs.values())
-            if (any_reader and not missing) or time.monotonic() > deadline:
-                return ", ".join(missing) if any_reader else "no subscriber on any played topic"
+            settled = time.monotonic() - self.created >= SETTLE
+            if not missing and settled and (any_reader or not first_reader):
+                if any_reader:  # the reader's side matches the player a moment after the player's side
+                    time.sleep(MATCH_GRACE)
+                return ""
+            if time.monotonic() > deadline:
+                return ", ".join(missing) if missing or any_reader else "no subscriber on any played topic"
             time.sleep(0.05)
 
     def _wait_until_due(self, t_ns: int, poll: Callable[[], None] | None) -> bool:
@@ -308,6 +324,7 @@ def run_player(
     progress: Callable[[float, str], None] | None,
     keys: bool,
     force: bool = False,
+    first_reader: bool = False,
 ) -> PlayResult:
     """Init rclpy, play, shut down. Ctrl-C ends the replay (KeyboardInterrupt).
     :class:`CellLiveError` if a live cell runs in the namespace played into (unless ``force``)."""
@@ -335,9 +352,11 @@ def run_player(
                 f"namespace (--namespace /replay), or give --force"
             )
         if wait_subscribers > 0:
-            missing = player.wait_for_subscribers(wait_subscribers)
+            missing = player.wait_for_subscribers(wait_subscribers, first_reader=first_reader)
             if missing:
-                sys.stderr.write(f"winder play: after {wait_subscribers:g} s still unmatched: {missing}\n")
+                sys.stderr.write(
+                    f"winder play: after {wait_subscribers:g} s still unmatched (playing anyway): {missing}\n"
+                )
         if delay > 0:
             time.sleep(delay)
         from winder.ros.terminal import KeyReader

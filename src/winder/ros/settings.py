@@ -90,8 +90,24 @@ class Settings:
         except SpecError as exc:
             log.error(f"settings rejected at start: {exc}")
             self.rejected.append(str(exc))
-        node.add_pre_set_parameters_callback(self._as_declared)
+        # one pre-set callback, whatever is added to it: rclpy gives each of a node's
+        # pre-set callbacks the list as it came and sets what they return, all of it,
+        # one after the other (two callbacks: every parameter twice, the first
+        # callback's version checked and set first)
+        self._pre_set: list[Callable[[list[Parameter]], list[Parameter]]] = [self._as_declared]
+        node.add_pre_set_parameters_callback(self._pre_set_all)
         node.add_on_set_parameters_callback(self._on_set)
+
+    def add_pre_set(self, callback: Callable[[list[Parameter]], list[Parameter]]) -> None:
+        """A pre-set callback of the node's (it may change the list and add
+        to it), run after the conversion to the declared types and those added
+        before it, each on what the one before returned."""
+        self._pre_set.append(callback)
+
+    def _pre_set_all(self, params: list[Parameter]) -> list[Parameter]:
+        for callback in self._pre_set:
+            params = callback(params)
+        return params
 
     def _as_declared(self, params: list[Parameter]) -> list[Parameter]:
         """An integer given for a double setting (``ros2 param set v_max 3000``)

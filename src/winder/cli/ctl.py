@@ -1,0 +1,483 @@
+"""``winder ctl``: a running cell driven from the command line, without the
+``ros2`` command (which the pip install lacks): start a run, read the cell's
+state, a node's parameters and lifecycle, pause, resume, abort, override.
+
+Each is a client of the standard services and the cell's topics
+(:mod:`winder.ros.ctl`), bounded by ``--timeout``; every error is one line
+and the exit status of its class (:mod:`winder.cli.exits`): 2 for what the
+user can fix (an unknown node or parameter, a bad value, a setting the node
+refused, a transition the node's state does not have, a missing job file), 1
+when the cell did not answer in time or refused the command, 3 and 1 for a
+run followed with ``--wait`` that ended aborted or incomplete, 130 at Ctrl-C.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from winder.cli.exits import EXIT_ABORTED, EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK
+
+__all__ = ["register"]
+
+#: seconds a command waits for the cell by default
+TIMEOUT = "10"
+
+
+def _timeout(args: argparse.Namespace) -> float:
+    from winder.cli.commands import CELL_SPECS
+
+    return float(CELL_SPECS["timeout"].parse(args.timeout))
+
+
+def _namespace(args: argparse.Namespace) -> str:
+    from winder.contract.topics import check_namespace
+
+    return check_namespace(args.namespace)
+
+
+def _ros() -> Any:
+    from winder.cli.commands import UserError
+
+    try:
+        from winder.ros import ctl
+    except ImportError as exc:
+        raise UserError(f"the ROS 2 packages are not installed ({exc}); run 'make demo'") from None
+    return ctl
+
+
+def _fail(args: argparse.Namespace, message: str, code: int) -> int:
+    print(f"winder ctl {args.action}: {message}", file=sys.stderr)
+    return code
+
+
+def _guarded(args: argparse.Namespace, body: Any) -> int:
+    """Run ``body(ctl)`` and map what it raises to one line and an exit status."""
+    ctl = _ros()
+    try:
+        return int(body(ctl))
+    except ctl.UnansweredError as exc:
+        return _fail(args, str(exc), EXIT_FAILED)
+    except ctl.NoSuchNodeError as exc:
+        return _fail(args, str(exc), EXIT_BAD_INPUT)
+    except ctl.RefusedError as exc:
+        return _fail(args, str(exc), getattr(args, "refused_code", EXIT_BAD_INPUT))
+    except ValueError as exc:
+        return _fail(args, str(exc), EXIT_BAD_INPUT)
+
+
+# -- pause, resume, abort, override ----------------------------------------------------------
+
+
+def cmd_operate(args: argparse.Namespace) -> int:
+    """One command to a running cell: EXIT_OK if it was done, EXIT_FAILED if the cell said no."""
+    from winder.contract.params import OPERATION_SPECS
+
+    ns = _namespace(args)
+    timeout = _timeout(args)
+    ctl = _ros()
+    if args.action == "override":
+        factor = OPERATION_SPECS["feed_override"].parse(args.value)
+        ok, message = ctl.set_parameter(f"{ns}/profile_node", "feed_override", factor, timeout=timeout)
+    else:
+        ok, message = ctl.trigger(f"{ns}/profile_node/{args.action}", timeout=timeout)
+    if not ok:
+        return _fail(args, message, EXIT_FAILED)
+    print(message)
+    return EXIT_OK
+
+
+# -- start -------------------------------------------------------------------------------------
+
+
+def run_values(args: argparse.Namespace) -> dict[str, Any]:
+    """The values ``~/start_run`` is to set: the job file (its absolute path,
+    checked here as the node will check it) and each ``--set key=value``,
+    checked against the interp node's setting table."""
+    from winder.contract.jobfile import load_job_file
+    from winder.contract.params import INTERP_SPECS
+
+    values: dict[str, Any] = {}
+    if args.job_file:
+        path = Path(args.job_file).expanduser().absolute()  # the caller's working directory, not the node's
+        load_job_file(path)  # JobFileError (a ValueError): one line naming the file tried
+        values["job_file"] = str(path)
+    for item in args.set or ():
+        key, eq, text = item.partition("=")
+        key = key.strip()
+        if not eq or not key:
+            raise ValueError(f"--set {item!r} is invalid: must be key=value (--set turns_per_layer=40)")
+        spec = INTERP_SPECS.get(key)
+        if spec is None or key == "job_file_sha256":
+            raise ValueError(
+                f"--set {key}: the interp node has no setting {key!r} (winder run --help and "
+                "winder ctl param list interp_node name them; the ramp is ramp.profile, ramp.v_max, ...)"
+            )
+        value = spec.parse(text)  # SpecError: "turns_per_layer='0' is invalid: must be ... in [1, ...]"
+        if key == "job_file" and value:
+            path = Path(value).expanduser().absolute()
+            load_job_file(path)
+            value = str(path)
+        values[key] = value
+    return values
+
+
+def start_code(reason: str) -> int:
+    """The exit status of a refused start: the cell busy, not ready or not
+    active is the cell's refusal (1); anything else is the settings' (2)."""
+    if reason.startswith("job not started") or "start refused, the running job goes on" in reason:
+        return EXIT_FAILED
+    return EXIT_BAD_INPUT
+
+
+def cmd_start(args: argparse.Namespace) -> int:
+    """Set up and start a run in one call (the interp node's ``~/start_run``)."""
+    ns = _namespace(args)
+    timeout = _timeout(args)
+    run_timeout = _run_timeout(args)
+
+    def body(ctl: Any) -> int:
+        values = run_values(args)  # checked before anything goes on the graph
+        with ctl.Session(timeout) as session:
+            interp = ctl.find_role(session, ns, "interp", "interp node (the publisher of winder/job)")
+            view = ctl.watch_cell(session, ns) if args.wait else None
+            try:
+                reply = ctl.start_run(session, interp, values)
+            except ctl.RefusedError as exc:
+                return _fail(args, str(exc), start_code(str(exc)))
+            found = ctl.RUN_ID.search(reply)
+            run_id = found.group(1) if found else ""
+            print(f"run {run_id}" if run_id else reply)
+            print(f"  {reply}")
+            if view is None:
+                return EXIT_OK
+            return wait_for_end(args, ctl, session, view, run_id, run_timeout)
+
+    return _guarded(args, body)
+
+
+def _run_timeout(args: argparse.Namespace) -> float:
+    from winder.cli.commands import CELL_SPECS
+
+    return float(CELL_SPECS["timeout"].parse(args.run_timeout))
+
+
+#: a run's end states in the consumer's final report, and the exit status of each
+END_CODES = {"done": EXIT_OK, "aborted": EXIT_ABORTED, "incomplete": EXIT_FAILED}
+
+
+def wait_for_end(
+    args: argparse.Namespace, ctl: Any, session: Any, view: Any, run_id: str, run_timeout: float
+) -> int:
+    """Follow the run ``run_id`` until the consumer's final report: a line
+    each time its state or progress changes, then the end state."""
+    from winder.contract.topics import has_role
+
+    def status(role: str) -> dict[str, str]:
+        """The values of ``role``'s job status for this run ({} until heard)."""
+        for st in view.statuses.values():
+            if has_role(st.name, st.values, role, view.namespace) and st.values.get("run_id") == run_id:
+                return dict(st.values)
+        return {}
+
+    end = time.monotonic() + run_timeout
+    heard = time.monotonic()  # when the cell last said anything of the run
+    last_line = ""
+    given_up = 0.0  # when the interp node gave the run up (a consumer that died sends no report)
+    seen = view.changed
+    while True:
+        session.spin(0.1)
+        now = time.monotonic()
+        if view.changed != seen:
+            seen = view.changed
+            heard = now
+        mine = status("consumer")
+        if mine:
+            line = (
+                f"  {mine.get('state', '-'):<10} steps {mine.get('steps_done', '?')} of "
+                f"{mine.get('steps_total', '?')}  ({100 * float(mine.get('progress') or 0):.1f} %)"
+            )
+            if line != last_line:
+                print(line, flush=True)
+                last_line = line
+            state = mine.get("state", "")
+            if state in END_CODES:
+                print(f"run {run_id}: {state}" + (f", bag {mine['bag']}" if mine.get("bag") else ""))
+                if state != "done":
+                    return _fail(args, f"run {run_id} ended {state}", END_CODES[state])
+                return EXIT_OK
+        theirs = status("interp")
+        if theirs.get("state") in ("incomplete", "aborted") and not given_up:
+            given_up = now
+        if given_up and now - given_up > 5.0:
+            return _fail(
+                args,
+                f"run {run_id}: the interp node says {theirs.get('state')}, the consumer sent no "
+                "final report (is it still running?)",
+                EXIT_FAILED,
+            )
+        if now - heard > session.timeout:
+            return _fail(
+                args,
+                f"run {run_id}: nothing heard from the cell for {session.timeout:g} s (its statuses on "
+                "/diagnostics, winder/state): did a node stop?",
+                EXIT_FAILED,
+            )
+        if now > end:
+            return _fail(
+                args,
+                f"run {run_id} did not end within {run_timeout:g} s (--run-timeout); it goes on",
+                EXIT_FAILED,
+            )
+
+
+# -- state -------------------------------------------------------------------------------------
+
+
+def state_lines(view: Any) -> list[str]:
+    """The cell's state as a few lines: the cell, the start handshake, each node."""
+    s = view.state
+    ns = view.namespace or "/"
+    lines = []
+    if s:
+        where = _where(s)
+        run = f"run {s['run_id']} (job {s.get('job_id') or '-'})" if s.get("run_id") else "no run yet"
+        sim = f"  sim {float(s['sim_time_s']):.3f} s" if s.get("sim_time_s") and s.get("run_id") else ""
+        lines.append(f"cell {ns}  {s.get('state', '-')}  {run}" + (f"  {where}" if where else "") + sim)
+    else:
+        lines.append(f"cell {ns}  (no winder/state heard: no consumer on the graph?)")
+    ready = ", ".join(f"{k} {v}" for k, v in sorted(view.ready.items())) or "-"
+    lines.append(f"  ready     {ready}")
+    roles = view.roles()
+    by_name = {st.name: role for role, st in roles.items()}
+    for name in sorted(view.statuses):
+        st = view.statuses[name]
+        v = st.values
+        node = name.split(":", 1)[0]
+        role = v.get("role") or by_name.get(name, "-")
+        total = v.get("steps_total") or "0"
+        steps = ""
+        if total != "0":
+            share = 100 * float(v.get("progress") or 0)
+            steps = f"  steps {v.get('steps_done', '0')}/{total} ({share:.1f} %)"
+        lines.append(f"  {node:<22} {role:<9} {v.get('state', '-'):<10} {v.get('run_id') or '-'}{steps}")
+    missing = [r for r in ("interp", "profile", "consumer") if r not in roles]
+    if missing:
+        lines.append(f"  no job status heard from: {', '.join(missing)}")
+    return lines
+
+
+def _where(state: dict[str, str]) -> str:
+    """Coil, layer and turn of a run's state ("" before any run)."""
+    if not state.get("run_id"):
+        return ""
+    return " ".join(f"{k} {state[k]}" for k in ("coil", "layer", "turn") if state.get(k))
+
+
+def change_line(view: Any) -> str:
+    """One line of what ``--watch`` prints on a change."""
+    s = view.state
+    roles = view.roles()
+    c = roles["consumer"].values if "consumer" in roles else {}
+    where = _where(s)
+    progress = ""
+    if c.get("steps_total") not in (None, "", "0"):
+        progress = (
+            f"  steps {c.get('steps_done')}/{c['steps_total']} ({100 * float(c.get('progress') or 0):.1f} %)"
+        )
+    ready = ", ".join(f"{k} {v}" for k, v in sorted(view.ready.items()))
+    run = s.get("run_id") or c.get("run_id") or "-"
+    return (
+        f"{s.get('state', '-'):<9} {run}"
+        + (f"  {where}" if where else "")
+        + progress
+        + (f"  ready: {ready}" if ready else "")
+    )
+
+
+def cmd_state(args: argparse.Namespace) -> int:
+    """Print the cell's state; with ``--watch`` a line on every change until Ctrl-C."""
+    ns = _namespace(args)
+    timeout = _timeout(args)
+
+    def body(ctl: Any) -> int:
+        with ctl.Session(timeout) as session:
+            view = ctl.cell_state(session, ns)
+            for line in state_lines(view):
+                print(line)
+            if not args.watch:
+                return EXIT_OK
+            last = ""
+            for _ in ctl.follow(session, view):
+                line = change_line(view)
+                if line != last:
+                    print(f"{time.strftime('%H:%M:%S')}  {line}", flush=True)
+                    last = line
+            return EXIT_OK  # not reached: Ctrl-C ends it
+
+    return _guarded(args, body)
+
+
+# -- param -------------------------------------------------------------------------------------
+
+
+def _job_file_value(name: str, value: str) -> str:
+    """A job_file given on the command line: absolute, against the caller's
+    working directory (the node would read a relative one from its own)."""
+    if name == "job_file" and value and not Path(value).expanduser().is_absolute():
+        return str(Path(value).expanduser().absolute())
+    return value
+
+
+def cmd_param(args: argparse.Namespace) -> int:
+    """Get, set or list a node's parameters through its parameter services."""
+    ns = _namespace(args)
+    timeout = _timeout(args)
+
+    def body(ctl: Any) -> int:
+        node = ctl.node_name(args.node, ns)
+        with ctl.Session(timeout) as session:
+            session.find_node(node)
+            if args.verb == "get":
+                print(ctl.get_parameter(session, node, args.name))
+            elif args.verb == "list":
+                rows = ctl.list_parameters(session, node)
+                wide = max((len(n) for n, _ in rows), default=0)
+                for name, value in rows:
+                    print(f"{name:<{wide}}  {value}")
+            else:
+                text = _job_file_value(args.name, args.value)
+                values = ctl.set_parameters(session, node, {args.name: text})
+                print(f"{node}: {args.name} = {ctl.parameter_text_py(values[args.name])}")
+        return EXIT_OK
+
+    args.action = f"param {args.verb}"
+    return _guarded(args, body)
+
+
+# -- lifecycle ---------------------------------------------------------------------------------
+
+
+def cmd_lifecycle(args: argparse.Namespace) -> int:
+    """A lifecycle transition of a node, or its state (``get``)."""
+    ns = _namespace(args)
+    timeout = _timeout(args)
+    args.action = f"lifecycle {args.transition}"
+    args.refused_code = EXIT_FAILED  # a transition the node tried and refused: the cell said no
+
+    def body(ctl: Any) -> int:
+        node = ctl.node_name(args.node, ns)
+        with ctl.Session(timeout) as session:
+            session.find_node(node)
+            if args.transition == "get":
+                print(f"{node}: {ctl.lifecycle_state(session, node)}")
+                return EXIT_OK
+            before, after = ctl.lifecycle_transition(session, node, args.transition)
+            print(f"{node}: {args.transition}: {before} -> {after}")
+        return EXIT_OK
+
+    return _guarded(args, body)
+
+
+# -- the parser --------------------------------------------------------------------------------
+
+
+def _common(p: argparse.ArgumentParser, timeout: str = TIMEOUT) -> None:
+    p.add_argument("--namespace", default="", help="ROS namespace of the cell (/name[/name...])")
+    p.add_argument(
+        "--timeout",
+        default=timeout,
+        metavar="S",
+        help=f"seconds to wait for the cell (the node, its service, its reply; default {timeout})",
+    )
+
+
+def register(sub: argparse._SubParsersAction[Any]) -> None:
+    """Add ``ctl`` and its commands to the ``winder`` subcommands."""
+    ctl = sub.add_parser(
+        "ctl",
+        help="drive a running cell: start, state, param, lifecycle, pause, resume, abort, override X",
+        description="Commands to a running cell on this ROS_DOMAIN_ID, through the standard ROS 2 "
+        "services and the cell's topics (what ros2 service call, ros2 param and ros2 lifecycle do, "
+        "on the pip install). Each waits at most --timeout seconds and names what it waited for.",
+    )
+    verbs = ctl.add_subparsers(dest="action", metavar="ACTION", parser_class=type(ctl))
+    verbs.required = True
+    for action, text in (
+        ("pause", "brake to rest (feed hold)"),
+        ("resume", "go on after a pause, or a programmed stop that waits for a call"),
+        ("abort", "brake to rest and end the run"),
+        ("override", "scale v_max by X in [0.05, 2] from now on (the profile node's feed_override)"),
+    ):
+        p = verbs.add_parser(action, help=text, description=text)
+        if action == "override":
+            p.add_argument("value", metavar="X", help="the override factor, in [0.05, 2]")
+        _common(p)
+        p.set_defaults(func=cmd_operate)
+
+    p = verbs.add_parser(
+        "start",
+        help="set up and start a run in one call (the interp node's ~/start_run); prints the run id",
+        description="Start a run on a running cell: the job file's job and ramp, and the values given "
+        "with --set, are set on the interp node all together or not at all, and the run starts with "
+        "them. A relative JOB_FILE is taken from this command's working directory (its absolute path "
+        "is sent; the interp node must be able to read it there). Asks again while the cell says it "
+        "is not ready, up to --timeout.",
+    )
+    p.add_argument("job_file", nargs="?", metavar="JOB_FILE", help="a job file (see jobs/)")
+    p.add_argument(
+        "--set",
+        action="append",
+        metavar="KEY=VALUE",
+        help="an interp node setting for this run (turns_per_layer=40, ramp.profile=trapezoid, ...); "
+        "repeatable; wins over the job file's value",
+    )
+    p.add_argument("--wait", action="store_true", help="follow the run and print how it ended")
+    p.add_argument(
+        "--run-timeout",
+        default="3600",
+        metavar="S",
+        help="with --wait: give up following after S seconds (default 3600; the run goes on)",
+    )
+    _common(p)
+    p.set_defaults(func=cmd_start)
+
+    p = verbs.add_parser(
+        "state",
+        help="print the cell's state: winder/state, the start handshake, each node's job status",
+    )
+    p.add_argument("--watch", action="store_true", help="then print a line on every change, until Ctrl-C")
+    _common(p)
+    p.set_defaults(func=cmd_state)
+
+    p = verbs.add_parser("param", help="get, set or list a node's parameters (ros2 param)")
+    kinds = p.add_subparsers(dest="verb", metavar="VERB", parser_class=type(p))
+    kinds.required = True
+    q = kinds.add_parser("get", help="print a parameter's value")
+    q.add_argument("node", metavar="NODE", help="node name (in --namespace), or its full name /ns/name")
+    q.add_argument("name", metavar="NAME")
+    _common(q)
+    q = kinds.add_parser(
+        "set",
+        help="set a parameter (read as a parameters file reads it, made the declared type); "
+        "a relative job_file is taken from this command's working directory",
+    )
+    q.add_argument("node", metavar="NODE", help="node name (in --namespace), or its full name /ns/name")
+    q.add_argument("name", metavar="NAME")
+    q.add_argument("value", metavar="VALUE")
+    _common(q)
+    q = kinds.add_parser("list", help="every parameter of a node, with its value")
+    q.add_argument("node", metavar="NODE", help="node name (in --namespace), or its full name /ns/name")
+    _common(q)
+    p.set_defaults(func=cmd_param)
+
+    p = verbs.add_parser("lifecycle", help="a node's lifecycle transition, or its state (ros2 lifecycle)")
+    p.add_argument("node", metavar="NODE", help="node name (in --namespace), or its full name /ns/name")
+    p.add_argument(
+        "transition", choices=("configure", "activate", "deactivate", "cleanup", "shutdown", "get")
+    )
+    _common(p)
+    p.set_defaults(func=cmd_lifecycle)
