@@ -37,6 +37,9 @@ def cmd_play(args: argparse.Namespace) -> int:
     offset = _number("start_offset", args.start_offset, 0.0, 1e7)
     delay = _number("delay", args.delay, 0.0, 3600.0)
     wait = _number("wait_for_subscribers", args.wait_for_subscribers, 0.0, 3600.0)
+    from winder.cli.view import foxglove_port
+
+    fox_port = foxglove_port(args)
     try:
         plan = plan_play(
             args.bag,
@@ -48,6 +51,10 @@ def cmd_play(args: argparse.Namespace) -> int:
         )
     except OSError as exc:
         raise ValueError(f"{exc.filename}: {exc.strerror or exc}") from None
+    if fox_port is not None:
+        from winder.cli.view import serve_bag
+
+        return serve_bag(args, plan, fox_port, rate)
     try:
         from winder.ros.player import describe, run_player
     except ImportError as exc:
@@ -247,6 +254,13 @@ def register(sub: argparse._SubParsersAction[Any]) -> None:
         default="0",
         metavar="S",
         help="first wait up to S seconds until every subscriber on the graph is matched",
+    )
+    from winder.cli.view import add_foxglove_arguments
+
+    add_foxglove_arguments(
+        p,
+        "the recording (not onto the ROS graph) with Foxglove's playback controls: play, pause, "
+        "seek, speed; --topics, --exclude, --namespace, --clock, --start-offset and --rate apply;",
     )
     p.set_defaults(func=cmd_play)
 
