@@ -32,6 +32,8 @@ import pytest
 import websockets
 from conftest import BIN, Procs, rosbags_read
 
+from winder.contract.topics import in_namespace
+
 pytestmark = pytest.mark.ros
 
 JOINTS = ["feed", "fork", "pole"]
@@ -230,31 +232,53 @@ def check_state(data: list[Data]) -> dict[str, str]:
     return values
 
 
-def check_advertised(client: Client) -> None:
+#: the layout's topics a live view cannot serve: the step stream (read by the layout's progress
+#: script; a view must not read it) and the outputs of the layout's own user scripts
+NOT_LIVE = {"/winder/step_times", "/studio_script/winder_progress", "/studio_script/winder_tracking_error"}
+
+
+def layout_topics() -> set[str]:
+    """The topics layouts/winder_foxglove.json names (message paths, script inputs)."""
+    text = (Path(__file__).resolve().parents[1] / "layouts" / "winder_foxglove.json").read_text()
+    return set(re.findall(r'"(/(?:winder|diagnostics|clock|studio_script)[A-Za-z_/]*)', text))
+
+
+def check_advertised(client: Client, ns: str = "") -> None:
     advertised = {c["topic"]: c["schemaName"] for c in client.channels.values()}
-    assert advertised == LIVE_TOPICS
-    schema = client.topic_channel("/winder/joint_states")["schema"]
+    assert advertised == {(t if t == "/diagnostics" else ns + t): kind for t, kind in LIVE_TOPICS.items()}
+    if not ns:  # the layout names the root namespace's topics
+        named = layout_topics()
+        assert "/winder/joint_states" in named and "/winder/job" in named  # the pattern finds what it must
+        assert named - NOT_LIVE <= set(advertised), (
+            f"the layout names topics a live cell does not serve: {named}"
+        )
+    schema = client.topic_channel(f"{ns}/winder/joint_states")["schema"]
     # the whole definition, its dependencies included, as rosbag2 writes it: Foxglove decodes with it alone
     assert schema.startswith("std_msgs/Header header\nstring[] name\nfloat64[] position")
     assert "MSG: std_msgs/Header" in schema and "MSG: builtin_interfaces/Time" in schema
 
 
-async def watch_live(port: int, job_id: str) -> Client:
+async def watch_live(port: int, job_id: str, ns: str = "") -> Client:
+    """Connect, check the channels, subscribe to joint states, state, job and
+    diagnostics of the cell in ``ns``, and check what they bring."""
     client = await connect(port)
     await client.until(lambda: len(client.channels) >= len(LIVE_TOPICS), 10, "every channel advertised")
     assert "playbackControl" not in client.info["capabilities"]
-    check_advertised(client)
-    await client.subscribe(["/winder/joint_states", "/winder/state", "/winder/job"])
+    check_advertised(client, ns)
+    states, state, job = f"{ns}/winder/joint_states", f"{ns}/winder/state", f"{ns}/winder/job"
+    await client.subscribe([states, state, job, "/diagnostics"])
     await client.until(
-        lambda: len(client.of("/winder/joint_states")) >= 50 and bool(client.of("/winder/job")),
+        lambda: len(client.of(states)) >= 50 and bool(client.of(job)) and bool(client.of("/diagnostics")),
         60,
-        "50 joint states and the job",
+        "50 joint states, the job and a status",
     )
     await client.drain(0.5)
-    check_joint_states(client.of("/winder/joint_states"), job_id)
-    state = check_state(client.of("/winder/state"))
-    job = json.loads(client.of("/winder/job")[-1].msg.data)
-    assert job["job"]["job_id"] == job_id and job["run_id"] == state["run_id"]
+    check_joint_states(client.of(states), job_id)
+    values = check_state(client.of(state))
+    description = json.loads(client.of(job)[-1].msg.data)
+    assert description["job"]["job_id"] == job_id and description["run_id"] == values["run_id"]
+    names = {s.name for d in client.of("/diagnostics") for s in d.msg.status}
+    assert all(in_namespace(n, ns) for n in names), f"statuses of another namespace served: {names}"
     await client.ws.close()
     return client
 
@@ -277,21 +301,22 @@ def test_run_foxglove_serves_the_live_cell(procs: Procs, ros: Any, tmp_path: Pat
     assert "Traceback" not in procs.log(run)
 
 
-def test_view_serves_a_cell_started_without_it(procs: Procs, ros: Any, tmp_path: Path) -> None:
+@pytest.mark.parametrize("ns", ["", "/c1"], ids=["root", "namespace"])
+def test_view_serves_a_cell_started_without_it(procs: Procs, ros: Any, tmp_path: Path, ns: str) -> None:
     """``winder view`` beside a running cell: the latched job, path and state
     reach a client that connects mid-run; the cell goes on; Ctrl-C ends the view, exit 0."""
     from winder.ros.graph import consumers
 
-    run = winder(procs, "run", *LONG, "--bag-dir", str(tmp_path / "bags"))
+    run = winder(procs, "run", *LONG, "--bag-dir", str(tmp_path / "bags"), "--namespace", ns)
     deadline = time.monotonic() + 60
-    while "winder/state" not in " ".join(n for n, _ in ros.get_topic_names_and_types()):
+    while f"{ns}/winder/state" not in [n for n, _ in ros.get_topic_names_and_types()]:
         assert time.monotonic() < deadline, procs.log(run)
         time.sleep(0.2)
-    view = winder(procs, "view", "--port", "0")
+    view = winder(procs, "view", "--port", "0", "--namespace", ns)
     port = served_port(procs, view)
-    client = asyncio.run(watch_live(port, "rw400"))
-    assert client.of("/winder/job")[0].log_time > 0
-    assert consumers(ros, "") == [("sim_node", "/")]
+    client = asyncio.run(watch_live(port, "rw400", ns))
+    assert client.of(f"{ns}/winder/job")[0].log_time > 0
+    assert consumers(ros, ns) == [("sim_node", ns or "/")]
     assert procs.stop(view) == 0
     out = procs.log(view)
     assert re.search(r"served \d+ messages", out) and "Traceback" not in out, out
