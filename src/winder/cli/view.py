@@ -129,7 +129,7 @@ def cmd_view(args: argparse.Namespace) -> int:
     port = foxglove_port(args, "--port")
     assert port is not None
     try:
-        from winder.ros.view import VIEW_TOPICS, LiveView, run_view
+        from winder.ros.view import LiveView, run_view
     except ImportError as exc:
         from winder.cli.commands import UserError
 
@@ -144,7 +144,7 @@ def cmd_view(args: argparse.Namespace) -> int:
     )
     print(f"winder view: the cell in {namespace or '/'}, live")
     print(f"  ROS domain         {where}, discovery {os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE']}")
-    print(f"  topics             {', '.join(t.name for t in VIEW_TOPICS)}")
+    print(f"  topics             {', '.join(view.names.values())}")
     print(f"  foxglove           {_url(server, args.host)}  (Foxglove: Open connection, Foxglove WebSocket)")
     print("  Ctrl-C ends", flush=True)
     t0 = time.monotonic()
