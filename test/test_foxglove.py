@@ -405,7 +405,12 @@ def test_play_foxglove_plays_pauses_and_seeks(procs: Procs, tmp_path: Path) -> N
 
         await client.control("play", 100.0, None, "fast")
         await client.until(lambda: any(s["status"] == 3 for s in client.states), 60, "the end (Ended)")
-        assert client.of("/winder/joint_states")[-1].log_time == states[-1][0]
+        # the state goes on the SDK's control plane, the data on its data plane: Ended may come first
+        await client.until(
+            lambda: client.of("/winder/joint_states")[-1].log_time == states[-1][0],
+            10,
+            "the last joint state",
+        )
         await client.ws.close()
 
     asyncio.run(scenario())
