@@ -258,6 +258,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     check_sim({**sim, "record": False} if "sim" in external else sim)  # a remote bag_dir is its host's
     cell = values_from_args(args, CELL_SPECS)
     args.namespace = check_namespace(args.namespace)
+    from winder.cli.view import foxglove_port, start_live_view
+
+    fox_port = foxglove_port(args)
     if args.check:
         steps = sum(s.steps for s in segments)
         print(
@@ -308,17 +311,25 @@ def cmd_run(args: argparse.Namespace) -> int:
     if server:  # Fast DDS makes every participant a client of the server(s) named there
         discovery = f"by the discovery server {server} ({DISCOVERY_SERVER_KEY})"
     print(f"  ROS domain         {domain} ({source}), discovery {discovery}")
+    fox_server, view = None, None
+    if fox_port is not None:  # listening before the cell starts: a port in use starts nothing
+        fox_server, view = start_live_view(args, fox_port, args.namespace)
     bar = Progress(1.0, "winding")
     t0 = time.monotonic()
-    result = run_cell(
-        params,
-        namespace=args.namespace,
-        domain=domain,
-        timeout=cell["timeout"],
-        start_timeout=cell["start_timeout"],
-        external=external,
-        progress=lambda frac, sim_t: bar.update(frac, f"sim {float(sim_t):7.2f} s"),
-    )
+    try:
+        result = run_cell(
+            params,
+            namespace=args.namespace,
+            domain=domain,
+            timeout=cell["timeout"],
+            start_timeout=cell["start_timeout"],
+            external=external,
+            progress=lambda frac, sim_t: bar.update(frac, f"sim {float(sim_t):7.2f} s"),
+            view=view,
+        )
+    finally:
+        if fox_server is not None:
+            fox_server.stop()
     bar.close()
     return report_run(result, time.monotonic() - t0)
 
@@ -641,6 +652,9 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="S",
         help="seconds of simulated time the axes rest at each programmed stop (--stop-pause S)",
     )
+    from winder.cli.view import add_foxglove_arguments
+
+    add_foxglove_arguments(g, "the cell's topics, live,")
     p.set_defaults(func=cmd_run)
 
     p = sub.add_parser(
@@ -683,6 +697,9 @@ def build_parser() -> argparse.ArgumentParser:
     from winder.cli.resonance import register as register_resonance  # resonance, tune (issue 15)
 
     register_resonance(sub)
+    from winder.cli.view import register as register_view  # view; run/play --foxglove (issue 33)
+
+    register_view(sub)
     return parser
 
 

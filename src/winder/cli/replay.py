@@ -47,6 +47,9 @@ def cmd_play(args: argparse.Namespace) -> int:
     wait = 0.0 if args.no_wait else WAIT_DEFAULT
     if given:
         wait = _number("wait_for_subscribers", args.wait_for_subscribers, 0.0, 3600.0)
+    from winder.cli.view import foxglove_port
+
+    fox_port = foxglove_port(args)
     try:
         plan = plan_play(
             args.bag,
@@ -58,6 +61,10 @@ def cmd_play(args: argparse.Namespace) -> int:
         )
     except OSError as exc:
         raise ValueError(f"{exc.filename}: {exc.strerror or exc}") from None
+    if fox_port is not None:
+        from winder.cli.view import serve_bag
+
+        return serve_bag(args, plan, fox_port, rate)
     try:
         from winder.ros.player import describe, run_player
     except ImportError as exc:
@@ -266,6 +273,13 @@ def register(sub: argparse._SubParsersAction[Any]) -> None:
         action="store_true",
         help="publish the first message at once, matched or not (as ros2 bag play does: a reader may "
         "miss the first messages)",
+    )
+    from winder.cli.view import add_foxglove_arguments
+
+    add_foxglove_arguments(
+        p,
+        "the recording (not onto the ROS graph) with Foxglove's playback controls: play, pause, "
+        "seek, speed; --topics, --exclude, --namespace, --clock, --start-offset and --rate apply;",
     )
     p.set_defaults(func=cmd_play)
 

@@ -628,6 +628,7 @@ def run_cell(
     progress: Callable[[float, str], None] | None = None,
     external: frozenset[str] = frozenset(),
     start_timeout: float = 60.0,
+    view: Any = None,
 ) -> CellResult:
     """Start the three nodes with ``params[node]`` parameters (but those in
     ``external``, which run elsewhere on the graph: their ``params`` are set
@@ -635,7 +636,9 @@ def run_cell(
     refusal ends the run unstarted), wait for the consumer to report the job
     done, stop them with SIGINT, return the summary; give up after
     ``timeout`` s, or ``start_timeout`` s if the job never started. The
-    nodes' output goes to ``result.log_dir``, removed after a clean run."""
+    nodes' output goes to ``result.log_dir``, removed after a clean run.
+    ``view``: a :class:`winder.ros.view.LiveView` (``--foxglove``), listening
+    on the graph from before the nodes start until they are stopped."""
     log_dir = Path(tempfile.mkdtemp(prefix="winder-cell-"))
     with cell_environment(domain) as env:
         procs = NodeProcesses(env, log_dir)
@@ -643,6 +646,9 @@ def run_cell(
         node = rclpy.create_node("winder_cell", namespace=namespace or "/")
         keys = Keys(node, namespace)
         try:
+            if view is not None:
+                view.attach()
+                view.start()
             remote = {NODE_ROLES[key]: dict(params.get(key, {})) for key in external}
             own = lambda: {str(p.pid) for p in procs.procs.values()}  # noqa: E731
             watch = CellWatch(node, namespace, remote, own=own)
@@ -654,6 +660,8 @@ def run_cell(
         finally:
             keys.close()
             procs.stop()
+            if view is not None:
+                view.close()
             node.destroy_node()
             rclpy.try_shutdown()
     return _result(watch, failure, log_dir)

@@ -1,0 +1,181 @@
+"""``winder view`` and ``winder run --foxglove``: a live cell's topics served
+to Foxglove (:mod:`winder.record.foxglove` serves; here one rclpy node listens).
+
+The node ``winder_view`` (in the cell's namespace) only subscribes, with
+``raw=True``: each message's CDR bytes go to its Foxglove channel as DDS
+delivered them, logged at the wall-clock time they arrived (a bag's log time
+is the wall clock too). It publishes nothing and reads neither
+``winder/steps`` nor ``winder/step_times``, so it plays no part in the cell
+(:data:`winder.contract.trust.SIGNS`): the interp node's start gate, the
+profile node's stream connection and the one-node-per-role check all see it
+as the echo it is. Reading the keep-all step stream would also let a slow
+viewer hold the profile node back; the layout's progress panel, which counts
+step times, is therefore empty on a live cell (``winder/progress`` and the
+job status's ``progress`` say it instead).
+
+The fast topics (joint states and commands, progress receipts, clock) are
+read best-effort: a viewer that falls behind loses samples, never slows the
+cell. The latched ones and the events are read as the cell offers them
+(reliable, transient-local), so a viewer started during a run still gets the
+run's job, path, configs, state and events; ``/diagnostics`` reliably, only
+the statuses of the cell's own namespace (what its bag records).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from rclpy.serialization import deserialize_message
+
+from winder.contract import qos as table
+from winder.contract.topics import (
+    TOPIC_CLOCK,
+    TOPIC_CONTROL,
+    TOPIC_DIAGNOSTICS,
+    TOPIC_JOB,
+    TOPIC_JOINT_COMMANDS,
+    TOPIC_JOINT_STATES,
+    TOPIC_PATH,
+    TOPIC_PROFILE_CONFIG,
+    TOPIC_PROGRESS,
+    TOPIC_SIM_CONFIG,
+    TOPIC_STATE,
+    in_namespace,
+)
+from winder.record.foxglove import Channels
+from winder.ros.graph import fully_qualified
+from winder.ros.player import message_class
+from winder.ros.qos import profile
+
+__all__ = ["VIEW_TOPICS", "LiveView", "ViewTopic"]
+
+
+@dataclass(frozen=True)
+class ViewTopic:
+    name: str  #: relative to the cell's namespace, as in winder.contract.topics
+    msgtype: str
+    qos: table.Qos  #: what the view subscribes with
+
+    @property
+    def keep(self) -> int:
+        """Messages sent again to a client that subscribes: a latched topic's depth."""
+        return self.qos.depth if self.qos.transient_local else 0
+
+
+def _lossy(q: table.Qos) -> table.Qos:
+    return table.Qos(reliable=False, transient_local=False, keep_all=False, depth=q.depth)
+
+
+#: what the view serves, and how it reads each topic
+VIEW_TOPICS = (
+    ViewTopic(TOPIC_JOINT_STATES, "sensor_msgs/msg/JointState", _lossy(table.STATE)),
+    ViewTopic(TOPIC_JOINT_COMMANDS, "sensor_msgs/msg/JointState", _lossy(table.STATE)),
+    ViewTopic(TOPIC_STATE, "diagnostic_msgs/msg/DiagnosticStatus", table.LATCHED),
+    ViewTopic(TOPIC_PROGRESS, "diagnostic_msgs/msg/KeyValue", _lossy(table.STATE)),
+    ViewTopic(TOPIC_PATH, "trajectory_msgs/msg/JointTrajectory", table.LATCHED),
+    ViewTopic(TOPIC_CONTROL, "std_msgs/msg/String", table.EVENTS),
+    ViewTopic(TOPIC_JOB, "std_msgs/msg/String", table.LATCHED),
+    ViewTopic(TOPIC_SIM_CONFIG, "std_msgs/msg/String", table.LATCHED),
+    ViewTopic(TOPIC_PROFILE_CONFIG, "std_msgs/msg/String", table.LATCHED),
+    ViewTopic(TOPIC_DIAGNOSTICS, "diagnostic_msgs/msg/DiagnosticArray", table.DIAGNOSTICS),
+    ViewTopic(TOPIC_CLOCK, "rosgraph_msgs/msg/Clock", table.CLOCK),
+)
+
+
+def _full(name: str, namespace: str) -> str:
+    """A topic's full name in the cell's namespace (a global one as it is)."""
+    return name if name.startswith("/") else fully_qualified(name, namespace)
+
+
+class LiveView:
+    """The listening node and its Foxglove channels. :meth:`attach` once
+    rclpy is initialised (it creates the node, in ``namespace``);
+    :meth:`spin` in the calling thread, or :meth:`start` a thread of its own
+    beside another node's executor (``winder run``)."""
+
+    def __init__(self, channels: Channels, namespace: str) -> None:
+        self.channels = channels
+        self.namespace = namespace
+        self.node: Node | None = None
+        self.executor: SingleThreadedExecutor | None = None
+        self.thread: threading.Thread | None = None
+        #: relative name -> the channel's topic (full name); advertised from now on
+        self.names = {t.name: _full(t.name, namespace) for t in VIEW_TOPICS}
+        for topic in VIEW_TOPICS:
+            self.channels.add(self.names[topic.name], topic.msgtype, keep=topic.keep)
+
+    def attach(self) -> None:
+        node = rclpy.create_node("winder_view", namespace=self.namespace or "/")
+        self.node = node
+        for topic in VIEW_TOPICS:
+            full = self.names[topic.name]
+            assert node.resolve_topic_name(topic.name) == full, (topic.name, full)
+            take = self._diagnostics if topic.name == TOPIC_DIAGNOSTICS else self._forward(full)
+            qos: QoSProfile = profile(topic.qos)
+            node.create_subscription(message_class(topic.msgtype), topic.name, take, qos, raw=True)
+        self.executor = SingleThreadedExecutor()
+        self.executor.add_node(node)
+
+    def _forward(self, full: str) -> Any:
+        log = self.channels.log
+        return lambda raw: log(full, raw, time.time_ns())
+
+    def _diagnostics(self, raw: bytes) -> None:
+        """A /diagnostics array, if any of its statuses is the cell's own."""
+        msg = deserialize_message(raw, DiagnosticArray)
+        if any(in_namespace(s.name, self.namespace) for s in msg.status):
+            self.channels.log(self.names[TOPIC_DIAGNOSTICS], raw, time.time_ns())
+
+    def spin(self) -> None:
+        assert self.executor is not None, "attach() first"
+        self.executor.spin()
+
+    def start(self) -> None:
+        """Spin in a thread of its own (ends with :meth:`close`)."""
+        self.thread = threading.Thread(target=self._spin_quietly, name="winder-view", daemon=True)
+        self.thread.start()
+
+    def _spin_quietly(self) -> None:
+        with contextlib.suppress(Exception):  # the context shut down under it: the view is ending
+            self.spin()
+
+    def close(self) -> None:
+        """Stop spinning and destroy the node (left to the process' exit if
+        its thread does not end: destroying a node under a waiting executor
+        crashes, see :meth:`winder.ros.player.Player.close`)."""
+        if self.executor is not None:
+            self.executor.shutdown(timeout_sec=5.0)
+        if self.thread is not None:
+            self.thread.join(timeout=5.0)
+            if self.thread.is_alive():
+                return
+        if self.node is not None:
+            self.node.destroy_node()
+            self.node = None
+
+
+def run_view(view: LiveView) -> None:
+    """``winder view``: init rclpy, listen until Ctrl-C (SIGINT) or SIGTERM, shut down."""
+    from rclpy.executors import ExternalShutdownException
+
+    from winder.ros.dds import use_profile
+
+    use_profile()
+    rclpy.init(args=[])
+    try:
+        view.attach()
+        view.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass  # the way a view ends
+    finally:
+        view.close()
+        rclpy.try_shutdown()
