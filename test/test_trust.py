@@ -53,8 +53,8 @@ def long_run(procs: Procs, bags: Path) -> subprocess.Popen[str]:
     nobody reads while the test goes on could fill and stop it)."""
     bags.mkdir(parents=True, exist_ok=True)
     return subprocess.Popen(
-        [str(BIN / "winder"), "run", "--bag-dir", str(bags), "--turns-per-layer", "400"]
-        + ["--real-time", "--real-time-factor", "160"],
+        [str(BIN / "winder"), "run", "--bag-dir", str(bags), "--turns-per-layer", "400",
+         "--real-time", "--real-time-factor", "160"],
         env=procs.env,
         stdout=(bags.parent / f"{bags.name}.out").open("w"),
         stderr=(bags.parent / f"{bags.name}.err").open("w"),

@@ -19,6 +19,7 @@ domain can) and, every ``--period`` s, forges what ``--forge`` names:
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
 
@@ -77,10 +78,9 @@ class Intruder(Node):
     def on_job(self, msg: String) -> None:
         if "intruder" not in msg.data:
             self.job_text = msg.data
-            try:  # the run's id as the run starts (its statuses say it up to 1 s later)
+            # the run's id as the run starts (its statuses say it up to 1 s later)
+            with contextlib.suppress(ValueError, KeyError, TypeError):
                 self.run_id = str(json.loads(msg.data)["run_id"]) or self.run_id
-            except (ValueError, KeyError, TypeError):
-                pass
 
     def tick(self) -> None:
         if not self.run_id:
