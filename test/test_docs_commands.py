@@ -315,3 +315,35 @@ def test_markers_sit_on_a_block() -> None:
             if MARKER.match(text):
                 after = next((t for t in lines[n + 1 :] if t.strip()), "")
                 assert after.strip() == "```sh", f"{path.name}:{n + 1}: marker not followed by a ```sh block"
+
+
+def _cells(row: str) -> int:
+    """Cells of a Markdown table row: ``|`` outside code spans, unescaped."""
+    count, code, prev = 0, False, ""
+    for ch in row.strip().strip("|"):
+        if ch == "`":
+            code = not code
+        elif ch == "|" and not code and prev != "\\":
+            count += 1
+        prev = ch
+    return count + 1
+
+
+def test_every_table_row_has_its_headers_cells() -> None:
+    """A table whose rows have more or fewer cells than its header renders
+    shifted (the resonance table once had 18 header cells and 13 per row)."""
+    bad = []
+    for path in DOCS:
+        fenced = False
+        header = 0
+        for n, text in enumerate(path.read_text().splitlines(), 1):
+            if text.lstrip().startswith("```"):
+                fenced = not fenced
+            if fenced or not text.startswith("|"):
+                header = 0
+                continue
+            if not header:
+                header = _cells(text)
+            elif _cells(text) != header:
+                bad.append(f"{path.name}:{n}: {_cells(text)} cells, the header has {header}")
+    assert not bad, "\n".join(bad)
