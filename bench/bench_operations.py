@@ -1,4 +1,4 @@
-"""How soon a pause takes effect in a real-time run (issue 14, item 3).
+"""How soon a pause takes effect in a real-time run.
 
 The three nodes run a long job in real time (look-ahead 50 ms, joint states
 at 200 Hz); this process calls the profile node's ``~/pause`` at random

@@ -1,4 +1,4 @@
-"""The cell integration contract (issue 20), with the real node executables
+"""The cell integration contract, with the real node executables
 started one by one as a cell starts them, on an isolated domain.
 
 * one run identity: the same job started twice in one cell's life gives two

@@ -571,7 +571,7 @@ def motion_refusal(job: Job) -> str:
     """Why the cell cannot wind ``job`` yet ("" if it can), in one line: the
     settings that are declared and checked, and shape the coil's geometry,
     but whose motion is not implemented (the orthocyclic cam of the flyer,
-    the reversal dwell, the slower first layer: issue 32). Winding them
+    the reversal dwell, the slower first layer). Winding them
     helically, without the dwell or at full speed, would lay another coil
     than the job asks for."""
     missing = []
