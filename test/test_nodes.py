@@ -374,7 +374,7 @@ def test_colcon_build_installs_runnable_executables(tmp_path: Path, procs: Procs
 
 
 def _launch(given: dict[str, str]) -> tuple[list[Any], list[dict[str, Any]]]:
-    """launch/launch_ros cannot be installed here (ROS_SETUP.md), so the launch
+    """launch/launch_ros cannot be installed here (they are no wheels), so the launch
     file runs against minimal stand-ins that record what it asks for: its
     declared arguments, and the nodes it makes for the arguments ``given``
     (its OpaqueFunction called with a context holding them, as launch does)."""
