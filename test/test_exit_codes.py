@@ -55,7 +55,7 @@ def winder(*args: str, env: dict[str, str] | None = None, cwd: Path | None = Non
 
 def test_the_documented_table_is_the_codes_table() -> None:
     text = (ROOT / "docs" / "RELIABILITY.md").read_text()
-    section = text.split("### Exit codes", 1)[1].split("\n#", 1)[0]
+    section = text.split("## Exit codes", 1)[1].split("\n#", 1)[0]
     rows = re.findall(r"^\| (\d+) \| ([^|]+) \| (.+) \|$", section, re.MULTILINE)
     table = {int(code): (name.strip(), when.strip()) for code, name, when in rows}
     assert table == EXIT_TABLE
