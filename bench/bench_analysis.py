@@ -1,5 +1,5 @@
 """Reading big recordings back: ``winder analyze`` and ``winder identify`` on
-bags of 1e6 and 1e7 steps (issue 13, item 6: they stream).
+bags of 1e6 and 1e7 steps (they stream the step rows).
 
 The bags are recorded by the three real nodes (the end-to-end benchmark's
 jobs: FAST ramp, joint states at 200 Hz, lz4 chunks). Each command runs as
@@ -111,7 +111,7 @@ def main() -> None:
     print("anchor: the mcap library iterating every message of the same file (best of 3)")
     heads = ["steps", "bag MiB", "command", "s", "s per 1e6 more", "peak MiB", "anchor s", "time / anchor"]
     print(table(heads, rows))
-    print("target (issue 13): peak < 300 MB at 1e7 and flat from 1e6; time linear: s per 1e6 more constant")
+    print("target: peak < 300 MB at 1e7 and flat from 1e6; time linear: s per 1e6 more constant")
 
 
 if __name__ == "__main__":

@@ -215,7 +215,7 @@ def main() -> None:
             rows,
         )
     )  # fmt: skip
-    print("target: none written in issue 7; the ratio speed / mcap is what to watch (1.0 = as fast as mcap)")
+    print("target: none set; the ratio speed / mcap is what to watch (1.0 = as fast as mcap)")
 
     for label, topic, msgtype, msgs in sets[:2]:
         print(f"\nwhere BagRecorder's time goes, {label} (cProfile, top by own time)")

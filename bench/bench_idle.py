@@ -1,4 +1,4 @@
-"""What an idle cell costs: CPU of each node while no job runs (issue 20).
+"""What an idle cell costs: CPU of each node while no job runs.
 
 The three nodes are started as a cell starts them (the interp node without
 autostart), left to connect for 3 s, then their CPU time (user + system,
@@ -70,7 +70,7 @@ def main() -> None:
         rows.append([name, f"{100 * share:.2f}", f"{share / anchor:.1f}" if anchor > 0 else "-"])
     print(f"Idle cell: CPU of each node over {dt:.1f} s with no job (% of one core)")
     print(table(["node", "CPU %", "/ bare node"], rows))
-    print("target (issue 20): each node below 1 % of a core")
+    print("target: each node below 1 % of a core")
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""How soon a pause takes effect in a real-time run (issue 14, item 3).
+"""How soon a pause takes effect in a real-time run.
 
 The three nodes run a long job in real time (look-ahead 50 ms, joint states
 at 200 Hz); this process calls the profile node's ``~/pause`` at random
@@ -6,7 +6,7 @@ moments (then ``~/resume`` after the axes rest), N times, and reads each
 pause's event on winder/control: ``latency_ns`` is the simulated time from
 the request (the cell's clock as the profile node last heard it) to the
 moment the deceleration starts. The anchor, in the same run: the look-ahead
-itself; the bound the README states is the look-ahead plus one step
+itself; the bound docs/OPERATING.md states is the look-ahead plus one step
 interval at v_max (plus one sample period of clock lag, not in the figure).
 
     .venv/bin/python bench/bench_operations.py [--quick]   # --quick: 12 pauses, else 60

@@ -1,5 +1,5 @@
 """Drawing the figures of a recorded run: the plots of ``winder analyze`` and
-``winder identify`` (issue 21: under a second for the default job).
+``winder identify`` (target: under a second for the default job).
 
     .venv/bin/python bench/bench_plots.py [--quick] [--bag BAG ...]
 
@@ -154,7 +154,7 @@ def main() -> None:
     print()
     print("winder analyze BAG as a process (best of 3 wall times)")
     print(table(["joint states", "with plots s", "--no-plots s", "plots cost s"], cli_rows))
-    print("target (issue 21): the plots of the default job under 1 s")
+    print("target: the plots of the default job under 1 s")
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""Scale-out (issue 16): start-up, many cells on one graph, a cell across
+"""Scale-out: start-up, many cells on one graph, a cell across
 hosts. Each figure is a ratio against an anchor measured in the same run.
 
     .venv/bin/python bench/bench_scale.py [--quick] [--parts startup,cells,hosts] [--cells 1,2,4,8]
@@ -24,7 +24,7 @@ hosts. Each figure is a ratio against an anchor measured in the same run.
    and 5 ms one-way delay (netem where the kernel has it, else a delay line:
    TUN devices and a relay process, bench/_delayline.py); the stream
    checker's figures (missing steps, gaps) from the run.
-The fourth figure of issue 16, end-to-end throughput at 10^7 steps on one
+The fourth scale-out figure, end-to-end throughput at 10^7 steps on one
 host, is bench/bench_e2e.py's.
 """
 

@@ -79,7 +79,7 @@ def test_eq7_of_the_commanded_steps(bag: Any) -> None:
         wire = 2.5e-3
         assert res.command.turn_max_pct == pytest.approx(100 * max(per_turn) / wire, rel=1e-12)
         assert res.command.turn_mean_pct == pytest.approx(100 * np.mean(per_turn) / wire, rel=1e-12)
-        # the README's claim: minimum deviation = a quarter of the 10 um feed step, 0.1 % of the wire
+        # the claim of docs/THEORY.md: minimum deviation = a quarter of the 10 um feed step, 0.1 % of the wire
         assert res.command.mean == pytest.approx(2.5e-6, rel=2e-3)
         assert res.command.turn_max_pct == pytest.approx(0.1, rel=5e-3)
 

@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 import ast
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -98,3 +99,61 @@ def test_the_core_imports_without_rclpy() -> None:
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "", f"importing the core pulled in ROS modules: {out.stdout.strip()}"
+
+
+#: rosdep keys of the Python libraries the code imports (ROS packages are their own key)
+PYTHON_KEYS = {
+    "numpy": "python3-numpy",
+    "matplotlib": "python3-matplotlib",
+    "ruamel": "python3-ruamel.yaml",
+    "lz4": "python3-lz4",
+    "zstandard": "python3-zstandard",
+}
+#: pip packages with no rosdep key, named in the core's package.xml comment instead
+PIP_ONLY = {"mcap", "rosbags", "backports"}
+#: the standard library of later Pythons (zstd is ``compression.zstd`` from 3.14)
+LATER_STDLIB = {"compression"}
+
+
+def _top_imports(root: Path) -> set[str]:
+    """Top-level modules imported anywhere under ``root`` (setup.py aside)."""
+    names: set[str] = set()
+    for path in root.rglob("*.py"):
+        if path.name == "setup.py" or "egg-info" in str(path):
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                names |= {a.name.split(".")[0] for a in node.names}
+                if any(a.name.startswith("rclpy.lifecycle") for a in node.names):
+                    names.add("lifecycle_msgs")
+            elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+                names.add(node.module.split(".")[0])
+                if node.module.startswith("rclpy.lifecycle"):
+                    names.add("lifecycle_msgs")  # rclpy's lifecycle nodes speak it
+    return names
+
+
+@pytest.mark.parametrize("package", ["src", "winder_interp", "winder_profile", "winder_sim", "winder_bridge"])
+def test_package_xml_lists_what_the_code_imports(package: str) -> None:
+    """A colcon or rosdep user gets every dependency from package.xml: each
+    module the package's code imports, beyond the standard library and the
+    package itself, is an exec_depend (ROS packages by name, Python
+    libraries by their python3-* key); mcap and rosbags, which rosdep has no
+    key for, are named in a comment."""
+    xml = (ROOT / package / "package.xml").read_text()
+    depends = set(re.findall(r"<exec_depend>([^<]+)</exec_depend>", xml))
+    own = "winder" if package == "src" else package
+    code = ROOT / package / ("winder" if package == "src" else package)
+    launch = ROOT / package / "launch"
+    imported = _top_imports(code) | (_top_imports(launch) if launch.is_dir() else set())
+    imported -= {*sys.stdlib_module_names, *LATER_STDLIB, own, "__future__"}
+    missing = []
+    for name in sorted(imported):
+        if name in PIP_ONLY:
+            assert name in xml, f"{package}/package.xml: {name} (pip) is not named"
+            continue
+        key = PYTHON_KEYS.get(name, name)
+        if key not in depends:
+            missing.append(key)
+    assert not missing, f"{package}/package.xml lacks exec_depend {missing}"
+    assert "example.com" not in xml and "winder@users.noreply.github.com" in xml

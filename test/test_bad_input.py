@@ -2,7 +2,7 @@
 non-finite, negative, zero, absurdly large and wrongly typed values, through
 the command line, through ``--ros-args -p`` at start, and through a parameter
 set at run time. Which values are bad is worked out here from the documented
-ranges (README), not asked of the code under test."""
+ranges (docs/OPERATING.md), not asked of the code under test."""
 
 from __future__ import annotations
 

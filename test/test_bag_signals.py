@@ -1,5 +1,5 @@
 """A bag is always readable or recoverable, whatever signal reaches the cell
-at whatever moment of a run (issue 31).
+at whatever moment of a run.
 
 Real cells (``winder run``, the three nodes) get SIGINT or SIGHUP on their
 process group (a Ctrl-C, a closed terminal), or SIGTERM or SIGKILL on the step

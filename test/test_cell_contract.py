@@ -1,4 +1,4 @@
-"""The cell integration contract (issue 20), with the real node executables
+"""The cell integration contract, with the real node executables
 started one by one as a cell starts them, on an isolated domain.
 
 * one run identity: the same job started twice in one cell's life gives two
@@ -150,7 +150,7 @@ def ros_spin(node: Any, seconds: float) -> None:
 
 
 def test_the_readme_controller_runs_a_cell(tmp_path: Path, procs: Procs) -> None:
-    """docs/cell_controller.py, the README's example of a line controller,
+    """docs/cell_controller.py, the docs' example of a line controller,
     against the three node executables started one by one, the consumer under
     another node name: it starts the job, follows its run id to the
     consumer's final report (found by its role) and exits 0 with the run done
@@ -266,8 +266,8 @@ def get_params(node: Any, target: str, names: list[str]) -> list[Any]:
 
     client = node.create_client(GetParameters, f"/{target}/get_parameters")
     spin_until(node, client.service_is_ready, 30, f"{target}/get_parameters")
-    # a DDS service reply can be lost while the reply topic still matches (README,
-    # Reliability): ask again after 10 s, three times at most
+    # a DDS service reply can be lost while the reply topic still matches
+    # (docs/RELIABILITY.md): ask again after 10 s, three times at most
     for attempt in range(3):
         future = client.call_async(GetParameters.Request(names=names))
         try:

@@ -1,7 +1,7 @@
-"""The coil as laid (issue 32, parts 1-3 and the recipe hash of part 6).
+"""The coil as laid in its bobbin, the fit check, and the job file's hash in the run.
 
-The geometry rules are written again here, from the issue's text, and the
-job's layout (winder.motion.coil through Job) and ``winder check`` (text and
+The geometry rules are written again here, from docs/OPERATING.md (Coil
+geometry), and the job's layout (winder.motion.coil through Job) and ``winder check`` (text and
 --json, on every shipped job) are compared with them; hypothesis draws the
 geometry, including windows that are an exact multiple of the wire. A job
 that does not fit is refused in the same one line by ``winder check``,

@@ -36,7 +36,7 @@ The checks, each a test: the handshake; a whole job; pause and resume;
 abort, then ready and a second job; a start refused while busy; a stall
 reported and the run closed; a killed and restarted consumer; the status
 keys, the final report and the names. The last two tests are of the interp
-node: a consumer written from the README alone that ignores aborts
+node: a consumer written from the topic contract alone that ignores aborts
 (``test/consumers/naive_consumer.py``) must not wedge the cell, and an abort
 whose braking steps the interp node had not sent yet still ends aborted.
 """
@@ -171,7 +171,7 @@ if os.environ.get("WINDER_CONSUMER", "").strip():
     )
 
 
-#: the consumer written from the README alone (not a subject: it ignores aborts on purpose)
+#: the consumer written from the topic contract alone (not a subject: it ignores aborts on purpose)
 NAIVE = ConsumerSpec("naive_consumer", (sys.executable, str(HERE / "consumers" / "naive_consumer.py")))
 
 
@@ -668,7 +668,7 @@ def test_status_keys_final_report_and_names(cell: Cell, consumer: ConsumerSpec) 
 
 
 def test_a_consumer_that_ignores_the_abort_does_not_wedge_the_cell(cell: Cell) -> None:
-    """test/consumers/naive_consumer.py follows the README but not
+    """test/consumers/naive_consumer.py follows the topic contract but not
     winder/control: after ~/abort it stays busy. A start is refused at first
     ("consumer busy"); once it has said busy for the interp node's
     stall_abort after the run ended, the interp node reports it once (ERROR

@@ -1,5 +1,5 @@
-"""One exit-code table for every ``winder`` command (issue 31): the README's
-table is the code's (winder.cli.exits), and each class really ends with its
+"""One exit-code table for every ``winder`` command: the table in
+docs/RELIABILITY.md is the code's (winder.cli.exits), and each class really ends with its
 code, made to happen with the real cell: a bad option, a run aborted by its
 schedule, a run whose consumer is killed, Ctrl-C, a refused ``winder ctl``,
 an output that cannot be written."""
@@ -53,9 +53,9 @@ def winder(*args: str, env: dict[str, str] | None = None, cwd: Path | None = Non
     return r.returncode, r.stderr
 
 
-def test_the_readme_table_is_the_codes_table() -> None:
-    text = (ROOT / "README.md").read_text()
-    section = text.split("### Exit codes", 1)[1].split("\n#", 1)[0]
+def test_the_documented_table_is_the_codes_table() -> None:
+    text = (ROOT / "docs" / "RELIABILITY.md").read_text()
+    section = text.split("## Exit codes", 1)[1].split("\n#", 1)[0]
     rows = re.findall(r"^\| (\d+) \| ([^|]+) \| (.+) \|$", section, re.MULTILINE)
     table = {int(code): (name.strip(), when.strip()) for code, name, when in rows}
     assert table == EXIT_TABLE

@@ -1,4 +1,4 @@
-"""Hardening (issue 13): values inside the documented ranges that the system
+"""Hardening: values inside the documented ranges that the system
 cannot simulate, bad namespaces and bag directories are refused before
 anything starts, in one line, exit 2; the sim node's samples come in bounded
 batches and still equal the exact response; no node outlives `winder run`."""

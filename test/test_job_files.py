@@ -1,4 +1,4 @@
-"""Job files (issue 14, item 1): a job as a ROS 2 parameters file that
+"""Job files: a job as a ROS 2 parameters file that
 ``winder run``, the nodes' ``--params-file`` and the interp node's
 ``job_file`` parameter all take.
 

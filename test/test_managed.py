@@ -1,4 +1,4 @@
-"""The managed-node (lifecycle) interface (issue 14, item 4): an orchestrator
+"""The managed-node (lifecycle) interface: an orchestrator
 brings the three real nodes up in its order through rclpy's lifecycle
 services; until then the cell takes no run. Plain start (every other node
 test, `winder run`) is unchanged: the nodes activate themselves.

@@ -328,6 +328,12 @@ def test_colcon_build_installs_runnable_executables(tmp_path: Path, procs: Procs
     )
     assert r.returncode == 0, r.stdout + r.stderr
     assert "5 packages finished" in r.stdout
+    # the cell's data beside its launch file: what params_file:= and the viewers take
+    share = ws / "install" / "winder_sim" / "share" / "winder_sim"
+    for d, pattern in (("jobs", "*.yaml"), ("layouts", "winder_*")):
+        want = sorted(f.name for f in (repo / d).glob(pattern))
+        assert want and sorted(f.name for f in (share / d).iterdir()) == want, d
+    assert (share / "launch" / "winder.launch.py").is_file()
     import os
 
     from ament_index_python.packages import get_package_prefix
@@ -367,10 +373,11 @@ def test_colcon_build_installs_runnable_executables(tmp_path: Path, procs: Procs
         assert b"Traceback" not in out
 
 
-def test_launch_file_describes_the_three_nodes() -> None:
-    """launch/launch_ros cannot be installed here (ROS_SETUP.md), so the launch
-    file runs against minimal stand-ins that record what it asks for: the
-    three executables, downstream first, each with its node's parameters."""
+def _launch(given: dict[str, str]) -> tuple[list[Any], list[dict[str, Any]]]:
+    """launch/launch_ros cannot be installed here (they are no wheels), so the launch
+    file runs against minimal stand-ins that record what it asks for: its
+    declared arguments, and the nodes it makes for the arguments ``given``
+    (its OpaqueFunction called with a context holding them, as launch does)."""
     import importlib.util
     import types
 
@@ -387,8 +394,7 @@ def test_launch_file_describes_the_three_nodes() -> None:
 
     fakes = {
         "launch": types.SimpleNamespace(LaunchDescription=Recorder),
-        "launch.actions": types.SimpleNamespace(DeclareLaunchArgument=Recorder),
-        "launch.substitutions": types.SimpleNamespace(LaunchConfiguration=Recorder),
+        "launch.actions": types.SimpleNamespace(DeclareLaunchArgument=Recorder, OpaqueFunction=Recorder),
         "launch_ros.actions": types.SimpleNamespace(Node=NodeStandIn),
     }
     saved = {k: sys.modules.get(k) for k in fakes}
@@ -400,21 +406,60 @@ def test_launch_file_describes_the_three_nodes() -> None:
         module = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(module)
         desc = module.generate_launch_description()
+        actions = desc.args[0]
+        declared = [a for a in actions if a.kwargs.get("default_value") is not None]
+        (opaque,) = [a for a in actions if "function" in a.kwargs]
+        configurations = {a.args[0]: a.kwargs["default_value"] for a in declared}  # launch fills defaults in
+        configurations.update(given)
+        opaque.kwargs["function"](types.SimpleNamespace(launch_configurations=configurations))
     finally:
         for k, v in saved.items():
             if v is None:
                 sys.modules.pop(k, None)
             else:
                 sys.modules[k] = v
-    from winder.contract.params import INTERP_SPECS, PROFILE_SPECS, SIM_SPECS
+    return declared, made
 
+
+def test_launch_file_takes_every_node_parameter_and_a_params_file() -> None:
+    """The three executables, downstream first; one argument per parameter
+    (stall_abort, which two nodes have, once), plus managed, use_sim_time,
+    params_file and namespace; an argument left out is not passed (the
+    params file's value or the node's default stands), one given is typed
+    and goes to every node that has it, after the params file."""
+    from winder.contract.params import INTERP_SPECS, OPERATION_SPECS, PROFILE_SPECS, SIM_SPECS
+
+    declared, made = _launch({})
+    names = [a.args[0] for a in declared]
+    assert len(names) == len(set(names)), sorted(n for n in names if names.count(n) > 1)
+    want = {*INTERP_SPECS, *PROFILE_SPECS, *OPERATION_SPECS, *SIM_SPECS}
+    want |= {"managed", "use_sim_time", "params_file", "namespace"}
+    assert set(names) == want
+    assert {"feed_override", "lookahead", "stall_abort", "fork.J"} <= set(names)
     assert [(n["package"], n["executable"]) for n in made] == [
         ("winder_sim", "sim_node"),
         ("winder_profile", "profile_node"),
         ("winder_interp", "interp_node"),
     ]
-    assert set(made[2]["parameters"][0]) == set(INTERP_SPECS)
-    assert set(made[1]["parameters"][0]) == set(PROFILE_SPECS)
-    assert set(made[0]["parameters"][0]) == set(SIM_SPECS)  # fork.J and the other dotted ones too
-    declared = {a.args[0] for a in desc.args[0] if isinstance(a, Recorder) and a.args}
-    assert {"namespace", "turns_per_layer", "profile", "model", "fork.J", "feed.D"} <= declared
+    assert [n["parameters"] for n in made] == [[{}], [{}], [{}]]
+
+    given = {
+        "params_file": "jobs/stator_12.yaml",
+        "namespace": "cell1",
+        "turns_per_layer": "40",
+        "fork.J": "2e-4",
+        "stall_abort": "5",
+        "feed_override": "0.5",
+        "lookahead": "0.1",
+        "managed": "true",
+        "use_sim_time": "true",
+    }
+    _, made = _launch(given)
+    sim, profile, interp = (n["parameters"] for n in made)
+    common = {"managed": True, "use_sim_time": True}
+    assert sim == ["jobs/stator_12.yaml", {**common, "fork.J": 2e-4, "stall_abort": 5.0}]
+    assert profile == ["jobs/stator_12.yaml", {**common, "feed_override": 0.5, "lookahead": 0.1}]
+    assert interp == ["jobs/stator_12.yaml", {**common, "turns_per_layer": 40, "stall_abort": 5.0}]
+    assert {n["namespace"] for n in made} == {"cell1"}
+    with pytest.raises(ValueError, match="lookahead"):
+        _launch({"lookahead": "soon"})

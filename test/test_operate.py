@@ -1,4 +1,4 @@
-"""Feed hold, resume, abort and feed override on the time law (issue 14, item 3),
+"""Feed hold, resume, abort and feed override on the time law,
 ROS-free: :mod:`winder.motion.retime` and :mod:`winder.contract.timeline`.
 
 Oracles: ruckig's time-optimal velocity-mode stop (duration and distance from

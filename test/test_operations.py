@@ -1,4 +1,4 @@
-"""Operating a running cell (issue 14, item 3) through the real nodes: pause,
+"""Operating a running cell through the real nodes: pause,
 resume, abort and feed override, scheduled in simulated time (as fast as
 possible) and live through `winder ctl` (real time), checked in the bags.
 

@@ -1,5 +1,5 @@
 """Every file a command writes is written whole or not at all, and an output
-path that cannot be written is one line and EXIT_OUTPUT (issue 31).
+path that cannot be written is one line and EXIT_OUTPUT.
 
 The paths are real ones the kernel refuses (tests may run as root, where a
 read-only mode stops nothing): a directory under a regular file, a file in

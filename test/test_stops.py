@@ -1,4 +1,4 @@
-"""Programmed stops (issue 14, item 2, with automatic resume): the axes come
+"""Programmed stops (with automatic resume): the axes come
 to rest after turn N exactly, with the same ramp as a segment end, rest the
 pause and go on; the step positions are the uninterrupted job's.
 

@@ -1,4 +1,4 @@
-"""The analysis streams (issue 13, item 6): the same numbers however the step
+"""The analysis streams the step rows: the same numbers however the step
 rows are cut into chunks, and memory that does not grow with the job.
 
 * the sliding kinematics stencil against a whole-array implementation written

@@ -12,11 +12,15 @@ setup(
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
+        # the cell's data, from the repository's root: the job files (the launch
+        # file's params_file) and the viewer layouts
+        ("share/" + package_name + "/jobs", sorted(glob("../jobs/*.yaml"))),
+        ("share/" + package_name + "/layouts", sorted(glob("../layouts/*.json") + glob("../layouts/*.xml"))),
     ],
     install_requires=["setuptools"],
     zip_safe=True,
-    maintainer="winder developers",
-    maintainer_email="winder-dev@example.com",
+    maintainer="winder maintainers",
+    maintainer_email="winder@users.noreply.github.com",
     description="Simulated axes: stepper motor model, /clock, MCAP recording",
     license="Apache-2.0",
     entry_points={"console_scripts": ["sim_node = winder_sim.sim_node:main"]},

@@ -1,4 +1,4 @@
-"""A step consumer written from the README's topic contract alone: rclpy and
+"""A step consumer written from the topic contract (docs/INTEGRATING.md) alone: rclpy and
 standard messages, no winder import, no StepConsumer.
 
 It announces itself on winder/ready, takes a run from winder/job, executes

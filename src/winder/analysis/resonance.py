@@ -1,4 +1,4 @@
-"""Residual vibration of a move with and without input shaping (issue 15, item 3).
+"""Residual vibration of a move with and without input shaping.
 
 A *test move* is one axis' move of ``steps`` steps with an S-curve ramp; the
 motor is the paper's (``StepperAxis.paper``) with its damping set for a

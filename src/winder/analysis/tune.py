@@ -1,4 +1,4 @@
-"""The ramp a motor and its load allow: ``winder tune`` (issue 15, item 4).
+"""The ramp a motor and its load allow: ``winder tune``.
 
 Given a job and each axis' motor (J, D, load torque, step angle; resonance
 f_n and damping ratio zeta follow from them), find the ramp limits (v_max,

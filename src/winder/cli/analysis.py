@@ -1,5 +1,5 @@
 """``winder analyze``, ``winder identify`` and ``winder bag recover``: the
-commands that read recordings back (issue 6). Registered into the ``winder``
+commands that read recordings back. Registered into the ``winder``
 parser by :func:`register`; errors are ValueErrors, which ``winder``'s main
 prints as one line with exit status 2.
 """

@@ -1,6 +1,6 @@
 """The exit status of every ``winder`` command: one table, the same for all.
 
-The README's "Exit codes" section shows this table; ``test/test_exit_codes.py``
+The "Exit codes" section of docs/RELIABILITY.md shows this table; ``test/test_exit_codes.py``
 checks that the two agree and that each class really ends with its code.
 """
 
@@ -25,7 +25,7 @@ EXIT_NODE_DIED = 4
 EXIT_OUTPUT = 5
 EXIT_INTERRUPTED = 130
 
-#: code -> (name, when), in the README's words
+#: code -> (name, when), in the words of docs/RELIABILITY.md
 EXIT_TABLE: dict[int, tuple[str, str]] = {
     EXIT_OK: ("ok", "the command did what it was asked; a run ended done"),
     EXIT_FAILED: (

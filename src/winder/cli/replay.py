@@ -1,5 +1,5 @@
 """``winder play`` and ``winder resim``: recorded jobs back onto a ROS graph,
-and through another motor (issue 21). Registered into the ``winder`` parser
+and through another motor. Registered into the ``winder`` parser
 by :func:`register`; user errors are ValueErrors (one line, exit status 2).
 """
 

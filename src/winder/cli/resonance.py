@@ -1,4 +1,4 @@
-"""``winder resonance`` and ``winder tune`` (issue 15): what input shaping
+"""``winder resonance`` and ``winder tune``: what input shaping
 does to a move's residual vibration, and the fastest ramp a job's motors
 allow without losing a step. Registered into the ``winder`` parser by
 :func:`register`; user errors are ValueErrors (one line, exit status 2), an

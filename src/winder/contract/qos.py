@@ -50,7 +50,7 @@ class Qos:
     depth: int
 
     def describe(self) -> str:
-        """``reliable, transient-local, keep-last 1``: the README's words."""
+        """``reliable, transient-local, keep-last 1``: the words of the topic table (docs/INTEGRATING.md)."""
         return ", ".join(
             (
                 "reliable" if self.reliable else "best-effort",

@@ -7,7 +7,7 @@ tools expect it, and ``/cell1/clock`` for a cell in ``/cell1``, so that two
 cells on one graph never drive one time base back and forth (a node that
 should follow cell1's time remaps ``/clock:=/cell1/clock``). ``/diagnostics``
 stays global, as diagnostic tools expect it; status names carry the namespace. Their QoS is in
-:mod:`winder.ros.qos`; their types and contents in the README's topic contract.
+:mod:`winder.ros.qos`; their types and contents in docs/CONTRACT.md (the topic table: docs/INTEGRATING.md).
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """The coil as it is laid in its bobbin: turns per layer, build height, turn
 lengths, wire length, resistance, fill factor and where the wire finishes.
-Pure functions of the geometry; the rules (README: Coil geometry):
+Pure functions of the geometry; the rules (docs/OPERATING.md: Coil geometry):
 
 * the window is ``W`` wide (axial room between the flanges) and ``H`` high
   (radial room above the core); ``d`` is the wire's outer (insulated)

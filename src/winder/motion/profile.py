@@ -5,7 +5,8 @@ sample it (:meth:`Profile.sample`) and get the exact times at which the axis
 crosses each step (:meth:`Profile.step_times`). Units are SI or dimensionless,
 consistently: distance, velocity ``/s``, acceleration ``/s^2``, jerk ``/s^3``.
 
-Kinds of ramp (papers 002 and 004 of ``/work/shared/papers``):
+Kinds of ramp (the teaching-system paper, 2014, and the stepper paper, 2012;
+authors and titles in docs/THEORY.md):
 
 ``"scurve"``
     Jerk-limited, seven phases (jerk up, constant acceleration, jerk down,

@@ -39,7 +39,7 @@ from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackRet
 __all__ = ["LEFT_CELL", "ManagedNode"]
 
 #: the exit status of a node that refused to join its cell: 2, "bad input"
-#: in the README's table of exit codes (it was started where it cannot run)
+#: in the table of exit codes (docs/RELIABILITY.md) (it was started where it cannot run)
 LEFT_CELL = 2
 
 

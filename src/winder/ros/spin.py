@@ -46,7 +46,7 @@ def _stop_quietly(signum: int, frame: FrameType | None) -> None:
     handler (which calls this one after it) shuts the context down, and spin
     returns once the callback that runs has ended. Python's default, a
     KeyboardInterrupt raised wherever the main thread happens to be, could
-    land between a bag's creation and the line that keeps it (issue 31: a
+    land between a bag's creation and the line that keeps it (which once left a
     0-byte .mcap and no metadata.yaml)."""
     del signum, frame
     _signalled.append(True)

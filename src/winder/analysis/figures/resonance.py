@@ -1,4 +1,4 @@
-"""Figures of issue 15: a move ringing against the same move shaped, the
+"""Figures of input shaping and tuning: a move ringing against the same move shaped, the
 shapers' residual vibration against frequency error, and job time against
 lost steps as the ramp limits rise (``winder resonance``, ``winder tune``)."""
 
