@@ -215,3 +215,22 @@ def test_plan_segment_shapes_with_the_settings() -> None:
     m = plan_segment(values, 2000)
     assert isinstance(m, ShapedProfile) and m.shaper == "ei"
     assert m.times[0] == 0.0 and m.amplitudes.sum() == pytest.approx(1.0, abs=1e-15)
+
+
+@settings(max_examples=25, deadline=None)
+@given(cases())
+def test_every_step_of_a_long_shaped_move_is_the_sums_crossing(
+    case: tuple[Profile, list[float], list[float]],
+) -> None:
+    """All the steps (chunks, lines and cubics, their seams) of the piecewise
+    cubic solution against the Newton iteration on the impulses' sum itself."""
+    base, amps, times = case
+    shaped = ShapedProfile(base, amps, times)
+    n = min(round(base.distance), 200_000)
+    x = np.arange(1, n + 1, dtype=np.float64) * (base.distance / n)
+    got = shaped.times_at(x)
+    ref = shaped._solve(x, base.times_at(x))  # the exponential ramp's way: Newton on sum_m A_m s(t - tau_m)
+    # the last step ends the move at rest, where the crossing is defined only to
+    # the rounding of the position (step_times gives it the duration exactly)
+    assert np.all(np.abs(got[:-1] - ref[:-1]) <= 1e-9 * max(1.0, float(ref[-1])))
+    assert np.all(np.diff(got) >= 0.0)

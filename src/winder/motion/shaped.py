@@ -14,11 +14,17 @@ the wound geometry is exact. The shaped move lasts ``duration + tau_last``;
 its velocity, acceleration and jerk are the same convex combinations, so no
 limit of the plan is exceeded and the peaks usually drop (:attr:`peaks`).
 
-Step times are the first times at which ``s~`` reaches each step position,
-by a safeguarded Newton iteration on the bracket ``[t(x), t(x) + tau_last]``
-(``t(x)``: the unshaped move's time of position ``x``; ``s~ <= s`` and
-``s~(t + tau_last) >= s(t)``), started at ``t(x) + sum_m A_m tau_m`` (exact
-in a cruise), converged to 1e-10 s or the bracket's width to 1e-10 s.
+Step times are the first times at which ``s~`` reaches each step position.
+For the polynomial ramps (S-curve, trapezoid) ``s~`` is a cubic between the
+breakpoints (the base's phase boundaries shifted by each impulse time): the
+pieces' coefficients are taken once, at each piece's middle, and every step
+is solved on its own piece by a safeguarded Newton iteration on the cubic
+(bracketed by the piece, started at ``t(x) + sum_m A_m tau_m``, ``t(x)`` the
+unshaped move's time of position ``x``: exact in a cruise), vectorised over
+all the steps, to 1e-10 s. The exponential ramp, not polynomial, is solved
+on the bracket ``[t(x), t(x) + tau_last]`` (``s~ <= s`` and
+``s~(t + tau_last) >= s(t)``) by the same iteration on the sum of the
+impulses' terms.
 """
 
 from __future__ import annotations
@@ -79,6 +85,7 @@ class ShapedProfile:
         self.v_max, self.a_max, self.j_max, self.tau = base.v_max, base.a_max, base.j_max, base.tau
         self._mean_delay = float(np.dot(a, t))
         self._peaks: dict[str, float] | None = None
+        self._cubic: tuple[F64, ...] | None = None
 
     def __repr__(self) -> str:
         return (
@@ -192,11 +199,105 @@ class ShapedProfile:
         """The first times (s) at which the shaped position reaches each of
         ``positions`` (non-decreasing, within [0, distance])."""
         x = np.array(positions, dtype=np.float64, copy=True).reshape(-1)
-        out = self.base.times_at(x)  # checks the positions; the lower end of each bracket
+        if self.kind == "exponential" or self.times.size == 1:
+            out = self.base.times_at(x)  # checks the positions; the lower end of each bracket
+            for c in range(0, x.size, _CHUNK):
+                sl = slice(c, min(c + _CHUNK, x.size))
+                out[sl] = self._solve(x[sl], out[sl])
+            return out
+        if x.size and not (np.all(x[1:] >= x[:-1]) and x[0] >= 0.0 and x[-1] <= self.distance):
+            raise ValueError(f"positions must be non-decreasing numbers in [0, distance={self.distance!r}]")
+        out = np.empty_like(x)
         for c in range(0, x.size, _CHUNK):
             sl = slice(c, min(c + _CHUNK, x.size))
-            out[sl] = self._solve(x[sl], out[sl])
+            out[sl] = self._solve_cubic(x[sl])
         return out
+
+    def _pieces(self) -> tuple[F64, ...]:
+        """The cubic pieces of a polynomial ramp's shaped position: each
+        piece's start, end and middle (s), and its position, velocity,
+        acceleration and jerk at the middle (the Taylor coefficients there:
+        inside a piece every term is one cubic), and the position at its start."""
+        if self._cubic is None:
+            b = self._breakpoints()
+            lo, hi = b[:-1], b[1:]
+            keep = hi > lo
+            lo, hi = lo[keep], hi[keep]
+            mid = 0.5 * (lo + hi)
+            p, v, a, j = self._terms(mid)
+            w = lo - mid
+            p_lo = p + w * (v + w * (0.5 * a + w * (j / 6.0)))
+            self._cubic = (lo, hi, mid, p, v, 0.5 * a, j / 6.0, p_lo)
+        return self._cubic
+
+    def _solve_cubic(self, x: F64) -> F64:
+        """The sorted targets ``x`` piece by piece (a target's piece: the
+        first whose end reaches it): on a line (every impulse's term cruising,
+        most of a long move) at once; on a cubic by a safeguarded Newton
+        iteration, started at the unshaped time plus the mean impulse delay,
+        with s~(lo) < x <= s~(hi) on the bracket throughout."""
+        lo_t, hi_t, mid_t, c0, c1, c2, c3, p_lo = self._pieces()
+        out = np.zeros_like(x)
+        # targets in (p_lo[k], p_lo[k + 1]] are piece k's; x <= 0 is reached at time 0
+        ends = np.searchsorted(x, p_lo, side="right")
+        ends = np.append(ends, x.size)
+        curved: list[tuple[int, int, int]] = []
+        for k in range(lo_t.size):
+            a, b = int(ends[k]), int(ends[k + 1])
+            if k == 0:
+                a = max(a, int(np.searchsorted(x, 0.0, side="right")))
+            if b <= a:
+                continue
+            if c2[k] == 0.0 and c3[k] == 0.0 and c1[k] > 0.0:  # a line
+                seg = out[a:b]
+                np.subtract(x[a:b], c0[k], out=seg)
+                seg /= c1[k]
+                seg += mid_t[k]
+            else:
+                curved.append((a, b, k))
+        if curved:  # one iteration over every target on a cubic, each with its piece's coefficients
+            idx = np.concatenate([np.arange(a, b) for a, b, _ in curved])
+            piece = np.repeat([k for _, _, k in curved], [b - a for a, b, _ in curved])
+            out[idx] = self._newton(
+                x[idx], mid_t[piece], lo_t[piece], hi_t[piece], c0[piece], c1[piece], c2[piece], c3[piece]
+            )
+        return out
+
+    def _newton(self, x: F64, mid: F64, lo: F64, hi: F64, p: F64, v: F64, ha: F64, sj: F64) -> F64:
+        """The first times at which each cubic p + v w + ha w^2 + sj w^3 (w =
+        t - mid, t in [lo, hi]; one per target) reaches ``x``: safeguarded
+        Newton, to TOLERANCE_S."""
+        wl = lo - mid
+        wh = hi - mid
+        w = np.clip(self.base.times_at(x) + self._mean_delay - mid, wl, wh)
+        a0 = p - x
+        result = np.empty_like(x)
+        todo = np.arange(x.size)
+        for _ in range(_MAX_ITER):
+            if todo.size == 0:
+                break
+            f = a0 + w * (v + w * (ha + w * sj))
+            fp = v + w * (2.0 * ha + w * (3.0 * sj))
+            below = f < 0.0
+            wl = np.where(below, w, wl)
+            wh = np.where(below, wh, w)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                step = f / fp
+            newton = w - step
+            ok = (fp > 0.0) & (newton > wl) & (newton < wh) & np.isfinite(newton)
+            nxt = np.where(ok, newton, 0.5 * (wl + wh))
+            converged = ok & (np.abs(step) <= TOLERANCE_S)
+            done = converged | (wh - wl <= TOLERANCE_S)
+            if np.any(done):
+                # a converged Newton step is the root; a closed bracket ends at its upper end
+                result[todo[done]] = (mid + np.where(converged, newton, wh))[done]
+                keep = ~done
+                todo, a0, wl, wh, nxt = todo[keep], a0[keep], wl[keep], wh[keep], nxt[keep]
+                mid, v, ha, sj = mid[keep], v[keep], ha[keep], sj[keep]
+            w = nxt
+        if todo.size:  # not reached in practice: the bracket halves at least every other step
+            result[todo] = mid + wh
+        return result
 
     def _solve(self, x: F64, t_base: F64) -> F64:
         """Safeguarded Newton: s~(lo) < x <= s~(hi) holds throughout."""
