@@ -48,7 +48,11 @@ Motion quality
   segment move in proportion (their delta / the major delta): the ideal
   interpolated motion, whose step quantisation is the eq. 7 error above. For
   a profile with jumps in acceleration (trapezoid, exponential) the jerk is
-  unbounded; the value shown is the jump divided by the stride time.
+  unbounded; the value shown is the jump divided by the stride time. Each
+  move between rests is differentiated on its own: a segment is cut at its
+  programmed stops and where a recorded pause or abort brought the axes to
+  rest (:func:`rests`), since t(k) jumps across a rest and is singular on
+  either side of it, as at a move's start.
 * **axes**: the recorded joint velocity, its acceleration and jerk by central
   differences at the publish rate (so the values depend on the rate: the step
   ripple of the motor is seen only as far as it is sampled).
@@ -372,7 +376,19 @@ def _axis_motion(run: Run, d: Digest) -> dict[str, AxisMotion]:
 
 def digest_run(run: Run, stride_time: float = STRIDE_TIME) -> Digest:
     """One pass over the run's step rows (:func:`winder.analysis.digest.digest`)."""
-    return digest(run.plan, run.step_rows, run.states.t, stride_time)
+    return digest(run.plan, run.step_rows, run.states.t, stride_time, rests(run))
+
+
+def rests(run: Run) -> list[tuple[int, int]]:
+    """Where the operator's commands brought the axes to rest within a segment:
+    (segment, steps of it done) of each recorded pause and abort."""
+    return [
+        (e["segment"], e["step"])
+        for e in run.events
+        if e.get("event") in ("pause", "abort")
+        and isinstance(e.get("segment"), int)
+        and isinstance(e.get("step"), int)
+    ]
 
 
 #: the profile node's settings shown as the ramp (winder/profile_config)

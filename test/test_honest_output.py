@@ -1,0 +1,113 @@
+"""What `winder run`, `winder analyze` and their figures say about a run is
+true (issue 33, "Plots and summaries that mislead"): the commanded jerk of a
+run with a pause and a programmed stop, the figures of an aborted run and of a
+one-pole job, the summary of a shaped run with commands, the name of a
+re-simulation, the time `winder bag recover` names.
+
+Every run is a real cell (`winder run`, the three nodes over DDS), read back
+from its bag. The oracles are written here: a cubic fitted to the step times
+of each stretch of steady motion (numpy's least squares), the recorded
+events, the pixels of the figures.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import next_domain, release_domain
+
+from winder.analysis.metrics import analyze
+from winder.record.reader import read_run
+
+pytestmark = pytest.mark.ros
+
+WINDER = Path(sys.executable).with_name("winder")
+JOB = ["--turns-per-layer", "8", "--layers", "1", "--poles", "2", "--fork-steps-per-rev", "512"]
+J_MAX = 65536.0  # steps/s^3, the profile's default jerk limit
+FORK_STEP = 2 * np.pi / 512  # rad per fork step
+
+
+class Cell:
+    """`winder run` in a domain of its own; each run's bag and output kept."""
+
+    def __init__(self, root: Path, domain: int) -> None:
+        self.root = root
+        self.env = {
+            **__import__("os").environ,
+            "ROS_DOMAIN_ID": str(domain),
+            "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+        }
+        self.runs: dict[str, tuple[Path, str]] = {}
+
+    def winder(self, *args: str, code: int = 0) -> str:
+        out = subprocess.run([str(WINDER), *args], env=self.env, capture_output=True, text=True, timeout=240)
+        assert out.returncode == code, out.stdout + out.stderr
+        return out.stdout
+
+    def run(self, tag: str, *args: str, code: int = 0) -> tuple[Path, str]:
+        if tag not in self.runs:
+            out = self.winder("run", *JOB, "--bag-dir", str(self.root / tag), *args, code=code)
+            [bag] = list((self.root / tag).iterdir())
+            self.runs[tag] = bag, out
+        return self.runs[tag]
+
+
+@pytest.fixture(scope="module")
+def cell(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Cell]:
+    domain = next_domain()
+    try:
+        yield Cell(tmp_path_factory.mktemp("honest"), domain)
+    finally:
+        release_domain(domain)
+
+
+PAUSED = ("--stops", "1:4", "--stop-pause", "0.3", "--schedule", "pause@0.8,resume@1.2")
+
+
+# -- 1. the commanded jerk of a run with a pause and a programmed stop -----------------------------
+
+
+def fitted_peak_jerk(t_ns: np.ndarray, window: int = 64, max_gap: float = 0.01) -> float:
+    """The largest |jerk| (steps/s^3) of cubics k(t) fitted by least squares to
+    windows of ``window`` consecutive steps, only where no two steps of the
+    window are more than ``max_gap`` s apart (the axis in motion, not at or
+    near a rest)."""
+    t = np.asarray(t_ns, dtype=np.float64) * 1e-9
+    gap = np.diff(t)
+    ok = np.concatenate([[False], gap < max_gap])  # step i follows step i - 1 closely
+    peak = 0.0
+    for i in range(0, t.size - window, window // 4):
+        if not np.all(ok[i + 1 : i + window]):
+            continue
+        tw = t[i : i + window] - t[i]
+        c = np.polyfit(tw, np.arange(window, dtype=np.float64), 3)
+        peak = max(peak, abs(6 * c[0]))
+    return peak
+
+
+def test_a_pause_and_a_programmed_stop_leave_the_commanded_jerk_at_its_limit(cell: Cell) -> None:
+    """pause@0.8 / resume@1.2 and a programmed stop in the first layer: the
+    fork's commanded peak jerk is the ramp's limit (65536 steps/s^3 = 804
+    rad/s^3 with 512 steps a turn), as a cubic fitted to the step times of
+    each stretch of motion says; it was 2e5 rad/s^3 (the kinematics
+    differentiated across the rests)."""
+    bag, _ = cell.run("paused", *PAUSED)
+    run = read_run(bag)
+    assert run.complete and [e["event"] for e in run.events] == ["pause", "resume"]
+    rows = run.steps
+    fork = rows[rows[:, 1] == 0]  # the first layer: the fork is its major axis
+    fitted = fitted_peak_jerk(fork[:, 0])
+    assert 0.9 * J_MAX < fitted < 1.1 * J_MAX  # the oracle sees the limit reached, and no more
+    result = analyze(run)
+    limit = J_MAX * FORK_STEP
+    got = result.axes["fork"].cmd_j
+    assert 0.95 * limit <= got <= 1.02 * limit, (got, limit)
+    # the feed moves with the fork along the layer: its jerk scales with its share of the steps
+    feed = result.axes["feed"].cmd_j
+    assert feed <= 1.02 * J_MAX * (2000 / 4096) * 1e-5, feed  # 2000 feed steps of 10 um a layer
+
