@@ -12,6 +12,7 @@ events, the pixels of the figures.
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -111,3 +112,28 @@ def test_a_pause_and_a_programmed_stop_leave_the_commanded_jerk_at_its_limit(cel
     feed = result.axes["feed"].cmd_j
     assert feed <= 1.02 * J_MAX * (2000 / 4096) * 1e-5, feed  # 2000 feed steps of 10 um a layer
 
+
+# -- 6. `winder bag recover` names the time it recovered up to truly ---------------------------------
+
+
+def test_bag_recover_names_simulated_time_since_the_start_not_an_epoch(cell: Cell, tmp_path: Path) -> None:
+    """A cut copy of a recording: `winder bag recover` says up to which
+    simulated time since the job's start it recovered (within the run's 6.5
+    s), and calls the log time what it is; it said "t = 1795655718.089 s of
+    simulated time" (the wall-clock start plus simulated time)."""
+    bag, _ = cell.run("paused", *PAUSED)
+    run = read_run(bag)
+    sim_end = float(run.report["sim_time_s"])
+    cut = tmp_path / "cut"
+    cut.mkdir()
+    [mcap] = list(bag.glob("*.mcap"))
+    data = mcap.read_bytes()
+    (cut / mcap.name).write_bytes(data[: len(data) * 2 // 3])
+    said = cell.winder("bag", "recover", str(cut))
+    [line] = [s for s in said.splitlines() if s.startswith("recovered ")]
+    m = re.search(r"up to t = ([0-9.]+) s of simulated time since the job's start", line)
+    assert m is not None, line
+    assert 0.0 <= float(m.group(1)) <= sim_end, line
+    wall = run.sim_config.wall_start_ns if run.sim_config else 0
+    assert wall > 0
+    assert "log time 20" in line and "UTC" in line, line  # the date the log times stand for
