@@ -137,3 +137,28 @@ def test_bag_recover_names_simulated_time_since_the_start_not_an_epoch(cell: Cel
     wall = run.sim_config.wall_start_ns if run.sim_config else 0
     assert wall > 0
     assert "log time 20" in line and "UTC" in line, line  # the date the log times stand for
+
+
+# -- 5. a re-simulation is named and labelled as one ----------------------------------------------
+
+
+def test_a_resimulated_bag_reads_as_a_resimulation(cell: Cell, tmp_path: Path) -> None:
+    """`winder resim` of a run: the new bag's name (its run id) says
+    ``resim`` and metadata.yaml's custom_data names the run and the bag it
+    re-simulates; it was named like a live run (rw400_<date>_<time>_1)."""
+    import yaml
+
+    bag, _ = cell.run("paused", *PAUSED)
+    source = read_run(bag)
+    said = cell.winder("resim", str(bag), "--fork.J", "2e-4", "--bag-dir", str(tmp_path / "out"))
+    [new] = list((tmp_path / "out").iterdir())
+    assert new.name.startswith(f"{source.job_id}_resim_"), new.name
+    assert f"bag                {new}" in said, said
+    run = read_run(new)
+    assert run.run_id == new.name and run.plan.source_run_id == source.run_id
+    meta = yaml.safe_load((new / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    custom = meta["custom_data"]
+    assert custom["winder_run"] == "re-simulation", custom
+    assert custom["winder_source_run_id"] == source.run_id, custom
+    assert custom["winder_source_bag"] == str(bag.resolve()), custom
+    assert analyze(run).source  # the analysis names the source as before
