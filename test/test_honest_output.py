@@ -162,3 +162,42 @@ def test_a_resimulated_bag_reads_as_a_resimulation(cell: Cell, tmp_path: Path) -
     assert custom["winder_source_run_id"] == source.run_id, custom
     assert custom["winder_source_bag"] == str(bag.resolve()), custom
     assert analyze(run).source  # the analysis names the source as before
+
+
+# -- 4. the summaries name the shaper, the programmed stops and the operator's commands ---------------
+
+SHAPED = (
+    *("--shaper", "zvd", "--shaper-freq", "12.5", "--stops", "1:4", "--stop-pause", "0.3"),
+    *("--schedule", "pause@0.8,resume@1.2,override@2.0=0.5"),
+)
+
+
+def lines_with(text: str, head: str) -> list[str]:
+    return [s.strip() for s in text.splitlines() if s.strip().startswith(head)]
+
+
+def test_the_summaries_name_the_shaper_the_stops_and_the_commands(cell: Cell) -> None:
+    """A ZVD-shaped run with a programmed stop, a pause, a resume and an
+    override: `winder run`'s header and `winder analyze`'s profile row name
+    the shaper and its frequency, both summaries have a line for the stop
+    (coil:turn, rest) and one for the commands (each with its time and
+    where the axes came to rest); they said "scurve profile" and nothing of
+    either. A run without any has neither line."""
+    bag, said = cell.run("shaped", *SHAPED)
+    assert said.splitlines()[0].endswith("scurve profile, ZVD shaper at 12.5 Hz, linear motor model"), said
+    for text in (said, cell.winder("analyze", str(bag), "--no-plots")):
+        [stops] = lines_with(text, "programmed stops")
+        assert "1 (1:4, rest 0.3 s, auto)" in stops, stops
+        [commands] = lines_with(text, "operator commands")
+        run = read_run(bag)
+        pause = run.events[0]
+        assert [e["event"] for e in run.events] == ["pause", "resume", "override"]
+        rest = pause["t_rest_ns"] / 1e9
+        assert f"pause at 0.800 s (at rest {rest:.3f} s, coil 1 turn " in commands, commands
+        assert "resume at 1.200 s" in commands and "override x0.5 at 2.000 s" in commands, commands
+    [profile] = lines_with(cell.winder("analyze", str(bag), "--no-plots"), "profile / motor model")
+    assert profile.endswith("scurve, ZVD shaper at 12.5 Hz / linear"), profile
+    plain, said = cell.run("plain")
+    assert said.splitlines()[0].endswith("scurve profile, linear motor model"), said
+    for text in (said, cell.winder("analyze", str(plain), "--no-plots")):
+        assert not lines_with(text, "programmed stops") and not lines_with(text, "operator commands"), text

@@ -72,6 +72,7 @@ import numpy.typing as npt
 
 from winder.analysis.digest import STRIDE_TIME, Digest, SegmentKinematics, digest, turn_index
 from winder.contract.eq7 import layer_of_samples, sample_deviation
+from winder.contract.run import commands_text, shaper_text, stops_text
 from winder.motion.job import AXES
 from winder.motion.profile import LIMITS
 from winder.record.reader import Run
@@ -186,6 +187,9 @@ class Analysis:
     stream: dict[str, int] = field(default_factory=dict)
     #: sha256 of the job file the run's job comes from ("" if none): its recipe
     job_file_sha256: str = ""
+    shaper: str = ""  #: the input shaper of the run's ramp ("ZVD shaper at 12.5 Hz"), "" if none
+    stops: str = ""  #: the job's programmed stops in one line (winder.contract.run.stops_text), "" if none
+    commands: str = ""  #: the operator's commands in one line (commands_text), "" if none
 
 
 # -- eq. 7 -------------------------------------------------------------------------
@@ -511,6 +515,9 @@ def analyze(run: Run, stride_time: float = STRIDE_TIME, digested: Digest | None 
         compression=run.compression,
         stream={k: int(_num(run.report, k)) for k in STREAM_KEYS if math.isfinite(_num(run.report, k))},
         job_file_sha256=run.plan.job_file_sha256,
+        shaper=shaper_text(run.profile_config),
+        stops=stops_text(run.plan),
+        commands=commands_text(run.events, run.plan),
     )
 
 
@@ -551,6 +558,7 @@ def setup(a: Analysis) -> dict[str, Any]:
         "job": a.job,
         "source": a.source,
         "profile": a.profile,
+        "shaper": a.shaper,
         "model": a.model,
     }
     shown = ("v_max", *LIMITS.get(a.profile, ()), "v_start", "dwell", "feed_override")
@@ -660,7 +668,7 @@ def _rows(a: Analysis) -> list[tuple[str, str]]:
         ("run", a.run_id or "-"),
         ("job file sha256", a.job_file_sha256 or "-"),
         ("re-simulation of", a.source or "-"),
-        ("profile / motor model", f"{a.profile} / {a.model}"),
+        ("profile / motor model", f"{a.profile}{', ' + a.shaper if a.shaper else ''} / {a.model}"),
         ("ramp limits (major axis)", _ramp(a)),
     ]
     for name, motor in a.motors.items():
@@ -679,6 +687,8 @@ def _rows(a: Analysis) -> list[tuple[str, str]]:
         ("state", state),
         ("steps", _steps(a)),
         ("stream faults", _stream(a)),
+        ("programmed stops", a.stops or "none"),
+        ("operator commands", a.commands or "none"),
         ("job time (last step)", f"{_f(a.job_time)} s"),
         ("simulated / wall time", f"{_f(a.sim_time)} s / {_f(a.wall_time)} s"),
         ("real-time factor", f"{_f(a.real_time_factor, decimals=1)} x"),
@@ -742,7 +752,7 @@ SETUP_ROWS: dict[str, tuple[str, ...]] = {
     "job id": ("job_id",),
     "job": ("job",),
     "re-simulation of": ("source",),
-    "profile / motor model": ("profile", "model"),
+    "profile / motor model": ("profile", "shaper", "model"),
     "ramp limits (major axis)": ("ramp.",),
     **{f"{ax}: motor J, D": (f"{ax}.J", f"{ax}.D", f"{ax}.load_torque") for ax in AXES},
     **{
@@ -762,6 +772,12 @@ def format_table(analyses: list[Analysis]) -> str:
     """One readable table, one column per run; with several runs, the set-up
     rows (job, ramp, motors, rates) in which they differ are marked ``*``."""
     cols = [_rows(a) for a in analyses]
+    # the stops and the commands are told when a run had any
+    told = {n for c in cols for n, v in c if n in ("programmed stops", "operator commands") and v != "none"}
+    cols = [
+        [(n, v) for n, v in c if n in told or n not in ("programmed stops", "operator commands")]
+        for c in cols
+    ]
     names = [r[0] for r in cols[0]]
     header = ["", *[a.label for a in analyses]]
     body = [[n, *[c[i][1] for c in cols]] for i, n in enumerate(names)]
