@@ -17,6 +17,7 @@ import subprocess
 import sys
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -201,3 +202,86 @@ def test_the_summaries_name_the_shaper_the_stops_and_the_commands(cell: Cell) ->
     assert said.splitlines()[0].endswith("scurve profile, linear motor model"), said
     for text in (said, cell.winder("analyze", str(plain), "--no-plots")):
         assert not lines_with(text, "programmed stops") and not lines_with(text, "operator commands"), text
+
+
+# -- 2. operations.png of an aborted run -------------------------------------------------------------
+
+ABORTED = ("--schedule", "pause@0.5,resume@0.8,pause@1.2,resume@1.5,abort@2.2")
+
+
+def figure_of(name: str, bag: Path) -> Any:
+    """The matplotlib figure ``name`` as winder analyze draws it, before it is saved."""
+    from winder.analysis.figures import analysis as fa
+    from winder.analysis.metrics import digest_run
+
+    run = read_run(bag)
+    return getattr(fa, f"{name}_figure")(run, digest_run(run))
+
+
+def test_operations_png_of_an_aborted_run_says_so_once_and_shows_the_abort(
+    cell: Cell, tmp_path: Path
+) -> None:
+    """Two pauses and an abort: the title says the run was aborted, when and
+    where (not "incomplete"); every legend entry is there once; the line where
+    the axes came to rest after the abort is inside the axes, clear of the
+    frame. The title said "(incomplete)", the two pauses gave the legend each
+    of their entries twice, and the plot ended at the last sample, 0.05 s after
+    that rest."""
+    bag, _ = cell.run("aborted", *ABORTED, code=3)
+    run = read_run(bag)
+    abort = run.events[-1]
+    assert abort["event"] == "abort" and run.report["state"] == "aborted"
+    fig = figure_of("operations", bag)
+    title = fig._suptitle.get_text()
+    assert "incomplete" not in title, title
+    assert f"aborted at {abort['t_ns'] / 1e9:.3f} s" in title and "coil 1 turn " in title, title
+    labels = [t.get_text() for ax in fig.axes if ax.get_legend() for t in ax.get_legend().get_texts()]
+    labels += [t.get_text() for leg in fig.legends for t in leg.get_texts()]
+    assert labels and len(labels) == len(set(labels)), labels
+    assert any("abort" in s and "rest" in s for s in labels), labels
+    rest = abort["t_rest_ns"] / 1e9
+    for ax in fig.axes:
+        lo, hi = ax.get_xlim()
+        xs = [line.get_xdata()[0] for line in ax.get_lines() if len(line.get_xdata()) == 2]
+        assert any(abs(x - rest) < 1e-9 for x in xs)  # the abort's rest is marked
+        assert lo < rest and hi - rest >= 0.05 * (hi - lo), (lo, rest, hi)
+
+
+# -- 3. motion.png: a short title, jerk that reads as a curve, no panel for an axis that never moves ---
+
+
+def stripes(ax: Any) -> int:
+    """Segments of the axes' drawn lines that cross its whole height (a line
+    between two samples beyond the opposite edges: a vertical stripe)."""
+    lo, hi = ax.get_ylim()
+    n = 0
+    for line in ax.get_lines():
+        if line.get_linestyle() in ("None", "", " ", "none"):
+            continue
+        y = np.asarray(line.get_ydata(), dtype=float)
+        if y.size < 2:
+            continue
+        a, b = y[:-1], y[1:]
+        n += int(np.count_nonzero(((a < lo) & (b > hi)) | ((a > hi) & (b < lo))))
+    return n
+
+
+def test_motion_png_has_a_short_title_jerk_curves_and_no_empty_pole_panels(cell: Cell) -> None:
+    """A one-pole job (the pole axis never moves): motion.png has no panel for
+    the pole, a title of one line and a short subtitle, and no jerk panel
+    drawn as vertical stripes. It had a three-line title, three pole panels
+    saying "does not move" and a sampled axis jerk of +-2e4 drawn as lines
+    through a panel clipped at +-2000."""
+    bag, _ = cell.run("onepole", "--poles", "1")
+    fig = figure_of("motion", bag)
+    lines = fig._suptitle.get_text().splitlines()
+    assert 1 <= len(lines) <= 2 and all(len(s) <= 130 for s in lines), lines
+    texts = [t.get_text() for ax in fig.axes for t in ax.texts]
+    assert not any("does not move" in t for t in texts), texts
+    assert not any(ax.get_title().startswith("pole") for ax in fig.axes)
+    assert not any("pole" in ax.get_ylabel() for ax in fig.axes)
+    jerk = [ax for ax in fig.axes if "jerk" in ax.get_ylabel()]
+    assert len(jerk) == 2  # feed and fork
+    for ax in jerk:
+        assert stripes(ax) == 0, ax.get_ylabel()
+        assert any(len(line.get_xdata()) > 10 for line in ax.get_lines())  # the command is drawn

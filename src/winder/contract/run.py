@@ -47,6 +47,7 @@ __all__ = [
     "parse_control",
     "shaper_text",
     "stops_text",
+    "where_text",
 ]
 
 #: the operator events of ``winder/control``
@@ -466,7 +467,7 @@ def stops_text(plan: JobPlan) -> str:
     return f"{len(plan.stops)} ({labels}, rest {plan.stop_pause:g} s, {goes_on})"
 
 
-def _where(plan: JobPlan, seg: int, step: int) -> str:
+def where_text(plan: JobPlan, seg: int, step: int) -> str:
     """Where step ``step`` of segment ``seg`` is: the coil and the turn into
     it (fractional), or the coil alone between layers."""
     segs = plan.job.segments()
@@ -491,7 +492,7 @@ def commands_text(events: list[dict[str, Any]] | tuple[dict[str, Any], ...], pla
         if kind in ("pause", "abort"):
             rest = e.get("t_rest_ns", t)
             where = (
-                _where(plan, e["segment"], e["step"])
+                where_text(plan, e["segment"], e["step"])
                 if isinstance(e.get("segment"), int) and isinstance(e.get("step"), int)
                 else ""
             )
