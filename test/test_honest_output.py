@@ -114,6 +114,22 @@ def test_a_pause_and_a_programmed_stop_leave_the_commanded_jerk_at_its_limit(cel
     assert feed <= 1.02 * J_MAX * (2000 / 4096) * 1e-5, feed  # 2000 feed steps of 10 um a layer
 
 
+def test_the_commanded_jerk_stays_at_its_limit_where_the_jerk_jumps_by_twice_it(cell: Cell) -> None:
+    """Feed override 0.5 with a pause: the moves at half speed never reach
+    a_max, their acceleration is a triangle and the jerk jumps from +J to -J
+    at its peak. The fork's commanded peak jerk is the limit, as the fitted
+    cubics say; the stencil's 3 a^2 / v - t3 v^4 gave 907.5 rad/s^3 (+13 %)
+    there (and 453.7 against 402 for the pole's index moves of the default job)."""
+    bag, _ = cell.run("override", *PAUSED, "--feed-override", "0.5")
+    run = read_run(bag)
+    assert run.complete
+    rows = run.steps
+    assert 0.9 * J_MAX < fitted_peak_jerk(rows[rows[:, 1] == 0][:, 0]) < 1.1 * J_MAX
+    got = analyze(run).axes["fork"].cmd_j
+    limit = J_MAX * FORK_STEP
+    assert 0.95 * limit <= got <= 1.02 * limit, (got, limit)
+
+
 # -- 6. `winder bag recover` names the time it recovered up to truly ---------------------------------
 
 

@@ -42,7 +42,10 @@ Motion quality
   segment's major axis. Step k happens when the planned motion reaches k steps,
   so the step times sample the inverse t(k) of the motion exactly at the
   integers; with the derivatives of t(k) by central differences over a stride
-  of m steps, v = 1/t', a = -t''/t'**3 and j = 3a**2/v - t'''*v**4. The stride
+  of m steps, v = 1/t' and a = -t''/t'**3; the jerk is the difference of a
+  one stride either side over the time between them (the mean jerk there, so
+  never beyond the move's largest |jerk|; the closed form 3a**2/v - t'''*v**4
+  overshot by 13 % where the jerk jumps from +J to -J). The stride
   is chosen so that it spans at least :data:`STRIDE_TIME` (the ns rounding of
   the step times would otherwise dominate the jerk). The other axes of the
   segment move in proportion (their delta / the major delta): the ideal
