@@ -1,5 +1,5 @@
 """What `winder run`, `winder analyze` and their figures say about a run is
-true (issue 33, "Plots and summaries that mislead"): the commanded jerk of a
+true: the commanded jerk of a
 run with a pause and a programmed stop, the figures of an aborted run and of a
 one-pole job, the summary of a shaped run with commands, the name of a
 re-simulation, the time `winder bag recover` names.
@@ -7,11 +7,12 @@ re-simulation, the time `winder bag recover` names.
 Every run is a real cell (`winder run`, the three nodes over DDS), read back
 from its bag. The oracles are written here: a cubic fitted to the step times
 of each stretch of steady motion (numpy's least squares), the recorded
-events, the pixels of the figures.
+events, the artists of the figures (title, legend texts, lines).
 """
 
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 import sys
@@ -40,7 +41,7 @@ class Cell:
     def __init__(self, root: Path, domain: int) -> None:
         self.root = root
         self.env = {
-            **__import__("os").environ,
+            **os.environ,
             "ROS_DOMAIN_ID": str(domain),
             "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
         }
