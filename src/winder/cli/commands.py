@@ -39,7 +39,7 @@ from winder.contract.params import (
     plan_timing,
     stop_points,
 )
-from winder.contract.run import JobReport
+from winder.contract.run import JobReport, commands_text, shaper_text, stops_text
 from winder.contract.topics import check_namespace
 from winder.motion.interp import dda, deviation_stats, interpolate, min_deviation, point_by_point
 from winder.motion.job import FIELD_SPECS, Job
@@ -285,7 +285,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     }
     for name in external:
         params[name] = given_values(args, *remote_specs[name])
-    ramp = "the external profile node's ramp" if "profile" in external else f"{profile['profile']} profile"
+    shaper = shaper_text(profile)
+    ramp = (
+        "the external profile node's ramp"
+        if "profile" in external
+        else f"{profile['profile']} profile" + (f", {shaper}" if shaper else "")
+    )
     model = "the external step consumer" if "sim" in external else f"{sim['model']} motor model"
     print(f"winder: job {job.job_id}, {job.total_steps} steps, {ramp}, {model}")
     if digest:
@@ -484,6 +489,21 @@ def _number(summary: dict[str, str], key: str, fmt: str, scale: float = 1.0) -> 
         return "-"
 
 
+def _told_by_bag(bag: str) -> tuple[str, str]:
+    """The programmed stops and the operator's commands of the run recorded in
+    ``bag``, each in one line ("" if none, or if the bag is not on this host or
+    cannot be read: the summary then says nothing of them)."""
+    if not bag or not Path(bag).is_dir():
+        return "", ""
+    from winder.record.reader import read_run
+
+    try:
+        run = read_run(bag)
+    except (OSError, ValueError):
+        return "", ""
+    return stops_text(run.plan), commands_text(run.events, run.plan)
+
+
 def report_run(result: Any, wall: float, command: str = "run") -> int:
     """The summary of a finished run (``winder run``, ``winder resim``) and
     the exit status (:mod:`winder.cli.exits`): done, aborted cleanly, a node
@@ -521,6 +541,11 @@ def report_run(result: Any, wall: float, command: str = "run") -> int:
         print(f"  max tracking error {_number(x, 'max_tracking_error_steps', '.3f')} steps")
     if "lost_steps" in x:
         print(f"  lost steps         {x['lost_steps']}")
+    stops, commands = _told_by_bag(r.bag)
+    if stops:
+        print(f"  programmed stops   {stops}")
+    if commands:
+        print(f"  operator commands  {commands}")
     print(f"  bag                {r.bag or '-'}")
     if result.errors:
         print(f"  ERROR reports      {len(result.errors)}, first: {result.errors[0]}")
