@@ -261,7 +261,7 @@ class BridgeNode(StepConsumer):
             "rate": self.rate,
             "interface": "trajectory" if self.trajectory else "forward",
             **(
-                {"batch": self.period_ns / 1e9, "lookahead_min_s": (AHEAD_BATCHES + 1) * self.period_ns / 1e9}
+                {"batch": self.period_ns / 1e9, "lookahead_min_s": (AHEAD_BATCHES + 2) * self.period_ns / 1e9}
                 if self.trajectory
                 else {}
             ),
@@ -284,9 +284,11 @@ class BridgeNode(StepConsumer):
     def execute(self, rows: npt.NDArray[np.int64]) -> None:
         with self.lock:
             assert self.pacer is not None
-            if self.armed and rows[0, 0] < self.t_tick:  # came after their time: they go out now
-                self.late_rows += int(np.count_nonzero(rows[:, 0] < self.t_tick))
-                self.max_late_ns = max(self.max_late_ns, self.t_tick - int(rows[0, 0]))
+            # came after their time (trajectory: after the points for their time went out): now
+            sent = self.frontier if self.trajectory else self.t_tick
+            if self.armed and rows[0, 0] < sent:
+                self.late_rows += int(np.count_nonzero(rows[:, 0] < sent))
+                self.max_late_ns = max(self.max_late_ns, sent - int(rows[0, 0]))
             self.pacer.add(rows)
 
     def holding(self) -> bool:
@@ -472,8 +474,10 @@ class BridgeNode(StepConsumer):
         JointTrajectoryController replaces its trajectory with it from
         there: a tick up to AHEAD_BATCHES - 1 batches late leaves it points
         to follow); and the clock. The steps must be here that far ahead:
-        the run's sim_config asks the profile node for a look-ahead of
-        AHEAD_BATCHES + 1 batches at least (``lookahead_min_s``)."""
+        the run's sim_config asks the profile node for the steps
+        AHEAD_BATCHES + 2 batches ahead at least (``lookahead_min_s``: the
+        points sent, a batch to the next tick, a batch for the clock the
+        profile node has seen)."""
         assert self.pacer is not None
         while self.points and self.points[0][0] <= t:
             self.points.popleft()
