@@ -336,7 +336,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         if fox_server is not None:
             fox_server.stop()
     bar.close()
-    return report_run(result, time.monotonic() - t0)
+    return report_run(result, time.monotonic() - t0, stops=bool(stops))
 
 
 def cmd_check(args: argparse.Namespace) -> int:
@@ -504,10 +504,12 @@ def _told_by_bag(bag: str) -> tuple[str, str]:
     return stops_text(run.plan), commands_text(run.events, run.plan)
 
 
-def report_run(result: Any, wall: float, command: str = "run") -> int:
+def report_run(result: Any, wall: float, command: str = "run", *, stops: bool = True) -> int:
     """The summary of a finished run (``winder run``, ``winder resim``) and
     the exit status (:mod:`winder.cli.exits`): done, aborted cleanly, a node
-    died before the run ended, or failed (with errors, or no final report)."""
+    died before the run ended, or failed (with errors, or no final report).
+    ``stops``: the job has programmed stops (else the bag is read for the
+    summary's stops and commands only when the consumer booked commands)."""
     s = result.summary
     if not s:
         print(
@@ -541,9 +543,12 @@ def report_run(result: Any, wall: float, command: str = "run") -> int:
         print(f"  max tracking error {_number(x, 'max_tracking_error_steps', '.3f')} steps")
     if "lost_steps" in x:
         print(f"  lost steps         {x['lost_steps']}")
-    stops, commands = _told_by_bag(r.bag)
-    if stops:
-        print(f"  programmed stops   {stops}")
+    # the stops and commands come from the bag: read only when the run had some (reading a
+    # large bag takes a while; the final report counts the operator's events)
+    had = stops or "operator_events" in x
+    stops_line, commands = _told_by_bag(r.bag) if had else ("", "")
+    if stops_line:
+        print(f"  programmed stops   {stops_line}")
     if commands:
         print(f"  operator commands  {commands}")
     print(f"  bag                {r.bag or '-'}")

@@ -199,6 +199,8 @@ class RunLedger:
     abort: AbortPoint | None = None
     #: the operator state announced last ("" while running)
     op_state: str = ""
+    #: operator events booked (pause, resume, abort, override)
+    events: int = 0
     _pending: list[Transition] = field(default_factory=list)
     _places: dict[tuple[int, int], tuple[int, int, int]] = field(default_factory=dict)
 
@@ -258,6 +260,7 @@ class RunLedger:
         if self.abort is not None:
             raise EventError(f"{event.kind} after the run's abort: it takes no more events")
         where = self._where(event.segment, event.step)
+        self.events += 1
         first: Transition | None = None
         if event.kind == "pause":
             assert event.steps is not None

@@ -677,8 +677,17 @@ class StepConsumer(ManagedNode):
             bag=str(self.bag.path.resolve()) if self.bag else "",
             errors=len(self.errors),
             stalls=self.stalls,
-            extra={**{k: str(v) for k, v in self.details().items()}, **self.intruder_keys()},
+            extra={
+                **{k: str(v) for k, v in self.details().items()},
+                **self.intruder_keys(),
+                **self.event_keys(),
+            },
         )
+
+    def event_keys(self) -> dict[str, str]:
+        """How many operator events the run booked (``operator_events``), if any."""
+        events = self.ledger.events if self.ledger else 0
+        return {"operator_events": str(events)} if events else {}
 
     def intruder_keys(self) -> dict[str, str]:
         """The run's refused messages, if any: ``foreign_messages`` and who sent them."""
