@@ -34,6 +34,7 @@ import shlex
 import shutil
 import signal
 import subprocess
+import tempfile
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -216,16 +217,45 @@ def _run(
     script: str, work: Path, env: dict[str, str], errexit: bool = True
 ) -> subprocess.CompletedProcess[str]:
     """``script`` in bash, as pasted: a script block stops at its first
-    failing command (-e); a ``$`` line is one command line, as typed."""
-    return subprocess.run(
-        ["bash", *(["-e"] if errexit else []), "-o", "pipefail", "-c", script],
-        cwd=work,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=TIMEOUT_S,
-        stdin=subprocess.DEVNULL,
-    )
+    failing command (-e); a ``$`` line is one command line, as typed. What
+    the script left running (a block that starts nodes in the background and
+    failed before it stopped them) is stopped after it, so that it cannot
+    hold the output pipes open or join the next block's graph."""
+    with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
+        p = subprocess.Popen(
+            ["bash", *(["-e"] if errexit else []), "-o", "pipefail", "-c", script],
+            cwd=work,
+            env=env,
+            stdout=out,
+            stderr=err,
+            text=True,
+            stdin=subprocess.DEVNULL,
+            start_new_session=True,
+        )
+        try:
+            code = p.wait(timeout=TIMEOUT_S)
+        finally:
+            _stop_group(p.pid)
+            p.wait()
+        out.seek(0)
+        err.seek(0)
+        return subprocess.CompletedProcess(p.args, code, out.read(), err.read())
+
+
+def _stop_group(pgid: int) -> None:
+    """SIGINT to what is left of a block's process group (as Ctrl-C), SIGKILL after 10 s."""
+    for sig, grace in ((signal.SIGINT, 10.0), (signal.SIGKILL, 0.0)):
+        try:
+            os.killpg(pgid, sig)
+        except ProcessLookupError:
+            return
+        end = time.monotonic() + grace
+        while time.monotonic() < end:
+            try:
+                os.killpg(pgid, 0)
+            except ProcessLookupError:
+                return
+            time.sleep(0.1)
 
 
 def _serve(script: str, work: Path, env: dict[str, str]) -> tuple[int | None, str]:

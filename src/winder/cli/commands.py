@@ -647,9 +647,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("job_file", nargs="?", metavar="JOB_FILE", help=JOB_FILE_HELP)
     add_spec_arguments(p, FIELD_SPECS, "winding job (defaults: the RW400 paper set-up)")
     add_spec_arguments(p, PROFILE_SPECS, "profile node (rates in steps of each segment's major axis)")
-    add_spec_arguments(p, OPERATION_SPECS, "operation (see README: Operating the cell)")
+    add_spec_arguments(p, OPERATION_SPECS, "operation (see docs/OPERATING.md: Operating the cell)")
     add_spec_arguments(p, SIM_SPECS, "sim node (motor settings per axis: --feed.J, --fork.D, ...)")
-    add_spec_arguments(p, STOP_SPECS, "programmed stops (see README: Operating the cell)")
+    add_spec_arguments(p, STOP_SPECS, "programmed stops (see docs/OPERATING.md: Operating the cell)")
     add_spec_arguments(p, CELL_SPECS, "cell")
     g = p.add_argument_group("cell")
     g.add_argument("--namespace", default="", help="ROS namespace of the cell (/name[/name...])")
@@ -661,8 +661,8 @@ def build_parser() -> argparse.ArgumentParser:
         "step consumer: the sim node or a hardware driver, found by its role whatever its node name), "
         "profile or both, comma-separated. Their settings given here (options, the job file's consumer "
         "or sim_node and profile_node sections) are set on them through their parameter services "
-        "before the job starts; a setting they refuse ends the run unstarted, naming it (see README: "
-        "Deploying a cell)",
+        "before the job starts; a setting they refuse ends the run unstarted, naming it (see "
+        "docs/DEPLOYING.md)",
     )
     g.add_argument(
         "--check",
@@ -699,7 +699,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser(
         "discovery-server",
-        help="run Fast DDS's discovery server for a cell across hosts (see README: Deploying a cell)",
+        help="run Fast DDS's discovery server for a cell across hosts (see docs/DEPLOYING.md)",
     )
     p.add_argument("--address", default="0.0.0.0", help="IPv4 address to listen on (default: all)")
     p.add_argument("--port", default="11811", help="UDP port; [1, 65535]; default 11811")
@@ -715,19 +715,19 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.set_defaults(func=cmd_figures)
 
-    from winder.cli.analysis import register  # analyze, identify, bag recover (issue 6)
+    from winder.cli.analysis import register  # analyze, identify, bag recover
 
     register(sub)
-    from winder.cli.replay import register as register_replay  # play, resim (issue 21)
+    from winder.cli.replay import register as register_replay  # play, resim
 
     register_replay(sub)
     from winder.cli.ctl import register as register_ctl  # ctl: start, state, param, lifecycle, pause...
 
     register_ctl(sub)
-    from winder.cli.resonance import register as register_resonance  # resonance, tune (issue 15)
+    from winder.cli.resonance import register as register_resonance  # resonance, tune
 
     register_resonance(sub)
-    from winder.cli.view import register as register_view  # view; run/play --foxglove (issue 33)
+    from winder.cli.view import register as register_view  # view; run/play --foxglove
 
     register_view(sub)
     return parser

@@ -32,9 +32,9 @@ __all__ = [
     "trigger",
 ]
 
-#: s of discovery after which a node the graph does not show, while it shows
-#: others, is taken as not there (a mistyped name), before the timeout
-DISCOVERY = 2.0
+#: s without a change of the graph after which a node it does not show, while
+#: it shows others, is taken as not there (a mistyped name), before the timeout
+DISCOVERY = 3.0
 
 
 class UnansweredError(Exception):
@@ -133,14 +133,22 @@ class Session:
 
     def find_node(self, fq: str) -> None:
         """Wait until the graph shows the node ``fq``. :class:`NoSuchNodeError` when
-        it shows other nodes but not this one after :data:`DISCOVERY` s (or at
-        the deadline); :class:`UnansweredError` when it shows none at all."""
+        it shows other nodes but not this one and has not changed for
+        :data:`DISCOVERY` s (or at the deadline); :class:`UnansweredError` when
+        it shows none at all. A new process learns a cell's node names one
+        participant at a time, on a busy machine seconds apart: a verdict 2 s
+        after the start called the interp node unknown while the
+        graph was still filling (``nodes seen: /winder_cell``)."""
+        last: list[str] = []
+        changed = self.started
         while True:
             seen = self.nodes()
             if fq in seen:
                 return
             now = time.monotonic()
-            if now > self.deadline or (seen and now - self.started > DISCOVERY):
+            if seen != last:
+                last, changed = seen, now
+            if now > self.deadline or (seen and now - changed > DISCOVERY):
                 if not seen:
                     raise UnansweredError(
                         f"no node {fq} within {self.timeout:g} s: the graph shows no node at all "

@@ -54,7 +54,7 @@ def describe_profile(environ: Mapping[str, str] | None = None) -> str:
     if path == PROFILE:
         return (
             "winder's default (shared memory and UDP, 64 kB datagrams); on a network that "
-            "loses packets select the LAN profile on every host (README: Deploying a cell)"
+            "loses packets select the LAN profile on every host (docs/DEPLOYING.md)"
         )
     if path == LAN_PROFILE:
         return "winder's LAN profile (UDP only, datagrams within one MTU)"
