@@ -86,6 +86,9 @@ class ShapedProfile:
         self._mean_delay = float(np.dot(a, t))
         self._peaks: dict[str, float] | None = None
         self._cubic: tuple[F64, ...] | None = None
+        # a move of a piecewise-polynomial ramp is one cubic between the
+        # breakpoints: solved piece by piece (else on the sum of the impulses' terms)
+        self._polynomial = base.ramp.piecewise_polynomial
 
     def __repr__(self) -> str:
         return (
@@ -163,14 +166,14 @@ class ShapedProfile:
         length = hi - lo
         keep = length > 0
         lo, hi, length = lo[keep], hi[keep], length[keep]
-        dense = 16 if self.kind != "exponential" else 512
+        dense = 16 if self._polynomial else 512
         frac = np.linspace(0.0, 1.0, dense + 1)[1:-1]
         inner = (lo[:, None] + length[:, None] * frac[None, :]).reshape(-1)
         eps = np.maximum(length * 1e-9, 1e-15)
         pts = np.concatenate([b, lo + eps, hi - eps, inner])
         _, v, a, j = self._terms(pts)
         v_peak = float(np.max(np.abs(v))) if v.size else 0.0
-        if self.kind != "exponential" and lo.size:  # the vertex of v where the (linear) acceleration is 0
+        if self._polynomial and lo.size:  # the vertex of v where the (linear) acceleration is 0
             _, _, a0, _ = self._terms(lo + eps)
             _, _, a1, _ = self._terms(hi - eps)
             cross = (a0 * a1 < 0.0) & (a0 != a1)
@@ -199,7 +202,7 @@ class ShapedProfile:
         """The first times (s) at which the shaped position reaches each of
         ``positions`` (non-decreasing, within [0, distance])."""
         x = np.array(positions, dtype=np.float64, copy=True).reshape(-1)
-        if self.kind == "exponential" or self.times.size == 1:
+        if not self._polynomial or self.times.size == 1:
             out = self.base.times_at(x)  # checks the positions; the lower end of each bracket
             for c in range(0, x.size, _CHUNK):
                 sl = slice(c, min(c + _CHUNK, x.size))
