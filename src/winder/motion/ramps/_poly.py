@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from winder.motion.ramps.base import LAWS, POLY, Profile, Seg, join, plan, tail
+from winder.motion.ramps.base import LAWS, POLY, Profile, Seg, Span, join, plan, tail
 
 F64 = NDArray[np.float64]
 
@@ -36,10 +36,8 @@ class _PolyLaw:
         p = A["p0"][ie] + tl * (v0 + tl * (0.5 * a0 + tl * (j / 6.0)))
         return p, v0 + tl * (a0 + 0.5 * tl * j), a0 + tl * j, j.copy()
 
-    def invert(self, A: dict[str, Any], i: int, x: F64) -> None:
-        t0, t1, T = float(A["t0"][i]), float(A["t1"][i]), float(A["T"][i])
-        p0, v0, a0, j = float(A["p0"][i]), float(A["v0"][i]), float(A["a0"][i]), float(A["j"][i])
-        p1, v1 = float(A["p1"][i]), float(A["v1"][i])
+    def invert(self, span: Span, x: F64) -> None:
+        t0, t1, (T, p0, v0, a0, j, *_), p1, v1, a1 = span
         if j == 0.0 and a0 == 0.0:  # cruise
             x -= p0
             x /= v0
@@ -57,7 +55,6 @@ class _PolyLaw:
             # anchor at the instant of zero acceleration - the phase start or end, or
             # outside the phase when a stop begins mid-ramp - where the position is
             # the odd cubic p_z + v_z s + j s^3 / 6 of the signed time s from it
-            a1 = float(A["a1"][i])
             if a0 == 0.0:
                 sz, pz, vz = 0.0, p0, v0
             elif a1 == 0.0:

@@ -70,6 +70,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from math import sqrt
 
 __all__ = ["SNAP", "Infeasible", "polish", "ramp", "scurve", "valley"]
 
@@ -98,9 +99,11 @@ def ramp(dv: float) -> tuple[float, float]:
 
 def _hill(w: float, h: float, lo_v: float, gap: float) -> float:
     """Distance of the hill with peak ``h + w`` and no cruise (unit limits)."""
-    tj, ta = ramp(w)  # the ramp between h and the peak
+    # the ramp between h and the peak, then between l and the peak (:func:`ramp`, inlined)
+    tj, ta = (1.0, w - 1.0) if w >= 1.0 else (sqrt(w), 0.0)
     d = (2.0 * h + w) * (tj + 0.5 * ta)
-    tj, ta = ramp(gap + w)  # between l and the peak
+    x = gap + w
+    tj, ta = (1.0, x - 1.0) if x >= 1.0 else (sqrt(x), 0.0)
     return d + (lo_v + h + w) * (tj + 0.5 * ta)
 
 
@@ -189,14 +192,22 @@ def scurve(
     answer, if any)."""
     g0 = 0.0 if v0_high else gap  # what the start lacks of h
     g1 = gap if v0_high else 0.0
-    d0 = _hill(0.0, h, lo_v, gap)
+    # d0 = _hill(0.0, h, lo_v, gap), the direct ramp's distance, written out (the hot path)
+    tj, ta = (1.0, gap - 1.0) if gap >= 1.0 else (sqrt(gap), 0.0)
+    d0 = 0.0 + (lo_v + h + 0.0) * (tj + 0.5 * ta)
     if d0 > D:
         if d0 * (1.0 - SNAP) > D:
             raise Infeasible(d0)
         D = d0  # the direct ramp, to rounding
-    dv = _hill(wv, h, lo_v, gap)
+    # dv = _hill(wv, h, lo_v, gap), written out: its ramps are the cruise's
+    tjh, tah = (1.0, wv - 1.0) if wv >= 1.0 else (sqrt(wv), 0.0)  # between h and v_max
+    x = gap + wv
+    tjl, tal = (1.0, x - 1.0) if x >= 1.0 else (sqrt(x), 0.0)  # between l and v_max
+    dv = (2.0 * h + wv) * (tjh + 0.5 * tah) + (lo_v + h + wv) * (tjl + 0.5 * tal)
     if dv <= D:  # cruise at v_max
-        return wv, *ramp(g0 + wv), (D - dv) / (h + wv), *ramp(g1 + wv)
+        if v0_high:
+            return wv, tjh, tah, (D - dv) / (h + wv), tjl, tal
+        return wv, tjl, tal, (D - dv) / (h + wv), tjh, tah
     w1 = 1.0 - gap if gap < 1.0 else 0.0  # long ramp gets constant acceleration
     if wv > 1.0 and _hill(1.0, h, lo_v, gap) <= D:
         # both ramps trapezoidal: w^2 + (2h + 1) w + k0 = 0
@@ -249,7 +260,10 @@ def scurve(
         if v0_high:
             return w, sh, 0.0, 0.0, sl, 0.0
         return w, sl, 0.0, 0.0, sh, 0.0
-    return w, *ramp(g0 + w), 0.0, *ramp(g1 + w)
+    x0, x1 = g0 + w, g1 + w
+    tj0, ta0 = (1.0, x0 - 1.0) if x0 >= 1.0 else (sqrt(x0), 0.0)
+    tj1, ta1 = (1.0, x1 - 1.0) if x1 >= 1.0 else (sqrt(x1), 0.0)
+    return w, tj0, ta0, 0.0, tj1, ta1
 
 
 def _pick(roots: list[float], lo: float, hi: float) -> float:

@@ -39,6 +39,7 @@ __all__ = [
     "Profile",
     "Ramp",
     "Seg",
+    "Span",
     "join",
     "plan",
     "register",
@@ -56,6 +57,11 @@ POLY = 0
 """Law code of a polynomial phase (constant jerk)."""
 
 _CHUNK = 1 << 15  # elements per pass when inverting steps: stays in L2 cache
+_INF = math.inf
+try:  # np.clip without its Python layers (a few us a call): the same ufunc
+    from numpy._core.umath import clip as _clip  # type: ignore[attr-defined]
+except ImportError:  # numpy < 2
+    from numpy.core.umath import clip as _clip  # type: ignore[no-redef]
 
 
 class Seg(NamedTuple):
@@ -75,6 +81,19 @@ class Seg(NamedTuple):
     tau: float = 0.0
 
 
+class Span(NamedTuple):
+    """A phase placed in its profile, as the step timing reads it: its start and
+    end time, the phase, and the state it ends in (the next phase's start;
+    the last one's: the profile's end)."""
+
+    t0: float
+    t1: float
+    seg: Seg
+    p1: float
+    v1: float
+    a1: float
+
+
 class Phase(NamedTuple):
     """One segment of a profile: start time, duration and its law.
 
@@ -89,7 +108,8 @@ class Phase(NamedTuple):
 class PhaseLaw(Protocol):
     """How the motion goes inside a phase. ``A`` is :meth:`Profile._arrays`
     (one array a field of :class:`Seg`, plus ``t0``, ``t1`` and the end state
-    ``p1``, ``v1``, ``a1`` of each phase)."""
+    ``p1``, ``v1``, ``a1`` of each phase) for the vectorised sampling; the
+    step timing inverts one phase at a time (:class:`Span`)."""
 
     codes: tuple[int, ...]
 
@@ -102,9 +122,9 @@ class PhaseLaw(Protocol):
         times ``tl`` from their starts (within them)."""
         ...
 
-    def invert(self, A: dict[str, Any], i: int, x: F64) -> None:
-        """In place: the times at which phase ``i`` (of non-zero duration)
-        reaches the sorted positions ``x`` (within it)."""
+    def invert(self, span: Span, x: F64) -> None:
+        """In place: the times at which the phase ``span`` (of non-zero
+        duration) reaches the sorted positions ``x`` (within it)."""
         ...
 
 
@@ -133,7 +153,6 @@ class Ramp(Protocol):
         v0: float,
         v1: float,
         V: float,
-        *,
         a_max: float | None,
         j_max: float | None,
         tau: float | None,
@@ -234,15 +253,14 @@ class Profile:
     and ``t_stop`` (for a stopped jog: when the stop began). Built by
     :func:`plan` and :meth:`winder.motion.ramps.jog.Jog.stop`.
 
-    A planner may hand over its phases as a builder (``segs`` callable) and
-    the duration it knows they add up to: they are then built when first
-    needed (sampling, step timing), not for a plan only asked its duration.
+    A planner may hand over its phases as a builder (:meth:`lazy`).
     """
 
     __slots__ = (
         "_arr",
         "_build",
         "_segs",
+        "_spans",
         "_t0",
         "a_max",
         "distance",
@@ -256,11 +274,13 @@ class Profile:
         "v_peak",
         "v_start",
     )
+    _segs: list[Seg] | None
+    _t0: list[float]
 
     def __init__(
         self,
         kind: str,
-        segs: list[Seg] | Callable[[], list[Seg]],
+        segs: list[Seg],
         end: tuple[float, float],
         *,
         v_max: float | None,
@@ -269,8 +289,6 @@ class Profile:
         tau: float | None,
         v_peak: float,
         t_stop: float | None = None,
-        duration: float | None = None,
-        v_start: float | None = None,
     ) -> None:
         self.kind = kind
         self.distance = end[0]
@@ -282,17 +300,48 @@ class Profile:
         self.tau = tau
         self.t_stop = t_stop
         self._arr: dict[str, Any] | None = None
-        self._segs: list[Seg] | None = None
-        self._t0: list[float] = []
-        if callable(segs):  # built lazily; the planner knows the duration and the start
-            assert duration is not None and v_start is not None
-            self._build: Callable[[], list[Seg]] | None = segs
-            self.duration = duration
-            self.v_start = v_start
-        else:
-            self._build = None
-            self.duration = self._settle(segs)
-            self.v_start = segs[0].v0 if segs else end[1]
+        self._spans: tuple[list[Span], F64] | None = None
+        self._build: tuple[Callable[..., list[Seg]], tuple[float, ...]] | None = None
+        self.duration = self._settle(segs)
+        self.v_start = segs[0].v0 if segs else end[1]
+
+    @classmethod
+    def lazy(
+        cls,
+        kind: str,
+        build: Callable[..., list[Seg]],
+        args: tuple[float, ...],
+        D: float,
+        v_end: float,
+        duration: float,
+        v_start: float,
+        v_peak: float,
+        v_max: float | None,
+        a_max: float | None,
+        j_max: float | None,
+        tau: float | None,
+    ) -> Profile:
+        """A profile whose phases ``build(*args)`` makes when first needed
+        (sampling, step timing), not for a plan only asked its duration: the
+        planner gives the ``duration`` they add up to (in their order, from
+        0) and the start velocity."""
+        self = cls.__new__(cls)
+        self.kind = kind
+        self.distance = D
+        self.v_end = v_end
+        self.duration = duration
+        self.v_start = v_start
+        self.v_peak = v_peak
+        self.v_max = v_max
+        self.a_max = a_max
+        self.j_max = j_max
+        self.tau = tau
+        self.t_stop = None
+        self._arr = None
+        self._spans = None
+        self._segs = None
+        self._build = (build, args)
+        return self
 
     def _settle(self, segs: list[Seg]) -> float:
         """Keep ``segs`` (made monotone) and their start times; return the duration."""
@@ -325,7 +374,8 @@ class Profile:
         segs = self._segs
         if segs is None:
             assert self._build is not None
-            self._settle(self._build())
+            build, args = self._build
+            self._settle(build(*args))
             self._build = None
             segs = self._segs
             assert segs is not None
@@ -362,13 +412,13 @@ class Profile:
             a = np.array(segs, dtype=np.float64).reshape(n, 8)
             t0 = np.array(self._t0, dtype=np.float64)
             # end state of each phase: the next one's start state (the last: the end)
-            p1 = np.append(a[1:, 1], self.distance)
-            v1 = np.append(a[1:, 2], self.v_end)
-            t1 = np.append(t0[1:], self.duration)
+            p1 = np.concatenate((a[1:, 1], (self.distance,)))
+            v1 = np.concatenate((a[1:, 2], (self.v_end,)))
+            t1 = np.concatenate((t0[1:], (self.duration,)))
             self._arr = {
                 "t0": t0, "t1": t1, "T": a[:, 0], "p0": a[:, 1], "v0": a[:, 2], "a0": a[:, 3],
                 "j": a[:, 4], "exp": a[:, 5] != POLY, "law": a[:, 5], "b": a[:, 6], "tau": a[:, 7],
-                "p1": p1, "v1": v1, "a1": np.append(a[1:, 3], 0.0),
+                "p1": p1, "v1": v1, "a1": np.concatenate((a[1:, 3], (0.0,))),
                 "v_hi": max(self.v_peak, self.v_start, self.v_end),
             }  # fmt: skip
         return self._arr
@@ -468,30 +518,44 @@ class Profile:
             self._invert(x)
         return x
 
+    def _span_list(self) -> tuple[list[Span], F64]:
+        """The phases placed (:class:`Span`) and the position each ends at."""
+        if self._spans is None:
+            segs = self.segments
+            t0 = self._t0
+            n = len(segs)
+            spans = [
+                Span(t0[i], t0[i + 1], segs[i], segs[i + 1].p0, segs[i + 1].v0, segs[i + 1].a0)
+                for i in range(n - 1)
+            ]
+            if n:
+                spans.append(Span(t0[-1], self.duration, segs[-1], self.distance, self.v_end, 0.0))
+            self._spans = spans, np.array([sp.p1 for sp in spans], dtype=np.float64)
+        return self._spans
+
     def _invert(self, x: F64) -> None:
         """Replace sorted positions ``x`` (in [0, distance]) by their times, in place."""
-        A = self._arrays()
+        spans, p1 = self._span_list()
         # positions in (p0_i, p1_i] belong to phase i; position 0 to time 0
         start = int(np.searchsorted(x, 0.0, side="right"))
         x[:start] = 0.0
-        ends = np.searchsorted(x, A["p1"], side="right")
-        for i in range(len(self.segments)):
-            lo, hi = start, int(ends[i])
+        ends = np.searchsorted(x, p1, side="right").tolist()
+        for sp, hi in zip(spans, ends, strict=True):
+            lo = start
             start = max(start, hi)
             if hi <= lo:
                 continue
             for c in range(lo, hi, _CHUNK):
-                _invert_phase(A, i, x[c : min(c + _CHUNK, hi)])
+                _invert_phase(sp, x[c : min(c + _CHUNK, hi)])
 
 
-def _invert_phase(A: dict[str, Any], i: int, x: F64) -> None:
-    """Times (in place) at which phase ``i`` reaches the positions ``x``."""
-    t0, t1 = float(A["t0"][i]), float(A["t1"][i])
-    if float(A["T"][i]) == 0.0:  # an ulp of position left between two phases built from either end
-        x.fill(t0)
+def _invert_phase(sp: Span, x: F64) -> None:
+    """Times (in place) at which the phase ``sp`` reaches the positions ``x``."""
+    if sp.seg.duration == 0.0:  # an ulp of position left between two phases built from either end
+        x.fill(sp.t0)
     else:
-        LAWS[int(A["law"][i])].invert(A, i, x)
-    np.clip(x, t0, t1, out=x)
+        LAWS[sp.seg.law].invert(sp, x)
+    _clip(x, sp.t0, sp.t1, out=x)
 
 
 # --------------------------------------------------------------------------- planning
@@ -526,15 +590,27 @@ def plan(
         ramp = MOVES[kind]
     except (KeyError, TypeError):
         raise bad("kind", kind, "one of " + ", ".join(repr(k) for k in MOVES)) from None
-    D = positive("distance", distance)
-    V = positive("v_max", v_max)
-    v0 = speed("v_start", v_start, V)
-    v1 = speed("v_end", v_end, V)
-    A = None if a_max is None else positive("a_max", a_max)
-    J = None if j_max is None else positive("j_max", j_max)
-    tc = None if tau is None else positive("tau", tau)
+    if (  # the common case at once; else each checked in turn, the first bad one named
+        type(distance) is float
+        and type(v_max) is float
+        and type(v_start) is float
+        and type(v_end) is float
+        and 0.0 < distance < _INF
+        and 0.0 < v_max < _INF
+        and 0.0 <= v_start <= v_max
+        and 0.0 <= v_end <= v_max
+    ):
+        D, V, v0, v1 = distance, v_max, v_start, v_end
+    else:
+        D = positive("distance", distance)
+        V = positive("v_max", v_max)
+        v0 = speed("v_start", v_start, V)
+        v1 = speed("v_end", v_end, V)
+    A = a_max if a_max is None or (type(a_max) is float and 0.0 < a_max < _INF) else positive("a_max", a_max)
+    J = j_max if j_max is None or (type(j_max) is float and 0.0 < j_max < _INF) else positive("j_max", j_max)
+    tc = tau if tau is None or (type(tau) is float and 0.0 < tau < _INF) else positive("tau", tau)
     try:
-        return ramp.plan(D, v0, v1, V, a_max=A, j_max=J, tau=tc, exp_cut=exp_cut)
+        return ramp.plan(D, v0, v1, V, A, J, tc, exp_cut)
     except Infeasible as e:
         lim = ", ".join(f"{k}={x!r}" for k, x in (("a_max", A), ("j_max", J), ("tau", tc)) if x)
         raise ValueError(

@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from winder.motion.ramps._scurve import SNAP, Infeasible, polish
-from winder.motion.ramps.base import LAWS, POLY, Profile, Ramp, Seg, bad, join, needed, plan, real, tail
+from winder.motion.ramps.base import LAWS, POLY, Profile, Ramp, Seg, Span, bad, join, needed, plan, real, tail
 
 F64 = NDArray[np.float64]
 
@@ -51,7 +51,6 @@ class ExponentialRamp:
         v0: float,
         v1: float,
         V: float,
-        *,
         a_max: float | None,
         j_max: float | None,
         tau: float | None,
@@ -117,12 +116,9 @@ class _ExpLaw:
         acc = np.where(up, b, -b) / tc * e
         return p, v, acc, -acc / tc
 
-    def invert(self, A: dict[str, Any], i: int, x: F64) -> None:
-        _invert(
-            x, float(A["t0"][i]), float(A["t1"][i]), float(A["p0"][i]), float(A["v0"][i]),
-            float(A["p1"][i]), float(A["v1"][i]), float(A["b"][i]), float(A["tau"][i]),
-            bool(A["law"][i] == EXP_UP),
-        )  # fmt: skip
+    def invert(self, span: Span, x: F64) -> None:
+        s = span.seg
+        _invert(x, span.t0, span.t1, s.p0, s.v0, span.p1, span.v1, s.b, s.tau, s.law == EXP_UP)
 
 
 LAW = _ExpLaw()

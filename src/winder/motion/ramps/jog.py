@@ -35,7 +35,6 @@ class JogRamp(PolyRamp):
         v0: float,
         v1: float,
         V: float,
-        *,
         a_max: float | None,
         j_max: float | None,
         tau: float | None,

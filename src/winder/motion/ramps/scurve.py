@@ -33,43 +33,72 @@ class ScurveRamp(PolyRamp):
         v0: float,
         v1: float,
         V: float,
-        *,
         a_max: float | None,
         j_max: float | None,
         tau: float | None,
         exp_cut: object,
     ) -> Profile:
-        return _plan(D, v0, v1, V, needed("a_max", a_max, self.name), needed("j_max", j_max, self.name))
+        if a_max is None or j_max is None:
+            needed("a_max", a_max, self.name)
+            needed("j_max", j_max, self.name)
+        A, J = a_max, j_max
+        assert A is not None and J is not None
+        tu = A / J  # unit time, velocity, distance of the limits
+        vu = A * tu
+        du = vu * tu
+        # differences before scaling, so that a gap of one ulp survives it
+        v0_high = v0 >= v1
+        h, lo_v = (v0, v1) if v0_high else (v1, v0)
+        Ds, hs, ls, gs, wvs = D / du, h / vu, lo_v / vu, (h - lo_v) / vu, (V - h) / vu
+        try:
+            w, tju, tau_u, tc, tjd, tad = _scurve.scurve(Ds, hs, ls, gs, wvs, v0_high)
+        except _scurve.Infeasible:
+            try:
+                u, tjd, tad, tju, tau_u = _scurve.valley(Ds, hs, ls, gs, v0_high)
+            except _scurve.Infeasible as e:
+                raise _scurve.Infeasible(e.d_min * du) from None
+            # valley: down from v0 to min(v0, v1) - u, up to v1
+            vv = max(lo_v - u * vu, 0.0)
+            tjd, tad, tju, tau_u = tjd * tu, tad * tu, tju * tu, tau_u * tu
+            T = 0.0 + tjd + tad + tjd + 0.0 + tju + tau_u + tju  # as Profile adds the phases up
+            down_up = (D, v0, v1, J, tjd, tad, vv, tju, tau_u)
+            return Profile.lazy("scurve", _valley, down_up, D, v1, T, v0, h, V, A, J, None)
+        tju, tau_u, tc, tjd, tad = tju * tu, tau_u * tu, tc * tu, tjd * tu, tad * tu
+        vp = V if tc > 0.0 or w >= wvs else min(h + w * vu, V)  # w == wvs: the cruise regime
+        T = 0.0 + tju + tau_u + tju + tc + tjd + tad + tjd
+        args = (D, v0, v1, J, tju, tau_u, vp, tc, tjd, tad)
+        return Profile.lazy("scurve", _hill, args, D, v1, T, v0, vp, V, A, J, None)
 
 
 RAMP: Ramp = ScurveRamp()
 
 
-def _plan(D: float, v0: float, v1: float, V: float, A: float, J: float) -> Profile:
-    tu = A / J  # unit time, velocity, distance of the limits
-    vu = A * tu
-    du = vu * tu
-    # differences before scaling, so that a gap of one ulp survives it
-    v0_high = v0 >= v1
-    h, lo_v = (v0, v1) if v0_high else (v1, v0)
-    Ds, hs, ls, gs, wvs = D / du, h / vu, lo_v / vu, (h - lo_v) / vu, (V - h) / vu
+def _hill(
+    D: float,
+    v0: float,
+    v1: float,
+    J: float,
+    tju: float,
+    tau: float,
+    vp: float,
+    tc: float,
+    tjd: float,
+    tad: float,
+) -> list[Seg]:
+    """The phases of a hill: up from v0, the cruise at vp, down to v1 (built back from D)."""
     segs: list[Seg] = []
-    try:
-        w, tju, tau, tc, tjd, tad = _scurve.scurve(Ds, hs, ls, gs, wvs, v0_high)
-    except _scurve.Infeasible:
-        try:
-            u, tjd, tad, tju, tau = _scurve.valley(Ds, hs, ls, gs, v0_high)
-        except _scurve.Infeasible as e:
-            raise _scurve.Infeasible(e.d_min * du) from None
-        # valley: down from v0 to min(v0, v1) - u, up to v1
-        vv = max(lo_v - u * vu, 0.0)
-        p, _ = ramp_up(segs, 0.0, v0, tjd * tu, tad * tu, J, -1.0)
-        segs.append(Seg(0.0, p, vv, 0.0, 0.0))
-        ramp_into(segs, D, v1, tju * tu, tau * tu, J, 1.0)
-        return Profile("scurve", segs, (D, v1), v_max=V, a_max=A, j_max=J, tau=None, v_peak=h)
-    tju, tau, tc, tjd, tad = tju * tu, tau * tu, tc * tu, tjd * tu, tad * tu
-    vp = V if tc > 0.0 or w >= wvs else min(h + w * vu, V)  # w == wvs: the cruise regime
     p, _ = ramp_up(segs, 0.0, v0, tju, tau, J, 1.0)
     segs.append(Seg(tc, p, vp, 0.0, 0.0))
     ramp_into(segs, D, v1, tjd, tad, J, -1.0)
-    return Profile("scurve", segs, (D, v1), v_max=V, a_max=A, j_max=J, tau=None, v_peak=vp)
+    return segs
+
+
+def _valley(
+    D: float, v0: float, v1: float, J: float, tjd: float, tad: float, vv: float, tju: float, tau: float
+) -> list[Seg]:
+    """The phases of a valley: down from v0 to vv, the (empty) bottom, up to v1."""
+    segs: list[Seg] = []
+    p, _ = ramp_up(segs, 0.0, v0, tjd, tad, J, -1.0)
+    segs.append(Seg(0.0, p, vv, 0.0, 0.0))
+    ramp_into(segs, D, v1, tju, tau, J, 1.0)
+    return segs

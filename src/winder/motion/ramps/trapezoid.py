@@ -30,7 +30,6 @@ class TrapezoidRamp(PolyRamp):
         v0: float,
         v1: float,
         V: float,
-        *,
         a_max: float | None,
         j_max: float | None,
         tau: float | None,
@@ -38,15 +37,22 @@ class TrapezoidRamp(PolyRamp):
     ) -> Profile:
         A = needed("a_max", a_max, self.name)
         vp, tu, tc, td = solve(D, v0, v1, V, A)
-        segs = [Seg(tu, 0.0, v0, A, 0.0)]
-        p = tu * (v0 + 0.5 * A * tu)
-        segs.append(Seg(tc, p, vp, 0.0, 0.0))
-        pd = D - td * (v1 + 0.5 * A * td)
-        segs.append(Seg(td, pd, v1 + A * td, -A, 0.0))
-        return Profile(self.name, segs, (D, v1), v_max=V, a_max=A, j_max=None, tau=None, v_peak=vp)
+        T = 0.0 + tu + tc + td  # as Profile adds the phases up
+        return Profile.lazy(
+            self.name, _phases, (D, v0, v1, A, vp, tu, tc, td), D, v1, T, v0, vp, V, A, None, None
+        )
 
 
 RAMP: Ramp = TrapezoidRamp()
+
+
+def _phases(
+    D: float, v0: float, v1: float, A: float, vp: float, tu: float, tc: float, td: float
+) -> list[Seg]:
+    """Up at ``a_max``, the cruise at ``vp``, down at ``-a_max`` (built back from ``D``)."""
+    p = tu * (v0 + 0.5 * A * tu)
+    pd = D - td * (v1 + 0.5 * A * td)
+    return [Seg(tu, 0.0, v0, A, 0.0), Seg(tc, p, vp, 0.0, 0.0), Seg(td, pd, v1 + A * td, -A, 0.0)]
 
 
 def solve(D: float, v0: float, v1: float, V: float, A: float) -> tuple[float, float, float, float]:
