@@ -15,13 +15,14 @@ its velocity, acceleration and jerk are the same convex combinations, so no
 limit of the plan is exceeded and the peaks usually drop (:attr:`peaks`).
 
 Step times are the first times at which ``s~`` reaches each step position.
-For the polynomial ramps (S-curve, trapezoid) ``s~`` is a cubic between the
+For a piecewise-polynomial ramp (its ``piecewise_polynomial``: the S-curve,
+the trapezoid, the jog) ``s~`` is a cubic between the
 breakpoints (the base's phase boundaries shifted by each impulse time): the
 pieces' coefficients are taken once, at each piece's middle, and every step
 is solved on its own piece by a safeguarded Newton iteration on the cubic
 (bracketed by the piece, started at ``t(x) + sum_m A_m tau_m``, ``t(x)`` the
 unshaped move's time of position ``x``: exact in a cruise), vectorised over
-all the steps, to 1e-10 s. The exponential ramp, not polynomial, is solved
+all the steps, to 1e-10 s. Any other ramp (the exponential) is solved
 on the bracket ``[t(x), t(x) + tau_last]`` (``s~ <= s`` and
 ``s~(t + tau_last) >= s(t)``) by the same iteration on the sum of the
 impulses' terms.
