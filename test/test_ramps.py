@@ -34,7 +34,7 @@ def test_every_module_of_the_folder_is_a_registered_ramp() -> None:
     plug_ins = sorted(n for n in names if not n.startswith("_") and n != "base")
     assert sorted(RAMPS) == plug_ins
     assert [r.rank for r in RAMPS.values()] == sorted(r.rank for r in RAMPS.values())
-    assert KINDS == tuple(n for n, r in RAMPS.items() if r.moves)
+    assert tuple(n for n, r in RAMPS.items() if r.moves) == KINDS
     assert KINDS[:3] == ("scurve", "trapezoid", "exponential")  # today's, first (the default first)
     assert {n: r.limits for n, r in MOVES.items()} == LIMITS
     assert all(set(r.limits) <= {"a_max", "j_max", "tau"} for r in RAMPS.values())

@@ -34,6 +34,7 @@ __all__ = [
     "POLY",
     "RAMPS",
     "Infeasible",
+    "Limit",
     "Phase",
     "PhaseLaw",
     "Profile",
@@ -55,6 +56,9 @@ time constants)."""
 
 POLY = 0
 """Law code of a polynomial phase (constant jerk)."""
+
+Limit = float | None
+"""A limit of :func:`plan`, checked (finite, > 0), or None where not given."""
 
 _CHUNK = 1 << 15  # elements per pass when inverting steps: stays in L2 cache
 _INF = math.inf
@@ -148,15 +152,7 @@ class Ramp(Protocol):
     it is then solved piece by piece, :mod:`winder.motion.shaped`)."""
 
     def plan(
-        self,
-        D: float,
-        v0: float,
-        v1: float,
-        V: float,
-        a_max: float | None,
-        j_max: float | None,
-        tau: float | None,
-        exp_cut: object,
+        self, D: float, v0: float, v1: float, V: float, a_max: Limit, j_max: Limit, tau: Limit, exp_cut: float
     ) -> Profile:
         """The move (limits checked, unused ones None); raises
         :class:`Infeasible` when no monotone move of length ``D`` exists."""

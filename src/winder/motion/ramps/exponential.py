@@ -26,7 +26,21 @@ import numpy as np
 from numpy.typing import NDArray
 
 from winder.motion.ramps._scurve import SNAP, Infeasible, polish
-from winder.motion.ramps.base import LAWS, POLY, Profile, Ramp, Seg, Span, bad, join, needed, plan, real, tail
+from winder.motion.ramps.base import (
+    LAWS,
+    POLY,
+    Limit,
+    Profile,
+    Ramp,
+    Seg,
+    Span,
+    bad,
+    join,
+    needed,
+    plan,
+    real,
+    tail,
+)
 
 F64 = NDArray[np.float64]
 
@@ -46,15 +60,7 @@ class ExponentialRamp:
     piecewise_polynomial = False
 
     def plan(
-        self,
-        D: float,
-        v0: float,
-        v1: float,
-        V: float,
-        a_max: float | None,
-        j_max: float | None,
-        tau: float | None,
-        exp_cut: object,
+        self, D: float, v0: float, v1: float, V: float, a_max: Limit, j_max: Limit, tau: Limit, exp_cut: float
     ) -> Profile:
         eps = real("exp_cut", exp_cut, "a finite number in (0, 0.5]")
         if not 0.0 < eps <= 0.5:

@@ -18,7 +18,7 @@ from numpy.typing import ArrayLike
 
 from winder.motion.ramps import _scurve
 from winder.motion.ramps._poly import PolyRamp, ramp_up
-from winder.motion.ramps.base import F64, Phase, Profile, Ramp, Seg, bad, positive, real, speed
+from winder.motion.ramps.base import F64, Limit, Phase, Profile, Ramp, Seg, bad, positive, real, speed
 
 
 class JogRamp(PolyRamp):
@@ -30,15 +30,7 @@ class JogRamp(PolyRamp):
     moves = False
 
     def plan(
-        self,
-        D: float,
-        v0: float,
-        v1: float,
-        V: float,
-        a_max: float | None,
-        j_max: float | None,
-        tau: float | None,
-        exp_cut: object,
+        self, D: float, v0: float, v1: float, V: float, a_max: Limit, j_max: Limit, tau: Limit, exp_cut: float
     ) -> Profile:
         raise ValueError("kind='jog' plans no point-to-point moves: use jog()")
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from winder.motion.ramps import _scurve
 from winder.motion.ramps._poly import PolyRamp, ramp_into, ramp_up
-from winder.motion.ramps.base import Profile, Ramp, Seg, needed
+from winder.motion.ramps.base import Limit, Profile, Ramp, Seg, needed
 
 
 class ScurveRamp(PolyRamp):
@@ -28,15 +28,7 @@ class ScurveRamp(PolyRamp):
     moves = True
 
     def plan(
-        self,
-        D: float,
-        v0: float,
-        v1: float,
-        V: float,
-        a_max: float | None,
-        j_max: float | None,
-        tau: float | None,
-        exp_cut: object,
+        self, D: float, v0: float, v1: float, V: float, a_max: Limit, j_max: Limit, tau: Limit, exp_cut: float
     ) -> Profile:
         if a_max is None or j_max is None:
             needed("a_max", a_max, self.name)

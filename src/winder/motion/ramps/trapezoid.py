@@ -13,7 +13,7 @@ import math
 
 from winder.motion.ramps._poly import PolyRamp
 from winder.motion.ramps._scurve import SNAP, Infeasible
-from winder.motion.ramps.base import Profile, Ramp, Seg, needed
+from winder.motion.ramps.base import Limit, Profile, Ramp, Seg, needed
 
 
 class TrapezoidRamp(PolyRamp):
@@ -25,15 +25,7 @@ class TrapezoidRamp(PolyRamp):
     moves = True
 
     def plan(
-        self,
-        D: float,
-        v0: float,
-        v1: float,
-        V: float,
-        a_max: float | None,
-        j_max: float | None,
-        tau: float | None,
-        exp_cut: object,
+        self, D: float, v0: float, v1: float, V: float, a_max: Limit, j_max: Limit, tau: Limit, exp_cut: float
     ) -> Profile:
         A = needed("a_max", a_max, self.name)
         vp, tu, tc, td = solve(D, v0, v1, V, A)
