@@ -355,13 +355,13 @@ class Profile:
             if segs[i].p0 > hi:
                 segs[i] = segs[i]._replace(p0=hi)
             hi = segs[i].p0
-        self._segs = segs
         t0 = [0.0] * len(segs)
         t = 0.0
         for i, s in enumerate(segs):
             t0[i] = t
             t = t + s.duration
         self._t0 = t0
+        self._segs = segs  # last: whoever sees the phases sees their start times
         return t
 
     @property
@@ -370,9 +370,8 @@ class Profile:
         segs = self._segs
         if segs is None:
             assert self._build is not None
-            build, args = self._build
+            build, args = self._build  # kept: two threads may build at once, alike
             self._settle(build(*args))
-            self._build = None
             segs = self._segs
             assert segs is not None
         return segs
