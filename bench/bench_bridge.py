@@ -130,8 +130,16 @@ def main() -> None:
     ap.add_argument(
         "--no-record", action="store_true", help="the bridge records no bag (what recording costs)"
     )
+    ap.add_argument(
+        "--interface",
+        choices=("forward", "trajectory"),
+        default="forward",
+        help="forward: a command each ms to a ForwardCommandController (default); trajectory: a "
+        "JointTrajectory of 1 ms points every 20 ms to a JointTrajectoryController",
+    )
     args = ap.parse_args()
     quick = args.quick
+    trajectory = args.interface == "trajectory"
     span = 4.0 if quick else 10.0
     work = Path(tempfile.mkdtemp(prefix="winder-bench-bridge-"))
     env = {**ros_env(DOMAIN), "PYTHONUNBUFFERED": "1"}
@@ -147,6 +155,11 @@ def main() -> None:
             # the stand-in is a Python process on shared cores: limits for its lag, not a drive's
             *("-p", "max_following_error.fork:=5.0", "-p", "joint_state_timeout:=0.5"),
             *(("-p", "record:=false") if args.no_record else ()),
+            *(
+                ("-p", "interface:=trajectory", "-p", "controller:=joint_trajectory_controller")
+                if trajectory
+                else ()
+            ),
         ],
         "ros2_control stand-in": [
             sys.executable,
@@ -155,8 +168,12 @@ def main() -> None:
             "feed,fork,pole",
             "--rate",
             "100",
+            *(("--interface", "trajectory") if trajectory else ()),
         ],
-        "profile_node": [str(BIN / "profile_node"), "--ros-args", "-p", "v_max:=4096.0"],
+        "profile_node": [
+            str(BIN / "profile_node"),
+            *("--ros-args", "-p", "v_max:=4096.0"),
+        ],
     }
     anchors = {
         "anchor: rclpy timer 1 kHz": [sys.executable, "-c", ANCHOR, "timer"],
@@ -188,7 +205,8 @@ def main() -> None:
         def ended() -> bool:
             if args.no_record:
                 return b": complete," in (work / "bridge.log").read_bytes()
-            return bool(list((work / "bags").glob("*/metadata.yaml")))
+            # metadata.yaml is there from the run's first moment; it says closed at the end
+            return any("winder_bag: closed" in m.read_text() for m in (work / "bags").glob("*/metadata.yaml"))
 
         while not ended() and time.monotonic() < t_end + 120:
             time.sleep(0.2)
@@ -211,8 +229,10 @@ def main() -> None:
     )
     print(table(["process", "idle %", "run %", "/ timer anchor"], rows))
     status = {} if args.no_record else final_status(work / "bags")
+    sent = "trajectories (1 ms points, 20 ms apart)" if trajectory else "commands"
     print(
-        f"bridge: {status.get('commands_sent', '?')} commands in {status.get('wall_time_s', '?')} s, "
+        f"bridge ({args.interface}): {status.get('commands_sent', '?')} {sent} in "
+        f"{status.get('wall_time_s', '?')} s, "
         f"largest gap {status.get('max_command_gap_ms', '?')} ms, "
         f"late steps {status.get('late_steps', '?')}, "
         f"run state {status.get('state', '?')}"

@@ -10,6 +10,17 @@ named and namespaced as ros2_control makes them, behaving as documented:
   rclcpp's SystemDefaultsQoS); each update writes the last command received
   into the joints' position command interfaces; a command whose size is not
   the number of joints is rejected with an error log and ignored;
+* or, with ``--interface trajectory``, ``<controller>``
+  (joint_trajectory_controller/JointTrajectoryController, position command
+  interface, no velocities or accelerations in the points: linear
+  interpolation): subscribes ``~/joint_trajectory``
+  (trajectory_msgs/JointTrajectory); a new trajectory replaces the one in
+  force, starting at its ``header.stamp`` (zero: when it is received),
+  each point at the start plus its ``time_from_start``; each update
+  samples it: before its first point, the line from the position
+  commanded when it arrived to the first point; between points, the line
+  between them; after the last, the last point held. A trajectory whose
+  joint names are not the controller's joints is rejected with an error log;
 * ``joint_state_broadcaster``: publishes sensor_msgs/JointState on
   ``joint_states`` (relative: ``/<ns>/joint_states``) with the joints' names,
   position, velocity and effort at each update, stamped with the update's
@@ -27,9 +38,11 @@ named and namespaced as ros2_control makes them, behaving as documented:
 from __future__ import annotations
 
 import argparse
+import bisect
 import math
 import sys
 import time
+from typing import Any
 
 import rclpy
 from rclpy.clock import Clock
@@ -38,6 +51,7 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
+from trajectory_msgs.msg import JointTrajectory
 
 
 def pairs(items: list[str], kind: type) -> dict[str, float]:
@@ -52,7 +66,8 @@ def main() -> None:
     argv = rclpy.utilities.remove_ros_args(sys.argv)[1:]
     ap = argparse.ArgumentParser()
     ap.add_argument("--joints", required=True)
-    ap.add_argument("--controller", default="forward_position_controller")
+    ap.add_argument("--controller", default=None)
+    ap.add_argument("--interface", choices=("forward", "trajectory"), default="forward")
     ap.add_argument("--rate", type=float, default=250.0)
     ap.add_argument("--initial", action="append", default=[], metavar="JOINT=VALUE")
     ap.add_argument("--offset", action="append", default=[], metavar="JOINT=VALUE")
@@ -61,6 +76,10 @@ def main() -> None:
     ap.add_argument("--silent-after", type=float, default=math.inf)
     args = ap.parse_args(argv)
     joints = args.joints.split(",")
+    if args.controller is None:
+        args.controller = (
+            "joint_trajectory_controller" if args.interface == "trajectory" else "forward_position_controller"
+        )
     initial, offset, lag = pairs(args.initial, float), pairs(args.offset, float), pairs(args.lag, float)
 
     rclpy.init(args=sys.argv)
@@ -90,8 +109,43 @@ def main() -> None:
             first_command[0] = time.monotonic()
             log.info(f"first command: {list(msg.data)}")
 
+    # the trajectory in force: (start ns, point times ns, positions), and where it set out from
+    traj: list[Any] = [None]
+
+    def on_trajectory(msg: JointTrajectory) -> None:
+        if list(msg.joint_names) != joints:
+            log.error(f"joints {list(msg.joint_names)} of the trajectory are not the controller's {joints}")
+            return
+        if not msg.points:
+            return
+        now = time.time_ns()
+        stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        start = stamp or now
+        times = [start + d.sec * 1_000_000_000 + d.nanosec for d in (p.time_from_start for p in msg.points)]
+        traj[0] = (now, list(command), times, [list(p.positions) for p in msg.points])
+        if first_command[0] == math.inf:
+            first_command[0] = time.monotonic()
+            log.info(f"first trajectory: {len(msg.points)} points")
+
+    def sample_trajectory() -> None:
+        if traj[0] is None:
+            return
+        received, before, times, points = traj[0]
+        now = time.time_ns()
+        k = bisect.bisect_right(times, now)
+        if k >= len(times):
+            command[:] = points[-1]
+            return
+        t_a, p_a = (received, before) if k == 0 else (times[k - 1], points[k - 1])
+        t_b, p_b = times[k], points[k]
+        f = 1.0 if t_b <= t_a else min(max((now - t_a) / (t_b - t_a), 0.0), 1.0)
+        command[:] = [a + (b - a) * f for a, b in zip(p_a, p_b, strict=True)]
+
     reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
-    ctrl.create_subscription(Float64MultiArray, "~/commands", on_commands, reliable)
+    if args.interface == "trajectory":
+        ctrl.create_subscription(JointTrajectory, "~/joint_trajectory", on_trajectory, reliable)
+    else:
+        ctrl.create_subscription(Float64MultiArray, "~/commands", on_commands, reliable)
     pub = jsb.create_publisher(JointState, "joint_states", reliable)
     dt = 1.0 / args.rate
     last = [time.monotonic()]
@@ -116,7 +170,9 @@ def main() -> None:
             )
             msg.header.stamp = cm.get_clock().now().to_msg()
             pub.publish(msg)
-        if last_msg[0] is not None:
+        if args.interface == "trajectory":
+            sample_trajectory()
+        elif last_msg[0] is not None:
             command[:] = last_msg[0]
 
     cm.create_timer(dt, update, clock=Clock(clock_type=ClockType.STEADY_TIME))

@@ -110,7 +110,7 @@ PYTHON_KEYS = {
     "zstandard": "python3-zstandard",
 }
 #: pip packages with no rosdep key, named in the core's package.xml comment instead
-PIP_ONLY = {"mcap", "rosbags", "backports"}
+PIP_ONLY = {"mcap", "rosbags", "backports", "foxglove"}
 #: the standard library of later Pythons (zstd is ``compression.zstd`` from 3.14)
 LATER_STDLIB = {"compression"}
 

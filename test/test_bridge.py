@@ -44,9 +44,11 @@ def start_standin(procs: Procs, *args: str) -> subprocess.Popen[bytes]:
     return procs.launch([sys.executable, str(STANDIN), "--joints", ",".join(JOINTS), *args], "standin")
 
 
-def start_cell(procs: Procs, bags: Path, *bridge_params: str) -> subprocess.Popen[bytes]:
-    """bridge_node (joints mapped out of the cell's order), profile_node and
-    interp_node (autostart); the bridge process."""
+def start_cell(
+    procs: Procs, bags: Path, *bridge_params: str, ramp: dict[str, str] | None = None
+) -> subprocess.Popen[bytes]:
+    """bridge_node (joints mapped out of the cell's order), profile_node (``ramp``,
+    else RAMP) and interp_node (autostart); the bridge process."""
     bridge = procs.start(
         "bridge_node",
         "-p",
@@ -59,7 +61,7 @@ def start_cell(procs: Procs, bags: Path, *bridge_params: str) -> subprocess.Pope
         f"axes:=[{','.join(AXES_OF)}]",
         *bridge_params,
     )
-    procs.start("profile_node", *[a for k, v in RAMP.items() for a in ("-p", f"{k}:={v}")])
+    procs.start("profile_node", *[a for k, v in (ramp or RAMP).items() for a in ("-p", f"{k}:={v}")])
     procs.start("interp_node", *[a for k, v in JOB.items() for a in ("-p", f"{k}:={v}")])
     return bridge
 
@@ -186,6 +188,66 @@ def test_payloads_are_what_rclpy_serializes() -> None:
     assert reader.read(serialize_message(JointState(name=["flyer"], position=[]))) is None
 
 
+def test_trajectory_payloads_read_back_in_rclpy_and_rosbags() -> None:
+    """The bridge's JointTrajectory bytes: rclpy and rosbags read the same
+    message back (rclpy's own serializer leaves bytes past the end, which a
+    bag reader refuses: the reason for an encoder of our own)."""
+    from rclpy.serialization import deserialize_message
+    from rosbags.typesys import Stores, get_typestore
+    from trajectory_msgs.msg import JointTrajectory
+
+    from winder.contract.cdr import trajectory_payload
+
+    names = ["pole_joint", "flyer", "feed_screw"]
+    pos = np.array([[0.5, -1.25, 1e-5], [0.75, math.pi, 2e-5], [1.0, 7.0, -3e-5]])
+    offsets = [1_000_000, 2_000_000, 1_500_000_000]
+    frames = ["br_20261126_010203004_1", "", "a", "ab", "abc", "abcd"]  # the first point padded or not
+    for frame in frames:
+        raw = trajectory_payload(1_795_000_000_123_456_789, frame, names, offsets, pos)
+        ros = deserialize_message(raw, JointTrajectory)
+        bag = get_typestore(Stores.ROS2_JAZZY).deserialize_cdr(raw, "trajectory_msgs/msg/JointTrajectory")
+        check_trajectory(ros, frame, names, offsets, pos)
+        check_trajectory(bag, frame, names, offsets, pos)
+
+
+def check_trajectory(msg: Any, frame: str, names: list[str], offsets: list[int], pos: np.ndarray) -> None:
+    assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (1_795_000_000, 123_456_789)
+    assert msg.header.frame_id == frame and list(msg.joint_names) == names
+    assert [p.time_from_start.sec * 10**9 + p.time_from_start.nanosec for p in msg.points] == offsets
+    np.testing.assert_array_equal([list(p.positions) for p in msg.points], pos)
+    assert all(len(p.velocities) == len(p.accelerations) == len(p.effort) == 0 for p in msg.points)
+
+
+def test_a_grid_of_times_is_what_advancing_to_each_gives() -> None:
+    """Pacer.advance_grid and CommandHistory.push_many, against advance and
+    push one time at a time (the trajectory interface's points)."""
+    from winder.contract.pacing import CommandHistory, Pacer
+
+    rng = np.random.default_rng(7)
+    rows = np.zeros((500, 5), np.int64)
+    rows[:, 0] = np.cumsum(rng.integers(1, 3_000_000, 500))
+    rows[:, 2:] = np.cumsum(rng.integers(-1, 2, (500, 3)), axis=0)
+    one, grid = (Pacer([4, 3, 2], np.array([5, 6, 7]), np.array([0.5, 1e-3, 2.0])) for _ in range(2))
+    one.add(rows[:300]), grid.add(rows[:300])
+    h_one, h_grid = (CommandHistory(np.zeros(3), size=64) for _ in range(2))
+    for lo in range(0, 1_200_000_000, 37_000_000):
+        times = np.arange(lo, lo + 37_000_000, 1_000_000, dtype=np.int64)
+        if lo == 444_000_000:
+            one.add(rows[300:]), grid.add(rows[300:])
+        want = []
+        for t in times.tolist():
+            one.advance(t)
+            want.append(one.position.copy())
+            h_one.push(t, one.position.copy())
+        got = grid.advance_grid(times)
+        h_grid.push_many(times, got)
+        np.testing.assert_array_equal(got, np.array(want))
+        assert grid.take_due() == one.take_due() and grid.held == one.held
+        for a, b in [(lo - 5_000_000, lo + 3_000_000), (lo + 10_000_000, lo + 30_000_000)]:
+            for x, y in zip(h_one.span(a, b), h_grid.span(a, b), strict=True):
+                np.testing.assert_array_equal(x, y)
+
+
 def test_pacer_commands_the_last_row_due() -> None:
     from winder.contract.pacing import Pacer
 
@@ -275,6 +337,67 @@ def test_whole_job_commands_the_exact_steps_in_time(tmp_path: Path, procs: Procs
         in (report2["servo_fault"])
     ), report2
     assert not raw2.get(COMMANDS) and not raw2.get("/clock")  # nothing commanded, the clock not started
+
+
+def test_a_trajectory_controller_gets_every_point_exact_in_batches(
+    tmp_path: Path, procs: Procs, ros: Any
+) -> None:
+    """interface trajectory: a JointTrajectory every batch to a
+    JointTrajectoryController (the stand-in's, from its documented
+    behaviour); every point, one every 1/rate s of run time for four batches
+    ahead, is the step counts of the last row due at its time times the step
+    lengths, exactly; points sent twice (the overlap) agree; the joints end
+    at the job's end; the job is done."""
+    bags = tmp_path / "bags"
+    standin = start_standin(procs, "--interface", "trajectory", "--rate", "500")
+    bridge = start_cell(
+        procs,
+        bags,
+        *("-p", "interface:=trajectory", "-p", "controller:=joint_trajectory_controller"),
+        *("-p", "max_following_error.fork:=5.0", "-p", "max_following_error.pole:=1.0"),
+        *("-p", "max_following_error.feed:=0.01"),
+        ramp={**RAMP, "lookahead": "0.02"},  # less than the bridge asks for: its ask must win
+    )
+    [bag] = wait_for_bags(bags, 1)
+    raw = rosbags_read(bag)
+    report = final_report(raw)
+    assert report["state"] == "done", report["servo_fault"] or report
+    assert report["steps_done"] == report["steps_total"] == str(Job(**JOB).total_steps)
+    config = sim_config(raw)
+    # the profile node sent the steps as far ahead as the bridge asked, not its own 20 ms: the
+    # last row of each chunk lies that far beyond the chunk's log time (run time: less wall_start_ns)
+    lead = [
+        int(np.asarray(m.data, np.int64).reshape(m.layout.dim[0].size, m.layout.dim[1].size)[-1, 0])
+        - (t - config["wall_start_ns"])
+        for t, m in raw["/winder/step_times"]
+    ]
+    assert np.median(lead) >= 0.1e9, np.median(lead)
+    assert config["interface"] == "trajectory" and config["batch"] == 0.02
+    assert config["lookahead_min_s"] == pytest.approx(0.12)  # the steps come six batches ahead
+    msgs = [m for _, m in raw["/joint_trajectory_controller/joint_trajectory"]]
+    assert len(msgs) > 10 and all(list(m.joint_names) == JOINTS for m in msgs)
+    stamp = np.array([m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in msgs], np.int64)
+    assert np.all(np.diff(stamp) > 0)
+    rows = step_rows(raw)
+    which = {"feed": 2, "fork": 3, "pole": 4}
+    counts = np.vstack([np.zeros((1, 3), np.int64), rows[:, [which[a] for a in AXES_OF]]])
+    seen: dict[int, list[float]] = {}
+    for m, s0 in zip(msgs, stamp, strict=True):
+        for p in m.points:
+            t_run = int(s0 - stamp[0]) + p.time_from_start.sec * 10**9 + p.time_from_start.nanosec
+            assert t_run % 1_000_000 == 0  # on the 1 kHz grid of the run's time
+            want = counts[int(np.searchsorted(rows[:, 0], t_run, side="right"))] * step_lengths()
+            if report["late_steps"] == "0":  # else a starved tick (two busy cores) held some points
+                np.testing.assert_array_equal(np.asarray(p.positions), want)
+            assert seen.setdefault(t_run, list(p.positions)) == list(p.positions)  # the overlap agrees
+    end = Job(**JOB).segments()[-1]
+    final = np.array([end.start[i] + end.delta[i] for i in (2, 1, 0)]) * step_lengths()
+    states = raw["/joint_states"]
+    np.testing.assert_allclose(states[-1][1].position, final, rtol=0, atol=1e-12)  # the controller got there
+    for proc in (bridge, standin):
+        assert proc.poll() is None
+    assert "Traceback" not in procs.log(bridge)
+    assert "are not the controller's" not in procs.log(standin)
 
 
 @pytest.mark.parametrize(

@@ -47,7 +47,8 @@ F = npt.NDArray[np.float64]
 def whole_array_kinematics(t_ns: F, stride_time: float = STRIDE_TIME) -> tuple[F, ...]:
     """Velocity, acceleration and jerk from the step times of a whole move at
     once (second-order central differences over a stride of m steps spanning
-    at least stride_time, END_STRIDES strides from either end)."""
+    at least stride_time, END_STRIDES strides from either end; the jerk the
+    difference quotient of the acceleration a stride either side)."""
     t = np.asarray(t_ns, dtype=np.float64)
     n = t.size
     empty = np.zeros(0)
@@ -66,11 +67,13 @@ def whole_array_kinematics(t_ns: F, stride_time: float = STRIDE_TIME) -> tuple[F
     t0, tp, tm, tp2, tm2 = t[k], t[k + m], t[k - m], t[k + 2 * m], t[k - 2 * m]
     d1 = (tp - tm) / (2 * mf) * 1e-9
     d2 = (tp - 2 * t0 + tm) / mf**2 * 1e-9
-    d3 = (tp2 - 2 * tp + 2 * tm - tm2) / (2 * mf**3) * 1e-9
+    # the jerk: the difference quotient of the acceleration a stride either side
+    d1p, d2p = (tp2 - t0) / (2 * mf) * 1e-9, (tp2 - 2 * tp + t0) / mf**2 * 1e-9
+    d1m, d2m = (t0 - tm2) / (2 * mf) * 1e-9, (t0 - 2 * tm + tm2) / mf**2 * 1e-9
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         v = 1.0 / d1
         a = -d2 / d1**3
-        j = 3 * a * a / v - d3 * v**4
+        j = (d2m / d1m**3 - d2p / d1p**3) / ((tp - tm) * 1e-9)
     good = np.isfinite(v) & np.isfinite(a) & np.isfinite(j)
     return t0[good] * 1e-9, v[good], a[good], j[good]
 

@@ -70,8 +70,9 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
+from trajectory_msgs.msg import JointTrajectory
 
-from winder.contract.cdr import CommandPayload, JointStateReader, clock_payload
+from winder.contract.cdr import CommandPayload, JointStateReader, clock_payload, trajectory_payload
 from winder.contract.pacing import CommandHistory, Pacer, following_error
 from winder.contract.params import BRIDGE_SPECS, check_bridge
 from winder.contract.stream import JobPlan
@@ -105,7 +106,11 @@ ABORT_RETRY = 1.0
 ABORT_TRIES = 5
 #: rows held at most (accepted, not due): further chunks wait in the inbox
 MAX_HELD = 1 << 16
-#: The bridge's own recorded topics (the commands topic follows ``controller``).
+#: interface trajectory: each trajectory holds the points of this many batches ahead
+AHEAD_BATCHES = 4
+#: the message type of the commands with interface trajectory
+TRAJECTORY_TYPE = "trajectory_msgs/msg/JointTrajectory"
+#: The bridge's own recorded topics (the commands topic follows ``controller`` and ``interface``).
 BRIDGE_TOPICS = {
     "commands": ("forward_position_controller/commands", "std_msgs/msg/Float64MultiArray"),
     "joint_states": (TOPIC_MEASURED, "sensor_msgs/msg/JointState"),
@@ -139,7 +144,7 @@ class BridgeNode(StepConsumer):
             start_parameter_services=False,
         )
         self.controller = ""
-        self.pub_cmd = self.commands_publisher(values["controller"])
+        self.pub_cmd = self.commands_publisher(values["controller"], values["interface"])
         self.pub_clock = self.io.create_publisher(Clock, self.resolve_topic_name(TOPIC_CLOCK), QOS_CLOCK)
         self.bag_topics["joint_states"] = (
             self.resolve_topic_name(TOPIC_MEASURED),
@@ -173,13 +178,19 @@ class BridgeNode(StepConsumer):
         self.thread.start()
         self.start_lifecycle()
 
-    def commands_publisher(self, controller: str) -> Any:
-        """The publisher of ``<controller>/commands`` (a new one if the controller changed)."""
-        if controller == self.controller:
+    def commands_publisher(self, controller: str, interface: str = "forward") -> Any:
+        """The publisher of ``<controller>/commands`` (interface forward) or
+        ``<controller>/joint_trajectory`` (trajectory): a new one if the
+        controller or the interface changed."""
+        if (controller, interface) == (self.controller, getattr(self, "interface_in_use", "forward")):
             return self.pub_cmd
         if self.controller:
             self.io.destroy_publisher(self.pub_cmd)
-        self.controller = controller
+        self.controller, self.interface_in_use = controller, interface
+        if interface == "trajectory":
+            topic = self.resolve_topic_name(f"{controller}/joint_trajectory")
+            self.bag_topics["commands"] = (topic, TRAJECTORY_TYPE)
+            return self.io.create_publisher(JointTrajectory, topic, QOS_STATE)
         topic = self.resolve_topic_name(f"{controller}/commands")
         self.bag_topics["commands"] = (topic, BRIDGE_TOPICS["commands"][1])
         return self.io.create_publisher(Float64MultiArray, topic, QOS_STATE)
@@ -187,7 +198,13 @@ class BridgeNode(StepConsumer):
     def new_run(self, values: dict[str, Any]) -> None:
         """A run's settings and state before it starts (also: the node's, before any run)."""
         self.rate = float(values["rate"])
-        self.period_ns = round(1e9 / self.rate)
+        self.point_ns = round(1e9 / self.rate)  # a commanded position every point_ns of run time
+        self.trajectory = values.get("interface", "forward") == "trajectory"
+        # the thread's tick: a command (forward), or a trajectory of the next two batches
+        self.period_ns = round(values["batch"] * 1e9) if self.trajectory else self.point_ns
+        self.points: deque[tuple[int, npt.NDArray[np.float64]]] = deque()  # sent, not passed yet
+        self.frontier = 0  # run time of the last point sent (trajectory)
+        self.wall_t0 = 0  # system clock time of run time 0 (the trajectories' stamps)
         self.timeout_ns = round(values["joint_state_timeout"] * 1e9)
         self.delay_ns = round(values["command_delay"] * 1e9)
         self.origin_here = values["job_origin"] == "start_position"
@@ -222,7 +239,7 @@ class BridgeNode(StepConsumer):
     # -- the consumer's hooks ---------------------------------------------------
     def begin(self, plan: JobPlan, values: dict[str, Any]) -> dict[str, object]:
         self.stop_pacing()
-        self.pub_cmd = self.commands_publisher(values["controller"])
+        self.pub_cmd = self.commands_publisher(values["controller"], values["interface"])
         which = [AXES.index(a) for a in values["axes"]]
         start = np.array([plan.segments[0].start[i] if plan.segments else 0 for i in which], np.int64)
         pacer = Pacer([2 + i for i in which], start, np.array([plan.joint_step[i] for i in which]))
@@ -242,6 +259,12 @@ class BridgeNode(StepConsumer):
             "real_time": True,
             "clock_origin_ns": self.origin_ns,
             "rate": self.rate,
+            "interface": "trajectory" if self.trajectory else "forward",
+            **(
+                {"batch": self.period_ns / 1e9, "lookahead_min_s": (AHEAD_BATCHES + 2) * self.period_ns / 1e9}
+                if self.trajectory
+                else {}
+            ),
             "controller_topic": self.bag_topics["commands"][0],
             "joint_states_topic": self.bag_topics["joint_states"][0],
             "joints": dict(zip(self.joints, self.axes, strict=True)),  # joint -> the cell axis it drives
@@ -261,9 +284,11 @@ class BridgeNode(StepConsumer):
     def execute(self, rows: npt.NDArray[np.int64]) -> None:
         with self.lock:
             assert self.pacer is not None
-            if self.armed and rows[0, 0] < self.t_tick:  # came after their time: they go out now
-                self.late_rows += int(np.count_nonzero(rows[:, 0] < self.t_tick))
-                self.max_late_ns = max(self.max_late_ns, self.t_tick - int(rows[0, 0]))
+            # came after their time (trajectory: after the points for their time went out): now
+            sent = self.frontier if self.trajectory else self.t_tick
+            if self.armed and rows[0, 0] < sent:
+                self.late_rows += int(np.count_nonzero(rows[:, 0] < sent))
+                self.max_late_ns = max(self.max_late_ns, sent - int(rows[0, 0]))
             self.pacer.add(rows)
 
     def holding(self) -> bool:
@@ -357,6 +382,10 @@ class BridgeNode(StepConsumer):
         return why
 
     def hardware_missing(self) -> str:
+        if not self.running:  # the controller the next run will command (its settings may have changed)
+            values = self.settings.values()
+            with self.lock:
+                self.pub_cmd = self.commands_publisher(values["controller"], values["interface"])
         if time.monotonic_ns() - self.heard_ns > HARDWARE_FRESH_NS:
             return f"no {self.bag_topics['joint_states'][0]} for {HARDWARE_FRESH_NS / 1e9:g} s"
         if self.pub_cmd.get_subscription_count() == 0:
@@ -390,15 +419,17 @@ class BridgeNode(StepConsumer):
                     self.go.clear()
 
     def tick(self) -> None:
-        """(Under the lock.) One command: the rows due now set the positions;
-        every CLOCK_PERIOD_NS the clock, and the measured states that came
-        (and before the run's time starts: each tick, and its start); all
-        queued for the bag."""
+        """(Under the lock.) One command: the rows due now set the positions
+        (interface trajectory: the trajectory of the next two batches); every
+        CLOCK_PERIOD_NS (trajectory: every tick) the clock, and the measured
+        states that came (and before the run's time starts: each tick, and
+        its start); all queued for the bag."""
         if not self.running or self.faulted:
             return
         now = time.monotonic_ns()
         t = now - self.t0_ns
-        look = not self.armed or t >= self.next_clock  # every CLOCK_PERIOD_NS (to the tick) once armed
+        # every CLOCK_PERIOD_NS (to the tick) once armed; a trajectory's tick is a batch apart
+        look = self.trajectory or not self.armed or t >= self.next_clock
         if look:  # a take costs ~20 us even when nothing came: not every tick
             for raw in waiting(self.sub_states):
                 self.heard_ns = now
@@ -413,6 +444,10 @@ class BridgeNode(StepConsumer):
         assert self.pacer is not None
         if self.ticks:
             self.max_gap_ns = max(self.max_gap_ns, t - self.t_tick)
+        if self.trajectory:
+            self.send_trajectory(t)
+            self.check_silence(now)
+            return
         if self.pacer.advance(t) or not self.ticks:  # the positions changed: a new command
             self.cmd.values[:] = self.pacer.position
             self.payload = self.cmd.bytes()
@@ -427,7 +462,52 @@ class BridgeNode(StepConsumer):
         self.outbox.append(("commands", t, self.payload, True))
         self.t_tick = t
         self.ticks += 1
-        late = now - int(self.last_seen.min()) if look else 0
+        if look:
+            self.check_silence(now)
+
+    def send_trajectory(self, t: int) -> None:
+        """(Under the lock.) Interface trajectory: one JointTrajectory from
+        run time ``t`` on, a point every ``point_ns`` to AHEAD_BATCHES
+        batches ahead (the points already sent for that stretch, then new
+        ones: a point is the last row due by its time, as a forward command
+        is), stamped with the system clock time of ``t`` (a
+        JointTrajectoryController replaces its trajectory with it from
+        there: a tick up to AHEAD_BATCHES - 1 batches late leaves it points
+        to follow); and the clock. The steps must be here that far ahead:
+        the run's sim_config asks the profile node for the steps
+        AHEAD_BATCHES + 2 batches ahead at least (``lookahead_min_s``: the
+        points sent, a batch to the next tick, a batch for the clock the
+        profile node has seen)."""
+        assert self.pacer is not None
+        while self.points and self.points[0][0] <= t:
+            self.points.popleft()
+        horizon = t + AHEAD_BATCHES * self.period_ns
+        m = max(self.frontier, t) // self.point_ns + 1
+        grid = np.arange(m, horizon // self.point_ns + 1, dtype=np.int64) * self.point_ns
+        if grid.size:
+            positions = self.pacer.advance_grid(grid)
+            self.points.extend(zip(grid.tolist(), positions, strict=True))
+            self.history.push_many(self.wall_t0 + grid, positions)
+            self.frontier = int(grid[-1])
+        payload = trajectory_payload(
+            self.wall_t0 + t,
+            self.plan.run_id if self.plan is not None else "",
+            self.joints,
+            np.fromiter((tp for tp, _ in self.points), np.int64, len(self.points)) - t,
+            np.array([p for _, p in self.points]).reshape(len(self.points), len(self.joints)),
+        )
+        self.pub_cmd.publish(payload)
+        self.outbox.append(("commands", t, payload, True))
+        self.clock_ns = self.origin_ns + t
+        clock = clock_payload(self.clock_ns)
+        self.pub_clock.publish(clock)
+        self.outbox.append(("clock", t, clock, True))
+        self.t_tick = t
+        self.ticks += 1
+
+    def check_silence(self, now: int) -> None:
+        """(Under the lock.) A servo fault if a joint was not measured for joint_state_timeout."""
+        late = now - int(self.last_seen.min())
         if late > self.timeout_ns:
             j = int(np.argmin(self.last_seen))
             self.raise_fault(
@@ -526,10 +606,14 @@ class BridgeNode(StepConsumer):
             self.pacer.set_origin(self.measured)
             self.history = CommandHistory(self.pacer.position.copy())
         self.t0_ns = now
+        self.wall_t0 = time.time_ns()  # the same instant on the system clock: the trajectories' stamps
+        self.points.clear()
+        self.frontier = 0
         self.next_clock = 0
         self.armed = True
+        batches = f", a trajectory every {self.period_ns / 1e6:g} ms" if self.trajectory else ""
         self.get_logger().info(
-            f"run armed: commanding {', '.join(self.joints)} at {self.rate:g} Hz "
+            f"run armed: commanding {', '.join(self.joints)} at {self.rate:g} Hz{batches} "
             f"on {self.bag_topics['commands'][0]}"
         )
 

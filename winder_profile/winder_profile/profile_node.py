@@ -409,6 +409,11 @@ class ProfileNode(ManagedNode):
         if config.get("real_time") is True and isinstance(origin, int):
             self.clock_origin_ns = origin
             self.lookahead_ns = round(self.settings.values()["lookahead"] * 1e9)
+            # a consumer that commits commands ahead of its clock needs the steps that far ahead at
+            # all times: steps go out in blocks when less than half the look-ahead is out, so twice it
+            wanted = config.get("lookahead_min_s")
+            if isinstance(wanted, int | float) and not isinstance(wanted, bool) and 0.0 < wanted <= 10.0:
+                self.lookahead_ns = max(self.lookahead_ns, round(2 * wanted * 1e9))
             if self.sub_clock is None:
                 self.sub_clock = self.create_subscription(
                     Clock, TOPIC_CLOCK, self.on_clock, QOS_CLOCK, raw=True

@@ -24,6 +24,7 @@ for many ways of cutting the rows into chunks).
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
@@ -171,11 +172,16 @@ class SegmentKinematics:
         tp2, tm2 = self._get(k + 2 * m), self._get(k - 2 * m)
         d1 = (tp - tm) / (2 * mf) * 1e-9  # s per step
         d2 = (tp - 2 * t0 + tm) / mf**2 * 1e-9
-        d3 = (tp2 - 2 * tp + 2 * tm - tm2) / (2 * mf**3) * 1e-9
+        # the jerk is the difference quotient of the acceleration a stride either side (from
+        # the same five step times): the mean jerk between those times, so it stays within the
+        # move's largest |jerk|, where 3 a^2 / v - t3 v^4 overshot at a jump of the jerk (+13 %
+        # at the peak of a triangular acceleration, where the jerk jumps by 2 J)
+        d1p, d2p = (tp2 - t0) / (2 * mf) * 1e-9, (tp2 - 2 * tp + t0) / mf**2 * 1e-9
+        d1m, d2m = (t0 - tm2) / (2 * mf) * 1e-9, (t0 - 2 * tm + tm2) / mf**2 * 1e-9
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
             v = 1.0 / d1
             a = -d2 / d1**3
-            j = 3 * a * a / v - d3 * v**4
+            j = (d2m / d1m**3 - d2p / d1p**3) / ((tp - tm) * 1e-9)
         good = np.isfinite(v) & np.isfinite(a) & np.isfinite(j)
         if np.any(good):
             self.emit(t0[good] * 1e-9, v[good], a[good], j[good])
@@ -362,8 +368,19 @@ class Digest:
 
 
 class _Pass:
-    def __init__(self, plan: JobPlan, sample_t: FloatArray, stride_time: float) -> None:
+    def __init__(
+        self, plan: JobPlan, sample_t: FloatArray, stride_time: float, rests: Iterable[tuple[int, int]] = ()
+    ) -> None:
         self.plan = plan
+        # each segment's moves, from rest to rest: (first step count, last step count)
+        cuts: dict[int, set[int]] = {}
+        for seg, step in rests:
+            if 0 <= seg < len(plan.segments) and 0 < step < plan.segments[seg].steps:
+                cuts.setdefault(seg, set()).add(step)
+        self.moves: dict[int, list[tuple[int, int]]] = {}
+        for i, s in enumerate(plan.segments):
+            ends = [0, *sorted(cuts.get(i, ())), s.steps]
+            self.moves[i] = list(itertools.pairwise(ends))
         self.d = Digest()
         self.stride_time = stride_time
         lx, ly = plan.step_lengths[0], plan.step_lengths[1]
@@ -392,8 +409,8 @@ class _Pass:
             self.d.traces[name] = Trace(first)
             self.d.first_moves[name] = None
         self.prev = np.asarray(plan.segments[0].start if plan.segments else (0,) * len(AXES), np.int64)
-        self.kin: dict[int, SegmentKinematics] = {}
-        self.closed: set[int] = set()
+        self.kin: dict[tuple[int, int], SegmentKinematics] = {}  #: (segment, move) -> its stencil
+        self.closed: set[tuple[int, int]] = set()
         order = np.argsort(sample_t, kind="stable")
         self.sample_order = order
         self.sample_ns = np.round(sample_t[order] * 1e9).astype(np.int64)
@@ -470,16 +487,31 @@ class _Pass:
         layer = d.layers.get(i)
         if layer is not None:
             layer.add(rows, self.plan)
-        if rows.shape[0] and i not in self.closed:
-            for j in [j for j in self.kin if j < i]:  # the stream has moved on: finish earlier moves
-                self._close(j)
-            kin = self.kin.get(i)
+        if not rows.shape[0]:
+            return
+        s = self.plan.segments[i]
+        k = np.abs(rows[:, 2 + s.major] - s.start[s.major])
+        # a move is differentiated on its own: across a rest (a programmed stop, a pause, the
+        # end of an abort) t(k) jumps and is singular on either side, as at a segment's start
+        touched = [
+            (n, lo, hi)
+            for n, (lo, hi) in enumerate(self.moves[i])
+            if (i, n) not in self.closed and np.any((k >= lo) & (k <= hi))
+        ]
+        if not touched:
+            return
+        first = (i, touched[0][0])
+        for key in [key for key in self.kin if key < first]:  # the stream has moved on: finish them
+            self._close(key)
+        for n, lo, hi in touched:
+            kin = self.kin.get((i, n))
             if kin is None:
-                kin = self.kin[i] = self._kinematics(i)
-            s = self.plan.segments[i]
-            kin.add(np.abs(rows[:, 2 + s.major] - s.start[s.major]), rows[:, 0])
+                kin = self.kin[(i, n)] = self._kinematics(i, hi - lo)
+            m = (k >= lo) & (k <= hi)
+            kin.add(k[m] - lo, rows[m, 0])
 
-    def _kinematics(self, i: int) -> SegmentKinematics:
+    def _kinematics(self, i: int, steps: int) -> SegmentKinematics:
+        """The stencil of a move of ``steps`` steps of segment ``i``."""
         s = self.plan.segments[i]
         js = self.plan.joint_step
         ratios = [(name, s.delta[ax] / s.steps * js[ax]) for ax, name in enumerate(AXES)] if s.steps else []
@@ -489,13 +521,13 @@ class _Pass:
                 if r != 0:
                     self.d.traces[name].add(i, t, v * r, a * r, j * r)
 
-        return SegmentKinematics(s.steps, emit, stride_time=self.stride_time)
+        return SegmentKinematics(steps, emit, stride_time=self.stride_time)
 
-    def _close(self, i: int) -> None:
-        kin = self.kin.pop(i)
+    def _close(self, key: tuple[int, int]) -> None:
+        kin = self.kin.pop(key)
         kin.finish()
         self.d.lost_stencils += kin.lost
-        self.closed.add(i)
+        self.closed.add(key)
 
     def finish(self) -> Digest:
         for i in sorted(self.kin):
@@ -507,12 +539,19 @@ class _Pass:
 
 
 def digest(
-    plan: JobPlan, rows: Iterable[IntArray], sample_t: FloatArray, stride_time: float = STRIDE_TIME
+    plan: JobPlan,
+    rows: Iterable[IntArray],
+    sample_t: FloatArray,
+    stride_time: float = STRIDE_TIME,
+    rests: Iterable[tuple[int, int]] = (),
 ) -> Digest:
     """One pass over step ``rows`` (chunks of (k, 5) int64, in stream order) of
     a job ``plan``; ``sample_t`` are the joint sample times (s) whose command
-    segment is wanted."""
-    p = _Pass(plan, np.asarray(sample_t, dtype=np.float64), stride_time)
+    segment is wanted. ``rests``: (segment, steps of it done) where the axes
+    came to rest within a segment besides the plan's programmed stops (an
+    operator's pause or abort): the kinematics take each move between rests
+    on its own."""
+    p = _Pass(plan, np.asarray(sample_t, dtype=np.float64), stride_time, [*plan.stops, *rests])
     for chunk in rows:
         chunk = np.asarray(chunk, dtype=np.int64)
         for i in range(0, chunk.shape[0], PIECE_ROWS):

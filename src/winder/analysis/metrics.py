@@ -42,13 +42,20 @@ Motion quality
   segment's major axis. Step k happens when the planned motion reaches k steps,
   so the step times sample the inverse t(k) of the motion exactly at the
   integers; with the derivatives of t(k) by central differences over a stride
-  of m steps, v = 1/t', a = -t''/t'**3 and j = 3a**2/v - t'''*v**4. The stride
+  of m steps, v = 1/t' and a = -t''/t'**3; the jerk is the difference of a
+  one stride either side over the time between them (the mean jerk there, so
+  never beyond the move's largest |jerk|; the closed form 3a**2/v - t'''*v**4
+  overshot by 13 % where the jerk jumps from +J to -J). The stride
   is chosen so that it spans at least :data:`STRIDE_TIME` (the ns rounding of
   the step times would otherwise dominate the jerk). The other axes of the
   segment move in proportion (their delta / the major delta): the ideal
   interpolated motion, whose step quantisation is the eq. 7 error above. For
   a profile with jumps in acceleration (trapezoid, exponential) the jerk is
-  unbounded; the value shown is the jump divided by the stride time.
+  unbounded; the value shown is the jump divided by the stride time. Each
+  move between rests is differentiated on its own: a segment is cut at its
+  programmed stops and where a recorded pause or abort brought the axes to
+  rest (:func:`rests`), since t(k) jumps across a rest and is singular on
+  either side of it, as at a move's start.
 * **axes**: the recorded joint velocity, its acceleration and jerk by central
   differences at the publish rate (so the values depend on the rate: the step
   ripple of the motor is seen only as far as it is sampled).
@@ -68,6 +75,7 @@ import numpy.typing as npt
 
 from winder.analysis.digest import STRIDE_TIME, Digest, SegmentKinematics, digest, turn_index
 from winder.contract.eq7 import layer_of_samples, sample_deviation
+from winder.contract.run import commands_text, shaper_text, stops_text
 from winder.motion.job import AXES
 from winder.motion.profile import LIMITS
 from winder.record.reader import Run
@@ -182,6 +190,9 @@ class Analysis:
     stream: dict[str, int] = field(default_factory=dict)
     #: sha256 of the job file the run's job comes from ("" if none): its recipe
     job_file_sha256: str = ""
+    shaper: str = ""  #: the input shaper of the run's ramp ("ZVD shaper at 12.5 Hz"), "" if none
+    stops: str = ""  #: the job's programmed stops in one line (winder.contract.run.stops_text), "" if none
+    commands: str = ""  #: the operator's commands in one line (commands_text), "" if none
 
 
 # -- eq. 7 -------------------------------------------------------------------------
@@ -372,7 +383,19 @@ def _axis_motion(run: Run, d: Digest) -> dict[str, AxisMotion]:
 
 def digest_run(run: Run, stride_time: float = STRIDE_TIME) -> Digest:
     """One pass over the run's step rows (:func:`winder.analysis.digest.digest`)."""
-    return digest(run.plan, run.step_rows, run.states.t, stride_time)
+    return digest(run.plan, run.step_rows, run.states.t, stride_time, rests(run))
+
+
+def rests(run: Run) -> list[tuple[int, int]]:
+    """Where the operator's commands brought the axes to rest within a segment:
+    (segment, steps of it done) of each recorded pause and abort."""
+    return [
+        (e["segment"], e["step"])
+        for e in run.events
+        if e.get("event") in ("pause", "abort")
+        and isinstance(e.get("segment"), int)
+        and isinstance(e.get("step"), int)
+    ]
 
 
 #: the profile node's settings shown as the ramp (winder/profile_config)
@@ -495,6 +518,9 @@ def analyze(run: Run, stride_time: float = STRIDE_TIME, digested: Digest | None 
         compression=run.compression,
         stream={k: int(_num(run.report, k)) for k in STREAM_KEYS if math.isfinite(_num(run.report, k))},
         job_file_sha256=run.plan.job_file_sha256,
+        shaper=shaper_text(run.profile_config),
+        stops=stops_text(run.plan),
+        commands=commands_text(run.events, run.plan),
     )
 
 
@@ -535,6 +561,7 @@ def setup(a: Analysis) -> dict[str, Any]:
         "job": a.job,
         "source": a.source,
         "profile": a.profile,
+        "shaper": a.shaper,
         "model": a.model,
     }
     shown = ("v_max", *LIMITS.get(a.profile, ()), "v_start", "dwell", "feed_override")
@@ -644,7 +671,7 @@ def _rows(a: Analysis) -> list[tuple[str, str]]:
         ("run", a.run_id or "-"),
         ("job file sha256", a.job_file_sha256 or "-"),
         ("re-simulation of", a.source or "-"),
-        ("profile / motor model", f"{a.profile} / {a.model}"),
+        ("profile / motor model", f"{a.profile}{', ' + a.shaper if a.shaper else ''} / {a.model}"),
         ("ramp limits (major axis)", _ramp(a)),
     ]
     for name, motor in a.motors.items():
@@ -663,6 +690,8 @@ def _rows(a: Analysis) -> list[tuple[str, str]]:
         ("state", state),
         ("steps", _steps(a)),
         ("stream faults", _stream(a)),
+        ("programmed stops", a.stops or "none"),
+        ("operator commands", a.commands or "none"),
         ("job time (last step)", f"{_f(a.job_time)} s"),
         ("simulated / wall time", f"{_f(a.sim_time)} s / {_f(a.wall_time)} s"),
         ("real-time factor", f"{_f(a.real_time_factor, decimals=1)} x"),
@@ -726,7 +755,7 @@ SETUP_ROWS: dict[str, tuple[str, ...]] = {
     "job id": ("job_id",),
     "job": ("job",),
     "re-simulation of": ("source",),
-    "profile / motor model": ("profile", "model"),
+    "profile / motor model": ("profile", "shaper", "model"),
     "ramp limits (major axis)": ("ramp.",),
     **{f"{ax}: motor J, D": (f"{ax}.J", f"{ax}.D", f"{ax}.load_torque") for ax in AXES},
     **{
@@ -746,6 +775,12 @@ def format_table(analyses: list[Analysis]) -> str:
     """One readable table, one column per run; with several runs, the set-up
     rows (job, ramp, motors, rates) in which they differ are marked ``*``."""
     cols = [_rows(a) for a in analyses]
+    # the stops and the commands are told when a run had any
+    told = {n for c in cols for n, v in c if n in ("programmed stops", "operator commands") and v != "none"}
+    cols = [
+        [(n, v) for n, v in c if n in told or n not in ("programmed stops", "operator commands")]
+        for c in cols
+    ]
     names = [r[0] for r in cols[0]]
     header = ["", *[a.label for a in analyses]]
     body = [[n, *[c[i][1] for c in cols]] for i, n in enumerate(names)]

@@ -95,19 +95,42 @@ def cmd_identify(args: argparse.Namespace) -> int:
 FINAL_STATES = ("done", "aborted", "incomplete")
 
 
-def _run_told(path: str) -> tuple[str, bool | None]:
-    """What a recording holds of its winder run, in words, and whether the
-    run's final report is in it (None: not a winder run, nothing to tell)."""
+def _run_told(path: str) -> tuple[str, bool | None, int]:
+    """What a recording holds of its winder run, in words, whether the run's
+    final report is in it (None: not a winder run, nothing to tell), and the
+    wall-clock time (ns) the simulated job started at (0 if unknown)."""
     from winder.record.reader import read_run
 
     try:
         run = read_run(path)
     except ValueError:  # not a winder bag, or several cells: only its messages are told
-        return "", None
+        return "", None, 0
     state = run.report.get("state", "")
     final = state in FINAL_STATES
     told = f"run {run.run_id or run.job_id}: {run.steps_recorded} of {run.plan.total_steps} steps recorded, "
-    return told + (f"final report: {state}" if final else "no final report"), final
+    wall0 = run.sim_config.wall_start_ns if run.sim_config is not None else 0
+    return told + (f"final report: {state}" if final else "no final report"), final, wall0
+
+
+def _log_time(t_ns: int) -> str:
+    """A bag's log time (ns since the Unix epoch) as a UTC date."""
+    import datetime
+
+    when = datetime.datetime.fromtimestamp(t_ns / 1e9, tz=datetime.timezone.utc)
+    return when.strftime("%Y-%m-%d %H:%M:%S.%f")[:-3] + " UTC"
+
+
+def _recovered_up_to(last_ns: int, wall0_ns: int) -> str:
+    """How far a recovered recording goes, in words. A winder bag's log time is
+    the wall-clock time the job started plus the simulated time since then
+    (the sim node's docstring): told as that simulated time, and as the date
+    the log time stands for; without the job's start, only the date."""
+    if wall0_ns > 0 and last_ns >= wall0_ns:
+        return (
+            f"up to t = {(last_ns - wall0_ns) / 1e9:.3f} s of simulated time since the job's start "
+            f"(log time {_log_time(last_ns)}: the job's wall-clock start plus simulated time)"
+        )
+    return f"up to log time {_log_time(last_ns)}"
 
 
 def cmd_bag_recover(args: argparse.Namespace) -> int:
@@ -118,7 +141,7 @@ def cmd_bag_recover(args: argparse.Namespace) -> int:
 
     try:
         raw = read_raw(args.bag)
-        told, final = _run_told(args.bag)
+        told, final, wall0 = _run_told(args.bag)
         total = sum(raw.counts.values())
         if raw.closed and not raw.recovered and not raw.damaged:
             if final is False:
@@ -139,8 +162,8 @@ def cmd_bag_recover(args: argparse.Namespace) -> int:
     for damage in raw.damaged:
         print(f"damaged: {damage}")
     print(
-        f"recovered {saved} messages on {len(raw.topics())} topics, up to t = {last / 1e9:.3f} s "
-        f"of simulated time, into {out}"
+        f"recovered {saved} messages on {len(raw.topics())} topics, {_recovered_up_to(last, wall0)}, "
+        f"into {out}"
     )
     why = []
     if raw.recovered or not raw.closed:

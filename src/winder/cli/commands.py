@@ -39,7 +39,7 @@ from winder.contract.params import (
     plan_timing,
     stop_points,
 )
-from winder.contract.run import JobReport
+from winder.contract.run import JobReport, commands_text, shaper_text, stops_text
 from winder.contract.topics import check_namespace
 from winder.motion.interp import dda, deviation_stats, interpolate, min_deviation, point_by_point
 from winder.motion.job import FIELD_SPECS, Job
@@ -285,7 +285,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     }
     for name in external:
         params[name] = given_values(args, *remote_specs[name])
-    ramp = "the external profile node's ramp" if "profile" in external else f"{profile['profile']} profile"
+    shaper = shaper_text(profile)
+    ramp = (
+        "the external profile node's ramp"
+        if "profile" in external
+        else f"{profile['profile']} profile" + (f", {shaper}" if shaper else "")
+    )
     model = "the external step consumer" if "sim" in external else f"{sim['model']} motor model"
     print(f"winder: job {job.job_id}, {job.total_steps} steps, {ramp}, {model}")
     if digest:
@@ -331,7 +336,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         if fox_server is not None:
             fox_server.stop()
     bar.close()
-    return report_run(result, time.monotonic() - t0)
+    return report_run(result, time.monotonic() - t0, stops=bool(stops))
 
 
 def cmd_check(args: argparse.Namespace) -> int:
@@ -484,10 +489,27 @@ def _number(summary: dict[str, str], key: str, fmt: str, scale: float = 1.0) -> 
         return "-"
 
 
-def report_run(result: Any, wall: float, command: str = "run") -> int:
+def _told_by_bag(bag: str) -> tuple[str, str]:
+    """The programmed stops and the operator's commands of the run recorded in
+    ``bag``, each in one line ("" if none, or if the bag is not on this host or
+    cannot be read: the summary then says nothing of them)."""
+    if not bag or not Path(bag).is_dir():
+        return "", ""
+    from winder.record.reader import read_run
+
+    try:
+        run = read_run(bag)
+    except (OSError, ValueError):
+        return "", ""
+    return stops_text(run.plan), commands_text(run.events, run.plan)
+
+
+def report_run(result: Any, wall: float, command: str = "run", *, stops: bool = True) -> int:
     """The summary of a finished run (``winder run``, ``winder resim``) and
     the exit status (:mod:`winder.cli.exits`): done, aborted cleanly, a node
-    died before the run ended, or failed (with errors, or no final report)."""
+    died before the run ended, or failed (with errors, or no final report).
+    ``stops``: the job has programmed stops (else the bag is read for the
+    summary's stops and commands only when the consumer booked commands)."""
     s = result.summary
     if not s:
         print(
@@ -521,6 +543,14 @@ def report_run(result: Any, wall: float, command: str = "run") -> int:
         print(f"  max tracking error {_number(x, 'max_tracking_error_steps', '.3f')} steps")
     if "lost_steps" in x:
         print(f"  lost steps         {x['lost_steps']}")
+    # the stops and commands come from the bag: read only when the run had some (reading a
+    # large bag takes a while; the final report counts the operator's events)
+    had = stops or "operator_events" in x
+    stops_line, commands = _told_by_bag(r.bag) if had else ("", "")
+    if stops_line:
+        print(f"  programmed stops   {stops_line}")
+    if commands:
+        print(f"  operator commands  {commands}")
     print(f"  bag                {r.bag or '-'}")
     if result.errors:
         print(f"  ERROR reports      {len(result.errors)}, first: {result.errors[0]}")

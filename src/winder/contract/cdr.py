@@ -35,6 +35,7 @@ __all__ = [
     "clock_payload",
     "encode_clocks",
     "joint_state_names",
+    "trajectory_payload",
 ]
 
 _HEADER = b"\x00\x01\x00\x00"  # CDR little endian, no options
@@ -122,6 +123,48 @@ class JointStateEncoder:
         o = 4 + self._vel
         block[:, o : o + 8 * self.n] = vel.view(np.uint8).reshape(m, 8 * self.n)
         return [row.tobytes() for row in block]
+
+
+def trajectory_payload(
+    stamp_ns: int, frame_id: str, names: Sequence[str], offsets_ns: npt.ArrayLike, positions: npt.ArrayLike
+) -> bytes:
+    """A ``trajectory_msgs/JointTrajectory`` payload: header (``stamp_ns``,
+    ``frame_id``), the joint ``names``, and one point per row of
+    ``positions`` (m, n) at ``offsets_ns`` after the stamp (positions only:
+    velocities, accelerations and effort empty). Exact bytes, as
+    :class:`JointStateEncoder`'s (rclpy's serializer leaves bytes past the
+    message's end, which rosbag readers refuse). A point that starts 4 bytes
+    past a multiple of 8 needs no padding and ends so again: every point
+    but perhaps the first is one fixed record, written for all at once."""
+    pos = np.ascontiguousarray(positions, dtype="<f8")
+    dt = np.asarray(offsets_ns, dtype=np.int64)
+    n = len(names)
+    if pos.ndim != 2 or pos.shape != (dt.size, n):
+        raise ValueError(f"positions {pos.shape} must be ({dt.size}, {n})")
+    w = _Writer()
+    sec, nsec = divmod(int(stamp_ns), 1_000_000_000)
+    w.buf += struct.pack("<iI", sec, nsec)
+    w.string(frame_id)
+    w.u32(n)
+    for name in names:
+        w.string(name)
+    w.u32(dt.size)
+    first = 0
+    if dt.size and len(w.buf) % 8 != 4:  # the first point's positions are padded to 8
+        at = w.doubles(n)
+        w.buf[at : at + 8 * n] = pos[0].tobytes()
+        w.u32(0), w.u32(0), w.u32(0)  # velocities, accelerations, effort: empty
+        w.buf += struct.pack("<iI", *divmod(int(dt[0]), 1_000_000_000))
+        first = 1
+    record = np.dtype(
+        [("n", "<u4"), ("pos", "<f8", (n,)), ("empty", "<u4", (3,)), ("sec", "<i4"), ("nsec", "<u4")],
+        align=False,
+    )
+    block = np.zeros(dt.size - first, dtype=record)
+    block["n"] = n
+    block["pos"] = pos[first:]
+    block["sec"], block["nsec"] = np.divmod(dt[first:], 1_000_000_000)
+    return _HEADER + bytes(w.buf) + block.tobytes()
 
 
 IntT = TypeVar("IntT", np.int32, np.int64)

@@ -78,6 +78,19 @@ class Pacer:
         self.lo = j
         return True
 
+    def advance_grid(self, times: npt.NDArray[np.int64]) -> npt.NDArray[np.float64]:
+        """:meth:`advance` to each of the increasing ``times`` in turn: the
+        positions in force at each, (len(times), joints); the rows fall due
+        as with one advance to the last."""
+        held = self.t[self.lo : self.hi]
+        due = np.searchsorted(held, times, side="right")  # held rows due by each time
+        counts = np.where((due > 0)[:, None], self.steps[self.lo + np.maximum(due, 1) - 1], self.counts)
+        out: npt.NDArray[np.float64] = counts * self.step_len
+        out += self.offset
+        if times.size:
+            self.advance(int(times[-1]))
+        return out
+
     def set_origin(self, at_start: npt.NDArray[np.float64]) -> None:
         """Step 0 of the job lies where the start counts put the joints at ``at_start``."""
         self.offset = np.asarray(at_start, np.float64) - self.counts * self.step_len
@@ -110,6 +123,19 @@ class CommandHistory:
         self.t[self.n] = t_ns
         self.pos[self.n] = position
         self.n += 1
+
+    def push_many(self, t_ns: npt.NDArray[np.int64], positions: npt.NDArray[np.float64]) -> None:
+        """:meth:`push` of each row of ``positions`` at ``t_ns`` (increasing)."""
+        for i in range(0, t_ns.size, self.size):  # never more than the newest half at once
+            n = min(self.size, t_ns.size - i)
+            if self.n + n > self.t.size:
+                keep = self.size - n  # the newest entries that stay beside the new ones
+                self.t[:keep] = self.t[self.n - keep : self.n]
+                self.pos[:keep] = self.pos[self.n - keep : self.n]
+                self.n = keep
+            self.t[self.n : self.n + n] = t_ns[i : i + n]
+            self.pos[self.n : self.n + n] = positions[i : i + n]
+            self.n += n
 
     def span(self, t_from: int, t_to: int) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
         """The least and greatest position of each joint commanded in force

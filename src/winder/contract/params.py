@@ -721,6 +721,27 @@ BRIDGE_SPECS = {
             pattern=r"[A-Za-z][A-Za-z0-9_]*",
             pattern_text="a controller name (letters, digits and _, starting with a letter)",
         ),
+        Spec(
+            "interface",
+            str,
+            "forward",
+            "how the positions go to ros2_control: forward = a std_msgs/Float64MultiArray on "
+            "<controller>/commands at rate Hz (forward_command_controller/ForwardCommandController); "
+            "trajectory = a trajectory_msgs/JointTrajectory on <controller>/joint_trajectory every batch "
+            "seconds, a point every 1/rate s for the next four batches "
+            "(joint_trajectory_controller/JointTrajectoryController)",
+            choices=("forward", "trajectory"),
+        ),
+        Spec(
+            "batch",
+            float,
+            0.02,
+            "interface trajectory: how often a trajectory goes out (each holds the points of the next four "
+            "batches, so a tick up to three batches late costs nothing)",
+            "s",
+            0.001,
+            1.0,
+        ),
         _NamesSpec(
             "joints",
             str,
@@ -799,6 +820,11 @@ def check_bridge(values: dict[str, Any]) -> None:
     one and name every axis of the cell once; the bag directory must be
     writable when recording."""
     check_consumer(values)
+    if values.get("interface") == "trajectory" and values["batch"] * values["rate"] < 1.0:
+        raise SpecError(
+            f"batch={values['batch']:g} is invalid with rate={values['rate']:g}: a trajectory must hold at "
+            f"least one point (batch >= 1/rate = {1 / values['rate']:g} s)"
+        )
     joints, axes = values["joints"], values["axes"]
     if len(axes) != len(joints):
         raise SpecError(

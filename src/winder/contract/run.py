@@ -43,7 +43,11 @@ __all__ = [
     "RunLedger",
     "StopPhase",
     "Transition",
+    "commands_text",
     "parse_control",
+    "shaper_text",
+    "stops_text",
+    "where_text",
 ]
 
 #: the operator events of ``winder/control``
@@ -195,6 +199,8 @@ class RunLedger:
     abort: AbortPoint | None = None
     #: the operator state announced last ("" while running)
     op_state: str = ""
+    #: operator events booked (pause, resume, abort, override)
+    events: int = 0
     _pending: list[Transition] = field(default_factory=list)
     _places: dict[tuple[int, int], tuple[int, int, int]] = field(default_factory=dict)
 
@@ -254,6 +260,7 @@ class RunLedger:
         if self.abort is not None:
             raise EventError(f"{event.kind} after the run's abort: it takes no more events")
         where = self._where(event.segment, event.step)
+        self.events += 1
         first: Transition | None = None
         if event.kind == "pause":
             assert event.steps is not None
@@ -431,3 +438,72 @@ class JobReport:
             kind = {"int": int, "float": float}.get(str(f.type), str)
             kwargs[key] = _num(str(text), kind) if kind is not str else str(text)
         return cls(state=str(kwargs.pop("state", "")), extra=extra, **kwargs)
+
+
+# -- a run told in words: one line each for the summaries of winder run and winder analyze ---------
+
+#: an input shaper's name as its papers write it
+SHAPER_NAMES = {"zv": "ZV", "mzv": "MZV", "zvd": "ZVD", "ei": "EI", "2hump_ei": "2-hump EI"}
+
+
+def shaper_text(ramp: dict[str, Any]) -> str:
+    """``"ZVD shaper at 12.5 Hz"`` for the ramp settings of a shaped run
+    (the profile node's, or ``winder/profile_config``), "" without a shaper."""
+    name = str(ramp.get("shaper") or "none")
+    if name == "none":
+        return ""
+    freq = ramp.get("shaper_freq")
+    at = f" at {float(freq):g} Hz" if isinstance(freq, (int, float)) and not isinstance(freq, bool) else ""
+    return f"{SHAPER_NAMES.get(name, name)} shaper{at}"
+
+
+def stops_text(plan: JobPlan) -> str:
+    """The job's programmed stops in one line (their count, each as
+    coil:turn as ``--stops`` takes it, the rest and how the job goes on), ""
+    if it has none."""
+    if not plan.stops:
+        return ""
+    segs = plan.job.segments()
+    places = [stop_place(plan.job, segs[seg], step) for seg, step in plan.stops if 0 <= seg < len(segs)]
+    labels = ", ".join(f"{coil}:{turn}" for coil, _, turn in places)
+    goes_on = "auto" if plan.stop_resume == "auto" else "waits for a resume"
+    return f"{len(plan.stops)} ({labels}, rest {plan.stop_pause:g} s, {goes_on})"
+
+
+def where_text(plan: JobPlan, seg: int, step: int) -> str:
+    """Where step ``step`` of segment ``seg`` is: the coil and the turn into
+    it (fractional), or the coil alone between layers."""
+    segs = plan.job.segments()
+    if not 0 <= seg < len(segs):
+        return ""
+    s = segs[seg]
+    if s.kind != "layer":
+        return f"coil {s.pole + 1}, between layers"
+    turns = plan.job.coil(s.pole).turns_per_layer
+    return f"coil {s.pole + 1} turn {s.layer * turns + step / plan.job.fork_steps_per_rev:.2f}"
+
+
+def commands_text(events: list[dict[str, Any]] | tuple[dict[str, Any], ...], plan: JobPlan) -> str:
+    """The operator's commands of a run (its ``winder/control`` events) in one
+    line, each with the simulated time it took effect and, for a pause or an
+    abort, when and where the axes came to rest; "" if there were none."""
+    told = []
+    for e in events:
+        kind = str(e.get("event", "?"))
+        t = e.get("t_ns")
+        at = f" at {t / 1e9:.3f} s" if isinstance(t, int) else ""
+        if kind in ("pause", "abort"):
+            rest = e.get("t_rest_ns", t)
+            where = (
+                where_text(plan, e["segment"], e["step"])
+                if isinstance(e.get("segment"), int) and isinstance(e.get("step"), int)
+                else ""
+            )
+            detail = [f"at rest {rest / 1e9:.3f} s" if isinstance(rest, int) else "", where]
+            told.append(f"{kind}{at} ({', '.join(d for d in detail if d)})")
+        elif kind == "override":
+            factor = e.get("factor")
+            told.append(f"override x{factor:g}{at}" if isinstance(factor, (int, float)) else f"override{at}")
+        else:
+            told.append(f"{kind}{at}")
+    return "; ".join(told)

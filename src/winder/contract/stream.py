@@ -46,6 +46,9 @@ FORMAT = "winder.job/1"
 
 #: a run id: ``<job_id>_<UTC date>_<UTC time with ms>_<n>`` (:func:`make_run_id`)
 RUN_ID = re.compile(r"^[A-Za-z0-9_\-]+_\d{8}_\d{9}_\d+$")
+#: what a re-simulation (winder resim) adds to the job id in its run id, so its bag's
+#: name reads as one: ``<job_id>_resim_<date>_<time>_<n>``
+RESIM_TAG = "_resim"
 
 
 def make_run_id(job_id: str, counter: int, now: float | None = None) -> str:

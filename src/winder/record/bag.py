@@ -274,6 +274,7 @@ class BagRecorder:
         compression: str = "lz4",
         qos: Mapping[str, Qos] | None = None,
         first: Sequence[tuple[str, int, bytes | memoryview]] = (),
+        custom: Mapping[str, str] | None = None,
     ) -> None:
         if compression not in COMPRESSIONS:
             raise ValueError(f"compression={compression!r} is invalid: must be one of {COMPRESSIONS}")
@@ -301,7 +302,7 @@ class BagRecorder:
             raise FileExistsError(f"{self.path}: exists already; a bag is never written into it")
         self._stage = parent / f".{self.path.name}.opening-{os.getpid()}"
         try:
-            self._open(topics, qos, first)
+            self._open(topics, qos, first, custom or {})
         except BaseException:  # a signal too: nothing half-made stays behind
             self.discard()
             raise
@@ -313,12 +314,16 @@ class BagRecorder:
         topics: dict[str, str],
         qos: Mapping[str, Qos] | None,
         first: Sequence[tuple[str, int, bytes | memoryview]],
+        custom: Mapping[str, str],
     ) -> None:
         """The bag, made whole under a staging name, then renamed: its directory
         never exists without metadata.yaml and a first chunk that holds
         ``first`` (the run's description), so a writer killed at any moment
-        after leaves a bag that ``winder bag recover`` reads."""
+        after leaves a bag that ``winder bag recover`` reads. ``custom``:
+        metadata.yaml's custom_data besides the bag's state."""
         writer = _Writer(self._stage, self.path.name)
+        for key, value in custom.items():
+            writer.set_custom_data(key, value)
         if self.compression != "none":  # chunk compression inside the .mcap
             writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
         self._writer = writer

@@ -416,11 +416,22 @@ class StepConsumer(ManagedNode):
             first = [(self.bag_topics["job"][0], self.wall0_ns, job_raw)]
             if config_raw:
                 first.append((self.bag_topics["sim_config"][0], self.wall0_ns, config_raw))
+            # a re-simulation says so in metadata.yaml, where rosbag2 tools show it
+            custom = (
+                {
+                    "winder_run": "re-simulation",
+                    "winder_source_bag": plan.source_bag,
+                    "winder_source_run_id": plan.source_run_id,
+                }
+                if plan.source_bag
+                else {}
+            )
             self.bag = BagRecorder(
                 path,
                 {name: kind for name, kind in self.bag_topics.values()},
                 compression=values["bag_compression"],
                 first=first,
+                custom=custom,
             )
         except (OSError, ValueError) as exc:  # the disk changed since bag_dir was accepted
             self.error(f"job {plan.job_id} runs unrecorded: cannot open a bag: {one_line(exc)}")
@@ -666,8 +677,17 @@ class StepConsumer(ManagedNode):
             bag=str(self.bag.path.resolve()) if self.bag else "",
             errors=len(self.errors),
             stalls=self.stalls,
-            extra={**{k: str(v) for k, v in self.details().items()}, **self.intruder_keys()},
+            extra={
+                **{k: str(v) for k, v in self.details().items()},
+                **self.intruder_keys(),
+                **self.event_keys(),
+            },
         )
+
+    def event_keys(self) -> dict[str, str]:
+        """How many operator events the run booked (``operator_events``), if any."""
+        events = self.ledger.events if self.ledger else 0
+        return {"operator_events": str(events)} if events else {}
 
     def intruder_keys(self) -> dict[str, str]:
         """The run's refused messages, if any: ``foreign_messages`` and who sent them."""

@@ -30,7 +30,7 @@ from std_msgs.msg import Int32MultiArray, Int64MultiArray, String
 from trajectory_msgs.msg import JointTrajectory
 
 from winder.contract.qos import EVENTS, LATCHED, STATE, STREAM
-from winder.contract.stream import make_run_id, with_source
+from winder.contract.stream import RESIM_TAG, make_run_id, with_source
 from winder.contract.topics import (
     READY_STATES,
     TOPIC_CONTROL,
@@ -89,7 +89,8 @@ def resimulate(
 ) -> tuple[str, CellResult]:
     """Run the sim node on the recorded stream; (the new run id, the result)."""
     old = json.loads(job_text)
-    run_id = make_run_id(str(old["job"]["job_id"]), 1)
+    # named so that it reads as a re-simulation wherever its run id shows (the bag's name)
+    run_id = make_run_id(f"{old['job']['job_id']}{RESIM_TAG}", 1)
     description = with_source(job_text, run_id, source_bag)
     log_dir = Path(tempfile.mkdtemp(prefix="winder-resim-"))
     with cell_environment(domain) as env:

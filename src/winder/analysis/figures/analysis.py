@@ -60,6 +60,7 @@ from winder.analysis.identify import Identification
 from winder.analysis.metrics import Analysis, digest_run, paired_error
 from winder.contract.eq7 import layer_of_samples, sample_deviation, signed_path_distance
 from winder.contract.files import atomic_file, output_dir
+from winder.contract.run import shaper_text, where_text
 from winder.contract.stream import JobPlan
 from winder.motion.job import AXES
 from winder.record.reader import Run
@@ -306,13 +307,32 @@ def _save(fig: Figure, path: Path) -> Path:
 
 
 def _title(run: Run) -> str:
+    """One line: the run, its job, ramp (and shaper), motor model and how it ended."""
     j = run.plan.job
     model = f"{run.sim_config.model} motor model" if run.sim_config else "no motor model"
-    state = "complete" if run.complete else ("cut short, recovered" if run.recovered else "incomplete")
+    shaper = shaper_text(run.profile_config)
+    ramp = f"{run.profile or '?'} profile" + (f", {shaper}" if shaper else "")
     return (
         f"{run.label}: {j.poles} poles x {j.layers} layers x {j.layer_turns} turns, "
-        f"{run.profile or '?'} profile, {model} ({state})"
+        f"{ramp}, {model} ({_ending(run)})"
     )
+
+
+def _ending(run: Run) -> str:
+    """How the recorded run ended, in a few words: complete, aborted (when, and
+    where the axes came to rest), cut short, or incomplete."""
+    if run.complete:
+        return "complete"
+    abort = next((e for e in reversed(run.events) if e.get("event") == "abort"), None)
+    if run.report.get("state") == "aborted" and abort is not None:
+        rest = abort.get("t_rest_ns", abort["t_ns"]) / 1e9
+        seg, step = abort.get("segment"), abort.get("step")
+        where = where_text(run.plan, seg, step) if isinstance(seg, int) and isinstance(step, int) else ""
+        said = f"aborted at {abort['t_ns'] / 1e9:.3f} s, at rest {rest:.3f} s" + (
+            f" in {where}" if where else ""
+        )
+        return said + ("" if run.closed and not run.damaged else ", recording incomplete")
+    return "cut short, recovered" if run.recovered else "incomplete"
 
 
 def _first_ramp(d: Digest, axis: str, t: FloatArray, v: FloatArray) -> tuple[float, float] | None:
@@ -337,27 +357,34 @@ def _first_ramp(d: Digest, axis: str, t: FloatArray, v: FloatArray) -> tuple[flo
 def _mark_events(ax: Axes, run: Run, label: bool) -> None:
     """The operator's commands on a time axis: a pause shaded from the moment
     it takes effect to the resume (the rest dotted), an abort and an override
-    as lines."""
+    as lines. With ``label``, each kind of mark is named once in the legend,
+    however often it occurs."""
     end = float(run.states.t[-1]) if len(run.states) else 0.0
     pause: dict[str, Any] | None = None
+    named: set[str] = set()
+
+    def once(name: str) -> str | None:
+        if not label or name in named:
+            return None
+        named.add(name)
+        return name
+
     for e in run.events:
         t = e["t_ns"] / 1e9
         kind = e.get("event")
         if kind in ("pause", "abort"):
             color = "black" if kind == "pause" else "tab:red"
-            ax.axvline(
-                t, color=color, lw=1.0, label=f"{kind} takes effect" if label else None, gid=BACKGROUND
-            )
+            ax.axvline(t, color=color, lw=1.0, label=once(f"{kind} takes effect"), gid=BACKGROUND)
             ax.axvline(e.get("t_rest_ns", e["t_ns"]) / 1e9, color=color, lw=0.8, ls=":",
-                       label="at rest" if label and kind == "pause" else None, gid=BACKGROUND)  # fmt: skip
+                       label=once(f"{kind}: at rest"), gid=BACKGROUND)  # fmt: skip
             pause = e if kind == "pause" else None
         elif kind == "resume":
-            ax.axvline(t, color="tab:green", lw=1.0, label="resume" if label else None, gid=BACKGROUND)
+            ax.axvline(t, color="tab:green", lw=1.0, label=once("resume"), gid=BACKGROUND)
             if pause is not None:
                 ax.axvspan(pause["t_ns"] / 1e9, t, color="tab:gray", alpha=0.12, gid=BACKGROUND)
             pause = None
         elif kind == "override":
-            name = f"override x{e.get('factor', 1.0):g}" if label else None
+            name = once(f"override x{e.get('factor', 1.0):g}")
             ax.axvline(t, color="tab:purple", lw=1.0, ls="--", label=name, gid=BACKGROUND)
     if pause is not None:
         ax.axvspan(
@@ -369,84 +396,114 @@ def _mark_events(ax: Axes, run: Run, label: bool) -> None:
 
 
 def _motion(run: Run, d: Digest, out: Path) -> Path:
+    return _save(motion_figure(run, d), out / "motion.png")
+
+
+def motion_figure(run: Run, d: Digest) -> Figure:
+    """motion.png's figure: velocity, acceleration and jerk of each axis that
+    moves, commanded and simulated (the whole run and a zoom into its first
+    acceleration). An axis that never moves (the pole of a one-pole job) has
+    no column. The simulated axis' jerk, the differences of its sampled
+    velocity, swings with the step ripple far beyond the command's: it is
+    drawn as dots, those beyond the panel's scale as marks at its edge."""
     st = run.states
     acc = np.asarray(np.gradient(st.vel, st.t, axis=0)) if len(st) >= 3 else np.zeros((0, 3))
     jerk = np.asarray(np.gradient(acc, st.t, axis=0)) if len(st) >= 3 else np.zeros((0, 3))
-    fig, renderer = _figure((15, 12))
-    gs = fig.add_gridspec(4, 3, **MARGINS, top=0.89, hspace=0.4)
-    axes = np.empty((4, 3), dtype=object)
-    for c in range(3):
-        axes[0, c] = fig.add_subplot(gs[0, c])
-        axes[1, c] = fig.add_subplot(gs[1, c])
+    shown = [c for c in range(len(AXES)) if d.moved[c] > 0] or list(range(len(AXES)))
+    cols = len(shown)
+    width = max(1.0 + 4.7 * cols, 12.0)  # 12 in at least: a figure of one or two columns too
+    fig, renderer = _figure((width, 12))
+    # margins in inches as those of three columns, whatever the figure's width
+    room = {**MARGINS, "left": MARGINS["left"] * 15 / width, "right": 1 - (1 - MARGINS["right"]) * 15 / width}
+    gs = fig.add_gridspec(4, cols, **room, top=0.92, hspace=0.4)
+    axes = np.empty((4, cols), dtype=object)
+    for i in range(cols):
+        axes[0, i] = fig.add_subplot(gs[0, i])
+        axes[1, i] = fig.add_subplot(gs[1, i])
         for r in (2, 3):  # the zoom rows share their time window
-            axes[r, c] = fig.add_subplot(gs[r, c], sharex=axes[1, c])
+            axes[r, i] = fig.add_subplot(gs[r, i], sharex=axes[1, i])
     names = ("velocity", "acceleration", "jerk")
     rate = run.sim_config.publish_rate if run.sim_config else math.nan
-    for c, axis in enumerate(AXES):
+    beyond = False
+    for i, c in enumerate(shown):
+        axis = AXES[c]
         scale, unit = SHOW[axis]
         tc, vc, _, _ = d.traces[axis].whole_run()
         t, v, a, j = d.traces[axis].first_move()
-        ax = axes[0, c]
+        ax = axes[0, i]
         if len(st):
             _line(ax, st.t, st.vel[:, c] * scale, color=ACT, lw=0.6, label="simulated axis")
         if vc.size:
             _dots(ax, tc, vc * scale, color=CMD, ms=1.0, label="command")
         ax.set_title(f"{axis}: whole run", fontsize=10)
-        _mark_events(ax, run, label=c == 0)
+        _mark_events(ax, run, label=i == 0)
         ax.set_ylabel(f"{axis} velocity ({unit}/s)")
         ax.set_xlabel("time (s)")
         window = _first_ramp(d, axis, t, v) if v.size else None
         for r, (cmd, act) in enumerate(((v, st.vel[:, c]), (a, acc[:, c]), (j, jerk[:, c]))):
-            ax = axes[r + 1, c]
+            ax = axes[r + 1, i]
             if r < 2:
                 ax.tick_params(labelbottom=False)
             if window is None:
-                ax.text(0.5, 0.5, f"the {axis} axis does not move", ha="center", transform=ax.transAxes)
+                ax.text(
+                    0.5, 0.5, f"no command kinematics of the {axis} axis", ha="center", transform=ax.transAxes
+                )
                 continue
             lo, hi = window
             ms = (st.t >= lo) & (st.t <= hi)
             mc = (t >= lo) & (t <= hi)
-            ax.plot(
-                st.t[ms],
-                act[ms] * scale,
-                ".-",
-                color=ACT,
-                lw=0.7,
-                ms=2.5,
-                label=f"simulated axis, sampled at {rate:g} Hz",
-            )
+            label = f"simulated axis, sampled at {rate:g} Hz"
+            if r < 2:
+                ax.plot(st.t[ms], act[ms] * scale, ".-", color=ACT, lw=0.7, ms=2.5, label=label)
             _line(ax, t[mc], cmd[mc] * scale, "-", color=CMD, lw=1.4, label="command (from the step times)")
             ax.set_xlim(lo, hi)
-            if r == 2 and np.any(mc):
-                lim = 2.5 * max(float(np.max(np.abs(cmd[mc]))), 1e-12) * scale
+            if r == 2:
+                lim = 2.5 * max(float(np.max(np.abs(cmd[mc]))) if np.any(mc) else 0.0, 1e-12) * scale
                 ax.set_ylim(-lim, lim)
+                ts, ys = st.t[ms], act[ms] * scale
+                inside = np.abs(ys) <= lim
+                ax.plot(ts[inside], ys[inside], ".", color=ACT, ms=2.5, label=label)
+                for sign, mark in ((1, "^"), (-1, "v")):
+                    out = sign * ys > lim
+                    if np.any(out):
+                        beyond = True
+                        edge = np.full(int(out.sum()), sign * 0.97 * lim)
+                        ax.plot(ts[out], edge, mark, color=ACT, ms=3, alpha=0.6)
             power = ("/s", "/s²", "/s³")[r]
             ax.set_ylabel(f"{axis} {names[r]} ({unit}{power})")
             if r == 0:
                 ax.set_title(f"{axis}: its first acceleration (zoom)", fontsize=10)
-        axes[3, c].set_xlabel("time (s)")
+        axes[3, i].set_xlabel("time (s)")
+    if beyond:  # named in the zoom's legend: a legend in a jerk panel would stretch its scale
+        axes[1, 0].plot([], [], "^", color=ACT, ms=3, alpha=0.6, label="simulated jerk beyond the scale")
     place_legend(axes[0, 0], renderer, markerscale=6)
     place_legend(axes[1, 0], renderer)
     fig.suptitle(
-        _title(run) + "\ncommand: the ideal interpolated motion from each segment's step times (not "
-        "estimated over the first and last few steps of a move, where the speed is near 0)\n"
-        "axes: the recorded joint velocity and its differences; the rotor rings at every step, so its "
-        "acceleration and jerk show the step ripple as far as it is sampled (jerk axis clipped)",
+        _title(run) + "\ncommand: from each segment's step times (not near rest); "
+        "axes: the recorded joint velocity and its differences",
         fontsize=10,
     )
-    return _save(fig, out / "motion.png")
+    return fig
 
 
 # -- operations.png -------------------------------------------------------------------------
 
 
 def _operations(run: Run, d: Digest, out: Path) -> Path:
-    """operations.png: the velocity of the moving axes around the operator's
-    commands (from half a second before the first to two after the last)."""
+    return _save(operations_figure(run, d), out / "operations.png")
+
+
+def operations_figure(run: Run, d: Digest) -> Figure:
+    """operations.png's figure: the velocity of the moving axes around the
+    operator's commands (from half a second before the first to two after the
+    last)."""
     st = run.states
     times = [e["t_ns"] / 1e9 for e in run.events] + [e.get("t_rest_ns", e["t_ns"]) / 1e9 for e in run.events]
     end = float(st.t[-1]) if len(st) else max(times)
-    lo, hi = max(min(times) - 0.5, 0.0), min(max(times) + 2.0, end)
+    lo, last = max(min(times) - 0.5, 0.0), max(times)
+    # two seconds after the last mark, or the run's end; never so close that a
+    # mark (an abort's rest, a sample period before the end) sits on the frame
+    hi = max(min(last + 2.0, end), last + 0.08 * (last - lo) + 0.1)
     moving = [c for c, axis in enumerate(AXES) if len(st) and np.ptp(st.pos[:, c]) > 0]
     rows = max(len(moving), 1)
     fig, _ = _figure((13, 1.0 + 3.0 * rows))
@@ -473,9 +530,9 @@ def _operations(run: Run, d: Digest, out: Path) -> Path:
         else:
             ax.set_xlabel("time since the run's start (s, simulated)")
     fig.suptitle(
-        _title(run) + "\noperator commands: where each takes effect, the rest it brakes to", fontsize=10
+        _title(run) + "\noperator commands: where each takes effect, the rest the axes brake to", fontsize=10
     )
-    return _save(fig, out / "operations.png")
+    return fig
 
 
 # -- tracking.png --------------------------------------------------------------------------
