@@ -15,13 +15,14 @@ its velocity, acceleration and jerk are the same convex combinations, so no
 limit of the plan is exceeded and the peaks usually drop (:attr:`peaks`).
 
 Step times are the first times at which ``s~`` reaches each step position.
-For the polynomial ramps (S-curve, trapezoid) ``s~`` is a cubic between the
+For a piecewise-polynomial ramp (its ``piecewise_polynomial``: the S-curve,
+the trapezoid, the jog) ``s~`` is a cubic between the
 breakpoints (the base's phase boundaries shifted by each impulse time): the
 pieces' coefficients are taken once, at each piece's middle, and every step
 is solved on its own piece by a safeguarded Newton iteration on the cubic
 (bracketed by the piece, started at ``t(x) + sum_m A_m tau_m``, ``t(x)`` the
 unshaped move's time of position ``x``: exact in a cruise), vectorised over
-all the steps, to 1e-10 s. The exponential ramp, not polynomial, is solved
+all the steps, to 1e-10 s. Any other ramp (the exponential) is solved
 on the bracket ``[t(x), t(x) + tau_last]`` (``s~ <= s`` and
 ``s~(t + tau_last) >= s(t)``) by the same iteration on the sum of the
 impulses' terms.
@@ -86,6 +87,9 @@ class ShapedProfile:
         self._mean_delay = float(np.dot(a, t))
         self._peaks: dict[str, float] | None = None
         self._cubic: tuple[F64, ...] | None = None
+        # a move of a piecewise-polynomial ramp is one cubic between the
+        # breakpoints: solved piece by piece (else on the sum of the impulses' terms)
+        self._polynomial = base.ramp.piecewise_polynomial
 
     def __repr__(self) -> str:
         return (
@@ -163,14 +167,14 @@ class ShapedProfile:
         length = hi - lo
         keep = length > 0
         lo, hi, length = lo[keep], hi[keep], length[keep]
-        dense = 16 if self.kind != "exponential" else 512
+        dense = 16 if self._polynomial else 512
         frac = np.linspace(0.0, 1.0, dense + 1)[1:-1]
         inner = (lo[:, None] + length[:, None] * frac[None, :]).reshape(-1)
         eps = np.maximum(length * 1e-9, 1e-15)
         pts = np.concatenate([b, lo + eps, hi - eps, inner])
         _, v, a, j = self._terms(pts)
         v_peak = float(np.max(np.abs(v))) if v.size else 0.0
-        if self.kind != "exponential" and lo.size:  # the vertex of v where the (linear) acceleration is 0
+        if self._polynomial and lo.size:  # the vertex of v where the (linear) acceleration is 0
             _, _, a0, _ = self._terms(lo + eps)
             _, _, a1, _ = self._terms(hi - eps)
             cross = (a0 * a1 < 0.0) & (a0 != a1)
@@ -199,7 +203,7 @@ class ShapedProfile:
         """The first times (s) at which the shaped position reaches each of
         ``positions`` (non-decreasing, within [0, distance])."""
         x = np.array(positions, dtype=np.float64, copy=True).reshape(-1)
-        if self.kind == "exponential" or self.times.size == 1:
+        if not self._polynomial or self.times.size == 1:
             out = self.base.times_at(x)  # checks the positions; the lower end of each bracket
             for c in range(0, x.size, _CHUNK):
                 sl = slice(c, min(c + _CHUNK, x.size))

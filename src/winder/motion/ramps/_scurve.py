@@ -1,6 +1,6 @@
-"""Peak-velocity solve of S-curve and trapezoid moves, in closed form (scalar ``math``).
+"""Peak-velocity solve of S-curve moves, in closed form (scalar ``math``).
 
-Internal to :mod:`winder.motion.profile`. All S-curve work is done in the units of
+Internal to :mod:`winder.motion.ramps.scurve`. All S-curve work is done in the units of
 the limits themselves: time ``A/J``, velocity ``A**2/J``, distance ``A**3/J**2``.
 There ``a_max = j_max = 1``, so a jerk of 1e9 with ``a_max`` 0.5 and a jerk of
 1e-9 give the same well-scaled polynomials: the published "too large a jerk
@@ -70,8 +70,9 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from math import sqrt
 
-__all__ = ["Infeasible", "ramp", "scurve", "trapezoid"]
+__all__ = ["SNAP", "Infeasible", "polish", "ramp", "scurve", "valley"]
 
 _EPS = 2.220446049250313e-16
 SNAP = 16 * _EPS
@@ -98,9 +99,11 @@ def ramp(dv: float) -> tuple[float, float]:
 
 def _hill(w: float, h: float, lo_v: float, gap: float) -> float:
     """Distance of the hill with peak ``h + w`` and no cruise (unit limits)."""
-    tj, ta = ramp(w)  # the ramp between h and the peak
+    # the ramp between h and the peak, then between l and the peak (:func:`ramp`, inlined)
+    tj, ta = (1.0, w - 1.0) if w >= 1.0 else (sqrt(w), 0.0)
     d = (2.0 * h + w) * (tj + 0.5 * ta)
-    tj, ta = ramp(gap + w)  # between l and the peak
+    x = gap + w
+    tj, ta = (1.0, x - 1.0) if x >= 1.0 else (sqrt(x), 0.0)
     return d + (lo_v + h + w) * (tj + 0.5 * ta)
 
 
@@ -154,7 +157,7 @@ def _depressed_quartic_roots(p: float, q: float, r: float) -> list[float]:
     return _quadratic_roots(-k, cp) + _quadratic_roots(k, cm)
 
 
-def _polish(fn: Callable[[float], tuple[float, float]], x: float, lo: float, hi: float) -> float:
+def polish(fn: Callable[[float], tuple[float, float]], x: float, lo: float, hi: float) -> float:
     """Bracketed Newton on an increasing ``fn`` (returns ``(value, slope)``) in [lo, hi]."""
     if not lo <= x <= hi:
         x = 0.5 * (lo + hi)
@@ -189,14 +192,22 @@ def scurve(
     answer, if any)."""
     g0 = 0.0 if v0_high else gap  # what the start lacks of h
     g1 = gap if v0_high else 0.0
-    d0 = _hill(0.0, h, lo_v, gap)
+    # d0 = _hill(0.0, h, lo_v, gap), the direct ramp's distance, written out (the hot path)
+    tj, ta = (1.0, gap - 1.0) if gap >= 1.0 else (sqrt(gap), 0.0)
+    d0 = 0.0 + (lo_v + h + 0.0) * (tj + 0.5 * ta)
     if d0 > D:
         if d0 * (1.0 - SNAP) > D:
             raise Infeasible(d0)
         D = d0  # the direct ramp, to rounding
-    dv = _hill(wv, h, lo_v, gap)
+    # dv = _hill(wv, h, lo_v, gap), written out: its ramps are the cruise's
+    tjh, tah = (1.0, wv - 1.0) if wv >= 1.0 else (sqrt(wv), 0.0)  # between h and v_max
+    x = gap + wv
+    tjl, tal = (1.0, x - 1.0) if x >= 1.0 else (sqrt(x), 0.0)  # between l and v_max
+    dv = (2.0 * h + wv) * (tjh + 0.5 * tah) + (lo_v + h + wv) * (tjl + 0.5 * tal)
     if dv <= D:  # cruise at v_max
-        return wv, *ramp(g0 + wv), (D - dv) / (h + wv), *ramp(g1 + wv)
+        if v0_high:
+            return wv, tjh, tah, (D - dv) / (h + wv), tjl, tal
+        return wv, tjl, tal, (D - dv) / (h + wv), tjh, tah
     w1 = 1.0 - gap if gap < 1.0 else 0.0  # long ramp gets constant acceleration
     if wv > 1.0 and _hill(1.0, h, lo_v, gap) <= D:
         # both ramps trapezoidal: w^2 + (2h + 1) w + k0 = 0
@@ -218,7 +229,7 @@ def scurve(
         # y = s + 1/2: y^4 + (2h - 1/2) y^2 + 2h y + (1/16 - 3h/2 + 2 k0)
         roots = _depressed_quartic_roots(2.0 * h - 0.5, 2.0 * h, 0.0625 - 1.5 * h + 2.0 * k0)
         s = _pick([y - 0.5 for y in roots], s_lo, s_hi)
-        s = _polish(fm, s, s_lo, s_hi)
+        s = polish(fm, s, s_lo, s_hi)
         w = s * s
         if v0_high:  # the short (triangular) ramp is the one up from v0 == h
             return w, s, 0.0, 0.0, *ramp(gap + w)
@@ -242,14 +253,17 @@ def scurve(
                 sg = math.cbrt(4.0 * D)
         else:
             sg = _pick(_depressed_quartic_roots(p4, q4, r4), sg_lo, sg_hi)
-        sg = _polish(fn, sg, sg_lo, sg_hi)
+        sg = polish(fn, sg, sg_lo, sg_hi)
         sh = max(0.5 * (sg - gap / sg), 0.0)
         sl = sg - sh
         w = sh * sh
         if v0_high:
             return w, sh, 0.0, 0.0, sl, 0.0
         return w, sl, 0.0, 0.0, sh, 0.0
-    return w, *ramp(g0 + w), 0.0, *ramp(g1 + w)
+    x0, x1 = g0 + w, g1 + w
+    tj0, ta0 = (1.0, x0 - 1.0) if x0 >= 1.0 else (sqrt(x0), 0.0)
+    tj1, ta1 = (1.0, x1 - 1.0) if x1 >= 1.0 else (sqrt(x1), 0.0)
+    return w, tj0, ta0, 0.0, tj1, ta1
 
 
 def _pick(roots: list[float], lo: float, hi: float) -> float:
@@ -260,26 +274,6 @@ def _pick(roots: list[float], lo: float, hi: float) -> float:
         if gap < best_gap:
             best, best_gap = x, gap
     return best
-
-
-def trapezoid(D: float, v0: float, v1: float, V: float, A: float) -> tuple[float, float, float, float]:
-    """Trapezoid (infinite jerk). Returns ``(vp, t_up, tc, t_down)``; raises
-    :class:`Infeasible` when ``D < |v1^2 - v0^2| / (2A)``."""
-    h = v0 if v0 >= v1 else v1
-    lo_v = v1 if v0 >= v1 else v0
-    d0 = (h - lo_v) * (h + lo_v) / (2.0 * A)
-    if d0 > D:
-        if d0 * (1.0 - SNAP) > D:
-            raise Infeasible(d0)
-        D = d0
-    dv = ((V - v0) * (V + v0) + (V - v1) * (V + v1)) / (2.0 * A)
-    if dv <= D:
-        return V, (V - v0) / A, (D - dv) / V, (V - v1) / A
-    # vp^2 = A D + (v0^2 + v1^2)/2, written as the increment over h
-    vp = math.sqrt(A * D + 0.5 * (v0 * v0 + v1 * v1))
-    w = (A * D - 0.5 * (h - lo_v) * (h + lo_v)) / (vp + h)
-    vp = min(h + w, V)
-    return vp, ((h - v0) + w) / A, 0.0, ((h - v1) + w) / A
 
 
 def _valley(u: float, h: float, lo_v: float, gap: float) -> float:
@@ -325,7 +319,7 @@ def valley(
         def fu(x: float) -> tuple[float, float]:
             return (x - b) * x + c, 2.0 * x - b
 
-        u = _polish(fu, u, u_lo, u_hi)
+        u = polish(fu, u, u_lo, u_hi)
         su = ramp(u)
         sh = ramp(gap + u)
     elif um + gap >= 1.0:  # l side triangular, h side trapezoidal: quartic in sqrt(u)
@@ -341,7 +335,7 @@ def valley(
             )
 
         s = _pick_rising(fs, [y - 0.5 for y in roots], s_lo, s_hi)
-        s = _polish(fs, s, s_lo, s_hi)
+        s = polish(fs, s, s_lo, s_hi)
         u = s * s
         su = (s, 0.0)
         sh = ramp(gap + u)
@@ -354,7 +348,7 @@ def valley(
             return ((x * x + p4) * x + q4) * x + r4, (4.0 * x * x + 2.0 * p4) * x + q4
 
         sg = _pick_rising(fsg, _depressed_quartic_roots(p4, q4, r4), sg_lo, sg_hi)
-        sg = _polish(fsg, sg, sg_lo, sg_hi)
+        sg = polish(fsg, sg, sg_lo, sg_hi)
         sl = max(0.5 * (sg - gap / sg), 0.0)
         u = sl * sl
         su = (sl, 0.0)
