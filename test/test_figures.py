@@ -264,3 +264,16 @@ def test_plots_are_written(
     (p,) = plot_identification(run, ident.identify(run), tmp_path)
     assert p == tmp_path / "identify.png"
     _looked_at(p)
+
+
+def test_a_figure_that_fails_is_named_and_the_others_are_still_drawn() -> None:
+    """A bug in one figure (here: drawn with no run set up) ends in
+    FigureError naming each figure and its error; winder analyze prints it in
+    one line and exits 1 instead of a traceback."""
+    from winder.analysis.figures import analysis as figures
+
+    assert figures._JOB is None
+    with pytest.raises(figures.FigureError) as err:
+        figures._draw_all(["motion", "wound"])
+    assert err.value.drawn == [] and len(err.value.failed) == 2
+    assert err.value.failed[0].startswith("motion.png: AssertionError")

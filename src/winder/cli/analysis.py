@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from winder.cli.exits import EXIT_BAD_INPUT, EXIT_OK
+from winder.cli.exits import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK
 
 __all__ = ["register"]
 
@@ -54,13 +54,21 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         results = [analyze(r, digested=d) for r, d in zip(runs, digests, strict=True)]
         print(to_json(results) if args.json else format_table(results))
         if not args.no_plots:
-            from winder.analysis.figures.analysis import plot_analysis
+            from winder.analysis.figures.analysis import FigureError, plot_analysis
 
             written: list[str] = []
+            failed: list[str] = []
             for run, res, d in zip(runs, results, digests, strict=True):
                 out = _plots_for(run.path, args.plots_dir, len(runs) > 1)
-                written += [f"plot: {p}" for p in plot_analysis(run, res, out, digested=d)]
+                try:
+                    paths = plot_analysis(run, res, out, digested=d)
+                except FigureError as exc:
+                    paths, failed = exc.drawn, failed + [f"{run.path.name}: {f}" for f in exc.failed]
+                written += [f"plot: {p}" for p in paths]
             _say(written, args.json)
+            if failed:  # a bug in winder: said in one line, the rest of the output stands
+                print(f"winder analyze: a figure could not be drawn: {'; '.join(failed)}", file=sys.stderr)
+                return EXIT_FAILED
     except OSError as exc:
         raise ValueError(_os_error(exc)) from None
     return EXIT_OK

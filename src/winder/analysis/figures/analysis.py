@@ -989,6 +989,15 @@ def _draw(name: str) -> Path:
         return _operations(run, d, out)
 
 
+class FigureError(Exception):
+    """Some figures could not be drawn (a bug): those that were, and why the others were not."""
+
+    def __init__(self, drawn: list[Path], failed: list[str]) -> None:
+        super().__init__("; ".join(failed))
+        self.drawn = drawn
+        self.failed = failed
+
+
 def _draw_all(figures: list[str]) -> list[Path]:
     """Each figure drawn in a process of its own when the machine has cores to
     spare (forked: the run is shared, not copied), else one after another.
@@ -999,7 +1008,15 @@ def _draw_all(figures: list[str]) -> list[Path]:
 
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     if cores < 2 or "fork" not in mp.get_all_start_methods():
-        return [_draw(name) for name in figures]
+        drawn, failed = [], []
+        for name in figures:
+            try:
+                drawn.append(_draw(name))
+            except Exception as exc:  # as below: the others are still drawn
+                failed.append(f"{name}.png: {type(exc).__name__}: {exc}")
+        if failed:
+            raise FigureError(drawn, failed)
+        return drawn
     from concurrent.futures import ProcessPoolExecutor
 
     # a process per figure even on two cores: the figures take unequal times
@@ -1009,7 +1026,16 @@ def _draw_all(figures: list[str]) -> list[Path]:
     gc.freeze()
     try:
         with ProcessPoolExecutor(len(figures), mp_context=mp.get_context("fork")) as pool:
-            return list(pool.map(_draw, figures))
+            futures = {name: pool.submit(_draw, name) for name in figures}
+            drawn, failed = [], []
+            for name, future in futures.items():
+                try:
+                    drawn.append(future.result())
+                except Exception as exc:  # a bug in one figure: the others are still drawn, and it is named
+                    failed.append(f"{name}.png: {type(exc).__name__}: {exc}")
+            if failed:
+                raise FigureError(drawn, failed)
+            return drawn
     finally:
         gc.unfreeze()
 
