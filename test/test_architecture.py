@@ -22,7 +22,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 SRC = ROOT / "src" / "winder"
-LAYERS = ("spec", "shaping", "motion", "axis", "contract", "record", "analysis", "ros", "cli")
+LAYERS = ("procs", "spec", "shaping", "motion", "axis", "contract", "record", "analysis", "ros", "cli")
 NODE_PACKAGES = ("winder_interp", "winder_profile", "winder_sim")
 ROS_PACKAGES = (
     "rclpy",

@@ -11,7 +11,6 @@ start) and :func:`run_cell`, which strings them together.
 
 from __future__ import annotations
 
-import ctypes
 import os
 import random
 import re
@@ -42,6 +41,7 @@ from std_srvs.srv import Trigger
 from winder.contract.jobfile import ros_text
 from winder.contract.run import JobReport
 from winder.contract.topics import ROLE_KEY, ROLES, TASK_JOB, TOPIC_DIAGNOSTICS, has_role, in_namespace
+from winder.procs import Children
 from winder.ros.dds import PROFILE_KEYS, use_profile
 from winder.ros.diagnostics import ERROR
 from winder.ros.graph import consumers, fully_qualified, profile_nodes
@@ -143,35 +143,20 @@ def cell_environment(domain: int | None) -> Iterator[dict[str, str]]:
                 os.environ[k] = v
 
 
-def _die_with_parent() -> None:
-    """In the child, before exec: SIGINT when the parent dies, even by SIGKILL
-    (Linux ``PR_SET_PDEATHSIG``), so no node outlives ``winder run``; SIGINT
-    lets it close its bag."""
-    if sys.platform.startswith("linux"):
-        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGINT)  # 1 = PR_SET_PDEATHSIG
-
-
 class NodeProcesses:
-    """The node executables as child processes, output to ``log_dir/<name>.log``;
-    :meth:`stop` sends SIGINT (the nodes close their bags) and kills what is
-    still running after ``grace`` seconds. The children get SIGINT when this
-    process dies, however it dies."""
+    """The node executables as child processes, output to ``log_dir/<name>.log``
+    (:class:`winder.procs.Children`); :meth:`stop` sends SIGINT (the nodes
+    close their bags) and kills what is still running after ``grace`` seconds.
+    The children get SIGINT when this process dies, however it dies."""
 
     def __init__(self, env: dict[str, str], log_dir: Path) -> None:
         self.env = env
         self.log_dir = log_dir
+        self.children = Children(log_dir, env)
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
 
     def start(self, name: str, args: list[str]) -> subprocess.Popen[bytes]:
-        with open(self.log_dir / f"{name}.log", "wb") as log:  # the child holds its own copy
-            p = subprocess.Popen(
-                [find_executable(name), *args],
-                env=self.env,
-                stdout=log,
-                stderr=subprocess.STDOUT,
-                stdin=subprocess.DEVNULL,
-                preexec_fn=_die_with_parent,
-            )
+        p = self.children.start([find_executable(name), *args], name)
         self.procs[name] = p
         return p
 
@@ -197,15 +182,7 @@ class NodeProcesses:
         return None
 
     def stop(self, grace: float = 15.0) -> None:
-        for p in self.procs.values():
-            if p.poll() is None:
-                p.send_signal(signal.SIGINT)
-        for p in self.procs.values():
-            try:
-                p.wait(timeout=grace)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
+        self.children.stop_all(signal.SIGINT, grace)
 
 
 #: what each role is called in messages

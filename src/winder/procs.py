@@ -1,0 +1,140 @@
+"""Child processes that die with their parent: the one process harness of
+``winder run`` (its nodes), the tests and the benchmarks.
+
+Every child is started with Linux's parent-death signal
+(``prctl(PR_SET_PDEATHSIG)``, set in the child before it executes): when the
+process that started it dies, however it dies (SIGKILL included), the kernel
+sends the child ``death_signal``, SIGINT by default, which a winder node
+takes as Ctrl-C and so closes its bag. :meth:`Children.stop` sends SIGINT and
+kills what is still running after a grace period. Each child's output goes to
+its own log file.
+
+Plain ``subprocess`` and ``ctypes``, no ROS: it is the bottom layer.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import signal
+import subprocess
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+#: ``PR_SET_PDEATHSIG`` of <linux/prctl.h>
+_PR_SET_PDEATHSIG = 1
+
+
+def die_with_parent(sig: int = signal.SIGINT) -> Callable[[], None]:
+    """A ``preexec_fn`` for :class:`subprocess.Popen`: the child gets ``sig``
+    when the process that started it dies (on Linux; elsewhere nothing). If
+    the parent died before the child set this up, the child signals itself."""
+    parent = os.getpid()
+
+    def _preexec() -> None:
+        if sys.platform.startswith("linux"):
+            ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, sig)
+            if os.getppid() != parent:  # the parent is already gone: the kernel will not tell
+                os.kill(os.getpid(), sig)
+
+    return _preexec
+
+
+def run(
+    argv: Sequence[str], *, death_signal: int = signal.SIGINT, **kwargs: Any
+) -> subprocess.CompletedProcess[Any]:
+    """:func:`subprocess.run` for a child that dies with this process."""
+    return subprocess.run(argv, preexec_fn=die_with_parent(death_signal), **kwargs)
+
+
+def stop(p: subprocess.Popen[Any], sig: int = signal.SIGINT, grace: float = 20.0) -> tuple[int, bool]:
+    """Send ``sig`` to ``p`` (if it still runs), wait ``grace`` seconds, then
+    kill it: its exit status and whether it stopped by itself."""
+    if p.poll() is None:
+        p.send_signal(sig)
+    try:
+        return p.wait(timeout=grace), True
+    except subprocess.TimeoutExpired:
+        p.kill()
+        return p.wait(), False
+
+
+class Children:
+    """Child processes of one owner (a cell, a test, a benchmark), each logged
+    to ``log_dir/<name>.log`` (or where ``stdout`` says), each dying with this
+    process; :meth:`stop_all` stops them all (``sig``, then kill after
+    ``grace`` seconds)."""
+
+    def __init__(
+        self,
+        log_dir: Path | None = None,
+        env: dict[str, str] | None = None,
+        death_signal: int = signal.SIGINT,
+    ) -> None:
+        self.log_dir = log_dir
+        self.env = env
+        self.death_signal = death_signal
+        #: every child started, with its log file (None: its output went elsewhere)
+        self.started: list[tuple[subprocess.Popen[Any], str, Path | None]] = []
+
+    def start(
+        self,
+        argv: Sequence[str],
+        name: str,
+        *,
+        env: dict[str, str] | None = None,
+        stdout: Any = None,
+        **kwargs: Any,
+    ) -> subprocess.Popen[Any]:
+        """Start ``argv`` as child ``name``. Its output goes to ``stdout`` when
+        given (a file, ``subprocess.PIPE``, ``DEVNULL``), else to
+        ``log_dir/<name>.log`` (stderr with it), else nowhere."""
+        log: Path | None = None
+        kwargs.setdefault("stdin", subprocess.DEVNULL)
+        if stdout is None and self.log_dir is not None:
+            log = self.log_dir / f"{name}.log"
+            kwargs.setdefault("stderr", subprocess.STDOUT)
+            with log.open("wb") as out:  # the child holds its own copy
+                p = self._popen(argv, env, out, kwargs)
+        else:
+            p = self._popen(argv, env, subprocess.DEVNULL if stdout is None else stdout, kwargs)
+        self.started.append((p, name, log))
+        return p
+
+    def _popen(
+        self, argv: Sequence[str], env: dict[str, str] | None, stdout: Any, kwargs: Any
+    ) -> subprocess.Popen[Any]:
+        return subprocess.Popen(
+            list(argv),
+            env=env if env is not None else self.env,
+            stdout=stdout,
+            preexec_fn=die_with_parent(self.death_signal),
+            **kwargs,
+        )
+
+    def log(self, p: subprocess.Popen[Any]) -> str:
+        """What child ``p`` wrote to its log file."""
+        for q, _, path in self.started:
+            if q is p and path is not None:
+                return path.read_text(errors="replace")
+        raise KeyError(p)
+
+    def running(self) -> list[subprocess.Popen[Any]]:
+        return [p for p, _, _ in self.started if p.poll() is None]
+
+    def stop_all(self, sig: int = signal.SIGINT, grace: float = 20.0) -> list[str]:
+        """Signal every running child at once, wait up to ``grace`` seconds
+        for them all, kill the rest: the names of those that had to be killed."""
+        for p in self.running():
+            p.send_signal(sig)
+        killed = []
+        for p, name, _ in self.started:
+            try:
+                p.wait(timeout=grace)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+                killed.append(name)
+        return killed

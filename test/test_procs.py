@@ -1,0 +1,104 @@
+"""winder.procs, the one process harness (winder run's nodes, the tests'
+processes, the session's bags, the benchmarks): children die with their
+parent however it dies, and a stop is SIGINT, then kill after the grace.
+
+The oracle is the kernel: /proc says whether a process still runs."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+from winder.procs import Children, stop
+
+#: a parent that starts two children through the harness, prints their pids and waits
+PARENT = textwrap.dedent(
+    """
+    import sys, time
+    from pathlib import Path
+    from winder.procs import Children
+
+    children = Children(Path(sys.argv[1]))
+    sleeper = [sys.executable, "-c", "import time; time.sleep(120)"]
+    # one that ignores SIGINT: the parent-death signal must still end it
+    ignore = "import signal, time; signal.signal(signal.SIGINT, signal.SIG_IGN); time.sleep(120)"
+    stubborn = [sys.executable, "-c", ignore]
+    a = children.start(sleeper, "sleeper")
+    b = Children(Path(sys.argv[1]), death_signal=15).start(stubborn, "stubborn")
+    print(a.pid, b.pid, flush=True)
+    time.sleep(120)
+    """
+)
+
+
+def alive(pid: int) -> bool:
+    """Whether ``pid`` runs (a zombie waiting for its reaper does not)."""
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (OSError, IndexError):
+        return False
+    return state not in ("Z", "X")
+
+
+def wait_gone(pids: list[int], timeout: float) -> list[int]:
+    end = time.monotonic() + timeout
+    while (left := [p for p in pids if alive(p)]) and time.monotonic() < end:
+        time.sleep(0.05)
+    return left
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
+def test_a_killed_parent_leaves_no_child_running(tmp_path: Path, sig: int) -> None:
+    parent = subprocess.Popen(
+        [sys.executable, "-c", PARENT, str(tmp_path)], stdout=subprocess.PIPE, text=True
+    )
+    try:
+        assert parent.stdout is not None
+        pids = [int(v) for v in parent.stdout.readline().split()]
+        assert len(pids) == 2 and all(alive(p) for p in pids)
+        parent.send_signal(sig)
+        parent.wait(timeout=10)
+        assert wait_gone(pids, 10) == [], "children outlived their parent"
+    finally:
+        parent.kill()
+        parent.wait()
+        for p in pids if "pids" in locals() else []:
+            if alive(p):
+                os.kill(p, signal.SIGKILL)
+
+
+def test_stop_is_sigint_then_kill_after_the_grace(tmp_path: Path) -> None:
+    children = Children(tmp_path)
+    polite = children.start([sys.executable, "-c", "import time; time.sleep(60)"], "polite")
+    stubborn = children.start(
+        [
+            sys.executable,
+            "-c",
+            "import signal, sys, time; signal.signal(signal.SIGINT, signal.SIG_IGN);"
+            " print('ignoring SIGINT', flush=True); time.sleep(60)",
+        ],
+        "stubborn",
+    )
+    end = time.monotonic() + 10
+    while "ignoring" not in children.log(stubborn) and time.monotonic() < end:
+        time.sleep(0.02)
+    t0 = time.monotonic()
+    assert children.stop_all(signal.SIGINT, grace=1.0) == ["stubborn"]
+    assert time.monotonic() - t0 < 5
+    assert polite.returncode != 0 and stubborn.returncode == -signal.SIGKILL
+    assert "ignoring SIGINT" in (tmp_path / "stubborn.log").read_text()
+    assert children.running() == []
+
+
+def test_one_stop_says_whether_the_child_stopped_by_itself(tmp_path: Path) -> None:
+    p = Children(tmp_path).start([sys.executable, "-c", "import time; time.sleep(60)"], "sleeper")
+    code, by_itself = stop(p, signal.SIGTERM, grace=10.0)
+    assert (code, by_itself) == (-signal.SIGTERM, True)
