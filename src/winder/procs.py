@@ -19,7 +19,7 @@ import os
 import signal
 import subprocess
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -47,6 +47,31 @@ def run(
 ) -> subprocess.CompletedProcess[Any]:
     """:func:`subprocess.run` for a child that dies with this process."""
     return subprocess.run(argv, preexec_fn=die_with_parent(death_signal), **kwargs)
+
+
+def popen(argv: Sequence[str], *, death_signal: int = signal.SIGINT, **kwargs: Any) -> subprocess.Popen[Any]:
+    """:class:`subprocess.Popen` for a child that dies with this process."""
+    return subprocess.Popen(list(argv), preexec_fn=die_with_parent(death_signal), **kwargs)
+
+
+def stop_all(
+    procs: Iterable[subprocess.Popen[Any]], sig: int = signal.SIGINT, grace: float = 20.0
+) -> list[int]:
+    """Signal every running process of ``procs`` at once, wait up to ``grace``
+    seconds for each, kill the rest: the pids of those that had to be killed."""
+    procs = list(procs)
+    for p in procs:
+        if p.poll() is None:
+            p.send_signal(sig)
+    killed = []
+    for p in procs:
+        try:
+            p.wait(timeout=grace)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
+            killed.append(p.pid)
+    return killed
 
 
 def stop(p: subprocess.Popen[Any], sig: int = signal.SIGINT, grace: float = 20.0) -> tuple[int, bool]:
@@ -106,13 +131,8 @@ class Children:
     def _popen(
         self, argv: Sequence[str], env: dict[str, str] | None, stdout: Any, kwargs: Any
     ) -> subprocess.Popen[Any]:
-        return subprocess.Popen(
-            list(argv),
-            env=env if env is not None else self.env,
-            stdout=stdout,
-            preexec_fn=die_with_parent(self.death_signal),
-            **kwargs,
-        )
+        env = env if env is not None else self.env
+        return popen(argv, death_signal=self.death_signal, env=env, stdout=stdout, **kwargs)
 
     def log(self, p: subprocess.Popen[Any]) -> str:
         """What child ``p`` wrote to its log file."""
@@ -126,15 +146,6 @@ class Children:
 
     def stop_all(self, sig: int = signal.SIGINT, grace: float = 20.0) -> list[str]:
         """Signal every running child at once, wait up to ``grace`` seconds
-        for them all, kill the rest: the names of those that had to be killed."""
-        for p in self.running():
-            p.send_signal(sig)
-        killed = []
-        for p, name, _ in self.started:
-            try:
-                p.wait(timeout=grace)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
-                killed.append(name)
-        return killed
+        for each, kill the rest: the names of those that had to be killed."""
+        killed = stop_all([p for p, _, _ in self.started], sig, grace)
+        return [name for p, name, _ in self.started if p.pid in killed]
