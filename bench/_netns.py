@@ -32,6 +32,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+from winder.procs import popen
+
 __all__ = ["Hosts", "available"]
 
 _subnets = itertools.count(1)
@@ -149,7 +151,7 @@ class Hosts:
 
     def _start_relay(self) -> str:
         """The delay line between the two TUN devices; "" or why not."""
-        self.relay = subprocess.Popen(
+        self.relay = popen(
             [sys.executable, str(Path(__file__).with_name("_delayline.py")), self.devs["a"], self.devs["b"],
              str(self.delay_ms)],
             stdin=subprocess.PIPE,

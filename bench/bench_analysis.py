@@ -28,6 +28,7 @@ from _common import best_of, table
 from bench_e2e import CHUNK_STEPS, FAST, PUBLISH_RATE, SIZES
 
 from winder.motion.job import Job
+from winder.procs import popen
 
 COMMANDS = {
     "analyze --no-plots": ["analyze", "--no-plots"],
@@ -58,7 +59,7 @@ def measure(args: list[str], bag: Path, plots: Path) -> tuple[float, float]:
     if "--no-plots" not in args:
         cmd += ["--plots-dir", str(plots)]
     t0 = time.perf_counter()
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     _, status, usage = os.wait4(proc.pid, 0)
     dt = time.perf_counter() - t0
     proc.returncode = os.waitstatus_to_exitcode(status)

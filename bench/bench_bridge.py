@@ -33,6 +33,8 @@ from typing import Any
 
 from _common import ros_env, table
 
+from winder.procs import popen, stop_all
+
 BIN = Path(sys.executable).parent
 ROOT = Path(__file__).resolve().parents[1]
 STANDIN = ROOT / "test" / "ros2_control_standin.py"
@@ -104,7 +106,7 @@ def final_status(bags: Path) -> dict[str, str]:
 
 def start(cmds: dict[str, list[str]], env: dict[str, str], log: Any) -> dict[str, subprocess.Popen[bytes]]:
     return {
-        name: subprocess.Popen(
+        name: popen(
             cmd,
             env=env,
             stdout=log if name.startswith("bridge") else subprocess.DEVNULL,
@@ -115,13 +117,7 @@ def start(cmds: dict[str, list[str]], env: dict[str, str], log: Any) -> dict[str
 
 
 def stop(procs: list[subprocess.Popen[bytes]]) -> None:
-    for p in procs:
-        p.send_signal(signal.SIGINT)
-    for p in procs:
-        try:
-            p.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            p.kill()
+    stop_all(procs, signal.SIGINT, 10.0)
 
 
 def main() -> None:
@@ -187,7 +183,7 @@ def main() -> None:
         time.sleep(4.0)  # start-up and discovery
         idle = window(procs, span)
         job = ["-p", "turns_per_layer:=60", "-p", f"layers:={layers}", "-p", "poles:=1"]
-        interp = subprocess.Popen(
+        interp = popen(
             [str(BIN / "interp_node"), "--ros-args", *job],
             env=env,
             stdout=subprocess.DEVNULL,

@@ -60,6 +60,7 @@ from _common import ros_env, table
 from _dds import ChildWatch
 
 from winder.motion.job import Job
+from winder.procs import popen
 
 HERE = Path(__file__).resolve().parent
 NODES = ("interp_node", "profile_node", "sim_node")
@@ -185,13 +186,13 @@ def run_raw(rows: int, domain: int, timeout: float, form: str) -> dict[str, Any]
     env = ros_env(domain)  # the cell's DDS settings: winder's profile
     cmd = [sys.executable, str(HERE / "_dds.py")]
     t0 = time.monotonic()
-    sub = subprocess.Popen(
+    sub = popen(
         [*cmd, "sub", "--rows", str(rows), "--timeout", str(timeout)],
         env=env,
         stdout=subprocess.PIPE,
         text=True,
     )
-    pub = subprocess.Popen(
+    pub = popen(
         [*cmd, "pub", "--rows", str(rows), "--timeout", str(timeout), "--form", form],
         env=env,
         stdout=subprocess.PIPE,
@@ -220,9 +221,9 @@ def run_chain(rows: int, domain: int, timeout: float) -> dict[str, Any]:
     cmd = [sys.executable, str(HERE / "_dds.py")]
     common = ["--rows", str(rows), "--timeout", str(timeout)]
     procs = [
-        subprocess.Popen([*cmd, "sub", *common, "--timed-only"], env=env, stdout=subprocess.PIPE, text=True),
-        subprocess.Popen([*cmd, "relay", *common], env=env, stdout=subprocess.PIPE, text=True),
-        subprocess.Popen(
+        popen([*cmd, "sub", *common, "--timed-only"], env=env, stdout=subprocess.PIPE, text=True),
+        popen([*cmd, "relay", *common], env=env, stdout=subprocess.PIPE, text=True),
+        popen(
             [*cmd, "pub", *common, "--form", "bytes", "--steps-only"],
             env=env,
             stdout=subprocess.PIPE,

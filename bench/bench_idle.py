@@ -23,6 +23,8 @@ from pathlib import Path
 
 from _common import table
 
+from winder.procs import popen, stop_all
+
 BIN = Path(sys.executable).parent
 BARE = "import rclpy; rclpy.init(); rclpy.spin(rclpy.create_node('bare_node'))"
 
@@ -45,7 +47,7 @@ def main() -> None:
         "bare rclpy node (anchor)": [sys.executable, "-c", BARE],
     }
     procs = {
-        name: subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        name: popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         for name, cmd in cmds.items()
     }
     try:
@@ -56,13 +58,7 @@ def main() -> None:
         dt = time.monotonic() - t0
         after = {name: cpu_seconds(p.pid) for name, p in procs.items()}
     finally:
-        for p in procs.values():
-            p.send_signal(signal.SIGINT)
-        for p in procs.values():
-            try:
-                p.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                p.kill()
+        stop_all(procs.values(), signal.SIGINT, 10.0)
     anchor = (after["bare rclpy node (anchor)"] - before["bare rclpy node (anchor)"]) / dt
     rows = []
     for name in cmds:

@@ -28,6 +28,8 @@ from pathlib import Path
 import numpy as np
 from _common import table
 
+from winder.procs import popen
+
 BIN = Path(sys.executable).parent
 LOOKAHEAD = 0.05
 V_MAX = 2048.0
@@ -50,7 +52,7 @@ def main() -> None:
         [str(BIN / "profile_node"), "--ros-args", "-p", f"lookahead:={LOOKAHEAD}"],
         [str(BIN / "interp_node"), "--ros-args", "-p", "turns_per_layer:=2000", "-p", "poles:=1"],
     ]
-    procs = [subprocess.Popen(c, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for c in cmds]
+    procs = [popen(c, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for c in cmds]
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     rclpy.init(domain_id=domain)
     node = rclpy.create_node("bench_operations")

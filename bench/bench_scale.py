@@ -44,6 +44,8 @@ from typing import Any
 from _common import ros_env, table
 from _netns import Hosts
 
+from winder.procs import popen
+
 HERE = Path(__file__).resolve().parent
 BIN = Path(sys.executable).parent
 QUICK = "--quick" in sys.argv
@@ -109,7 +111,7 @@ def bare_pair(domain: int) -> float:
     """Spawn to the first message between two bare rclpy processes (s)."""
     env = ros_env(domain)
     t0 = time.time_ns()
-    pub = subprocess.Popen([sys.executable, "-c", PAIR, "pub"], env=env, stdout=subprocess.DEVNULL)
+    pub = popen([sys.executable, "-c", PAIR, "pub"], env=env, stdout=subprocess.DEVNULL)
     sub = subprocess.run([sys.executable, "-c", PAIR, "sub"], env=env, capture_output=True, text=True)
     pub.kill()
     pub.wait()
@@ -169,7 +171,7 @@ def many_cells(tmp: Path) -> None:
         domain = next(DOMAINS)
         t0 = time.time_ns()
         procs = [
-            subprocess.Popen(
+            popen(
                 [str(BIN / "winder"), "run", "--namespace", f"/c{k}", *job, "--bag-dir", str(tmp / f"n{n}")],
                 env=ros_env(domain),
                 stdout=subprocess.PIPE,
@@ -290,7 +292,7 @@ def raw_across(hosts: Hosts, rows: int, extra: dict[str, str]) -> float:
     """Raw DDS rows/s from host a to host b (first publish to last chunk in)."""
     domain = next(DOMAINS)
     dds = [sys.executable, str(HERE / "_dds.py")]
-    sub = subprocess.Popen(
+    sub = popen(
         hosts.command("b", [*dds, "sub", "--rows", str(rows), "--timeout", "120", "--timed-only"]),
         env={**hosts.env("b", ros_env(domain)), **extra},
         stdout=subprocess.PIPE,
@@ -316,7 +318,7 @@ def cell_across(hosts: Hosts, job: list[str], tmp: Path, extra: dict[str, str]) 
     """The sim node on host b, the rest of the cell on host a; steady steps/s."""
     domain = next(DOMAINS)
     bags = tmp / f"across{domain}"
-    sim = subprocess.Popen(
+    sim = popen(
         hosts.command("b", [str(BIN / "sim_node"), "--ros-args", "-p", f"bag_dir:={bags}"]),
         env={**hosts.env("b", ros_env(domain)), **extra},
         stdout=subprocess.DEVNULL,

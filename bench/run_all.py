@@ -26,6 +26,8 @@ import time
 from importlib import metadata
 from pathlib import Path
 
+from winder.procs import popen
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 ORDER = ["interp", "profile", "motor", "e2e", "bag", "bridge"]
@@ -96,7 +98,7 @@ def run_one(path: Path, quick: bool) -> tuple[int, float, str]:
     t0 = time.monotonic()
     out: list[str] = []
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    proc = subprocess.Popen(
+    proc = popen(
         cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, bufsize=1
     )
     assert proc.stdout is not None
