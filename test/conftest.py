@@ -6,96 +6,45 @@ never hear each other or another graph on the machine.
 
 from __future__ import annotations
 
-import fcntl
-import itertools
 import os
 import signal
 import subprocess
-import sys
-import tempfile
-import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
 from rosbags.highlevel import AnyReader
+from support.bags import SessionBags
+from support.domains import lock_domain, long_lived_domain, next_domain, release_domain
+from support.paths import BIN
+from support.ros_probe import spin_until
 
 from winder.contract.topics import has_role
+from winder.procs import Children, stop
 from winder.ros.dds import use_profile
+
+__all__ = [  # what test modules import from here besides the fixtures
+    "BIN",
+    "Procs",
+    "bag_closed",
+    "closed_bags",
+    "final_report",
+    "is_consumer",
+    "lock_domain",
+    "long_lived_domain",
+    "next_domain",
+    "release_domain",
+    "rosbags_read",
+    "spin_until",
+]
 
 use_profile()  # this process' probes discover the nodes as fast as the nodes each other
 
-BIN = Path(sys.executable).parent
-
-
-def _pool() -> range:
-    """The ROS domains this test session may use: ``WINDER_TEST_DOMAINS=A-B``
-    (inclusive; 20-219 unless set). Domains 1-19 belong to the conformance
-    suite, which locks them the same way."""
-    text = os.environ.get("WINDER_TEST_DOMAINS", "20-219")
-    try:
-        low, high = (int(v) for v in text.split("-"))
-    except ValueError:
-        raise pytest.UsageError(f"WINDER_TEST_DOMAINS={text!r}: expected A-B, e.g. 20-219") from None
-    if not 0 <= low <= high <= 232 or high - low < 9:
-        raise pytest.UsageError(f"WINDER_TEST_DOMAINS={text!r}: need 10 or more domains within 0-232")
-    return range(low, high + 1)
-
-
-_held: dict[int, Any] = {}
-_cursor = itertools.count(os.getpid() * 7)
-
-
-def lock_domain(domain: int, kind: str) -> Any:
-    """The open lock file of ``domain`` for tests of ``kind`` (locked: no other
-    process holds it until it is closed), or None if another process holds it."""
-    lock = (Path(tempfile.gettempdir()) / f"winder-{kind}-domain-{domain}.lock").open("w")
-    try:
-        fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except OSError:
-        lock.close()
-        return None
-    return lock
-
-
-def next_domain(timeout: float = 120.0) -> int:
-    """A ROS domain no other test process on this machine holds (a lock file
-    per domain in the temp directory), held until :func:`release_domain` or
-    the end of this process. Two pytest runs side by side never share one, so
-    their nodes never hear each other."""
-    pool = _pool()
-    end = time.monotonic() + timeout
-    while True:
-        for _ in range(len(pool)):
-            domain = pool[next(_cursor) % len(pool)]
-            if domain in _held:
-                continue
-            lock = lock_domain(domain, "test")
-            if lock is None:
-                continue
-            _held[domain] = lock
-            return domain
-        if time.monotonic() > end:
-            raise RuntimeError(f"every ROS domain of {pool} held by other test processes for {timeout} s")
-        time.sleep(0.5)
-
-
-def release_domain(domain: int) -> None:
-    """Hand a domain of :func:`next_domain` back (its processes are stopped)."""
-    lock = _held.pop(domain, None)
-    if lock is not None:
-        lock.close()
-
-
-def long_lived_domain() -> int:
-    """A domain for processes that outlive one test (the session's bag runs):
-    held until the end of the session."""
-    return next_domain()
-
-
 class Procs:
-    """Node processes of one test, stopped (SIGINT, then kill) at teardown."""
+    """Node processes of one test on the test's domain, each logged to
+    ``<tag>-<n>.log`` and dying with the test process (:class:`winder.procs.Children`),
+    stopped (SIGINT, then kill) at teardown."""
 
     def __init__(self, domain: int, log_dir: Path) -> None:
         self.domain = domain
@@ -106,7 +55,11 @@ class Procs:
             "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
             "PYTHONUNBUFFERED": "1",
         }
-        self.procs: list[tuple[subprocess.Popen[bytes], Path]] = []
+        self.children = Children(log_dir, self.env)
+
+    @property
+    def procs(self) -> list[tuple[subprocess.Popen[bytes], Path | None]]:
+        return [(p, log) for p, _, log in self.children.started]
 
     def start(self, executable: str, *ros_args: str) -> subprocess.Popen[bytes]:
         """One of the venv's node executables, with ``--ros-args`` when given."""
@@ -118,43 +71,19 @@ class Procs:
     def launch(self, argv: list[str], tag: str) -> subprocess.Popen[bytes]:
         """Any process of the test's cell (a stand-in, a third-party consumer):
         on the test's domain, logged as ``<tag>-<n>.log``, stopped at teardown."""
-        log = self.log_dir / f"{tag}-{len(self.procs)}.log"
-        p = subprocess.Popen(
-            argv,
-            env=self.env,
-            stdout=log.open("wb"),
-            stderr=subprocess.STDOUT,
-            stdin=subprocess.DEVNULL,
-        )
-        self.procs.append((p, log))
-        return p
+        return self.children.start(argv, f"{tag}-{len(self.children.started)}")
 
     def log(self, p: subprocess.Popen[bytes]) -> str:
-        for q, path in self.procs:
-            if q is p:
-                return path.read_text(errors="replace")
-        raise KeyError(p)
+        return self.children.log(p)
 
     def stop(self, p: subprocess.Popen[bytes], sig: int = signal.SIGINT, timeout: float = 20.0) -> int:
-        if p.poll() is None:
-            p.send_signal(sig)
-        try:
-            return p.wait(timeout=timeout)
-        except subprocess.TimeoutExpired:
-            p.kill()
-            p.wait()
-            raise AssertionError(f"{p.args[0]} did not stop within {timeout} s") from None
+        code, stopped = stop(p, sig, timeout)
+        if not stopped:
+            raise AssertionError(f"{p.args[0]} did not stop within {timeout} s")
+        return code
 
     def stop_all(self) -> None:
-        for p, _ in self.procs:
-            if p.poll() is None:
-                p.send_signal(signal.SIGINT)
-        for p, _ in self.procs:
-            try:
-                p.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
+        self.children.stop_all(signal.SIGINT, 20.0)
 
 
 @pytest.fixture
@@ -167,6 +96,18 @@ def procs(tmp_path: Path) -> Iterator[Procs]:
     finally:
         ps.stop_all()
         release_domain(ps.domain)
+
+
+@pytest.fixture(scope="session")
+def bag(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Callable[[str], Path]]:
+    """``bag(name)``: the bag directory of the session's run of configuration
+    ``name`` (support.bags.CONFIGS: each runs once per session, a few at a time,
+    started when first asked for)."""
+    bags = SessionBags(tmp_path_factory.mktemp("winder_bags"))
+    try:
+        yield bags.get
+    finally:
+        bags.close()
 
 
 @pytest.fixture
@@ -184,22 +125,6 @@ def ros(procs: Procs) -> Iterator[object]:
     finally:
         node.destroy_node()
         rclpy.try_shutdown(context=ctx)
-
-
-def spin_until(node: object, cond: object, timeout: float, what: str) -> None:
-    """Spin ``node`` until ``cond()`` is true, or fail naming ``what``."""
-    from rclpy.executors import SingleThreadedExecutor
-
-    ex = SingleThreadedExecutor(context=node.context)  # type: ignore[attr-defined]
-    ex.add_node(node)
-    t_end = time.monotonic() + timeout
-    try:
-        while not cond():  # type: ignore[operator]
-            if time.monotonic() > t_end:
-                raise AssertionError(f"timed out after {timeout} s waiting for {what}")
-            ex.spin_once(timeout_sec=0.05)
-    finally:
-        ex.remove_node(node)
 
 
 # -- independent reading of the bags the nodes wrote ---------------------------------

@@ -17,10 +17,10 @@ from typing import Any
 
 import numpy as np
 import pytest
-import test_reader
 from conftest import final_report, is_consumer, rosbags_read
 from mcap.reader import make_reader
-from test_reader import assert_one_line_error, joint_arrays, run_cli, step_rows
+from support.bags import joint_arrays, step_rows
+from support.cli import assert_one_line_error, run_cli
 
 from winder.analysis.metrics import analyze, step_kinematics
 from winder.record.reader import read_run
@@ -33,12 +33,6 @@ V_MAX, A_MAX, J_MAX, TAU = (
     65536.0,
     0.1,
 )  # the profile node's defaults (steps of the major axis)
-
-
-@pytest.fixture(scope="session")
-def bag(tmp_path_factory: pytest.TempPathFactory, request: pytest.FixtureRequest) -> Any:
-    """The bags shared with test_reader (one ``winder run`` per configuration per session)."""
-    return test_reader.bags(tmp_path_factory, request).get
 
 
 def eq7_by_hand(path: Path) -> tuple[float, float, list[float]]:

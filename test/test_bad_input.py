@@ -14,7 +14,7 @@ from typing import Any
 
 import pytest
 from conftest import Procs
-from test_nodes import set_params
+from support.ros_probe import set_params
 
 from winder.cli import commands as cli_main
 from winder.contract.params import INTERP_SPECS, PROFILE_SPECS, SIM_SPECS

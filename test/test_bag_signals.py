@@ -23,7 +23,7 @@ from pathlib import Path
 
 import pytest
 from conftest import BIN, next_domain, release_domain, rosbags_read
-from test_reader import run_cli
+from support.cli import run_cli
 
 from winder.record.reader import BagError, read_raw, read_run
 

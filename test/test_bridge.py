@@ -468,7 +468,7 @@ def test_bad_settings_are_refused_in_one_line(tmp_path: Path, procs: Procs, ros:
     """Bad values at start: each reported in one line naming the setting, the
     value and what is allowed (the node runs on, blocked); at run time:
     refused with such a reason, cross-field rules included."""
-    from test_nodes import set_params
+    from support.ros_probe import set_params
 
     bad = {
         "rate": "0.5",

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 import pytest
 from conftest import Procs, bag_closed, final_report, is_consumer, rosbags_read, spin_until
+from support.ros_probe import get_params, ros_spin, start_run
 
 from winder.analysis.metrics import analyze
 from winder.contract.stream import RUN_ID
@@ -143,10 +144,6 @@ def test_the_same_job_twice_gives_two_runs_on_one_clock(tmp_path: Path, procs: P
         assert {"running", "done"} <= states[node], states
 
 
-def ros_spin(node: Any, seconds: float) -> None:
-    """Spin the probe node for ``seconds``."""
-    t_end = time.monotonic() + seconds
-    spin_until(node, lambda: time.monotonic() >= t_end, seconds + 5, f"{seconds} s")
 
 
 def test_the_readme_controller_runs_a_cell(tmp_path: Path, procs: Procs) -> None:
@@ -259,51 +256,8 @@ def test_start_run_sets_up_and_starts_in_one_call(tmp_path: Path, procs: Procs, 
     assert run.profile_config["ramp_source"] == "job"
 
 
-def get_params(node: Any, target: str, names: list[str]) -> list[Any]:
-    """The values of ``target``'s parameters ``names``."""
-    from rcl_interfaces.srv import GetParameters
-    from rclpy.parameter import parameter_value_to_python
-
-    client = node.create_client(GetParameters, f"/{target}/get_parameters")
-    spin_until(node, client.service_is_ready, 30, f"{target}/get_parameters")
-    # a DDS service reply can be lost while the reply topic still matches
-    # (docs/RELIABILITY.md): ask again after 10 s, three times at most
-    for attempt in range(3):
-        future = client.call_async(GetParameters.Request(names=names))
-        try:
-            spin_until(node, future.done, 10, "get_parameters reply")
-            break
-        except AssertionError:
-            client.remove_pending_request(future)
-            if attempt == 2:
-                raise
-    return [parameter_value_to_python(v) for v in future.result().values]
 
 
-def start_run(node: Any, values: dict[str, Any]) -> Any:
-    """Call /interp_node/start_run with ``values``, asking again while the cell
-    is still connecting ("not ready"); the SetParametersResult."""
-    from rcl_interfaces.srv import SetParametersAtomically
-    from rclpy.parameter import Parameter
-
-    client = node.create_client(SetParametersAtomically, "/interp_node/start_run")
-    spin_until(node, client.service_is_ready, 30, "the start_run service")
-    t_end = time.monotonic() + 30
-    while True:
-        req = SetParametersAtomically.Request()
-        req.parameters = [Parameter(k, value=v).to_parameter_msg() for k, v in values.items()]
-        future = client.call_async(req)
-        try:  # a DDS service reply can be lost while its topic is still matching: ask again
-            spin_until(node, future.done, 5, "the start_run reply")
-        except AssertionError:
-            client.remove_pending_request(future)
-            if time.monotonic() > t_end:
-                raise
-            continue
-        result = future.result().result
-        if result.successful or "not ready" not in result.reason or time.monotonic() > t_end:
-            return result
-        ros_spin(node, 0.3)
 
 
 def test_winder_run_ignores_other_cells_errors(tmp_path: Path, procs: Procs, ros: Any) -> None:
@@ -314,7 +268,7 @@ def test_winder_run_ignores_other_cells_errors(tmp_path: Path, procs: Procs, ros
 
     from conftest import BIN
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-    from test_nodes import SMALL_JOB, job_args
+    from support.cell import SMALL_JOB, job_args
 
     foreign = ros.create_publisher(DiagnosticArray, "/diagnostics", 10)
     bad = [

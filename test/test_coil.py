@@ -464,7 +464,7 @@ def test_the_interp_node_refuses_a_coil_that_does_not_fit_and_keeps_running(
     """At start (its parameters file): the words in its log, the node up and
     blocked. On ~/start_run: the words as the reason, nothing set, the node up;
     then a job file that fits runs and its bag names the file's sha256."""
-    from test_cell_contract import get_params, start_run
+    from support.ros_probe import get_params, start_run
 
     job = tmp_path / "too_wide.yaml"
     job.write_text(TOO_WIDE)
@@ -508,7 +508,7 @@ def test_the_interp_node_refuses_a_coil_that_does_not_fit_and_keeps_running(
     assert json.loads(out.stdout)[0]["job_file_sha256"] == run.plan.job_file_sha256
     # a change of the job without the file: the hash no longer names it
     assert get_params(ros, "interp_node", ["job_file_sha256"]) == [run.plan.job_file_sha256]
-    from test_nodes import set_params
+    from support.ros_probe import set_params
 
     [res] = set_params(ros, "interp_node", {"layers": 1})
     assert res.successful, res.reason
@@ -518,7 +518,7 @@ def test_the_interp_node_refuses_a_coil_that_does_not_fit_and_keeps_running(
 
 @pytest.mark.ros
 def test_winder_run_carries_the_job_files_hash_into_the_bag(tmp_path: Path, procs: Procs) -> None:
-    from test_nodes import only_bag, winder_run
+    from support.cell import only_bag, winder_run
 
     from winder.record.reader import read_run
 

@@ -3,7 +3,7 @@
 Every test starts the real ``interp_node`` and ``profile_node`` and the
 consumer under test as separate processes over DDS, on a ``ROS_DOMAIN_ID``
 of the test's own (LOCALHOST discovery; one no other test picks, see
-:data:`DOMAINS`), and watches the cell the way a
+:func:`conftest.next_domain`), and watches the cell the way a
 controller does: ``winder/ready``, ``winder/state``, ``winder/progress``,
 ``winder/control``, ``/diagnostics`` and the services. The consumer's
 statuses are found by their role (``role: consumer`` in the cell's
@@ -53,14 +53,13 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from itertools import pairwise
 from pathlib import Path
 from typing import Any
 
 import pytest
-from conftest import BIN, Procs, bag_closed, lock_domain, spin_until
+from conftest import BIN, Procs, bag_closed, next_domain, release_domain, spin_until
 
 from winder.contract.topics import CELL_STATE_KEYS, ROLE_KEY, STATUS_KEYS, in_namespace
 
@@ -84,45 +83,18 @@ INTERP_STALL_ABORT = 3.0
 SLACK = 1.5
 
 
-#: The domains of this module's tests: none that another test (conftest: WINDER_TEST_DOMAINS,
-#: 20-219 by default), a benchmark (70-99) or `winder run` (100-199) picks, so a cell here
-#: never hears the nodes of a test running beside it (another pytest process on
-#: the machine: its profile node would time this cell's steps too); a lock file
-#: per domain keeps two runs of this module apart.
-DOMAINS = range(1, 20)
-
-
-@contextmanager
-def own_domain(timeout: float = 120.0) -> Iterator[int]:
-    """A domain of :data:`DOMAINS` no other process of this module holds, held until the end."""
-    start = os.getpid() % len(DOMAINS)
-    end = time.monotonic() + timeout
-    while True:
-        for i in range(len(DOMAINS)):
-            domain = DOMAINS[(start + i) % len(DOMAINS)]
-            lock = lock_domain(domain, "conformance")
-            if lock is None:
-                continue
-            try:
-                yield domain
-            finally:
-                lock.close()
-            return
-        assert time.monotonic() < end, f"every domain of {DOMAINS} held by another run for {timeout} s"
-        time.sleep(0.5)
-
-
 @pytest.fixture
 def procs(tmp_path: Path) -> Iterator[Procs]:
-    """conftest's ``procs`` on a domain of :data:`DOMAINS` (the ``ros`` probe joins it)."""
+    """conftest's ``procs``: a domain of ``WINDER_TEST_DOMAINS`` no other test
+    process of the machine holds (the ``ros`` probe joins it)."""
     log_dir = tmp_path / "logs"
     log_dir.mkdir()
-    with own_domain() as domain:
-        ps = Procs(domain, log_dir)
-        try:
-            yield ps
-        finally:
-            ps.stop_all()
+    ps = Procs(next_domain(), log_dir)
+    try:
+        yield ps
+    finally:
+        ps.stop_all()
+        release_domain(ps.domain)
 
 
 @dataclass(frozen=True)

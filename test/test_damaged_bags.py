@@ -16,7 +16,8 @@ from typing import Any
 
 import numpy as np
 import pytest
-from test_reader import bag, run_cli  # noqa: F401 - bag is the session's fixture of real runs
+from support.bags import rewrite
+from support.cli import run_cli
 
 from winder.record.bag import COMPRESSIONS, BagRecorder
 from winder.record.raw import BagError, RawBag, read_raw
@@ -28,14 +29,6 @@ FLIPS = 60  # per compression mode
 CUTS = 20
 
 
-def rewrite(raw: RawBag, out: Path, compression: str) -> Path:
-    """The messages of ``raw`` written again by the sim node's BagRecorder."""
-    topics = {c.topic: c.msgtype for c in raw.connections.values()}
-    rec = BagRecorder(out, topics, compression=compression)
-    for cid, t, data in raw.messages:
-        rec.write(raw.connections[cid].topic, t, data, exact=True)
-    rec.close()
-    return out
 
 
 def messages(raw: RawBag) -> Counter[tuple[str, int, bytes]]:
@@ -59,7 +52,7 @@ def check(path: Path, original: Counter[tuple[str, int, bytes]]) -> str:
 
 @pytest.mark.parametrize("compression", COMPRESSIONS)
 def test_flipped_bytes_and_truncations_never_pass_as_good(
-    bag: Any,  # noqa: F811 - the fixture imported above
+    bag: Any,
     tmp_path: Path,
     compression: str,
 ) -> None:
@@ -87,7 +80,7 @@ def test_flipped_bytes_and_truncations_never_pass_as_good(
     assert outcomes["flagged"] + outcomes["refused"] >= CUTS, outcomes
 
 
-def test_a_flipped_byte_in_a_chunk_is_named_and_the_rest_read(bag: Any, tmp_path: Path) -> None:  # noqa: F811
+def test_a_flipped_byte_in_a_chunk_is_named_and_the_rest_read(bag: Any, tmp_path: Path) -> None:
     """One flip in the middle of a compressed chunk: that chunk is skipped and
     named; the chunks after it are read; `winder analyze` says DAMAGED."""
     clean = rewrite(read_raw(bag("lin2k")), tmp_path / "clean", "lz4")
@@ -148,7 +141,7 @@ def recover_says(path: Path, *args: str) -> str:
     return r.stdout
 
 
-def test_recover_never_calls_a_damaged_bag_complete(bag: Any, tmp_path: Path) -> None:  # noqa: F811
+def test_recover_never_calls_a_damaged_bag_complete(bag: Any, tmp_path: Path) -> None:
     """`winder bag recover` says what it saved and that it is incomplete, for a
     truncated file, a cut last chunk, a damaged chunk and a whole file without
     the run's final report; only a whole bag with its report is left alone."""
@@ -207,14 +200,15 @@ def refusal(call: Any) -> str | None:
     return None
 
 
-def test_play_refuses_what_analyze_refuses(bag: Any, tmp_path: Path) -> None:  # noqa: F811
+def test_play_refuses_what_analyze_refuses(bag: Any, tmp_path: Path) -> None:
     """Every damaged bag `winder analyze` refuses, `winder play` refuses with
     the same line (it refuses more: a gap it cannot replay); a foreign bag, a
     job description that is not one and a step chunk of the wrong shape are
     refused by both commands in the same one line, exit 2, no traceback."""
     from rosbags.rosbag2 import StoragePlugin
     from rosbags.typesys import Stores, get_typestore
-    from test_reader import _write_bag, assert_one_line_error
+    from support.bags import write_bag
+    from support.cli import assert_one_line_error
 
     from winder.record.replay import plan_play
 
@@ -243,14 +237,14 @@ def test_play_refuses_what_analyze_refuses(bag: Any, tmp_path: Path) -> None:  #
     Ints = store.types["std_msgs/msg/Int64MultiArray"]
     job = read_run(clean).plan.text
     foreign = tmp_path / "foreign"
-    _write_bag(foreign, [("/chatter", "std_msgs/msg/String", 1, String(data="hi"))], StoragePlugin.MCAP)
+    write_bag(foreign, [("/chatter", "std_msgs/msg/String", 1, String(data="hi"))], StoragePlugin.MCAP)
     bad_job = tmp_path / "bad_job"
     not_json = String(data="{not json")
-    _write_bag(bad_job, [("/winder/job", "std_msgs/msg/String", 1, not_json)], StoragePlugin.MCAP)
+    write_bag(bad_job, [("/winder/job", "std_msgs/msg/String", 1, not_json)], StoragePlugin.MCAP)
     bad_chunk = tmp_path / "bad_chunk"
     no_layout = store.types["std_msgs/msg/MultiArrayLayout"](dim=[], data_offset=0)
     chunk = Ints(layout=no_layout, data=np.arange(7))
-    _write_bag(
+    write_bag(
         bad_chunk,
         [("/winder/job", "std_msgs/msg/String", 1, String(data=job)),
          ("/winder/step_times", "std_msgs/msg/Int64MultiArray", 2, chunk)],

@@ -14,7 +14,6 @@ from typing import Any
 
 import numpy as np
 import pytest
-import test_reader
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
@@ -217,12 +216,6 @@ def test_a_coil_wound_backward_is_measured_against_its_own_layer() -> None:
 
 
 # -- every figure of a recorded run ----------------------------------------------------------------
-
-
-@pytest.fixture(scope="session")
-def bag(tmp_path_factory: pytest.TempPathFactory, request: pytest.FixtureRequest) -> Any:
-    """The bags shared with test_reader (one ``winder run`` per configuration per session)."""
-    return test_reader.bags(tmp_path_factory, request).get
 
 
 def _looked_at(path: Path) -> None:

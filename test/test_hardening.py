@@ -17,7 +17,7 @@ import pytest
 from conftest import BIN, Procs, closed_bags, is_consumer, rosbags_read
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from test_nodes import SMALL_JOB, job_args, only_bag, timed_rows, winder_run
+from support.cell import SMALL_JOB, job_args, only_bag, timed_rows, winder_run
 
 from winder.axis import StepperAxis
 from winder.cli import commands as cli
@@ -229,7 +229,7 @@ def damage(chunks: list[np.ndarray], fault: str, job: Any) -> tuple[list[np.ndar
 def test_sim_node_reports_a_malformed_chunk_and_closes_the_job(
     tmp_path: Path, procs: Procs, ros: Any, fault: str
 ) -> None:
-    from test_reliability import FakeProfile
+    from support.cell import FakeProfile
 
     from winder.motion.job import Job
 
@@ -495,9 +495,7 @@ def small_disk(
     cmd = [str(BIN / "sim_node"), "--ros-args", "-p", f"bag_dir:={disk / 'bags'}", *sim_args]
     if not mounted:
         cmd = ["prlimit", f"--fsize={1 << 20}", *cmd]
-    log = procs.log_dir / "sim_node-small-disk.log"
-    p = subprocess.Popen(cmd, env=procs.env, stdout=log.open("wb"), stderr=subprocess.STDOUT)
-    procs.procs.append((p, log))
+    p = procs.children.start(cmd, "sim_node-small-disk")
     return ("tmpfs" if mounted else "fsize"), p
 
 
@@ -566,7 +564,7 @@ ROS_EXTREMES: dict[str, list[tuple[str, Any, bool]]] = {
 def test_extreme_in_range_parameters_are_refused_and_the_node_lives(
     procs: Procs, ros: Any, executable: str
 ) -> None:
-    from test_nodes import set_params
+    from support.ros_probe import set_params
 
     from winder.ros.cell import ros_args
 
@@ -671,7 +669,7 @@ def test_ros_parameters_at_every_bound(tmp_path: Path, procs: Procs, ros: Any, e
     """The same bound matrix through set_parameters on the running node: outside
     a range refused naming the parameter, inside accepted or refused in one
     line; accepted values are set back; the node lives through all of it."""
-    from test_nodes import set_params
+    from support.ros_probe import set_params
 
     from winder.contract.params import INTERP_SPECS, PROFILE_SPECS
 
@@ -733,7 +731,7 @@ def test_a_new_real_time_factor_changes_the_rate_not_the_time_elapsed(
     from conftest import spin_until
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from rosgraph_msgs.msg import Clock
-    from test_nodes import set_params
+    from support.ros_probe import set_params
 
     ticks: list[tuple[float, float]] = []  # (wall s, simulated s)
     ros.create_subscription(
@@ -894,7 +892,7 @@ def test_an_integer_for_a_double_setting_stays_a_double(procs: Procs, ros: Any) 
     from conftest import spin_until
     from rcl_interfaces.msg import ParameterType
     from rcl_interfaces.srv import GetParameters
-    from test_nodes import set_params
+    from support.ros_probe import set_params
 
     procs.start("profile_node", "-p", "v_max:=3000")
     client = ros.create_client(GetParameters, "/profile_node/get_parameters")
@@ -927,7 +925,7 @@ def test_the_interp_node_refuses_a_job_too_long_as_check_does(procs: Procs, ros:
     from conftest import spin_until
     from rclpy.task import Future
     from std_srvs.srv import Trigger
-    from test_cell_contract import get_params, start_run
+    from support.ros_probe import get_params, start_run
 
     from winder.contract.params import PROFILE_SPECS
 

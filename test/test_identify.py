@@ -14,21 +14,14 @@ from typing import Any
 
 import numpy as np
 import pytest
-import test_reader
 from conftest import rosbags_read
-from test_reader import assert_one_line_error, run_cli
+from support.cli import assert_one_line_error, run_cli
 
 from winder.analysis.identify import AxisRecord, identify, identify_axis, with_noise
 from winder.axis import StepperAxis
 from winder.record.reader import AxisConfig, read_run
 
 AXES = ("feed", "fork", "pole")
-
-
-@pytest.fixture(scope="session")
-def bag(tmp_path_factory: pytest.TempPathFactory, request: pytest.FixtureRequest) -> Any:
-    """The bags shared with test_reader (one ``winder run`` per configuration per session)."""
-    return test_reader.bags(tmp_path_factory, request).get
 
 
 def recorded(path: Path) -> dict[str, dict[str, float]]:

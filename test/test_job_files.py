@@ -259,7 +259,7 @@ def test_the_interp_node_takes_a_job_file_in_one_start_run_call(
     """~/start_run with job_file: the file's job and its ramp (carried with the
     job: the profile node's own is scurve) in one call; a bad file sets
     nothing and starts nothing, with the file's reason."""
-    from test_cell_contract import get_params, ros_spin, start_run
+    from support.ros_probe import get_params, ros_spin, start_run
 
     job = tmp_path / "job.yaml"
     job.write_text(SMALL_JOB)
@@ -361,7 +361,7 @@ def test_check_and_the_node_read_every_scalar_the_same(tmp_path: Path, procs: Pr
     """Each tricky scalar in a job file: ``winder run --check`` and a real
     interp_node given the file (``--params-file``: ROS's own parser) agree
     on it: both refuse it, or both take the same value."""
-    from test_cell_contract import get_params
+    from support.ros_probe import get_params
 
     from winder.contract.params import INTERP_SPECS
 

@@ -2,7 +2,7 @@
 
 Every Foxglove message path and every PlotJuggler series is resolved on the
 messages rosbags decodes from a recorded run (the session's 'trap' bag, see
-test_reader.bags): Foxglove paths by walking the message path syntax they use
+conftest's ``bag``): Foxglove paths by walking the message path syntax they use
 (``.field``, ``[i]``, ``[:]``, ``{field=="text"}``), PlotJuggler series against
 the names its ROS parser gives a bag's series (a JointState by joint name, a
 DiagnosticArray by hardware id, status name and key, numeric values only).
@@ -23,7 +23,6 @@ from typing import Any
 
 import numpy as np
 import pytest
-import test_reader
 from conftest import rosbags_read
 
 pytestmark = pytest.mark.ros
@@ -37,9 +36,9 @@ Messages = dict[str, list[tuple[int, Any]]]
 
 
 @pytest.fixture(scope="module")
-def messages(tmp_path_factory: pytest.TempPathFactory, request: pytest.FixtureRequest) -> Messages:
+def messages(bag: Any) -> Messages:
     """Every message of a recorded run, by topic: [(log time, message)]."""
-    return rosbags_read(test_reader.bags(tmp_path_factory, request).get("trap"))
+    return rosbags_read(bag("trap"))
 
 
 @pytest.fixture(scope="module")

@@ -24,6 +24,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy import signal
 from scipy.integrate import solve_ivp
+from support.oracles import params, superpose
 
 from winder.axis import (
     G_CM_S2,
@@ -43,44 +44,10 @@ PITCH = 2 * math.pi / 40
 # -- oracles -------------------------------------------------------------------
 
 
-def params(Zr: float, L: float, i_a: float, J: float, D: float) -> tuple[float, float, float]:
-    """(w_n, zeta, K) from the paper's eq. 12, computed here."""
-    K = 0.5 * Zr**2 * L * i_a**2
-    return math.sqrt(K / J), D / (2 * math.sqrt(K * J)), K
 
 
-def textbook_step(wn: float, zeta: float, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Unit step response s(tau) of w_n^2/(s^2 + 2 zeta w_n s + w_n^2) and its derivative."""
-    tau = np.asarray(tau, dtype=float)
-    if zeta < 1:
-        wd = wn * math.sqrt(1 - zeta**2)
-        ex = np.exp(-zeta * wn * tau)
-        s = 1 - ex * (np.cos(wd * tau) + zeta * wn / wd * np.sin(wd * tau))
-        ds = wn**2 / wd * ex * np.sin(wd * tau)
-    elif zeta == 1:
-        ex = np.exp(-wn * tau)
-        s = 1 - ex * (1 + wn * tau)
-        ds = wn**2 * tau * ex
-    else:
-        r = math.sqrt(zeta**2 - 1)
-        p1, p2 = -wn * (zeta - r), -wn * (zeta + r)
-        s = 1 - (p2 * np.exp(p1 * tau) - p1 * np.exp(p2 * tau)) / (p2 - p1)
-        ds = p1 * p2 * (np.exp(p2 * tau) - np.exp(p1 * tau)) / (p2 - p1)
-    return s, ds
 
 
-def superpose(
-    wn: float, zeta: float, times: np.ndarray, angles: np.ndarray, t: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """theta(t), omega(t): sum of the step responses, one per step (step at t applied)."""
-    th = np.zeros(t.size)
-    om = np.zeros(t.size)
-    for tk, a in zip(times, angles, strict=True):
-        on = t >= tk
-        s, ds = textbook_step(wn, zeta, t[on] - tk)
-        th[on] += a * s
-        om[on] += a * ds
-    return th, om
 
 
 def decimal_step(wn: float, zeta: float, tau: float) -> tuple[float, float]:

@@ -17,65 +17,21 @@ from typing import Any
 import numpy as np
 import pytest
 from conftest import BIN, Procs, bag_closed, final_report, is_consumer, rosbags_read, spin_until
+from support.cell import SMALL_JOB, expected_end, job_args, only_bag, timed_rows, winder_run
+from support.ros_probe import set_params
 
 pytestmark = pytest.mark.ros
 
-SMALL_JOB = {"turns_per_layer": 3, "layers": 3, "poles": 2, "fork_steps_per_rev": 256, "job_id": "small"}
 
 
-def timed_rows(bag: dict[str, list[tuple[int, Any]]], topic: str = "/winder/step_times") -> np.ndarray:
-    chunks = []
-    for _, msg in bag[topic]:
-        dims = msg.layout.dim
-        assert dims[1].label == "t_ns,segment,feed,fork,pole"
-        chunks.append(np.asarray(msg.data, dtype=np.int64).reshape(dims[0].size, dims[1].size))
-    return np.vstack(chunks)
 
 
-def expected_end(job: dict[str, Any]) -> tuple[int, int, int]:
-    """Final axis positions worked out by hand from the job fields."""
-    turns, layers, poles = job["turns_per_layer"], job["layers"], job["poles"]
-    fork = job.get("fork_steps_per_rev", 1024)
-    feed_per_layer = round(turns * job.get("wire_diameter", 2.5e-3) / job.get("feed_step", 1e-5))
-    feed_end = 0
-    direction = 1
-    for _ in range(poles * layers):
-        feed_end += direction * feed_per_layer
-        direction = -direction
-    pole_end = round((poles - 1) * job.get("pole_steps_per_rev", 1024) / poles)
-    return feed_end, poles * layers * turns * fork, pole_end
 
 
-def winder_run(
-    tmp_path: Path, domain: int, *args: str, timeout: float = 240
-) -> subprocess.CompletedProcess[str]:
-    env = {"ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "PATH": str(BIN)}
-    import os
-
-    (tmp_path / "tmp").mkdir(exist_ok=True)  # where the run keeps its node logs
-    env["TMPDIR"] = str(tmp_path / "tmp")
-
-    return subprocess.run(
-        [str(BIN / "winder"), "run", "--bag-dir", str(tmp_path / "bags"), *args],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        env={**os.environ, **env},
-        stdin=subprocess.DEVNULL,
-    )
 
 
-def job_args(job: dict[str, Any]) -> list[str]:
-    out = []
-    for k, v in job.items():
-        out += [f"--{k.replace('_', '-')}", str(v)]
-    return out
 
 
-def only_bag(tmp_path: Path) -> Path:
-    bags = sorted((tmp_path / "bags").iterdir())
-    assert len(bags) == 1, bags
-    return bags[0]
 
 
 @pytest.mark.parametrize("profile", ["scurve", "trapezoid", "exponential"])
@@ -158,26 +114,6 @@ def test_bad_job_on_the_command_line_starts_nothing(tmp_path: Path, procs: Procs
     assert not (tmp_path / "bags").exists() or not any((tmp_path / "bags").iterdir())
 
 
-def set_params(node: Any, target: str, values: dict[str, Any]) -> list[Any]:
-    from rcl_interfaces.srv import SetParameters
-    from rclpy.parameter import Parameter
-
-    client = node.create_client(SetParameters, f"/{target}/set_parameters")
-    spin_until(node, client.service_is_ready, 30, f"{target}/set_parameters")
-    req = SetParameters.Request(
-        parameters=[Parameter(k, value=v).to_parameter_msg() for k, v in values.items()]
-    )
-    # DDS services can drop a reply while the response topic is still matching
-    # (service_is_ready() only sees the request side): ask again
-    for _ in range(6):
-        fut = client.call_async(req)
-        try:
-            spin_until(node, fut.done, 5, "set_parameters reply")
-        except AssertionError:
-            client.remove_pending_request(fut)
-            continue
-        return list(fut.result().results)
-    raise AssertionError(f"no reply from {target}/set_parameters in 30 s")
 
 
 @pytest.mark.parametrize(

@@ -11,14 +11,13 @@ limits checked by sampling every piece of the law.
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 import pytest
-import ruckig
 from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 from scipy import integrate
+from support.oracles import ruckig_change, ruckig_stop
 
 from winder.contract.params import PROFILE_SPECS, plan_timing
 from winder.contract.timeline import Command, CommandError, Timeline, parse_schedule
@@ -28,43 +27,12 @@ from winder.spec import SpecError
 
 RAMP = {k: s.default for k, s in PROFILE_SPECS.items()}
 FAST = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-_RK = ruckig.Ruckig(1)
 
 
-def ruckig_change_traj(v: float, a: float, v_to: float, A: float, J: float) -> Any:
-    """ruckig's time-optimal velocity-mode change from (v, a) to (v_to, 0).
-    ruckig refuses a current acceleration at its limit to the last bit (the
-    states on a planned move sit there): the limit a hair above, 1e-12 of it;
-    and for a few states well inside the limits it refuses that hair (step 1
-    finds no profile: v = 532.58, a = 0, A = 10**4.75, J = 10**6.78125, found
-    by hypothesis on a fresh clone): then the limit itself."""
-    inp = ruckig.InputParameter(1)
-    inp.control_interface = ruckig.ControlInterface.Velocity
-    inp.current_position, inp.current_velocity, inp.current_acceleration = [0.0], [v], [a]
-    inp.target_velocity, inp.target_acceleration = [v_to], [0.0]
-    inp.max_velocity, inp.max_jerk = [1e12], [J]
-    for limit in (A * (1 + 1e-12), A):
-        inp.max_acceleration = [limit]
-        traj = ruckig.Trajectory(1)
-        try:
-            result = _RK.calculate(inp, traj)
-        except ruckig.RuckigError:
-            continue
-        assert result in (ruckig.Result.Working, ruckig.Result.Finished)
-        return traj
-    raise AssertionError(f"ruckig found no change from v={v!r}, a={a!r} to {v_to!r} (A={A!r}, J={J!r})")
 
 
-def ruckig_stop(v: float, a: float, v_end: float, A: float, J: float) -> tuple[float, float]:
-    """Duration and distance of ruckig's time-optimal stop to ``v_end`` from (v, a)."""
-    traj = ruckig_change_traj(v, a, v_end, A, J)
-    return traj.duration, float(traj.at_time(traj.duration)[0][0])
 
 
-def ruckig_change(v: float, a: float, v_to: float, A: float, J: float) -> float:
-    """Distance of ruckig's time-optimal change from (v, a) to (v_to, 0)."""
-    traj = ruckig_change_traj(v, a, v_to, A, J)
-    return float(traj.at_time(traj.duration)[0][0])
 
 
 def ramp_distance(v: float, A: float, J: float) -> float:

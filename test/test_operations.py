@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 import pytest
 from conftest import Procs, closed_bags, rosbags_read
-from test_operate import ruckig_stop
+from support.oracles import ruckig_stop
 
 from winder.analysis.metrics import analyze
 from winder.contract.params import PROFILE_SPECS, plan_segment

@@ -5,19 +5,17 @@ for cut-short files, from the byte offsets of the message records in the
 complete file (found by searching for each record's bytes, built here from the
 MCAP specification).
 
-The bags are shared by test_reader, test_analysis and test_identify: each
-configuration of ``winder run`` runs once per session (a few at a time, each in
-its own ROS domain) - see :func:`bag`.
+The bags are the session's (conftest's ``bag``, support.bags.CONFIGS): each
+configuration of ``winder run`` runs once per session, shared by every module
+that reads them.
 """
 
 from __future__ import annotations
 
 import json
-import os
 import shutil
 import signal
 import struct
-import subprocess
 import time
 from collections import Counter
 from pathlib import Path
@@ -25,10 +23,11 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import BIN, Procs, final_report, long_lived_domain, rosbags_read
-from rosbags.highlevel import AnyReader
-from rosbags.rosbag2 import StoragePlugin, Writer
+from conftest import Procs, final_report, rosbags_read
+from rosbags.rosbag2 import StoragePlugin
 from rosbags.typesys import Stores, get_typestore
+from support.bags import joint_arrays, rosbags_raw, step_rows, write_bag
+from support.cli import assert_one_line_error, run_cli
 
 from winder.record.reader import BagError, read_raw, read_run, recover
 
@@ -36,197 +35,25 @@ pytestmark = pytest.mark.ros
 
 # -- the bags, shared by the three test modules -----------------------------------------
 
-SMALL = ["--turns-per-layer", "3", "--poles", "2"]
-CONFIGS: dict[str, list[str]] = {
-    # linear motor, S-curve, fine sampling: identification and analysis
-    # (uncompressed chunks: test_cut_short_files finds each message's bytes in the file)
-    "lin2k": ["--job-id", "lin2k", *SMALL, "--publish-rate", "2000", "--bag-compression", "none"],
-    # nonlinear motor with non-default J and D, in a namespace
-    "nlns": [
-        "--job-id",
-        "nlns",
-        "--model",
-        "nonlinear",
-        "--turns-per-layer",
-        "2",
-        "--poles",
-        "2",
-        "--fork.J",
-        "2e-4",
-        "--feed.D",
-        "0.01",
-        "--pole.J",
-        "5e-5",
-        "--publish-rate",
-        "2000",
-        "--namespace",
-        "/cell1",
-    ],
-    # the same job as lin2k with the other two ramps, default 200 Hz sampling
-    "trap": ["--job-id", "trap", *SMALL, "--profile", "trapezoid"],
-    "expo": ["--job-id", "expo", *SMALL, "--profile", "exponential"],
-    # too fast for the pole axis: it falls out of step (pull-out speed T_m/D = 6.7 rad/s)
-    "slip": [
-        "--job-id",
-        "slip",
-        "--model",
-        "nonlinear",
-        "--profile",
-        "trapezoid",
-        "--a-max",
-        "4e5",
-        "--v-max",
-        "12000",
-        "--fork.D",
-        "0.003",
-        *SMALL,
-        "--publish-rate",
-        "2000",
-    ],
-    # a feed motor too weak for its load (a fifth of its current, nonlinear model): it loses steps
-    "feedslip": [
-        "--job-id",
-        "feedslip",
-        "--model",
-        "nonlinear",
-        "--feed.i-a",
-        "0.3",
-        "--turns-per-layer",
-        "6",
-        "--poles",
-        "1",
-        "--publish-rate",
-        "2000",
-    ],
-    # one coil: the pole axis never moves
-    "pole1": ["--job-id", "pole1", "--turns-per-layer", "2", "--layers", "1", "--poles", "1"],
-    # aborted a third of the way (the job lasts about 6.5 s): winder analyze counts what was simulated
-    "abort": ["--job-id", "abort", *SMALL, "--schedule", "abort@2"],
-}
-#: winder run's exit status where it is not 0 (done): 3, aborted cleanly
-STATUS = {"abort": 3}
-PARALLEL = 3
-TIMEOUT = 240.0
 
 
-class _Bags:
-    """Runs ``winder run`` for each configuration, at most PARALLEL at a time."""
-
-    def __init__(self, root: Path) -> None:
-        self.root = root
-        self.pending = list(CONFIGS)
-        self.running: dict[str, tuple[subprocess.Popen[bytes], float]] = {}
-        self.done: dict[str, Path | str] = {}
-
-    def _start(self, name: str) -> None:
-        env = {
-            **os.environ,
-            "ROS_DOMAIN_ID": str(long_lived_domain()),
-            "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
-        }
-        log = (self.root / f"{name}.log").open("wb")
-        p = subprocess.Popen(
-            [str(BIN / "winder"), "run", "--bag-dir", str(self.root / name), *CONFIGS[name]],
-            stdout=log,
-            stderr=subprocess.STDOUT,
-            stdin=subprocess.DEVNULL,
-            env=env,
-        )
-        self.running[name] = (p, time.monotonic())
-
-    def _finish(self, name: str, p: subprocess.Popen[bytes]) -> None:
-        log = (self.root / f"{name}.log").read_text(errors="replace")
-        bags = sorted((self.root / name).glob("*")) if (self.root / name).exists() else []
-        if p.returncode != STATUS.get(name, 0) or len(bags) != 1:
-            self.done[name] = f"winder run {name} failed (status {p.returncode}, bags {bags}):\n{log}"
-        else:
-            self.done[name] = bags[0]
-
-    def get(self, name: str) -> Path:
-        if name in self.pending:
-            self.pending.remove(name)
-            self.pending.insert(0, name)
-        while name not in self.done:
-            while self.pending and len(self.running) < PARALLEL:
-                self._start(self.pending.pop(0))
-            for n, (p, t0) in list(self.running.items()):
-                if p.poll() is not None:
-                    del self.running[n]
-                    self._finish(n, p)
-                elif time.monotonic() - t0 > TIMEOUT:
-                    p.kill()
-                    p.wait()
-                    del self.running[n]
-                    self.done[n] = f"winder run {n} did not finish within {TIMEOUT} s"
-            time.sleep(0.05)
-        got = self.done[name]
-        if isinstance(got, str):
-            raise AssertionError(got)
-        return got
-
-    def close(self) -> None:
-        for p, _ in self.running.values():
-            p.send_signal(signal.SIGINT)
-        for p, _ in self.running.values():
-            try:
-                p.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
-        self.running.clear()
 
 
-_BAGS: list[_Bags] = []
 
 
-def bags(tmp_path_factory: pytest.TempPathFactory, request: pytest.FixtureRequest) -> _Bags:
-    """The session's bag factory (created by the first module that asks)."""
-    if not _BAGS:
-        _BAGS.append(_Bags(tmp_path_factory.mktemp("winder_bags")))
-        request.session.config.add_cleanup(_BAGS[0].close)
-    return _BAGS[0]
-
-
-@pytest.fixture(scope="session")
-def bag(tmp_path_factory: pytest.TempPathFactory, request: pytest.FixtureRequest) -> Any:
-    """``bag(name)``: the bag directory of configuration ``name`` (see CONFIGS)."""
-    return bags(tmp_path_factory, request).get
 
 
 # -- independent reading with rosbags -------------------------------------------------------
 
 
-def rosbags_raw(path: Path) -> list[tuple[str, int, bytes]]:
-    with AnyReader([path]) as reader:
-        return [(c.topic, t, bytes(raw)) for c, t, raw in reader.messages()]
 
 
-def joint_arrays(msgs: list[tuple[int, Any]]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    t = np.array([m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for _, m in msgs])
-    order = [list(msgs[0][1].name).index(a) for a in ("feed", "fork", "pole")]
-    pos = np.array([np.asarray(m.position)[order] for _, m in msgs])
-    vel = np.array([np.asarray(m.velocity)[order] for _, m in msgs])
-    return t, pos, vel
 
 
-def step_rows(msgs: list[tuple[int, Any]]) -> np.ndarray:
-    return np.vstack([np.asarray(m.data, dtype=np.int64).reshape(-1, 5) for _, m in msgs])
 
 
-def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [str(BIN / "winder"), *args], capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL
-    )
 
 
-def assert_one_line_error(r: subprocess.CompletedProcess[str], *needles: str, code: int = 2) -> None:
-    """One line on stderr holding every needle, no traceback, exit ``code`` (2: bad input)."""
-    assert r.returncode == code, r.stdout + r.stderr
-    assert "Traceback" not in r.stderr
-    lines = r.stderr.strip().splitlines()
-    assert len(lines) == 1, r.stderr
-    for n in needles:
-        assert n in lines[0], lines[0]
 
 
 # -- whole bags ---------------------------------------------------------------------------
@@ -282,15 +109,6 @@ def test_namespaced_cell(bag: Any) -> None:
         read_run(path, namespace="/other")
 
 
-def _write_bag(path: Path, messages: list[tuple[str, str, int, Any]], storage: StoragePlugin) -> None:
-    store = get_typestore(Stores.ROS2_JAZZY)
-    with Writer(path, version=9, storage_plugin=storage) as w:
-        conns: dict[str, Any] = {}
-        for topic, msgtype, _, _ in messages:
-            if topic not in conns:
-                conns[topic] = w.add_connection(topic, msgtype, typestore=store)
-        for topic, msgtype, t, msg in messages:
-            w.write(conns[topic], t, store.serialize_cdr(msg, msgtype))
 
 
 def test_two_cells_in_one_bag_need_a_namespace(bag: Any, tmp_path: Path) -> None:
@@ -298,7 +116,7 @@ def test_two_cells_in_one_bag_need_a_namespace(bag: Any, tmp_path: Path) -> None
     String = store.types["std_msgs/msg/String"]
     job = read_run(bag("lin2k")).plan.text
     path = tmp_path / "two"
-    _write_bag(
+    write_bag(
         path,
         [("/a/winder/job", "std_msgs/msg/String", 0, String(data=job)),
          ("/b/winder/job", "std_msgs/msg/String", 0, String(data=job))],
@@ -467,12 +285,12 @@ def test_bad_bags_are_one_line_errors(tmp_path: Path, bag: Any) -> None:
     magic_then_noise = tmp_path / "magic.mcap"
     magic_then_noise.write_bytes(b"\x89MCAP0\r\n" + rng.bytes(4096))
     chatter = tmp_path / "chatter"
-    _write_bag(chatter, [("/chatter", "std_msgs/msg/String", i, String(data=f"hi {i}")) for i in range(3)],
+    write_bag(chatter, [("/chatter", "std_msgs/msg/String", i, String(data=f"hi {i}")) for i in range(3)],
                StoragePlugin.MCAP)  # fmt: skip
     chatter_db = tmp_path / "chatter_db"
-    _write_bag(chatter_db, [("/chatter", "std_msgs/msg/String", 1, String(data="hi"))], StoragePlugin.SQLITE3)
+    write_bag(chatter_db, [("/chatter", "std_msgs/msg/String", 1, String(data="hi"))], StoragePlugin.SQLITE3)
     silent = tmp_path / "silent"
-    _write_bag(silent, [], StoragePlugin.MCAP)
+    write_bag(silent, [], StoragePlugin.MCAP)
     meta_only = tmp_path / "meta_only"
     meta_only.mkdir()
     shutil.copy(bag("lin2k") / "metadata.yaml", meta_only / "metadata.yaml")

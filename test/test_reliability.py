@@ -14,10 +14,8 @@ from typing import Any
 import numpy as np
 import pytest
 from conftest import Procs, bag_closed, is_consumer, rosbags_read, spin_until
-from test_nodes import SMALL_JOB, expected_end, job_args, only_bag, timed_rows, winder_run
+from support.cell import SMALL_JOB, FakeProfile, expected_end, job_args, only_bag, timed_rows, winder_run
 
-from winder.contract.stream import describe_job
-from winder.motion.interp import interpolate
 from winder.motion.job import Job
 
 pytestmark = pytest.mark.ros
@@ -55,62 +53,6 @@ def test_signal_mid_job_closes_the_bag(tmp_path: Path, procs: Procs, sig: int) -
     assert "Traceback" not in procs.log(sim)
 
 
-class FakeProfile:
-    """Plays the profile node: sends the job and hand-made timed chunks."""
-
-    def __init__(self, node: Any, job: Job) -> None:
-        from diagnostic_msgs.msg import DiagnosticArray
-        from std_msgs.msg import Int32MultiArray, Int64MultiArray, String
-        from trajectory_msgs.msg import JointTrajectory
-
-        from winder.ros.qos import QOS_LATCHED, QOS_STREAM
-
-        self.node = node
-        self.job = job
-        self.pub_job = node.create_publisher(String, "/winder/job", QOS_LATCHED)
-        self.pub = node.create_publisher(Int64MultiArray, "/winder/step_times", QOS_STREAM)
-        # it stands in for the cell's interp and profile node, and the sim node acts only on
-        # theirs (docs/SECURITY.md): it has their parts' endpoints (winder.contract.trust.SIGNS)
-        self.parts = [
-            node.create_publisher(Int32MultiArray, "/winder/steps", QOS_STREAM),
-            node.create_publisher(String, "/winder/control", QOS_STREAM),
-            node.create_publisher(JointTrajectory, "/winder/path", QOS_LATCHED),
-        ]
-        self.statuses: list[tuple[int, str, dict[str, str]]] = []
-        node.create_subscription(DiagnosticArray, "/diagnostics", self._diag, 100)
-        self.String = String
-
-    def _diag(self, msg: Any) -> None:
-        for s in msg.status:
-            self.statuses.append(
-                (s.level[0], s.name + " | " + s.message, {kv.key: kv.value for kv in s.values})
-            )
-
-    def chunks(self, size: int) -> list[np.ndarray]:
-        out = []
-        t = 0
-        for seg in self.job.segments():
-            path = interpolate(seg.start, seg.delta)
-            for i in range(0, path.shape[0], size):
-                rows = path[i : i + size]
-                chunk = np.empty((rows.shape[0], 5), np.int64)
-                chunk[:, 0] = t + 1_000_000 * np.arange(1, rows.shape[0] + 1)  # 1 ms per step
-                t = int(chunk[-1, 0])
-                chunk[:, 1] = seg.index
-                chunk[:, 2:] = rows
-                out.append(chunk)
-        return out
-
-    def send(self, chunks: list[np.ndarray]) -> None:
-        from winder.ros.chunks import pack_timed
-
-        spin_until(
-            self.node, lambda: self.pub.get_subscription_count() > 0, 30, "the sim node's subscription"
-        )
-        self.pub_job.publish(self.String(data=describe_job(self.job)))
-        time.sleep(0.5)  # the job description first, as the real profile node does
-        for c in chunks:
-            self.pub.publish(pack_timed(c))
 
 
 @pytest.mark.parametrize("fault", ["drop", "duplicate", "reorder"])

@@ -21,12 +21,11 @@ from typing import Any
 
 import numpy as np
 import pytest
-import test_reader
 from conftest import BIN, Procs, final_report, long_lived_domain, rosbags_read, spin_until
 from ruamel.yaml import YAML
-from test_damaged_bags import rewrite
-from test_motor import params, superpose
-from test_reader import assert_one_line_error, joint_arrays, rosbags_raw, run_cli, step_rows
+from support.bags import joint_arrays, rewrite, rosbags_raw, step_rows
+from support.cli import assert_one_line_error, run_cli
+from support.oracles import params, superpose
 
 from winder.contract.qos import qos_of
 from winder.record.raw import read_raw
@@ -135,15 +134,13 @@ def expected(bag: Path, start_offset: float = 0.0) -> dict[str, list[bytes]]:
 
 def play(procs: Procs, bag: Path, *args: str) -> subprocess.Popen[str]:
     """``winder play`` as a process of the test's domain (stopped at teardown if the test fails)."""
-    p = subprocess.Popen(
+    p: subprocess.Popen[str] = procs.children.start(
         [str(BIN / "winder"), "play", str(bag), *args],
-        env=procs.env,
+        "winder-play",
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
-        stdin=subprocess.DEVNULL,
         text=True,
     )
-    procs.procs.append((p, procs.log_dir / "winder-play.log"))  # type: ignore[arg-type]
     return p
 
 
@@ -350,10 +347,10 @@ def flip_in_a_chunk(bag: Path, out: Path) -> Path:
 
 
 def test_damaged_bags_and_bad_options_are_refused(
-    ops_bag: Path, tmp_path: Path, tmp_path_factory: pytest.TempPathFactory, request: pytest.FixtureRequest
+    ops_bag: Path, tmp_path: Path, bag: Any
 ) -> None:
     """Nothing is played from a recording with a gap: one line, exit 2, as `winder analyze` words it."""
-    lin2k = test_reader.bags(tmp_path_factory, request).get("lin2k")  # several chunks
+    lin2k = bag("lin2k")  # several chunks
     several = flip_in_a_chunk(lin2k, tmp_path / "several")
     assert_one_line_error(run_cli("play", str(several)), "damaged recording: 1 chunk(s) skipped")
     # the small bag is one chunk: its damage leaves nothing

@@ -144,7 +144,7 @@ def test_tuned_limits_lose_no_step_in_the_cell_and_the_margin_is_real(tmp_path: 
 @pytest.mark.ros
 def test_a_shaped_cell_run_keeps_every_step_in_place(tmp_path: Path) -> None:
     from conftest import next_domain, rosbags_read
-    from test_nodes import SMALL_JOB, job_args, timed_rows, winder_run
+    from support.cell import SMALL_JOB, job_args, timed_rows, winder_run
 
     runs = {}
     for label, extra in (

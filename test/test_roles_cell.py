@@ -153,7 +153,7 @@ def test_a_setting_the_external_consumer_refuses_ends_the_run_unstarted(tmp_path
     """The job file asks the external consumer for a bag directory it cannot
     write (a job file cannot check that: it is the consumer's host's): the
     consumer refuses it, the job never starts, the reason names the setting."""
-    from test_reader import assert_one_line_error
+    from support.cli import assert_one_line_error
 
     job = tmp_path / "job.yaml"
     job.write_text(JOB_FILE.replace("    publish_rate: 500.0\n", "    bag_dir: /proc/winder_bags\n"))
@@ -180,7 +180,7 @@ def test_start_run_with_a_ramp_runs_that_ramp(tmp_path: Path, procs: Procs, ros:
     """``ramp.profile: trapezoid`` without ``ramp.source``: the run brings its
     ramp (the profile node's own is scurve); with ``ramp.source:
     profile_node`` beside it the call is refused, nothing set, no run."""
-    from test_cell_contract import get_params, ros_spin, start_run
+    from support.ros_probe import get_params, ros_spin, start_run
 
     bags = tmp_path / "bags"
     procs.start("sim_node", "-p", f"bag_dir:={bags}")
@@ -321,7 +321,7 @@ def test_a_third_party_consumer_that_names_no_role(tmp_path: Path, procs: Procs)
     import subprocess
     import sys
 
-    from test_reader import assert_one_line_error
+    from support.cli import assert_one_line_error
 
     driver = procs.launch([sys.executable, "-c", DRIVER, "--ros-args", "-r", "__node:=axes"], "driver")
     small = ["--job-id", "third", "--turns-per-layer", "2", "--layers", "1", "--poles", "1"]

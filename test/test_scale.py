@@ -17,7 +17,7 @@ from typing import Any
 
 import pytest
 from conftest import BIN, Procs, final_report, rosbags_read
-from test_nodes import only_bag
+from support.cell import only_bag
 
 from winder.motion.job import Job
 from winder.ros.dds import LAN_PROFILE, PROFILE
@@ -228,7 +228,7 @@ def test_external_sim_that_never_comes_is_named(procs: Procs, profile: Path | No
     """``winder run --external sim`` with no sim node on the graph: the DDS
     profile in force is printed, and the run ends in one line naming what it
     waited for, not a bare timeout."""
-    from test_reader import assert_one_line_error
+    from support.cli import assert_one_line_error
 
     env = dict(procs.env)
     if profile is not None:
@@ -292,7 +292,7 @@ def test_a_cell_found_by_a_discovery_server(procs: Procs, tmp_path: Path) -> Non
     total = Job(job_id="split", turns_per_layer=10, poles=2, layers=2).total_steps
     assert sum(len(m.data) // 5 for _, m in bag["/winder/step_times"]) == total
 
-    from test_reader import assert_one_line_error
+    from support.cli import assert_one_line_error
 
     alone = subprocess.run([*run, "--start-timeout", "5"], stdin=subprocess.DEVNULL, **options)
     assert_one_line_error(alone, "the job did not start within 5 s", code=1)  # the run failed
@@ -312,7 +312,7 @@ def test_a_split_cell_found_by_a_discovery_server(hosts: Hosts, procs: Procs, tm
 
 
 def test_discovery_server_settings_are_checked() -> None:
-    from test_reader import assert_one_line_error, run_cli
+    from support.cli import assert_one_line_error, run_cli
 
     assert_one_line_error(run_cli("discovery-server", "--port", "0"), "port=0 is invalid", "[1, 65535]")
     assert_one_line_error(run_cli("discovery-server", "--id", "256"), "id=256 is invalid", "[0, 255]")
@@ -320,7 +320,7 @@ def test_discovery_server_settings_are_checked() -> None:
 
 
 def test_external_takes_only_nodes_that_can_run_elsewhere(tmp_path: Path) -> None:
-    from test_reader import assert_one_line_error, run_cli
+    from support.cli import assert_one_line_error, run_cli
 
     assert_one_line_error(run_cli("run", "--external", "interp", "--check"), "external='interp' is invalid")
     # settings of an external node are set on it (test_external_settings.py), checked here as any

@@ -156,7 +156,7 @@ def test_a_stop_that_waits_for_resume_holds_until_winder_ctl_resume(
     automatic resume, and completes. A resume when nothing waits says so."""
     from conftest import spin_until
     from diagnostic_msgs.msg import DiagnosticArray
-    from test_cell_contract import ros_spin
+    from support.ros_probe import ros_spin
 
     seen: list[dict[str, str]] = []
 

@@ -26,7 +26,6 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 import pytest
-import test_reader
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -166,11 +165,6 @@ def test_the_integrals_do_not_depend_on_the_event_batches(model: str, batch: int
 
 
 # -- recorded runs, cut every way --------------------------------------------------------
-
-
-@pytest.fixture(scope="session")
-def bag(tmp_path_factory: pytest.TempPathFactory, request: pytest.FixtureRequest) -> Any:
-    return test_reader.bags(tmp_path_factory, request).get
 
 
 def same(a: Any, b: Any, path: str = "") -> None:

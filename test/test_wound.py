@@ -13,20 +13,13 @@ from typing import Any
 
 import numpy as np
 import pytest
-import test_reader
 from conftest import BIN, rosbags_read
-from test_reader import joint_arrays
+from support.bags import joint_arrays
 
 from winder.analysis.wound import as_wound
 from winder.record.reader import read_run
 
 pytestmark = pytest.mark.ros
-
-
-@pytest.fixture(scope="session")
-def bag(tmp_path_factory: pytest.TempPathFactory, request: pytest.FixtureRequest) -> Any:
-    """The bags shared with test_reader (one ``winder run`` per configuration per session)."""
-    return test_reader.bags(tmp_path_factory, request).get
 
 
 def test_a_clean_run_lays_every_turn_in_its_place(bag: Any) -> None:

@@ -1,0 +1,196 @@
+"""The session's bags: each configuration of ``winder run`` in CONFIGS runs
+once per test session (a few at a time, each on a ROS domain of its own) and
+is shared by every test that asks for it through conftest's ``bag`` fixture;
+and the ways tests read or write bags independently of winder's reader."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from rosbags.highlevel import AnyReader
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
+
+from support.domains import long_lived_domain
+from support.paths import BIN
+from winder.procs import Children
+from winder.record.bag import BagRecorder
+from winder.record.raw import RawBag
+
+SMALL = ["--turns-per-layer", "3", "--poles", "2"]
+CONFIGS: dict[str, list[str]] = {
+    # linear motor, S-curve, fine sampling: identification and analysis
+    # (uncompressed chunks: test_cut_short_files finds each message's bytes in the file)
+    "lin2k": ["--job-id", "lin2k", *SMALL, "--publish-rate", "2000", "--bag-compression", "none"],
+    # nonlinear motor with non-default J and D, in a namespace
+    "nlns": [
+        "--job-id",
+        "nlns",
+        "--model",
+        "nonlinear",
+        "--turns-per-layer",
+        "2",
+        "--poles",
+        "2",
+        "--fork.J",
+        "2e-4",
+        "--feed.D",
+        "0.01",
+        "--pole.J",
+        "5e-5",
+        "--publish-rate",
+        "2000",
+        "--namespace",
+        "/cell1",
+    ],
+    # the same job as lin2k with the other two ramps, default 200 Hz sampling
+    "trap": ["--job-id", "trap", *SMALL, "--profile", "trapezoid"],
+    "expo": ["--job-id", "expo", *SMALL, "--profile", "exponential"],
+    # too fast for the pole axis: it falls out of step (pull-out speed T_m/D = 6.7 rad/s)
+    "slip": [
+        "--job-id",
+        "slip",
+        "--model",
+        "nonlinear",
+        "--profile",
+        "trapezoid",
+        "--a-max",
+        "4e5",
+        "--v-max",
+        "12000",
+        "--fork.D",
+        "0.003",
+        *SMALL,
+        "--publish-rate",
+        "2000",
+    ],
+    # a feed motor too weak for its load (a fifth of its current, nonlinear model): it loses steps
+    "feedslip": [
+        "--job-id",
+        "feedslip",
+        "--model",
+        "nonlinear",
+        "--feed.i-a",
+        "0.3",
+        "--turns-per-layer",
+        "6",
+        "--poles",
+        "1",
+        "--publish-rate",
+        "2000",
+    ],
+    # one coil: the pole axis never moves
+    "pole1": ["--job-id", "pole1", "--turns-per-layer", "2", "--layers", "1", "--poles", "1"],
+    # aborted a third of the way (the job lasts about 6.5 s): winder analyze counts what was simulated
+    "abort": ["--job-id", "abort", *SMALL, "--schedule", "abort@2"],
+}
+
+
+#: winder run's exit status where it is not 0 (done): 3, aborted cleanly
+STATUS = {"abort": 3}
+PARALLEL = 3
+TIMEOUT = 240.0
+
+
+class SessionBags:
+    """Runs ``winder run`` for each configuration, at most PARALLEL at a time,
+    each on a domain of its own held for the session, as children that die
+    with the test process (:class:`winder.procs.Children`)."""
+
+    def __init__(self, root: Path) -> None:
+        self.root = root
+        self.pending = list(CONFIGS)
+        self.children = Children(root)
+        self.running: dict[str, tuple[subprocess.Popen[bytes], float]] = {}
+        self.done: dict[str, Path | str] = {}
+
+    def _start(self, name: str) -> None:
+        env = {
+            **os.environ,
+            "ROS_DOMAIN_ID": str(long_lived_domain()),
+            "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+        }
+        p = self.children.start(
+            [str(BIN / "winder"), "run", "--bag-dir", str(self.root / name), *CONFIGS[name]], name, env=env
+        )
+        self.running[name] = (p, time.monotonic())
+
+    def _finish(self, name: str, p: subprocess.Popen[bytes]) -> None:
+        log = self.children.log(p)
+        bags = sorted((self.root / name).glob("*")) if (self.root / name).exists() else []
+        if p.returncode != STATUS.get(name, 0) or len(bags) != 1:
+            self.done[name] = f"winder run {name} failed (status {p.returncode}, bags {bags}):\n{log}"
+        else:
+            self.done[name] = bags[0]
+
+    def get(self, name: str) -> Path:
+        """The bag directory of configuration ``name``, once its run ended."""
+        if name in self.pending:
+            self.pending.remove(name)
+            self.pending.insert(0, name)
+        while name not in self.done:
+            while self.pending and len(self.running) < PARALLEL:
+                self._start(self.pending.pop(0))
+            for n, (p, t0) in list(self.running.items()):
+                if p.poll() is not None:
+                    del self.running[n]
+                    self._finish(n, p)
+                elif time.monotonic() - t0 > TIMEOUT:
+                    p.kill()
+                    p.wait()
+                    del self.running[n]
+                    self.done[n] = f"winder run {n} did not finish within {TIMEOUT} s"
+            time.sleep(0.05)
+        got = self.done[name]
+        if isinstance(got, str):
+            raise AssertionError(got)
+        return got
+
+    def close(self) -> None:
+        self.children.stop_all(signal.SIGINT, 20.0)
+        self.running.clear()
+
+
+def rosbags_raw(path: Path) -> list[tuple[str, int, bytes]]:
+    with AnyReader([path]) as reader:
+        return [(c.topic, t, bytes(raw)) for c, t, raw in reader.messages()]
+
+
+def joint_arrays(msgs: list[tuple[int, Any]]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    t = np.array([m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for _, m in msgs])
+    order = [list(msgs[0][1].name).index(a) for a in ("feed", "fork", "pole")]
+    pos = np.array([np.asarray(m.position)[order] for _, m in msgs])
+    vel = np.array([np.asarray(m.velocity)[order] for _, m in msgs])
+    return t, pos, vel
+
+
+def step_rows(msgs: list[tuple[int, Any]]) -> np.ndarray:
+    return np.vstack([np.asarray(m.data, dtype=np.int64).reshape(-1, 5) for _, m in msgs])
+
+
+def write_bag(path: Path, messages: list[tuple[str, str, int, Any]], storage: StoragePlugin) -> None:
+    store = get_typestore(Stores.ROS2_JAZZY)
+    with Writer(path, version=9, storage_plugin=storage) as w:
+        conns: dict[str, Any] = {}
+        for topic, msgtype, _, _ in messages:
+            if topic not in conns:
+                conns[topic] = w.add_connection(topic, msgtype, typestore=store)
+        for topic, msgtype, t, msg in messages:
+            w.write(conns[topic], t, store.serialize_cdr(msg, msgtype))
+
+
+def rewrite(raw: RawBag, out: Path, compression: str) -> Path:
+    """The messages of ``raw`` written again by the sim node's BagRecorder."""
+    topics = {c.topic: c.msgtype for c in raw.connections.values()}
+    rec = BagRecorder(out, topics, compression=compression)
+    for cid, t, data in raw.messages:
+        rec.write(raw.connections[cid].topic, t, data, exact=True)
+    rec.close()
+    return out
+

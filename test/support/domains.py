@@ -1,0 +1,82 @@
+"""The ROS domains a test session may use (``WINDER_TEST_DOMAINS=A-B``),
+each locked by a file in the temp directory while a test uses it, so two
+pytest runs on one machine never share one."""
+
+from __future__ import annotations
+
+import fcntl
+import itertools
+import os
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+
+def _pool() -> range:
+    """The ROS domains this test session may use: ``WINDER_TEST_DOMAINS=A-B``
+    (inclusive; 20-219 unless set). Every test takes its domains from here,
+    the conformance suite too."""
+    text = os.environ.get("WINDER_TEST_DOMAINS", "20-219")
+    try:
+        low, high = (int(v) for v in text.split("-"))
+    except ValueError:
+        raise pytest.UsageError(f"WINDER_TEST_DOMAINS={text!r}: expected A-B, e.g. 20-219") from None
+    if not 0 <= low <= high <= 232 or high - low < 9:
+        raise pytest.UsageError(f"WINDER_TEST_DOMAINS={text!r}: need 10 or more domains within 0-232")
+    return range(low, high + 1)
+
+
+_held: dict[int, Any] = {}
+_cursor = itertools.count(os.getpid() * 7)
+
+
+def lock_domain(domain: int, kind: str) -> Any:
+    """The open lock file of ``domain`` for tests of ``kind`` (locked: no other
+    process holds it until it is closed), or None if another process holds it."""
+    lock = (Path(tempfile.gettempdir()) / f"winder-{kind}-domain-{domain}.lock").open("w")
+    try:
+        fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        lock.close()
+        return None
+    return lock
+
+
+def next_domain(timeout: float = 120.0) -> int:
+    """A ROS domain no other test process on this machine holds (a lock file
+    per domain in the temp directory), held until :func:`release_domain` or
+    the end of this process. Two pytest runs side by side never share one, so
+    their nodes never hear each other."""
+    pool = _pool()
+    end = time.monotonic() + timeout
+    while True:
+        for _ in range(len(pool)):
+            domain = pool[next(_cursor) % len(pool)]
+            if domain in _held:
+                continue
+            lock = lock_domain(domain, "test")
+            if lock is None:
+                continue
+            _held[domain] = lock
+            return domain
+        if time.monotonic() > end:
+            raise RuntimeError(f"every ROS domain of {pool} held by other test processes for {timeout} s")
+        time.sleep(0.5)
+
+
+def release_domain(domain: int) -> None:
+    """Hand a domain of :func:`next_domain` back (its processes are stopped)."""
+    lock = _held.pop(domain, None)
+    if lock is not None:
+        lock.close()
+
+
+def long_lived_domain() -> int:
+    """A domain for processes that outlive one test (the session's bag runs):
+    held until the end of the session."""
+    return next_domain()
+
+

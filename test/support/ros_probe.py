@@ -1,0 +1,100 @@
+"""A probe node's dealings with a running cell: spinning it, and the
+parameter and start services it calls (asking again where a DDS service
+reply can be lost)."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+
+def spin_until(node: Any, cond: Any, timeout: float, what: str) -> None:
+    """Spin ``node`` until ``cond()`` is true, or fail naming ``what``."""
+    from rclpy.executors import SingleThreadedExecutor
+
+    ex = SingleThreadedExecutor(context=node.context)
+    ex.add_node(node)
+    t_end = time.monotonic() + timeout
+    try:
+        while not cond():
+            if time.monotonic() > t_end:
+                raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+            ex.spin_once(timeout_sec=0.05)
+    finally:
+        ex.remove_node(node)
+
+
+def ros_spin(node: Any, seconds: float) -> None:
+    """Spin the probe node for ``seconds``."""
+    t_end = time.monotonic() + seconds
+    spin_until(node, lambda: time.monotonic() >= t_end, seconds + 5, f"{seconds} s")
+
+
+def get_params(node: Any, target: str, names: list[str]) -> list[Any]:
+    """The values of ``target``'s parameters ``names``."""
+    from rcl_interfaces.srv import GetParameters
+    from rclpy.parameter import parameter_value_to_python
+
+    client = node.create_client(GetParameters, f"/{target}/get_parameters")
+    spin_until(node, client.service_is_ready, 30, f"{target}/get_parameters")
+    # a DDS service reply can be lost while the reply topic still matches
+    # (docs/RELIABILITY.md): ask again after 10 s, three times at most
+    for attempt in range(3):
+        future = client.call_async(GetParameters.Request(names=names))
+        try:
+            spin_until(node, future.done, 10, "get_parameters reply")
+            break
+        except AssertionError:
+            client.remove_pending_request(future)
+            if attempt == 2:
+                raise
+    return [parameter_value_to_python(v) for v in future.result().values]
+
+
+def start_run(node: Any, values: dict[str, Any]) -> Any:
+    """Call /interp_node/start_run with ``values``, asking again while the cell
+    is still connecting ("not ready"); the SetParametersResult."""
+    from rcl_interfaces.srv import SetParametersAtomically
+    from rclpy.parameter import Parameter
+
+    client = node.create_client(SetParametersAtomically, "/interp_node/start_run")
+    spin_until(node, client.service_is_ready, 30, "the start_run service")
+    t_end = time.monotonic() + 30
+    while True:
+        req = SetParametersAtomically.Request()
+        req.parameters = [Parameter(k, value=v).to_parameter_msg() for k, v in values.items()]
+        future = client.call_async(req)
+        try:  # a DDS service reply can be lost while its topic is still matching: ask again
+            spin_until(node, future.done, 5, "the start_run reply")
+        except AssertionError:
+            client.remove_pending_request(future)
+            if time.monotonic() > t_end:
+                raise
+            continue
+        result = future.result().result
+        if result.successful or "not ready" not in result.reason or time.monotonic() > t_end:
+            return result
+        ros_spin(node, 0.3)
+
+
+def set_params(node: Any, target: str, values: dict[str, Any]) -> list[Any]:
+    from rcl_interfaces.srv import SetParameters
+    from rclpy.parameter import Parameter
+
+    client = node.create_client(SetParameters, f"/{target}/set_parameters")
+    spin_until(node, client.service_is_ready, 30, f"{target}/set_parameters")
+    req = SetParameters.Request(
+        parameters=[Parameter(k, value=v).to_parameter_msg() for k, v in values.items()]
+    )
+    # DDS services can drop a reply while the response topic is still matching
+    # (service_is_ready() only sees the request side): ask again
+    for _ in range(6):
+        fut = client.call_async(req)
+        try:
+            spin_until(node, fut.done, 5, "set_parameters reply")
+        except AssertionError:
+            client.remove_pending_request(fut)
+            continue
+        return list(fut.result().results)
+    raise AssertionError(f"no reply from {target}/set_parameters in 30 s")
+
