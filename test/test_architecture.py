@@ -19,8 +19,8 @@ import sys
 from pathlib import Path
 
 import pytest
+from support.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 SRC = ROOT / "src" / "winder"
 LAYERS = ("procs", "spec", "shaping", "motion", "axis", "contract", "record", "analysis", "ros", "cli")
 NODE_PACKAGES = ("winder_interp", "winder_profile", "winder_sim")

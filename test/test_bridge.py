@@ -24,12 +24,13 @@ from typing import Any
 import numpy as np
 import pytest
 from conftest import Procs, closed_bags, final_report, rosbags_read, spin_until
+from support.paths import TEST
 
 from winder.motion.job import Job
 
 pytestmark = pytest.mark.ros
 
-STANDIN = Path(__file__).with_name("ros2_control_standin.py")
+STANDIN = TEST / "ros2_control_standin.py"
 #: the controller's joints, in its order, and the cell axis each drives (not the cell's order)
 JOINTS = ["pole_joint", "flyer", "feed_screw"]
 AXES_OF = ["pole", "fork", "feed"]

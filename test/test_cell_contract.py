@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 import pytest
 from conftest import Procs, bag_closed, final_report, is_consumer, rosbags_read, spin_until
+from support.paths import ROOT
 from support.ros_probe import get_params, ros_spin, start_run
 
 from winder.analysis.metrics import analyze
@@ -156,7 +157,7 @@ def test_the_readme_controller_runs_a_cell(tmp_path: Path, procs: Procs) -> None
     import subprocess
     import sys
 
-    script = Path(__file__).resolve().parents[1] / "docs" / "cell_controller.py"
+    script = ROOT / "docs" / "cell_controller.py"
     t0 = time.monotonic()
     alone = subprocess.run(
         [sys.executable, str(script), "", "2"], env=procs.env, capture_output=True, text=True, timeout=60

@@ -27,10 +27,10 @@ from conftest import Procs
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from ruamel.yaml import YAML
+from support.paths import ROOT
 
 from winder.motion.job import Job, JobError
 
-ROOT = Path(__file__).resolve().parents[1]
 JOBS = sorted((ROOT / "jobs").glob("*.yaml"))
 WINDER = Path(sys.executable).with_name("winder")
 

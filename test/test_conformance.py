@@ -60,12 +60,12 @@ from typing import Any
 
 import pytest
 from conftest import BIN, Procs, bag_closed, next_domain, release_domain, spin_until
+from support.paths import TEST
 
 from winder.contract.topics import CELL_STATE_KEYS, ROLE_KEY, STATUS_KEYS, in_namespace
 
 pytestmark = pytest.mark.ros
 
-HERE = Path(__file__).parent
 #: the consumer's job status keys after ``role`` that every consumer reports (CONTRACT.md §3.7)
 CONSUMER_KEYS = (
     *("steps_missing", "gaps", "chunks_rejected", "sim_time_s", "wall_time_s", "real_time_factor"),
@@ -126,7 +126,7 @@ CONSUMERS = [
             "max_following_error.pole": "1.0",
             "max_following_error.feed": "0.01",
         },
-        extra=((sys.executable, str(HERE / "ros2_control_standin.py"), "--joints", ",".join(BRIDGE_JOINTS)),),
+        extra=((sys.executable, str(TEST / "ros2_control_standin.py"), "--joints", ",".join(BRIDGE_JOINTS)),),
     ),
 ]
 if os.environ.get("WINDER_CONSUMER", "").strip():
@@ -144,7 +144,7 @@ if os.environ.get("WINDER_CONSUMER", "").strip():
 
 
 #: the consumer written from the topic contract alone (not a subject: it ignores aborts on purpose)
-NAIVE = ConsumerSpec("naive_consumer", (sys.executable, str(HERE / "consumers" / "naive_consumer.py")))
+NAIVE = ConsumerSpec("naive_consumer", (sys.executable, str(TEST / "consumers" / "naive_consumer.py")))
 
 
 @pytest.fixture(params=CONSUMERS, ids=[c.id for c in CONSUMERS])

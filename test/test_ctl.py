@@ -18,6 +18,7 @@ from typing import Any
 
 import pytest
 from conftest import Procs, closed_bags, spin_until
+from support.paths import ROOT
 
 from winder.cli.exits import EXIT_ABORTED, EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from winder.record.reader import read_run
@@ -197,7 +198,7 @@ def test_the_node_reads_a_relative_job_file_from_its_directory_and_names_the_pat
     request = SetParameters.Request(
         parameters=[Parameter("job_file", value="jobs/rw400.yaml").to_parameter_msg()]
     )
-    here = Path(__file__).resolve().parents[1]
+    here = ROOT
     if Path.cwd().resolve() == here:  # the repository's job file, read from the node's directory
         fut = client.call_async(request)
         spin_until(ros, fut.done, 10, "the reply")

@@ -42,8 +42,8 @@ from pathlib import Path
 
 import pytest
 from conftest import BIN, next_domain, release_domain
+from support.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 
 #: commands of a ROS install, not of the pip install

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pytest
 from conftest import BIN, next_domain, release_domain
+from support.paths import ROOT
 
 from winder.cli.exits import (
     EXIT_ABORTED,
@@ -28,7 +29,6 @@ from winder.cli.exits import (
     EXIT_TABLE,
 )
 
-ROOT = Path(__file__).resolve().parents[1]
 TINY = ["--turns-per-layer", "4", "--layers", "1", "--poles", "1"]
 
 

@@ -31,6 +31,7 @@ from typing import Any
 import pytest
 import websockets
 from conftest import BIN, Procs, rosbags_read
+from support.paths import ROOT
 
 from winder.contract.topics import in_namespace
 
@@ -239,7 +240,7 @@ NOT_LIVE = {"/winder/step_times", "/studio_script/winder_progress", "/studio_scr
 
 def layout_topics() -> set[str]:
     """The topics layouts/winder_foxglove.json names (message paths, script inputs)."""
-    text = (Path(__file__).resolve().parents[1] / "layouts" / "winder_foxglove.json").read_text()
+    text = (ROOT / "layouts" / "winder_foxglove.json").read_text()
     return set(re.findall(r'"(/(?:winder|diagnostics|clock|studio_script)[A-Za-z_/]*)', text))
 
 

@@ -19,11 +19,11 @@ import numpy as np
 import pytest
 from conftest import Procs
 from ruamel.yaml import YAML
+from support.paths import ROOT
 
 from winder.contract.jobfile import SECTION_ALIASES, JobFileError, load_job_file
 from winder.record.reader import read_run
 
-ROOT = Path(__file__).resolve().parents[1]
 JOBS = sorted((ROOT / "jobs").glob("*.yaml"))
 WINDER = Path(sys.executable).with_name("winder")
 

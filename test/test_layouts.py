@@ -18,16 +18,15 @@ from __future__ import annotations
 import json
 import re
 import xml.etree.ElementTree as ET
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 from conftest import rosbags_read
+from support.paths import ROOT
 
 pytestmark = pytest.mark.ros
 
-ROOT = Path(__file__).resolve().parents[1]
 FOXGLOVE = ROOT / "layouts" / "winder_foxglove.json"
 PLOTJUGGLER = ROOT / "layouts" / "winder_plotjuggler.xml"
 JOINTS = ("feed", "fork", "pole")

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 from conftest import BIN, Procs, bag_closed, final_report, is_consumer, rosbags_read, spin_until
 from support.cell import SMALL_JOB, expected_end, job_args, only_bag, timed_rows, winder_run
+from support.paths import ROOT
 from support.ros_probe import set_params
 
 pytestmark = pytest.mark.ros
@@ -241,7 +242,7 @@ def test_sigint_mid_job_leaves_a_readable_bag(tmp_path: Path, procs: Procs) -> N
 
 def test_colcon_build_installs_runnable_executables(tmp_path: Path, procs: Procs) -> None:
     """What `ros2 run <pkg> <exe>` does: ament index -> prefix/lib/pkg/exe."""
-    repo = Path(__file__).resolve().parents[1]
+    repo = ROOT
     ws = tmp_path / "ws"
     r = subprocess.run(
         [
@@ -336,7 +337,7 @@ def _launch(given: dict[str, str]) -> tuple[list[Any], list[dict[str, Any]]]:
     saved = {k: sys.modules.get(k) for k in fakes}
     sys.modules.update(fakes)  # type: ignore[arg-type]
     try:
-        path = Path(__file__).resolve().parents[1] / "winder_sim" / "launch" / "winder.launch.py"
+        path = ROOT / "winder_sim" / "launch" / "winder.launch.py"
         spec = importlib.util.spec_from_file_location("winder_launch", path)
         assert spec is not None and spec.loader is not None
         module = importlib.util.module_from_spec(spec)

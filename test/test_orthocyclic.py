@@ -20,6 +20,7 @@ import pytest
 from conftest import BIN, Procs, closed_bags, rosbags_read
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
+from support.paths import ROOT
 
 from winder.contract.eq7 import step_deviation
 from winder.contract.params import PROFILE_SPECS, plan_timing
@@ -29,7 +30,7 @@ from winder.motion.interp import interpolate, interpolate_pieces
 from winder.motion.job import Job, JobError
 from winder.record.reader import read_run
 
-JOBS = Path(__file__).resolve().parent.parent / "jobs"
+JOBS = ROOT / "jobs"
 
 
 # -- the rules, written again -------------------------------------------------

@@ -22,11 +22,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import BIN, next_domain
+from support.paths import ROOT
 
 from winder.analysis.resonance import TestMove, motor_for, move_for, residual, residual_table
 from winder.shaping import duration
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def winder(*args: str, cwd: Path, timeout: float = 300, env: dict[str, str] | None = None) -> str:

@@ -18,11 +18,12 @@ from typing import Any
 import pytest
 from conftest import BIN, Procs, final_report, rosbags_read
 from support.cell import only_bag
+from support.paths import ROOT
 
 from winder.motion.job import Job
 from winder.ros.dds import LAN_PROFILE, PROFILE
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+sys.path.insert(0, str(ROOT / "bench"))
 from _netns import Hosts, available
 
 pytestmark = pytest.mark.ros

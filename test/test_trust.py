@@ -22,12 +22,13 @@ from typing import Any
 import numpy as np
 import pytest
 from conftest import BIN, Procs, final_report, rosbags_read
+from support.paths import TEST
 
 from winder.record.reader import read_run
 
 pytestmark = pytest.mark.ros
 
-INTRUDER = Path(__file__).parent / "consumers" / "intruder.py"
+INTRUDER = TEST / "consumers" / "intruder.py"
 #: a small job with operator events: a pause and a resume from the schedule, then an override
 JOB = ["--turns-per-layer", "30", "--layers", "2", "--poles", "2"]
 EVENTS = ["--schedule", "pause@1.0,resume@1.5,override@2.0=0.8"]
