@@ -15,7 +15,7 @@ ros2_control bridge, driving test/ros2_control_standin.py), and any
 executable named by the environment::
 
     WINDER_CONSUMER="my_driver --ros-args -p port:=/dev/ttyUSB0" \\
-        .venv/bin/python -m pytest test/test_conformance.py
+        .venv/bin/python -m pytest test/contract/test_conformance.py
 
 ``WINDER_CONSUMER`` is a command line (split like a shell's; a bare first
 word is looked up in the venv's bin, then on PATH); the optional
@@ -120,7 +120,7 @@ CONSUMERS = [
             "joints": f"[{','.join(BRIDGE_JOINTS)}]",
             "axes": f"[{','.join(BRIDGE_JOINTS.values())}]",
             "job_origin": "start_position",  # a run after an abort or a stall starts where the joints stopped
-            # the stand-in is a Python process on two busy cores: its joints lag (test_bridge's limits)
+            # the stand-in is a Python process on two busy cores: its joints lag (test_bridge_node's limits)
             "joint_state_timeout": "0.5",
             "max_following_error.fork": "5.0",
             "max_following_error.pole": "1.0",

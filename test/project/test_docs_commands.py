@@ -22,7 +22,7 @@ How a block is read:
   the block is not run, and the reason is the test's skip reason.
 * Lines for a ROS install (``ros2 ...``, ``colcon ...``, ``source ...``) are
   not run: ros2cli, launch and colcon's workspaces are not part of the pip
-  install (the node executables they start are run by ``test_nodes.py``,
+  install (the node executables they start are run by ``test_node_processes.py``,
   the colcon build too).
 """
 
@@ -49,7 +49,7 @@ DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 #: commands of a ROS install, not of the pip install
 ROS_INSTALL = {
     "ros2": "ros2cli is not installable as wheels: for a ROS 2 install",
-    "colcon": "a colcon workspace (test_nodes.py builds one)",
+    "colcon": "a colcon workspace (test_node_processes.py builds one)",
     "source": "sourcing a ROS install's setup script",
 }
 MARKER = re.compile(r"^\s*<!--\s*doc-test:\s*(skip|serve|same output)\s*(?:\((.*)\))?\s*-->")

@@ -4,7 +4,7 @@ other, discovery by static peers, so the step stream crosses the link over
 UDP as between machines: clean, at 1 % packet loss, and over a link that
 delays every packet 5 ms one way. Where the machine forbids network namespaces the
 tests say so and skip; two cells on one graph are tested always
-(test_reliability)."""
+(test_faults)."""
 
 from __future__ import annotations
 
@@ -324,7 +324,7 @@ def test_external_takes_only_nodes_that_can_run_elsewhere(tmp_path: Path) -> Non
     from support.cli import assert_one_line_error, run_cli
 
     assert_one_line_error(run_cli("run", "--external", "interp", "--check"), "external='interp' is invalid")
-    # settings of an external node are set on it (test_external_settings.py), checked here as any
+    # settings of an external node are set on it (test_nodes_under_other_names.py), checked here as any
     bad = run_cli("run", "--external", "sim", "--fork.J", "-1", "--check")
     assert_one_line_error(bad, "fork.J=-1.0 is invalid")
     given = ["--fork.J", "2e-4", "--v-max", "900"]

@@ -46,7 +46,7 @@ paper's D = 0.03 read in its own gravitational units, 0.03 gf*cm*s/rad =
 2.9e-6 N*m*s/rad - where a start at 20 rad/s without ramp slips and the
 exponential and S-curve starts in 1/16 microsteps do not (in full steps the
 slow sweep through the 44.5 Hz resonance makes even the ramps slip). See
-``test/test_motor.py`` and ``docs/img/motor_startup.png``.
+``test/axis/test_stepper_model.py`` and ``docs/img/motor_startup.png``.
 
 The rest of the axis is beside this module: the exact linear response (the
 transition matrix and blocked scan used here, the modal sums) in

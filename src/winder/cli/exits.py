@@ -1,6 +1,6 @@
 """The exit status of every ``winder`` command: one table, the same for all.
 
-The "Exit codes" section of docs/RELIABILITY.md shows this table; ``test/test_exit_codes.py``
+The "Exit codes" section of docs/RELIABILITY.md shows this table; ``test/cli/test_exit_codes.py``
 checks that the two agree and that each class really ends with its code.
 """
 
