@@ -15,6 +15,7 @@ from typing import Any
 
 import pytest
 from rosbags.highlevel import AnyReader
+from support import domains
 from support.bags import SessionBags
 from support.domains import lock_domain, long_lived_domain, next_domain, release_domain
 from support.paths import BIN
@@ -40,6 +41,14 @@ __all__ = [  # what test modules import from here besides the fixtures
 ]
 
 use_profile()  # this process' probes discover the nodes as fast as the nodes each other
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    """Whether the test about to run is marked ``ros``: a test that is not
+    and takes a ROS domain anyway (so would start nodes or use DDS) fails,
+    naming itself; ``pytest -m "not ros"`` never starts a node."""
+    domains.current.update(test=item.nodeid, ros=item.get_closest_marker("ros") is not None)
 
 class Procs:
     """Node processes of one test on the test's domain, each logged to

@@ -74,11 +74,13 @@ def test_bad_input_and_unwritable_output(tmp_path: Path) -> None:
     assert code == EXIT_OUTPUT and "plain is a file" in err, err
 
 
+@pytest.mark.ros
 def test_a_run_aborted_by_its_schedule(env: dict[str, str], tmp_path: Path) -> None:
     code, err = winder("run", *TINY, "--schedule", "abort@0.3", "--bag-dir", str(tmp_path), env=env)
     assert code == EXIT_ABORTED, err
 
 
+@pytest.mark.ros
 def test_a_refused_ctl_command_fails(env: dict[str, str]) -> None:
     code, err = winder("ctl", "pause", "--timeout", "1", env=env)  # no cell on this domain
     assert code == EXIT_FAILED and len(err.strip().splitlines()) == 1, err
@@ -120,6 +122,7 @@ def _wait_running(run: subprocess.Popen[str], tmp_path: Path, timeout: float = 6
     time.sleep(1.0)
 
 
+@pytest.mark.ros
 def test_a_run_whose_consumer_is_killed(env: dict[str, str], tmp_path: Path) -> None:
     run = _start_run(env, tmp_path)
     try:
@@ -135,6 +138,7 @@ def test_a_run_whose_consumer_is_killed(env: dict[str, str], tmp_path: Path) -> 
     assert "sim_node exited with status -9" in err, err
 
 
+@pytest.mark.ros
 def test_ctrl_c_interrupts_a_run(env: dict[str, str], tmp_path: Path) -> None:
     run = _start_run(env, tmp_path)
     try:

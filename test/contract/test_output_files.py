@@ -143,6 +143,7 @@ def test_new_directory_appears_whole_or_not_at_all(tmp_path: Path) -> None:
 # -- every command that writes ------------------------------------------------------------
 
 
+@pytest.mark.ros
 def test_unwritable_output_paths_of_every_command(bag: Path, cut: Path, tmp_path: Path) -> None:
     plain = tmp_path / "plain"
     plain.write_text("")
@@ -166,6 +167,7 @@ def test_unwritable_output_paths_of_every_command(bag: Path, cut: Path, tmp_path
     assert leftovers(tmp_path) == []
 
 
+@pytest.mark.ros
 def test_a_full_disk_leaves_nothing_half_written(bag: Path, cut: Path, tmp_path: Path) -> None:
     """The kernel fails a write past 20 kB (EFBIG, as ENOSPC on a full disk):
     each command says so in one line and leaves no part of its output."""

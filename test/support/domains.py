@@ -30,6 +30,8 @@ def _pool() -> range:
 
 
 _held: dict[int, Any] = {}
+#: the test being set up or run, and whether it is marked ``ros`` (set by conftest)
+current: dict[str, Any] = {"test": "", "ros": True}
 _cursor = itertools.count(os.getpid() * 7)
 
 
@@ -50,6 +52,11 @@ def next_domain(timeout: float = 120.0) -> int:
     per domain in the temp directory), held until :func:`release_domain` or
     the end of this process. Two pytest runs side by side never share one, so
     their nodes never hear each other."""
+    if not current["ros"]:
+        raise RuntimeError(
+            f"{current['test']} takes a ROS domain but is not marked ros: "
+            "mark it (@pytest.mark.ros), so that pytest -m 'not ros' starts no node"
+        )
     pool = _pool()
     end = time.monotonic() + timeout
     while True:
