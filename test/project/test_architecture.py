@@ -1,6 +1,6 @@
 """The import rules of docs/ARCHITECTURE.md, read from the code itself.
 
-* Arrows only go down the layers: ``spec`` < ``shaping`` < ``motion`` < ``axis`` <
+* Arrows only go down the layers: ``procs`` < ``spec`` < ``shaping`` < ``motion`` < ``axis`` <
   ``contract`` < ``record`` < ``analysis`` < ``ros`` < ``cli``; a module may
   import its own layer and those below, never one above.
 * Nothing under ``winder/`` imports a node package.
