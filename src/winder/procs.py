@@ -9,6 +9,10 @@ takes as Ctrl-C and so closes its bag. :meth:`Children.stop` sends SIGINT and
 kills what is still running after a grace period. Each child's output goes to
 its own log file.
 
+The kernel sends the signal when the *thread* that started the child ends,
+so start children from the main thread (or one that lives as long as they
+should).
+
 Plain ``subprocess`` and ``ctypes``, no ROS: it is the bottom layer.
 """
 

@@ -21,6 +21,7 @@ from conftest import Procs, closed_bags, spin_until
 from support.paths import ROOT
 
 from winder.cli.exits import EXIT_ABORTED, EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
+from winder.procs import popen
 from winder.record.reader import read_run
 
 pytestmark = pytest.mark.ros
@@ -228,7 +229,7 @@ def test_lifecycle_transitions_and_an_invalid_one(procs: Procs, ros: Any, tmp_pa
 def test_state_watch_prints_each_change_until_ctrl_c(procs: Procs, tmp_path: Path) -> None:
     bags = tmp_path / "bags"
     start_cell(procs, bags, "-p", "turns_per_layer:=4", "-p", "layers:=1", "-p", "poles:=1")
-    watch = subprocess.Popen(
+    watch = popen(
         [str(WINDER), "ctl", "state", "--watch", "--timeout", "60"],
         env=procs.env,
         stdout=subprocess.PIPE,
@@ -269,7 +270,7 @@ def test_a_followed_run_that_is_aborted_ends_with_exit_3_and_a_busy_cell_refuses
     procs.start("profile_node")
     procs.start("interp_node", "-p", "autostart:=false")
     argv = ["start", "--set", "turns_per_layer=40", "--set", "poles=1", "--wait", "--timeout", "60"]
-    follow = subprocess.Popen(
+    follow = popen(
         [str(WINDER), "ctl", *argv],
         env=procs.env,
         stdout=subprocess.PIPE,

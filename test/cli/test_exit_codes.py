@@ -28,6 +28,7 @@ from winder.cli.exits import (
     EXIT_OUTPUT,
     EXIT_TABLE,
 )
+from winder.procs import popen
 
 TINY = ["--turns-per-layer", "4", "--layers", "1", "--poles", "1"]
 
@@ -108,7 +109,7 @@ def _start_run(env: dict[str, str], tmp_path: Path) -> subprocess.Popen[str]:
     # a real-time run of some 10 s (20 turns of 1024 steps at 2048 steps/s): time to act on it mid-run
     argv = [str(BIN / "winder"), "run", "--turns-per-layer", "20", "--layers", "1", "--poles", "1"]
     argv += ["--real-time", "--bag-dir", str(tmp_path)]
-    return subprocess.Popen(
+    return popen(
         argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, stdin=subprocess.DEVNULL
     )
 

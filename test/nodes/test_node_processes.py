@@ -21,6 +21,8 @@ from support.cell import SMALL_JOB, expected_end, job_args, only_bag, timed_rows
 from support.paths import ROOT
 from support.ros_probe import set_params
 
+from winder.procs import popen
+
 pytestmark = pytest.mark.ros
 
 
@@ -299,7 +301,7 @@ def test_colcon_build_installs_runnable_executables(tmp_path: Path, procs: Procs
                 / "site-packages"
             ),
         }
-        p = subprocess.Popen(
+        p = popen(
             [str(path)], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, cwd=tmp_path
         )
         time.sleep(3.0)

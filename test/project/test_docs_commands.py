@@ -44,6 +44,8 @@ import pytest
 from conftest import BIN, next_domain, release_domain
 from support.paths import ROOT
 
+from winder.procs import popen
+
 DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 
 #: commands of a ROS install, not of the pip install
@@ -222,7 +224,7 @@ def _run(
     failed before it stopped them) is stopped after it, so that it cannot
     hold the output pipes open or join the next block's graph."""
     with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
-        p = subprocess.Popen(
+        p = popen(
             ["bash", *(["-e"] if errexit else []), "-o", "pipefail", "-c", script],
             cwd=work,
             env=env,
@@ -261,7 +263,7 @@ def _stop_group(pgid: int) -> None:
 def _serve(script: str, work: Path, env: dict[str, str]) -> tuple[int | None, str]:
     """Start ``script``; None and its output so far if it still runs after
     SERVE_S (then it is stopped with SIGINT, as Ctrl-C would), else its status."""
-    p = subprocess.Popen(
+    p = popen(
         ["bash", "-e", "-o", "pipefail", "-c", script],
         cwd=work,
         env=env,

@@ -25,6 +25,7 @@ import pytest
 from conftest import BIN, next_domain, release_domain, rosbags_read
 from support.cli import run_cli
 
+from winder.procs import popen
 from winder.record.reader import BagError, read_raw, read_run
 
 pytestmark = pytest.mark.ros
@@ -70,7 +71,7 @@ class Cell:
             "TMPDIR": str(tmp),
         }
         self.log = tmp / "winder-run.log"
-        self.p = subprocess.Popen(
+        self.p = popen(
             [str(BIN / "winder"), "run", "--bag-dir", str(bag_dir), *JOB],
             env=env,
             stdout=self.log.open("wb"),

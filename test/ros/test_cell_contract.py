@@ -29,6 +29,7 @@ from support.ros_probe import get_params, ros_spin, start_run
 from winder.analysis.metrics import analyze
 from winder.contract.stream import RUN_ID
 from winder.contract.topics import STATUS_KEYS
+from winder.procs import popen
 from winder.record.reader import read_run
 
 pytestmark = pytest.mark.ros
@@ -277,7 +278,7 @@ def test_winder_run_ignores_other_cells_errors(tmp_path: Path, procs: Procs, ros
         for name in ("c10/sim_node: job", "cell9/interp_node: job", "c1/deeper/sim_node: job")
     ]
     runs = {
-        ns: subprocess.Popen(
+        ns: popen(
             [str(BIN / "winder"), "run", "--bag-dir", str(tmp_path / f"bags{ns}"), *job_args(SMALL_JOB)]
             + (["--namespace", ns] if ns else []),
             env=procs.env,

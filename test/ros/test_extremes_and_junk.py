@@ -22,6 +22,7 @@ from support.cell import SMALL_JOB, job_args, only_bag, timed_rows, winder_run
 from winder.axis import StepperAxis
 from winder.cli import commands as cli
 from winder.contract.params import MAX_JOB_SECONDS, SIM_SPECS, bag_directory
+from winder.procs import popen
 from winder.spec import SpecError
 
 # (arguments, what the one line must name): each value is inside its own
@@ -144,7 +145,7 @@ def children_of(pid: int) -> list[int]:
 @pytest.mark.ros
 def test_no_node_outlives_a_killed_winder_run(tmp_path: Path, procs: Procs) -> None:
     env = {**os.environ, "ROS_DOMAIN_ID": str(procs.domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
-    p = subprocess.Popen(
+    p = popen(
         [str(BIN / "winder"), "run", "--bag-dir", str(tmp_path / "bags"), "--real-time"],
         env=env,
         stdout=subprocess.DEVNULL,

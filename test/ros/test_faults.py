@@ -17,6 +17,7 @@ from conftest import Procs, bag_closed, is_consumer, rosbags_read, spin_until
 from support.cell import SMALL_JOB, FakeProfile, expected_end, job_args, only_bag, timed_rows, winder_run
 
 from winder.motion.job import Job
+from winder.procs import popen
 
 pytestmark = pytest.mark.ros
 
@@ -146,7 +147,7 @@ def test_two_cells_in_two_namespaces_do_not_interfere(tmp_path: Path, procs: Pro
     runs = {}
     for ns, job in jobs.items():
         (tmp_path / ns).mkdir()
-        runs[ns] = subprocess.Popen(
+        runs[ns] = popen(
             [
                 str(BIN / "winder"),
                 "run",

@@ -31,6 +31,7 @@ import pytest
 from conftest import BIN, Procs, bag_closed, rosbags_read
 
 from winder.contract.topics import ROLE_KEY, STATUS_KEYS
+from winder.procs import popen
 from winder.record.reader import read_run
 
 pytestmark = pytest.mark.ros
@@ -75,7 +76,7 @@ def winder_on_a_terminal(procs: Procs, *args: str, timeout: float = 180.0) -> tu
     reader = threading.Thread(target=drain, daemon=True)
     reader.start()
     try:
-        p = subprocess.Popen(
+        p = popen(
             [str(BIN / "winder"), *args],
             env=procs.env,
             stdout=subprocess.PIPE,

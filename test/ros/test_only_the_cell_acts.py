@@ -24,6 +24,7 @@ import pytest
 from conftest import BIN, Procs, final_report, rosbags_read
 from support.paths import TEST
 
+from winder.procs import popen
 from winder.record.reader import read_run
 
 pytestmark = pytest.mark.ros
@@ -53,7 +54,7 @@ def long_run(procs: Procs, bags: Path) -> subprocess.Popen[str]:
     (its output into files beside the bags, read by :func:`finish`: a pipe
     nobody reads while the test goes on could fill and stop it)."""
     bags.mkdir(parents=True, exist_ok=True)
-    return subprocess.Popen(
+    return popen(
         [
             *(str(BIN / "winder"), "run", "--bag-dir", str(bags), "--turns-per-layer", "400"),
             *("--real-time", "--real-time-factor", "160"),

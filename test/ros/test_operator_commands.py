@@ -28,6 +28,7 @@ from winder.contract.params import PROFILE_SPECS, plan_segment
 from winder.motion.interp import interpolate
 from winder.motion.job import Job
 from winder.motion.retime import motion_state
+from winder.procs import popen
 from winder.record.reader import read_run
 
 pytestmark = pytest.mark.ros
@@ -224,7 +225,7 @@ def test_winder_run_takes_keys_on_a_terminal(tmp_path: Path, procs: Procs) -> No
     master, slave = pty.openpty()
     bags = tmp_path / "bags"
     job = ["--turns-per-layer", "20", "--layers", "1", "--poles", "1", "--real-time"]
-    run = subprocess.Popen(
+    run = popen(
         [str(WINDER), "run", *job, "--bag-dir", str(bags)],
         env=procs.env,
         stdin=slave,

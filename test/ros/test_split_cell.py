@@ -21,6 +21,7 @@ from support.cell import only_bag
 from support.paths import ROOT
 
 from winder.motion.job import Job
+from winder.procs import popen
 from winder.ros.dds import LAN_PROFILE, PROFILE
 
 sys.path.insert(0, str(ROOT / "bench"))
@@ -64,7 +65,7 @@ def split_run(hosts: Hosts, procs: Procs, tmp_path: Path, extra: dict[str, str],
     bags = tmp_path / "bags"
     env_b = {**hosts.env("b", procs.env), **extra}
     env_a = {**hosts.env("a", procs.env), **extra}
-    sim = subprocess.Popen(
+    sim = popen(
         hosts.command("b", [str(BIN / "sim_node"), "--ros-args", "-p", f"bag_dir:={bags}"]),
         env=env_b,
         stdout=subprocess.DEVNULL,
@@ -149,7 +150,7 @@ for k in range(int(sys.argv[2])):
 def test_the_delayed_link_delays_every_packet(delayed_hosts: Hosts) -> None:
     """Every UDP round trip over the link takes at least twice the one-way delay."""
     n = 20
-    echo = subprocess.Popen(
+    echo = popen(
         delayed_hosts.command("b", [sys.executable, "-c", ECHO, str(n)]), stdout=subprocess.PIPE, text=True
     )
     try:
@@ -256,7 +257,7 @@ class DiscoveryServer:
 
     def __init__(self, env: dict[str, str], address: str, port: int, hosts: Hosts | None = None) -> None:
         argv = [str(BIN / "winder"), "discovery-server", "--address", address, "--port", str(port)]
-        self.p = subprocess.Popen(
+        self.p = popen(
             hosts.command("b", argv) if hosts else argv,
             env=env,
             stdout=subprocess.PIPE,
