@@ -1,4 +1,7 @@
-"""Fixtures for tests that start the real node processes over DDS.
+"""The fixtures every test module may use: ``procs`` (a test's processes on
+a ROS domain of its own), ``ros`` (a probe node on that domain), ``bag`` (the
+session's recorded runs); and the check that a test taking a domain is
+marked ``ros``. Plain helpers live in ``test/support/``.
 
 Each test gets its own ROS domain (and localhost-only discovery), so tests
 never hear each other or another graph on the machine.
@@ -49,6 +52,7 @@ def pytest_runtest_setup(item: pytest.Item) -> None:
     and takes a ROS domain anyway (so would start nodes or use DDS) fails,
     naming itself; ``pytest -m "not ros"`` never starts a node."""
     domains.current.update(test=item.nodeid, ros=item.get_closest_marker("ros") is not None)
+
 
 class Procs:
     """Node processes of one test on the test's domain, each logged to

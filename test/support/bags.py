@@ -193,4 +193,3 @@ def rewrite(raw: RawBag, out: Path, compression: str) -> Path:
         rec.write(raw.connections[cid].topic, t, data, exact=True)
     rec.close()
     return out
-

@@ -131,4 +131,3 @@ class FakeProfile:
         time.sleep(0.5)  # the job description first, as the real profile node does
         for c in chunks:
             self.pub.publish(pack_timed(c))
-

@@ -22,4 +22,3 @@ def assert_one_line_error(r: subprocess.CompletedProcess[str], *needles: str, co
     assert len(lines) == 1, r.stderr
     for n in needles:
         assert n in lines[0], lines[0]
-

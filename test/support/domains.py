@@ -85,5 +85,3 @@ def long_lived_domain() -> int:
     """A domain for processes that outlive one test (the session's bag runs):
     held until the end of the session."""
     return next_domain()
-
-

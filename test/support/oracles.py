@@ -87,4 +87,3 @@ def superpose(
         th[on] += a * s
         om[on] += a * ds
     return th, om
-

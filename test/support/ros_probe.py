@@ -97,4 +97,3 @@ def set_params(node: Any, target: str, values: dict[str, Any]) -> list[Any]:
             continue
         return list(fut.result().results)
     raise AssertionError(f"no reply from {target}/set_parameters in 30 s")
-
