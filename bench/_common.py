@@ -7,6 +7,27 @@ import time
 from collections.abc import Callable, Sequence
 
 
+def domains() -> range:
+    """The ROS domains the benchmarks may use: ``WINDER_BENCH_DOMAINS=A-B``
+    (inclusive; 221-232 unless set: clear of the tests' default 20-219, of
+    ``winder run``'s random 100-199; Fast DDS allows 0-232). The benchmarks
+    run one at a time, each taking its domains in order from the first."""
+    text = os.environ.get("WINDER_BENCH_DOMAINS", "221-232")
+    try:
+        low, high = (int(v) for v in text.split("-"))
+    except ValueError:
+        raise SystemExit(f"WINDER_BENCH_DOMAINS={text!r}: expected A-B, e.g. 221-232") from None
+    if not 0 <= low <= high <= 232:
+        raise SystemExit(f"WINDER_BENCH_DOMAINS={text!r}: need domains within 0-232")
+    return range(low, high + 1)
+
+
+def domain(i: int = 0) -> int:
+    """The ``i``-th domain of :func:`domains` (cycling when there are fewer)."""
+    pool = domains()
+    return pool[i % len(pool)]
+
+
 def ros_env(domain: int) -> dict[str, str]:
     """The environment of a process on ROS ``domain`` with localhost discovery
     and winder's Fast DDS profile: the cell's nodes load it themselves, and the

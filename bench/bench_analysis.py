@@ -24,7 +24,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from _common import best_of, table
+from _common import best_of, domain, table
 from bench_e2e import CHUNK_STEPS, FAST, PUBLISH_RATE, SIZES
 
 from winder.motion.job import Job
@@ -93,7 +93,7 @@ def main() -> None:
     before: dict[str, tuple[int, float]] = {}
     try:
         for n, (label, job_fields) in enumerate(sizes):
-            bag = record(label, job_fields, work / "bags", 150 + n)
+            bag = record(label, job_fields, work / "bags", domain(n))
             size = sum(f.stat().st_size for f in bag.iterdir()) / 2**20
             anchor = mcap_read(bag)
             steps = Job(**job_fields).total_steps

@@ -31,14 +31,13 @@ import time
 from pathlib import Path
 from typing import Any
 
-from _common import ros_env, table
+from _common import domain, ros_env, table
 
 from winder.procs import popen, stop_all
 
 BIN = Path(sys.executable).parent
 ROOT = Path(__file__).resolve().parents[1]
 STANDIN = ROOT / "test" / "ros2_control_standin.py"
-DOMAIN = 157
 #: the anchors: 1 kHz publishing of a prebuilt 3-value Float64MultiArray, by an rclpy timer and by a thread
 ANCHOR = """
 import sys, threading, time
@@ -138,7 +137,7 @@ def main() -> None:
     trajectory = args.interface == "trajectory"
     span = 4.0 if quick else 10.0
     work = Path(tempfile.mkdtemp(prefix="winder-bench-bridge-"))
-    env = {**ros_env(DOMAIN), "PYTHONUNBUFFERED": "1"}
+    env = {**ros_env(domain()), "PYTHONUNBUFFERED": "1"}
     log = (work / "bridge.log").open("wb")
     # a job of one layer of 60 turns (15 s at 4096 steps/s) or two: longer than warm-up + window
     layers = 1 if quick else 2

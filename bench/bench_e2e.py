@@ -30,8 +30,8 @@ largest size, (N2 - N1) / (T2 - T1), is printed as a cross-check.
 CPU seconds per step (all node processes during the job / the raw pair during
 the transfer) is the figure least disturbed by other load.
 
-Every size runs in its own ROS_DOMAIN_ID (221..232: clear of the tests'
-120..219 and ``winder run``'s 100..199) with ROS_AUTOMATIC_DISCOVERY_RANGE=
+Every size runs in its own ROS_DOMAIN_ID (``_common.domains``: 221..232
+unless WINDER_BENCH_DOMAINS says otherwise) with ROS_AUTOMATIC_DISCOVERY_RANGE=
 LOCALHOST. Peak resident memory (VmHWM) of every process is read from /proc
 while it runs, the last read within 0.1 s of its exit.
 
@@ -56,7 +56,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from _common import ros_env, table
+from _common import domain, ros_env, table
 from _dds import ChildWatch
 
 from winder.motion.job import Job
@@ -378,7 +378,7 @@ def main() -> None:
     sizes = SIZES[:3] if quick else SIZES
     repeat = 2 if quick else 3  # pairs of (raw DDS, end-to-end) per size, interleaved
     timeout = 900.0
-    cases = [Case(label, j, FAST, 221 + i) for i, (label, j) in enumerate(sizes)]
+    cases = [Case(label, j, FAST, domain(i)) for i, (label, j) in enumerate(sizes)]
     scratch = Path(tempfile.mkdtemp(prefix="winder-bench-keep-"))
     results: list[tuple[Case, dict[str, Any], dict[str, Any], list[dict[str, Any]]]] = []
     for i, case in enumerate(cases):
@@ -527,8 +527,8 @@ def main() -> None:
 
     if not quick:
         extra = [
-            Case("1e6@5e4", SIZES[2][1] | {"job_id": "bench_real"}, REAL, 229),
-            Case("1e7x1seg", job("1seg", 9766, 1, 1), FAST, 230),
+            Case("1e6@5e4", SIZES[2][1] | {"job_id": "bench_real"}, REAL, domain(8)),
+            Case("1e7x1seg", job("1seg", 9766, 1, 1), FAST, domain(9)),
         ]
         xrows = []
         for case in extra:
@@ -570,7 +570,7 @@ def main() -> None:
                 f"\nWhere the sim node's time goes: the {what} job's chunks replayed into an in-process "
                 "SimNode"
             )
-            env = ros_env(232)
+            env = ros_env(domain(11))
             cmd = [sys.executable, __file__, "--replay", str(scratch / name)]
             r = subprocess.run(cmd, env=env, capture_output=True, text=True)
             if r.returncode:  # said, never shown as an empty table

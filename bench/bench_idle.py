@@ -21,7 +21,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from _common import table
+from _common import domain, table
 
 from winder.procs import popen, stop_all
 
@@ -39,7 +39,7 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true")
     window = 4.0 if ap.parse_args().quick else 10.0
     work = Path(tempfile.mkdtemp(prefix="winder-bench-idle-"))
-    env = {**os.environ, "ROS_DOMAIN_ID": "151", "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain()), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
     cmds = {
         "sim_node": [str(BIN / "sim_node"), "--ros-args", "-p", f"bag_dir:={work}"],
         "profile_node": [str(BIN / "profile_node")],

@@ -26,6 +26,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _common import domain as common_domain
 from _common import table
 
 from winder.procs import popen
@@ -45,7 +46,7 @@ def main() -> None:
     from std_srvs.srv import Trigger
 
     work = Path(tempfile.mkdtemp(prefix="winder-bench-ops-"))
-    domain = 153
+    domain = common_domain()
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
     cmds = [
         [str(BIN / "sim_node"), "--ros-args", "-p", f"bag_dir:={work}", "-p", "real_time:=true"],

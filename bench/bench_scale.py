@@ -30,6 +30,7 @@ host, is bench/bench_e2e.py's.
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import re
@@ -41,7 +42,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from _common import ros_env, table
+from _common import domains, ros_env, table
 from _netns import Hosts
 
 from winder.procs import popen
@@ -59,9 +60,8 @@ def _option(name: str) -> str:
 CELLS = tuple(int(c) for c in _option("--cells").split(",") if c)
 #: --parts startup,cells,hosts: which parts run (default all three)
 PARTS = set(_option("--parts").split(",")) - {""} or {"startup", "cells", "hosts"}
-#: ROS domains of this benchmark: clear of the tests' (20-69, 120-219), winder run's
-#: (100-199) and bench_e2e's (221-232); Fast DDS allows 0-232
-DOMAINS = iter(range(70, 100))
+#: ROS domains of this benchmark, one after the other (_common.domains, cycling)
+DOMAINS = itertools.cycle(domains())
 FAST = ["--v-max", "1e6", "--a-max", "1e9", "--j-max", "1e12"]
 
 
