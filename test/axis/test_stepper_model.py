@@ -20,7 +20,7 @@ from decimal import Decimal, localcontext
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 from scipy import signal
 from scipy.integrate import solve_ivp
@@ -481,6 +481,8 @@ def modal_case(draw: st.DrawFn) -> tuple[StepperAxis, np.ndarray, np.ndarray, np
     _, _, K = params(**PAPER)
     J = K / wn**2
     ax = StepperAxis(PAPER["Zr"], PAPER["L"], PAPER["i_a"], J, 2 * zeta * math.sqrt(K * J))
+    # zeta just under the bound can come back from D as the bound itself (rounding)
+    assume(ax.damping_ratio < MODAL_ZETA)
     rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
     n = draw(st.integers(0, 3000))
     span = draw(st.floats(1e-3, 200.0)) / wn  # up to ~30 windows at zeta = 0.95
