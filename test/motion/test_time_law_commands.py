@@ -96,7 +96,7 @@ def test_trapezoid_stop_is_the_closed_form(D, lv, la, fs, where):
     _, v, _ = motion_state(prof, t)
     tail = stop_tail(prof, t)
     v1 = V * fs
-    assert math.isclose(tail.distance, (v * v - v1 * v1) / (2 * A), rel_tol=1e-9, abs_tol=1e-12 * D)
+    assert math.isclose(tail.distance, (v - v1) * (v + v1) / (2 * A), rel_tol=1e-9, abs_tol=1e-12 * D)
     assert math.isclose(tail.duration, (v - v1) / A, rel_tol=1e-9, abs_tol=1e-12)
 
 
