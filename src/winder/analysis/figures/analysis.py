@@ -59,7 +59,7 @@ from winder.analysis.digest import ZOOM_STEPS, Digest, turn_index
 from winder.analysis.identify import Identification
 from winder.analysis.metrics import Analysis, digest_run, paired_error
 from winder.contract.eq7 import layer_of_samples, sample_deviation, signed_path_distance
-from winder.contract.files import atomic_file, output_dir
+from winder.contract.files import OutputError, atomic_file, output_dir
 from winder.contract.run import shaper_text, where_text
 from winder.contract.stream import JobPlan
 from winder.motion.job import AXES
@@ -1012,6 +1012,8 @@ def _draw_all(figures: list[str]) -> list[Path]:
         for name in figures:
             try:
                 drawn.append(_draw(name))
+            except (OutputError, OSError):  # the output cannot be written: the caller says so
+                raise
             except Exception as exc:  # as below: the others are still drawn
                 failed.append(f"{name}.png: {type(exc).__name__}: {exc}")
         if failed:
@@ -1031,6 +1033,8 @@ def _draw_all(figures: list[str]) -> list[Path]:
             for name, future in futures.items():
                 try:
                     drawn.append(future.result())
+                except (OutputError, OSError):  # the output cannot be written: the caller says so
+                    raise
                 except Exception as exc:  # a bug in one figure: the others are still drawn, and it is named
                     failed.append(f"{name}.png: {type(exc).__name__}: {exc}")
             if failed:
