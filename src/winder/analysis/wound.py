@@ -261,8 +261,7 @@ def _marks(seg: Segment, n: int, job: Any, ortho: bool) -> FloatArray:
     if not ortho:
         mid = (k + 0.5) * spr
         return np.stack([mid, mid, mid], axis=1)
-    za = math.floor(job.crossover_at / 360.0 * spr + 0.5)
-    zc = max(1, math.floor(job.crossover / 360.0 * spr + 0.5))
+    za, zc = job.crossover_zone
     lo = np.maximum((k - 1) * spr + za + zc, 0.0)
     hi = np.maximum(k * spr + za, lo)
     return np.stack([lo, (lo + hi) / 2, hi], axis=1)

@@ -444,7 +444,7 @@ class Job:
             for shift in (0, 1):  # the crossover of each layer kind (rounded to steps)
                 places = np.floor((2 * k + shift) * q + 0.5)
                 across = max(across, int(np.max(np.diff(places))))
-            zone = max(1, math.floor(self.crossover / 360.0 * spr + 0.5))
+            zone = self.crossover_zone[1]
             if across > zone:
                 need = math.ceil(across / spr * 3600.0) / 10.0
                 raise JobError(
@@ -646,8 +646,7 @@ class Job:
             climb_to: int | None = origin + first * self.turn_place(layer + 1, k_next)
         else:
             climb_to = None
-        za = math.floor(self.crossover_at / 360.0 * spr + 0.5)
-        zc = max(1, math.floor(self.crossover / 360.0 * spr + 0.5))
+        za, zc = self.crossover_zone
         end = turns * spr + dwell
         pieces: list[tuple[int, int]] = []  # (feed, fork progress), merged below
         feed, fork = at, 0
@@ -675,6 +674,14 @@ class Job:
             else:
                 merged.append((df, dk))
         return tuple((df, sgn * dk, 0) for df, dk in merged)
+
+    @property
+    def crossover_zone(self) -> tuple[int, int]:
+        """Orthocyclic: where the crossover zone starts in each turn and how
+        long it is, in fork steps (rounded to the nearest step; at least one)."""
+        spr = self.fork_steps_per_rev
+        start = math.floor(self.crossover_at / 360.0 * spr + 0.5)
+        return start, max(1, math.floor(self.crossover / 360.0 * spr + 0.5))
 
     def segment_speed(self, segment: Segment) -> float:
         """The fraction of ``v_max`` a segment runs at: ``first_layer_speed``
