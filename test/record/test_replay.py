@@ -346,9 +346,7 @@ def flip_in_a_chunk(bag: Path, out: Path) -> Path:
     return out
 
 
-def test_damaged_bags_and_bad_options_are_refused(
-    ops_bag: Path, tmp_path: Path, bag: Any
-) -> None:
+def test_damaged_bags_and_bad_options_are_refused(ops_bag: Path, tmp_path: Path, bag: Any) -> None:
     """Nothing is played from a recording with a gap: one line, exit 2, as `winder analyze` words it."""
     lin2k = bag("lin2k")  # several chunks
     several = flip_in_a_chunk(lin2k, tmp_path / "several")
@@ -502,5 +500,26 @@ def test_a_signal_ends_the_player_paused_or_playing(
     p.send_signal(getattr(signal, sig))
     out, err = p.communicate(timeout=20)
     assert time.monotonic() - t0 < 5.0
+    assert p.returncode == 130, out + err
+    assert "interrupted" in err and "Traceback" not in err, err
+
+
+@pytest.mark.parametrize(
+    ("sig", "after"), [("SIGTERM", 0.1), ("SIGINT", 0.6), ("SIGTERM", 1.1), ("SIGINT", 1.6)]
+)
+def test_a_signal_at_any_moment_of_the_start_ends_the_player(
+    ops_bag: Path, procs: Procs, sig: str, after: float
+) -> None:
+    """A signal while the command loads, reads the bag, starts rclpy or looks
+    at the graph: 'interrupted', status 130, no traceback. rclpy's own
+    handlers once shut the context down under the player's service thread
+    (SIGSEGV, about 1 Ctrl-C in 15 on a loaded machine, caught by CI), and a
+    signal between rclpy's init and the node ended with a traceback."""
+    import signal
+
+    p = play(procs, ops_bag, "--start-paused")
+    time.sleep(after)
+    p.send_signal(getattr(signal, sig))
+    out, err = p.communicate(timeout=20)
     assert p.returncode == 130, out + err
     assert "interrupted" in err and "Traceback" not in err, err

@@ -32,8 +32,6 @@ def _number(name: str, text: str, low: float, high: float, *, low_open: bool = F
 
 def cmd_play(args: argparse.Namespace) -> int:
     """Publish a recording's topics onto the graph (see winder.ros.player)."""
-    from winder.cli.commands import Progress, UserError
-    from winder.contract.topics import check_namespace
     from winder.record.replay import plan_play
 
     rate = _number("rate", args.rate, 0.001, 1e6)
@@ -65,10 +63,37 @@ def cmd_play(args: argparse.Namespace) -> int:
         from winder.cli.view import serve_bag
 
         return serve_bag(args, plan, fox_port, rate)
+    from winder.interrupts import Interrupts
+
+    interrupts = Interrupts().install()  # rclpy's own handlers are not used: see winder.interrupts
     try:
-        from winder.ros.player import describe, run_player
-    except ImportError as exc:
-        raise UserError(f"the ROS 2 packages are not installed ({exc}); run 'make demo'") from None
+        return _play_on_graph(
+            args, plan, interrupts, rate=rate, offset=offset, delay=delay, wait=wait, given=given
+        )
+    finally:
+        interrupts.restore()
+
+
+def _play_on_graph(
+    args: argparse.Namespace,
+    plan: Any,
+    interrupts: Any,
+    *,
+    rate: float,
+    offset: float,
+    delay: float,
+    wait: float,
+    given: bool,
+) -> int:
+    """``winder play`` onto the ROS graph (not --foxglove): the signals taken by ``interrupts``."""
+    from winder.cli.commands import Progress, UserError
+    from winder.contract.topics import check_namespace
+
+    with interrupts.held():  # a Ctrl-C in the middle of importing rclpy is not "not installed"
+        try:
+            from winder.ros.player import describe, run_player
+        except ImportError as exc:
+            raise UserError(f"the ROS 2 packages are not installed ({exc}); run 'make demo'") from None
     from winder.ros.cell import cell_network
 
     domain, discovery, source = cell_network()
@@ -103,6 +128,7 @@ def cmd_play(args: argparse.Namespace) -> int:
             keys=True,
             force=args.force,
             first_reader=given,
+            interrupts=interrupts,
         )
     except CellLiveError as exc:
         raise UserError(str(exc)) from None

@@ -307,7 +307,8 @@ def _read_mcap(path: Path, sink: _Sink) -> Steps:
     size = path.stat().st_size
     if size == 0:
         raise BagError(f"{path}: empty file (0 bytes)")
-    with path.open("rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as mm:
+    with path.open("rb") as f:
+        mm = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
         data = memoryview(mm)
         released = 0
         try:
@@ -318,8 +319,11 @@ def _read_mcap(path: Path, sink: _Sink) -> Steps:
                     released = upto
                 yield pos
         finally:
-            with contextlib.suppress(BufferError):  # a walk left early may still hold a slice
+            # a walk left early (an exception, a Ctrl-C) may still hold a slice in its
+            # traceback: the mapping then goes with the slice, not here
+            with contextlib.suppress(BufferError):
                 data.release()
+                mm.close()
 
 
 def _scan(path: Path, data: memoryview, sink: _Sink) -> Steps:

@@ -29,13 +29,13 @@ from typing import Any
 
 import rclpy
 from rcl_interfaces.msg import SetParametersResult
-from rclpy._rclpy_pybind11 import RCLError
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from std_srvs.srv import Trigger
 
 from winder.contract.topics import TOPIC_JOB
 from winder.contract.trust import SIGNS
+from winder.interrupts import Interrupts
 from winder.record.replay import PlayPlan, PlayTopic
 from winder.ros.qos import profile
 
@@ -64,7 +64,6 @@ class PlayResult:
     loops: int = 0
     wall_s: float = 0.0
     unacked: list[str] = field(default_factory=list)  #: topics whose readers did not acknowledge all
-    interrupted: bool = False  #: a signal (SIGINT, SIGTERM) ended the replay
 
 
 class Player:
@@ -200,8 +199,6 @@ class Player:
         while True:
             if poll is not None:
                 poll()
-            if not self.node.context.ok():  # SIGINT or SIGTERM: rclpy shut the context down
-                self.stopped = True
             with self.cond:
                 if self.stopped:
                     return False
@@ -236,13 +233,7 @@ class Player:
             for topic, t, data in self.plan.messages():
                 if not self._wait_until_due(t, poll):
                     break
-                try:
-                    self.pubs[topic.recorded].publish(data)
-                except RCLError:
-                    if self.node.context.ok():
-                        raise
-                    self.stopped = True  # a signal shut the context down meanwhile
-                    break
+                self.pubs[topic.recorded].publish(data)
                 result.published[topic.name] += 1
                 self.position_ns = max(self.position_ns, t)
                 now = time.monotonic()
@@ -260,9 +251,7 @@ class Player:
                 if loop:
                     continue
             break
-        result.interrupted = not self.node.context.ok()
-        if not result.interrupted:
-            result.unacked = self.wait_for_acks(ACK_TIMEOUT)
+        result.unacked = self.wait_for_acks(ACK_TIMEOUT)
         result.wall_s = time.monotonic() - wall0
         return result
 
@@ -325,25 +314,27 @@ def run_player(
     keys: bool,
     force: bool = False,
     first_reader: bool = False,
+    interrupts: Interrupts | None = None,
 ) -> PlayResult:
-    """Init rclpy, play, shut down. Ctrl-C ends the replay (KeyboardInterrupt).
+    """Init rclpy, play, shut down. Ctrl-C or SIGTERM ends the replay
+    (KeyboardInterrupt), taken by ``interrupts`` (installed by the caller;
+    rclpy's own signal handlers are not used, see :mod:`winder.interrupts`).
     :class:`CellLiveError` if a live cell runs in the namespace played into (unless ``force``)."""
-    from rclpy.executors import ExternalShutdownException
+    from rclpy.signals import SignalHandlerOptions
 
     from winder.ros.dds import use_profile
 
+    own = interrupts is None
+    if interrupts is None:
+        interrupts = Interrupts().install()
     use_profile()
-    rclpy.init(args=[])
     player = None
     terminal = None
     try:
-        player = Player(plan, rate=rate, node_namespace=_namespace_of(plan), start_paused=start_paused)
-        try:
-            live = [] if force else live_cell(player.node, _namespace_of(plan))
-        except RCLError:  # Ctrl-C shut the context down while it looked at the graph
-            if rclpy.ok():
-                raise
-            raise KeyboardInterrupt from None
+        with interrupts.held():  # no signal between init and a node whose thread spins
+            rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
+            player = Player(plan, rate=rate, node_namespace=_namespace_of(plan), start_paused=start_paused)
+        live = [] if force else live_cell(player.node, _namespace_of(plan))
         if live:
             ns = _namespace_of(plan) or "/"
             raise CellLiveError(
@@ -366,18 +357,16 @@ def run_player(
         if terminal is not None and terminal.enabled:
             sys.stderr.write("keys: space pause/resume, n next message, + faster, - slower\n")
             poll = lambda: _keys(player, terminal)  # noqa: E731 - a closure over both
-        result = player.play(loop=loop, progress=progress, poll=poll)
-        if result.interrupted:
-            raise KeyboardInterrupt  # winder's main: "interrupted", exit status 130
-        return result
-    except ExternalShutdownException:
-        raise KeyboardInterrupt from None
+        return player.play(loop=loop, progress=progress, poll=poll)
     finally:
+        interrupts.ending()  # the thread stops before the node goes, the node before rclpy
         if terminal is not None:
             terminal.close()
         if player is not None:
             player.close()
         rclpy.try_shutdown()
+        if own:
+            interrupts.restore()
 
 
 class CellLiveError(Exception):

@@ -1,0 +1,75 @@
+"""winder.interrupts: SIGINT and SIGTERM as one KeyboardInterrupt in the main
+thread, deferred while held, none during the cleanup. Real signals, sent to
+this process with os.kill; no ROS."""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+
+import pytest
+
+from winder.interrupts import Interrupts
+
+
+def _deliver(sig: int) -> None:
+    """Send ``sig`` to this process and give the main thread a bytecode to run its handler on."""
+    os.kill(os.getpid(), sig)
+    for _ in range(1000):
+        time.sleep(0.0001)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_is_a_keyboard_interrupt_and_the_handlers_come_back(sig: int) -> None:
+    before = signal.getsignal(sig)
+    interrupts = Interrupts().install()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            _deliver(sig)
+    finally:
+        interrupts.restore()
+    assert signal.getsignal(sig) is before
+
+
+def test_a_signal_inside_a_held_section_raises_as_it_ends() -> None:
+    interrupts = Interrupts().install()
+    steps = []
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with interrupts.held():
+                _deliver(signal.SIGINT)
+                steps.append("after the signal")  # the section runs to its end
+                with interrupts.held():  # nested: only the outermost end raises
+                    steps.append("inner")
+                steps.append("after the inner section")
+            steps.append("never")
+    finally:
+        interrupts.restore()
+    assert steps == ["after the signal", "inner", "after the inner section"]
+
+
+def test_only_the_first_signal_raises_and_none_once_the_cleanup_began() -> None:
+    interrupts = Interrupts().install()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            _deliver(signal.SIGTERM)
+        _deliver(signal.SIGINT)  # a second Ctrl-C during the cleanup: ignored
+        fresh = Interrupts().install()
+        fresh.ending()
+        _deliver(signal.SIGTERM)  # the cleanup began: ignored
+        fresh.restore()
+    finally:
+        interrupts.restore()
+
+
+def test_a_held_section_left_by_an_error_keeps_the_error() -> None:
+    interrupts = Interrupts().install()
+    try:
+        with pytest.raises(ValueError, match="bad"):
+            with interrupts.held():
+                _deliver(signal.SIGINT)
+                raise ValueError("bad")
+        assert interrupts.pending and not interrupts.raised
+    finally:
+        interrupts.restore()
