@@ -66,10 +66,9 @@ def test_only_the_first_signal_raises_and_none_once_the_cleanup_began() -> None:
 def test_a_held_section_left_by_an_error_keeps_the_error() -> None:
     interrupts = Interrupts().install()
     try:
-        with pytest.raises(ValueError, match="bad"):
-            with interrupts.held():
-                _deliver(signal.SIGINT)
-                raise ValueError("bad")
+        with pytest.raises(ValueError, match="bad"), interrupts.held():
+            _deliver(signal.SIGINT)
+            raise ValueError("bad")
         assert interrupts.pending and not interrupts.raised
     finally:
         interrupts.restore()
