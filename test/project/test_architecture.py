@@ -1,7 +1,7 @@
 """The import rules of docs/ARCHITECTURE.md, read from the code itself.
 
-* Arrows only go down the layers: ``procs`` < ``spec`` < ``shaping`` < ``motion`` < ``axis`` <
-  ``contract`` < ``record`` < ``analysis`` < ``ros`` < ``cli``; a module may
+* Arrows only go down the layers: ``procs`` < ``interrupts`` < ``spec`` < ``shaping`` <
+  ``motion`` < ``axis`` < ``contract`` < ``record`` < ``analysis`` < ``ros`` < ``cli``; a module may
   import its own layer and those below, never one above.
 * Nothing under ``winder/`` imports a node package.
 * Only ``winder.ros`` (and the node packages) import rclpy or ROS message
@@ -22,7 +22,19 @@ import pytest
 from support.paths import ROOT
 
 SRC = ROOT / "src" / "winder"
-LAYERS = ("procs", "spec", "shaping", "motion", "axis", "contract", "record", "analysis", "ros", "cli")
+LAYERS = (
+    "procs",
+    "interrupts",
+    "spec",
+    "shaping",
+    "motion",
+    "axis",
+    "contract",
+    "record",
+    "analysis",
+    "ros",
+    "cli",
+)
 NODE_PACKAGES = ("winder_interp", "winder_profile", "winder_sim")
 ROS_PACKAGES = (
     "rclpy",
