@@ -71,7 +71,7 @@ from winder.ros.chunks import STEPS_CDR, TIMED_CDR
 from winder.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from winder.ros.managed import ManagedNode
 from winder.ros.peers import Peers, Solo
-from winder.ros.qos import QOS_CLOCK, QOS_EVENTS, QOS_LATCHED, QOS_STREAM
+from winder.ros.qos import QOS_CLOCK, QOS_EVENTS, QOS_LATCHED, QOS_LATCHED_READER, QOS_STREAM
 from winder.ros.ready import Announcer
 from winder.ros.sender import attributed, waiting
 from winder.ros.settings import Settings
@@ -103,7 +103,7 @@ class ProfileNode(ManagedNode):
         self.pub_config = self.create_publisher(String, TOPIC_PROFILE_CONFIG, QOS_LATCHED)
         self.pub_path = self.create_publisher(JointTrajectory, TOPIC_PATH, QOS_LATCHED)
         self.diag = Diagnostics(self, "winder_profile")
-        self.ready = Announcer(self, "profile")  # the start handshake (winder/ready)
+        self.ready = Announcer(self, "profile", recheck=self.announce)  # the start handshake (winder/ready)
         # messages are acted on only when the cell's node owning the topic sent them
         self.peers = Peers(self)
         self.solo = Solo(self, "profile", self.peers, self.leave)  # one profile node per cell
@@ -111,7 +111,7 @@ class ProfileNode(ManagedNode):
         self.job_waiting: bytes | None = None  # a job description that came before the node settled
         self.diag.foreign = self.peers.intruders.summary  # its statuses name what it refused
         self.peers.on_new = lambda: self.report()  # at once, not at the next second
-        attributed(self, String, TOPIC_JOB, self.on_job, QOS_LATCHED)
+        attributed(self, String, TOPIC_JOB, self.on_job, QOS_LATCHED_READER)
         self.sub_steps: Subscription | None = None  # created once the timed stream has a reader
         # connect() and announce() follow the streams' matching as it happens;
         # the 1 Hz report repeats both (and is the only timer)
@@ -120,7 +120,7 @@ class ProfileNode(ManagedNode):
         self.create_service(Trigger, "~/pause", lambda _q, r: self.reply(r, *self.command("pause")))
         self.create_service(Trigger, "~/abort", lambda _q, r: self.reply(r, *self.command("abort")))
         self.pub_control = self.create_publisher(String, TOPIC_CONTROL, QOS_EVENTS)
-        attributed(self, String, TOPIC_SIM_CONFIG, self.on_sim_config_raw, QOS_LATCHED)
+        attributed(self, String, TOPIC_SIM_CONFIG, self.on_sim_config_raw, QOS_LATCHED_READER)
         self.sim_config_topic = self.resolve_topic_name(TOPIC_SIM_CONFIG)
         self.sub_clock: Subscription | None = None  # only while a real-time run is timed
         self.last_sim_config: String | None = None

@@ -60,6 +60,8 @@ NODE_ROLES = {"interp": "interp", "profile": "profile", "sim": "consumer"}
 START_ORDER = ("sim", "profile", "interp")
 #: Seconds before an unanswered start request is asked again.
 START_RETRY = 5.0
+#: s between two start requests the cell answered 'not ready' (its nodes say ready within ~0.05 s)
+NOT_READY_RETRY = 0.02
 #: s a cell runner listens to /diagnostics before its first start call: every
 #: node reports once a second, so another cell's in the same namespace is heard
 OCCUPIED_WAIT = 1.2
@@ -458,6 +460,8 @@ class CellWatch:
         if not all(r.done for r in self.remote):
             return None
         req = self._request
+        if req is None and time.monotonic() - self._asked < NOT_READY_RETRY:
+            return None  # the last reply said "not ready" a moment ago
         if req is None or (not req.done() and time.monotonic() - self._asked > START_RETRY):
             # a DDS service reply can be lost while its topic is still matching:
             # ask again (a job already started is no error)

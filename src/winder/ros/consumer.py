@@ -88,7 +88,7 @@ from winder.ros.chunks import TIMED_CDR
 from winder.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from winder.ros.managed import ManagedNode
 from winder.ros.peers import Peers, Solo
-from winder.ros.qos import QOS_DIAGNOSTICS, QOS_EVENTS, QOS_LATCHED, QOS_STATE, QOS_STREAM
+from winder.ros.qos import QOS_DIAGNOSTICS, QOS_EVENTS, QOS_LATCHED, QOS_LATCHED_READER, QOS_STATE, QOS_STREAM
 from winder.ros.ready import Announcer
 from winder.ros.sender import attributed, waiting
 from winder.ros.settings import Settings
@@ -147,7 +147,7 @@ class StepConsumer(ManagedNode):
         self.pub_config = (
             self.create_publisher(String, TOPIC_SIM_CONFIG, QOS_LATCHED) if self.configures else None
         )
-        self.ready = Announcer(self, "consumer")
+        self.ready = Announcer(self, "consumer", recheck=self.announce)
         # a job description starts a run now: volatile, so a consumer that
         # (re)starts never takes the last run's latched description for a new
         # run; "ready" waits for this subscription's match too (announce())
@@ -162,11 +162,15 @@ class StepConsumer(ManagedNode):
             String,
             TOPIC_JOB,
             self.on_job,
-            QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE),
+            # volatile: a description latched before this node came is not a run of its own;
+            # deep: see QOS_LATCHED_READER
+            QoSProfile(
+                depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE
+            ),
             event_callbacks=SubscriptionEventCallbacks(matched=lambda _info: self.announce()),
         )
-        attributed(self, JointTrajectory, TOPIC_PATH, self.on_path, QOS_LATCHED)
-        attributed(self, String, TOPIC_PROFILE_CONFIG, self.on_profile_config, QOS_LATCHED)
+        attributed(self, JointTrajectory, TOPIC_PATH, self.on_path, QOS_LATCHED_READER)
+        attributed(self, String, TOPIC_PROFILE_CONFIG, self.on_profile_config, QOS_LATCHED_READER)
         self.sub_control = attributed(self, String, TOPIC_CONTROL, self.on_control, QOS_EVENTS)
         self.sub_times = attributed(
             self,

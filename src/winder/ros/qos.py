@@ -7,7 +7,16 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from winder.contract import qos as table
 
-__all__ = ["QOS_CLOCK", "QOS_DIAGNOSTICS", "QOS_EVENTS", "QOS_LATCHED", "QOS_STATE", "QOS_STREAM", "profile"]
+__all__ = [
+    "QOS_CLOCK",
+    "QOS_DIAGNOSTICS",
+    "QOS_EVENTS",
+    "QOS_LATCHED",
+    "QOS_LATCHED_READER",
+    "QOS_STATE",
+    "QOS_STREAM",
+    "profile",
+]
 
 
 def profile(q: table.Qos) -> QoSProfile:
@@ -26,3 +35,15 @@ QOS_STATE = profile(table.STATE)
 QOS_CLOCK = profile(table.CLOCK)
 QOS_DIAGNOSTICS = profile(table.DIAGNOSTICS)
 QOS_EVENTS = profile(table.EVENTS)
+
+#: A cell node's reader of a latched topic whose messages it checks by sender
+#: (winder.ros.peers): latched as the writers are, but deeper. Keep-last counts
+#: the samples of every writer together, so at depth 1 a stranger publishing
+#: every 50 ms replaced the cell's own job description in the reader's queue
+#: before the node took it, and the run never started (test_only_the_cell_acts).
+QOS_LATCHED_READER = QoSProfile(
+    depth=10,
+    reliability=QOS_LATCHED.reliability,
+    durability=QOS_LATCHED.durability,
+    history=HistoryPolicy.KEEP_LAST,
+)

@@ -24,24 +24,43 @@ from winder.contract.topics import READY_ROLES, READY_STATES, TOPIC_READY
 from winder.ros.peers import Peers
 from winder.ros.qos import QOS_LATCHED
 from winder.ros.sender import attributed
+from winder.ros.timers import steady_timer
+
+#: s between two looks at the graph while a node says "waiting" (see :class:`Announcer`)
+RECHECK = 0.05
 
 
 class Announcer:
     """Publishes one node's readiness: each change at once (latched), and
     again on :meth:`repeat` (the node's 1 Hz report), so that a listener that
-    forgot it (see :class:`Readiness`) hears it again."""
+    forgot it (see :class:`Readiness`) hears it again.
 
-    def __init__(self, node: Node, role: str) -> None:
+    ``recheck`` (the node's own announce) is called every :data:`RECHECK` s
+    while the node says "waiting": what it waits for is on the graph (its
+    publishers matched, the cell's other nodes discovered), which tells no
+    one when it changes; looked at only with the 1 Hz report, a cell's start
+    waited up to a second, and a node started 1.2 s before it said ready."""
+
+    def __init__(self, node: Node, role: str, recheck: Callable[[], None] | None = None) -> None:
         assert role in READY_ROLES
         self.role = role
         self.pub = node.create_publisher(KeyValue, TOPIC_READY, QOS_LATCHED)
         self.state = ""
+        self.timer = None
+        if recheck is not None:
+            self.timer = steady_timer(node, RECHECK, recheck)
+            self.timer.cancel()  # runs while "waiting"
 
     def announce(self, state: str) -> None:
         assert state in READY_STATES
         if state != self.state:
             self.state = state
             self.pub.publish(KeyValue(key=self.role, value=state))
+        if self.timer is not None and (state == "waiting") == self.timer.is_canceled():
+            if state == "waiting":
+                self.timer.reset()
+            else:
+                self.timer.cancel()
 
     def repeat(self) -> None:
         if self.state:
