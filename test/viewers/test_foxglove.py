@@ -302,6 +302,33 @@ def test_run_foxglove_serves_the_live_cell(procs: Procs, ros: Any, tmp_path: Pat
     assert "Traceback" not in procs.log(run)
 
 
+@pytest.mark.parametrize(
+    ("sig", "after"),
+    [("SIGTERM", 0.2), ("SIGINT", 0.8), ("SIGTERM", 1.4), ("SIGINT", 2.0), ("SIGINT", 3.0)],
+)
+def test_a_signal_at_any_moment_ends_run_foxglove(
+    procs: Procs, tmp_path: Path, sig: str, after: float
+) -> None:
+    """``winder run --foxglove``: a signal while it loads, starts the server,
+    rclpy, the view's thread or the nodes, or while the job runs: 'interrupted',
+    status 130, no traceback, every bag closed. With rclpy's own handlers,
+    which shut the context down from their thread under the view's, a signal
+    in the middle of creating the view's subscriptions ended with a
+    traceback (2 of 40 under load)."""
+    import signal
+
+    bags = tmp_path / "bags"
+    run = winder(procs, "run", *LONG, "--bag-dir", str(bags), "--foxglove", "0")
+    time.sleep(after)
+    run.send_signal(getattr(signal, sig))
+    run.wait(timeout=30)
+    log = procs.log(run)
+    assert run.returncode == 130, log
+    assert "interrupted" in log and "Traceback" not in log, log
+    for bag in bags.glob("*/"):
+        assert (bag / "metadata.yaml").is_file(), sorted(bag.iterdir())
+
+
 @pytest.mark.parametrize("ns", ["", "/c1"], ids=["root", "namespace"])
 def test_view_serves_a_cell_started_without_it(procs: Procs, ros: Any, tmp_path: Path, ns: str) -> None:
     """``winder view`` beside a running cell: the latched job, path and state

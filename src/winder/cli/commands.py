@@ -269,74 +269,86 @@ def cmd_run(args: argparse.Namespace) -> int:
             "nothing was started"
         )
         return EXIT_OK
-    try:
-        from winder.ros.cell import cell_network, run_cell
-        from winder.ros.dds import DISCOVERY_SERVER_KEY
-    except ImportError as exc:
-        raise UserError(f"the ROS 2 node packages are not installed ({exc}); run 'make demo'") from None
-    bag_dir = bag_directory(sim["bag_dir"]) if "sim" not in external else Path(sim["bag_dir"])
-    sim["bag_dir"] = str(bag_dir)
-    params = {"interp": {**job.to_dict(), **extra}, "profile": {**profile, **operation}, "sim": sim}
-    # a node that runs elsewhere is told only what was given (job file, options), through
-    # its parameter services before the job starts; it keeps its own values for the rest
-    remote_specs = {
-        "sim": (SIM_SPECS, given["consumer"]),
-        "profile": (PROFILE_SPECS | OPERATION_SPECS, given["profile_node"]),
-    }
-    for name in external:
-        params[name] = given_values(args, *remote_specs[name])
-    shaper = shaper_text(profile)
-    ramp = (
-        "the external profile node's ramp"
-        if "profile" in external
-        else f"{profile['profile']} profile" + (f", {shaper}" if shaper else "")
-    )
-    model = "the external step consumer" if "sim" in external else f"{sim['model']} motor model"
-    print(f"winder: job {job.job_id}, {job.total_steps} steps, {ramp}, {model}")
-    if digest:
-        print(f"  job file           {args.job_file}  (sha256 {digest})")
-    if external:
-        from winder.ros.dds import describe_profile
+    from winder.interrupts import Interrupts
 
-        names = ", ".join(EXTERNAL[n] for n in sorted(external))
-        print(f"  not started here   {names} (--external {','.join(sorted(external))})")
-        for name in sorted(external):
-            if params[name]:
-                told = ", ".join(f"{k}={v}" for k, v in params[name].items())
-                label = {"sim": "external consumer", "profile": "external profile"}[name]
-                print(f"  {label:<18} {told}  (set through its parameter services before the job)")
-        print(f"  DDS profile        {describe_profile()}")
-    if sim["record"] and "sim" not in external:
-        probe = next(p for p in (bag_dir, *bag_dir.parents) if p.exists())
-        free = shutil.disk_usage(probe).free
-        room = f"{free / 2**30:.1f} GiB" if free >= 2**30 else f"{free / 2**20:.1f} MiB"
-        print(f"  recording into     {bag_dir}  ({room} free)")
-    domain, discovery, source = cell_network()
-    server = os.environ.get(DISCOVERY_SERVER_KEY, "").strip()
-    if server:  # Fast DDS makes every participant a client of the server(s) named there
-        discovery = f"by the discovery server {server} ({DISCOVERY_SERVER_KEY})"
-    print(f"  ROS domain         {domain} ({source}), discovery {discovery}")
-    fox_server, view = None, None
-    if fox_port is not None:  # listening before the cell starts: a port in use starts nothing
-        fox_server, view = start_live_view(args, fox_port, args.namespace)
-    bar = Progress(1.0, "winding")
-    t0 = time.monotonic()
+    interrupts = Interrupts().install()  # rclpy's own handlers are not used: see winder.interrupts
     try:
-        result = run_cell(
-            params,
-            namespace=args.namespace,
-            domain=domain,
-            timeout=cell["timeout"],
-            start_timeout=cell["start_timeout"],
-            external=external,
-            progress=lambda frac, sim_t: bar.update(frac, f"sim {float(sim_t):7.2f} s"),
-            view=view,
+        with interrupts.held():  # a Ctrl-C in the middle of importing rclpy is not "not installed"
+            try:
+                from winder.ros.cell import cell_network, run_cell
+                from winder.ros.dds import DISCOVERY_SERVER_KEY
+            except ImportError as exc:
+                raise UserError(
+                    f"the ROS 2 node packages are not installed ({exc}); run 'make demo'"
+                ) from None
+        bag_dir = bag_directory(sim["bag_dir"]) if "sim" not in external else Path(sim["bag_dir"])
+        sim["bag_dir"] = str(bag_dir)
+        params = {"interp": {**job.to_dict(), **extra}, "profile": {**profile, **operation}, "sim": sim}
+        # a node that runs elsewhere is told only what was given (job file, options), through
+        # its parameter services before the job starts; it keeps its own values for the rest
+        remote_specs = {
+            "sim": (SIM_SPECS, given["consumer"]),
+            "profile": (PROFILE_SPECS | OPERATION_SPECS, given["profile_node"]),
+        }
+        for name in external:
+            params[name] = given_values(args, *remote_specs[name])
+        shaper = shaper_text(profile)
+        ramp = (
+            "the external profile node's ramp"
+            if "profile" in external
+            else f"{profile['profile']} profile" + (f", {shaper}" if shaper else "")
         )
+        model = "the external step consumer" if "sim" in external else f"{sim['model']} motor model"
+        print(f"winder: job {job.job_id}, {job.total_steps} steps, {ramp}, {model}")
+        if digest:
+            print(f"  job file           {args.job_file}  (sha256 {digest})")
+        if external:
+            from winder.ros.dds import describe_profile
+
+            names = ", ".join(EXTERNAL[n] for n in sorted(external))
+            print(f"  not started here   {names} (--external {','.join(sorted(external))})")
+            for name in sorted(external):
+                if params[name]:
+                    told = ", ".join(f"{k}={v}" for k, v in params[name].items())
+                    label = {"sim": "external consumer", "profile": "external profile"}[name]
+                    print(f"  {label:<18} {told}  (set through its parameter services before the job)")
+            print(f"  DDS profile        {describe_profile()}")
+        if sim["record"] and "sim" not in external:
+            probe = next(p for p in (bag_dir, *bag_dir.parents) if p.exists())
+            free = shutil.disk_usage(probe).free
+            room = f"{free / 2**30:.1f} GiB" if free >= 2**30 else f"{free / 2**20:.1f} MiB"
+            print(f"  recording into     {bag_dir}  ({room} free)")
+        domain, discovery, source = cell_network()
+        server = os.environ.get(DISCOVERY_SERVER_KEY, "").strip()
+        if server:  # Fast DDS makes every participant a client of the server(s) named there
+            discovery = f"by the discovery server {server} ({DISCOVERY_SERVER_KEY})"
+        print(f"  ROS domain         {domain} ({source}), discovery {discovery}")
+        fox_server, view = None, None
+        try:
+            if fox_port is not None:  # listening before the cell starts: a port in use starts nothing
+                # foxglove's server calls Python from Rust, where a KeyboardInterrupt can be lost
+                with interrupts.held():
+                    fox_server, view = start_live_view(args, fox_port, args.namespace)
+            bar = Progress(1.0, "winding")
+            t0 = time.monotonic()
+            result = run_cell(
+                params,
+                namespace=args.namespace,
+                domain=domain,
+                timeout=cell["timeout"],
+                start_timeout=cell["start_timeout"],
+                external=external,
+                progress=lambda frac, sim_t: bar.update(frac, f"sim {float(sim_t):7.2f} s"),
+                view=view,
+                interrupts=interrupts,
+            )
+        finally:
+            if fox_server is not None:
+                fox_server.stop()
+        bar.close()
+        return report_run(result, time.monotonic() - t0, stops=bool(stops))
     finally:
-        if fox_server is not None:
-            fox_server.stop()
-    bar.close()
-    return report_run(result, time.monotonic() - t0, stops=bool(stops))
+        interrupts.restore()
 
 
 def cmd_check(args: argparse.Namespace) -> int:

@@ -100,6 +100,12 @@ def start_server(
             server_listener=listener,
             playback_time_range=playback_range,
         )
+    except SystemError as exc:
+        # a Ctrl-C (or SIGTERM) while the server starts, raised in the Python code
+        # it calls (its logging) and reported as a SystemError: the command is interrupted
+        if isinstance(exc.__cause__, KeyboardInterrupt):
+            raise KeyboardInterrupt from None
+        raise
     except (RuntimeError, OverflowError) as exc:
         why = str(exc).removeprefix("FoxgloveError: ")
         raise SpecError(

@@ -11,6 +11,7 @@ start) and :func:`run_cell`, which strings them together.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import random
 import re
@@ -30,7 +31,6 @@ from typing import Any
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.srv import SetParametersAtomically
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -41,6 +41,7 @@ from std_srvs.srv import Trigger
 from winder.contract.jobfile import ros_text
 from winder.contract.run import JobReport
 from winder.contract.topics import ROLE_KEY, ROLES, TASK_JOB, TOPIC_DIAGNOSTICS, has_role, in_namespace
+from winder.interrupts import Interrupts
 from winder.procs import Children
 from winder.ros.dds import PROFILE_KEYS, use_profile
 from winder.ros.diagnostics import ERROR
@@ -546,9 +547,13 @@ def _wait_for_job(
     timeouts: tuple[float, float],
     progress: Callable[[float, str], None] | None,
     keys: Keys | None = None,
+    interrupts: Interrupts | None = None,
 ) -> str:
     """Spin until the consumer's final report; the reason if it never came
-    (the job not started within ``timeouts[0]`` s, or not done within ``timeouts[1]``)."""
+    (the job not started within ``timeouts[0]`` s, or not done within ``timeouts[1]``).
+    A signal taken by ``interrupts`` ends it between two rounds, never inside
+    one (a KeyboardInterrupt raised in Python code that rclpy's C++ runs can be lost)."""
+    held = interrupts.held if interrupts is not None else contextlib.nullcontext
     start_timeout, timeout = timeouts
     executor = SenderExecutor()  # the watch takes /diagnostics with each sender (winder.ros.sender)
     executor.add_node(node)
@@ -556,27 +561,28 @@ def _wait_for_job(
     waited = min(start_timeout, timeout)
     t_start, t_end = t0 + waited, t0 + timeout
     while watch.summary is None:
-        refused = watch.ask_to_start()
-        if refused:
-            watch.refused = refused
-            return refused
-        executor.spin_once(timeout_sec=0.1)
-        if keys is not None:
-            keys.poll()
-        if progress is not None:
-            progress(watch.progress, watch.sim_time)
-        left = procs.left_cell()
-        if left:  # a node of ours found another cell's node in its part and did not join
-            watch.occupied = watch.occupied or left
-            return f"job not started: {watch.occupied}"
-        dead = procs.dead()
-        if dead:
-            return dead
-        now = time.monotonic()
-        if not watch.accepted and now > t_start:
-            return f"the job did not start within {waited:g} s: waiting for {watch.waiting_for()}"
-        if now > t_end:
-            return f"job did not finish within {timeout:g} s"
+        with held():
+            refused = watch.ask_to_start()
+            if refused:
+                watch.refused = refused
+                return refused
+            executor.spin_once(timeout_sec=0.1)
+            if keys is not None:
+                keys.poll()
+            if progress is not None:
+                progress(watch.progress, watch.sim_time)
+            left = procs.left_cell()
+            if left:  # a node of ours found another cell's node in its part and did not join
+                watch.occupied = watch.occupied or left
+                return f"job not started: {watch.occupied}"
+            dead = procs.dead()
+            if dead:
+                return dead
+            now = time.monotonic()
+            if not watch.accepted and now > t_start:
+                return f"the job did not start within {waited:g} s: waiting for {watch.waiting_for()}"
+            if now > t_end:
+                return f"job did not finish within {timeout:g} s"
     return ""
 
 
@@ -610,6 +616,7 @@ def run_cell(
     external: frozenset[str] = frozenset(),
     start_timeout: float = 60.0,
     view: Any = None,
+    interrupts: Interrupts | None = None,
 ) -> CellResult:
     """Start the three nodes with ``params[node]`` parameters (but those in
     ``external``, which run elsewhere on the graph: their ``params`` are set
@@ -619,30 +626,53 @@ def run_cell(
     ``timeout`` s, or ``start_timeout`` s if the job never started. The
     nodes' output goes to ``result.log_dir``, removed after a clean run.
     ``view``: a :class:`winder.ros.view.LiveView` (``--foxglove``), listening
-    on the graph from before the nodes start until they are stopped."""
+    on the graph from before the nodes start until they are stopped.
+
+    Ctrl-C or SIGTERM ends it (KeyboardInterrupt, the nodes stopped), taken
+    by ``interrupts`` (installed by the caller, else here): rclpy's own
+    handlers are not used (:mod:`winder.interrupts`). They shut the context
+    down from a thread of their own, under the view's spinning thread, in
+    the middle of creating the node or the view's subscriptions (a
+    traceback), and a Ctrl-C while the cell started was lost at times: the
+    job ran to its end (10 of 40 signals under load, ``--foxglove``)."""
+    from rclpy.signals import SignalHandlerOptions
+
+    own = interrupts is None
+    if interrupts is None:
+        interrupts = Interrupts().install()
     log_dir = Path(tempfile.mkdtemp(prefix="winder-cell-"))
-    with cell_environment(domain) as env:
-        procs = NodeProcesses(env, log_dir)
-        rclpy.init(args=[])
-        node = rclpy.create_node("winder_cell", namespace=namespace or "/")
-        keys = Keys(node, namespace)
-        try:
-            if view is not None:
-                view.attach()
-                view.start()
-            remote = {NODE_ROLES[key]: dict(params.get(key, {})) for key in external}
-            own = lambda: {str(p.pid) for p in procs.procs.values()}  # noqa: E731
-            watch = CellWatch(node, namespace, remote, own=own)
-            watch.started = {NODES[key] for key in NODE_ROLES if key not in external}
-            _spawn(procs, params, namespace, external)
-            failure = _wait_for_job(node, watch, procs, (start_timeout, timeout), progress, keys)
-        except ExternalShutdownException:
-            raise KeyboardInterrupt from None  # Ctrl-C: the caller reports it
-        finally:
-            keys.close()
-            procs.stop()
-            if view is not None:
-                view.close()
-            node.destroy_node()
-            rclpy.try_shutdown()
+    try:
+        with cell_environment(domain) as env:
+            procs = NodeProcesses(env, log_dir)
+            node: Node | None = None
+            keys: Keys | None = None
+            try:
+                with interrupts.held():  # no signal between init and the nodes, the view's thread spinning
+                    rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
+                    node = rclpy.create_node("winder_cell", namespace=namespace or "/")
+                    keys = Keys(node, namespace)
+                    if view is not None:
+                        view.attach()
+                        view.start()
+                    remote = {NODE_ROLES[key]: dict(params.get(key, {})) for key in external}
+                    own_pids = lambda: {str(p.pid) for p in procs.procs.values()}  # noqa: E731
+                    watch = CellWatch(node, namespace, remote, own=own_pids)
+                    watch.started = {NODES[key] for key in NODE_ROLES if key not in external}
+                    _spawn(procs, params, namespace, external)  # each child recorded, to be stopped
+                failure = _wait_for_job(
+                    node, watch, procs, (start_timeout, timeout), progress, keys, interrupts
+                )
+            finally:
+                interrupts.ending()  # the view's thread stops before its node goes, the nodes before rclpy
+                if keys is not None:
+                    keys.close()
+                procs.stop()
+                if view is not None:
+                    view.close()
+                if node is not None:
+                    node.destroy_node()
+                rclpy.try_shutdown()
+    finally:
+        if own:
+            interrupts.restore()
     return _result(watch, failure, log_dir)
