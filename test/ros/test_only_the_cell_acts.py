@@ -110,7 +110,10 @@ def test_forged_messages_change_nothing(tmp_path: Path, procs: Procs, forge: str
     intruder = procs.launch(
         [sys.executable, str(INTRUDER), "--forge", forge, "--ros-args", "-r", "__ns:=/c1"], "intruder"
     )
-    r = winder_run(procs, tmp_path / "attacked", "--namespace", "/c1", *JOB, *EVENTS)
+    # paced to the wall clock (77 s simulated in ~5 s): on a loaded machine the
+    # intruder, started just before, must still find the run going to forge into it
+    paced = ["--real-time", "--real-time-factor", "15"]
+    r = winder_run(procs, tmp_path / "attacked", "--namespace", "/c1", *JOB, *EVENTS, *paced)
     assert intruder.poll() is None, "the intruder stopped before the run"
     assert r.returncode == 0, r.stdout + r.stderr
     assert "  state              done" in r.stdout, r.stdout
@@ -192,7 +195,10 @@ def test_play_into_a_live_cell_is_refused_and_forced_changes_nothing(tmp_path: P
         )
 
     try:
-        time.sleep(3.0)
+        # the live cell is up once its run records (a fixed wait was too short on a loaded machine)
+        deadline = time.monotonic() + 60
+        while not list((tmp_path / "live").glob("*/*.mcap")) and time.monotonic() < deadline:
+            time.sleep(0.1)
         refused = play()
         forced = play("--force", "--rate", "20")
         out, err = finish(live, tmp_path / "live")
