@@ -8,11 +8,14 @@ paused ``winder play`` on a loaded machine), and a signal between
 ``rclpy.init`` and the node's creation, or in the middle of importing rclpy,
 ended the command with a traceback or a false "not installed". So such a
 command initialises rclpy without its handlers and takes the signals here:
-the first SIGINT or SIGTERM raises :class:`KeyboardInterrupt` in the main
-thread (reported "interrupted", status 130), at once, or, inside
-:meth:`Interrupts.held`, as the held section ends; later signals are
-ignored, so that the cleanup (stop the ROS thread, then destroy the node,
-then shut rclpy down, in that order) runs to its end.
+a SIGINT or SIGTERM raises :class:`KeyboardInterrupt` in the main thread
+(reported "interrupted", status 130), at once, or, inside
+:meth:`Interrupts.held`, as the held section ends; once the cleanup has
+begun (:meth:`Interrupts.ending`) signals are ignored, so that it (stop the
+ROS thread, then destroy the node, then shut rclpy down, in that order)
+runs to its end. Before that every signal raises: should code that runs
+Python callbacks swallow one KeyboardInterrupt, the next Ctrl-C still ends
+the command.
 
 Plain :mod:`signal`, no ROS.
 """
@@ -32,13 +35,14 @@ SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
 class Interrupts:
-    """SIGINT and SIGTERM as one :class:`KeyboardInterrupt` in the main thread,
-    deferred while held; :meth:`install` from the main thread."""
+    """SIGINT and SIGTERM as :class:`KeyboardInterrupt` in the main thread,
+    deferred while held, ignored once the cleanup began; :meth:`install`
+    from the main thread."""
 
     def __init__(self) -> None:
         self.depth = 0  # nesting of held()
         self.pending = False  # a signal came while held
-        self.raised = False  # the one KeyboardInterrupt was raised (or cleanup began)
+        self.closing = False  # the cleanup began: signals are ignored
         self.previous: dict[int, Any] = {}
 
     def install(self) -> Interrupts:
@@ -54,12 +58,11 @@ class Interrupts:
 
     def _on_signal(self, signum: int, frame: FrameType | None) -> None:
         del signum, frame
-        if self.raised:
+        if self.closing:
             return
         if self.depth:
             self.pending = True
             return
-        self.raised = True
         raise KeyboardInterrupt
 
     @contextlib.contextmanager
@@ -72,10 +75,10 @@ class Interrupts:
             yield
         finally:
             self.depth -= 1
-        if not self.depth and self.pending and not self.raised:
-            self.raised = True
+        if not self.depth and self.pending and not self.closing:
+            self.pending = False
             raise KeyboardInterrupt
 
     def ending(self) -> None:
         """The cleanup begins: no signal interrupts it any more."""
-        self.raised = True
+        self.closing = True
