@@ -296,9 +296,15 @@ class BridgeNode(StepConsumer):
         return pacer is not None and (pacer.held > 0 or pacer.due > 0)
 
     def pending(self) -> bool:
-        """Waiting to arm, or settling."""
+        """Waiting to arm, settling, or an operator state booked ahead of the
+        command thread's time: a pause's rest comes after its last step, and
+        with no rows left to pace the pump stopped before it was reached (the
+        run stayed 'pausing', test_pause_and_resume[bridge_node] on a loaded
+        machine)."""
         if self.plan is None or self.fault_text:
             return False
+        if not self.finishing and self.ledger is not None and self.ledger.transitions_ahead:
+            return True
         return not self.armed or (self.settle_until is not None and self.t_tick < self.settle_until)
 
     def work(self) -> None:

@@ -332,6 +332,13 @@ class RunLedger:
         return self.due(max(ahead)) if ahead else []
 
     @property
+    def transitions_ahead(self) -> bool:
+        """Operator states booked for a time execution has not reached yet
+        (the rest of a pause or an abort): a backend that executes on the
+        wall clock keeps telling its time (:meth:`due`) until they are reached."""
+        return bool(self._pending)
+
+    @property
     def at_stop(self) -> bool:
         """At a programmed stop (announced, not left)."""
         return any(p.phase is StopPhase.PAUSED for p in self.stops)
