@@ -7,12 +7,13 @@ Every error ends as one line on stderr and the exit status of its class
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import os
 import shutil
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -41,6 +42,7 @@ from winder.contract.params import (
 )
 from winder.contract.run import JobReport, commands_text, shaper_text, stops_text
 from winder.contract.topics import check_namespace
+from winder.interrupts import Interrupts
 from winder.motion.interp import dda, deviation_stats, interpolate, min_deviation, point_by_point
 from winder.motion.job import FIELD_SPECS, Job
 from winder.spec import Spec, SpecError
@@ -68,6 +70,19 @@ CELL_SPECS: dict[str, Spec] = {
 
 class UserError(Exception):
     """An error the user can fix; printed as one line, exit status EXIT_BAD_INPUT."""
+
+
+@contextlib.contextmanager
+def ros_imports(interrupts: Interrupts | None = None) -> Iterator[None]:
+    """Around a command's imports of :mod:`winder.ros` (rclpy, the message
+    packages): their ImportError is the one-line "not installed" error; with
+    ``interrupts``, a Ctrl-C while they load is taken as they end, not
+    turned into that error (rclpy's loader reports any failure as an ImportError)."""
+    with interrupts.held() if interrupts is not None else contextlib.nullcontext():
+        try:
+            yield
+        except ImportError as exc:
+            raise UserError(f"the ROS 2 packages are not installed ({exc}); run 'make demo'") from None
 
 
 def add_spec_arguments(
@@ -269,18 +284,11 @@ def cmd_run(args: argparse.Namespace) -> int:
             "nothing was started"
         )
         return EXIT_OK
-    from winder.interrupts import Interrupts
-
     interrupts = Interrupts().install()  # rclpy's own handlers are not used: see winder.interrupts
     try:
-        with interrupts.held():  # a Ctrl-C in the middle of importing rclpy is not "not installed"
-            try:
-                from winder.ros.cell import cell_network, run_cell
-                from winder.ros.dds import DISCOVERY_SERVER_KEY
-            except ImportError as exc:
-                raise UserError(
-                    f"the ROS 2 node packages are not installed ({exc}); run 'make demo'"
-                ) from None
+        with ros_imports(interrupts):
+            from winder.ros.cell import cell_network, run_cell
+            from winder.ros.dds import DISCOVERY_SERVER_KEY
         bag_dir = bag_directory(sim["bag_dir"]) if "sim" not in external else Path(sim["bag_dir"])
         sim["bag_dir"] = str(bag_dir)
         params = {"interp": {**job.to_dict(), **extra}, "profile": {**profile, **operation}, "sim": sim}

@@ -40,12 +40,10 @@ def _namespace(args: argparse.Namespace) -> str:
 
 
 def _ros() -> Any:
-    from winder.cli.commands import UserError
+    from winder.cli.commands import ros_imports
 
-    try:
+    with ros_imports():
         from winder.ros import ctl
-    except ImportError as exc:
-        raise UserError(f"the ROS 2 packages are not installed ({exc}); run 'make demo'") from None
     return ctl
 
 

@@ -86,14 +86,11 @@ def _play_on_graph(
     given: bool,
 ) -> int:
     """``winder play`` onto the ROS graph (not --foxglove): the signals taken by ``interrupts``."""
-    from winder.cli.commands import Progress, UserError
+    from winder.cli.commands import Progress, UserError, ros_imports
     from winder.contract.topics import check_namespace
 
-    with interrupts.held():  # a Ctrl-C in the middle of importing rclpy is not "not installed"
-        try:
-            from winder.ros.player import describe, run_player
-        except ImportError as exc:
-            raise UserError(f"the ROS 2 packages are not installed ({exc}); run 'make demo'") from None
+    with ros_imports(interrupts):
+        from winder.ros.player import describe, run_player
     from winder.ros.cell import cell_network
 
     domain, discovery, source = cell_network()
@@ -171,7 +168,7 @@ def cmd_resim(args: argparse.Namespace) -> int:
     import time
     from pathlib import Path
 
-    from winder.cli.commands import Progress, UserError, report_run, values_from_args
+    from winder.cli.commands import Progress, report_run, ros_imports, values_from_args
     from winder.contract.params import SIM_SPECS, bag_directory, check_sim
     from winder.contract.topics import (
         TOPIC_CONTROL,
@@ -205,11 +202,9 @@ def cmd_resim(args: argparse.Namespace) -> int:
             events.append(data)
         elif not topic.recorded.endswith(TOPIC_STEP_TIMES):
             first.setdefault(topic.recorded, data)
-    try:
+    with ros_imports():
         from winder.ros.cell import cell_network
         from winder.ros.resim import Recorded, resimulate
-    except ImportError as exc:
-        raise UserError(f"the ROS 2 node packages are not installed ({exc}); run 'make demo'") from None
     rec = Recorded(
         job=first[f"{ns}/{TOPIC_JOB}"],
         path=first.get(f"{ns}/{TOPIC_PATH}"),

@@ -128,12 +128,10 @@ def cmd_view(args: argparse.Namespace) -> int:
     namespace = check_namespace(args.namespace)
     port = foxglove_port(args, "--port")
     assert port is not None
-    try:
-        from winder.ros.view import LiveView, run_view
-    except ImportError as exc:
-        from winder.cli.commands import UserError
+    from winder.cli.commands import ros_imports
 
-        raise UserError(f"the ROS 2 packages are not installed ({exc}); run 'make demo'") from None
+    with ros_imports():
+        from winder.ros.view import LiveView, run_view
     domain = os.environ.get("ROS_DOMAIN_ID", "")
     where = f"{domain} (ROS_DOMAIN_ID)" if domain else "0 (ROS's default: set ROS_DOMAIN_ID to the cell's)"
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")  # as winder run's cells

@@ -11,7 +11,6 @@ start) and :func:`run_cell`, which strings them together.
 
 from __future__ import annotations
 
-import contextlib
 import os
 import random
 import re
@@ -546,14 +545,13 @@ def _wait_for_job(
     procs: NodeProcesses,
     timeouts: tuple[float, float],
     progress: Callable[[float, str], None] | None,
-    keys: Keys | None = None,
-    interrupts: Interrupts | None = None,
+    keys: Keys | None,
+    interrupts: Interrupts,
 ) -> str:
     """Spin until the consumer's final report; the reason if it never came
     (the job not started within ``timeouts[0]`` s, or not done within ``timeouts[1]``).
     A signal taken by ``interrupts`` ends it between two rounds, never inside
     one (a KeyboardInterrupt raised in Python code that rclpy's C++ runs can be lost)."""
-    held = interrupts.held if interrupts is not None else contextlib.nullcontext
     start_timeout, timeout = timeouts
     executor = SenderExecutor()  # the watch takes /diagnostics with each sender (winder.ros.sender)
     executor.add_node(node)
@@ -561,7 +559,7 @@ def _wait_for_job(
     waited = min(start_timeout, timeout)
     t_start, t_end = t0 + waited, t0 + timeout
     while watch.summary is None:
-        with held():
+        with interrupts.held():
             refused = watch.ask_to_start()
             if refused:
                 watch.refused = refused

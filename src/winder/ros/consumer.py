@@ -165,7 +165,9 @@ class StepConsumer(ManagedNode):
             # volatile: a description latched before this node came is not a run of its own;
             # deep: see QOS_LATCHED_READER
             QoSProfile(
-                depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE
+                depth=QOS_LATCHED_READER.depth,
+                reliability=ReliabilityPolicy.RELIABLE,
+                durability=DurabilityPolicy.VOLATILE,
             ),
             event_callbacks=SubscriptionEventCallbacks(matched=lambda _info: self.announce()),
         )

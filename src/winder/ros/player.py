@@ -314,7 +314,7 @@ def run_player(
     keys: bool,
     force: bool = False,
     first_reader: bool = False,
-    interrupts: Interrupts | None = None,
+    interrupts: Interrupts,
 ) -> PlayResult:
     """Init rclpy, play, shut down. Ctrl-C or SIGTERM ends the replay
     (KeyboardInterrupt), taken by ``interrupts`` (installed by the caller;
@@ -324,9 +324,6 @@ def run_player(
 
     from winder.ros.dds import use_profile
 
-    own = interrupts is None
-    if interrupts is None:
-        interrupts = Interrupts().install()
     use_profile()
     player = None
     terminal = None
@@ -365,8 +362,6 @@ def run_player(
         if player is not None:
             player.close()
         rclpy.try_shutdown()
-        if own:
-            interrupts.restore()
 
 
 class CellLiveError(Exception):

@@ -36,11 +36,14 @@ QOS_CLOCK = profile(table.CLOCK)
 QOS_DIAGNOSTICS = profile(table.DIAGNOSTICS)
 QOS_EVENTS = profile(table.EVENTS)
 
-#: A cell node's reader of a latched topic whose messages it checks by sender
-#: (winder.ros.peers): latched as the writers are, but deeper. Keep-last counts
-#: the samples of every writer together, so at depth 1 a stranger publishing
-#: every 50 ms replaced the cell's own job description in the reader's queue
-#: before the node took it, and the run never started (test_only_the_cell_acts).
+#: A cell node's reader of a latched topic with several writers (the cell's own
+#: and strangers', whose messages it checks by sender: winder.ros.peers; the
+#: handshake's roles on winder/ready): latched as the writers are, but deeper.
+#: Keep-last counts the samples of every writer together, so at depth 1 a
+#: stranger publishing every 50 ms replaced the cell's own job description in
+#: the reader's queue before the node took it, and the run never started
+#: (test_only_the_cell_acts); on winder/ready a consumer's "busy" was lost behind
+#: the profile node's repeated "ready", and a start let through.
 QOS_LATCHED_READER = QoSProfile(
     depth=10,
     reliability=QOS_LATCHED.reliability,

@@ -17,12 +17,11 @@ from typing import Any
 from diagnostic_msgs.msg import KeyValue
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
 
 from winder.contract.topics import READY_ROLES, READY_STATES, TOPIC_READY
 from winder.ros.peers import Peers
-from winder.ros.qos import QOS_LATCHED
+from winder.ros.qos import QOS_LATCHED, QOS_LATCHED_READER
 from winder.ros.sender import attributed
 from winder.ros.timers import steady_timer
 
@@ -67,12 +66,6 @@ class Announcer:
             self.pub.publish(KeyValue(key=self.role, value=self.state))
 
 
-#: the handshake's reader: latched as the announcers are, but deeper: keep-last
-#: counts the samples of every writer together, so at depth 1 one role's
-#: announcement replaced another's not taken yet (a consumer's "busy" lost
-#: behind the profile node's repeated "ready", and a start let through)
-QOS_READER = QoSProfile(depth=10, reliability=QOS_LATCHED.reliability, durability=QOS_LATCHED.durability)
-
 #: an announcement older than this (s) no longer counts: the announcers repeat
 #: theirs every second, so silence means the node is gone (a node killed
 #: outright stays in the DDS graph, its latched "ready" with it, for ~20 s)
@@ -99,7 +92,7 @@ class Readiness:
             KeyValue,
             TOPIC_READY,
             self._on_raw,
-            QOS_READER,
+            QOS_LATCHED_READER,  # deep: one role's announcement must not replace another's not taken yet
             event_callbacks=SubscriptionEventCallbacks(matched=self._on_matched),
         )
 
