@@ -26,6 +26,13 @@ def test_default_job_is_the_rw400_setup() -> None:
     assert job.step_lengths[1] == pytest.approx(math.pi / 1024)
 
 
+def test_the_job_in_one_phrase_counts_in_the_singular_and_plural() -> None:
+    """Reports name a job by its shape: "1 pole x 1 layer", never "1 poles"."""
+    assert Job().shape == "4 poles x 2 layers x 20 turns"
+    assert Job(poles=1, layers=1, turns_per_layer=1).shape == "1 pole x 1 layer x 1 turn"
+    assert Job(poles=2, layers=1, turns_per_layer=3).shape == "2 poles x 1 layer x 3 turns"
+
+
 @settings(max_examples=60, deadline=None)
 @given(
     turns=st.integers(1, 30),

@@ -17,8 +17,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from winder.contract.params import PROFILE_SPECS, plan_segment, plan_timing, shaping_report
+from winder.contract.params import PROFILE_SPECS
 from winder.contract.timeline import Command, Timeline
+from winder.contract.timing import plan_segment, plan_timing, shaping_report
 from winder.motion.profile import Profile, plan
 from winder.motion.shaped import ShapedProfile
 

@@ -19,8 +19,9 @@ from hypothesis import strategies as st
 from scipy import integrate
 from support.oracles import ruckig_change, ruckig_stop
 
-from winder.contract.params import PROFILE_SPECS, plan_timing
+from winder.contract.params import PROFILE_SPECS
 from winder.contract.timeline import Command, CommandError, Timeline, parse_schedule
+from winder.contract.timing import plan_timing
 from winder.motion.profile import EXP_CUT, plan
 from winder.motion.retime import continue_tail, motion_state, stop_tail
 from winder.spec import SpecError

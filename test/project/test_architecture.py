@@ -3,6 +3,9 @@
 * Arrows only go down the layers: ``procs`` < ``interrupts`` < ``spec`` < ``shaping`` <
   ``motion`` < ``axis`` < ``contract`` < ``record`` < ``analysis`` < ``ros`` < ``cli``; a module may
   import its own layer and those below, never one above.
+* No circles: no module of the library imports, through any chain of
+  imports (those inside functions and under ``TYPE_CHECKING`` too), a module
+  that imports it.
 * Nothing under ``winder/`` imports a node package.
 * Only ``winder.ros`` (and the node packages) import rclpy or ROS message
   packages; only ``winder.analysis.figures`` imports matplotlib.
@@ -97,6 +100,75 @@ def test_imports_only_go_down(name: str, path: Path) -> None:
         target = layer(imp)
         if top == "winder" and target in LAYERS:
             assert LAYERS.index(target) <= rank, f"{name} ({own}) imports {imp} ({target}), a layer above"
+
+
+def import_graph() -> dict[str, set[str]]:
+    """Module -> the library's modules it imports (a name imported from a
+    module is that module; a package's ``__init__`` is a module too)."""
+    known = {name for name, _ in modules()}
+    graph: dict[str, set[str]] = {}
+    for name, path in modules():
+        targets = set()
+        for imp in imports(path):
+            while imp and imp not in known:
+                imp = imp.rpartition(".")[0]
+            if imp and imp != name:
+                targets.add(imp)
+        graph[name] = targets
+    return graph
+
+
+def circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected parts of more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on: set[str] = set()
+    found: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in sorted(graph.get(v, ())):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            part = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                part.append(w)
+                if w == v:
+                    break
+            if len(part) > 1:
+                found.append(sorted(part))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return found
+
+
+def test_circles_are_found() -> None:
+    """The oracle of the next test: a loop is found, a chain is not."""
+    assert circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert circles({"a": {"b"}, "b": {"c"}, "c": set()}) == []
+
+
+def test_no_module_imports_itself_through_others() -> None:
+    """Each concern in one place, arrows only downward: a circle of imports
+    (even one closed inside a function or for type checking only) means two
+    modules hold one concern between them."""
+    graph = import_graph()
+    loops = circles(graph)
+    ties = [
+        "; ".join(f"{a} -> {b}" for a in loop for b in sorted(graph[a]) if b in loop) for loop in loops
+    ]
+    assert not loops, f"import circles: {ties}"
 
 
 def test_the_core_imports_without_rclpy() -> None:

@@ -24,7 +24,8 @@ from conftest import Procs, closed_bags, rosbags_read
 from support.oracles import ruckig_stop
 
 from winder.analysis.metrics import analyze
-from winder.contract.params import PROFILE_SPECS, plan_segment
+from winder.contract.params import PROFILE_SPECS
+from winder.contract.timing import plan_segment
 from winder.motion.interp import interpolate
 from winder.motion.job import Job
 from winder.motion.retime import motion_state

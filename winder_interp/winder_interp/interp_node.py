@@ -30,8 +30,8 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import Int32MultiArray, String
 from std_srvs.srv import Trigger
 
-from winder.contract.jobfile import load_job_file_hashed
-from winder.contract.params import INTERP_SPECS, check_interp, run_ramp, stop_points
+from winder.contract.jobfile import check_interp_settings, load_job_file_hashed
+from winder.contract.params import INTERP_SPECS, run_ramp, stop_points
 from winder.contract.stream import describe_job, make_run_id
 from winder.contract.topics import TOPIC_CONTROL, TOPIC_JOB, TOPIC_PROGRESS, TOPIC_STEPS, status_values
 from winder.motion.interp import interpolate_pieces
@@ -54,7 +54,7 @@ ROLE = "interp"
 class InterpNode(ManagedNode):
     def __init__(self) -> None:
         super().__init__("interp_node")
-        self.settings = Settings(self, INTERP_SPECS, check_interp)
+        self.settings = Settings(self, INTERP_SPECS, check_interp_settings)
         self.settings.add_pre_set(self.with_job_file)
         given = self.settings.values()["job_file"]
         if given:  # given at start (-p job_file:=...): load it as a change would
@@ -345,8 +345,11 @@ class InterpNode(ManagedNode):
             return
         if int(value) > self.consumed:
             self.progress_wall = time.monotonic()  # a step taken: not stuck on the run
+        was_running = self.running()
         self.consumed = max(self.consumed, int(value))
         self.last_receipt_wall = time.monotonic()  # a repeated receipt: the sim node is alive
+        if was_running and not self.running():
+            self.report()  # the run is over: "done" at once, not at the next second
         if self.pending is not None:
             self.send_some()  # the window has room again: fill it now, not at the next tick
 

@@ -474,7 +474,7 @@ def analyze(run: Run, stride_time: float = STRIDE_TIME, digested: Digest | None 
         job_id=run.job_id,
         run_id=run.run_id,
         job=(
-            f"{job.poles} poles x {job.layers} layers x {job.layer_turns} turns, "
+            f"{job.shape}, "
             f"wire {job.wire_diameter * 1e3:g} mm"
             + (f", coils {job.coil_overrides}" if job.coil_overrides else "")
         ),

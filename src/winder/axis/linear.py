@@ -30,16 +30,14 @@ from __future__ import annotations
 
 import cmath
 import math
-from typing import TYPE_CHECKING, Any, Literal
+from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
 
 from winder.axis._checks import ArrayLike, FloatArray
+from winder.axis._protocol import Motor
 from winder.axis._steps import _StepQueue
-
-if TYPE_CHECKING:
-    from winder.axis.model import StepperAxis
 
 __all__ = ["MODAL_ZETA", "LinearTracker"]
 
@@ -64,7 +62,7 @@ class LinearTracker:
     a call are kept pending until a sample reaches them.
     """
 
-    def __init__(self, axis: StepperAxis, method: Literal["auto", "modal", "scan"] = "auto") -> None:
+    def __init__(self, axis: Motor, method: Literal["auto", "modal", "scan"] = "auto") -> None:
         self._axis = axis
         self._t = -math.inf  # time of the held state (last applied step); -inf: at rest
         self._z = (0.0, 0.0)  # error state (theta - theta1, omega) just after that step

@@ -14,16 +14,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 
 from winder.axis._checks import ArrayLike, FloatArray, _positive
+from winder.axis._protocol import Motor
 from winder.axis._steps import _StepQueue
-
-if TYPE_CHECKING:
-    from winder.axis.model import StepperAxis
 
 __all__ = ["Load", "LoadStep", "NonlinearTracker"]
 
@@ -70,7 +67,7 @@ class NonlinearTracker:
 
     def __init__(
         self,
-        axis: StepperAxis,
+        axis: Motor,
         load: Load = 0.0,
         *,
         t0: float = 0.0,

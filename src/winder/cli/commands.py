@@ -7,27 +7,37 @@ Every error ends as one line on stderr and the exit status of its class
 from __future__ import annotations
 
 import argparse
-import contextlib
 import math
 import os
 import shutil
 import sys
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
 import numpy as np
 
+from winder.cli.common import (
+    CELL_SPECS,
+    Progress,
+    UserError,
+    add_spec_arguments,
+    given_values,
+    job_file,
+    job_file_hashed,
+    job_from_args,
+    ros_imports,
+    values_from_args,
+)
 from winder.cli.exits import (
-    EXIT_ABORTED,
     EXIT_BAD_INPUT,
-    EXIT_FAILED,
     EXIT_INTERRUPTED,
-    EXIT_NODE_DIED,
     EXIT_OK,
     EXIT_OUTPUT,
 )
+from winder.cli.lifetime import leave_when_done, take_early
+from winder.cli.summary import report_run
 from winder.contract.files import OutputError
 from winder.contract.params import (
     INTERP_SPECS,
@@ -37,160 +47,17 @@ from winder.contract.params import (
     bag_directory,
     check_profile,
     check_sim,
-    plan_timing,
     stop_points,
 )
-from winder.contract.run import JobReport, commands_text, shaper_text, stops_text
+from winder.contract.run import shaper_text
+from winder.contract.timing import plan_timing
 from winder.contract.topics import check_namespace
-from winder.interrupts import Interrupts
+from winder.interrupts import Interrupts, deferred
 from winder.motion.interp import dda, deviation_stats, interpolate, min_deviation, point_by_point
 from winder.motion.job import FIELD_SPECS, Job
 from winder.spec import Spec, SpecError
 
 __all__ = ["main"]
-
-
-#: Settings of the cell runner itself (``winder run``), checked like the nodes'.
-CELL_SPECS: dict[str, Spec] = {
-    "timeout": Spec(
-        "timeout", float, 3600.0, "give up after this much wall time", "s", 0.0, 1e7, low_open=True
-    ),
-    "start_timeout": Spec(
-        "start_timeout",
-        float,
-        60.0,
-        "give up if the job has not started after this much wall time (a node missing from the graph)",
-        "s",
-        0.0,
-        1e7,
-        low_open=True,
-    ),
-}
-
-
-class UserError(Exception):
-    """An error the user can fix; printed as one line, exit status EXIT_BAD_INPUT."""
-
-
-@contextlib.contextmanager
-def ros_imports(interrupts: Interrupts | None = None) -> Iterator[None]:
-    """Around a command's imports of :mod:`winder.ros` (rclpy, the message
-    packages): their ImportError is the one-line "not installed" error; with
-    ``interrupts``, a Ctrl-C while they load is taken as they end, not
-    turned into that error (rclpy's loader reports any failure as an ImportError)."""
-    with interrupts.held() if interrupts is not None else contextlib.nullcontext():
-        try:
-            yield
-        except ImportError as exc:
-            raise UserError(f"the ROS 2 packages are not installed ({exc}); run 'make demo'") from None
-
-
-def add_spec_arguments(
-    parser: argparse.ArgumentParser, specs: dict[str, Spec], title: str, skip: tuple[str, ...] = ()
-) -> None:
-    """One option per setting. Values stay text here and are checked by their
-    Spec afterwards, so a bad one is a one-line error, not an argparse usage dump."""
-    group = parser.add_argument_group(title)
-    for name, spec in specs.items():
-        if name in skip:
-            continue
-        flag = "--" + name.replace("_", "-")
-        # a flag not given is None, as any option not given: a job file's value stands
-        if spec.kind is bool and spec.default is False:
-            group.add_argument(flag, dest=name, action="store_true", default=None, help=spec.description)
-        elif spec.kind is bool:
-            group.add_argument(
-                "--no-" + name.replace("_", "-"),
-                dest=name,
-                action="store_false",
-                default=None,
-                help=f"do not {spec.description}",
-            )
-        else:
-            group.add_argument(
-                flag, dest=name, default=None, metavar=spec.kind.__name__.upper(), help=spec.help()
-            )
-
-
-def values_from_args(
-    args: argparse.Namespace, specs: dict[str, Spec], base: dict[str, Any] | None = None
-) -> dict[str, Any]:
-    """The settings given on the command line, checked; the others from
-    ``base`` (a job file's, checked already), else their defaults."""
-    out = {}
-    base = base or {}
-    for name, spec in specs.items():
-        raw = getattr(args, name, None)
-        if raw is None:
-            out[name] = base.get(name, spec.default)
-        elif isinstance(raw, str):
-            out[name] = spec.parse(raw)
-        else:
-            out[name] = spec.check(raw)
-    return out
-
-
-def given_values(args: argparse.Namespace, specs: dict[str, Spec], base: dict[str, Any]) -> dict[str, Any]:
-    """Only the settings given: ``base`` (a job file's section, checked
-    already) and the options given on the command line over it, checked;
-    no defaults (what a node that runs elsewhere is to be told, keeping its
-    own values for the rest)."""
-    out = {name: value for name, value in base.items() if name in specs}
-    for name, spec in specs.items():
-        raw = getattr(args, name, None)
-        if raw is not None:
-            out[name] = spec.parse(raw) if isinstance(raw, str) else spec.check(raw)
-    return out
-
-
-def job_file(args: argparse.Namespace, *, check_fit: bool = True) -> dict[str, dict[str, Any]]:
-    """The settings of the job file named on the command line, per node
-    (none: empty): ``interp_node``, ``profile_node`` and ``consumer``."""
-    return job_file_hashed(args, check_fit=check_fit)[0]
-
-
-def job_file_hashed(
-    args: argparse.Namespace, *, check_fit: bool = True
-) -> tuple[dict[str, dict[str, Any]], str]:
-    """:func:`job_file` and the sha256 of the file's bytes ("" without a file)."""
-    path = getattr(args, "job_file", None)
-    if not path:
-        return {"interp_node": {}, "profile_node": {}, "consumer": {}}, ""
-    from winder.contract.jobfile import load_job_file_hashed
-
-    return load_job_file_hashed(path, check_fit=check_fit)
-
-
-def job_from_args(args: argparse.Namespace, base: dict[str, Any] | None = None) -> Job:
-    return Job.from_dict(values_from_args(args, FIELD_SPECS, base))
-
-
-class Progress:
-    """A one-line progress bar on stderr (only when stderr is a terminal, or forced)."""
-
-    def __init__(self, total: float, label: str, enabled: bool | None = None) -> None:
-        self.total = max(float(total), 1e-300)
-        self.label = label
-        self.enabled = sys.stderr.isatty() if enabled is None else enabled
-        self.t0 = time.monotonic()
-        self._last = -1.0
-
-    def update(self, done: float, extra: str = "") -> None:
-        if not self.enabled:
-            return
-        now = time.monotonic()
-        if now - self._last < 0.1 and done < self.total:
-            return
-        self._last = now
-        frac = min(1.0, done / self.total)
-        bar = "#" * int(30 * frac) + "-" * (30 - int(30 * frac))
-        sys.stderr.write(f"\r{self.label} [{bar}] {100 * frac:5.1f}% {extra}")
-        sys.stderr.flush()
-
-    def close(self) -> None:
-        if self.enabled:
-            sys.stderr.write("\n")
-            sys.stderr.flush()
 
 
 def cmd_interp(args: argparse.Namespace) -> int:
@@ -233,7 +100,7 @@ def cmd_interp(args: argparse.Namespace) -> int:
     }
     turn = {k: deviation_stats(p, x1, y1, step_lengths=(lx, ly)).mean for k, p in methods.items()}
     rate = done / elapsed if elapsed > 0 else float("inf")
-    print(f"job {job.job_id}: {job.poles} poles x {job.layers} layers x {job.layer_turns} turns")
+    print(f"job {job.job_id}: {job.shape}")
     print(f"  segments           {len(segments)}")
     print(f"  steps              {done}  ({rate / 1e6:.1f} M steps/s)")
     print(f"  final position     feed {position[0]}  fork {position[1]}  pole {position[2]} steps")
@@ -349,10 +216,14 @@ def cmd_run(args: argparse.Namespace) -> int:
                 progress=lambda frac, sim_t: bar.update(frac, f"sim {float(sim_t):7.2f} s"),
                 view=view,
                 interrupts=interrupts,
+                one_process=args.one_process,
+                early=take_early(),
             )
         finally:
             if fox_server is not None:
                 fox_server.stop()
+        if view is None or view.node is None:  # the cell is down, every node of this process destroyed
+            leave_when_done()
         bar.close()
         return report_run(result, time.monotonic() - t0, stops=bool(stops))
     finally:
@@ -492,6 +363,11 @@ def external_nodes(args: argparse.Namespace) -> frozenset[str]:
     before the job starts (:class:`winder.ros.cell.RemoteSettings`)."""
     text = getattr(args, "external", None) or ""
     names = frozenset(n.strip() for n in text.split(",") if n.strip())
+    if names and getattr(args, "one_process", False):
+        raise UserError(
+            f"--one-process with external={text!r} is invalid: one process holds the whole cell; "
+            "leave out one of the two"
+        )
     bad = sorted(names - set(EXTERNAL))
     if bad:
         raise UserError(
@@ -499,93 +375,6 @@ def external_nodes(args: argparse.Namespace) -> frozenset[str]:
             f"host (choose from {', '.join(EXTERNAL)}, comma-separated; the interp node holds the job)"
         )
     return names
-
-
-def _number(summary: dict[str, str], key: str, fmt: str, scale: float = 1.0) -> str:
-    """A report's number as text, "-" if it is missing or not a number."""
-    try:
-        return format(float(summary[key]) * scale, fmt)
-    except (KeyError, ValueError):
-        return "-"
-
-
-def _told_by_bag(bag: str) -> tuple[str, str]:
-    """The programmed stops and the operator's commands of the run recorded in
-    ``bag``, each in one line ("" if none, or if the bag is not on this host or
-    cannot be read: the summary then says nothing of them)."""
-    if not bag or not Path(bag).is_dir():
-        return "", ""
-    from winder.record.reader import read_run
-
-    try:
-        run = read_run(bag)
-    except (OSError, ValueError):
-        return "", ""
-    return stops_text(run.plan), commands_text(run.events, run.plan)
-
-
-def report_run(result: Any, wall: float, command: str = "run", *, stops: bool = True) -> int:
-    """The summary of a finished run (``winder run``, ``winder resim``) and
-    the exit status (:mod:`winder.cli.exits`): done, aborted cleanly, a node
-    died before the run ended, or failed (with errors, or no final report).
-    ``stops``: the job has programmed stops (else the bag is read for the
-    summary's stops and commands only when the consumer booked commands)."""
-    s = result.summary
-    if not s:
-        print(
-            f"winder {command}: the cell did not finish: {result.message} (node logs in {result.log_dir})",
-            file=sys.stderr,
-        )
-        if getattr(result, "occupied", False) or getattr(result, "refused", False):
-            return EXIT_BAD_INPUT  # another cell in the namespace, or a setting or start refused: nothing ran
-        return EXIT_NODE_DIED if result.node_died else EXIT_FAILED
-    r = JobReport.from_values(s)
-    x = r.extra  # beyond the contract's keys, what the consumer reports (a hardware driver's may not)
-    print(f"  run                {r.run_id or '-'}")
-    print(f"  state              {r.state}")
-    print(
-        f"  steps              {r.steps_done} of {r.steps_total}  (missing {r.steps_missing}, gaps {r.gaps})"
-    )
-    simulated = "lost_steps" in x  # the simulator's report; a hardware consumer's runs in real time
-    if "sim_time_s" in s:
-        print(f"  {'simulated time' if simulated else 'run time':<18} {r.sim_time_s:.3f} s")
-    if simulated:
-        rtf = f"{r.real_time_factor:.1f}" if math.isfinite(r.real_time_factor) else "-"
-        print(f"  real-time factor   {rtf} x  (simulation), run took {wall:.1f} s")
-    else:
-        print(f"  run took           {wall:.1f} s")
-    if "mean_deviation_command_m" in x or "mean_deviation_actual_m" in x:
-        print(
-            f"  mean deviation     command {_number(x, 'mean_deviation_command_m', '.3f', 1e6)} um, "
-            f"axes {_number(x, 'mean_deviation_actual_m', '.3f', 1e6)} um  (eq. 7)"
-        )
-    if "max_tracking_error_steps" in x:
-        print(f"  max tracking error {_number(x, 'max_tracking_error_steps', '.3f')} steps")
-    if "lost_steps" in x:
-        print(f"  lost steps         {x['lost_steps']}")
-    # the stops and commands come from the bag: read only when the run had some (reading a
-    # large bag takes a while; the final report counts the operator's events)
-    had = stops or "operator_events" in x
-    stops_line, commands = _told_by_bag(r.bag) if had else ("", "")
-    if stops_line:
-        print(f"  programmed stops   {stops_line}")
-    if commands:
-        print(f"  operator commands  {commands}")
-    print(f"  bag                {r.bag or '-'}")
-    if result.errors:
-        print(f"  ERROR reports      {len(result.errors)}, first: {result.errors[0]}")
-    # messages from nodes that are not the cell's, refused: by each node of the cell, and this command
-    foreign = getattr(result, "intruders", "") or x.get("intruders", "")
-    if foreign:
-        print(f"  ignored, foreign   {foreign}")
-    if r.state == "aborted" and not r.errors and not result.errors:
-        print(f"winder {command}: {result.message}", file=sys.stderr)
-        return EXIT_ABORTED
-    if not result.ok or r.errors or result.errors:
-        logs = f" (node logs in {result.log_dir})" if result.log_dir else ""
-        print(f"winder {command}: {result.message}{logs}", file=sys.stderr)
-        return EXIT_FAILED
-    return EXIT_OK
 
 
 #: Settings of ``winder discovery-server``.
@@ -685,6 +474,14 @@ def build_parser() -> argparse.ArgumentParser:
         "docs/DEPLOYING.md)",
     )
     g.add_argument(
+        "--one-process",
+        action="store_true",
+        help="run the three nodes in one process (winder_container, as a ROS 2 component container, "
+        "started while the command reads its arguments): the job starts about 0.5 s sooner and many "
+        "cells on one host run faster, but the three share one core (a 10^7-step job ran 10-20 %% "
+        "slower, docs/BENCHMARKS.md). Not with --external",
+    )
+    g.add_argument(
         "--check",
         action="store_true",
         help="check the job and every setting, print the plan, start nothing",
@@ -760,8 +557,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     # it does any Unix filter, instead of an "error: Broken pipe"
     if hasattr(signal, "SIGPIPE"):
         signal.signal(signal.SIGPIPE, signal.SIG_DFL)
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    with deferred():  # the parser's options load modules (lazily): no signal among them
+        parser = build_parser()
+        args = parser.parse_args(argv)
     func: Callable[[argparse.Namespace], int] | None = getattr(args, "func", None)
     if func is None:
         parser.print_help()

@@ -28,7 +28,7 @@ TIMEOUT = "10"
 
 
 def _timeout(args: argparse.Namespace) -> float:
-    from winder.cli.commands import CELL_SPECS
+    from winder.cli.common import CELL_SPECS
 
     return float(CELL_SPECS["timeout"].parse(args.timeout))
 
@@ -40,7 +40,7 @@ def _namespace(args: argparse.Namespace) -> str:
 
 
 def _ros() -> Any:
-    from winder.cli.commands import ros_imports
+    from winder.cli.common import ros_imports
 
     with ros_imports():
         from winder.ros import ctl
@@ -158,7 +158,7 @@ def cmd_start(args: argparse.Namespace) -> int:
 
 
 def _run_timeout(args: argparse.Namespace) -> float:
-    from winder.cli.commands import CELL_SPECS
+    from winder.cli.common import CELL_SPECS
 
     return float(CELL_SPECS["timeout"].parse(args.run_timeout))
 

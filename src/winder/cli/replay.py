@@ -86,7 +86,7 @@ def _play_on_graph(
     given: bool,
 ) -> int:
     """``winder play`` onto the ROS graph (not --foxglove): the signals taken by ``interrupts``."""
-    from winder.cli.commands import Progress, UserError, ros_imports
+    from winder.cli.common import Progress, UserError, ros_imports
     from winder.contract.topics import check_namespace
 
     with ros_imports(interrupts):
@@ -168,7 +168,8 @@ def cmd_resim(args: argparse.Namespace) -> int:
     import time
     from pathlib import Path
 
-    from winder.cli.commands import Progress, report_run, ros_imports, values_from_args
+    from winder.cli.common import Progress, ros_imports, values_from_args
+    from winder.cli.summary import report_run
     from winder.contract.params import SIM_SPECS, bag_directory, check_sim
     from winder.contract.topics import (
         TOPIC_CONTROL,
@@ -304,7 +305,7 @@ def register(sub: argparse._SubParsersAction[Any]) -> None:
     )
     p.set_defaults(func=cmd_play)
 
-    from winder.cli.commands import add_spec_arguments
+    from winder.cli.common import add_spec_arguments
     from winder.contract.params import SIM_SPECS
 
     p = sub.add_parser(

@@ -58,7 +58,7 @@ def cmd_resonance(args: argparse.Namespace) -> int:
         residual,
         residual_table,
     )
-    from winder.cli.commands import Progress
+    from winder.cli.common import Progress
 
     zetas = _zetas(args.zetas)
     models = ["linear"] if args.linear_only else ["linear", "nonlinear"]
@@ -191,8 +191,9 @@ def _apply(path: Path, ramp: dict[str, Any]) -> list[str]:
 def cmd_tune(args: argparse.Namespace) -> int:
     """The fastest ramp with zero lost steps and the torque margin (winder.analysis.tune)."""
     from winder.analysis.tune import axes_of, lost_steps, tune
-    from winder.cli.commands import Progress, job_file
-    from winder.contract.params import PROFILE_SPECS, plan_timing
+    from winder.cli.common import Progress, job_file
+    from winder.contract.params import PROFILE_SPECS
+    from winder.contract.timing import plan_timing
     from winder.motion.job import Job
 
     margin = _fraction("margin", args.margin)

@@ -58,6 +58,7 @@ __all__ = [
     "NODE_SPECS",
     "SECTION_ALIASES",
     "JobFileError",
+    "check_interp_settings",
     "load_job_file",
     "load_job_file_hashed",
     "ros_scalar",
@@ -374,6 +375,16 @@ def _check(path: Path, where: str, spec: Spec, value: Any) -> Any:
         return spec.check(value)
     except SpecError as exc:
         raise JobFileError(f"{path}: {where}: {exc}") from None
+
+
+def check_interp_settings(values: dict[str, Any]) -> None:
+    """The interp node's whole check of its settings (SpecError):
+    :func:`~winder.contract.params.check_interp`, and the job file it names,
+    read as a change to ``job_file`` would read it: a file that cannot be
+    used is refused with its reason."""
+    check_interp(values)
+    if values.get("job_file"):
+        load_job_file(values["job_file"])
 
 
 def load_job_file(path: str | Path, *, check_fit: bool = True) -> dict[str, dict[str, Any]]:

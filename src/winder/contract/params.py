@@ -6,27 +6,21 @@ anything, so a value is judged the same way wherever it is typed.
 
 from __future__ import annotations
 
-import itertools
 import math
 import os
 import tempfile
-from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-import numpy.typing as npt
-
+from winder.contract.timing import MAX_JOB_SECONDS, plan_segment, plan_timing
 from winder.motion.job import AXES, FIELD_SPECS, Job, Segment
-from winder.motion.profile import KINDS, LIMITS, plan
-from winder.motion.shaped import Motion, ShapedProfile, shape
+from winder.motion.profile import KINDS
 from winder.spec import Spec, SpecError
 
 __all__ = [
     "CONSUMER_SPECS",
     "INTERP_SPECS",
-    "MAX_JOB_SECONDS",
     "MOTOR_FIELDS",
     "OPERATION_SPECS",
     "PROFILE_KINDS",
@@ -34,18 +28,13 @@ __all__ = [
     "RAMP_SOURCES",
     "SIM_SPECS",
     "UNSHAPED",
-    "SegmentTiming",
     "bag_directory",
     "check_consumer",
     "check_interp",
     "check_job_duration",
     "check_profile",
     "check_sim",
-    "plan_job",
-    "plan_segment",
-    "plan_timing",
     "run_ramp",
-    "shaping_report",
     "stop_place",
     "stop_points",
 ]
@@ -390,7 +379,8 @@ def stop_place(job: Job, segment: Segment, k: int) -> tuple[int, int, int]:
 def check_interp(values: dict[str, Any], *, check_fit: bool = True) -> None:
     """Cross-field check of the interp node's settings (SpecError): the job
     (its coils fit their window, unless ``check_fit`` is False), its stops,
-    schedule, job file and ramp."""
+    schedule and ramp. The node's ``job_file`` is checked by
+    :func:`winder.contract.jobfile.check_interp_settings`, which reads it."""
     job = Job.from_dict({k: v for k, v in values.items() if k in FIELD_SPECS}, check_fit=check_fit)
     if values.get("stops"):
         stop_points(job, values["stops"])
@@ -398,10 +388,6 @@ def check_interp(values: dict[str, Any], *, check_fit: bool = True) -> None:
         from winder.contract.timeline import parse_schedule
 
         parse_schedule(values["schedule"])
-    if values.get("job_file"):
-        from winder.contract.jobfile import load_job_file
-
-        load_job_file(values["job_file"])  # a file that cannot be used is refused with its reason
     ramp = run_ramp(values)
     if ramp is not None:
         check_profile(ramp)
@@ -437,179 +423,6 @@ def check_job_duration(job: Job, values: dict[str, Any]) -> None:
             f"node takes ({top:g} steps/s) it lasts {fastest:.4g} s, more than a job may last "
             f"({MAX_JOB_SECONDS:g} s); wind fewer turns_per_layer, layers or poles per job"
         )
-
-
-#: The longest a job may last, in simulated time: a week. Step times travel as
-#: int64 nanoseconds (good for 292 years), but the sim node produces every
-#: sample of that time; limits that would stretch a job beyond it are refused.
-MAX_JOB_SECONDS = 7 * 24 * 3600.0
-
-
-def plan_segment(values: dict[str, Any], steps: int, speed: float = 1.0) -> Motion:
-    """The profile of one segment of ``steps`` steps with the profile settings,
-    at ``speed`` times ``v_max`` (a job's ``first_layer_speed``), shaped by
-    ``shaper`` (absent: none); ValueError (one line) if the limits cannot plan
-    it or it would last longer than :data:`MAX_JOB_SECONDS`."""
-    kind = values["profile"]
-    v_max = values["v_max"] * speed
-    if values["v_start"] > v_max:
-        raise ValueError(
-            f"first_layer_speed={speed:g} is invalid with v_max={values['v_max']:g}: the first layer's "
-            f"speed {v_max:g} steps/s is below v_start={values['v_start']:g} steps/s"
-        )
-    kw: dict[str, Any] = {"v_max": v_max, "v_start": values["v_start"], "v_end": values["v_start"]}
-    kw.update({name: values[name] for name in LIMITS[kind]})
-    limits = ", ".join(f"{k}={v:g}" for k, v in kw.items() if k != "v_end")
-    profile: Motion
-    try:
-        profile = plan(kind, float(steps), **kw)
-    except (ZeroDivisionError, OverflowError):
-        raise ValueError(
-            f"profile={kind} with {limits}: the limits are too far apart to plan a {steps}-step move "
-            "in floating point"
-        ) from None
-    kind_s = values.get("shaper", "none")
-    if kind_s != "none":
-        profile = shape(profile, kind_s, values["shaper_freq"], values["shaper_damping"])
-    if not math.isfinite(profile.duration) or profile.duration > MAX_JOB_SECONDS:
-        raise ValueError(
-            f"profile={kind} with {limits}: a {steps}-step move takes {profile.duration:.3g} s, "
-            f"more than a job may last ({MAX_JOB_SECONDS:g} s)"
-        )
-    return profile
-
-
-def plan_job(
-    values: dict[str, Any], segment_steps: Sequence[int]
-) -> tuple[list[Motion], npt.NDArray[np.int64], int]:
-    """The profiles of a job's segments, each segment's start time (ns) and the
-    job's duration (ns, without the last dwell). Segments of equal length share
-    one plan (a job of 10^5 layers plans two or three moves, not 10^5).
-    ValueError (one line) if the job would last longer than :data:`MAX_JOB_SECONDS`."""
-    plans = {n: plan_segment(values, n) for n in dict.fromkeys(segment_steps)}
-    profiles = [plans[n] for n in segment_steps]
-    dwell_ns = round(values["dwell"] * 1e9)
-    durations = np.array([round(p.duration * 1e9) + dwell_ns for p in profiles], dtype=np.float64)
-    total = float(durations.sum()) - dwell_ns
-    if total > MAX_JOB_SECONDS * 1e9:
-        raise ValueError(
-            f"the job takes {total / 1e9:.4g} s with profile={values['profile']}, v_max={values['v_max']:g}: "
-            f"more than a job may last ({MAX_JOB_SECONDS:g} s); raise the limits or split the job"
-        )
-    t0 = np.zeros(len(profiles), np.int64)
-    np.cumsum(durations[:-1].astype(np.int64), out=t0[1:])
-    return profiles, t0, int(total)
-
-
-@dataclass(frozen=True)
-class SegmentTiming:
-    """When each step of one segment happens: its moves (one, or several
-    split at programmed stops, each from and to rest) and the pauses between.
-
-    ``ends``: the step index at which each move ends (the last is the
-    segment's step count); ``starts_ns``: each move's start after the
-    segment's start ``t0_ns``; ``duration_ns``: to the end of the last move;
-    ``speed``: the fraction of ``v_max`` the segment runs at.
-    """
-
-    t0_ns: int
-    ends: tuple[int, ...]
-    profiles: tuple[Motion, ...]
-    starts_ns: tuple[int, ...]
-    speed: float = 1.0
-
-    @property
-    def duration_ns(self) -> int:
-        return self.starts_ns[-1] + round(self.profiles[-1].duration * 1e9)
-
-    def times_ns(self, k: npt.NDArray[np.integer[Any]]) -> npt.NDArray[np.int64]:
-        """The time (ns since the job's start) of steps ``k`` (1-based) of the segment."""
-        if len(self.ends) == 1:  # one move: as before stops existed, bit for bit
-            times = self.profiles[0].times_at(k.astype(np.float64))
-            return self.t0_ns + np.rint(times * 1e9).astype(np.int64)
-        move = np.minimum(np.searchsorted(self.ends, k, side="left"), len(self.ends) - 1)
-        before = np.concatenate([[0], self.ends[:-1]])[move]
-        out = np.empty(k.shape, np.int64)
-        for j in np.unique(move):
-            m = move == j
-            local = (k[m] - before[m]).astype(np.float64)
-            times = self.profiles[int(j)].times_at(local)
-            out[m] = self.t0_ns + self.starts_ns[int(j)] + np.rint(times * 1e9).astype(np.int64)
-        return out
-
-
-def plan_timing(
-    values: dict[str, Any],
-    segment_steps: Sequence[int],
-    stops: Sequence[tuple[int, int]] = (),
-    pause: float = 0.0,
-    speeds: Sequence[float] | None = None,
-) -> tuple[list[SegmentTiming], int]:
-    """The timing of every segment of a job with the ramp ``values``, its
-    programmed ``stops`` ((segment, step index) pairs: the axes come to rest
-    there, with the same ramp as a segment end, and rest ``pause`` seconds)
-    and ``dwell`` between segments; and the job's duration (ns). ``speeds``:
-    each segment's fraction of ``v_max`` (:meth:`Job.segment_speed`; absent:
-    all 1). Without stops and speeds the steps' times are :func:`plan_job`'s.
-    ValueError (one line) as there."""
-    at: dict[int, list[int]] = {}
-    for seg, k in stops:
-        at.setdefault(seg, []).append(k)
-    speed_of = list(speeds) if speeds is not None else [1.0] * len(segment_steps)
-    lengths: set[tuple[int, float]] = set()
-    for i, n in enumerate(segment_steps):
-        cuts = [0, *sorted(k for k in at.get(i, ()) if 0 < k < n), n]
-        lengths.update((b - a, speed_of[i]) for a, b in itertools.pairwise(cuts) if b > a)
-    plans = {key: plan_segment(values, *key) for key in sorted(lengths)}
-    dwell_ns, pause_ns = round(values["dwell"] * 1e9), round(pause * 1e9)
-    timings = []
-    t0 = 0
-    for i, n in enumerate(segment_steps):
-        stops_here = sorted(set(at.get(i, ())))
-        cuts = [0, *[k for k in stops_here if 0 < k < n], n]
-        ends, profiles, starts = [], [], []
-        start = 0
-        for a, b in itertools.pairwise(cuts):
-            move = plans[(b - a, speed_of[i])]
-            ends.append(b)
-            profiles.append(move)
-            starts.append(start)
-            start += round(move.duration * 1e9) + pause_ns
-        timing = SegmentTiming(t0, tuple(ends), tuple(profiles), tuple(starts), speed_of[i])
-        timings.append(timing)
-        rest = pause_ns if n in stops_here else 0  # a stop at a segment's end: the pause after it
-        t0 += timing.duration_ns + dwell_ns + rest
-        if t0 > MAX_JOB_SECONDS * 1e9:
-            raise ValueError(
-                f"the job takes more than {MAX_JOB_SECONDS:g} s with profile={values['profile']}, "
-                f"v_max={values['v_max']:g}: more than a job may last; raise the limits or split the job"
-            )
-    total = timings[-1].t0_ns + timings[-1].duration_ns if timings else 0
-    return timings, total
-
-
-def shaping_report(timings: Sequence[SegmentTiming]) -> dict[str, Any]:
-    """What a shaped ramp does to a job, for the ramp configuration it
-    publishes: the shaper's impulses and, over every move, the peak velocity,
-    acceleration and jerk of the shaped motion (steps/s, /s^2, /s^3: never
-    above the ramp's limits, usually below) beside the unshaped plan's. Empty
-    for an unshaped ramp."""
-    moves = {id(p): p for t in timings for p in t.profiles}.values()
-    shaped = [p for p in moves if isinstance(p, ShapedProfile)]
-    if not shaped:
-        return {}
-    first = shaped[0]
-    peaks = [p.peaks for p in shaped]
-    unshaped = [ShapedProfile(p.base, [1.0], [0.0]).peaks for p in shaped]
-    return {
-        "shaped": {
-            "amplitudes": first.amplitudes.tolist(),
-            "times_s": first.times.tolist(),
-            "shaper_duration_s": first.shaper_duration,
-            "peak": {k: max(q[k] for q in peaks) for k in ("v", "a", "j")},
-            "peak_unshaped": {k: max(q[k] for q in unshaped) for k in ("v", "a", "j")},
-        }
-    }
 
 
 def check_profile(values: dict[str, Any]) -> None:

@@ -2,7 +2,7 @@
 
 A job's motion is a sequence of *moves* (a segment, or the part of one between
 programmed stops), each from rest to rest, planned by
-:func:`winder.contract.params.plan_timing`. A :class:`Timeline` starts as that
+:func:`winder.contract.timing.plan_timing`. A :class:`Timeline` starts as that
 plan and takes commands at a simulated time ``t`` (ns since the job's start):
 
 * ``pause`` (feed hold): the move in motion at ``t`` stops with the
@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from winder.contract.params import SegmentTiming
+from winder.contract.timing import SegmentTiming
 from winder.motion.retime import continue_tail, from_rest, motion_state, stop_tail
 from winder.motion.shaped import Motion
 from winder.spec import SpecError

@@ -513,6 +513,17 @@ class Job:
         return self._winding  # type: ignore[attr-defined, no-any-return]
 
     @property
+    def shape(self) -> str:
+        """The job in one phrase, as every report names it: "4 poles x 2 layers x 20 turns"."""
+
+        def count(n: int, what: str) -> str:
+            return f"{n} {what}" if n == 1 else f"{n} {what}s"
+
+        return " x ".join(
+            (count(self.poles, "pole"), count(self.layers, "layer"), count(self.layer_turns, "turn"))
+        )
+
+    @property
     def layer_turns(self) -> int:
         """Turns of layer 1 of a coil without overrides (``turns_per_layer``, auto resolved)."""
         return self._base_turns  # type: ignore[attr-defined, no-any-return]

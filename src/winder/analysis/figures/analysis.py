@@ -313,7 +313,7 @@ def _title(run: Run) -> str:
     shaper = shaper_text(run.profile_config)
     ramp = f"{run.profile or '?'} profile" + (f", {shaper}" if shaper else "")
     return (
-        f"{run.label}: {j.poles} poles x {j.layers} layers x {j.layer_turns} turns, "
+        f"{run.label}: {j.shape}, "
         f"{ramp}, {model} ({_ending(run)})"
     )
 
@@ -569,6 +569,20 @@ def _tracking(run: Run, d: Digest, out: Path) -> Path:
             ax.plot(st.t[m], st.pos[m, c] / js[c], ".-", color=ACT, lw=0.8, ms=2.5, label="simulated axis")
             ax.set_xlim(t0 - 0.02, t_end)
             ax.set_title(f"the first {ZOOM_STEPS} steps of the first {axis} move (zoom)", fontsize=9)
+        else:  # an empty frame would read as a missing figure: say why it is empty
+            ax.text(
+                0.5,
+                0.5,
+                f"the {axis} axis does not move in this run",
+                ha="center",
+                va="center",
+                transform=ax.transAxes,
+                fontsize=9,
+                color="0.35",
+            )
+            ax.set_xticks([])
+            ax.set_yticks([])
+            ax.set_title(f"{axis}: no move to zoom into", fontsize=9)
         ax.set_ylabel(f"{axis} position (steps)")
         ax.set_xlabel("time (s)")
         ax = axes[2, c]

@@ -1,0 +1,101 @@
+"""The summary ``winder run`` and ``winder resim`` print when a run ends,
+and the exit status it means (:mod:`winder.cli.exits`)."""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+from winder.cli.exits import EXIT_ABORTED, EXIT_BAD_INPUT, EXIT_FAILED, EXIT_NODE_DIED, EXIT_OK
+from winder.contract.run import JobReport, commands_text, stops_text
+
+__all__ = ["report_run"]
+
+
+def _number(summary: dict[str, str], key: str, fmt: str, scale: float = 1.0) -> str:
+    """A report's number as text, "-" if it is missing or not a number."""
+    try:
+        return format(float(summary[key]) * scale, fmt)
+    except (KeyError, ValueError):
+        return "-"
+
+
+def _told_by_bag(bag: str) -> tuple[str, str]:
+    """The programmed stops and the operator's commands of the run recorded in
+    ``bag``, each in one line ("" if none, or if the bag is not on this host or
+    cannot be read: the summary then says nothing of them)."""
+    if not bag or not Path(bag).is_dir():
+        return "", ""
+    from winder.record.reader import read_run
+
+    try:
+        run = read_run(bag)
+    except (OSError, ValueError):
+        return "", ""
+    return stops_text(run.plan), commands_text(run.events, run.plan)
+
+
+def report_run(result: Any, wall: float, command: str = "run", *, stops: bool = True) -> int:
+    """The summary of a finished run (``winder run``, ``winder resim``) and
+    the exit status (:mod:`winder.cli.exits`): done, aborted cleanly, a node
+    died before the run ended, or failed (with errors, or no final report).
+    ``stops``: the job has programmed stops (else the bag is read for the
+    summary's stops and commands only when the consumer booked commands)."""
+    s = result.summary
+    if not s:
+        print(
+            f"winder {command}: the cell did not finish: {result.message} (node logs in {result.log_dir})",
+            file=sys.stderr,
+        )
+        if getattr(result, "occupied", False) or getattr(result, "refused", False):
+            return EXIT_BAD_INPUT  # another cell in the namespace, or a setting or start refused: nothing ran
+        return EXIT_NODE_DIED if result.node_died else EXIT_FAILED
+    r = JobReport.from_values(s)
+    x = r.extra  # beyond the contract's keys, what the consumer reports (a hardware driver's may not)
+    print(f"  run                {r.run_id or '-'}")
+    print(f"  state              {r.state}")
+    print(
+        f"  steps              {r.steps_done} of {r.steps_total}  (missing {r.steps_missing}, gaps {r.gaps})"
+    )
+    simulated = "lost_steps" in x  # the simulator's report; a hardware consumer's runs in real time
+    if "sim_time_s" in s:
+        print(f"  {'simulated time' if simulated else 'run time':<18} {r.sim_time_s:.3f} s")
+    if simulated:
+        rtf = f"{r.real_time_factor:.1f}" if math.isfinite(r.real_time_factor) else "-"
+        print(f"  real-time factor   {rtf} x  (simulation), run took {wall:.1f} s")
+    else:
+        print(f"  run took           {wall:.1f} s")
+    if "mean_deviation_command_m" in x or "mean_deviation_actual_m" in x:
+        print(
+            f"  mean deviation     command {_number(x, 'mean_deviation_command_m', '.3f', 1e6)} um, "
+            f"axes {_number(x, 'mean_deviation_actual_m', '.3f', 1e6)} um  (eq. 7)"
+        )
+    if "max_tracking_error_steps" in x:
+        print(f"  max tracking error {_number(x, 'max_tracking_error_steps', '.3f')} steps")
+    if "lost_steps" in x:
+        print(f"  lost steps         {x['lost_steps']}")
+    # the stops and commands come from the bag: read only when the run had some (reading a
+    # large bag takes a while; the final report counts the operator's events)
+    had = stops or "operator_events" in x
+    stops_line, commands = _told_by_bag(r.bag) if had else ("", "")
+    if stops_line:
+        print(f"  programmed stops   {stops_line}")
+    if commands:
+        print(f"  operator commands  {commands}")
+    print(f"  bag                {r.bag or '-'}")
+    if result.errors:
+        print(f"  ERROR reports      {len(result.errors)}, first: {result.errors[0]}")
+    # messages from nodes that are not the cell's, refused: by each node of the cell, and this command
+    foreign = getattr(result, "intruders", "") or x.get("intruders", "")
+    if foreign:
+        print(f"  ignored, foreign   {foreign}")
+    if r.state == "aborted" and not r.errors and not result.errors:
+        print(f"winder {command}: {result.message}", file=sys.stderr)
+        return EXIT_ABORTED
+    if not result.ok or r.errors or result.errors:
+        logs = f" (node logs in {result.log_dir})" if result.log_dir else ""
+        print(f"winder {command}: {result.message}{logs}", file=sys.stderr)
+        return EXIT_FAILED
+    return EXIT_OK
