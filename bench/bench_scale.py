@@ -2,6 +2,7 @@
 hosts. Each figure is a ratio against an anchor measured in the same run.
 
     .venv/bin/python bench/bench_scale.py [--quick] [--parts startup,cells,hosts] [--cells 1,2,4,8]
+        [--one-process]   # part 2: each cell one winder_container process
 
 1. Start-up. ``winder run`` of a one-layer job, spawn to first step (the sim
    node's ``wall_start_ns`` in ``winder/sim_config``, the wall clock when the
@@ -60,6 +61,8 @@ def _option(name: str) -> str:
 CELLS = tuple(int(c) for c in _option("--cells").split(",") if c)
 #: --parts startup,cells,hosts: which parts run (default all three)
 PARTS = set(_option("--parts").split(",")) - {""} or {"startup", "cells", "hosts"}
+#: --one-process: the cells of part 2 each run as one winder_container process (winder run --one-process)
+ONE_PROCESS = ["--one-process"] if "--one-process" in sys.argv else []
 #: ROS domains of this benchmark, one after the other (_common.domains, cycling)
 DOMAINS = itertools.cycle(domains())
 FAST = ["--v-max", "1e6", "--a-max", "1e9", "--j-max", "1e12"]
@@ -139,16 +142,20 @@ def startup(tmp: Path) -> None:
     domain = next(DOMAINS)
     pair = [bare_pair(domain) for _ in range(reps)]
     small = ["--turns-per-layer", "2", "--poles", "1", "--layers", "1"]
-    tiny = [winder_start(domain, tmp / "startup", small) for _ in range(reps)]
-    default = [winder_start(domain, tmp / "startup", []) for _ in range(max(3, reps // 2))]
+    modes: list[tuple[str, list[str]]] = [("", []), (" --one-process", ["--one-process"])]
+    runs: dict[str, list[tuple[float, float]]] = {}
+    for mode, _ in modes:
+        runs[f"1 layer{mode}"], runs[f"default job{mode}"] = [], []
+    for i in range(reps):
+        for mode, extra in modes:  # alternated, run by run
+            runs[f"1 layer{mode}"].append(winder_start(domain, tmp / "startup", [*small, *extra]))
+            if i < max(3, reps // 2):
+                runs[f"default job{mode}"].append(winder_start(domain, tmp / "startup", extra))
     anchor = statistics.median(pair)
-    rows = [
-        ["bare rclpy pair: spawn -> first message", f"{min(pair):.3f}", f"{anchor:.3f}", "1.00"],
-        ["winder run, 1 layer: spawn -> first step", *_stats([s for s, _ in tiny], anchor)],
-        ["winder run, 1 layer: whole command", *_stats([w for _, w in tiny], anchor)],
-        ["winder run, default job: spawn -> first step", *_stats([s for s, _ in default], anchor)],
-        ["winder run, default job: whole command", *_stats([w for _, w in default], anchor)],
-    ]
+    rows = [["bare rclpy pair: spawn -> first message", f"{min(pair):.3f}", f"{anchor:.3f}", "1.00"]]
+    for what, got in runs.items():
+        rows.append([f"winder run, {what}: spawn -> first step", *_stats([s for s, _ in got], anchor)])
+        rows.append([f"winder run, {what}: whole command", *_stats([w for _, w in got], anchor)])
     print(f"1. start-up ({reps} runs each; ratio of medians against the bare pair)")
     print(table(["what", "best s", "median s", "x pair"], rows))
 
@@ -169,10 +176,11 @@ def many_cells(tmp: Path) -> None:
     base = 0.0
     for n in counts:
         domain = next(DOMAINS)
+        bags = ["--bag-dir", str(tmp / f"n{n}")]
         t0 = time.time_ns()
         procs = [
             popen(
-                [str(BIN / "winder"), "run", "--namespace", f"/c{k}", *job, "--bag-dir", str(tmp / f"n{n}")],
+                [str(BIN / "winder"), "run", "--namespace", f"/c{k}", *job, *ONE_PROCESS, *bags],
                 env=ros_env(domain),
                 stdout=subprocess.PIPE,
                 stderr=subprocess.STDOUT,
@@ -212,7 +220,8 @@ def many_cells(tmp: Path) -> None:
                 "ok" if not problems else "; ".join(problems),
             ]
         )
-    print("\n2. many cells on one graph (819 200 steps each, fast ramp; aggregate over the jobs' span)")
+    how = ", each cell one process (--one-process)" if ONE_PROCESS else ""
+    print(f"\n2. many cells on one graph (819 200 steps each, fast ramp; aggregate over the jobs' span{how})")
     heads = ["cells", "steps", "M steps/s", "x 1 cell", "spawn->first step s", "every step, own topics"]
     print(table(heads, rows))
 

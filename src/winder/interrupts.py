@@ -24,11 +24,12 @@ from __future__ import annotations
 
 import contextlib
 import signal
+import threading
 from collections.abc import Iterator
 from types import FrameType
 from typing import Any
 
-__all__ = ["Interrupts"]
+__all__ = ["Interrupts", "deferred", "ignored"]
 
 #: the signals that end a command as Ctrl-C does
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -82,3 +83,36 @@ class Interrupts:
     def ending(self) -> None:
         """The cleanup begins: no signal interrupts it any more."""
         self.closing = True
+
+
+@contextlib.contextmanager
+def deferred() -> Iterator[None]:
+    """A section no signal may cut (a command's modules loading: a
+    KeyboardInterrupt raised inside numpy's C-extension import, or inside a
+    dataclass being made, comes out as another error with a traceback): a
+    SIGINT or SIGTERM that comes inside it raises as it ends. The handlers
+    before it are back after it. Outside the main thread, nothing is held."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    interrupts = Interrupts().install()
+    try:
+        with interrupts.held():
+            yield
+    finally:
+        interrupts.restore()
+
+
+@contextlib.contextmanager
+def ignored() -> Iterator[None]:
+    """A cleanup no signal may interrupt: SIGINT and SIGTERM are ignored
+    inside it (main thread only), the handlers before it back after it."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    interrupts = Interrupts().install()
+    interrupts.ending()
+    try:
+        yield
+    finally:
+        interrupts.restore()

@@ -77,3 +77,23 @@ def test_a_held_section_left_by_an_error_keeps_the_error() -> None:
         assert interrupts.pending and not interrupts.closing
     finally:
         interrupts.restore()
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_deferred_raises_once_its_section_has_run_and_ignored_not_at_all(sig: int) -> None:
+    """deferred(): the section runs to its end, the signal raises after it;
+    ignored(): the signal is dropped; the handlers before either are back."""
+    from winder.interrupts import deferred, ignored
+
+    before = signal.getsignal(sig)
+    steps = []
+    with pytest.raises(KeyboardInterrupt), deferred():
+        _deliver(sig)
+        steps.append("after the signal")
+    assert steps == ["after the signal"]
+    assert signal.getsignal(sig) is before
+    with ignored():
+        _deliver(sig)
+        steps.append("ignored")
+    assert steps[-1] == "ignored"
+    assert signal.getsignal(sig) is before

@@ -32,8 +32,15 @@ def ros_spin(node: Any, seconds: float) -> None:
 
 def get_params(node: Any, target: str, names: list[str]) -> list[Any]:
     """The values of ``target``'s parameters ``names``."""
-    from rcl_interfaces.srv import GetParameters
     from rclpy.parameter import parameter_value_to_python
+
+    return [parameter_value_to_python(v) for v in get_param_values(node, target, names)]
+
+
+def get_param_values(node: Any, target: str, names: list[str]) -> list[Any]:
+    """``target``'s parameters ``names`` as ``rcl_interfaces/ParameterValue``
+    messages (their type with them)."""
+    from rcl_interfaces.srv import GetParameters
 
     client = node.create_client(GetParameters, f"/{target}/get_parameters")
     spin_until(node, client.service_is_ready, 30, f"{target}/get_parameters")
@@ -48,7 +55,8 @@ def get_params(node: Any, target: str, names: list[str]) -> list[Any]:
             client.remove_pending_request(future)
             if attempt == 2:
                 raise
-    return [parameter_value_to_python(v) for v in future.result().values]
+    node.destroy_client(client)
+    return list(future.result().values)
 
 
 def start_run(node: Any, values: dict[str, Any]) -> Any:

@@ -7,6 +7,8 @@ import sys
 from collections.abc import Sequence
 from types import FrameType
 
+from winder.cli.lifetime import early_containers, ros_done
+
 __all__ = ["main"]
 
 
@@ -18,14 +20,31 @@ def main(argv: Sequence[str] | None = None) -> int:
     SIGTERM ends a command as Ctrl-C does, from its first moment on."""
     signal.signal(signal.SIGTERM, _terminate)
     try:
-        from winder.cli.commands import main as run
+        from winder.interrupts import deferred, ignored
 
-        return run(argv)
+        with deferred():  # a signal while the modules load is taken once they are loaded
+            if argv is None:  # the console script: a cell's container can start while the command loads
+                from winder.ros.early import prestart, wants_prestart
+
+                if wants_prestart(sys.argv[1:]):
+                    early_containers.append(prestart())
+            from winder.cli.commands import main as run
+        rc = run(argv)
     except KeyboardInterrupt:
         from winder.cli.exits import EXIT_INTERRUPTED
 
         print("winder: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        rc = EXIT_INTERRUPTED
+    finally:
+        if early_containers:  # not taken by a cell (bad input, Ctrl-C): ended, signals ignored meanwhile
+            with ignored():
+                while early_containers:
+                    early_containers.pop().cancel()
+    if ros_done and argv is None:  # the console script, not a caller's in-process call
+        from winder.ros.spin import leave
+
+        leave(rc)
+    return rc
 
 
 def _terminate(signum: int, frame: FrameType | None) -> None:

@@ -23,12 +23,12 @@ from typing import Any
 from rosbags.interfaces import Qos as BagQos
 from rosbags.interfaces import QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
-from rosbags.typesys import Stores, get_typestore
 
 from winder.contract.files import fsync_path
 from winder.contract.params import BAG_COMPRESSIONS
 from winder.contract.qos import Qos, qos_of
 from winder.record.mcap_storage import StreamingMcapStorage
+from winder.record.msgtypes import typestore_for
 
 __all__ = [
     "STATE_KEY",
@@ -54,8 +54,6 @@ def signals_held() -> Iterator[None]:
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
-
-_TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 
 
 def new_bag_path(directory: Path, job_id: str) -> Path:
@@ -106,10 +104,11 @@ def cdr_exact(data: bytes | memoryview, msgtype: str) -> bytes | memoryview:
     elements that are not there; strict readers (rosbags) reject that. The
     message is parsed once to find its end; the payload is otherwise untouched.
     """
-    msgdef = _TYPESTORE.get_msgdef(msgtype)
+    store = typestore_for((msgtype,))
+    msgdef = store.get_msgdef(msgtype)
     little = bytes(data[1:2]) == b"\x01"
     func = msgdef.deserialize_cdr_le if little else msgdef.deserialize_cdr_be
-    _, pos = func(bytes(data[4:]), 0, msgdef.cls, _TYPESTORE)
+    _, pos = func(bytes(data[4:]), 0, msgdef.cls, store)
     end = 4 + ((pos + 3) & ~3)
     return data[:end] if len(data) > end else data
 
@@ -332,10 +331,11 @@ class BagRecorder:
         if self.compression != "none":
             storage.compression = self.compression
         self._storage = storage
+        store = typestore_for(topics.values())
         for topic, msgtype in topics.items():
             offered = (qos or {}).get(topic) or qos_of(topic)
             profiles = [bag_qos(offered)] if offered is not None else []
-            conn = writer.add_connection(topic, msgtype, typestore=_TYPESTORE, offered_qos_profiles=profiles)
+            conn = writer.add_connection(topic, msgtype, typestore=store, offered_qos_profiles=profiles)
             self._conns[topic] = conn.id
             self._types[topic] = msgtype
         for topic, t, data in first:

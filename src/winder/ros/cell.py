@@ -44,6 +44,7 @@ from winder.interrupts import Interrupts
 from winder.procs import Children
 from winder.ros.dds import PROFILE_KEYS, use_profile
 from winder.ros.diagnostics import ERROR
+from winder.ros.early import CELL_CLASSES, CONTAINER, EarlyContainer, find_executable
 from winder.ros.graph import consumers, fully_qualified, profile_nodes
 from winder.ros.managed import LEFT_CELL
 from winder.ros.peers import Peers
@@ -60,6 +61,10 @@ NODE_ROLES = {"interp": "interp", "profile": "profile", "sim": "consumer"}
 START_ORDER = ("sim", "profile", "interp")
 #: Seconds before an unanswered start request is asked again.
 START_RETRY = 5.0
+#: s between two looks at the graph while the job is not started, for its
+#: first START_POLL_FOR s (a cell on this host starts within ~1 s); 0.1 s after
+START_POLL = 0.01
+START_POLL_FOR = 3.0
 #: s between two start requests the cell answered 'not ready' (its nodes say ready within ~0.05 s)
 NOT_READY_RETRY = 0.02
 #: s a cell runner listens to /diagnostics before its first start call: every
@@ -85,17 +90,6 @@ class NodeExit(str):
     """The reason a run ended when a node of the cell exited: a ``str``, so
     every caller keeps it as the failure text, and :func:`_result` tells it
     apart from the other failures (``winder`` exits with its own code)."""
-
-
-def find_executable(name: str) -> str:
-    """The node executable next to this Python (the venv's bin/), else on PATH."""
-    here = Path(sys.executable).parent / name
-    if here.exists():
-        return str(here)
-    found = shutil.which(name)
-    if found is None:
-        raise FileNotFoundError(f"node executable {name!r} not found next to {sys.executable} or on PATH")
-    return found
 
 
 def ros_args(params: dict[str, Any], namespace: str) -> list[str]:
@@ -151,11 +145,12 @@ class NodeProcesses:
     close their bags) and kills what is still running after ``grace`` seconds.
     The children get SIGINT when this process dies, however it dies."""
 
-    def __init__(self, env: dict[str, str], log_dir: Path) -> None:
+    def __init__(self, env: dict[str, str], log_dir: Path, early: EarlyContainer | None = None) -> None:
         self.env = env
         self.log_dir = log_dir
-        self.children = Children(log_dir, env)
+        self.children = early.children if early is not None else Children(log_dir, env)
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
+        self.early = early
 
     def start(self, name: str, args: list[str]) -> subprocess.Popen[bytes]:
         p = self.children.start([find_executable(name), *args], name)
@@ -173,7 +168,8 @@ class NodeProcesses:
                 except OSError:
                     lines = []
                 said = [line.split("]: ", 1)[-1] for line in lines if "already runs in" in line]
-                return said[-1] if said else f"{name} did not join: another node plays its part here"
+                if said:  # else status 2 for another reason (a usage error): dead() reports it
+                    return said[-1]
         return ""
 
     def dead(self) -> str | None:
@@ -183,8 +179,12 @@ class NodeProcesses:
                 return NodeExit(f"{name} exited with status {p.returncode}")
         return None
 
-    def stop(self, grace: float = 15.0) -> None:
-        self.children.stop_all(signal.SIGINT, grace)
+    def stop(self, grace: float = 15.0) -> bool:
+        """Stop them all: True if each ended by itself, status 0."""
+        if self.early is not None:
+            self.early.close()  # if it never had its arguments, it leaves at once
+        killed = self.children.stop_all(signal.SIGINT, grace)
+        return not killed and all(p.returncode == 0 for p, _, _ in self.children.started)
 
 
 #: what each role is called in messages
@@ -528,15 +528,48 @@ class Keys:
 
 
 def _spawn(
-    procs: NodeProcesses, params: dict[str, dict[str, Any]], namespace: str, external: frozenset[str]
+    procs: NodeProcesses,
+    params: dict[str, dict[str, Any]],
+    namespace: str,
+    external: frozenset[str],
+    one_process: bool = False,
 ) -> None:
+    if one_process:  # the three in one container process, each node's parameters in a section of its own
+        path = procs.log_dir / "cell_params.yaml"
+        path.write_text(cell_params_file(params, namespace))
+        args = [*ros_args({}, namespace), "--params-file", str(path)]
+        if procs.early is not None:  # started while the command read its arguments: it waits for these
+            procs.procs[CONTAINER] = procs.early.proc
+            procs.early.hand(procs.env, args)
+        else:
+            procs.start(CONTAINER, [*(CELL_CLASSES[key] for key in START_ORDER), *args])
+        return
     for key in START_ORDER:
         if key in external:
             continue  # it runs elsewhere on the graph (another host)
-        node_params = dict(params.get(key, {}))
-        if key == "interp":
-            node_params["autostart"] = False  # started by the watch, once it listens
-        procs.start(NODES[key], ros_args(node_params, namespace))
+        procs.start(NODES[key], ros_args(_node_params(params, key), namespace))
+
+
+def cell_params_file(params: dict[str, dict[str, Any]], namespace: str) -> str:
+    """A ROS parameters file with each node's parameters under its fully
+    qualified name, for the nodes of one container. (rcl's node-prefixed
+    ``-p node:name:=value`` matches a node only outside any namespace: in a
+    namespaced cell every setting was dropped without a word.)"""
+    ns = namespace.strip("/")
+    lines = []
+    for key in START_ORDER:
+        values = _node_params(params, key)
+        lines.append(f"{'/' + ns if ns else ''}/{NODES[key]}:")
+        lines.append("  ros__parameters:" + ("" if values else " {}"))
+        lines += [f"    {k}: {ros_text(v)}" for k, v in values.items()]
+    return "\n".join(lines) + "\n"
+
+
+def _node_params(params: dict[str, dict[str, Any]], key: str) -> dict[str, Any]:
+    node_params = dict(params.get(key, {}))
+    if key == "interp":
+        node_params["autostart"] = False  # started by the watch, once it listens
+    return node_params
 
 
 def _wait_for_job(
@@ -564,7 +597,10 @@ def _wait_for_job(
             if refused:
                 watch.refused = refused
                 return refused
-            executor.spin_once(timeout_sec=0.1)
+            # what the start waits for (the graph: the nodes' services and
+            # endpoints) wakes no executor: look often until the job has started
+            fast = not watch.accepted and time.monotonic() - t0 < START_POLL_FOR
+            executor.spin_once(timeout_sec=START_POLL if fast else 0.1)
             if keys is not None:
                 keys.poll()
             if progress is not None:
@@ -615,6 +651,8 @@ def run_cell(
     start_timeout: float = 60.0,
     view: Any = None,
     interrupts: Interrupts | None = None,
+    one_process: bool = False,
+    early: EarlyContainer | None = None,
 ) -> CellResult:
     """Start the three nodes with ``params[node]`` parameters (but those in
     ``external``, which run elsewhere on the graph: their ``params`` are set
@@ -632,16 +670,32 @@ def run_cell(
     down from a thread of their own, under the view's spinning thread, in
     the middle of creating the node or the view's subscriptions (a
     traceback), and a Ctrl-C while the cell started was lost at times: the
-    job ran to its end (10 of 40 signals under load, ``--foxglove``)."""
+    job ran to its end (10 of 40 signals under load, ``--foxglove``).
+
+    ``one_process``: the three nodes run in one ``winder_container`` process
+    (none may be external): they find each other without discovery between
+    processes, so the job starts sooner, but share one core. ``early``: that
+    container, started already (:func:`winder.ros.early.prestart`): it gets
+    its arguments when the cell starts, and is stopped with the cell in any case."""
     from rclpy.signals import SignalHandlerOptions
 
+    if (one_process or early is not None) and external:
+        if early is not None:
+            early.cancel()
+        raise ValueError(
+            f"one_process with external={sorted(external)} is invalid: one process holds the whole cell"
+        )
+    one_process = one_process or early is not None
     own = interrupts is None
     if interrupts is None:
         interrupts = Interrupts().install()
-    log_dir = Path(tempfile.mkdtemp(prefix="winder-cell-"))
+    log_dir = early.log_dir if early is not None else Path(tempfile.mkdtemp(prefix="winder-cell-"))
+    clean, adopted = False, False
+    errors: list[str] = []  # the watch's, once it is there
     try:
         with cell_environment(domain) as env:
-            procs = NodeProcesses(env, log_dir)
+            procs = NodeProcesses(env, log_dir, early)
+            adopted = True
             node: Node | None = None
             keys: Keys | None = None
             try:
@@ -655,8 +709,9 @@ def run_cell(
                     remote = {NODE_ROLES[key]: dict(params.get(key, {})) for key in external}
                     own_pids = lambda: {str(p.pid) for p in procs.procs.values()}  # noqa: E731
                     watch = CellWatch(node, namespace, remote, own=own_pids)
+                    errors = watch.errors
                     watch.started = {NODES[key] for key in NODE_ROLES if key not in external}
-                    _spawn(procs, params, namespace, external)  # each child recorded, to be stopped
+                    _spawn(procs, params, namespace, external, one_process)
                 failure = _wait_for_job(
                     node, watch, procs, (start_timeout, timeout), progress, keys, interrupts
                 )
@@ -664,13 +719,23 @@ def run_cell(
                 interrupts.ending()  # the view's thread stops before its node goes, the nodes before rclpy
                 if keys is not None:
                     keys.close()
-                procs.stop()
+                clean = procs.stop()
                 if view is not None:
                     view.close()
                 if node is not None:
                     node.destroy_node()
                 rclpy.try_shutdown()
+    except KeyboardInterrupt:
+        if clean and not errors:  # stopped as asked, every node in order, nothing reported: no litter
+            shutil.rmtree(log_dir, ignore_errors=True)
+        raise
     finally:
+        if early is not None and not adopted:  # ended before the cell had it (a signal)
+            early.cancel()
         if own:
             interrupts.restore()
-    return _result(watch, failure, log_dir)
+    result = _result(watch, failure, log_dir)
+    if view is not None and view.ignored:  # what the live view did not show: not the cell's
+        shown = f"live view: {view.ignored}"
+        result.intruders = f"{result.intruders}; {shown}" if result.intruders else shown
+    return result

@@ -368,8 +368,12 @@ class CellLiveError(Exception):
     """``winder play`` would publish onto a namespace where a live cell runs."""
 
 
-#: s the player looks at the graph for a live cell in its namespace before it plays
-LIVE_LOOK = 1.0
+#: s the player looks at the graph for a live cell in its namespace before it
+#: plays. A running cell's participants announce themselves once a second
+#: (winder's DDS profile) and a newcomer learns of them at their next
+#: announcement: measured 0.06-1.07 s to the first node of a live cell, so
+#: 1.0 s missed one at times (and the player published into it)
+LIVE_LOOK = 2.5
 
 
 def live_cell(node: Any, namespace: str, look: float = LIVE_LOOK) -> list[str]:

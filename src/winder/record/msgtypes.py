@@ -1,0 +1,73 @@
+"""The ROS 2 Jazzy message types a winder bag records, for rosbags.
+
+rosbags' whole Jazzy typestore is some 160 message classes made at import,
+through the module chain of every earlier distribution: 0.1 s of every node
+process that records a bag. The types winder's recorders write are few;
+:func:`typestore_for` makes them alone, from their ``.msg`` definitions
+(comments left out), and falls back to the whole store for any other type.
+The test suite checks each definition against rosbags' Jazzy store.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from functools import cache
+from typing import Any
+
+__all__ = ["DEFINITIONS", "typestore_for"]
+
+#: ``package/msg/Name`` -> its ``.msg`` definition in ROS 2 Jazzy, for the
+#: types winder's bags hold and the types they are made of
+DEFINITIONS = {
+    "builtin_interfaces/msg/Time": "int32 sec\nuint32 nanosec",
+    "builtin_interfaces/msg/Duration": "int32 sec\nuint32 nanosec",
+    "std_msgs/msg/Header": "builtin_interfaces/Time stamp\nstring frame_id",
+    "std_msgs/msg/String": "string data",
+    "std_msgs/msg/MultiArrayDimension": "string label\nuint32 size\nuint32 stride",
+    "std_msgs/msg/MultiArrayLayout": "MultiArrayDimension[] dim\nuint32 data_offset",
+    "std_msgs/msg/Int64MultiArray": "MultiArrayLayout layout\nint64[] data",
+    "std_msgs/msg/UInt64MultiArray": "MultiArrayLayout layout\nuint64[] data",
+    "std_msgs/msg/Float64MultiArray": "MultiArrayLayout layout\nfloat64[] data",
+    "sensor_msgs/msg/JointState": (
+        "std_msgs/Header header\nstring[] name\nfloat64[] position\nfloat64[] velocity\nfloat64[] effort"
+    ),
+    "rosgraph_msgs/msg/Clock": "builtin_interfaces/Time clock",
+    "diagnostic_msgs/msg/KeyValue": "string key\nstring value",
+    "diagnostic_msgs/msg/DiagnosticStatus": (
+        "byte OK=0\nbyte WARN=1\nbyte ERROR=2\nbyte STALE=3\n"
+        "byte level\nstring name\nstring message\nstring hardware_id\nKeyValue[] values"
+    ),
+    "diagnostic_msgs/msg/DiagnosticArray": "std_msgs/Header header\nDiagnosticStatus[] status",
+    "trajectory_msgs/msg/JointTrajectoryPoint": (
+        "float64[] positions\nfloat64[] velocities\nfloat64[] accelerations\nfloat64[] effort\n"
+        "builtin_interfaces/Duration time_from_start"
+    ),
+    "trajectory_msgs/msg/JointTrajectory": (
+        "std_msgs/Header header\nstring[] joint_names\nJointTrajectoryPoint[] points"
+    ),
+}
+
+
+@cache
+def _small() -> Any:
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    store = get_typestore(Stores.EMPTY)
+    types: dict[str, Any] = {}
+    for name, text in DEFINITIONS.items():
+        types.update(get_types_from_msg(text, name))
+    store.register(types)
+    return store
+
+
+@cache
+def _jazzy() -> Any:
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+def typestore_for(msgtypes: Iterable[str]) -> Any:
+    """A rosbags typestore that knows every type of ``msgtypes``: the small
+    one of :data:`DEFINITIONS` when it has them all, else the whole Jazzy store."""
+    return _small() if all(t in DEFINITIONS for t in msgtypes) else _jazzy()

@@ -1,0 +1,48 @@
+"""winder.record.msgtypes: the message types a bag records, made from their
+definitions alone, are rosbags' ROS 2 Jazzy types field for field, and give
+the same message definition text (what a bag's schema holds, and Foxglove
+decodes with). The oracle is rosbags' own Jazzy typestore."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from rosbags.typesys import Stores, get_typestore
+
+from winder.record.msgtypes import DEFINITIONS, typestore_for
+
+JAZZY = get_typestore(Stores.ROS2_JAZZY)
+
+
+@pytest.mark.parametrize("name", sorted(DEFINITIONS))
+def test_each_type_is_jazzys(name: str) -> None:
+    small = typestore_for([name])
+    assert "geometry_msgs/msg/Twist" not in small.fielddefs  # the small store, not a fallback to Jazzy's
+    assert small.fielddefs[name] == JAZZY.fielddefs[name]
+    assert small.generate_msgdef(name, ros_version=2) == JAZZY.generate_msgdef(name, ros_version=2)
+
+
+def test_the_small_store_serializes_as_jazzys() -> None:
+    """A JointState with every field set, and a DiagnosticArray, round-trip
+    through the small store to the bytes the Jazzy store makes."""
+    small = typestore_for(DEFINITIONS)
+    for store_a, store_b in ((small, JAZZY), (JAZZY, small)):
+        t = store_a.types
+        js = t["sensor_msgs/msg/JointState"](
+            header=t["std_msgs/msg/Header"](
+                stamp=t["builtin_interfaces/msg/Time"](sec=3, nanosec=7), frame_id="f"
+            ),
+            name=["fork", "feed"],
+            position=np.array([1.5, -2.0]),
+            velocity=np.array([0.25, 0.0]),
+            effort=np.array([], dtype=float),
+        )
+        data = store_a.serialize_cdr(js, "sensor_msgs/msg/JointState")
+        back = store_b.deserialize_cdr(data, "sensor_msgs/msg/JointState")
+        assert store_b.serialize_cdr(back, "sensor_msgs/msg/JointState") == data
+
+
+def test_another_type_gets_the_whole_store() -> None:
+    assert "geometry_msgs/msg/Twist" not in DEFINITIONS
+    store = typestore_for(["sensor_msgs/msg/JointState", "geometry_msgs/msg/Twist"])
+    assert "geometry_msgs/msg/Twist" in store.fielddefs

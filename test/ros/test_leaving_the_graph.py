@@ -1,0 +1,89 @@
+"""A winder process that ends leaves the ROS graph at once, and quickly.
+
+rclpy's LifecycleNode kept its state machine, and through it the node's
+handle, after ``destroy_node``: the process' DDS participant was only
+removed by the interpreter's teardown (0.15 s a process, 0.1 s of it a sleep
+in Fast DDS's exit), and a process that skipped that teardown stayed on the
+graph for the whole lease (10 s) (:meth:`winder.ros.managed.ManagedNode.destroy_node`,
+:func:`winder.ros.spin.leave`). Real node processes, a probe node on the
+test's domain watching the graph."""
+
+from __future__ import annotations
+
+import subprocess
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+from conftest import BIN, Procs
+from support.ros_probe import spin_until
+
+pytestmark = pytest.mark.ros
+
+#: well under the 10 s lease of winder's DDS profile, over what a loaded machine takes to say goodbye
+GONE_WITHIN = 3.0
+
+
+def names(ros: Any) -> set[str]:
+    return {n for n, _ in ros.get_node_names_and_namespaces()} - {ros.get_name()}
+
+
+def gone_after_exit(procs: Procs, ros: Any, p: subprocess.Popen[bytes], expected: set[str]) -> None:
+    """``p``'s nodes are on the graph; SIGINT ends it with status 0 and they leave within GONE_WITHIN s."""
+    spin_until(ros, lambda: expected <= names(ros), 60, f"{sorted(expected)} on the graph")
+    assert procs.stop(p) == 0, procs.log(p)
+    spin_until(ros, lambda: not expected & names(ros), GONE_WITHIN, f"{sorted(expected)} gone from the graph")
+    assert "Traceback" not in procs.log(p)
+
+
+@pytest.mark.parametrize("node", ["interp_node", "profile_node", "sim_node"])
+def test_a_node_process_leaves_the_graph_when_it_ends(
+    procs: Procs, ros: Any, tmp_path: Path, node: str
+) -> None:
+    p = procs.start(node, "-p", f"bag_dir:={tmp_path / 'bags'}") if node == "sim_node" else procs.start(node)
+    gone_after_exit(procs, ros, p, {node})
+
+
+def test_a_container_leaves_the_graph_when_it_ends(procs: Procs, ros: Any, tmp_path: Path) -> None:
+    p = procs.launch(
+        [
+            str(BIN / "winder_container"),
+            "winder_sim.sim_node:SimNode",
+            "winder_profile.profile_node:ProfileNode",
+            "winder_interp.interp_node:InterpNode",
+            "--ros-args",
+            "-p",
+            f"bag_dir:={tmp_path / 'bags'}",
+            "-p",
+            "autostart:=false",
+        ],
+        "container",
+    )
+    gone_after_exit(procs, ros, p, {"interp_node", "profile_node", "sim_node"})
+
+
+@pytest.mark.parametrize("mode", [[], ["--one-process"]], ids=["three processes", "one process"])
+def test_winder_run_leaves_nothing_on_the_graph(
+    procs: Procs, ros: Any, tmp_path: Path, mode: list[str]
+) -> None:
+    """After ``winder run`` has printed its summary and exited, neither its
+    own node nor the cell's are on the graph a moment later."""
+    seen: set[str] = set()
+    job = ["--turns-per-layer", "2", "--layers", "1", "--poles", "1"]
+    run = subprocess.Popen(
+        [str(BIN / "winder"), "run", *job, *mode, "--bag-dir", str(tmp_path / "bags")],
+        env=procs.env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+    )
+    deadline = time.monotonic() + 120
+    while run.poll() is None:  # the probe's graph is kept by DDS' threads: no spinning needed
+        assert time.monotonic() < deadline, "winder run did not end within 120 s"
+        seen |= names(ros)
+        time.sleep(0.02)
+    out = run.stdout.read().decode() if run.stdout else ""
+    assert run.returncode == 0, out
+    assert "state              done" in out, out
+    assert {"winder_cell", "interp_node", "profile_node", "sim_node"} <= seen, seen
+    spin_until(ros, lambda: not names(ros), GONE_WITHIN, "the graph empty")
