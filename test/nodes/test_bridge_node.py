@@ -24,6 +24,8 @@ from typing import Any
 import numpy as np
 import pytest
 from conftest import Procs, closed_bags, final_report, rosbags_read, spin_until
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from support.paths import TEST
 
 from winder.motion.job import Job
@@ -187,6 +189,38 @@ def test_payloads_are_what_rclpy_serializes() -> None:
             want = [names.index(j) + 0.5 if j in names else math.nan for j in JOINTS]
             np.testing.assert_array_equal(pos, want)
     assert reader.read(serialize_message(JointState(name=["flyer"], position=[]))) is None
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    names=st.lists(st.sampled_from(["feed_screw", "flyer", "pole_joint", "x", "yy"]), unique=True),
+    values=st.lists(st.floats(allow_infinity=False) | st.just(math.nan), min_size=5, max_size=5),
+    frame=st.text(max_size=7),
+)
+def test_the_plain_python_read_is_the_numpy_read_where_every_joint_is_measured(
+    names: list[str], values: list[float], frame: str
+) -> None:
+    """JointStateReader.read_all (the bridge's per-message path, no numpy)
+    gives what read gives when the message measures every wanted joint, and
+    None otherwise (a joint not named or NaN: the bridge then takes read)."""
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import JointState
+
+    from winder.contract.cdr import JointStateReader
+
+    js = JointState(name=names, position=values[: len(names)])
+    js.header.frame_id = frame
+    raw = serialize_message(js)
+    reader = JointStateReader(JOINTS)
+    for _ in range(2):  # the layout parsed, then reused
+        got, fast = reader.read(raw), reader.read_all(raw)
+        assert got is not None
+        measured = [values[names.index(j)] if j in names else math.nan for j in JOINTS]
+        if any(math.isnan(v) for v in measured):
+            assert fast is None
+        else:
+            assert fast is not None and fast[0] == got[0]
+            assert fast[1] == measured == got[1].tolist()
 
 
 def test_trajectory_payloads_read_back_in_rclpy_and_rosbags() -> None:

@@ -54,8 +54,6 @@ def test_signal_mid_job_closes_the_bag(tmp_path: Path, procs: Procs, sig: int) -
     assert "Traceback" not in procs.log(sim)
 
 
-
-
 @pytest.mark.parametrize("fault", ["drop", "duplicate", "reorder"])
 def test_stream_fault_is_detected_and_reported(tmp_path: Path, procs: Procs, ros: Any, fault: str) -> None:
     job = Job(job_id="faulty", turns_per_layer=2, layers=2, poles=1, fork_steps_per_rev=256)
@@ -133,6 +131,43 @@ def test_killed_profile_node_is_reported_as_a_stall(tmp_path: Path, procs: Procs
     profile.kill()
     profile.wait()
     spin_until(ros, lambda: any("step stream stalled" in s for s in seen), 30, "a stall report")
+
+
+def test_a_slow_run_set_up_is_no_stall(tmp_path: Path, procs: Procs, ros: Any) -> None:
+    """A consumer whose set-up of a run takes 3 s (test/consumers/slow_start.py:
+    a sim node whose ``begin`` sleeps, as a starved host made the real one
+    take over 2 s) with a 1 s ``stall_timeout``: the steps that came during
+    the set-up are work at hand, the watch counts from the end of it, and
+    the run ends done with no stall reported. (Counting from before the
+    set-up, 8 cells on 2 cores reported stalls 46 ms into their runs.)"""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from support.paths import TEST
+
+    seen: list[tuple[str, str, dict[str, str]]] = []
+    ros.create_subscription(
+        DiagnosticArray,
+        "/diagnostics",
+        lambda m: seen.extend((s.name, s.message, {kv.key: kv.value for kv in s.values}) for s in m.status),
+        100,
+    )
+    bags = tmp_path / "bags"
+    slow = TEST / "consumers" / "slow_start.py"
+    procs.launch(
+        [sys.executable, str(slow), "--ros-args", "-p", f"bag_dir:={bags}", "-p", "stall_timeout:=1.0"],
+        "slow_start",
+    )
+    procs.start("profile_node")
+    procs.start("interp_node", "-p", "turns_per_layer:=4", "-p", "layers:=1", "-p", "poles:=1")
+
+    def final() -> dict[str, str] | None:
+        done = [v for n, _, v in seen if is_consumer(n, v) and v.get("state") in ("done", "incomplete")]
+        return done[-1] if done else None
+
+    spin_until(ros, lambda: final() is not None, 90, "the run's final report")
+    report = final()
+    assert report is not None and report["state"] == "done", report
+    assert report["stalls"] == "0", report
+    assert not [m for _, m, _ in seen if "stalled" in m], [m for _, m, _ in seen if "stalled" in m]
 
 
 def test_two_cells_in_two_namespaces_do_not_interfere(tmp_path: Path, procs: Procs) -> None:

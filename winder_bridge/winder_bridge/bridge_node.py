@@ -51,7 +51,7 @@ The thread shares the pacer, the command history and the record queue with
 the executor under one lock, and hands a fault to the executor through a
 guard condition; everything else (the base's bookkeeping, the bag, the
 fault's report) runs in the executor, woken by the step stream and every
-0.1 s while rows wait (``pump_period``).
+0.25 s after the last pump while rows wait (``pump_period``).
 """
 
 from __future__ import annotations
@@ -122,8 +122,11 @@ BRIDGE_TOPICS = {
 
 class BridgeNode(StepConsumer):
     #: the base's pump only accounts for what the command thread executed
-    #: (receipts, the run's transitions, the bag): ten times a second is enough
-    pump_period = 0.1
+    #: (receipts, the run's transitions, the bag): 0.25 s after the last
+    #: pump is soon enough, and while the step chunks come (the look-ahead
+    #: the profile node keeps: every ~0.12 s at most) they pump alone
+    pump_period = 0.25
+    pump_from_last = True
 
     def __init__(self) -> None:
         super().__init__(
@@ -202,7 +205,9 @@ class BridgeNode(StepConsumer):
         self.trajectory = values.get("interface", "forward") == "trajectory"
         # the thread's tick: a command (forward), or a trajectory of the next two batches
         self.period_ns = round(values["batch"] * 1e9) if self.trajectory else self.point_ns
-        self.points: deque[tuple[int, npt.NDArray[np.float64]]] = deque()  # sent, not passed yet
+        # the points sent and not passed yet: their run times and positions
+        self.point_t = np.empty(0, np.int64)
+        self.point_pos = np.empty((0, len(values["joints"])))
         self.frontier = 0  # run time of the last point sent (trajectory)
         self.wall_t0 = 0  # system clock time of run time 0 (the trajectories' stamps)
         self.timeout_ns = round(values["joint_state_timeout"] * 1e9)
@@ -485,22 +490,24 @@ class BridgeNode(StepConsumer):
         points sent, a batch to the next tick, a batch for the clock the
         profile node has seen)."""
         assert self.pacer is not None
-        while self.points and self.points[0][0] <= t:
-            self.points.popleft()
+        passed = int(np.searchsorted(self.point_t, t, side="right"))
         horizon = t + AHEAD_BATCHES * self.period_ns
         m = max(self.frontier, t) // self.point_ns + 1
         grid = np.arange(m, horizon // self.point_ns + 1, dtype=np.int64) * self.point_ns
         if grid.size:
             positions = self.pacer.advance_grid(grid)
-            self.points.extend(zip(grid.tolist(), positions, strict=True))
+            self.point_t = np.concatenate((self.point_t[passed:], grid))
+            self.point_pos = np.concatenate((self.point_pos[passed:], positions))
             self.history.push_many(self.wall_t0 + grid, positions)
             self.frontier = int(grid[-1])
+        elif passed:
+            self.point_t, self.point_pos = self.point_t[passed:], self.point_pos[passed:]
         payload = trajectory_payload(
             self.wall_t0 + t,
             self.plan.run_id if self.plan is not None else "",
             self.joints,
-            np.fromiter((tp for tp, _ in self.points), np.int64, len(self.points)) - t,
-            np.array([p for _, p in self.points]).reshape(len(self.points), len(self.joints)),
+            self.point_t - t,
+            self.point_pos,
         )
         self.pub_cmd.publish(payload)
         self.outbox.append(("commands", t, payload, True))
@@ -526,20 +533,30 @@ class BridgeNode(StepConsumer):
     def measurement(self, raw: bytes, now: int) -> None:
         """(Under the lock.) One joint_states message of the run: recorded;
         before the run's time starts, checked against the job's start; then
-        against the commands (following error)."""
-        got = self.reader.read(raw)
-        if got is None:
-            self.bad_states += 1
-            if self.bad_states == 1:
-                self.get_logger().warning(
-                    f"{self.bag_topics['joint_states'][0]}: a message that is not a JointState with one "
-                    "position per name: ignored"
-                )
-            return
-        stamp, pos = got
-        seen = ~np.isnan(pos)
-        self.last_seen[seen] = now
-        self.measured[seen] = pos[seen]
+        against the commands (following error). A message that measures
+        every joint (a joint_state_broadcaster's) is read and checked in
+        plain Python: at 100 Hz numpy's per-call cost was a tenth of the
+        bridge's CPU; another (a joint missing or NaN) with numpy."""
+        every = self.reader.read_all(raw)
+        if every is not None:
+            stamp, values = every
+            self.last_seen[:] = now
+            self.measured[:] = values
+            pos, seen = self.measured, None
+        else:
+            got = self.reader.read(raw)
+            if got is None:
+                self.bad_states += 1
+                if self.bad_states == 1:
+                    self.get_logger().warning(
+                        f"{self.bag_topics['joint_states'][0]}: a message that is not a JointState with "
+                        "one position per name: ignored"
+                    )
+                return
+            stamp, pos = got
+            seen = ~np.isnan(pos)
+            self.last_seen[seen] = now
+            self.measured[seen] = pos[seen]
         self.outbox.append(("joint_states", self.t_tick, raw, False))
         self.states_in_run += 1
         wall = time.time_ns()
@@ -547,26 +564,51 @@ class BridgeNode(StepConsumer):
         low, high = self.history.span(when - self.delay_ns, when)
         if not self.armed:
             if not self.origin_here:
-                self.check_start(pos, seen, low)
+                self.check_start(pos.copy(), np.ones(pos.size, bool) if seen is None else seen, low)
+            return
+        if seen is None:
+            self.check_following(values, low, high)
             return
         error = np.where(seen, following_error(low, high, np.where(seen, pos, low)), 0.0)
         size = np.abs(error)
         np.maximum(self.max_error, size, out=self.max_error)
         if (size > self.limits).any():
             j = int(np.argmax(size / self.limits))
-            unit = self.units[j]
-            self.raise_fault(
-                f"servo fault: joint {self.joints[j]} ({self.axes[j]} axis): following error "
-                f"{error[j]:+.6g} {unit} beyond max_following_error.{self.axes[j]} = {self.limits[j]:g} "
-                f"{unit} (measured {pos[j]:.6g}, commanded {low[j]:.6g} to {high[j]:.6g} over command_delay)",
-                {
-                    "joint": self.joints[j],
-                    "axis": self.axes[j],
-                    "following_error": f"{error[j]:.6g}",
-                    "limit": f"{self.limits[j]:g}",
-                    "unit": unit,
-                },
-            )
+            self.following_fault(j, float(error[j]), float(pos[j]), float(low[j]), float(high[j]))
+
+    def check_following(
+        self, pos: list[float], low: npt.NDArray[np.float64], high: npt.NDArray[np.float64]
+    ) -> None:
+        """(Under the lock.) :func:`winder.contract.pacing.following_error`
+        of every joint, one float at a time; the largest error, and a fault
+        for the joint furthest beyond its limit."""
+        worst, worst_j = 1.0, -1
+        for j, (m, lo, hi) in enumerate(zip(pos, low.tolist(), high.tolist(), strict=True)):
+            size = lo - m if m < lo else (m - hi if m > hi else 0.0)
+            if size > self.max_error[j]:
+                self.max_error[j] = size
+            if size > self.limits[j] * worst:  # beyond the limit, and the worst so far
+                worst, worst_j = size / self.limits[j], j
+        if worst_j >= 0:
+            m, lo, hi = pos[worst_j], float(low[worst_j]), float(high[worst_j])
+            self.following_fault(worst_j, lo - m if m < lo else hi - m, m, lo, hi)
+
+    def following_fault(self, j: int, error: float, measured: float, low: float, high: float) -> None:
+        """(Under the lock.) Joint ``j`` is further than its limit from every
+        position commanded over command_delay: a servo fault."""
+        unit = self.units[j]
+        self.raise_fault(
+            f"servo fault: joint {self.joints[j]} ({self.axes[j]} axis): following error "
+            f"{error:+.6g} {unit} beyond max_following_error.{self.axes[j]} = {self.limits[j]:g} "
+            f"{unit} (measured {measured:.6g}, commanded {low:.6g} to {high:.6g} over command_delay)",
+            {
+                "joint": self.joints[j],
+                "axis": self.axes[j],
+                "following_error": f"{error:.6g}",
+                "limit": f"{self.limits[j]:g}",
+                "unit": unit,
+            },
+        )
 
     def check_start(
         self, pos: npt.NDArray[np.float64], seen: npt.NDArray[np.bool_], start: npt.NDArray[np.float64]
@@ -613,7 +655,7 @@ class BridgeNode(StepConsumer):
             self.history = CommandHistory(self.pacer.position.copy())
         self.t0_ns = now
         self.wall_t0 = time.time_ns()  # the same instant on the system clock: the trajectories' stamps
-        self.points.clear()
+        self.point_t, self.point_pos = self.point_t[:0], self.point_pos[:0]
         self.frontier = 0
         self.next_clock = 0
         self.armed = True
@@ -723,6 +765,9 @@ class BridgeNode(StepConsumer):
         self.quit = True
         self.go.set()
         self.thread.join(timeout=1.0)
+        # a command thread still waiting holds its node: its destruction waits for the
+        # interpreter's teardown, which the process must then not skip (winder.ros.spin.leave)
+        self.let_go = not self.thread.is_alive()
         self.io.destroy_node()
 
 

@@ -44,17 +44,10 @@ from std_msgs.msg import Int32MultiArray, Int64MultiArray, String
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from winder.contract.params import (
-    OPERATION_SPECS,
-    PROFILE_SPECS,
-    UNSHAPED,
-    SegmentTiming,
-    check_profile,
-    plan_timing,
-    shaping_report,
-)
+from winder.contract.params import OPERATION_SPECS, PROFILE_SPECS, UNSHAPED, check_profile
 from winder.contract.stream import STEP_COLUMNS, TIMED_COLUMNS, JobPlan, StreamChecker, parse_job_description
 from winder.contract.timeline import Command, CommandError, Timeline, parse_schedule
+from winder.contract.timing import SegmentTiming, plan_timing, shaping_report
 from winder.contract.topics import (
     TOPIC_CLOCK,
     TOPIC_CONTROL,
@@ -85,7 +78,7 @@ ROLE = "profile"
 #: says whether it runs in real time) before they go out without look-ahead.
 MODE_WAIT = 1.0
 #: Steps timed per pass in a real-time run (the rest wait for the clock).
-RELEASE_BLOCK = 256
+RELEASE_BLOCK = 4096
 
 
 class ProfileNode(ManagedNode):

@@ -20,6 +20,7 @@ header; primitives aligned to their size):
 
 from __future__ import annotations
 
+import functools
 import struct
 from collections.abc import Sequence
 from typing import Generic, TypeVar
@@ -156,15 +157,21 @@ def trajectory_payload(
         w.u32(0), w.u32(0), w.u32(0)  # velocities, accelerations, effort: empty
         w.buf += struct.pack("<iI", *divmod(int(dt[0]), 1_000_000_000))
         first = 1
-    record = np.dtype(
-        [("n", "<u4"), ("pos", "<f8", (n,)), ("empty", "<u4", (3,)), ("sec", "<i4"), ("nsec", "<u4")],
-        align=False,
-    )
-    block = np.zeros(dt.size - first, dtype=record)
+    block = np.zeros(dt.size - first, dtype=_point_record(n))
     block["n"] = n
     block["pos"] = pos[first:]
     block["sec"], block["nsec"] = np.divmod(dt[first:], 1_000_000_000)
     return _HEADER + bytes(w.buf) + block.tobytes()
+
+
+@functools.cache
+def _point_record(n: int) -> np.dtype[np.void]:
+    """A JointTrajectoryPoint of ``n`` positions (and nothing else) that
+    starts 4 bytes past a multiple of 8, as one fixed record."""
+    return np.dtype(
+        [("n", "<u4"), ("pos", "<f8", (n,)), ("empty", "<u4", (3,)), ("sec", "<i4"), ("nsec", "<u4")],
+        align=False,
+    )
 
 
 IntT = TypeVar("IntT", np.int32, np.int64)
@@ -320,20 +327,41 @@ class JointStateReader:
         self._count = 0  # positions in the message
         self._index = np.zeros(len(self.joints), np.int64)  # message index of each wanted joint
         self._present = np.zeros(len(self.joints), bool)
+        self._picks: list[int] | None = None  # message index of each wanted joint, if all are named
+        self._format = ""
 
     def read(self, raw: bytes) -> tuple[int, npt.NDArray[np.float64]] | None:
         """(stamp ns, positions of the wanted joints, NaN if absent), or None
         if the payload is not a JointState with one position per name."""
-        if len(raw) < 12 or raw[1] != 1:
-            return None
-        known = self._prefix and raw.startswith(self._prefix, 12) and len(raw) >= self._end
-        if not known and not self._parse(raw):
+        if not self._layout(raw):
             return None
         sec, nsec = struct.unpack_from("<iI", raw, 4)
         data = np.frombuffer(raw, "<f8", self._count, self._pos_at)
         out = np.full(len(self.joints), np.nan)
         out[self._present] = data[self._index[self._present]]
         return sec * 1_000_000_000 + nsec, out
+
+    def read_all(self, raw: bytes) -> tuple[int, list[float]] | None:
+        """As :meth:`read`, as Python floats, but only for a message that
+        gives every wanted joint a position, none NaN (None otherwise: use
+        :meth:`read`): a handful of joints at 100 Hz costs less without
+        numpy's per-call overhead."""
+        if not self._layout(raw) or self._picks is None:
+            return None
+        sec, nsec = struct.unpack_from("<iI", raw, 4)
+        values = struct.unpack_from(self._format, raw, self._pos_at)
+        picked = [values[i] for i in self._picks]
+        if any(v != v for v in picked):  # a NaN: that joint is not measured (read() says so)
+            return None
+        return sec * 1_000_000_000 + nsec, picked
+
+    def _layout(self, raw: bytes) -> bool:
+        """Whether ``raw`` is a little-endian CDR JointState whose layout is
+        known (the last one's, reused) or parsed now."""
+        if len(raw) < 12 or raw[1] != 1:
+            return False
+        known = self._prefix and raw.startswith(self._prefix, 12) and len(raw) >= self._end
+        return bool(known) or self._parse(raw)
 
     @property
     def _end(self) -> int:
@@ -359,4 +387,6 @@ class JointStateReader:
         where = {name: i for i, name in enumerate(names)}
         self._present = np.array([j in where for j in self.joints], bool)
         self._index = np.array([where.get(j, 0) for j in self.joints], np.int64)
+        self._picks = [where[j] for j in self.joints] if self._present.all() else None
+        self._format = f"<{npos}d"
         return True

@@ -59,16 +59,17 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import Int64MultiArray, String
 from trajectory_msgs.msg import JointTrajectory
 
-from winder.contract.params import MAX_JOB_SECONDS, bag_directory
+from winder.contract.params import bag_directory
 from winder.contract.run import EventError, JobReport, RunLedger, Transition, parse_control
 from winder.contract.stream import TIMED_COLUMNS, JobPlan, StreamChecker, parse_job_description
+from winder.contract.timing import MAX_JOB_SECONDS
 from winder.contract.topics import (
     TOPIC_CONTROL,
     TOPIC_DIAGNOSTICS,
@@ -88,7 +89,7 @@ from winder.ros.chunks import TIMED_CDR
 from winder.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from winder.ros.managed import ManagedNode
 from winder.ros.peers import Peers, Solo
-from winder.ros.qos import QOS_DIAGNOSTICS, QOS_EVENTS, QOS_LATCHED, QOS_LATCHED_READER, QOS_STATE, QOS_STREAM
+from winder.ros.qos import QOS_EVENTS, QOS_LATCHED, QOS_LATCHED_READER, QOS_STATE, QOS_STREAM
 from winder.ros.ready import Announcer
 from winder.ros.sender import attributed, waiting
 from winder.ros.settings import Settings
@@ -154,7 +155,8 @@ class StepConsumer(ManagedNode):
         # every message acted on is taken with its publisher, and acted on only
         # when that is the cell's node owning the topic (winder.ros.peers)
         self.peers = Peers(self)
-        self.solo = Solo(self, "consumer", self.peers, self.leave)  # one consumer per cell
+        # one consumer per cell; the statuses it takes are recorded (on_diagnostics)
+        self.solo = Solo(self, "consumer", self.peers, self.leave, also=self.on_diagnostics)
         self.solo.on_settled = self.settled
         self.job_waiting: bytes | None = None  # a job description that came before the node settled
         self.sub_job = attributed(
@@ -183,7 +185,6 @@ class StepConsumer(ManagedNode):
             # the handshake follows the stream's connection as it happens, not by polling
             event_callbacks=SubscriptionEventCallbacks(matched=lambda _info: self.announce()),
         )
-        attributed(self, DiagnosticArray, TOPIC_DIAGNOSTICS, self.on_diagnostics, QOS_DIAGNOSTICS)
         # pump() runs on events (a chunk, a job) and, while work waits on the
         # clock (pacing, batching), every 5 ms; idle, only the 1 Hz report runs
         self.pump_timer = steady_timer(self, self.pump_period, self.pump)
@@ -216,6 +217,11 @@ class StepConsumer(ManagedNode):
     #: s between pumps while work waits on the clock (a backend with a pacing
     #: thread of its own needs the pump less often)
     pump_period = 0.005
+    #: whether each pump (a chunk's too) restarts the pump's period, so that
+    #: the timer fires only ``pump_period`` after the last pump: a backend
+    #: whose pump is a bookkeeping round, not its clock, wakes for the step
+    #: chunks alone while they come often enough
+    pump_from_last = False
     #: chunks kept for a run whose description has not come yet, at most
     EARLY_CHUNKS = 4096
 
@@ -381,6 +387,9 @@ class StepConsumer(ManagedNode):
         for event in events:  # the run's own events that came before its description; others dropped
             self.handle_control(event, early=True)
         early, self.early = self.fresh(plan, self.early), []
+        # the stall watch counts from now, the run set up (its plan, its bag):
+        # on a machine starting other cells that alone took over 2 s
+        self.last_chunk_wall = time.monotonic()
         for chunk in early:  # in order, before any taken from the queue
             self.receive(chunk)
         self.pump()
@@ -586,7 +595,7 @@ class StepConsumer(ManagedNode):
         if self.plan is not None:
             self._work()
         if self.plan is not None and (self.inbox or self.holding() or self.pending() or self.finishing):
-            if self.pump_timer.is_canceled():
+            if self.pump_from_last or self.pump_timer.is_canceled():
                 self.pump_timer.reset()
         else:
             self.pump_timer.cancel()
@@ -827,15 +836,13 @@ class StepConsumer(ManagedNode):
             {"job_id": plan.job_id if plan else "", "run_id": plan.run_id if plan else ""},
         )
 
-    def on_diagnostics(self, raw: bytes, gid: bytes) -> None:
+    def on_diagnostics(self, raw: bytes, gid: bytes, statuses: list[Any]) -> None:
         """Record the statuses of this cell's nodes, each sent by the node it
-        names: another cell's are its own bag's, a stranger's none."""
+        names: another cell's are its own bag's, a stranger's none (the
+        messages Solo takes on /diagnostics)."""
         if self.bag is None:
             return
-        try:
-            names = [st.name for st in deserialize_message(raw, DiagnosticArray).status]
-        except Exception:  # not ours to judge; nothing of it is recorded
-            return
+        names = [st.name for st in statuses]
         own = self.get_fully_qualified_name().lstrip("/") + ":"
         if all(n.startswith(own) for n in names):
             return  # this node records its own statuses as it publishes them (publish_status)
@@ -861,7 +868,9 @@ class StepConsumer(ManagedNode):
         """The stall watch (every 0.5 s)."""
         if self.plan is None or self.ledger is None or self.finishing:
             return
-        busy = bool(self.inbox) or self.holding() or self.pending()
+        # step chunks held until the graph names their sender (winder.ros.peers) are work that is here
+        held = bool(self.peers.held.get(TOPIC_STEP_TIMES))
+        busy = bool(self.inbox) or self.holding() or self.pending() or held
         if (self.ledger.waiting_for_resume or self.ledger.held) and not busy:
             self.last_chunk_wall = time.monotonic()
             for t in self.ledger.reach_stops():  # the axes are at the stop: say so

@@ -1,0 +1,31 @@
+"""The sim node with a slow run set-up: its ``begin`` hook takes
+``SETUP_S`` s of wall time before the run is on, as a sim node's plan and
+bag took on a host that started eight cells at once (docs/BENCHMARKS.md).
+Steps keep arriving meanwhile; test_faults.py checks that the stall watch
+counts from the end of the set-up and reports no stall.
+
+    python slow_start.py [--ros-args -p stall_timeout:=1.0 ...]
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from winder_sim.sim_node import SimNode
+
+from winder.contract.stream import JobPlan
+from winder.ros.spin import spin
+
+#: s the run's set-up takes (longer than the stall_timeout the test gives)
+SETUP_S = 3.0
+
+
+class SlowStart(SimNode):
+    def begin(self, plan: JobPlan, values: dict[str, Any]) -> dict[str, object]:
+        time.sleep(SETUP_S)
+        return super().begin(plan, values)
+
+
+if __name__ == "__main__":
+    spin(SlowStart)
