@@ -11,7 +11,8 @@ domain can) and, every ``--period`` s, forges what ``--forge`` names:
 * ``diagnostics``: a final report named like the cell's consumer (state
   done, bag /FAKE) and an ERROR named like its interp node;
 * ``state``: ``winder/state`` saying the run failed;
-* ``sim_config``: a sim_config of the run claiming a real-time look-ahead.
+* ``sim_config``: a sim_config of the run claiming a real-time look-ahead;
+* ``joints``: a joint state of a joint named ``forged`` on winder/joint_states.
 
     python intruder.py --forge control,steps --ns /c1 [--ros-args -r __node:=name]
 """
@@ -28,12 +29,14 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from sensor_msgs.msg import JointState
 from std_msgs.msg import Int64MultiArray, String
 
 from winder.contract.topics import (
     TOPIC_CONTROL,
     TOPIC_DIAGNOSTICS,
     TOPIC_JOB,
+    TOPIC_JOINT_STATES,
     TOPIC_PROGRESS,
     TOPIC_READY,
     TOPIC_SIM_CONFIG,
@@ -43,7 +46,7 @@ from winder.contract.topics import (
 from winder.ros.chunks import pack_timed
 from winder.ros.qos import QOS_DIAGNOSTICS, QOS_EVENTS, QOS_LATCHED, QOS_STATE, QOS_STREAM
 
-KINDS = ("control", "steps", "job", "ready", "progress", "diagnostics", "state", "sim_config")
+KINDS = ("control", "steps", "job", "ready", "progress", "diagnostics", "state", "sim_config", "joints")
 
 
 class Intruder(Node):
@@ -64,6 +67,7 @@ class Intruder(Node):
             "diagnostics": self.create_publisher(DiagnosticArray, TOPIC_DIAGNOSTICS, QOS_DIAGNOSTICS),
             "state": self.create_publisher(DiagnosticStatus, TOPIC_STATE, QOS_LATCHED),
             "sim_config": self.create_publisher(String, TOPIC_SIM_CONFIG, QOS_LATCHED),
+            "joints": self.create_publisher(JointState, TOPIC_JOINT_STATES, QOS_STATE),
         }
         self.create_subscription(DiagnosticArray, TOPIC_DIAGNOSTICS, self.on_diagnostics, QOS_DIAGNOSTICS)
         self.create_subscription(String, TOPIC_JOB, self.on_job, QOS_LATCHED)
@@ -150,6 +154,9 @@ class Intruder(Node):
     def forge_sim_config(self) -> None:
         doc = {"run_id": self.run_id, "real_time": True, "lookahead_s": 0.001, "clock_origin_ns": 0}
         self.pub["sim_config"].publish(String(data=json.dumps(doc)))
+
+    def forge_joints(self) -> None:
+        self.pub["joints"].publish(JointState(name=["forged"], position=[1.0], velocity=[0.0]))
 
 
 def main() -> None:

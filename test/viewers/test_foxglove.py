@@ -22,6 +22,7 @@ import re
 import socket
 import struct
 import subprocess
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -31,7 +32,8 @@ from typing import Any
 import pytest
 import websockets
 from conftest import BIN, Procs, rosbags_read
-from support.paths import ROOT
+from support.paths import ROOT, TEST
+from support.ros_probe import spin_until
 
 from winder.contract.topics import in_namespace
 
@@ -296,6 +298,8 @@ def test_run_foxglove_serves_the_live_cell(procs: Procs, ros: Any, tmp_path: Pat
     run = winder(procs, "run", *LONG, "--bag-dir", str(tmp_path / "bags"), "--foxglove", "0")
     port = served_port(procs, run)
     asyncio.run(watch_live(port, "rw400"))
+    # the probe's graph is what it has discovered so far: wait for the consumer, then count them
+    spin_until(ros, lambda: bool(consumers(ros, "")), 10, "the cell's consumer on the graph")
     assert consumers(ros, "") == [("sim_node", "/")]
     assert run.poll() is None, procs.log(run)
     procs.stop(run)
@@ -344,11 +348,99 @@ def test_view_serves_a_cell_started_without_it(procs: Procs, ros: Any, tmp_path:
     port = served_port(procs, view)
     client = asyncio.run(watch_live(port, "rw400", ns))
     assert client.of(f"{ns}/winder/job")[0].log_time > 0
+    spin_until(ros, lambda: bool(consumers(ros, ns)), 10, "the cell's consumer on the graph")
     assert consumers(ros, ns) == [("sim_node", ns or "/")]
     assert procs.stop(view) == 0
     out = procs.log(view)
     assert re.search(r"served \d+ messages", out) and "Traceback" not in out, out
     assert run.poll() is None, "the cell stopped with the view"
+
+
+INTRUDER = TEST / "consumers" / "intruder.py"
+
+
+def forged(d: Data) -> bool:
+    """Whether a message served is one of the intruder's (test/consumers/intruder.py)."""
+    m = d.msg
+    if d.topic.endswith("/winder/joint_states"):
+        return list(m.name) != JOINTS
+    if d.topic.endswith("/winder/state"):
+        return m.message == "forged"
+    if d.topic.endswith("/winder/job"):
+        return "intruder" in json.loads(m.data)
+    if d.topic == "/diagnostics":
+        return any(
+            st.message == "forged ERROR" or any(kv.value == "/FAKE" for kv in st.values) for st in m.status
+        )
+    raise AssertionError(f"no forgery check for {d.topic}")
+
+
+def test_the_live_view_serves_only_the_cells_own(procs: Procs, tmp_path: Path) -> None:
+    """A foreign node in the cell's namespace forges its joint states, state,
+    job and statuses while ``winder run --foxglove`` serves the live cell:
+    the client gets the cell's messages of each and none of the forger's;
+    the view names the forger once (a WARN) and the summary counts it."""
+    bags = tmp_path / "bags"
+    # the default job paced at 7 x the wall clock: 12 s
+    real_time = ["--real-time", "--real-time-factor", "7"]
+    run = winder(procs, "run", *real_time, "--bag-dir", str(bags), "--foxglove", "0")
+    port = served_port(procs, run)
+    intruder = procs.launch(
+        [sys.executable, str(INTRUDER), "--forge", "joints,state,job,diagnostics", "--period", "0.05"],
+        "intruder",
+    )
+    topics = ["/winder/joint_states", "/winder/state", "/winder/job", "/diagnostics"]
+
+    async def watch() -> Client:
+        client = await connect(port)
+        await client.until(lambda: len(client.channels) >= len(LIVE_TOPICS), 10, "every channel advertised")
+        await client.subscribe(topics)
+        await client.until(lambda: "forging" in procs.log(intruder), 60, "the intruder to forge")
+        await client.drain(3.0)  # 60 forgeries of each kind
+        await client.ws.close()
+        return client
+
+    client = asyncio.run(watch())
+    for topic in topics:
+        assert client.of(topic), f"nothing of the cell's on {topic}"
+    served = [d for d in client.data if forged(d)]
+    assert not served, f"{len(served)} forged messages served, first: {served[0]}"
+    assert run.wait(timeout=120) == 0, procs.log(run)
+    out = procs.log(run)
+    # the view's node says so once, whatever it refused of the intruder's
+    said = re.findall(r"\[winder_view\]: \S+: messages from /intruder ignored .*", out)
+    assert len(said) == 1 and "only the cell's own nodes show in the live view" in said[0], out
+    found = re.search(r"ignored, foreign +(.*)", out)
+    assert found and "live view: /intruder (" in found[1], out
+    assert "Traceback" not in out
+
+
+def test_view_serves_a_replay_where_no_cell_runs(
+    procs: Procs, tmp_path: Path, bag: Callable[[str], Path]
+) -> None:
+    """``winder view`` with no cell in the namespace serves what ``winder
+    play`` publishes there: a recording replayed is shown as it comes (the
+    player is no cell's node, and no cell is there to misrepresent)."""
+    recorded = bag("pole1")
+    view = winder(procs, "view", "--port", "0")
+    port = served_port(procs, view)
+    states, job = "/winder/joint_states", "/winder/job"
+
+    async def watch() -> Client:
+        client = await connect(port)
+        await client.until(lambda: len(client.channels) >= len(LIVE_TOPICS), 10, "every channel advertised")
+        await client.subscribe([states, job])
+        winder(procs, "play", str(recorded), "--loop")
+        await client.until(lambda: len(client.of(states)) >= 20 and bool(client.of(job)), 60, "the replay")
+        await client.ws.close()
+        return client
+
+    client = asyncio.run(watch())
+    assert all(list(d.msg.name) == JOINTS for d in client.of(states))
+    assert json.loads(client.of(job)[-1].msg.data)["job"]["job_id"] == "pole1"
+    assert procs.stop(view) == 0
+    out = procs.log(view)
+    assert "ignored, foreign" not in out and "Traceback" not in out, out
 
 
 def test_play_foxglove_plays_pauses_and_seeks(procs: Procs, tmp_path: Path) -> None:

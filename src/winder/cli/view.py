@@ -82,7 +82,7 @@ def start_live_view(args: argparse.Namespace, port: int, namespace: str) -> tupl
 def serve_bag(args: argparse.Namespace, plan: Any, port: int, rate: float) -> int:
     """``winder play BAG --foxglove``: the recording to Foxglove with its
     playback controls, until Ctrl-C. ROS is not needed."""
-    from winder.cli.commands import Progress
+    from winder.cli.common import Progress
     from winder.record.foxglove import BagPlayback, start_server
 
     playback = BagPlayback(plan, speed=rate)
@@ -128,7 +128,7 @@ def cmd_view(args: argparse.Namespace) -> int:
     namespace = check_namespace(args.namespace)
     port = foxglove_port(args, "--port")
     assert port is not None
-    from winder.cli.commands import ros_imports
+    from winder.cli.common import ros_imports
 
     with ros_imports():
         from winder.ros.view import LiveView, run_view
@@ -157,6 +157,8 @@ def cmd_view(args: argparse.Namespace) -> int:
         + (f" ({', '.join(f'{t} {n}' for n, t in busy)})" if busy else ""),
         file=sys.stdout,
     )
+    if view.ignored:
+        print(f"  ignored, foreign   {view.ignored} (not the cell's nodes: docs/SECURITY.md)")
     return EXIT_OK
 
 

@@ -8,8 +8,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from winder.contract.topics import (
+    TOPIC_CLOCK,
     TOPIC_CONTROL,
     TOPIC_JOB,
+    TOPIC_JOINT_COMMANDS,
+    TOPIC_JOINT_STATES,
     TOPIC_PATH,
     TOPIC_PROFILE_CONFIG,
     TOPIC_PROGRESS,
@@ -19,7 +22,7 @@ from winder.contract.topics import (
     TOPIC_STEPS,
 )
 
-__all__ = ["OWNERS", "ROLE_NAMES", "SIGNS", "Intruders"]
+__all__ = ["OWNERS", "ROLE_NAMES", "SHOWN", "SIGNS", "Intruders"]
 
 #: The role whose node alone may publish each of the cell's topics that a
 #: node acts on (``winder/ready`` is owned by the role its key names, a
@@ -34,6 +37,17 @@ OWNERS = {
     TOPIC_SIM_CONFIG: "consumer",
     TOPIC_PROGRESS: "consumer",
     TOPIC_STATE: "consumer",
+}
+
+#: The role whose node alone may publish each topic a live view shows
+#: (``winder view``, ``winder run --foxglove``): those of :data:`OWNERS`, and
+#: the consumer's joint states, joint commands and clock, which no node of
+#: the cell acts on. (A ``/diagnostics`` status: the node it names.)
+SHOWN = {
+    **OWNERS,
+    TOPIC_JOINT_STATES: "consumer",
+    TOPIC_JOINT_COMMANDS: "consumer",
+    TOPIC_CLOCK: "consumer",
 }
 
 #: How each role shows on the graph, in the cell's namespace: the topics its

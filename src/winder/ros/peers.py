@@ -43,7 +43,6 @@ __all__ = ["Peers", "Solo"]
 UNKNOWN = "_UNKNOWN_"
 
 
-
 #: s a message is held for the graph to name its publisher (:meth:`Peers.deliver`)
 HOLD = 2.0
 
@@ -54,7 +53,12 @@ class Peers:
     the cell's (the node's own by default)."""
 
     def __init__(
-        self, node: Node, namespace: str | None = None, warn: Callable[[str], None] | None = None
+        self,
+        node: Node,
+        namespace: str | None = None,
+        warn: Callable[[str], None] | None = None,
+        *,
+        what: str = "change a run",
     ) -> None:
         self.node = node
         ns = (node.get_namespace() if namespace is None else namespace).strip("/")
@@ -75,6 +79,8 @@ class Peers:
         #: be woken, as the consumer's pump)
         self.on_late: Callable[[], None] | None = None
         self.warn = warn or (lambda text: node.get_logger().warning(text))
+        #: what only the cell's own nodes may do here, in the warning ("show in the live view")
+        self.what = what
 
     # -- the graph ----------------------------------------------------------------
     def topic(self, name: str) -> str:
@@ -239,7 +245,7 @@ class Peers:
         if self.intruders.count(sender, self.topic(topic)):
             self.warn(
                 f"{self.topic(topic)}: messages from {sender} ignored ({why}); "
-                "only the cell's own nodes change a run (docs/SECURITY.md)"
+                f"only the cell's own nodes {self.what} (docs/SECURITY.md)"
             )
             if self.on_new is not None:
                 self.on_new()
@@ -256,10 +262,23 @@ class Solo:
     status of its own role in its namespace from another process, sent by
     the node the status names (no stranger can make it leave), the one that
     started later leaves: ``leave`` is called once with one line naming the
-    other (the node says so and exits). The one that stays warns once."""
+    other (the node says so and exits). The one that stays warns once.
 
-    def __init__(self, node: Node, role: str, peers: Peers, leave: Callable[[str], None]) -> None:
+    ``also``, if given, is handed every status message taken (its payload,
+    its sender's GID and its statuses), so that a node that wants the
+    statuses too needs no second subscription: each would wake the
+    executor and parse the message again."""
+
+    def __init__(
+        self,
+        node: Node,
+        role: str,
+        peers: Peers,
+        leave: Callable[[str], None],
+        also: Callable[[bytes, bytes, list[Any]], None] | None = None,
+    ) -> None:
         self.node = node
+        self.also = also
         self.role = role
         self.peers = peers
         self.leave = leave
@@ -301,11 +320,13 @@ class Solo:
         return all(self.peers.owner(r) is not None for r in SIGNS if r != self.role)
 
     def _on_raw(self, raw: bytes, gid: bytes) -> None:
-        if self.left:
-            return
         try:
             statuses = deserialize_message(raw, DiagnosticArray).status
         except Exception:  # not a DiagnosticArray
+            return
+        if self.also is not None:
+            self.also(raw, gid, statuses)
+        if self.left:
             return
         for st in statuses:
             values = {kv.key: kv.value for kv in st.values}

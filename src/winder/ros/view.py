@@ -13,6 +13,16 @@ viewer hold the profile node back; the layout's progress panel, which counts
 step times, is therefore empty on a live cell (``winder/progress`` and the
 job status's ``progress`` say it instead).
 
+What it shows is the cell's own (docs/SECURITY.md): while a node of the cell
+plays a part in the namespace, a message is served only when its publisher,
+as the graph names it, is the cell's node that owns the topic
+(:data:`winder.contract.trust.SHOWN`), and a ``/diagnostics`` array only when
+it comes from the node its statuses name; anything else is counted and
+reported once per sender as a WARN, as the cell's nodes do. With no cell in
+the namespace, what is published there is shown as it comes: a recording
+played by ``winder play`` (which refuses to play into a live cell's
+namespace unless forced, and is then foreign to the view as to the cell).
+
 The fast topics (joint states and commands, progress receipts, clock) are
 read best-effort: a viewer that falls behind loses samples, never slows the
 cell. The latched ones and the events are read as the cell offers them
@@ -31,9 +41,7 @@ from typing import Any
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
 
 from winder.contract import qos as table
@@ -51,12 +59,23 @@ from winder.contract.topics import (
     TOPIC_STATE,
     in_namespace,
 )
+from winder.contract.trust import SHOWN, SIGNS
 from winder.record.foxglove import Channels
 from winder.ros.graph import fully_qualified
+from winder.ros.peers import Peers
 from winder.ros.player import message_class
 from winder.ros.qos import profile
+from winder.ros.sender import SenderExecutor, attributed
+from winder.ros.timers import steady_timer
 
 __all__ = ["VIEW_TOPICS", "LiveView", "ViewTopic"]
+
+#: s between the view's looks at the graph for a cell in its namespace
+CELL_LOOK = 0.5
+#: s a look that found no cell stays good: a message that comes later makes
+#: the view look again before serving it (a cell that has just come, and a
+#: forger who answers its first message at once, are not missed)
+NO_CELL_FRESH = 0.005
 
 
 @dataclass(frozen=True)
@@ -106,7 +125,11 @@ class LiveView:
         self.channels = channels
         self.namespace = namespace
         self.node: Node | None = None
-        self.executor: SingleThreadedExecutor | None = None
+        self.peers: Peers | None = None
+        #: a node of the cell plays a part in the namespace (as of the last look)
+        self.cell_here = False
+        self.looked = 0.0  # time.monotonic() of the last look
+        self.executor: SenderExecutor | None = None
         self.thread: threading.Thread | None = None
         #: relative name -> the channel's topic (full name); advertised from now on
         self.names = {t.name: _full(t.name, namespace) for t in VIEW_TOPICS}
@@ -116,24 +139,69 @@ class LiveView:
     def attach(self) -> None:
         node = rclpy.create_node("winder_view", namespace=self.namespace or "/")
         self.node = node
+        self.peers = Peers(node, self.namespace, what="show in the live view")
         for topic in VIEW_TOPICS:
             full = self.names[topic.name]
             assert node.resolve_topic_name(topic.name) == full, (topic.name, full)
-            take = self._diagnostics if topic.name == TOPIC_DIAGNOSTICS else self._forward(full)
-            qos: QoSProfile = profile(topic.qos)
-            node.create_subscription(message_class(topic.msgtype), topic.name, take, qos, raw=True)
-        self.executor = SingleThreadedExecutor()
+            take = self._diagnostics if topic.name == TOPIC_DIAGNOSTICS else self._forward(topic.name, full)
+            attributed(node, message_class(topic.msgtype), topic.name, take, profile(topic.qos))
+        self._look()
+        steady_timer(node, CELL_LOOK, self._look)
+        self.executor = SenderExecutor()
         self.executor.add_node(node)
 
-    def _forward(self, full: str) -> Any:
-        log = self.channels.log
-        return lambda raw: log(full, raw, time.time_ns())
+    def _look(self) -> None:
+        assert self.peers is not None
+        self.cell_here = any(self.peers.holders(role) for role in SIGNS)
+        self.looked = time.monotonic()
 
-    def _diagnostics(self, raw: bytes) -> None:
-        """A /diagnostics array, if any of its statuses is the cell's own."""
+    def _no_cell(self) -> bool:
+        """No node of a cell plays a part in the namespace, as of a fresh look."""
+        if not self.cell_here and time.monotonic() - self.looked > NO_CELL_FRESH:
+            self._look()
+        return not self.cell_here
+
+    def _forward(self, name: str, full: str) -> Any:
+        """The callback of topic ``name``: its message served (logged at the
+        time it arrived) if the cell's node owning the topic sent it, or if
+        no cell is in the namespace."""
+        log = self.channels.log
+        role = SHOWN[name]
+        peers = self.peers
+        assert peers is not None
+
+        def take(raw: bytes, gid: bytes) -> None:
+            stamp = time.time_ns()
+            if self._no_cell():
+                log(full, raw, stamp)
+            else:
+                peers.deliver(name, gid, raw, lambda r: log(full, r, stamp), role)
+
+        return take
+
+    def _diagnostics(self, raw: bytes, gid: bytes) -> None:
+        """A /diagnostics array, if any of its statuses is of the cell's
+        namespace and, with a cell there, the node they name sent it."""
+        assert self.peers is not None
         msg = deserialize_message(raw, DiagnosticArray)
-        if any(in_namespace(s.name, self.namespace) for s in msg.status):
-            self.channels.log(self.names[TOPIC_DIAGNOSTICS], raw, time.time_ns())
+        named = {
+            st.name.split(":", 1)[0].rsplit("/", 1)[-1]
+            for st in msg.status
+            if in_namespace(st.name, self.namespace)
+        }
+        if not named:
+            return
+        if not self._no_cell() and not all(
+            self.peers.admit_from(TOPIC_DIAGNOSTICS, gid, n) for n in sorted(named)
+        ):
+            return
+        self.channels.log(self.names[TOPIC_DIAGNOSTICS], raw, time.time_ns())
+
+    @property
+    def ignored(self) -> str:
+        """The messages not served because a node not the cell's sent them,
+        per sender ("" if none)."""
+        return self.peers.intruders.summary() if self.peers is not None else ""
 
     def spin(self) -> None:
         assert self.executor is not None, "attach() first"
