@@ -49,15 +49,18 @@ def winder_run(
 
 
 def long_run(procs: Procs, bags: Path) -> subprocess.Popen[str]:
-    """``winder run`` of a job that lasts ~10 s (paced to the wall clock, so
-    that a fast machine does not end it before the test acts), in the background: the live cell
+    """``winder run`` of a job that lasts ~14 s (the default job, 84.5 s of
+    simulated time, paced to the wall clock at 6 x, so that a fast machine
+    does not end it before the test acts; 400 turns a layer at 160 x ran
+    195 s: a real-time cell keeps ~8 x at most with the default look-ahead),
+    in the background: the live cell
     (its output into files beside the bags, read by :func:`finish`: a pipe
     nobody reads while the test goes on could fill and stop it)."""
     bags.mkdir(parents=True, exist_ok=True)
     return popen(
         [
-            *(str(BIN / "winder"), "run", "--bag-dir", str(bags), "--turns-per-layer", "400"),
-            *("--real-time", "--real-time-factor", "160"),
+            *(str(BIN / "winder"), "run", "--bag-dir", str(bags)),
+            *("--real-time", "--real-time-factor", "6"),
         ],
         env=procs.env,
         stdout=(bags.parent / f"{bags.name}.out").open("w"),
