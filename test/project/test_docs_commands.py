@@ -19,11 +19,16 @@ How a block is read:
   in the command's output; ``<!-- doc-test: serve (why) -->`` the commands
   start something that runs until stopped (a real-time run, a paused
   player): up after a few seconds counts; ``<!-- doc-test: skip (why) -->``
-  the block is not run, and the reason is the test's skip reason.
+  the block is not run here (a second host, minutes of tests): the reason
+  says why.
 * Lines for a ROS install (``ros2 ...``, ``colcon ...``, ``source ...``) are
   not run: ros2cli, launch and colcon's workspaces are not part of the pip
   install (the node executables they start are run by ``test_node_processes.py``,
   the colcon build too).
+* What is not run is checked without running it: every part of it that is
+  winder's (subcommands and options, node parameters and their ranges,
+  launch arguments, services and their types, make targets, test paths)
+  must exist (``support/doc_commands.py``).
 """
 
 from __future__ import annotations
@@ -42,6 +47,7 @@ from pathlib import Path
 
 import pytest
 from conftest import BIN, next_domain, release_domain
+from support.doc_commands import problems
 from support.paths import ROOT
 
 from winder.procs import popen
@@ -160,15 +166,20 @@ BLOCKS = [b for path in DOCS for b in parse(path)]
 
 
 def _params() -> list[object]:
+    """The blocks that run here (the others: :func:`_not_run`)."""
+    return [pytest.param(b, id=b.name) for b in BLOCKS if b.marker != "skip" and b.commands]
+
+
+def _not_run() -> list[object]:
+    """Each block with commands that are not run here (a skip marker, a ROS
+    install's lines), with those commands: checked without running them."""
     params: list[object] = []
     for b in BLOCKS:
-        if b.marker == "skip":
-            params.append(pytest.param(b, id=b.name, marks=pytest.mark.skip(reason=b.reason)))
-        elif not b.commands:
-            reasons = sorted({why for _, why in b.not_run})
-            params.append(pytest.param(b, id=b.name, marks=pytest.mark.skip(reason="; ".join(reasons))))
-        else:
-            params.append(pytest.param(b, id=b.name))
+        lines = [c for c, _ in b.not_run]
+        if b.marker == "skip" or not b.commands:
+            lines = [*b.commands, *lines]
+        if lines:
+            params.append(pytest.param(b, lines, id=b.name))
     return params
 
 
@@ -320,6 +331,73 @@ def test_the_docs_commands_run(block: Block, checkout: tuple[Path, dict[str, str
                 + "\n".join(missing)
                 + f"\n--- it printed:\n{out}"
             )
+
+
+@pytest.mark.parametrize(("block", "lines"), _not_run())
+def test_the_docs_commands_not_run_name_only_what_winder_has(block: Block, lines: list[Command]) -> None:
+    """A command the docs show that cannot run here (a ROS install's ``ros2
+    run``/``launch``/``service call``, a second host, minutes of tests) names
+    only what winder has: its subcommands and options parse, its nodes'
+    parameters exist and are in range, the launch arguments, services and
+    service types, make targets and test paths exist
+    (``support/doc_commands.py``). Another project's commands are not
+    checked, but every such block holds at least one of winder's."""
+    checked, bad = 0, []
+    for c in lines:
+        found = problems(c.text)
+        if found is None:
+            continue
+        checked += 1
+        bad += [f"{block.path.relative_to(ROOT)}:{c.line}: {p}" for p in found]
+    assert not bad, "\n".join(bad)
+    assert checked, f"{block.name}: none of its commands is winder's: {[c.text for c in lines]}"
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        ".venv/bin/winder run --no-such-option 3",
+        ".venv/bin/winder analyse bags/x",
+        ".venv/bin/sim_node --ros-args -p fork.Q:=1",
+        ".venv/bin/sim_node --ros-args -p fork.J:=-1",
+        "ros2 run winder_sim sim_nodes --ros-args -p model:=nonlinear",
+        "ros2 run winder_profile profile_node --ros-args -p tau:=fast",
+        "ros2 launch winder_sim winder.launch.py turns:=40",
+        "ros2 launch winder_sim winder_cell.launch.py",
+        "ros2 service call /cell1/interp_node/begin std_srvs/srv/Trigger",
+        "ros2 service call /interp_node/start_run std_srvs/srv/Trigger",
+        "make tests",
+        ".venv/bin/python -m pytest test/contract/test_conformances.py",
+        'WINDER_CONSUMER="bridge_node --ros-args -p max_following_error.hand:=1" make test',
+        "ros2 run winder_sim sim_node --ros-args -p model:=quadratic",
+        "ros2 param set /cell1/interp_node turns_per_layer 0",
+        "ros2 param get /interp_node job",
+    ],
+)
+def test_a_command_not_run_that_names_what_winder_lacks_is_found(text: str) -> None:
+    """The check above can fail: each of these names something winder does
+    not have (a misspelt option, parameter, executable, launch file or
+    argument, service or its type, target or path, an out-of-range value)."""
+    found = problems(text)
+    assert found, text
+    assert all("\n" not in line for line in found), found
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        ".venv/bin/winder run --turns-per-layer 10 --one-process",
+        "ros2 run winder_sim sim_node --ros-args -r __ns:=/cell1 -p model:=nonlinear -p fork.D:=0.003",
+        "ros2 launch winder_sim winder.launch.py turns_per_layer:=40 profile:=trapezoid fork.J:=2e-4",
+        "ros2 service call /cell1/interp_node/start std_srvs/srv/Trigger",
+        "ros2 service call /sim_node/change_state lifecycle_msgs/srv/ChangeState",
+        "ros2 param set /interp_node job_file jobs/rw400.yaml",
+        "WINDER_TEST_DOMAINS=20-59 nice -n 5 .venv/bin/python -m pytest test/analysis/test_metrics.py",
+    ],
+)
+def test_a_command_not_run_that_names_what_winder_has_passes(text: str) -> None:
+    assert problems(text) == [], text
+    assert problems("xacro winder.urdf.xacro") is None  # another project's: not checked
 
 
 def test_every_block_is_read_and_every_skip_says_why() -> None:
