@@ -210,6 +210,9 @@ def test_without_commands_the_times_are_the_plans(seed, kind, dwell):
     st.floats(0, 2),
     st.floats(0.05, 2),
 )
+# found by hypothesis in CI: the stop came 5e-7 steps short of step 3493, which
+# the pause counted as reached; after the resume that step was timed 0.36 ms after the rest
+@example(1592, "scurve", 1 / 3, 0.0, 1.0)
 def test_pause_resume_override_keep_every_step_in_order(seed, kind, where, rest, f):
     steps = job_steps(seed)
     ramp = {**RAMP, "profile": kind, "dwell": 0.1}

@@ -174,7 +174,9 @@ class Timeline:
             limit = len(x)
             if mv.rest_at is not None:
                 limit = int(np.searchsorted(x, mv.rest_at * (1 + _SNAP) + _SNAP, side="right"))
-            starts = [pc.p0 for pc in mv.pieces[1:]]
+            # a step a stop came within _SNAP of counts as reached at the rest
+            # (the pause's event counts it): it stays the stop's, not the resume's
+            starts = [pc.p0 * (1 + _SNAP) + _SNAP if pc.kind == "resume" else pc.p0 for pc in mv.pieces[1:]]
             which = np.searchsorted(
                 np.asarray(starts), x[:limit], side="left"
             )  # x <= p0 of the next: this one
