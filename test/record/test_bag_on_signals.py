@@ -132,11 +132,14 @@ def mcap_size(bag_dir: Path) -> int:
     """The bytes of the bags' .mcap files now. A bag opens in a hidden
     directory renamed once it is set up: a file listed there may be gone
     when it is looked at (FileNotFoundError in a fresh-clone CI run); it
-    counts then as nothing yet, and the next look finds it renamed."""
+    counts then as nothing yet, and the next look finds it renamed. The glob
+    itself raised it too, listing the hidden directory as it was renamed
+    (3 of 4 'mid' tests in one fresh-clone CI run)."""
     total = 0
-    for f in bag_dir.glob("*/*.mcap"):
-        with contextlib.suppress(FileNotFoundError):
-            total += f.stat().st_size
+    with contextlib.suppress(FileNotFoundError):  # the glob itself, when the directory goes as it lists it
+        for f in bag_dir.glob("*/*.mcap"):
+            with contextlib.suppress(FileNotFoundError):
+                total += f.stat().st_size
     return total
 
 
