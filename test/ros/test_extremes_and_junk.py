@@ -18,6 +18,7 @@ from conftest import BIN, Procs, closed_bags, is_consumer, rosbags_read
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from support.cell import SMALL_JOB, job_args, only_bag, timed_rows, winder_run
+from support.ros_probe import heard_diagnostics
 
 from winder.axis import StepperAxis
 from winder.cli import commands as cli
@@ -353,20 +354,6 @@ def test_nodes_survive_junk_jobs_chunks_and_receipts(tmp_path: Path, procs: Proc
         raise AssertionError("\n".join(sorted(set(seen)))) from None
     for p in nodes:
         assert "Traceback" not in procs.log(p)
-
-
-def heard_diagnostics(ros: Any) -> list[tuple[str, str, dict[str, str]]]:
-    """Every DiagnosticStatus the probe node hears from now on: (name, message, values)."""
-    from diagnostic_msgs.msg import DiagnosticArray
-
-    seen: list[tuple[str, str, dict[str, str]]] = []
-    ros.create_subscription(
-        DiagnosticArray,
-        "/diagnostics",
-        lambda m: seen.extend((s.name, s.message, {kv.key: kv.value for kv in s.values}) for s in m.status),
-        100,
-    )
-    return seen
 
 
 @pytest.mark.ros

@@ -140,16 +140,10 @@ def test_a_slow_run_set_up_is_no_stall(tmp_path: Path, procs: Procs, ros: Any) -
     the set-up are work at hand, the watch counts from the end of it, and
     the run ends done with no stall reported. (Counting from before the
     set-up, 8 cells on 2 cores reported stalls 46 ms into their runs.)"""
-    from diagnostic_msgs.msg import DiagnosticArray
     from support.paths import TEST
+    from support.ros_probe import heard_diagnostics
 
-    seen: list[tuple[str, str, dict[str, str]]] = []
-    ros.create_subscription(
-        DiagnosticArray,
-        "/diagnostics",
-        lambda m: seen.extend((s.name, s.message, {kv.key: kv.value for kv in s.values}) for s in m.status),
-        100,
-    )
+    seen = heard_diagnostics(ros)
     bags = tmp_path / "bags"
     slow = TEST / "consumers" / "slow_start.py"
     procs.launch(

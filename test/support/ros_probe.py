@@ -1,11 +1,25 @@
-"""A probe node's dealings with a running cell: spinning it, and the
-parameter and start services it calls (asking again where a DDS service
+"""A probe node's dealings with a running cell: spinning it, the statuses
+it hears, and the parameter and start services it calls (asking again where a DDS service
 reply can be lost)."""
 
 from __future__ import annotations
 
 import time
 from typing import Any
+
+
+def heard_diagnostics(ros: Any) -> list[tuple[str, str, dict[str, str]]]:
+    """Every DiagnosticStatus the probe node hears from now on: (name, message, values)."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    seen: list[tuple[str, str, dict[str, str]]] = []
+    ros.create_subscription(
+        DiagnosticArray,
+        "/diagnostics",
+        lambda m: seen.extend((s.name, s.message, {kv.key: kv.value for kv in s.values}) for s in m.status),
+        100,
+    )
+    return seen
 
 
 def spin_until(node: Any, cond: Any, timeout: float, what: str) -> None:
