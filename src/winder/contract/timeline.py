@@ -52,6 +52,12 @@ OVERRIDE_RANGE = (0.05, 2.0)
 _SNAP = 1e-9  # relative: a stop this close to a move's end ends the move
 
 
+def _reached(position: float) -> float:
+    """The furthest step position counted as reached by a stop at ``position``
+    (steps since the move's start): a step within _SNAP of it is."""
+    return position * (1 + _SNAP) + _SNAP
+
+
 class CommandError(ValueError):
     """A command the job cannot take now (one line: why)."""
 
@@ -173,10 +179,10 @@ class Timeline:
             x = (k[lo:hi] - mv.k0).astype(np.float64)
             limit = len(x)
             if mv.rest_at is not None:
-                limit = int(np.searchsorted(x, mv.rest_at * (1 + _SNAP) + _SNAP, side="right"))
+                limit = int(np.searchsorted(x, _reached(mv.rest_at), side="right"))
             # a step a stop came within _SNAP of counts as reached at the rest
             # (the pause's event counts it): it stays the stop's, not the resume's
-            starts = [pc.p0 * (1 + _SNAP) + _SNAP if pc.kind == "resume" else pc.p0 for pc in mv.pieces[1:]]
+            starts = [_reached(pc.p0) if pc.kind == "resume" else pc.p0 for pc in mv.pieces[1:]]
             which = np.searchsorted(
                 np.asarray(starts), x[:limit], side="left"
             )  # x <= p0 of the next: this one
@@ -287,7 +293,7 @@ class Timeline:
             self.held = m
         for later in self.moves[m + 1 :]:
             later.waiting = True
-        step = mv.k0 + min(math.floor(rest * (1 + _SNAP) + _SNAP), mv.length)
+        step = mv.k0 + min(math.floor(_reached(rest)), mv.length)
         return {
             "v": v, "a": a, "stop_distance": tail.distance, "t_rest_ns": self.rest_ns,
             "segment": mv.seg, "step": step, "steps": self._steps_before(m) + step - mv.k0,
@@ -313,7 +319,7 @@ class Timeline:
             prof = from_rest(mv.profile, mv.length - rest, self.v_max * self.factor * mv.speed)
             mv.pieces.append(_Piece(t, rest, prof, "resume"))
             self._shift_from(m + 1, mv.end_ns + mv.gap_ns)
-            seg, step = mv.seg, mv.k0 + math.floor(rest * (1 + _SNAP) + _SNAP)
+            seg, step = mv.seg, mv.k0 + math.floor(_reached(rest))
             steps = self._steps_before(m) + step - mv.k0
         else:
             self._shift_from(m, t + self.gap_left_ns)
@@ -328,7 +334,7 @@ class Timeline:
             m = self.held
             mv = self.moves[m] if m < len(self.moves) else None
             if mv is not None and mv.rest_at is not None:
-                step = mv.k0 + min(math.floor(mv.rest_at * (1 + _SNAP) + _SNAP), mv.length)
+                step = mv.k0 + min(math.floor(_reached(mv.rest_at)), mv.length)
                 steps, seg = self._steps_before(m) + step - mv.k0, mv.seg
             else:
                 prev = self.moves[m - 1] if m else None
