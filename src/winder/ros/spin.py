@@ -100,13 +100,11 @@ def spin_all(factories: list[Callable[[], Node]], args: list[str] | None = None)
     rclpy.init(args=args)
     nodes: list[Node] = []
     executor: SenderExecutor | None = None
-    made = False  # every node made: none is half made, unknown to the clean-up below
     try:
         if _signalled:  # before rclpy's handlers were there to shut the context down
             return
         for factory in factories:
             nodes.append(factory())
-        made = True
         executor = SenderExecutor()  # takes attributed subscriptions with their publisher (winder.ros.sender)
         for node in nodes:
             executor.add_node(node)
@@ -137,8 +135,9 @@ def spin_all(factories: list[Callable[[], Node]], args: list[str] | None = None)
     # a node whose making a signal cut short (its context shut down under it)
     # was never destroyed, and only the interpreter's teardown takes its DDS
     # participant down: without it the node stayed on the graph for the whole
-    # lease (10 s), where a restarted node would have been taken for a second one
-    if made and all(getattr(node, "let_go", True) for node in nodes):
+    # lease (10 s), where a restarted node would have been taken for a second one;
+    # every node made, none is half made and unknown to the clean-up above
+    if len(nodes) == len(factories) and all(getattr(node, "let_go", True) for node in nodes):
         leave(code)
     if code:  # a node still holds an entity: the interpreter's teardown removes the participant
         raise SystemExit(code)
