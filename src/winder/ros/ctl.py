@@ -454,7 +454,11 @@ class CellView:
         return bool(self.state or self.statuses)
 
     def complete(self) -> bool:
-        return len(self.roles()) == 3 and bool(self.state)
+        """Every role's job status, ``winder/state`` and both roles' ``winder/ready``
+        heard (latched messages of two publishers come at different times)."""
+        from winder.contract.topics import READY_ROLES
+
+        return len(self.roles()) == 3 and bool(self.state) and all(r in self.ready for r in READY_ROLES)
 
 
 def watch_cell(session: Session, namespace: str) -> CellView:
