@@ -80,21 +80,30 @@ def wait_for_bags(bags: Path, n: int, timeout: float = 60.0) -> list[Path]:
     raise AssertionError(f"no {n} closed bag(s) in {bags} within {timeout} s")
 
 
-def start_again(ros: Any) -> str:
-    """Call the interp node's ~/start until a run starts (the cell settles first); its reply."""
+def call_start(ros: Any) -> tuple[bool, str]:
+    """One call of the interp node's ~/start: (success, its message)."""
     from std_srvs.srv import Trigger
 
     client = ros.create_client(Trigger, "/interp_node/start")
     spin_until(ros, client.service_is_ready, 30, "interp_node/start")
-    reply = ""
+    future = client.call_async(Trigger.Request())
+    spin_until(ros, future.done, 10, "the start reply")
+    reply = future.result()
+    ros.destroy_client(client)
+    return bool(reply.success), str(reply.message)
+
+
+def start_again(ros: Any) -> str:
+    """Call the interp node's ~/start until a run starts (the cell settles
+    first); its reply. By the reply's success flag: a refusal's words ("job
+    not started: not ready") hold "started" too."""
+    ok, reply = False, ""
     t_end = time.monotonic() + 30
-    while "started" not in reply and time.monotonic() < t_end:
-        future = client.call_async(Trigger.Request())
-        spin_until(ros, future.done, 10, "the start reply")
-        reply = future.result().message
-        if "started" not in reply:
+    while not ok and time.monotonic() < t_end:
+        ok, reply = call_start(ros)
+        if not ok:
             time.sleep(0.5)
-    assert "started" in reply, reply
+    assert ok and reply.startswith("run "), reply
     return reply
 
 
@@ -439,7 +448,7 @@ def test_a_trajectory_controller_gets_every_point_exact_in_batches(
     ("fault", "joint", "words", "words2"),
     [
         (("--stuck", "feed_screw"), "feed_screw", "following error", "following error"),
-        (("--silent-after", "0.4"), "", "joint_state_timeout", "cannot start: no joint_states"),
+        (("--silent-after", "0.4"), "", "joint_state_timeout", ""),
     ],
     ids=["stuck_joint", "silent_joint_states"],
 )
@@ -449,9 +458,12 @@ def test_servo_fault_stops_the_cell(
     """A stuck joint (or a broadcaster gone quiet): an ERROR naming the joint,
     the run closed incomplete with a readable bag, the commands held from
     the fault on, the profile node told to abort, the interp node ready for
-    a new start, and that next run clean (no stale step of the first)."""
+    a new start, and that next run clean (no stale step of the first).
+    ``words2``: the fault of that next run (the joint still stuck); "": the
+    broadcaster stays quiet, so the cell refuses to start until the hardware
+    is back, and then runs the job to the end."""
     bags = tmp_path / "bags"
-    start_standin(procs, *fault)
+    standin = start_standin(procs, *fault)
     bridge = start_cell(
         procs,
         bags,
@@ -488,14 +500,59 @@ def test_servo_fault_stops_the_cell(
         log = procs.log(bridge)
     assert "/profile_node/abort: run" in log and "aborting" in log, log
 
+    if not words2:
+        # no joint_states for a second: the bridge says it waits for the hardware, and a start
+        # is refused (not taken, to fail 2 s later); a new broadcaster, and the cell starts again
+        from diagnostic_msgs.msg import KeyValue
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+        said: dict[str, str] = {}
+        latched = QoSProfile(
+            depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+        )
+        sub = ros.create_subscription(
+            KeyValue, "/winder/ready", lambda m: said.update({m.key: m.value}), latched
+        )
+        spin_until(ros, lambda: said.get("consumer") == "waiting", 20, "the bridge's winder/ready: waiting")
+        ros.destroy_subscription(sub)
+        assert "waiting for the hardware: no /joint_states" in procs.log(bridge).split(fault_text)[-1]
+        ok, reply = call_start(ros)
+        assert not ok and "not ready" in reply and "consumer" in reply, reply
+        procs.stop(standin)
+        start_standin(procs)
     # the interp node stopped sending: a new start is taken
     start_again(ros)
-    # that run (from where the joints stopped: job_origin start_position) faults the same way,
-    # with a clean stream: the first run's late chunks were not taken for it
+    # that run (from where the joints stopped: job_origin start_position) faults the same way or
+    # runs to the end, with a clean stream: the first run's late chunks were not taken for it
     second = wait_for_bags(bags, 2)[1]
     report2 = final_report(rosbags_read(second))
-    assert report2["state"] == "incomplete" and words2 in report2["servo_fault"], report2
+    if words2:
+        assert report2["state"] == "incomplete" and words2 in report2["servo_fault"], report2
+    else:
+        assert report2["state"] == "done" and report2["steps_done"] == report2["steps_total"], report2
     assert (report2["gaps"], report2["chunks_rejected"], report2["steps_missing"]) == ("0", "0", "0"), report2
+    assert "Traceback" not in procs.log(bridge)
+
+
+def test_a_joint_the_broadcaster_never_names_keeps_the_run_from_starting(
+    tmp_path: Path, procs: Procs, ros: Any
+) -> None:
+    """joint_states come, but never for one of the bridge's joints (a
+    broadcaster configured for other joints): the cell is ready (the
+    hardware talks), the run is taken and then refused within 2 s, naming
+    that joint; nothing is commanded; the next start is taken again."""
+    bags = tmp_path / "bags"
+    procs.launch([sys.executable, str(STANDIN), "--joints", ",".join(JOINTS[:2])], "standin")
+    bridge = start_cell(procs, bags)  # interp_node starts the job by itself
+    [bag] = wait_for_bags(bags, 1)
+    raw = rosbags_read(bag)
+    report = final_report(raw)
+    assert report["state"] == "incomplete" and report["steps_done"] == "0", report
+    assert "the run cannot start: no joint_states for feed_screw within 2 s" in report["servo_fault"], report
+    assert not raw.get(COMMANDS) and not raw.get("/clock")  # nothing commanded, the clock not started
+    start_again(ros)
+    second = wait_for_bags(bags, 2)[1]
+    assert "no joint_states for feed_screw" in final_report(rosbags_read(second))["servo_fault"]
     assert "Traceback" not in procs.log(bridge)
 
 
