@@ -89,6 +89,11 @@ def test_the_same_job_twice_gives_two_runs_on_one_clock(tmp_path: Path, procs: P
         assert said, reply.message
         return said.group(1)
 
+    # every node's 1 Hz status heard first: its /diagnostics writer is matched with ours, so
+    # none of its statuses of the runs is lost to discovery (a loaded CI run once heard the
+    # profile node only after both its runs' 'running')
+    nodes = {"interp_node", "profile_node", "sim_node"}
+    spin_until(ros, lambda: nodes <= {n.split(":")[0] for n, _, _ in statuses}, 30, "every node's status")
     first = start()
     # another cell's node reports an ERROR while this cell runs: not ours
     bad = DiagnosticStatus(level=DiagnosticStatus.ERROR, name="cell9/sim_node: job", message="elsewhere")
