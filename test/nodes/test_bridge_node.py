@@ -469,6 +469,10 @@ def test_servo_fault_stops_the_cell(
         bags,
         *("-p", "max_following_error.fork:=5.0", "-p", "max_following_error.pole:=1.0"),
         *("-p", "job_origin:=start_position"),
+        # the stuck joint's limit is the feed's default; a run meant to end (the silent case's
+        # second) gets the tolerance of the other whole-run tests: a fresh Python stand-in
+        # on two busy cores once lagged 5.9 mm behind its commands in a CI run
+        *(() if words2 else ("-p", "max_following_error.feed:=0.01")),
     )
     [bag] = wait_for_bags(bags, 1)
     raw = rosbags_read(bag)
@@ -519,7 +523,11 @@ def test_servo_fault_stops_the_cell(
         ok, reply = call_start(ros)
         assert not ok and "not ready" in reply and "consumer" in reply, reply
         procs.stop(standin)
-        start_standin(procs)
+        standin = start_standin(procs)
+        t_end = time.monotonic() + 30
+        while "stand-in up" not in procs.log(standin):
+            assert time.monotonic() < t_end, procs.log(standin)
+            time.sleep(0.1)
     # the interp node stopped sending: a new start is taken
     start_again(ros)
     # that run (from where the joints stopped: job_origin start_position) faults the same way or

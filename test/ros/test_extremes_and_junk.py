@@ -18,7 +18,7 @@ from conftest import BIN, Procs, closed_bags, is_consumer, rosbags_read
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from support.cell import SMALL_JOB, job_args, only_bag, timed_rows, winder_run
-from support.ros_probe import heard_diagnostics
+from support.ros_probe import heard_diagnostics, start_job
 
 from winder.axis import StepperAxis
 from winder.cli import commands as cli
@@ -339,13 +339,8 @@ def test_nodes_survive_junk_jobs_chunks_and_receipts(tmp_path: Path, procs: Proc
         assert logs[name].count(f"messages from {sender} ignored") == 1, (name, sender, logs[name])
     assert not any("job description rejected" in s for s in seen), "junk from a stranger was acted on"
     # a good job still runs through the same three nodes
-    from rclpy.task import Future
-    from std_srvs.srv import Trigger
-
-    client = ros.create_client(Trigger, "/interp_node/start")
-    spin_until(ros, client.service_is_ready, 30, "the start service")
-    future: Future = client.call_async(Trigger.Request())
-    spin_until(ros, future.done, 30, "the start reply")
+    reply = start_job(ros)
+    assert reply.success, reply.message
     try:
         spin_until(
             ros, lambda: any(s.startswith("sim_node: job|job rw400: complete") for s in seen), 60, "the job"
@@ -391,7 +386,8 @@ def test_a_restarted_node_leaves_the_cell_able_to_run_the_next_job(
     client = ros.create_client(Trigger, "/interp_node/start")
     spin_until(ros, client.service_is_ready, 30, "the start service")
     spin_until(ros, lambda: any(is_consumer(n, v) for n, _, v in seen), 30, "the sim node")
-    client.call_async(Trigger.Request())
+    reply = start_job(ros)
+    assert reply.success, reply.message
     spin_until(ros, lambda: any(v.get("state") == "running" for _, _, v in seen), 60, "the job to run")
     first_run = next(v["run_id"] for _, _, v in seen if v.get("state") == "running" and v.get("run_id"))
     nodes[victim].kill()
@@ -826,7 +822,7 @@ def test_a_start_while_a_job_runs_is_refused_and_the_job_completes(
     def done_count() -> int:
         return sum(1 for n, _, v in seen if is_consumer(n, v) and v.get("state") == "done")
 
-    first = start()
+    first = start_job(ros)
     assert first.success, first.message
     spin_until(
         ros, lambda: any(v.get("state") == "running" for n, _, v in seen if is_consumer(n, v)), 30, "run"

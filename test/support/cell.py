@@ -127,6 +127,14 @@ class FakeProfile:
         spin_until(
             self.node, lambda: self.pub.get_subscription_count() > 0, 30, "the sim node's subscription"
         )
+        # and its 1 Hz status heard: its /diagnostics writer is matched with ours, so the
+        # one-shot ERROR a bad chunk gets is not lost to discovery
+        spin_until(
+            self.node,
+            lambda: any(name.startswith("sim_node: ") for _, name, _ in self.statuses),
+            30,
+            "the sim node's status",
+        )
         self.pub_job.publish(self.String(data=describe_job(self.job)))
         time.sleep(0.5)  # the job description first, as the real profile node does
         for c in chunks:

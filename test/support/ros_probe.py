@@ -99,6 +99,26 @@ def start_run(node: Any, values: dict[str, Any]) -> Any:
         ros_spin(node, 0.3)
 
 
+def start_job(node: Any, timeout: float = 30.0) -> Any:
+    """Call /interp_node/start, asking again while the cell is still
+    connecting ("not ready": the nodes' handshake on winder/ready comes after
+    their services); the std_srvs/Trigger response. Not asked again on a lost
+    reply: a second start could then be taken."""
+    from std_srvs.srv import Trigger
+
+    client = node.create_client(Trigger, "/interp_node/start")
+    spin_until(node, client.service_is_ready, timeout, "the start service")
+    t_end = time.monotonic() + timeout
+    while True:
+        future = client.call_async(Trigger.Request())
+        spin_until(node, future.done, 30, "the start reply")
+        reply = future.result()
+        if reply.success or "not ready" not in reply.message or time.monotonic() > t_end:
+            node.destroy_client(client)
+            return reply
+        ros_spin(node, 0.3)
+
+
 def set_params(node: Any, target: str, values: dict[str, Any]) -> list[Any]:
     from rcl_interfaces.srv import SetParameters
     from rclpy.parameter import Parameter

@@ -59,6 +59,7 @@ class Peers:
         warn: Callable[[str], None] | None = None,
         *,
         what: str = "change a run",
+        patient: bool = False,
     ) -> None:
         self.node = node
         ns = (node.get_namespace() if namespace is None else namespace).strip("/")
@@ -81,6 +82,10 @@ class Peers:
         self.warn = warn or (lambda text: node.get_logger().warning(text))
         #: what only the cell's own nodes may do here, in the warning ("show in the live view")
         self.what = what
+        #: hold (not refuse) a named sender's message while no node shows in the topic's role:
+        #: a reader without the cell's start handshake (the live view) may hear a node's
+        #: latched message before the graph shows the endpoints that give it its part
+        self.patient = patient
 
     # -- the graph ----------------------------------------------------------------
     def topic(self, name: str) -> str:
@@ -158,13 +163,15 @@ class Peers:
         """True: the message comes from the cell's node owning ``topic``
         (``role``, by default the owner in :data:`OWNERS`); False: from
         another node (counted, reported once per sender); None: the graph
-        does not name its publisher yet."""
+        does not name its publisher yet (or, ``patient``, shows nobody in the role)."""
         role = role or OWNERS[topic]
         who = self.sender(topic, gid)
         if who is None:
             return None
         if who == self.pinned.get(role) or who == self.owner(role):
             return True
+        if self.patient and not self.holders(role):
+            return None  # nobody plays the part yet, as far as the graph shows: judged again
         self.refuse(topic, who, gid, f"not the cell's {ROLE_NAMES[role]}")
         return False
 

@@ -139,7 +139,7 @@ class LiveView:
     def attach(self) -> None:
         node = rclpy.create_node("winder_view", namespace=self.namespace or "/")
         self.node = node
-        self.peers = Peers(node, self.namespace, what="show in the live view")
+        self.peers = Peers(node, self.namespace, what="show in the live view", patient=True)
         for topic in VIEW_TOPICS:
             full = self.names[topic.name]
             assert node.resolve_topic_name(topic.name) == full, (topic.name, full)
