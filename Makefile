@@ -1,6 +1,7 @@
 # winder: the two commands of the README, plus the side jobs.
 #   make demo   - create .venv if needed, run the default winding job
 #   make test   - create .venv if needed, lint and type-check every package, run the whole test suite
+#   make flakes - the node tests FLAKE_ROUNDS times (default 3) beside a busy loop: each failure, counted
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
@@ -9,8 +10,13 @@ SETUPS := pyproject.toml src/setup.py winder_interp/setup.py winder_profile/setu
 	  winder_bridge/setup.py
 
 PACKAGES := src winder_interp winder_profile winder_sim winder_bridge
+# pytest workers: the node tests mostly wait (discovery, a node's start, a paced run), so
+# four share two cores well; each test holds ROS domains of its own (test/support/domains.py)
+TEST_WORKERS ?= 4
+PYTEST := $(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile
+FLAKE_ROUNDS ?= 3
 
-.PHONY: demo test bench figures venv bytecode clean
+.PHONY: demo test flakes bench figures venv bytecode clean
 
 venv: $(STAMP)
 
@@ -35,7 +41,12 @@ demo: bytecode
 test: bytecode
 	$(BIN)/ruff check $(PACKAGES) test bench
 	$(BIN)/mypy
-	$(BIN)/python -m pytest
+	$(PYTEST)
+
+# the flake finder: the node tests (-m ros) FLAKE_ROUNDS rounds beside a busy loop on one
+# core; prints each test that failed and in how many rounds (no retries: a failure counts)
+flakes: bytecode
+	$(BIN)/python test/flakes.py --rounds $(FLAKE_ROUNDS) --workers $(TEST_WORKERS)
 
 bench: bytecode
 	$(BIN)/python bench/run_all.py

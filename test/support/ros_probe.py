@@ -7,6 +7,8 @@ from __future__ import annotations
 import time
 from typing import Any
 
+from support import wait
+
 
 def heard_diagnostics(ros: Any) -> list[tuple[str, str, dict[str, str]]]:
     """Every DiagnosticStatus the probe node hears from now on: (name, message, values)."""
@@ -22,26 +24,14 @@ def heard_diagnostics(ros: Any) -> list[tuple[str, str, dict[str, str]]]:
     return seen
 
 
-def spin_until(node: Any, cond: Any, timeout: float, what: str) -> None:
-    """Spin ``node`` until ``cond()`` is true, or fail naming ``what``."""
-    from rclpy.executors import SingleThreadedExecutor
-
-    ex = SingleThreadedExecutor(context=node.context)
-    ex.add_node(node)
-    t_end = time.monotonic() + timeout
-    try:
-        while not cond():
-            if time.monotonic() > t_end:
-                raise AssertionError(f"timed out after {timeout} s waiting for {what}")
-            ex.spin_once(timeout_sec=0.05)
-    finally:
-        ex.remove_node(node)
+def spin_until(node: Any, cond: Any, timeout: float, what: str, heard: Any = None) -> Any:
+    """Spin ``node`` until ``cond()`` is true, or fail naming ``what`` (:func:`support.wait.spin_until`)."""
+    return wait.spin_until(node, cond, timeout, what, heard=heard)
 
 
 def ros_spin(node: Any, seconds: float) -> None:
-    """Spin the probe node for ``seconds``."""
-    t_end = time.monotonic() + seconds
-    spin_until(node, lambda: time.monotonic() >= t_end, seconds + 5, f"{seconds} s")
+    """Spin the probe node for ``seconds`` (:func:`support.wait.spin_for`)."""
+    wait.spin_for(node, seconds)
 
 
 def get_params(node: Any, target: str, names: list[str]) -> list[Any]:
