@@ -24,6 +24,7 @@ from typing import Any
 
 __all__ = [
     "WaitTimeoutError",
+    "child",
     "log_has",
     "matched",
     "node_gone",
@@ -178,3 +179,32 @@ def log_has(path: Path, texts: str | Iterable[str], timeout: float, what: str = 
             heard=lambda: read()[-1500:],
         )
     )
+
+
+def child(parent: int, name: str, timeout: float) -> int:
+    """Until process ``parent`` has a child whose command line holds ``name``; its pid."""
+
+    def find() -> int:
+        for task in Path(f"/proc/{parent}/task").glob("*"):
+            try:
+                kids = (task / "children").read_text().split()
+            except OSError:
+                continue
+            for pid in kids:
+                try:
+                    argv = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
+                except OSError:
+                    continue
+                if any(name.encode() in a for a in argv):
+                    return int(pid)
+        return 0
+
+    def kids() -> list[str]:
+        return sorted(
+            Path(f"/proc/{k}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")[:120]
+            for t in Path(f"/proc/{parent}/task").glob("*")
+            for k in (t / "children").read_text().split()
+            if Path(f"/proc/{k}").exists()
+        )
+
+    return int(until(find, timeout, f"child {name} of process {parent}", heard=kids))

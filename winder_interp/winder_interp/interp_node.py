@@ -421,8 +421,8 @@ class InterpNode(ManagedNode):
         if self.job is None or quiet <= self.settings.values()["stall_abort"]:
             return
         why = (
-            f"job {self.job.job_id} aborted: no receipt for {quiet:.1f} s at "
-            f"{self.consumed}/{self.sent} steps taken of {self.sent} sent"
+            f"job {self.job.job_id} given up, incomplete: no receipt from the consumer for {quiet:.1f} s "
+            f"(stall_abort) at {self.consumed}/{self.sent} steps taken of {self.sent} sent"
         )
         self.get_logger().error(why)
         self.pending = None

@@ -76,6 +76,15 @@ def report_run(result: Any, wall: float, command: str = "run", *, stops: bool = 
         print(f"  max tracking error {_number(x, 'max_tracking_error_steps', '.3f')} steps")
     if "lost_steps" in x:
         print(f"  lost steps         {x['lost_steps']}")
+    if r.stalls:
+        # a stall of the producers: as fast as possible nothing waits on the steps, so one that
+        # ends with every step done is a warning; in real time the axes ran out of steps (ERROR)
+        longest = x.get("longest_stall_s")
+        print(
+            f"  WARNING stalls     {r.stalls}, the step stream stood still"
+            + (f" up to {longest} s" if longest else "")
+            + (", nothing lost" if r.state == "done" and not r.steps_missing else "")
+        )
     # the stops and commands come from the bag: read only when the run had some (reading a
     # large bag takes a while; the final report counts the operator's events)
     had = stops or "operator_events" in x

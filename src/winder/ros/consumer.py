@@ -312,6 +312,7 @@ class StepConsumer(ManagedNode):
         self.start_wall = time.monotonic()
         self.stalled = False
         self.stalls = 0
+        self.longest_stall = 0.0  #: the longest time without steps while the run waited on them (s)
         self.errors: list[str] = []
         self.foreign = 0  # control messages of the run refused
 
@@ -693,6 +694,7 @@ class StepConsumer(ManagedNode):
             errors=len(self.errors),
             stalls=self.stalls,
             extra={
+                **({"longest_stall_s": f"{self.longest_stall:.1f}"} if self.stalls else {}),
                 **{k: str(v) for k, v in self.details().items()},
                 **self.intruder_keys(),
                 **self.event_keys(),
@@ -889,13 +891,23 @@ class StepConsumer(ManagedNode):
             self.stalled = True
             self.stalls += 1
             why = f"step stream stalled: no steps for {idle:.1f} s at {done} steps"
+            if not self.paces():
+                why += " (as fast as possible: nothing waits on the steps; the run fails if steps are lost)"
             self.get_logger().warning(why)
             self.publish_status(
-                "stream", ERROR, why, {"job_id": self.plan.job_id, "run_id": self.plan.run_id}
+                "stream", self.stall_level(), why, {"job_id": self.plan.job_id, "run_id": self.plan.run_id}
             )
+        if self.stalled:
+            self.longest_stall = max(self.longest_stall, idle)
         if idle > settings["stall_abort"]:
             self.error(f"step stream stalled for {idle:.1f} s at {done} steps: job closed incomplete")
             self.finish(complete=False)
+
+    def stall_level(self) -> int:
+        """How bad a stall is while it lasts: in real time the axes run out of
+        steps (ERROR); as fast as possible nothing waits on them, and a run
+        that then completes lost nothing (WARN: the summary counts it)."""
+        return ERROR if self.paces() else WARN
 
     def receipt(self) -> None:
         """The steps of the run executed so far, or known missing, on
@@ -945,7 +957,7 @@ class StepConsumer(ManagedNode):
             state = self.ledger.op_state
         self.publish_status(
             "job",
-            ERROR if self.stalled else OK,
+            self.stall_level() if self.stalled else OK,
             f"run {self.plan.run_id or self.plan.job_id}: {state}",
             self.job_report(state).to_values(),
         )
