@@ -79,8 +79,9 @@ def test_a_transient_stall_as_fast_as_possible_is_a_warning(tmp_path: Path, proc
             run.kill()
             run.wait()
     assert run.returncode == 0, (out, err)
-    assert "WARNING stalls     1, the step stream stood still up to" in out, out
-    assert "nothing lost" in out, out
+    # one stall at least: the one made here (on a loaded machine the producers may stall more)
+    line = next((ln for ln in out.splitlines() if ln.startswith("  WARNING stalls")), out)
+    assert "the step stream stood still up to" in line and line.endswith(", nothing lost"), line
     assert "ERROR reports" not in out, out
     # the stall was said as a warning while it lasted, never as an error
     said = [(lvl, m) for lvl, m in levels if "stalled" in m or m.endswith(": stalled")]
@@ -88,7 +89,7 @@ def test_a_transient_stall_as_fast_as_possible_is_a_warning(tmp_path: Path, proc
     assert all(lvl == DiagnosticStatus.WARN[0] for lvl, _ in said), said
     report = final_report(rosbags_read(only_bag(tmp_path)))
     assert report["state"] == "done" and report["steps_missing"] == "0", report
-    assert report["stalls"] == "1" and float(report["longest_stall_s"]) >= 0.5, report
+    assert int(report["stalls"]) >= 1 and float(report["longest_stall_s"]) >= 0.5, report
 
 
 def test_a_stall_in_real_time_is_an_error(tmp_path: Path, procs: Procs, ros: Any) -> None:
