@@ -10,12 +10,13 @@ import os
 import re
 import signal
 import subprocess
-import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 from conftest import BIN, next_domain, release_domain
+from support import wait
+from support.bags import mcap_size
 from support.paths import ROOT
 
 from winder.cli.exits import (
@@ -89,8 +90,8 @@ def test_a_refused_ctl_command_fails(env: dict[str, str]) -> None:
 
 def _child(parent: int, name: str, timeout: float = 60.0) -> int:
     """The pid of ``parent``'s child process whose command line names ``name``."""
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
+
+    def found() -> int:
         for entry in Path("/proc").iterdir():
             if not entry.name.isdigit():
                 continue
@@ -101,8 +102,11 @@ def _child(parent: int, name: str, timeout: float = 60.0) -> int:
                 continue
             if ppid == parent and any(a.endswith(name.encode()) for a in argv):
                 return int(entry.name)
-        time.sleep(0.2)
-    raise AssertionError(f"no child {name} of {parent} within {timeout} s")
+        return 0
+
+    return int(
+        wait.until(found, timeout, f"child {name} of {parent}", poll=0.2)
+    )  # each look reads all of /proc
 
 
 def _start_run(env: dict[str, str], tmp_path: Path) -> subprocess.Popen[str]:
@@ -115,12 +119,14 @@ def _start_run(env: dict[str, str], tmp_path: Path) -> subprocess.Popen[str]:
 
 
 def _wait_running(run: subprocess.Popen[str], tmp_path: Path, timeout: float = 60.0) -> None:
-    """Until the run's bag exists (the consumer started recording the run)."""
-    end = time.monotonic() + timeout
-    while not any(tmp_path.glob("*/*.mcap")):
-        assert run.poll() is None and time.monotonic() < end, run.communicate()
-        time.sleep(0.2)
-    time.sleep(1.0)
+    """Until the run is under way: its bag's file holds its first chunks (30 kB)."""
+    wait.until(
+        lambda: mcap_size(tmp_path) > 30_000,
+        timeout,
+        "the run's first 30 kB in its bag",
+        heard=lambda: f"{mcap_size(tmp_path)} bytes",
+        running=run,
+    )
 
 
 @pytest.mark.ros

@@ -21,6 +21,8 @@ from typing import Any
 import numpy as np
 import pytest
 from conftest import bag_closed, final_report, next_domain, release_domain, rosbags_read
+from support import wait
+from support.bags import mcap_size
 
 from winder.motion.job import Job
 
@@ -134,10 +136,8 @@ def test_ctrl_c_mid_run_closes_the_one_process_cells_bag(env: dict[str, str], tm
         stderr=subprocess.PIPE,
         text=True,
     )
-    end = time.monotonic() + 60
-    while time.monotonic() < end and not any(tmp_path.glob("*/*.mcap")):
-        time.sleep(0.1)
-    time.sleep(0.5)  # in the run
+    # in the run: its bag's file holds its first chunks
+    wait.until(lambda: mcap_size(tmp_path) > 30_000, 60, "the run's first 30 kB in its bag", running=p)
     p.send_signal(signal.SIGINT)
     out, err = p.communicate(timeout=60)
     assert p.returncode == 130, out + err
@@ -204,11 +204,10 @@ def test_a_run_that_starts_no_cell_leaves_no_container(env: dict[str, str], tmp_
         # the signal comes ``after`` s after the container was started: winder's
         # own code runs by then (before it, Python's start is no part of winder)
         sig, after = how.split(" at ")
-        deadline = time.monotonic() + 30
-        while not container_started(tag) and p.poll() is None:
-            assert time.monotonic() < deadline, "no container within 30 s"
-            time.sleep(0.005)
-        time.sleep(float(after.removesuffix(" s")))
+        wait.until(
+            lambda: container_started(tag) or p.poll() is not None, 30, "the early container", poll=0.005
+        )
+        time.sleep(float(after.removesuffix(" s")))  # the signal's moment is the subject: not a wait
         p.send_signal(getattr(signal, sig))
     out, err = p.communicate(timeout=60)
     if how.startswith("SIG"):
@@ -217,10 +216,13 @@ def test_a_run_that_starts_no_cell_leaves_no_container(env: dict[str, str], tmp_
         assert p.returncode == 2, out + err
         assert len(err.strip().splitlines()) == 1 and "error" in err, err
     assert "Traceback" not in err, err
-    deadline = time.monotonic() + 10  # a container told to leave has a moment to do so
-    while tagged_processes(tag) and time.monotonic() < deadline:
-        time.sleep(0.05)
-    assert tagged_processes(tag) == [], f"{how}: a process of the command outlived it"
+    wait.until(  # a container told to leave has a moment to do so
+        lambda: not tagged_processes(tag),
+        10,
+        f"the end of every process of the command ({how})",
+        heard=lambda: tagged_processes(tag),
+        poll=0.05,
+    )
     assert list(tmp.iterdir()) == [], f"{how}: left behind {list(tmp.iterdir())}"
 
 
@@ -268,10 +270,16 @@ def test_the_container_takes_its_arguments_on_stdin(tmp_path: Path) -> None:
         p.stdin.write(json.dumps(told).encode())
         p.stdin.close()
         want = {(n, "/told") for n in ("interp_node", "profile_node", "sim_node")}
-        end = time.monotonic() + 60
-        while not want <= set(probe.get_node_names_and_namespaces()):
-            assert time.monotonic() < end and p.poll() is None, p.stderr.read() if p.stderr else ""
-            time.sleep(0.05)
+        wait.until(  # the probe's graph is kept by DDS' threads: no spinning needed
+            lambda: want <= set(probe.get_node_names_and_namespaces()),
+            60,
+            "the container's three nodes in /told",
+            heard=lambda: (
+                probe.get_node_names_and_namespaces(),
+                p.stderr.read() if p.poll() is not None and p.stderr else "",  # read once it ended: no block
+            ),
+            running=p,
+        )
         p.send_signal(signal.SIGINT)
         assert p.wait(timeout=30) == 0
     finally:

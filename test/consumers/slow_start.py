@@ -23,7 +23,7 @@ SETUP_S = 3.0
 
 class SlowStart(SimNode):
     def begin(self, plan: JobPlan, values: dict[str, Any]) -> dict[str, object]:
-        time.sleep(SETUP_S)
+        time.sleep(SETUP_S)  # the slow set-up itself, on purpose: not a wait
         return super().begin(plan, values)
 
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 import re
 import subprocess
 import sys
-import time
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +18,7 @@ import numpy as np
 import pytest
 from conftest import Procs
 from ruamel.yaml import YAML
+from support import wait
 from support.paths import ROOT
 
 from winder.contract.jobfile import SECTION_ALIASES, JobFileError, load_job_file
@@ -238,12 +238,17 @@ def test_the_nodes_take_a_job_file_as_their_params_file(tmp_path: Path, procs: P
     procs.start("profile_node", "--params-file", str(job))
     procs.start("interp_node", "--params-file", str(job))
     # a bag has its metadata.yaml from its first moment: wait for the run's final report in it
-    t_end = time.monotonic() + 60
-    while time.monotonic() < t_end:
-        metas = list(bags.glob("*/metadata.yaml"))
-        if metas and read_run(metas[0].parent).report.get("state"):
-            break
-        time.sleep(0.2)
+    wait.until(
+        lambda: (
+            (metas := list(bags.glob("*/metadata.yaml"))) and read_run(metas[0].parent).report.get("state")
+        ),
+        60,
+        f"a bag in {bags} with its run's final report",
+        heard=lambda: (
+            sorted(str(m.relative_to(bags)) for m in bags.glob("*/*")) if bags.is_dir() else "no bags"
+        ),
+        poll=0.2,  # each look reads the bag
+    )
     [meta] = list(bags.glob("*/metadata.yaml"))
     run = read_run(meta.parent)
     assert run.complete and run.job_id == "filed" and run.plan.job.fork_steps_per_rev == 512
@@ -259,7 +264,7 @@ def test_the_interp_node_takes_a_job_file_in_one_start_run_call(
     """~/start_run with job_file: the file's job and its ramp (carried with the
     job: the profile node's own is scurve) in one call; a bad file sets
     nothing and starts nothing, with the file's reason."""
-    from support.ros_probe import get_params, ros_spin, start_run
+    from support.ros_probe import get_params, start_run
 
     job = tmp_path / "job.yaml"
     job.write_text(SMALL_JOB)
@@ -285,11 +290,13 @@ def test_the_interp_node_takes_a_job_file_in_one_start_run_call(
     started = start(job)
     assert started.successful, started.reason
     run_id = re.match(r"run (\S+) started", started.reason).group(1)  # type: ignore[union-attr]
-    t_end = time.monotonic() + 60  # the bag is there from its first moment: wait for its final report
-    while time.monotonic() < t_end and not (
-        (bags / run_id / "metadata.yaml").exists() and read_run(bags / run_id).report.get("state")
-    ):
-        ros_spin(ros, 0.2)
+    wait.until(  # the bag is there from its first moment: wait for its final report
+        lambda: (bags / run_id / "metadata.yaml").exists() and read_run(bags / run_id).report.get("state"),
+        60,
+        f"the final report of run {run_id} in its bag",
+        heard=lambda: sorted(b.name for b in bags.iterdir()) if bags.is_dir() else "no bags",
+        poll=0.2,  # each look reads the bag
+    )
     run = read_run(bags / run_id)
     assert run.complete and run.job_id == "filed" and run.plan.job.poles == 2
     assert run.profile == "trapezoid" and run.profile_config["ramp_source"] == "job"

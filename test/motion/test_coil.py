@@ -17,7 +17,6 @@ import math
 import re
 import subprocess
 import sys
-import time
 from fractions import Fraction
 from pathlib import Path
 from typing import Any
@@ -27,6 +26,7 @@ from conftest import Procs
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from ruamel.yaml import YAML
+from support import wait
 from support.paths import ROOT
 
 from winder.motion.job import Job, JobError
@@ -469,9 +469,7 @@ def test_the_interp_node_refuses_a_coil_that_does_not_fit_and_keeps_running(
     job = tmp_path / "too_wide.yaml"
     job.write_text(TOO_WIDE)
     p = procs.start("interp_node", "--params-file", str(job), "-p", "autostart:=false")
-    t_end = time.monotonic() + 30
-    while WORDS not in procs.log(p) and time.monotonic() < t_end and p.poll() is None:
-        time.sleep(0.1)
+    wait.log_has(lambda: procs.log(p), WORDS, 30, "the interp node's refusal of the coil", running=p)
     assert p.poll() is None, procs.log(p)
     assert f"settings rejected at start: {WORDS}" in procs.log(p)
     assert procs.stop(p) == 0 and "Traceback" not in procs.log(p)
@@ -493,11 +491,13 @@ def test_the_interp_node_refuses_a_coil_that_does_not_fit_and_keeps_running(
     run_id = re.match(r"run (\S+) started", good.reason).group(1)  # type: ignore[union-attr]
     from winder.record.reader import read_run
 
-    t_end = time.monotonic() + 60
-    while time.monotonic() < t_end:
-        if (bags / run_id / "metadata.yaml").exists() and read_run(bags / run_id).report.get("state"):
-            break
-        time.sleep(0.2)
+    wait.until(  # the bag is there from its first moment: wait for its final report
+        lambda: (bags / run_id / "metadata.yaml").exists() and read_run(bags / run_id).report.get("state"),
+        60,
+        f"the final report of run {run_id} in its bag",
+        heard=lambda: sorted(b.name for b in bags.iterdir()) if bags.is_dir() else "no bags",
+        poll=0.2,  # each look reads the bag
+    )
     run = read_run(bags / run_id)
     assert run.complete and run.plan.job.window_width == 0.048 and run.plan.job.layer_turns == 4
     assert run.plan.job_file_sha256 == hashlib.sha256(fits.read_bytes()).hexdigest()

@@ -8,12 +8,12 @@ from __future__ import annotations
 
 import math
 import re
-import time
 from pathlib import Path
 from typing import Any
 
 import pytest
 from conftest import Procs
+from support import wait
 from support.ros_probe import set_params
 
 from winder.cli import commands as cli_main
@@ -149,11 +149,18 @@ def test_bad_overrides_at_start_are_all_reported(
     if executable == "sim_node" and "bag_dir" not in bad:
         args += ["-p", f"bag_dir:={tmp_path / 'bags'}"]
     p = procs.start(executable, *args)
-    t_end = time.monotonic() + 30
-    while time.monotonic() < t_end and not all(
-        f"{n}=" in procs.log(p) or f"Parameter {n} " in procs.log(p) for n in bad
-    ):
-        time.sleep(0.2)
+
+    def unreported() -> list[str]:
+        log = procs.log(p)
+        return [n for n in bad if not (f"{n}=" in log or f"parameter {n}" in log.lower())]
+
+    wait.until(
+        lambda: not unreported(),
+        30,
+        f"{executable}'s report of each bad {kind} value",
+        heard=lambda: (f"not reported: {unreported()}", procs.log(p)[-1000:]),
+        running=p,
+    )
     log = procs.log(p)
     assert p.poll() is None, log
     for n in bad:

@@ -10,31 +10,20 @@ import json
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 from conftest import BIN, Procs, bag_closed, final_report, is_consumer, rosbags_read, spin_until
+from support import wait
 from support.cell import SMALL_JOB, expected_end, job_args, only_bag, timed_rows, winder_run
 from support.paths import ROOT
-from support.ros_probe import set_params
+from support.ros_probe import heard_diagnostics, set_params, under_way
 
 from winder.procs import popen
 
 pytestmark = pytest.mark.ros
-
-
-
-
-
-
-
-
-
-
-
 
 
 @pytest.mark.parametrize("profile", ["scurve", "trapezoid", "exponential"])
@@ -117,8 +106,6 @@ def test_bad_job_on_the_command_line_starts_nothing(tmp_path: Path, procs: Procs
     assert not (tmp_path / "bags").exists() or not any((tmp_path / "bags").iterdir())
 
 
-
-
 @pytest.mark.parametrize(
     ("executable", "name", "value", "reason"),
     [
@@ -183,9 +170,7 @@ def test_bad_override_at_start_is_reported_not_fatal(
     procs: Procs, executable: str, override: str, message: str
 ) -> None:
     p = procs.start(executable, "-p", override)
-    t_end = time.monotonic() + 30
-    while message not in procs.log(p) and time.monotonic() < t_end and p.poll() is None:
-        time.sleep(0.1)
+    wait.log_has(lambda: procs.log(p), message, 30, f"{executable}'s report of {override}", running=p)
     assert p.poll() is None, procs.log(p)
     assert message in procs.log(p)
     assert procs.stop(p) == 0
@@ -209,22 +194,22 @@ def test_bad_job_at_start_never_starts_and_leaves_no_bag(tmp_path: Path, procs: 
         30,
         "the interp node's error report",
     )
-    time.sleep(1.0)
+    wait.spin_for(ros, 1.0)  # the subject is what does not happen: no run, no bag, in a second after it
     assert interp.poll() is None
     assert not bags.exists() or not any(bags.iterdir())
 
 
-def test_sigint_mid_job_leaves_a_readable_bag(tmp_path: Path, procs: Procs) -> None:
+def test_sigint_mid_job_leaves_a_readable_bag(tmp_path: Path, procs: Procs, ros: Any) -> None:
+    seen = heard_diagnostics(ros)
     bags = tmp_path / "bags"
     sim = procs.start(
         "sim_node", "-p", f"bag_dir:={bags}", "-p", "real_time:=true", "-p", "real_time_factor:=2.0"
     )
     procs.start("profile_node")
     procs.start("interp_node", "-p", "turns_per_layer:=50", "-p", "job_id:=cut")
-    t_end = time.monotonic() + 60
-    while not (bags.exists() and any(bags.iterdir())) and time.monotonic() < t_end:
-        time.sleep(0.1)
-    time.sleep(2.0)  # mid-job: the whole job takes over a minute of simulated time
+    # mid-job: the sim node says its run is running with steps executed (the whole job
+    # takes over a minute of simulated time)
+    spin_until(ros, lambda: under_way(seen), 60, "the sim node's run under way", heard=lambda: seen[-5:])
     assert procs.stop(sim, signal.SIGINT) == 0
     bag_dir = only_bag(tmp_path)
     assert bag_closed(bag_dir)
@@ -242,7 +227,7 @@ def test_sigint_mid_job_leaves_a_readable_bag(tmp_path: Path, procs: Procs) -> N
     assert "Traceback" not in procs.log(sim)
 
 
-def test_colcon_build_installs_runnable_executables(tmp_path: Path, procs: Procs) -> None:
+def test_colcon_build_installs_runnable_executables(tmp_path: Path, procs: Procs, ros: Any) -> None:
     """What `ros2 run <pkg> <exe>` does: ament index -> prefix/lib/pkg/exe."""
     repo = ROOT
     ws = tmp_path / "ws"
@@ -301,15 +286,24 @@ def test_colcon_build_installs_runnable_executables(tmp_path: Path, procs: Procs
                 / "site-packages"
             ),
         }
-        p = popen(
-            [str(path)], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, cwd=tmp_path
-        )
-        time.sleep(3.0)
+        p = popen([str(path)], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, cwd=tmp_path)
+        started(ros, p, exe)
         assert p.poll() is None, p.stdout.read().decode() if p.stdout else ""
         p.send_signal(signal.SIGINT)
         out, _ = p.communicate(timeout=20)
         assert p.returncode == 0, out.decode()
         assert b"Traceback" not in out
+
+
+def started(ros: Any, p: subprocess.Popen[bytes], name: str) -> None:
+    """Until process ``p``'s node ``name`` is on the graph (it started), or ``p`` ended."""
+    wait.spin_until(
+        ros,
+        lambda: p.poll() is not None or name in [n for n, _ in ros.get_node_names_and_namespaces()],
+        60,
+        f"the installed {name} on the graph",
+        heard=ros.get_node_names_and_namespaces,
+    )
 
 
 def _launch(given: dict[str, str]) -> tuple[list[Any], list[dict[str, Any]]]:

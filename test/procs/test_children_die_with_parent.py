@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 
 import pytest
+from support import wait
 
 from winder.procs import Children, stop
 
@@ -33,7 +34,7 @@ PARENT = textwrap.dedent(
     a = children.start(sleeper, "sleeper")
     b = Children(Path(sys.argv[1]), death_signal=15).start(stubborn, "stubborn")
     print(a.pid, b.pid, flush=True)
-    time.sleep(120)
+    time.sleep(120)  # a parent that lives on until the test kills it: not a wait
     """
 )
 
@@ -45,13 +46,6 @@ def alive(pid: int) -> bool:
     except (OSError, IndexError):
         return False
     return state not in ("Z", "X")
-
-
-def wait_gone(pids: list[int], timeout: float) -> list[int]:
-    end = time.monotonic() + timeout
-    while (left := [p for p in pids if alive(p)]) and time.monotonic() < end:
-        time.sleep(0.05)
-    return left
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
@@ -66,7 +60,12 @@ def test_a_killed_parent_leaves_no_child_running(tmp_path: Path, sig: int) -> No
         assert len(pids) == 2 and all(alive(p) for p in pids)
         parent.send_signal(sig)
         parent.wait(timeout=10)
-        assert wait_gone(pids, 10) == [], "children outlived their parent"
+        wait.until(
+            lambda: not [p for p in pids if alive(p)],
+            10,
+            "the end of the children with their parent",
+            heard=lambda: [p for p in pids if alive(p)],
+        )
     finally:
         parent.kill()
         parent.wait()
@@ -87,9 +86,10 @@ def test_stop_is_sigint_then_kill_after_the_grace(tmp_path: Path) -> None:
         ],
         "stubborn",
     )
-    end = time.monotonic() + 10
-    while "ignoring" not in children.log(stubborn) and time.monotonic() < end:
-        time.sleep(0.02)
+    # it ignores SIGINT from here on
+    wait.log_has(
+        tmp_path / "stubborn.log", "ignoring SIGINT", 30, "the stubborn child's start", running=stubborn
+    )
     t0 = time.monotonic()
     assert children.stop_all(signal.SIGINT, grace=1.0) == ["stubborn"]
     assert time.monotonic() - t0 < 5

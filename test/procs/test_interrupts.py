@@ -16,7 +16,7 @@ from winder.interrupts import Interrupts
 def _deliver(sig: int) -> None:
     """Send ``sig`` to this process and give the main thread a bytecode to run its handler on."""
     os.kill(os.getpid(), sig)
-    for _ in range(1000):
+    for _ in range(1000):  # not a wait on an event: the handler raises in one of these
         time.sleep(0.0001)
 
 

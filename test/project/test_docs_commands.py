@@ -33,6 +33,7 @@ How a block is read:
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import shlex
@@ -40,13 +41,13 @@ import shutil
 import signal
 import subprocess
 import tempfile
-import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
 from conftest import BIN, next_domain, release_domain
+from support import wait
 from support.doc_commands import problems
 from support.paths import ROOT
 
@@ -257,18 +258,24 @@ def _run(
 
 def _stop_group(pgid: int) -> None:
     """SIGINT to what is left of a block's process group (as Ctrl-C), SIGKILL after 10 s."""
+
+    def gone() -> bool:
+        try:
+            os.killpg(pgid, 0)
+        except ProcessLookupError:
+            return True
+        return False
+
     for sig, grace in ((signal.SIGINT, 10.0), (signal.SIGKILL, 0.0)):
         try:
             os.killpg(pgid, sig)
         except ProcessLookupError:
             return
-        end = time.monotonic() + grace
-        while time.monotonic() < end:
-            try:
-                os.killpg(pgid, 0)
-            except ProcessLookupError:
-                return
-            time.sleep(0.1)
+        try:
+            wait.until(gone, grace, f"end of process group {pgid} after {sig.name}", poll=0.1)
+            return
+        except wait.WaitTimeoutError:
+            continue  # its grace is over: the next signal (nothing fails here: a stop)
 
 
 def _serve(script: str, work: Path, env: dict[str, str]) -> tuple[int | None, str]:
@@ -284,9 +291,9 @@ def _serve(script: str, work: Path, env: dict[str, str]) -> tuple[int | None, st
         stdin=subprocess.DEVNULL,
         start_new_session=True,
     )
-    end = time.monotonic() + SERVE_S
-    while time.monotonic() < end and p.poll() is None:
-        time.sleep(0.2)
+    # the subject is what does not happen: a served command does not end within SERVE_S
+    with contextlib.suppress(subprocess.TimeoutExpired):
+        p.wait(timeout=SERVE_S)
     if p.poll() is not None:
         out, _ = p.communicate()
         return p.returncode, out

@@ -23,6 +23,8 @@ from pathlib import Path
 
 import pytest
 from conftest import BIN, next_domain, release_domain, rosbags_read
+from support import wait
+from support.bags import mcap_size
 from support.cli import run_cli
 
 from winder.procs import popen
@@ -95,20 +97,24 @@ class Cell:
         assert pid is not None, "the sim node is not running"
         os.kill(pid, sig)
 
+    def ended(self) -> bool:
+        """Whether winder run and every node of the cell have ended (winder run reaped)."""
+        try:
+            os.killpg(self.p.pid, 0)
+        except ProcessLookupError:
+            self.p.wait()
+            return True
+        self.p.poll()  # reaped once it ends: a zombie leader keeps its group
+        return False
+
     def wait(self, timeout: float = 40.0) -> None:
         """Until winder run and every node of the cell have ended (killed after ``timeout``)."""
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            try:
-                os.killpg(self.p.pid, 0)
-            except ProcessLookupError:
-                self.p.wait()
-                return
-            self.p.poll()
-            time.sleep(0.05)
-        os.killpg(self.p.pid, signal.SIGKILL)
-        self.p.wait()
-        raise AssertionError(f"the cell did not end within {timeout} s:\n{self.log.read_text()}")
+        try:
+            wait.until(self.ended, timeout, "the end of the cell", heard=lambda: self.log.read_text()[-1500:])
+        except wait.WaitTimeoutError:
+            os.killpg(self.p.pid, signal.SIGKILL)
+            self.p.wait()
+            raise
 
 
 def entries(bag_dir: Path) -> list[str]:
@@ -118,43 +124,19 @@ def entries(bag_dir: Path) -> list[str]:
         return []
 
 
-def wait_for(cond: object, timeout: float, spin: float = 0.0) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if cond():  # type: ignore[operator]
-            return True
-        if spin:
-            time.sleep(spin)
-    return False
-
-
-def mcap_size(bag_dir: Path) -> int:
-    """The bytes of the bags' .mcap files now. A bag opens in a hidden
-    directory renamed once it is set up: a file listed there may be gone
-    when it is looked at (FileNotFoundError in a fresh-clone CI run); it
-    counts then as nothing yet, and the next look finds it renamed. The glob
-    itself raised it too, listing the hidden directory as it was renamed
-    (3 of 4 'mid' tests in one fresh-clone CI run)."""
-    total = 0
-    with contextlib.suppress(FileNotFoundError):  # the glob itself, when the directory goes as it lists it
-        for f in bag_dir.glob("*/*.mcap"):
-            with contextlib.suppress(FileNotFoundError):
-                total += f.stat().st_size
-    return total
-
-
 def signal_at(cell: Cell, bag_dir: Path, phase: str, sig: int, whom: str, rng: random.Random) -> None:
     """Send ``sig`` at ``phase`` of the run (see the module)."""
+    log = lambda: cell.log.read_text()[-1500:]  # noqa: E731 - what the cell said, if a wait fails
     if phase == "before":  # somewhere in the start: nodes starting, handshake, job description
-        wait_for(lambda: cell.consumer() is not None, 20, 0.005)
-        time.sleep(rng.uniform(0.0, 2.5))
+        wait.until(lambda: cell.consumer() is not None, 20, "the sim node's process", heard=log, poll=0.005)
+        time.sleep(rng.uniform(0.0, 2.5))  # the signal's moment, drawn at random: the subject, not a wait
     elif phase == "open":  # the moment anything appears in the bag directory: no sleep between looks
-        assert wait_for(lambda: entries(bag_dir), 30), cell.log.read_text()
+        wait.until(lambda: entries(bag_dir), 30, "an entry in the bag directory", heard=log, poll=0)
     elif phase == "mid":  # the run's first chunks are in the file
-        assert wait_for(lambda: mcap_size(bag_dir) > 30_000, 30, 0.001), cell.log.read_text()
+        wait.until(lambda: mcap_size(bag_dir) > 30_000, 30, "30 kB in the bag's file", heard=log, poll=0.001)
     else:  # around the end of the steps, when the final report is written and the bag closes
-        assert wait_for(lambda: entries(bag_dir), 30, 0.001), cell.log.read_text()
-        time.sleep(rng.uniform(1.3, 2.0))
+        wait.until(lambda: entries(bag_dir), 30, "an entry in the bag directory", heard=log, poll=0.001)
+        time.sleep(rng.uniform(1.3, 2.0))  # the signal's moment, drawn at random: the subject, not a wait
     if cell.p.poll() is not None and whom == "group":
         return  # the run ended before the moment came: nothing to signal
     with contextlib.suppress(AssertionError, ProcessLookupError):  # the consumer had already ended

@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 from conftest import BIN, Procs, final_report, long_lived_domain, rosbags_read, spin_until
 from ruamel.yaml import YAML
+from support import wait
 from support.bags import joint_arrays, rewrite, rosbags_raw, step_rows
 from support.cli import assert_one_line_error, run_cli
 from support.oracles import params, superpose
@@ -333,7 +334,7 @@ def test_namespace_pause_step_and_resume(ops_bag: Path, procs: Procs, ros: Any) 
         spin_until(ros, fut.done, 10, "play_next")
         assert fut.result().success, fut.result().message
         spin_until(ros, lambda i=i: sum(map(len, taker.got.values())) >= i + 1, 10, "one message")
-        time.sleep(0.3)
+        wait.spin_for(ros, 0.3)  # the subject is what does not happen: no second message for one call
         assert sum(map(len, taker.got.values())) == i + 1  # one message per call, no more
         topic, _, data = order[i]
         assert taker.got[topic][-1].rstrip(b"\0") == data.rstrip(b"\0")
@@ -502,14 +503,29 @@ def test_resim_of_a_resim_names_each_source(ops_bag: Path, procs: Procs, tmp_pat
 @pytest.mark.parametrize("sig", ["SIGTERM", "SIGINT"])
 @pytest.mark.parametrize("mode", [["--start-paused"], ["--rate", "1"]])
 def test_a_signal_ends_the_player_paused_or_playing(
-    ops_bag: Path, procs: Procs, sig: str, mode: list[str]
+    ops_bag: Path, procs: Procs, ros: Any, sig: str, mode: list[str]
 ) -> None:
     """SIGTERM or SIGINT, paused or playing: the player ends at once with
     'interrupted' (status 130), no traceback."""
     import signal
 
+    from std_srvs.srv import Trigger
+
+    taker = Taker(ros, ops_bag)
     p = play(procs, ops_bag, *mode)
-    time.sleep(2.0)
+    if "--start-paused" in mode:  # paused: one message asked for shows the player in its loop, paused
+        step = ros.create_client(Trigger, "/winder_player/play_next")
+        spin_until(ros, step.service_is_ready, 60, "the player's play_next service")
+        reply = step.call_async(Trigger.Request())
+        spin_until(ros, reply.done, 30, "the play_next reply")
+        assert reply.result().success, reply.result().message
+    spin_until(  # the player plays (or has played the message asked for)
+        ros,
+        lambda: any(taker.got.values()),
+        60,
+        "a message from the player",
+        heard=lambda: p.poll(),
+    )
     t0 = time.monotonic()
     p.send_signal(getattr(signal, sig))
     out, err = p.communicate(timeout=20)
@@ -532,7 +548,7 @@ def test_a_signal_at_any_moment_of_the_start_ends_the_player(
     import signal
 
     p = play(procs, ops_bag, "--start-paused")
-    time.sleep(after)
+    time.sleep(after)  # the signal's moment is the subject (any moment of the start): not a wait
     p.send_signal(getattr(signal, sig))
     out, err = p.communicate(timeout=20)
     assert p.returncode == 130, out + err

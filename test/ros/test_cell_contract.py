@@ -198,10 +198,27 @@ def test_a_dead_consumer_is_not_ready(tmp_path: Path, procs: Procs, ros: Any) ->
     procs.start("interp_node", *SMALL, "-p", "autostart:=false")
     client = ros.create_client(Trigger, "/interp_node/start")
     spin_until(ros, client.service_is_ready, 30, "the start service")
-    ros_spin(ros, 3.0)  # everyone connected and announced
+    # everyone connected and announced: the consumer's and the profile node's latched ready heard
+    from diagnostic_msgs.msg import KeyValue
+
+    from winder.ros.qos import QOS_LATCHED_READER
+
+    ready: dict[str, str] = {}
+    ros.create_subscription(
+        KeyValue, "/winder/ready", lambda m: ready.__setitem__(m.key, m.value), QOS_LATCHED_READER
+    )
+    spin_until(
+        ros,
+        lambda: ready.get("consumer") == "ready" and ready.get("profile") == "ready",
+        30,
+        "ready from the consumer and the profile node on winder/ready",
+        heard=lambda: ready,
+    )
     sim.send_signal(signal.SIGKILL)
     sim.wait()
-    ros_spin(ros, 4.0)  # its announcements stop: after 3 s of silence they no longer count
+    # the subject is time: once its announcements stop for 3 s (FRESH) the latched ready no
+    # longer counts; a start asked sooner would rightly be taken, so this waits out the 3 s
+    ros_spin(ros, 4.0)
     future = client.call_async(Trigger.Request())
     spin_until(ros, future.done, 30, "the start reply")
     reply = future.result()

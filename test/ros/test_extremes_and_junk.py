@@ -17,6 +17,7 @@ import pytest
 from conftest import BIN, Procs, closed_bags, is_consumer, rosbags_read
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from support import wait
 from support.cell import SMALL_JOB, job_args, only_bag, timed_rows, winder_run
 from support.ros_probe import heard_diagnostics, start_job
 
@@ -155,17 +156,27 @@ def test_no_node_outlives_a_killed_winder_run(tmp_path: Path, procs: Procs) -> N
         stderr=subprocess.DEVNULL,
         stdin=subprocess.DEVNULL,
     )
+
+    def three() -> list[int]:
+        found = children_of(p.pid)
+        return found if len(found) >= 3 else []
+
     try:
-        t_end = time.monotonic() + 30
-        while len(kids := children_of(p.pid)) < 3:
-            assert time.monotonic() < t_end, "the three nodes did not start"
-            time.sleep(0.1)
+        kids = wait.until(
+            three,
+            30,
+            "the three nodes started by winder run",
+            heard=lambda: children_of(p.pid),
+            running=p,
+            poll=0.1,  # each look reads all of /proc
+        )
         p.send_signal(signal.SIGKILL)
         p.wait()
-        t_end = time.monotonic() + 20
-        while alive := [k for k in kids if Path(f"/proc/{k}").exists() and not _zombie(k)]:
-            assert time.monotonic() < t_end, f"nodes {alive} outlived winder run"
-            time.sleep(0.1)
+
+        def alive() -> list[int]:
+            return [k for k in kids if Path(f"/proc/{k}").exists() and not _zombie(k)]
+
+        wait.until(lambda: not alive(), 20, "the end of the nodes of the killed winder run", heard=alive)
     finally:
         if p.poll() is None:
             p.kill()
@@ -308,11 +319,19 @@ def test_nodes_survive_junk_jobs_chunks_and_receipts(tmp_path: Path, procs: Proc
     pub_steps = junk["steps"].create_publisher(Int32MultiArray, "/winder/steps", QOS_STREAM)
     pub_times = junk["times"].create_publisher(Int64MultiArray, "/winder/step_times", QOS_STREAM)
     pub_progress = junk["progress"].create_publisher(KeyValue, "/winder/progress", QOS_STATE)
+    # every junk writer matched by its readers (the job's: the profile and sim nodes), so no junk is lost
+    pubs = {
+        "job": (pub_job, 2),
+        "steps": (pub_steps, 1),
+        "times": (pub_times, 1),
+        "progress": (pub_progress, 1),
+    }
     spin_until(
         ros,
-        lambda: pub_times.get_subscription_count() > 0 and pub_steps.get_subscription_count() > 0,
+        lambda: all(pub.get_subscription_count() >= n for pub, n in pubs.values()),
         30,
-        "the nodes",
+        "the nodes' subscriptions on each junk topic",
+        heard=lambda: {t: pub.get_subscription_count() for t, (pub, _) in pubs.items()},
     )
     for text in [
         "[1,2]",
@@ -322,20 +341,40 @@ def test_nodes_survive_junk_jobs_chunks_and_receipts(tmp_path: Path, procs: Proc
         '"x"',
     ]:
         pub_job.publish(String(data=text))
+        # paced, not a wait: a latched writer keeps one message, so each junk job goes out alone
         time.sleep(0.2)
     pub_steps.publish(pack_steps(np.zeros((0, 4), np.int32)))
     pub_times.publish(pack_timed(np.zeros((0, 5), np.int64)))
     pub_progress.publish(KeyValue(key="rw400", value="lots"))
     pub_progress.publish(KeyValue(key="rw400", value="-5"))
-    time.sleep(1.5)
-    assert all(p.poll() is None for p in nodes), [procs.log(p) for p in nodes if p.poll() is not None]
-    logs = {name: procs.log(p) for name, p in zip(("sim", "profile", "interp"), nodes, strict=True)}
     # each refused, named once: the job by the profile and sim nodes, the steps by the
     # profile node, the timed steps by the sim node, the receipts by the interp node
-    for name, sender in [
+    refusals = [
         ("sim", "/junk_job"), ("profile", "/junk_job"), ("profile", "/junk_steps"),
         ("sim", "/junk_times"), ("interp", "/junk_progress"),
-    ]:  # fmt: skip
+    ]  # fmt: skip
+    names = dict(zip(("sim", "profile", "interp"), nodes, strict=True))
+
+    def unsaid() -> list[tuple[str, str]]:
+        return [
+            (n, sender)
+            for n, sender in refusals
+            if f"messages from {sender} ignored" not in procs.log(names[n])
+        ]
+
+    wait.until(
+        lambda: not unsaid(),
+        30,
+        "each node's refusal of the junk",
+        heard=lambda: (
+            f"not said: {unsaid()}",
+            f"ended: {[n for n, p in names.items() if p.poll() is not None]}",
+        ),
+    )
+    wait.spin_for(ros, 1.0)  # and once only: no second line for the rest of the junk in a further second
+    assert all(p.poll() is None for p in nodes), [procs.log(p) for p in nodes if p.poll() is not None]
+    logs = {name: procs.log(p) for name, p in names.items()}
+    for name, sender in refusals:
         assert logs[name].count(f"messages from {sender} ignored") == 1, (name, sender, logs[name])
     assert not any("job description rejected" in s for s in seen), "junk from a stranger was acted on"
     # a good job still runs through the same three nodes
@@ -398,14 +437,17 @@ def test_a_restarted_node_leaves_the_cell_able_to_run_the_next_job(
         return any(is_consumer(n, v) and v.get("state") == "incomplete" for n, _, v in seen)
 
     def aborted() -> bool:
-        return any(n == "interp_node: job" and "aborted" in m for n, m, _ in seen)
+        # its words for a job it gives up after stall_abort: "job ... given up, incomplete: ..."
+        return any(n == "interp_node: job" and "given up" in m for n, m, _ in seen)
 
     from winder.analysis.metrics import analyze
     from winder.record.reader import read_run
 
     if victim == "sim_node":
         spin_until(ros, aborted, 60, "the interp node to drop the job")
-        time.sleep(3.0)  # longer than stall_abort: a stale run would have been taken and closed by now
+        # the subject is what does not happen: longer than stall_abort, a stale run would
+        # have been taken and closed by now (its statuses heard meanwhile)
+        wait.spin_for(ros, 3.0)
         assert not closed(), "the restarted sim node took the dead run's description for a run"
         assert not any(is_consumer(n, v) and v.get("state") == "running" for n, _, v in seen[-20:])
         # the killed node's bag is cut short (SIGKILL: whatever reached the disk), or,
@@ -423,9 +465,9 @@ def test_a_restarted_node_leaves_the_cell_able_to_run_the_next_job(
             ros, lambda: closed() and aborted(), 60, "the sim node to close the job, the interp to drop it"
         )
         # the bag of the sim node that saw the stall is closed, with its final report
-        time.sleep(0.5)
-        finished = closed_bags(bags)
-        assert finished, sorted(bags.iterdir())
+        finished = wait.until(
+            lambda: closed_bags(bags), 30, f"a closed bag in {bags}", heard=lambda: sorted(bags.iterdir())
+        )
         assert final_status_of(finished[-1])["state"] == "incomplete"
         # the stall's ERROR reports are in the bag, and winder analyze says so
         run = read_run(finished[-1])
@@ -436,16 +478,19 @@ def test_a_restarted_node_leaves_the_cell_able_to_run_the_next_job(
     # so they stay until its lease expires (10 s in winder's DDS profile), and until then
     # the restarted node, the same name in another process, is not taken for the cell's
     # (a second cell's node would look just so)
-    t_end = time.monotonic() + 30.0
-    while True:
+    replies: list[str] = []
+
+    def taken() -> bool:
         seen.clear()
         future = client.call_async(Trigger.Request())
         spin_until(ros, future.done, 30, "the start reply")
-        if future.result().success or time.monotonic() > t_end:
-            break
-        assert "not ready" in future.result().message, future.result().message
-        time.sleep(1.0)
-    assert future.result().success, future.result().message
+        reply = future.result()
+        replies.append(reply.message)
+        assert reply.success or "not ready" in reply.message, reply.message
+        return bool(reply.success)
+
+    # asked again each second while the cell is "not ready"
+    wait.until(taken, 30, "a start taken by the restarted cell", heard=lambda: replies[-3:], poll=1.0)
     spin_until(
         ros, lambda: any(v.get("state") == "done" for n, _, v in seen if is_consumer(n, v)), 120, "job 2"
     )
@@ -510,7 +555,7 @@ def test_a_full_disk_mid_job_closes_the_job_and_keeps_what_was_written(
         message, _ = closed()  # type: ignore[misc]
         assert "recording stopped" in message and ("disk full" in message or "file size limit" in message)
         assert sim.poll() is None, "the sim node died"
-        time.sleep(1.0)
+        wait.spin_for(ros, 1.0)  # the subject is what does not happen: the node does not die a moment later
         assert sim.poll() is None
         bags = list((tmp_path / "small" / "bags").iterdir())
         assert len(bags) == 1
@@ -561,10 +606,7 @@ def test_extreme_in_range_parameters_are_refused_and_the_node_lives(
     p = procs.start(executable, *ros_args(start, "")[1:])
     # the node logs the refused override as it starts: wait for that line before
     # the calls (a full `make test` once read the log before it was there)
-    t_end = time.monotonic() + 30
-    while not procs.log(p).strip():
-        assert p.poll() is None and time.monotonic() < t_end, procs.log(p)
-        time.sleep(0.05)
+    wait.until(lambda: procs.log(p).strip(), 30, f"{executable}'s first log line", running=p)
     for name, value, refused in ROS_EXTREMES[executable]:
         [result] = set_params(ros, executable, {name: value})
         assert result.successful != refused, (name, value, result.reason)
@@ -783,13 +825,12 @@ def test_a_cell_with_use_sim_time_completes_its_job(tmp_path: Path, procs: Procs
     procs.start("sim_node", "-p", f"bag_dir:={tmp_path / 'bags'}", *sim_time)
     procs.start("profile_node", *sim_time)
     procs.start("interp_node", *SMALL_INTERP, *sim_time)
-    t_end = time.monotonic() + 60
-    while time.monotonic() < t_end:
-        bags = closed_bags(tmp_path / "bags")
-        if bags:
-            break
-        time.sleep(0.2)
-    assert bags, "no closed bag within 60 s"
+    bags = wait.until(
+        lambda: closed_bags(tmp_path / "bags"),
+        60,
+        "a closed bag of the use_sim_time cell",
+        heard=lambda: [procs.log(p)[-300:] for p, _ in procs.procs],
+    )
     report = final_report(rosbags_read(bags[0]))
     assert report["state"] == "done" and report["steps_done"] == report["steps_total"], report
 
@@ -830,14 +871,17 @@ def test_a_start_while_a_job_runs_is_refused_and_the_job_completes(
     second = start()
     assert not second.success and "is running" in second.message, second.message
     spin_until(ros, lambda: done_count() >= 1, 60, "the first job to complete")
-    third = start()
-    t_end = time.monotonic() + 10
-    while not third.success and "not ready" in third.message and time.monotonic() < t_end:
-        # "done" and the sim node's "ready" travel on two topics: the interp node may hear
-        # the one after this test heard the other; the contract is to ask again
-        time.sleep(0.2)
-        third = start()
-    assert third.success, third.message
+    replies: list[str] = []
+
+    def third() -> bool:
+        reply = start()
+        replies.append(reply.message)
+        assert reply.success or "not ready" in reply.message, reply.message
+        return bool(reply.success)
+
+    # "done" and the sim node's "ready" travel on two topics: the interp node may hear
+    # the one after this test heard the other; the contract is to ask again
+    wait.until(third, 30, "a start taken after the first job", heard=lambda: replies[-3:], poll=0.2)
     spin_until(ros, lambda: len(closed_bags(bags)) == 2, 60, "the second bag")
     for done in closed_bags(bags):
         report = final_report(rosbags_read(done))
@@ -859,8 +903,7 @@ def test_a_plain_reader_is_not_the_sim(tmp_path: Path, procs: Procs, ros: Any) -
     ros.create_subscription(Int64MultiArray, "/winder/step_times", heard.append, QOS_STREAM)
     procs.start("profile_node")
     procs.start("interp_node", *SMALL_INTERP)  # autostart on
-    t_end = time.monotonic() + 5.0
-    spin_until(ros, lambda: time.monotonic() > t_end, 10, "5 s")
+    wait.spin_for(ros, 5.0)  # the subject is what does not happen: no job for a plain reader in 5 s
     assert not heard, "the job started for a plain reader"
     bags = tmp_path / "bags"
     procs.start("sim_node", "-p", f"bag_dir:={bags}")

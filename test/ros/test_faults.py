@@ -7,7 +7,6 @@ import json
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 from typing import Any
 
@@ -15,6 +14,7 @@ import numpy as np
 import pytest
 from conftest import Procs, bag_closed, is_consumer, rosbags_read, spin_until
 from support.cell import SMALL_JOB, FakeProfile, expected_end, job_args, only_bag, timed_rows, winder_run
+from support.ros_probe import heard_diagnostics, under_way
 
 from winder.motion.job import Job
 from winder.procs import popen
@@ -35,17 +35,16 @@ def final_status(bag: dict[str, list[tuple[int, Any]]], prefix: str = "") -> dic
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
-def test_signal_mid_job_closes_the_bag(tmp_path: Path, procs: Procs, sig: int) -> None:
+def test_signal_mid_job_closes_the_bag(tmp_path: Path, procs: Procs, ros: Any, sig: int) -> None:
+    seen = heard_diagnostics(ros)
     bags = tmp_path / "bags"
     sim = procs.start(
         "sim_node", "-p", f"bag_dir:={bags}", "-p", "real_time:=true", "-p", "real_time_factor:=4.0"
     )
     procs.start("profile_node")
     procs.start("interp_node", "-p", "turns_per_layer:=40")
-    t_end = time.monotonic() + 60
-    while not (bags.exists() and any(bags.iterdir())) and time.monotonic() < t_end:
-        time.sleep(0.1)
-    time.sleep(1.5)
+    # mid-job: the sim node says its run is running with steps executed
+    spin_until(ros, lambda: under_way(seen), 60, "the sim node's run under way", heard=lambda: seen[-5:])
     assert procs.stop(sim, sig) == 0
     bag_dir = only_bag(tmp_path)
     assert bag_closed(bag_dir)

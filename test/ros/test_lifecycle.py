@@ -6,12 +6,12 @@ test, `winder run`) is unchanged: the nodes activate themselves.
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 from typing import Any
 
 import pytest
 from conftest import Procs, closed_bags
+from support import wait
 
 from winder.record.reader import read_run
 
@@ -59,6 +59,23 @@ class Lifecycle:
         return bool(self.call(self.change[node], req).success)
 
 
+def started(procs: Procs, bags: Path) -> None:
+    """Until the cell's run has started: its bag directory has an entry."""
+    wait.until(lambda: list(bags.glob("*")), 60, f"the run's bag in {bags}", heard=lambda: logs(procs))
+
+
+def closed(procs: Procs, bags: Path) -> list[Path]:
+    """The closed bags in ``bags``, once there is one (the run ended)."""
+    return list(
+        wait.until(lambda: closed_bags(bags), 60, f"a closed bag in {bags}", heard=lambda: logs(procs))
+    )
+
+
+def logs(procs: Procs) -> list[str]:
+    """The last lines of each node's log."""
+    return [procs.log(p)[-300:] for p, _ in procs.procs]
+
+
 def test_an_orchestrator_brings_the_cell_up_in_order(tmp_path: Path, procs: Procs, ros: Any) -> None:
     """managed:=true: the nodes wait unconfigured and the cell refuses a run;
     configured and activated one by one (sim, profile, interp), the job
@@ -81,30 +98,24 @@ def test_an_orchestrator_brings_the_cell_up_in_order(tmp_path: Path, procs: Proc
     for node in NODES:  # the orchestrator's order: the consumer first
         assert lc.transition(node, "configure")
         assert lc.state(node) == "inactive"
-    time.sleep(1.0)
+    wait.spin_for(ros, 1.0)  # the subject is what does not happen: no run while the nodes are inactive
     assert not list(bags.glob("*")), "a run started before the nodes were active"
     for node in NODES:
         assert lc.transition(node, "activate")
         assert lc.state(node) == "active"
 
     # the run autostarts once all three are active; while it goes on it cannot be deactivated
-    t_end = time.monotonic() + 60
-    while not list(bags.glob("*")) and time.monotonic() < t_end:
-        time.sleep(0.1)
-    assert list(bags.glob("*")), "the run did not start"
+    started(procs, bags)
     assert not lc.transition("sim_node", "deactivate")
     assert lc.state("sim_node") == "active"
-    while not closed_bags(bags) and time.monotonic() < t_end:
-        time.sleep(0.2)
-    [meta] = [b / "metadata.yaml" for b in closed_bags(bags)]
+    [meta] = [b / "metadata.yaml" for b in closed(procs, bags)]
     run = read_run(meta.parent)
     assert run.complete and not run.errors, run.errors
 
     # after the run: deactivated, the cell refuses a start again; then cleanup and shutdown
-    t_end = time.monotonic() + 30
-    while not lc.transition("sim_node", "deactivate"):  # the sim node ends its run's report first
-        assert time.monotonic() < t_end, "sim_node cannot be deactivated after its run"
-        time.sleep(0.2)
+    wait.until(  # the sim node ends its run's report first: asked again every 0.2 s
+        lambda: lc.transition("sim_node", "deactivate"), 30, "sim_node's deactivation after its run", poll=0.2
+    )
     reply = lc.call(start, Trigger.Request())
     assert not reply.success and "consumer inactive" in reply.message, reply.message
     for node in NODES[1:]:
@@ -134,10 +145,8 @@ def test_a_transition_the_state_does_not_have_is_refused_and_every_node_lives_on
     procs.start("interp_node", "-p", "turns_per_layer:=8", "-p", "poles:=1", "-p", "layers:=1")
     lc = Lifecycle(ros)
     assert [lc.state(n) for n in NODES] == ["active"] * 3
-    t_end = time.monotonic() + 60
-    while not list(bags.glob("*")) and time.monotonic() < t_end:
-        time.sleep(0.1)
-    assert list(bags.glob("*")) and not closed_bags(bags), "no run going on"
+    started(procs, bags)
+    assert not closed_bags(bags), "no run going on"
     for node in NODES:  # mid-run
         assert not lc.transition(node, "configure")
         assert not lc.transition(node, "activate")
@@ -147,9 +156,7 @@ def test_a_transition_the_state_does_not_have_is_refused_and_every_node_lives_on
         assert not lc.call(lc.change[node], req).success
         assert lc.state(node) == "active"
     assert all(p.poll() is None for p, _ in procs.procs), "a node died"
-    while not closed_bags(bags) and time.monotonic() < t_end:
-        time.sleep(0.2)
-    [meta] = [b / "metadata.yaml" for b in closed_bags(bags)]
+    [meta] = [b / "metadata.yaml" for b in closed(procs, bags)]
     assert read_run(meta.parent).complete  # the run went on to its end
     for node, p in zip(NODES, (p for p, _ in procs.procs), strict=True):
         assert "transition 'explode' refused: not valid from state active" in procs.log(p), node

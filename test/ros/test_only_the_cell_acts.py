@@ -15,13 +15,13 @@ import json
 import re
 import subprocess
 import sys
-import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 from conftest import BIN, Procs, final_report, rosbags_read
+from support import wait
 from support.paths import TEST
 
 from winder.procs import popen
@@ -67,6 +67,17 @@ def long_run(procs: Procs, bags: Path) -> subprocess.Popen[str]:
         stderr=(bags.parent / f"{bags.name}.err").open("w"),
         text=True,
         stdin=subprocess.DEVNULL,
+    )
+
+
+def recording(run: subprocess.Popen[str], bags: Path) -> None:
+    """Until a :func:`long_run`'s run records (its bag has its .mcap file): the live cell is up."""
+    wait.until(
+        lambda: list(bags.glob("*/*.mcap")),
+        60,
+        f"the live cell's recording in {bags}",
+        heard=lambda: (bags.parent / f"{bags.name}.err").read_text()[-1500:],
+        running=run,
     )
 
 
@@ -145,7 +156,7 @@ def test_forged_messages_change_nothing(tmp_path: Path, procs: Procs, forge: str
 def test_a_second_cell_in_the_namespace_is_refused(tmp_path: Path, procs: Procs) -> None:
     first = long_run(procs, tmp_path / "a")
     try:
-        time.sleep(3.0)  # the first cell runs
+        recording(first, tmp_path / "a")  # the first cell runs
         second = winder_run(procs, tmp_path / "b", timeout=120)
         out, err = finish(first, tmp_path / "a")
     finally:
@@ -165,7 +176,7 @@ def test_a_second_cell_in_the_namespace_is_refused(tmp_path: Path, procs: Procs)
 def test_a_second_node_of_a_role_leaves(tmp_path: Path, procs: Procs) -> None:
     first = long_run(procs, tmp_path / "a")
     try:
-        time.sleep(3.0)
+        recording(first, tmp_path / "a")  # the first cell runs
         seconds = [procs.start(node, "-p", f"bag_dir:={tmp_path / 'b'}") for node in ("sim_node",)]
         seconds += [procs.start(node) for node in ("profile_node", "interp_node")]
         for p in seconds:
@@ -199,9 +210,7 @@ def test_play_into_a_live_cell_is_refused_and_forced_changes_nothing(tmp_path: P
 
     try:
         # the live cell is up once its run records (a fixed wait was too short on a loaded machine)
-        deadline = time.monotonic() + 60
-        while not list((tmp_path / "live").glob("*/*.mcap")) and time.monotonic() < deadline:
-            time.sleep(0.1)
+        recording(live, tmp_path / "live")
         refused = play()
         forced = play("--force", "--rate", "20")
         out, err = finish(live, tmp_path / "live")

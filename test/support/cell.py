@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import os
 import subprocess
-import time
 from pathlib import Path
 from typing import Any
 
@@ -136,6 +135,16 @@ class FakeProfile:
             "the sim node's status",
         )
         self.pub_job.publish(self.String(data=describe_job(self.job)))
-        time.sleep(0.5)  # the job description first, as the real profile node does
+        # the job description taken first, as the real profile node sends it: the sim node's run is on
+        spin_until(
+            self.node,
+            lambda: any(
+                name.startswith("sim_node: ") and v.get("job_id") == self.job.job_id
+                for _, name, v in self.statuses
+            ),
+            30,
+            f"the sim node's run of job {self.job.job_id}",
+            heard=lambda: [name for _, name, _ in self.statuses[-5:]],
+        )
         for c in chunks:
             self.pub.publish(pack_timed(c))

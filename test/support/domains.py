@@ -8,11 +8,12 @@ import fcntl
 import itertools
 import os
 import tempfile
-import time
 from pathlib import Path
 from typing import Any
 
 import pytest
+
+from support import wait
 
 
 def _pool() -> range:
@@ -58,8 +59,8 @@ def next_domain(timeout: float = 120.0) -> int:
             "mark it (@pytest.mark.ros), so that pytest -m 'not ros' starts no node"
         )
     pool = _pool()
-    end = time.monotonic() + timeout
-    while True:
+
+    def free() -> list[int]:  # one look at every domain of the pool: the first free one, taken ([] if none)
         for _ in range(len(pool)):
             domain = pool[next(_cursor) % len(pool)]
             if domain in _held:
@@ -68,10 +69,13 @@ def next_domain(timeout: float = 120.0) -> int:
             if lock is None:
                 continue
             _held[domain] = lock
-            return domain
-        if time.monotonic() > end:
-            raise RuntimeError(f"every ROS domain of {pool} held by other test processes for {timeout} s")
-        time.sleep(0.5)
+            return [domain]
+        return []
+
+    # a domain another test process releases; asked again every 0.5 s (each look opens lock files)
+    what = f"free ROS domain in {pool} (all held by other test processes)"
+    [domain] = wait.until(free, timeout, what, poll=0.5)
+    return int(domain)
 
 
 def release_domain(domain: int) -> None:

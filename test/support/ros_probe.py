@@ -24,6 +24,22 @@ def heard_diagnostics(ros: Any) -> list[tuple[str, str, dict[str, str]]]:
     return seen
 
 
+def under_way(seen: list[tuple[str, str, dict[str, str]]], namespace: str = "") -> dict[str, str] | None:
+    """The last job status of :func:`heard_diagnostics` in which the step
+    consumer of the cell in ``namespace`` says its run is running with steps
+    executed (a run mid-job), or None."""
+    from winder.contract.topics import has_role
+
+    on = [
+        v
+        for n, _, v in seen
+        if has_role(n, v, "consumer", namespace)
+        and v.get("state") == "running"
+        and v.get("steps_done", "0") != "0"
+    ]
+    return on[-1] if on else None
+
+
 def spin_until(node: Any, cond: Any, timeout: float, what: str, heard: Any = None) -> Any:
     """Spin ``node`` until ``cond()`` is true, or fail naming ``what`` (:func:`support.wait.spin_until`)."""
     return wait.spin_until(node, cond, timeout, what, heard=heard)

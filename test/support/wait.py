@@ -10,6 +10,7 @@ itself and fail loudly at the bound::
     wait.spin_until(ros, lambda: heard, 10, "running from profile_node", heard=lambda: states)
     wait.matched(ros, pub, 30, "the sim node's subscription on winder/step_times")
     wait.node_gone(ros, "sim_node", 30)
+    wait.log_has(lambda: procs.log(p), "run armed", 60, "the bridge's run", running=p)
 
 Plain functions only (no rclpy at import): a test that starts no node may use them too.
 """
@@ -43,8 +44,8 @@ class WaitTimeoutError(AssertionError):
     """A wait's bound passed before its event; the message names both, and what was heard."""
 
 
-def _message(what: str, timeout: float, heard: Callable[[], object] | None) -> str:
-    text = f"no {what} within {timeout:g} s"
+def _message(what: str, timeout: float, heard: Callable[[], object] | None, why: str = "") -> str:
+    text = f"no {what} " + (why or f"within {timeout:g} s")
     if heard is not None:
         try:
             seen = heard()
@@ -66,14 +67,22 @@ def until(
     *,
     heard: Callable[[], object] | None = None,
     poll: float = POLL,
+    running: subprocess.Popen[Any] | None = None,
 ) -> Any:
     """Poll ``cond()`` until it is true (returned), at most ``timeout`` s;
-    :class:`WaitTimeoutError` naming ``what`` and ``heard()`` after it."""
+    :class:`WaitTimeoutError` naming ``what`` and ``heard()`` after it. With
+    ``running`` (the process the event is to come from): fails at once, with
+    its exit status, if that process ends first."""
     end = time.monotonic() + timeout
     while True:
-        value = cond()
+        ended = running is not None and running.poll() is not None
+        value = cond()  # looked at after the exit check: what the process did before it ended counts
         if value:
             return value
+        if ended:
+            assert running is not None
+            why = f"before {running.args!r} ended (status {running.returncode})"
+            raise WaitTimeoutError(_message(what, timeout, heard, why))
         if time.monotonic() > end:
             raise WaitTimeoutError(_message(what, timeout, heard))
         time.sleep(poll)
@@ -161,11 +170,22 @@ def until_exit(p: subprocess.Popen[Any], timeout: float, what: str = "") -> int:
         raise WaitTimeoutError(f"no exit of {what or p.args!r} within {timeout:g} s") from None
 
 
-def log_has(path: Path, texts: str | Iterable[str], timeout: float, what: str = "") -> str:
-    """Until the file at ``path`` holds every one of ``texts``; its text."""
+def log_has(
+    path: Path | Callable[[], str],
+    texts: str | Iterable[str],
+    timeout: float,
+    what: str = "",
+    *,
+    running: subprocess.Popen[Any] | None = None,
+) -> str:
+    """Until the file at ``path`` (or the text ``path()`` reads, such as
+    ``lambda: procs.log(p)``) holds every one of ``texts``; its text. With
+    ``running``: fails at once if that process ends without them."""
     wanted = [texts] if isinstance(texts, str) else list(texts)
 
     def read() -> str:
+        if callable(path):
+            return path()
         try:
             return path.read_text(errors="replace")
         except FileNotFoundError:
@@ -175,8 +195,9 @@ def log_has(path: Path, texts: str | Iterable[str], timeout: float, what: str = 
         until(
             lambda: (lambda t: t if all(w in t for w in wanted) else "")(read()),
             timeout,
-            what or f"{wanted!r} in {path.name}",
+            what or f"{wanted!r} in {getattr(path, 'name', 'the output')}",
             heard=lambda: read()[-1500:],
+            running=running,
         )
     )
 

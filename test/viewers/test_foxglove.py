@@ -32,6 +32,7 @@ from typing import Any
 import pytest
 import websockets
 from conftest import BIN, Procs, rosbags_read
+from support import wait
 from support.paths import ROOT, TEST
 from support.ros_probe import spin_until
 
@@ -185,14 +186,14 @@ async def connect(port: int) -> Client:
 
 def served_port(procs: Procs, p: subprocess.Popen[bytes], timeout: float = 60.0) -> int:
     """The port a winder command printed in its ``ws://127.0.0.1:PORT`` line (it was given port 0)."""
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        found = URL.search(procs.log(p))
-        if found:
-            return int(found[1])
-        assert p.poll() is None, f"{p.args} exited {p.returncode}:\n{procs.log(p)}"
-        time.sleep(0.1)
-    raise AssertionError(f"{p.args} printed no ws:// URL within {timeout} s:\n{procs.log(p)}")
+    found = wait.until(
+        lambda: URL.search(procs.log(p)),
+        timeout,
+        f"ws:// URL printed by {p.args!r}",
+        heard=lambda: procs.log(p)[-1500:],
+        running=p,
+    )
+    return int(found[1])
 
 
 def winder(procs: Procs, *args: str) -> subprocess.Popen[bytes]:
@@ -323,7 +324,7 @@ def test_a_signal_at_any_moment_ends_run_foxglove(
 
     bags = tmp_path / "bags"
     run = winder(procs, "run", *LONG, "--bag-dir", str(bags), "--foxglove", "0")
-    time.sleep(after)
+    time.sleep(after)  # the signal's moment is the subject (any moment of the start): not a wait
     run.send_signal(getattr(signal, sig))
     run.wait(timeout=30)
     log = procs.log(run)
@@ -340,10 +341,13 @@ def test_view_serves_a_cell_started_without_it(procs: Procs, ros: Any, tmp_path:
     from winder.ros.graph import consumers
 
     run = winder(procs, "run", *LONG, "--bag-dir", str(tmp_path / "bags"), "--namespace", ns)
-    deadline = time.monotonic() + 60
-    while f"{ns}/winder/state" not in [n for n, _ in ros.get_topic_names_and_types()]:
-        assert time.monotonic() < deadline, procs.log(run)
-        time.sleep(0.2)
+    wait.spin_until(
+        ros,
+        lambda: f"{ns}/winder/state" in [n for n, _ in ros.get_topic_names_and_types()],
+        60,
+        f"{ns}/winder/state on the graph",
+        heard=lambda: (sorted(n for n, _ in ros.get_topic_names_and_types()), procs.log(run)[-1000:]),
+    )
     view = winder(procs, "view", "--port", "0", "--namespace", ns)
     port = served_port(procs, view)
     client = asyncio.run(watch_live(port, "rw400", ns))
