@@ -13,7 +13,17 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Spec", "SpecError"]
+__all__ = ["Spec", "SpecError", "shorten"]
+
+
+def shorten(text: str, keep: int = 60) -> str:
+    """``text`` as a message quotes it: its repr, or, when longer than
+    ``keep`` characters, its first ``keep`` and last 8 characters around
+    "..." and its length (``'/xxxx...xxxx' (301 characters)``), so that a
+    refusal stays one readable line whatever was typed."""
+    if len(text) <= keep + 12:
+        return repr(text)
+    return f"{text[:keep] + '...' + text[-8:]!r} ({len(text)} characters)"
 
 
 class SpecError(ValueError):
@@ -63,9 +73,9 @@ class Spec:
             if not isinstance(value, str):
                 raise SpecError(f"{name}={value!r} is invalid: must be a string, {self.range_text()}")
             if self.choices and value not in self.choices:
-                raise SpecError(f"{name}={value!r} is invalid: must be {self.range_text()}")
+                raise SpecError(f"{name}={shorten(value)} is invalid: must be {self.range_text()}")
             if self.pattern and not re.fullmatch(self.pattern, value):
-                raise SpecError(f"{name}={value!r} is invalid: must be {self.pattern_text}")
+                raise SpecError(f"{name}={shorten(value)} is invalid: must be {self.pattern_text}")
             return value
         if self.kind is int:
             if isinstance(value, (float, np.floating)) and math.isfinite(value) and float(value).is_integer():

@@ -17,7 +17,6 @@ from __future__ import annotations
 import math
 import subprocess
 import sys
-import time
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +25,7 @@ import pytest
 from conftest import Procs, closed_bags, final_report, rosbags_read, spin_until
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from support import wait
 from support.paths import TEST
 
 from winder.motion.job import Job
@@ -71,13 +71,19 @@ def start_cell(
 
 def wait_for_bags(bags: Path, n: int, timeout: float = 60.0) -> list[Path]:
     """The first ``n`` closed bags, oldest first."""
-    t_end = time.monotonic() + timeout
-    while time.monotonic() < t_end:
+
+    def enough() -> list[Path]:
         done = closed_bags(bags)
-        if len(done) >= n:
-            return done
-        time.sleep(0.2)
-    raise AssertionError(f"no {n} closed bag(s) in {bags} within {timeout} s")
+        return done if len(done) >= n else []
+
+    return list(
+        wait.until(
+            enough,
+            timeout,
+            f"{n} closed bag(s) in {bags}",
+            heard=lambda: sorted(b.name for b in bags.iterdir()) if bags.is_dir() else "no bag directory",
+        )
+    )
 
 
 def call_start(ros: Any) -> tuple[bool, str]:
@@ -97,14 +103,17 @@ def start_again(ros: Any) -> str:
     """Call the interp node's ~/start until a run starts (the cell settles
     first); its reply. By the reply's success flag: a refusal's words ("job
     not started: not ready") hold "started" too."""
-    ok, reply = False, ""
-    t_end = time.monotonic() + 30
-    while not ok and time.monotonic() < t_end:
+    replies: list[str] = []
+
+    def taken() -> bool:
         ok, reply = call_start(ros)
-        if not ok:
-            time.sleep(0.5)
-    assert ok and reply.startswith("run "), reply
-    return reply
+        replies.append(reply)
+        return ok
+
+    # asked again every 0.5 s: a refusal while the cell settles is no failure
+    wait.until(taken, 30, "a start taken by the interp node", heard=lambda: replies[-3:], poll=0.5)
+    assert replies[-1].startswith("run "), replies[-1]
+    return replies[-1]
 
 
 def step_rows(raw: dict[str, list[tuple[int, Any]]]) -> np.ndarray:
@@ -497,11 +506,7 @@ def test_servo_fault_stops_the_cell(
     # command is the steps of a row due at its time; then they hold
     check_commands(raw, report)
 
-    log = procs.log(bridge)
-    t_end = time.monotonic() + 20
-    while "profile_node/abort: run" not in log and time.monotonic() < t_end:
-        time.sleep(0.2)
-        log = procs.log(bridge)
+    log = wait.log_has(lambda: procs.log(bridge), "profile_node/abort: run", 30, "the bridge's abort call")
     assert "/profile_node/abort: run" in log and "aborting" in log, log
 
     if not words2:
@@ -524,10 +529,9 @@ def test_servo_fault_stops_the_cell(
         assert not ok and "not ready" in reply and "consumer" in reply, reply
         procs.stop(standin)
         standin = start_standin(procs)
-        t_end = time.monotonic() + 30
-        while "stand-in up" not in procs.log(standin):
-            assert time.monotonic() < t_end, procs.log(standin)
-            time.sleep(0.1)
+        wait.log_has(
+            lambda: procs.log(standin), "stand-in up", 30, "the new stand-in's start", running=standin
+        )
     # the interp node stopped sending: a new start is taken
     start_again(ros)
     # that run (from where the joints stopped: job_origin start_position) faults the same way or
@@ -581,9 +585,7 @@ def test_bad_settings_are_refused_in_one_line(tmp_path: Path, procs: Procs, ros:
     }
     args = [a for k, v in bad.items() for a in ("-p", f"{k}:={v}")]
     p = procs.start("bridge_node", "-p", f"bag_dir:={tmp_path / 'bags'}", *args)
-    t_end = time.monotonic() + 30
-    while time.monotonic() < t_end and not all(f"{n}=" in procs.log(p) for n in bad):
-        time.sleep(0.2)
+    wait.log_has(lambda: procs.log(p), [f"{n}=" for n in bad], 30, "a line for each bad setting", running=p)
     lines = procs.log(p).splitlines()
     for name in bad:
         [line] = [x for x in lines if f"{name}=" in x and "invalid" in x]
@@ -597,6 +599,8 @@ def test_bad_settings_are_refused_in_one_line(tmp_path: Path, procs: Procs, ros:
         {"axes": ["feed", "feed", "pole"]},
         {"joints": "flyer"},  # not a list
         {"max_following_error.fork": 0.0},
+        # its topics would be longer than ROS allows a name: the node died on this (RCLError)
+        {"controller": "x" * 300},
     ):
         [res] = set_params(ros, "bridge_node", values)
         [name] = values
@@ -604,22 +608,37 @@ def test_bad_settings_are_refused_in_one_line(tmp_path: Path, procs: Procs, ros:
         assert name in res.reason and "\n" not in res.reason, res.reason
     [res] = set_params(ros, "bridge_node", {"joints": ["j_pole", "j_fork", "j_feed"]})
     assert res.successful, res.reason
+    [res] = set_params(ros, "bridge_node", {"controller": "x" * 200})  # within the bound: taken
+    assert res.successful, res.reason
     assert p.poll() is None and "Traceback" not in procs.log(p)
     assert not (tmp_path / "bags").exists()
 
 
-def test_sigint_mid_run_closes_a_readable_bag(tmp_path: Path, procs: Procs) -> None:
+def test_sigint_mid_run_closes_a_readable_bag(tmp_path: Path, procs: Procs, ros: Any) -> None:
     """Ctrl-C during a run: the process exits 0, the bag is closed (metadata
     written) with the run incomplete and every command sent so far in it."""
+    from rosgraph_msgs.msg import Clock
+
+    from winder.ros.qos import QOS_CLOCK
+
+    clock: list[int] = []  # the run's time as the bridge's /clock tells it (ns)
+    ros.create_subscription(
+        Clock, "/clock", lambda m: clock.append(m.clock.sec * 10**9 + m.clock.nanosec), QOS_CLOCK
+    )
     bags = tmp_path / "bags"
     start_standin(procs)
     bridge = start_cell(
         procs, bags, *("-p", "max_following_error.fork:=5.0", "-p", "max_following_error.pole:=1.0")
     )
-    t_end = time.monotonic() + 60
-    while "run armed" not in procs.log(bridge) and time.monotonic() < t_end:
-        time.sleep(0.1)
-    time.sleep(0.5)
+    wait.log_has(lambda: procs.log(bridge), "run armed", 60, "the bridge's run", running=bridge)
+    # mid-run: the run's clock has gone 0.15 s (150 commands at 1 kHz) of its 0.65 s
+    spin_until(
+        ros,
+        lambda: clock and clock[-1] >= 150_000_000,  # the first run's clock starts at 0
+        60,
+        "0.15 s of the run on the bridge's /clock",
+        heard=lambda: clock[-3:],
+    )
     assert procs.stop(bridge) == 0
     [bag] = wait_for_bags(bags, 1, timeout=5)
     raw = rosbags_read(bag)

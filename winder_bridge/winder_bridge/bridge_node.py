@@ -81,7 +81,7 @@ from winder.motion.job import AXES
 from winder.ros.chunks import waiting
 from winder.ros.consumer import StepConsumer
 from winder.ros.diagnostics import ERROR
-from winder.ros.graph import fully_qualified, profile_nodes
+from winder.ros.graph import fully_qualified
 from winder.ros.qos import QOS_CLOCK, QOS_STATE
 from winder.ros.spin import spin
 from winder.ros.timers import steady_timer
@@ -130,7 +130,12 @@ class BridgeNode(StepConsumer):
 
     def __init__(self) -> None:
         super().__init__(
-            "bridge_node", BRIDGE_SPECS, check_bridge, hardware_id="winder_bridge", topics=BRIDGE_TOPICS
+            "bridge_node",
+            BRIDGE_SPECS,
+            # the topics `controller` names must be names ROS takes in this node's namespace
+            lambda values: check_bridge(values, namespace=self.get_namespace()),
+            hardware_id="winder_bridge",
+            topics=BRIDGE_TOPICS,
         )
         values = self.settings.values()
         # The hardware side: a helper node no executor spins holds the joint
@@ -706,14 +711,13 @@ class BridgeNode(StepConsumer):
 
     def profile_abort_client(self) -> Client | None:
         """The ``~/abort`` service of the cell's profile node, found by its role
-        on the graph, not its name (winder.ros.graph.profile_nodes)."""
-        mine = profile_nodes(self, self.get_namespace())
-        if not mine:
+        on the graph, not its name: the node whose step times this node acts
+        on (``peers.owner``: the one pinned, or the only one the graph shows;
+        None while the graph shows none, or two and none pinned)."""
+        who = self.peers.owner("profile")
+        if who is None:
             return None
-        if len(mine) > 1:
-            self.get_logger().warning(f"several profile nodes in this namespace: {mine}; aborting {mine[0]}")
-        name, ns = mine[0]
-        service = fully_qualified(name, ns) + "/abort"
+        service = fully_qualified(who.name, who.namespace) + "/abort"
         if service not in self.abort_clients:
             self.abort_clients[service] = self.create_client(Trigger, service)
         return self.abort_clients[service]

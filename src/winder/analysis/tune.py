@@ -35,13 +35,17 @@ from winder.contract.timing import plan_timing
 from winder.motion.interp import interpolate
 from winder.motion.job import AXES, Job
 
-__all__ = ["MARGIN", "Axis", "Candidate", "TuneResult", "axes_of", "check_limits", "tune"]
+__all__ = ["MARGIN", "Axis", "Candidate", "TuneResult", "axes_of", "check_limits", "check_size", "tune"]
 
 MARGIN = 0.3
 SHAPERS = ("none", "zv", "zvd", "ei")
 JERK_TIMES = (1.0, 0.25, 0.0625)  #: jerk phase in periods of the major axis' resonance
 SPEEDS = 20
 SETTLE = 0.5  #: simulated time after a move's last step (s)
+#: steps of a move, at most: every distinct move is simulated whole, each
+#: candidate's (a move of 10^6 steps took 20 s and 200 MB; one of 1.3*10^9
+#: was killed for its memory)
+MAX_MOVE_STEPS = 2**21
 
 
 @dataclass(frozen=True)
@@ -129,6 +133,20 @@ def speed_limit(axes: Sequence[Axis], ratios: Sequence[list[float]], margin: flo
     return best
 
 
+def check_size(job: Job) -> None:
+    """ValueError (one line) if a move of ``job`` is too long to simulate
+    whole (:data:`MAX_MOVE_STEPS`): checked from the step counts, before
+    anything is simulated or allocated."""
+    longest = max(job.segments(), key=lambda s: s.steps, default=None)
+    if longest is not None and longest.steps > MAX_MOVE_STEPS:
+        what = "layer" if longest.kind == "layer" else "pole index"
+        raise ValueError(
+            f"job {job.job_id}: a {what} of {longest.steps} steps is too long to tune: each distinct move "
+            f"is simulated whole, at most {MAX_MOVE_STEPS} steps (fewer turns_per_layer or "
+            "fork_steps_per_rev)"
+        )
+
+
 def lost_steps(job: Job, ramp: dict[str, Any], axes: Sequence[Axis]) -> int:
     """Steps the nonlinear model loses over the job's distinct moves, every
     moving axis simulated from rest with its steps at the ramp's times (as the
@@ -184,6 +202,7 @@ def tune(
     (its v_start and dwell are kept)."""
     if not 0.0 <= margin < 1.0:
         raise ValueError(f"margin={margin!r} is invalid: must be in [0, 1)")
+    check_size(job)
     current = {n: s.default for n, s in PROFILE_SPECS.items()}
     current.update(profile)
     segments = [s.steps for s in job.segments()]

@@ -45,6 +45,7 @@ from winder.contract.params import (
     PROFILE_SPECS,
     SIM_SPECS,
     bag_directory,
+    check_interp,
     check_profile,
     check_sim,
     stop_points,
@@ -53,19 +54,34 @@ from winder.contract.run import shaper_text
 from winder.contract.timing import plan_timing
 from winder.contract.topics import check_namespace
 from winder.interrupts import Interrupts, deferred
-from winder.motion.interp import dda, deviation_stats, interpolate, min_deviation, point_by_point
+from winder.motion.interp import dda, deviation_stats, min_deviation, point_by_point
 from winder.motion.job import FIELD_SPECS, Job
 from winder.spec import Spec, SpecError
 
 __all__ = ["main"]
 
 
+#: rows ``winder interp`` interpolates at a time: its memory stays flat (about
+#: 100 MiB) whatever the job; the job is streamed through in such blocks
+INTERP_BLOCK = 1 << 20
+#: steps of the one turn ``winder interp`` compares every method on, at most
+#: (the DDA and point-by-point paths are made whole, as the paper's figures)
+ONE_TURN_MAX = 1 << 22
+
+
 def cmd_interp(args: argparse.Namespace) -> int:
-    """Interpolate a job and print what the interpolation did."""
+    """Interpolate a job and print what the interpolation did. The steps
+    are made and measured a block (:data:`INTERP_BLOCK`) at a time, each
+    layer against its path (its line, or the cam's piece: eq. 7, as
+    ``winder analyze`` measures it), so a job of any size runs in flat memory."""
+    from winder.contract.eq7 import signed_path_distance
+    from winder.motion.interp import interpolate_pieces, line_distance
+
     job = job_from_args(args, job_file(args)["interp_node"])
     segments = job.segments()
     lx, ly, _ = job.step_lengths
-    progress = Progress(job.total_steps, "interpolating")
+    total = sum(s.steps for s in segments)
+    progress = Progress(total, "interpolating")
     t0 = time.perf_counter()
     done = 0
     total_dev = 0.0
@@ -73,24 +89,46 @@ def cmd_interp(args: argparse.Namespace) -> int:
     layer_points = 0
     position = list(segments[0].start) if segments else [0, 0, 0]
     for seg in segments:
-        path = interpolate(position, seg.delta)
-        if seg.kind == "layer":
-            rel = path[:, :2] - np.asarray(seg.start[:2])
-            st = deviation_stats(rel, seg.delta[0], seg.delta[1], step_lengths=(lx, ly))
-            total_dev += st.mean * st.points
-            max_dev = max(max_dev, st.max)
-            layer_points += st.points
-        position = path[-1].tolist()
-        done += path.shape[0]
-        progress.update(done)
+        for first in range(0, seg.steps, INTERP_BLOCK):
+            stop = min(seg.steps, first + INTERP_BLOCK)
+            path = interpolate_pieces(seg.start, seg.pieces, first=first, stop=stop)
+            if seg.kind == "layer" and path.shape[0]:
+                if len(seg.pieces) > 1:
+                    dist = np.abs(
+                        signed_path_distance(seg.start, seg.pieces, path[:, 0], path[:, 1], (lx, ly))
+                    )
+                else:
+                    dist = line_distance(
+                        path[:, :2], seg.delta[0], seg.delta[1], step_lengths=(lx, ly), origin=seg.start[:2]
+                    )
+                total_dev += float(np.sum(dist))
+                max_dev = max(max_dev, float(dist.max()))
+                layer_points += dist.size
+            if path.shape[0]:
+                position = path[-1].tolist()
+            done += path.shape[0]
+            progress.update(done)
     progress.close()
     elapsed = time.perf_counter() - t0
-    if tuple(position) != segments[-1].end:
+    if segments and tuple(position) != segments[-1].end:
         raise RuntimeError(f"interpolation ended at {position}, job ends at {segments[-1].end}")
     mean_dev = total_dev / max(layer_points, 1)
+    rate = done / elapsed if elapsed > 0 else float("inf")
+    print(f"job {job.job_id}: {job.shape}")
+    print(f"  segments           {len(segments)}")
+    print(f"  steps              {done}  ({rate / 1e6:.1f} M steps/s)")
+    print(f"  final position     feed {position[0]}  fork {position[1]}  pole {position[2]} steps")
+    print(f"  mean deviation     {mean_dev * 1e6:.3f} um  (eq. 7, all layers)")
+    print(f"  max deviation      {max_dev * 1e6:.3f} um")
     # one turn with every method, as the paper compares them
     x1 = round(job.wire_diameter / job.feed_step)
     y1 = job.fork_steps_per_rev
+    if max(x1, y1) > ONE_TURN_MAX:
+        print(
+            f"  one turn, {x1} feed x {y1} fork steps: not compared (more than {ONE_TURN_MAX} steps; "
+            "the DDA and point-by-point paths are made whole)"
+        )
+        return EXIT_OK
     bits = max(10, math.ceil(math.log2(max(x1, y1))))
     methods = {
         "min-deviation": min_deviation(x1, y1),
@@ -99,13 +137,6 @@ def cmd_interp(args: argparse.Namespace) -> int:
         "point-by-point": point_by_point(x1, y1),
     }
     turn = {k: deviation_stats(p, x1, y1, step_lengths=(lx, ly)).mean for k, p in methods.items()}
-    rate = done / elapsed if elapsed > 0 else float("inf")
-    print(f"job {job.job_id}: {job.shape}")
-    print(f"  segments           {len(segments)}")
-    print(f"  steps              {done}  ({rate / 1e6:.1f} M steps/s)")
-    print(f"  final position     feed {position[0]}  fork {position[1]}  pole {position[2]} steps")
-    print(f"  mean deviation     {mean_dev * 1e6:.3f} um  (eq. 7, all layers)")
-    print(f"  max deviation      {max_dev * 1e6:.3f} um")
     print(f"  one turn, {x1} feed x {y1} fork steps, mean deviation (eq. 7):")
     for name, mean in turn.items():
         print(f"    {name:26s} {mean * 1e6:8.3f} um  ({mean / turn['min-deviation']:.2f} x)")
@@ -135,14 +166,18 @@ def cmd_run(args: argparse.Namespace) -> int:
     _, duration_ns = plan_timing(  # the job as a whole
         profile, [s.steps for s in segments], stops, pause, [job.segment_speed(s) for s in segments]
     )
+    # the interp node's own check of what it will be given (schedule, the ramp it carries, ...)
+    check_interp({**{n: s.default for n, s in INTERP_SPECS.items()}, **job.to_dict(), **extra}, job=job)
     external = external_nodes(args)
     sim = values_from_args(args, SIM_SPECS, given["consumer"])
     check_sim({**sim, "record": False} if "sim" in external else sim)  # a remote bag_dir is its host's
     cell = values_from_args(args, CELL_SPECS)
     args.namespace = check_namespace(args.namespace)
-    from winder.cli.view import foxglove_port, start_live_view
+    from winder.cli.view import foxglove_host, foxglove_port, start_live_view
 
     fox_port = foxglove_port(args)
+    if fox_port is not None:
+        foxglove_host(args)
     if args.check:
         steps = sum(s.steps for s in segments)
         print(

@@ -177,13 +177,17 @@ def cmd_resim(args: argparse.Namespace) -> int:
         TOPIC_PATH,
         TOPIC_PROFILE_CONFIG,
         TOPIC_STEP_TIMES,
+        check_namespace,
     )
     from winder.record.reader import read_run
     from winder.record.replay import plan_play
 
+    if args.namespace is not None:
+        check_namespace(args.namespace)
     try:
         run = read_run(args.bag, args.namespace)
-        ns = run.namespace
+        # the cell's nodes start in the recorded namespace: one ROS takes (a bag may come from anywhere)
+        ns = check_namespace(run.namespace, "the recorded namespace")
         wanted = [
             f"{ns}/{t}"
             for t in (TOPIC_JOB, TOPIC_PATH, TOPIC_PROFILE_CONFIG, TOPIC_CONTROL, TOPIC_STEP_TIMES)

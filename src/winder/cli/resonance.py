@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from winder.cli.exits import EXIT_OK
-from winder.contract.files import OutputError, atomic_file, write_text
+from winder.contract.files import OutputError, atomic_file, check_writable, write_text
 
 __all__ = ["register"]
 
@@ -32,16 +32,28 @@ def _fraction(name: str, text: str) -> float:
     return value
 
 
+#: damping ratios ``winder resonance`` tabulates, at most (each costs some 15 s)
+MAX_ZETAS = 8
+
+
 def _zetas(text: str) -> list[float]:
+    from winder.spec import shorten
+
+    parts = text.split(",")
+    if len(parts) > MAX_ZETAS:
+        raise ValueError(
+            f"zetas={shorten(text)} is invalid: {len(parts)} damping ratios, at most {MAX_ZETAS} "
+            "(each is simulated with every shaper and model)"
+        )
     out = []
-    for part in text.split(","):
+    for part in parts:
         try:
             z = float(part)
         except ValueError:
             z = math.nan
         if not (math.isfinite(z) and 0.0 <= z <= 0.95):
             raise ValueError(
-                f"zetas={text!r} is invalid: must be damping ratios in [0, 0.95], comma-separated"
+                f"zetas={shorten(text)} is invalid: must be damping ratios in [0, 0.95], comma-separated"
             )
         out.append(z)
     return out
@@ -61,6 +73,10 @@ def cmd_resonance(args: argparse.Namespace) -> int:
     from winder.cli.common import Progress
 
     zetas = _zetas(args.zetas)
+    if args.json:  # the outputs are written after the table: a path that cannot be is refused first
+        check_writable(args.json)
+    if not args.no_plots:
+        check_writable(args.plots_dir, directory=True)
     models = ["linear"] if args.linear_only else ["linear", "nonlinear"]
     move = TestMove()
     bar = Progress(1, "winder resonance")
@@ -201,6 +217,8 @@ def cmd_tune(args: argparse.Namespace) -> int:
         raise ValueError("--apply needs a JOB_FILE to write the tuned ramp into")
     if args.apply:
         _writable(Path(args.job_file))  # before the tuning, not after it
+    if not args.no_plots:
+        check_writable(args.plots_dir, directory=True)
     given = job_file(args)
     job = Job.from_dict(given["interp_node"])
     sim, notes = _axes_from(args, given["consumer"])

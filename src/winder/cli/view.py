@@ -13,7 +13,14 @@ from typing import Any
 
 from winder.cli.exits import EXIT_OK
 
-__all__ = ["add_foxglove_arguments", "foxglove_port", "register", "serve_bag", "start_live_view"]
+__all__ = [
+    "add_foxglove_arguments",
+    "foxglove_host",
+    "foxglove_port",
+    "register",
+    "serve_bag",
+    "start_live_view",
+]
 
 DEFAULT_HOST = "127.0.0.1"
 
@@ -46,6 +53,26 @@ def foxglove_port(args: argparse.Namespace, option: str = "--foxglove") -> int |
 
     text = getattr(args, option.lstrip("-").replace("-", "_"))
     return None if text is None else int(port_spec(option).parse(text))
+
+
+def foxglove_host(args: argparse.Namespace, option: str = "--foxglove-host") -> str:
+    """The address of ``option`` checked as the server will take it: a name
+    or address this host resolves (``winder run --check`` starts no server,
+    and says so before a run would refuse it). SpecError (one line) otherwise."""
+    import socket
+
+    from winder.spec import SpecError, shorten
+
+    host = str(getattr(args, option.lstrip("-").replace("-", "_")))
+    try:
+        socket.getaddrinfo(host, None, type=socket.SOCK_STREAM)
+    except (OSError, UnicodeError) as exc:
+        why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise SpecError(
+            f"{option}={shorten(host)} is invalid: cannot be resolved ({why}); must be an address of this "
+            f"host (default {DEFAULT_HOST}; 0.0.0.0: every interface)"
+        ) from None
+    return host
 
 
 def _url(server: Any, host: str) -> str:

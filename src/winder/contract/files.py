@@ -30,7 +30,16 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, Any
 
-__all__ = ["OutputError", "atomic_file", "fsync_path", "new_directory", "output_dir", "write_text"]
+__all__ = [
+    "OutputError",
+    "atomic_file",
+    "check_writable",
+    "fsync_path",
+    "new_directory",
+    "output_dir",
+    "too_long_name",
+    "write_text",
+]
 
 
 class OutputError(Exception):
@@ -77,10 +86,64 @@ def output_dir(path: str | Path) -> Path:
     try:
         p.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        in_way = next((q for q in (p, *p.parents) if q.exists() and not q.is_dir()), None)
+        in_way = _file_in_way(p)
         if in_way is not None:  # a file where the directory should be
             raise OutputError(f"{p}: cannot be made a directory: {in_way} is a file") from None
         raise OutputError(f"{p}: cannot be made a directory: {_reason(exc)}") from None
+    return p
+
+
+def _file_in_way(p: Path) -> Path | None:
+    """The first of ``p`` and its parents that exists and is not a directory
+    (None: none; a name too long to look up is none of them)."""
+    for q in (p, *p.parents):
+        try:
+            if q.exists() and not q.is_dir():
+                return q
+        except OSError:  # ENAMETOOLONG and the like: that part cannot exist
+            continue
+    return None
+
+
+#: the longest name of a file or directory (Linux NAME_MAX), bytes
+NAME_MAX = 255
+
+
+def too_long_name(path: str | Path) -> str | None:
+    """The first name in ``path`` longer than :data:`NAME_MAX` bytes (no
+    file system takes it: ENAMETOOLONG), else None."""
+    return next((part for part in Path(path).parts if len(os.fsencode(part)) > NAME_MAX), None)
+
+
+def check_writable(path: str | Path, *, directory: bool = False) -> Path:
+    """OutputError (one line) unless the file (or, with ``directory``, the
+    directory) ``path`` can be written later: the nearest part of it that
+    exists is a directory this process can write into, probed by making and
+    removing a directory there. Nothing is made or left behind: a command
+    that writes its output after a long computation asks first."""
+    p = Path(path)
+    what = "cannot be made a directory" if directory else "cannot be written"
+    if too_long_name(p) is not None:
+        raise OutputError(f"{p}: {what}: a name in it is longer than {NAME_MAX} bytes")
+    try:
+        base = p if directory else (p.parent if str(p.parent) else Path("."))
+        if not directory and p.is_dir():
+            raise OutputError(f"{p}: cannot be written: it is a directory")
+        probe = base
+        while not probe.exists() and probe != probe.parent:
+            probe = probe.parent
+        if not probe.is_dir():
+            raise OutputError(f"{p}: {what}: {probe} is a file")
+        if probe != base:  # the rest is made later: each name of it must be one the system takes
+            os.stat(base)
+    except FileNotFoundError:
+        pass
+    except OSError as exc:  # a name too long, a loop of links
+        raise _output_error(p, exc, what) from None
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=".winder-probe-", dir=probe))
+    except OSError as exc:
+        raise _output_error(p, exc, what) from None
     return p
 
 

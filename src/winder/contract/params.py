@@ -13,10 +13,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from winder.contract.files import NAME_MAX, too_long_name
 from winder.contract.timing import MAX_JOB_SECONDS, plan_segment, plan_timing
+from winder.contract.topics import check_relative_name
 from winder.motion.job import AXES, FIELD_SPECS, Job, Segment
 from winder.motion.profile import KINDS
-from winder.spec import Spec, SpecError
+from winder.spec import Spec, SpecError, shorten
 
 __all__ = [
     "CONSUMER_SPECS",
@@ -333,36 +335,57 @@ def stop_points(job: Job, text: str) -> list[tuple[int, int]]:
     """The programmed stops ``text`` (``"coil:turn,..."``) of ``job`` as
     (segment, step index) pairs, sorted: the axes come to rest after step k of
     layer segment s, exactly where the fork completes the turn. SpecError (one
-    line) for a coil or turn the job does not have, or a stop inside a layer
-    whose major axis is not the fork (its turns do not fall on step indices)."""
-    out = set()
+    line) for a coil or turn the job does not have, a stop given twice, or a
+    stop inside a layer whose major axis is not the fork (its turns do not
+    fall on step indices)."""
+    out: list[tuple[int, int]] = []
     spr = job.fork_steps_per_rev
-    segs = job.segments()
-    for item in (t for t in text.replace(" ", "").split(",") if t):
-        coil, turn = (int(x) for x in item.split(":"))
+    items = [t for t in text.replace(" ", "").split(",") if t]
+    if not items:
+        return []
+    layers = {(s.pole, s.layer): s for s in job.segments() if s.kind == "layer"}
+    turns_of: dict[int, list[int]] = {}  # per coil, its layers' turns
+    seen: dict[tuple[int, int], str] = {}
+    for item in items:
+        try:
+            coil, turn = (int(x) for x in item.split(":"))
+        except ValueError:
+            raise SpecError(
+                f"stops={shorten(text)} is invalid: {shorten(item)} must be COIL:TURN (two whole numbers)"
+            ) from None
         if not 1 <= coil <= job.poles:
-            raise SpecError(f"stops={text!r} is invalid: coil {coil} is not in [1, {job.poles}] (poles)")
+            raise SpecError(
+                f"stops={shorten(text)} is invalid: coil {coil} is not in [1, {job.poles}] (poles)"
+            )
         wound = job.coil(coil - 1)
-        per_layer = [job.layer_turns_of(coil - 1, layer) for layer in range(wound.layers)]
+        if coil not in turns_of:
+            turns_of[coil] = [job.layer_turns_of(coil - 1, layer) for layer in range(wound.layers)]
+        per_layer = turns_of[coil]
         per_coil = sum(per_layer)
         if not 1 <= turn <= per_coil:
             raise SpecError(
-                f"stops={text!r} is invalid: turn {turn} of coil {coil} is not in [1, {per_coil}] "
+                f"stops={shorten(text)} is invalid: turn {turn} of coil {coil} is not in [1, {per_coil}] "
                 f"({wound.layers} layers of {wound.turns_per_layer} turns)"
             )
+        if (coil, turn) in seen:
+            raise SpecError(
+                f"stops={shorten(text)} is invalid: {coil}:{turn} is given twice ({seen[coil, turn]} and "
+                f"{item}); each stop once"
+            )
+        seen[coil, turn] = item
         layer, within = 0, turn - 1
         while within >= per_layer[layer]:
             within -= per_layer[layer]
             layer += 1
-        seg = next(s for s in segs if s.kind == "layer" and s.pole == coil - 1 and s.layer == layer)
+        seg = layers[coil - 1, layer]
         if abs(seg.delta[1]) < abs(seg.delta[0]) and within + 1 < per_layer[layer]:
             raise SpecError(
-                f"stops={text!r} is invalid: turn {turn} ends inside a layer whose feed steps "
+                f"stops={shorten(text)} is invalid: turn {turn} ends inside a layer whose feed steps "
                 f"({abs(seg.delta[0])}) outnumber its fork steps: stop at a layer's end instead"
             )
         # the layer's end (its last step, whichever axis leads, after the reversal dwell)
         last = within + 1 == per_layer[layer]
-        out.add((seg.index, seg.steps if last else (within + 1) * spr))
+        out.append((seg.index, seg.steps if last else (within + 1) * spr))
     return sorted(out)
 
 
@@ -376,21 +399,27 @@ def stop_place(job: Job, segment: Segment, k: int) -> tuple[int, int, int]:
     return segment.pole + 1, segment.layer + 1, before + within
 
 
-def check_interp(values: dict[str, Any], *, check_fit: bool = True) -> None:
+def check_interp(values: dict[str, Any], *, check_fit: bool = True, job: Job | None = None) -> None:
     """Cross-field check of the interp node's settings (SpecError): the job
-    (its coils fit their window, unless ``check_fit`` is False), its stops,
-    schedule and ramp. The node's ``job_file`` is checked by
+    (its coils fit their window, unless ``check_fit`` is False: a job that
+    does not fit is then not laid out, and its stops and length are not
+    checked), its stops, schedule (:func:`winder.contract.timeline.check_schedule`),
+    ramp and length. ``job``: the job of ``values``, made already (``winder
+    run --check``). The node's ``job_file`` is checked by
     :func:`winder.contract.jobfile.check_interp_settings`, which reads it."""
-    job = Job.from_dict({k: v for k, v in values.items() if k in FIELD_SPECS}, check_fit=check_fit)
-    if values.get("stops"):
-        stop_points(job, values["stops"])
+    if job is None:
+        job = Job.from_dict({k: v for k, v in values.items() if k in FIELD_SPECS}, check_fit=check_fit)
     if values.get("schedule"):
-        from winder.contract.timeline import parse_schedule
+        from winder.contract.timeline import check_schedule
 
-        parse_schedule(values["schedule"])
+        check_schedule(values["schedule"])
     ramp = run_ramp(values)
     if ramp is not None:
         check_profile(ramp)
+    if not job.winding.fits:  # check_fit=False (winder check): not laid out, refused for its fit later
+        return
+    if values.get("stops"):
+        stop_points(job, values["stops"])
     check_job_duration(job, values)
 
 
@@ -433,25 +462,53 @@ def check_profile(values: dict[str, Any]) -> None:
         raise SpecError(str(exc)) from None
 
 
+#: the longest path the system takes (Linux PATH_MAX, the terminating NUL counted)
+PATH_MAX = 4095
+#: how much deeper than ``bag_dir`` a bag's files go, at most: its staging name
+#: ``.<run id>.opening-<pid>`` (a run id: a job_id of up to 64 characters, a
+#: date, a counter) and a file in it (``<run id>_0.mcap``, ``metadata.yaml``)
+BAG_NAME_ROOM = 256
+
+
 def bag_directory(text: str) -> Path:
     """``bag_dir`` as an absolute path (``~`` expanded, symlinks resolved);
     SpecError (one line) unless it is a directory this process can write
     into, or one it can create. Checked by writing: a probe directory is made
     and removed in it (or in its nearest existing parent), which also catches
     read-only mounts and pseudo file systems such as /proc."""
+    shown = shorten(text, 200)  # a path is shown whole up to a few lines' worth
     try:
         path = Path(text).expanduser().resolve()
     except (OSError, RuntimeError) as exc:  # a symlink loop, an unreadable link
-        raise SpecError(f"bag_dir={text!r} is invalid: {exc}") from None
-    probe = path
-    while not probe.exists() and probe != probe.parent:
-        probe = probe.parent
+        raise SpecError(f"bag_dir={shown} is invalid: {exc}") from None
+    if too_long_name(path) is not None:
+        raise SpecError(
+            f"bag_dir={shown} is invalid: a name in it is longer than {NAME_MAX} bytes, the most a "
+            "file system takes"
+        )
+    deepest = len(os.fsencode(path)) + BAG_NAME_ROOM
+    if deepest > PATH_MAX:
+        raise SpecError(
+            f"bag_dir={shown} is invalid: {len(os.fsencode(path))} bytes long, at most "
+            f"{PATH_MAX - BAG_NAME_ROOM}: a bag's files go up to {BAG_NAME_ROOM} bytes deeper, and the "
+            f"system takes paths of up to {PATH_MAX}"
+        )
+    try:
+        probe = path
+        while not probe.exists() and probe != probe.parent:
+            probe = probe.parent
+        if probe != path:  # the rest is made later: each name in it must be one the system takes
+            os.stat(path)
+    except FileNotFoundError:
+        pass
+    except OSError as exc:  # a name longer than the file system takes
+        raise SpecError(f"bag_dir={shown} is invalid: {exc.strerror or exc}") from None
     if not probe.is_dir():
-        raise SpecError(f"bag_dir={text!r} is invalid: {probe} is not a directory")
+        raise SpecError(f"bag_dir={shown} is invalid: {probe} is not a directory")
     try:
         os.rmdir(tempfile.mkdtemp(prefix=".winder-probe-", dir=probe))
     except OSError as exc:
-        raise SpecError(f"bag_dir={text!r} is invalid: cannot write in {probe} ({exc.strerror})") from None
+        raise SpecError(f"bag_dir={shown} is invalid: cannot write in {probe} ({exc.strerror})") from None
     return path
 
 
@@ -628,10 +685,22 @@ BRIDGE_SPECS = {
 }
 
 
-def check_bridge(values: dict[str, Any]) -> None:
+#: the topics a bridge's ``controller`` names (relative to the bridge's namespace)
+CONTROLLER_TOPICS = ("/commands", "/joint_trajectory")
+
+
+def check_bridge(values: dict[str, Any], namespace: str | None = None) -> None:
     """Cross-field check of the bridge: ``joints`` and ``axes`` pair up one to
     one and name every axis of the cell once; the bag directory must be
-    writable when recording."""
+    writable when recording; with the bridge node's ``namespace``, the
+    topics ``controller`` names are names ROS takes there
+    (:func:`winder.contract.topics.check_relative_name`: a 300-character
+    controller ended the node in rcl)."""
+    if namespace is not None:
+        try:
+            check_relative_name("controller", values["controller"], namespace, CONTROLLER_TOPICS)
+        except ValueError as exc:
+            raise SpecError(str(exc)) from None
     check_consumer(values)
     if values.get("interface") == "trajectory" and values["batch"] * values["rate"] < 1.0:
         raise SpecError(

@@ -36,7 +36,7 @@ import numpy.typing as npt
 from winder.contract.timing import SegmentTiming
 from winder.motion.retime import continue_tail, from_rest, motion_state, stop_tail
 from winder.motion.shaped import Motion
-from winder.spec import SpecError
+from winder.spec import SpecError, shorten
 
 __all__ = [
     "COMMANDS",
@@ -44,6 +44,7 @@ __all__ = [
     "Command",
     "CommandError",
     "Timeline",
+    "check_schedule",
     "parse_schedule",
 ]
 
@@ -71,16 +72,22 @@ class Command:
     value: float = 1.0
 
 
-def parse_schedule(text: str) -> list[Command]:
-    """``"pause@1.5,resume@3,override@4=0.5,abort@9"`` (times in s of simulated
-    time since the job's start) as commands in time order; SpecError (one
+#: commands a schedule holds, at most (each one replans the moves after it)
+MAX_SCHEDULE = 1000
+
+
+def _schedule_items(text: str) -> list[tuple[str, Command]]:
+    """The commands of a schedule as written (item, command); SpecError (one
     line) naming the item and the rule."""
+    items = [t for t in text.replace(" ", "").split(",") if t]
+    if len(items) > MAX_SCHEDULE:
+        raise SpecError(f"schedule={shorten(text)} is invalid: {len(items)} commands, at most {MAX_SCHEDULE}")
     out = []
-    for item in (t for t in text.replace(" ", "").split(",") if t):
+    for item in items:
         kind, _, rest = item.partition("@")
         at, _, value = rest.partition("=")
         rule = (
-            f"schedule={text!r} is invalid: {item!r} must be KIND@SECONDS "
+            f"schedule={shorten(text)} is invalid: {shorten(item)} must be KIND@SECONDS "
             f"(KIND one of {', '.join(COMMANDS)}; override@SECONDS=FACTOR)"
         )
         try:
@@ -95,9 +102,44 @@ def parse_schedule(text: str) -> list[Command]:
         ):
             raise SpecError(rule + "; SECONDS in [0, 1e6]")
         if kind == "override" and not OVERRIDE_RANGE[0] <= f <= OVERRIDE_RANGE[1]:
-            raise SpecError(f"schedule={text!r} is invalid: override factor {f:g} is not in [0.05, 2]")
-        out.append(Command(round(t * 1e9), kind, f))
-    return sorted(out, key=lambda c: c.t_ns)
+            raise SpecError(f"schedule={shorten(text)} is invalid: override factor {f:g} is not in [0.05, 2]")
+        out.append((item, Command(round(t * 1e9), kind, f)))
+    return out
+
+
+def parse_schedule(text: str) -> list[Command]:
+    """``"pause@1.5,resume@3,override@4=0.5,abort@9"`` (times in s of simulated
+    time since the job's start) as commands in time order; SpecError (one
+    line) naming the item and the rule. What a job description carries is
+    read with it; a setting is checked with :func:`check_schedule`."""
+    return sorted((c for _, c in _schedule_items(text)), key=lambda c: c.t_ns)
+
+
+def check_schedule(text: str) -> list[Command]:
+    """:func:`parse_schedule` as a setting is checked (the interp node's
+    ``schedule``, ``winder run --schedule``, ``--check`` included): besides
+    each item's rule, the commands are written in increasing time (none
+    twice, none at the time of the one before), and each can be taken where
+    it stands: a pause while running, a resume while paused, nothing after an
+    abort. SpecError (one line) naming the item and the rule."""
+    items = _schedule_items(text)
+    paused, aborted = False, ""
+    for i, (item, cmd) in enumerate(items):
+        bad = f"schedule={shorten(text)} is invalid: {shorten(item)}"
+        if i and cmd.t_ns <= items[i - 1][1].t_ns:
+            before = items[i - 1][0]
+            raise SpecError(
+                f"{bad} is not later than {shorten(before)}, the command before it: the times must increase"
+            )
+        if aborted:
+            raise SpecError(f"{bad} comes after {shorten(aborted)}: an aborted job takes no more commands")
+        if cmd.kind == "pause" and paused:
+            raise SpecError(f"{bad} pauses a paused job: resume first")
+        if cmd.kind == "resume" and not paused:
+            raise SpecError(f"{bad} resumes a job that is not paused: pause first")
+        paused = {"pause": True, "resume": False}.get(cmd.kind, paused)
+        aborted = item if cmd.kind == "abort" else ""
+    return [c for _, c in items]
 
 
 @dataclass

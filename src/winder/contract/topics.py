@@ -13,7 +13,9 @@ stays global, as diagnostic tools expect it; status names carry the namespace. T
 from __future__ import annotations
 
 import re
-from collections.abc import Collection, Mapping
+from collections.abc import Collection, Mapping, Sequence
+
+from winder.spec import shorten
 
 TOPIC_JOB = "winder/job"
 TOPIC_PATH = "winder/path"
@@ -65,24 +67,126 @@ def in_namespace(name: str, namespace: str) -> bool:
 
 _TOKEN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
+#: rcl's bounds on names (rmw: validate_full_topic_name.h, validate_namespace.h):
+#: a fully qualified topic or service name is at most ``255 - 8`` characters
+#: (DDS prefixes and suffixes take the rest), a namespace at most 2 fewer
+MAX_NAME_LENGTH = 255 - 8
+MAX_NAMESPACE_LENGTH = MAX_NAME_LENGTH - 2
+#: the nodes winder runs in a cell's namespace: the cell's and the command-line
+#: tools' (``winder run``, ``view``, ``play``, ``resim``); the bridge's helper
+#: node ``bridge_node_io`` has no parameter services
+NODE_NAMES = (
+    "interp_node", "profile_node", "sim_node", "bridge_node", "winder_cell", "winder_view",
+    "winder_player", "winder_resim",
+)  # fmt: skip
+#: the services of those nodes: rclpy's parameter and type description
+#: services, a managed node's lifecycle services, winder's own (``~/start_run``...)
+NODE_SERVICES = (
+    "describe_parameters", "get_parameter_types", "get_parameters", "list_parameters", "set_parameters",
+    "set_parameters_atomically", "get_type_description", "change_state", "get_state",
+    "get_available_states", "get_available_transitions", "get_transition_graph", "transition_event",
+    "start", "start_run", "pause", "resume", "abort", "toggle_paused", "play_next",
+)  # fmt: skip
+#: the longest name a cell forms under its namespace (a topic, or a node's service)
+LONGEST_NAME = max(
+    (
+        TOPIC_JOB, TOPIC_PATH, TOPIC_STEPS, TOPIC_STEP_TIMES, TOPIC_JOINT_STATES, TOPIC_JOINT_COMMANDS,
+        TOPIC_SIM_CONFIG, TOPIC_PROGRESS, TOPIC_PROFILE_CONFIG, TOPIC_CLOCK, TOPIC_STATE, TOPIC_CONTROL,
+        *(f"{node}/{service}" for node in NODE_NAMES for service in NODE_SERVICES),
+        "bridge_node_io/get_type_description",
+    ),
+    key=len,
+)  # fmt: skip
 
-def check_namespace(namespace: str) -> str:
+
+def check_namespace(namespace: str, option: str = "namespace", longest: str = LONGEST_NAME) -> str:
     """A cell's namespace as ROS 2 accepts it, with the leading ``/`` added:
     ``""`` or ``"/"`` (the root), else ``/name[/name...]``, each name of
-    letters, digits and ``_``, not starting with a digit. ValueError (one line)
-    naming the value and the rule otherwise."""
+    letters, digits and ``_``, not starting with a digit, and short enough
+    that every name the cell forms under it (``longest``: a topic, a node's
+    service) stays within ROS's bound on a name (:data:`MAX_NAME_LENGTH`).
+    ValueError (one line) naming ``option``, the value (shortened) and the
+    rule otherwise, before anything reaches rcl (whose refusal is a traceback)."""
+    if not isinstance(namespace, str):
+        raise ValueError(f"{option}={namespace!r} is invalid: must be a text, /name[/name...]")
     if namespace in ("", "/"):
         return ""
     body = namespace[1:] if namespace.startswith("/") else namespace
     tokens = body.split("/")
     bad = next((t for t in tokens if not _TOKEN.fullmatch(t)), None)
     if bad is not None:
-        why = "an empty name ('//' or a trailing '/')" if bad == "" else f"the name {bad!r}"
+        why = "an empty name ('//' or a trailing '/')" if bad == "" else f"the name {shorten(bad)}"
         raise ValueError(
-            f"namespace={namespace!r} is invalid: it has {why}; a namespace is /name[/name...], "
+            f"{option}={shorten(namespace)} is invalid: it has {why}; a namespace is /name[/name...], "
             "each name letters, digits and '_', not starting with a digit"
         )
+    most = min(MAX_NAMESPACE_LENGTH, MAX_NAME_LENGTH - 1 - len(longest))
+    if 1 + len(body) > most:
+        raise ValueError(
+            f"{option}={shorten(namespace)} is invalid: {1 + len(body)} characters, at most {most}: ROS "
+            f"bounds a name to {MAX_NAME_LENGTH} characters, and the longest the cell forms under its "
+            f"namespace is /{longest}"
+        )
     return "/" + body
+
+
+def check_node_name(name: str, namespace: str = "", option: str = "node") -> str:
+    """A node named on a command line (``winder ctl param NODE``: its name
+    in ``namespace``, or its full name ``/ns/name``) fully qualified, as ROS
+    takes it: each name letters, digits and ``_``, not starting with a digit,
+    and its services (``<node>/set_parameters_atomically``, the longest of
+    :data:`NODE_SERVICES`) within :data:`MAX_NAME_LENGTH`. ValueError (one
+    line: ``option``, the value shortened, the rule) otherwise."""
+    text = name.strip("/") if isinstance(name, str) else ""
+    if not text:
+        raise ValueError(f"{option}={name!r} is invalid: must be a node name, or its full name /ns/name")
+    ns = namespace.strip("/")
+    full = "/" + text if name.startswith("/") else (f"/{ns}/{text}" if ns else f"/{text}")
+    bad = next((t for t in full[1:].split("/") if not _TOKEN.fullmatch(t)), None)
+    if bad is not None:
+        why = "an empty name ('//')" if bad == "" else f"the name {shorten(bad)}"
+        raise ValueError(
+            f"{option}={shorten(name)} is invalid: it has {why}; a node is NAME or /NS/NAME, each name "
+            "letters, digits and '_', not starting with a digit"
+        )
+    service = max(NODE_SERVICES, key=len)
+    if len(full) + 1 + len(service) > MAX_NAME_LENGTH:
+        raise ValueError(
+            f"{option}={shorten(name)} is invalid: its service {shorten(full + '/' + service)} would be "
+            f"longer than the {MAX_NAME_LENGTH} characters ROS allows a name (the node's full name: at most "
+            f"{MAX_NAME_LENGTH - 1 - len(service)})"
+        )
+    return full
+
+
+def check_relative_name(option: str, value: str, namespace: str = "", suffixes: Sequence[str] = ("",)) -> str:
+    """A relative topic name a setting gives (``controller``: its topics
+    ``<controller>/commands`` and ``<controller>/joint_trajectory``) as ROS
+    accepts it in ``namespace``: names of letters, digits and ``_``, not
+    starting with a digit, separated by ``/``, and the longest topic it
+    names (``namespace/value`` + one of ``suffixes``) within
+    :data:`MAX_NAME_LENGTH`. ValueError (one line: the setting, the value
+    shortened, the rule) otherwise; the value as given."""
+    if not isinstance(value, str) or not value:
+        raise ValueError(f"{option}={value!r} is invalid: must be a name (letters, digits, '_' and '/')")
+    bad = next((t for t in value.split("/") if not _TOKEN.fullmatch(t)), None)
+    if bad is not None:
+        why = "an empty name ('//', or a '/' at an end)" if bad == "" else f"the name {shorten(bad)}"
+        raise ValueError(
+            f"{option}={shorten(value)} is invalid: it has {why}; a relative topic name is name[/name...], "
+            "each name letters, digits and '_', not starting with a digit"
+        )
+    base = namespace.rstrip("/")
+    tail = max(suffixes, key=len, default="")
+    full = f"{base}/{value}{tail}"
+    if len(full) > MAX_NAME_LENGTH:
+        most = MAX_NAME_LENGTH - len(base) - 1 - len(tail)
+        raise ValueError(
+            f"{option}={shorten(value)} is invalid: it names the topic {shorten(full)}, longer than the "
+            f"{MAX_NAME_LENGTH} characters ROS allows a name; in the namespace {base or '/'} it may have "
+            f"at most {max(most, 0)} characters"
+        )
+    return value
 
 
 #: The start handshake (diagnostic_msgs/KeyValue, latched): the step stream's

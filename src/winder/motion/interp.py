@@ -281,6 +281,43 @@ def path_mismatch(
     return hit if bad[hit] else -1
 
 
+@dataclass(frozen=True)
+class _Pieces:
+    """A path of straight pieces, indexed: each piece's delta, where it
+    starts (the sum of the deltas before it) and its first row (the sum of
+    the major steps before it; one more entry: the path's rows)."""
+
+    deltas: npt.NDArray[np.int64]  # (n, axes)
+    at: npt.NDArray[np.int64]  # (n, axes)
+    rows: npt.NDArray[np.int64]  # (n + 1,)
+
+
+#: the last paths indexed, by identity (tuples only: a job's cam, laid out
+#: once, is walked chunk by chunk; indexing it again for every chunk made a
+#: layer of 10^5 turns cost hours)
+_INDEXED: list[tuple[Sequence[Sequence[int]], _Pieces]] = []
+
+
+def _indexed(pieces: Sequence[Sequence[int]]) -> _Pieces:
+    global _INDEXED
+    for known, index in _INDEXED:
+        if known is pieces:
+            return index
+    d = np.asarray(pieces, dtype=np.int64)
+    if d.ndim != 2:
+        d = d.reshape(len(pieces), -1) if d.size else np.zeros((len(pieces), 0), np.int64)
+    rows = np.zeros(len(pieces) + 1, np.int64)
+    if d.size:
+        np.cumsum(np.max(np.abs(d), axis=1), out=rows[1:])
+    at = np.zeros_like(d)
+    if len(d) > 1:
+        np.cumsum(d[:-1], axis=0, out=at[1:])
+    index = _Pieces(d, at, rows)
+    if type(pieces) is tuple:  # immutable: it stays what was indexed
+        _INDEXED = [(pieces, index), *_INDEXED[:3]]
+    return index
+
+
 def _piece_windows(
     pieces: Sequence[Sequence[int]], first: int, stop: int
 ) -> Iterator[tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], int, int, int]]:
@@ -288,18 +325,15 @@ def _piece_windows(
     a delta; the rows of a piece follow those of the one before), each piece
     they touch: (its start, its delta, its rows' first and stop within it,
     and the offset of its first row in the window)."""
-    at = np.zeros(len(pieces[0]), np.int64)
-    done = 0
-    for piece in pieces:
-        d = np.asarray(piece, dtype=np.int64)
-        n = int(np.max(np.abs(d))) if d.size else 0
+    index = _indexed(pieces)
+    rows = index.rows
+    i = int(np.searchsorted(rows[1:], first, side="right"))  # the first piece ending after row first
+    while i < len(index.deltas) and rows[i] < stop:
+        done, n = int(rows[i]), int(rows[i + 1] - rows[i])
         lo, hi = max(first - done, 0), min(stop - done, n)
         if lo < hi:
-            yield at.copy(), d, lo, hi, done + lo - first
-        at += d
-        done += n
-        if done >= stop:
-            return
+            yield index.at[i].copy(), index.deltas[i], lo, hi, done + lo - first
+        i += 1
 
 
 def interpolate_pieces(
@@ -313,7 +347,7 @@ def interpolate_pieces(
     s = np.asarray(start, dtype=np.int64)
     if len(pieces) == 1:
         return interpolate(s, pieces[0], first=first, stop=stop)
-    total = sum(max(abs(int(v)) for v in p) for p in pieces)
+    total = int(_indexed(pieces).rows[-1])
     stop = total if stop is None else stop
     if not 0 <= first <= stop <= total:
         raise ValueError(f"start={first}, stop={stop} is invalid: need 0 <= start <= stop <= {total}")
@@ -336,7 +370,7 @@ def pieces_mismatch(
         return path_mismatch(start, pieces[0], first, pos)
     p = np.asarray(pos)
     s = np.asarray([int(v) for v in start], dtype=np.int64)
-    total = sum(max(abs(int(v)) for v in q) for q in pieces)
+    total = int(_indexed(pieces).rows[-1])
     n = p.shape[0] if p.ndim == 2 else 0
     if p.ndim != 2 or p.shape[1] != s.size:
         raise ValueError(f"pos has shape {p.shape}: must be (n, {s.size})")

@@ -43,6 +43,7 @@ from winder.spec import Spec, SpecError
 __all__ = [
     "AXES",
     "FIELD_SPECS",
+    "MAX_PIECES",
     "Coil",
     "Job",
     "JobError",
@@ -53,6 +54,9 @@ __all__ = [
 AXES = ("feed", "fork", "pole")
 #: Steps of one axis in one segment, at most: positions travel as int32.
 MAX_STEPS = 2**31 - 1
+#: Straight moves of a job, at most (its segments' pieces: an orthocyclic
+#: layer is two a turn): every node lays them out, about 0.1 kB and 1 us each
+MAX_PIECES = 2**20
 
 
 class JobError(SpecError):
@@ -363,11 +367,8 @@ class Job:
         base = Coil(0 if auto else int(self.turns_per_layer), self.layers, 1)
         coils = parse_coil_overrides(self.coil_overrides, self.poles, base)
         asked = tuple(coils.get(p, base) for p in range(self.poles))
-        if any(c.turns_per_layer == 0 for c in asked) and self.bobbin.window_width <= 0:
-            raise JobError(
-                "turns_per_layer=auto is invalid without bobbin.window_width: give the window's width "
-                "(as many turns as fit it are wound)"
-            )
+        if any(c.turns_per_layer == 0 for c in asked):
+            self._check_auto_turns(auto)
         laid = winding(
             self.bobbin,
             self.wire_diameter,
@@ -384,15 +385,19 @@ class Job:
         object.__setattr__(self, "_base_turns", first if auto else base.turns_per_layer)
         if check_fit and not laid.fits:
             raise JobError(laid.overflow())
+        self._check_size(laid)
+        checked = {(base.turns_per_layer, base.layers)}
         for p, c in enumerate(wound):
             if (
-                asked[p] != base and c.turns_per_layer > 0
+                asked[p] != base and c.turns_per_layer > 0 and (c.turns_per_layer, c.layers) not in checked
             ):  # each coil's layers checked as the common one is below
+                checked.add((c.turns_per_layer, c.layers))
                 try:
-                    replace(
+                    replace(  # one coil of it: the job's size is checked above
                         self,
                         turns_per_layer=c.turns_per_layer,
                         layers=c.layers,
+                        poles=1,
                         coil_overrides="",
                         check_fit=False,
                     )
@@ -424,6 +429,51 @@ class Job:
             raise JobError(
                 f"turns_per_layer={turns} is invalid: a layer of "
                 f"{self.layer_fork_steps} fork steps exceeds 2**31 - 1 steps"
+            )
+
+    def _check_auto_turns(self, auto: bool) -> None:
+        """``turns_per_layer: auto`` (here or in a coil override) resolves to
+        as many turns as fit layer 1 of the window (the most of any layer):
+        checked against ``turns_per_layer``'s own range before anything is
+        laid out or sized from it (JobError, one line)."""
+        where = "turns_per_layer=auto" if auto else "coil_overrides: turns_per_layer=auto"
+        width = self.bobbin.window_width
+        if width <= 0:
+            raise JobError(
+                f"{where} is invalid without bobbin.window_width: give the window's width "
+                "(as many turns as fit it are wound)"
+            )
+        spec = FIELD_SPECS["turns_per_layer"]
+        high = int(spec.high or 0)
+        fit = layer_capacity(width, self.wire_diameter, self.lay, 1)
+        if fit > high:
+            given = f"bobbin.window_width={width:g} m" if self.window_width else f"coil_length={width:g} m"
+            raise JobError(
+                f"{where} is invalid: {fit} turns of {self.wire_diameter:g} m wire fit a layer of "
+                f"{given}, turns_per_layer must be in [{int(spec.low or 1)}, {high}]; give turns_per_layer "
+                "(the turns wound in the window's first part), or a narrower window"
+            )
+
+    def _check_size(self, laid: Winding) -> None:
+        """The job's moves are few enough to lay out (JobError, one line),
+        checked from the turn counts before any move is made: a layer is one
+        straight piece (two with a reversal dwell); an orthocyclic layer is a
+        cam of two pieces a turn (a hold and a crossover) and one more, and
+        each piece is a Python object that every node of the cell holds
+        (:data:`MAX_PIECES`)."""
+        if self.lay == "orthocyclic":
+            pieces = sum(2 * c.total_turns + len(c.layers) for c in laid.coils)
+        else:
+            pieces = sum(len(c.layers) for c in laid.coils) * (2 if self.dwell_fork_steps else 1)
+        pieces += self.poles - 1  # the index moves
+        object.__setattr__(self, "_moves", pieces)
+        if pieces > MAX_PIECES:
+            turns = laid.total_turns
+            raise JobError(
+                f"turns_per_layer={self.layer_turns} x layers={self.layers} x poles={self.poles} "
+                f"(lay={self.lay}) is invalid: {turns} turns make {pieces} straight moves, a job may have "
+                f"at most {MAX_PIECES} (an orthocyclic job about {MAX_PIECES // 2} turns); wind fewer "
+                "turns per job"
             )
 
     def _check_cam(self) -> None:
@@ -524,6 +574,13 @@ class Job:
         )
 
     @property
+    def straight_moves(self) -> int:
+        """The straight moves (segments' pieces) the job is laid out in, at
+        most: counted from its turns before anything is laid out, and
+        bounded by :data:`MAX_PIECES`."""
+        return self._moves  # type: ignore[attr-defined, no-any-return]
+
+    @property
     def layer_turns(self) -> int:
         """Turns of layer 1 of a coil without overrides (``turns_per_layer``, auto resolved)."""
         return self._base_turns  # type: ignore[attr-defined, no-any-return]
@@ -580,7 +637,15 @@ class Job:
     def segments(self) -> list[Segment]:
         """The ordered moves of the job, in steps: per coil its layers (each a
         straight line, or a cam of the flyer: :meth:`layer_cam`), and the
-        pole index between coils."""
+        pole index between coils. Laid out once per job (a job does not
+        change): each call returns a new list of the same segments."""
+        made: tuple[Segment, ...] | None = getattr(self, "_segments", None)
+        if made is None:
+            made = tuple(self._lay_out())
+            object.__setattr__(self, "_segments", made)
+        return list(made)
+
+    def _lay_out(self) -> list[Segment]:
         out: list[Segment] = []
         pos = [0, 0, 0]
         direction = 1
@@ -648,6 +713,8 @@ class Job:
         if self.lay != "orthocyclic":
             line = (going * self.feed_steps_of(turns), sgn * turns * spr, 0)
             return (line, (0, sgn * dwell, 0)) if dwell else (line,)
+        if turns < 1:  # no turn fits the layer (a job built with check_fit=False): it cannot be laid
+            raise JobError(self.winding.overflow() or f"layer {layer + 1} of coil {pole + 1} holds no turn")
         # the places of this layer's turns in the order the flyer lays them
         order = range(turns) if layer % 2 == 0 else range(turns - 1, -1, -1)
         places = [origin + first * self.turn_place(layer, k) for k in order]

@@ -57,6 +57,7 @@ from winder.contract.topics import (
 )
 from winder.motion.job import AXES
 from winder.record.raw import BagError, RawBag, _typestore, read_raw, recover
+from winder.spec import shorten
 
 __all__ = [
     "AxisConfig",
@@ -440,7 +441,10 @@ def _pick_namespace(bag: Path, counts: dict[str, int], namespace: str | None) ->
         ns = "/" + namespace.strip("/") if namespace.strip("/") else ""
         if ns not in spaces:
             have = ", ".join(s or "/" for s in spaces) or "none"
-            raise BagError(f"{bag}: no winder job in namespace {ns or '/'} (namespaces with a job: {have})")
+            raise BagError(
+                f"{bag}: no winder job in namespace {(ns if len(ns) <= 52 else shorten(ns)) or '/'} "
+                f"(namespaces with a job: {have})"
+            )
         return ns
     if not spaces:
         raise BagError(f"{bag}: not a winder bag: no /winder/job topic")
