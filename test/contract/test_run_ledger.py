@@ -141,6 +141,35 @@ def test_an_abort_ends_the_run_once_its_steps_are_executed_and_takes_no_more_eve
         ledger.apply(parse_control(event("resume")))
 
 
+@pytest.mark.parametrize("missing", [0, 1])
+def test_a_resume_that_comes_after_its_first_steps_ends_the_rest(missing: int) -> None:
+    """Steps and events travel on two topics (issue 40: a consumer held up
+    took the resumed steps before their event): at rest once every step up
+    to the pause's rest is executed, no longer once a step beyond it is
+    (executed, or known missing); the resume that comes after them is booked,
+    not refused, and announced at its time."""
+    ledger = RunLedger(plan_of())
+    ledger.executed(5)
+    ledger.apply(parse_control(event("pause", t_ns=100, t_rest_ns=300, steps=20)))
+    ledger.executed(14)
+    assert ledger.held and not ledger.at_rest
+    ledger.executed(1)
+    assert ledger.at_rest  # all 20 steps up to the rest
+    ledger.executed(1 - missing)
+    ledger.missing_steps = missing
+    assert ledger.held and not ledger.at_rest  # the 21st: the motion goes on
+    first = ledger.apply(parse_control(event("resume", t_ns=900, steps=20)))
+    assert first is not None and not ledger.held and not ledger.at_rest
+    assert [(t.t_ns, t.state) for t in ledger.due(10**9)] == [
+        (100, "pausing"),
+        (300, "paused"),
+        (900, "running"),
+    ]
+    # a pause or an abort claiming fewer steps than were executed is still refused
+    with pytest.raises(EventError, match="21 steps are executed already" if not missing else "20 steps"):
+        ledger.apply(parse_control(event("pause", t_ns=950, t_rest_ns=960, steps=19)))
+
+
 def test_pause_and_resume_are_announced_in_time_order_as_execution_reaches_them() -> None:
     ledger = RunLedger(plan_of())
     ledger.apply(

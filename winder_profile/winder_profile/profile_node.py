@@ -21,7 +21,9 @@ winder/control as it takes effect. Steps are timed when they are sent: in a
 real-time run (the consumer's winder/sim_config says so) no further than
 ``lookahead`` ahead of the cell's clock, so a command takes effect within it;
 otherwise as soon as they arrive, and a command takes effect after the last
-step sent.
+step sent. A resume in real time is timed ``lookahead`` ahead of the
+consumer's clock as it runs on at rest: the clock last heard (the one waiting
+in the reader taken first), carried on by the wall time since it was heard.
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ import numpy as np
 import numpy.typing as npt
 from builtin_interfaces.msg import Duration
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
+from rclpy.exceptions import InvalidHandle
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
 from rclpy.subscription import Subscription
@@ -62,6 +65,7 @@ from winder.contract.topics import (
 from winder.motion.job import AXES
 from winder.ros.chunks import STEPS_CDR, TIMED_CDR
 from winder.ros.diagnostics import ERROR, OK, WARN, Diagnostics
+from winder.ros.graph import Who, participant
 from winder.ros.managed import ManagedNode
 from winder.ros.peers import Peers, Solo
 from winder.ros.qos import QOS_CLOCK, QOS_EVENTS, QOS_LATCHED, QOS_LATCHED_READER, QOS_STREAM
@@ -74,9 +78,16 @@ from winder.spec import SpecError, check_all
 
 #: this node's part in the cell (winder.contract.topics.ROLES), in every job status
 ROLE = "profile"
-#: How long steps wait for the consumer's winder/sim_config of a run (which
-#: says whether it runs in real time) before they go out without look-ahead.
-MODE_WAIT = 1.0
+#: How long (s) at most a run's steps wait for the consumer's winder/sim_config
+#: of the run (whether it runs in real time, and its clock) while the cell's
+#: consumer is on the graph and publishes one: a consumer that takes the run
+#: late (a loaded host, a process held up) is waited for, not guessed at (a
+#: fixed 1 s sent a real-time run's steps without look-ahead under load).
+#: Past it, or with no consumer left, the steps go out without look-ahead,
+#: said once with what was waited for.
+MODE_WAIT = 10.0
+#: after this long (s) waiting for it, the wait is said once in the log
+MODE_SAY = 1.0
 #: Steps timed per pass in a real-time run (the rest wait for the clock).
 RELEASE_BLOCK = 4096
 
@@ -133,9 +144,12 @@ class ProfileNode(ManagedNode):
         #: once the consumer's sim_config for the run came (or MODE_WAIT passed)
         self.lookahead_ns: int | None = None
         self.mode_known = False
+        self.mode_said = False  # the wait for the run's sim_config was said in the log
         self.job_wall = 0.0
         self.clock_origin_ns = 0
         self.t_now_ns = -1  # the cell's clock, as time since the run's start (real-time runs)
+        self.t_now_wall = 0.0  # when it was heard (time.monotonic())
+        self.clock_factor = 1.0  # the consumer's real_time_factor: its clock's s per wall s
         #: a programmed stop waiting for ~/resume (stop_resume call): the stops
         #: still ahead, and the one the job waits at
         self.holds: list[tuple[int, int]] = []
@@ -228,6 +242,7 @@ class ProfileNode(ManagedNode):
         self.queue.clear()
         self.t_sent_ns, self.dropped, self.t_now_ns = -1, 0, -1
         self.lookahead_ns, self.mode_known, self.job_wall = None, False, time.monotonic()
+        self.mode_said = False
         if self.last_sim_config is not None:  # the consumer's word on this run may be here already
             self.on_sim_config(self.last_sim_config)
         self.ramp_kind = str(values["profile"])
@@ -356,24 +371,43 @@ class ProfileNode(ManagedNode):
 
     def mode_ready(self) -> bool:
         """Whether the run's look-ahead is known: the consumer's sim_config for
-        it came, or nobody publishes one (a consumer that does not pace in
-        real time need not: it is not waited for), or MODE_WAIT passed
-        without one (then there is none, and that is said once)."""
-        if (
-            not self.mode_known
-            and self.pub.get_subscription_count() > 0
-            and self.count_publishers(self.sim_config_topic) == 0
-        ):
-            # the consumer is on the graph (it reads the step times) and
-            # publishes no configuration: it does not pace, so nothing to wait for
-            self.mode_known = True
-        elif not self.mode_known and time.monotonic() - self.job_wall > MODE_WAIT:
-            self.mode_known = True
-            self.get_logger().warning(
-                f"no {TOPIC_SIM_CONFIG} for this run within {MODE_WAIT:g} s: "
-                "steps are sent without look-ahead"
-            )
-        return self.mode_known
+        it came, or the cell's consumer publishes none (a consumer that does
+        not pace in real time need not: it is not waited for). While the
+        cell's consumer (as the graph shows it: the node this one knew when
+        it said ready) publishes one, it is waited for, however late it
+        takes the run, up to MODE_WAIT s; past that, or with no consumer on
+        the graph any more, the steps go out without look-ahead (said once)."""
+        if self.mode_known or self.plan is None:
+            return self.mode_known
+        consumer = self.peers.owner("consumer")
+        if consumer is not None and not self.configures(consumer):
+            self.mode_known = True  # it publishes no configuration: it does not pace, nothing to wait for
+            return True
+        waited = time.monotonic() - self.job_wall
+        run = self.plan.run_id or self.plan.job_id
+        if consumer is not None and waited <= MODE_WAIT:
+            if waited > MODE_SAY and not self.mode_said:
+                self.mode_said = True
+                self.get_logger().info(
+                    f"run {run}: its steps wait for {consumer.fq}'s {TOPIC_SIM_CONFIG} of the run "
+                    f"(whether it runs in real time), {MODE_WAIT:g} s at most"
+                )
+            return False
+        why = (
+            f"none from {consumer.fq} within {MODE_WAIT:g} s" if consumer else "no step consumer on the graph"
+        )
+        self.get_logger().warning(
+            f"no {TOPIC_SIM_CONFIG} for run {run} ({why}): steps are sent without look-ahead"
+        )
+        self.mode_known = True
+        return True
+
+    def configures(self, consumer: Who) -> bool:
+        """Whether the graph shows ``consumer`` publishing winder/sim_config."""
+        return any(
+            Who(i.node_name, i.node_namespace, participant(i.endpoint_gid)) == consumer
+            for i in self.get_publishers_info_by_topic(self.sim_config_topic)
+        )
 
     def on_sim_config_raw(self, raw: bytes, gid: bytes) -> None:
         self.peers.deliver(TOPIC_SIM_CONFIG, gid, raw, self.take_sim_config)
@@ -388,9 +422,11 @@ class ProfileNode(ManagedNode):
     def on_sim_config(self, msg: String) -> None:
         """The consumer's configuration of the run: a real-time run gets the
         look-ahead, and the clock it is measured on. It may come before the
-        job description does: the last one is kept for it."""
+        job description does: the last one is kept for it. One that comes
+        after the steps went out without look-ahead (MODE_WAIT passed) still
+        sets it, from then on."""
         self.last_sim_config = msg
-        if self.plan is None or self.mode_known:
+        if self.plan is None or self.lookahead_ns is not None or self.run_over():
             return
         try:
             config = json.loads(msg.data)
@@ -398,9 +434,24 @@ class ProfileNode(ManagedNode):
             return
         if not isinstance(config, dict) or config.get("run_id") != self.plan.run_id:
             return
+        run = self.plan.run_id or self.plan.job_id
+        if self.mode_said and not self.mode_known:
+            self.get_logger().info(
+                f"run {run}: the consumer's {TOPIC_SIM_CONFIG} came after "
+                f"{time.monotonic() - self.job_wall:.1f} s; its steps go out"
+            )
         origin = config.get("clock_origin_ns")
         if config.get("real_time") is True and isinstance(origin, int):
+            if self.mode_known:
+                self.get_logger().warning(
+                    f"run {run}: the consumer's {TOPIC_SIM_CONFIG} came after steps went out without "
+                    "look-ahead: the look-ahead holds from now on"
+                )
             self.clock_origin_ns = origin
+            factor = config.get("real_time_factor")
+            self.clock_factor = 1.0
+            if isinstance(factor, int | float) and not isinstance(factor, bool) and 0.0 < factor < 1e6:
+                self.clock_factor = float(factor)
             self.lookahead_ns = round(self.settings.values()["lookahead"] * 1e9)
             # a consumer that commits commands ahead of its clock needs the steps that far ahead at
             # all times: steps go out in blocks when less than half the look-ahead is out, so twice it
@@ -419,8 +470,33 @@ class ProfileNode(ManagedNode):
         if len(raw) < 12:
             return
         sec, nsec = struct.unpack_from("<iI", raw, 4)
-        self.t_now_ns = max(self.t_now_ns, sec * 1_000_000_000 + nsec - self.clock_origin_ns)
+        t = sec * 1_000_000_000 + nsec - self.clock_origin_ns
+        if t > self.t_now_ns:
+            self.t_now_ns, self.t_now_wall = t, time.monotonic()
         self.release()
+
+    def take_clock(self) -> None:
+        """The clock message waiting in the reader, if one is (a busy node
+        serves a call before it): heard now."""
+        sub = self.sub_clock
+        if sub is None:
+            return
+        try:
+            with sub.handle:
+                got = sub.handle.take_message(sub.msg_type, sub.raw)
+        except InvalidHandle:  # destroyed meanwhile (shutdown)
+            return
+        if got is not None:
+            self.on_clock(got[0])
+
+    def clock_at_rest_ns(self) -> int:
+        """The consumer's clock now, at rest after a pause: in a real-time run
+        it runs on with the wall clock (the sim node's, from where it stands),
+        so the clock last heard is carried on by the wall time since it was
+        heard. (A consumer held up meanwhile is behind that: never ahead.)"""
+        if self.t_now_ns < 0:
+            return self.t_now_ns
+        return self.t_now_ns + round((time.monotonic() - self.t_now_wall) * self.clock_factor * 1e9)
 
     def end_clock(self) -> None:
         if self.sub_clock is not None:
@@ -440,9 +516,16 @@ class ProfileNode(ManagedNode):
         tl, plan = self.timeline, self.plan
         if tl is None or plan is None or self.run_over():
             return False, f"{kind} refused: no run is being timed"
-        t_req = (
-            self.t_now_ns if self.lookahead_ns is not None and self.t_now_ns >= 0 else max(self.t_sent_ns, 0)
-        )
+        if self.lookahead_ns is not None:
+            self.take_clock()  # the clock as fresh as it is here
+        real_time = self.lookahead_ns is not None and self.t_now_ns >= 0
+        if real_time and kind == "resume":
+            # the consumer's clock ran on while it rested: the resume is timed from
+            # where that clock is now, not from where it was last heard (the resumed
+            # steps came behind it, and a sim node died of them: issue 40)
+            t_req = self.clock_at_rest_ns()
+        else:
+            t_req = self.t_now_ns if real_time else max(self.t_sent_ns, 0)
         t = max(self.t_sent_ns, t_req, 0)
         if kind == "resume" and self.lookahead_ns is not None:
             t = max(t, t_req + self.lookahead_ns)  # the new steps reach the consumer before they are due

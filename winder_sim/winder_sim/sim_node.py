@@ -23,7 +23,11 @@ start.
 Each axis is a stepper driven through ``winder.axis``: the linear model is
 exact between steps, the nonlinear one integrates the sine torque and reports
 lost steps. The simulation advances to the time of the last step received and
-never beyond, so /clock never runs ahead of the commands.
+never beyond, so /clock never runs ahead of the commands; only at rest after
+a pause does a real-time run's clock go on with the wall clock (from where it
+stands: it never leaps ahead to make up for time the node was held up). A step
+that still comes behind the clock is executed at the clock and counted late
+(:class:`winder.ros.consumer.StepConsumer`).
 """
 
 from __future__ import annotations
@@ -41,6 +45,7 @@ from sensor_msgs.msg import JointState
 from winder.axis import StepperAxis
 from winder.contract.cdr import JointStateEncoder, encode_clocks
 from winder.contract.eq7 import layer_of_samples, sample_deviation, step_deviation
+from winder.contract.pacing import ns_not_before
 from winder.contract.params import MOTOR_FIELDS, SIM_SPECS, check_sim
 from winder.contract.stream import JobPlan
 from winder.contract.topics import TOPIC_CLOCK, TOPIC_JOINT_COMMANDS, TOPIC_JOINT_STATES
@@ -48,11 +53,20 @@ from winder.motion.job import AXES
 from winder.ros.consumer import StepConsumer
 from winder.ros.qos import QOS_CLOCK, QOS_STATE
 from winder.ros.spin import spin
+from winder.ros.timers import steady_timer
 
 #: Samples simulated in one go, at most: the node's memory is bounded by this,
 #: never by the simulated time a batch of steps covers (at 1 step/s, a chunk of
 #: 8192 steps spans 8192 s: 1.6 million samples at 200 Hz).
 SAMPLE_BATCH = 1 << 15
+#: At rest after a pause in real time, the clock goes on with the wall clock;
+#: a node that finds the wall clock more than this many wall seconds beyond
+#: its next sample (it fell behind in the motion, or it was held up: a starved
+#: host, SIGSTOP) goes on from its clock instead of leaping ahead. A leap would
+#: pass the resume the profile node timed from the clock it heard last.
+FREE_RUN_LEAP = 0.02
+#: s of wall time after which a real-time run waiting for steps says its /clock again
+CLOCK_REPEAT = 0.1
 #: the simulator's own recorded topics
 SIM_TOPICS = {
     "clock": (TOPIC_CLOCK, "rosgraph_msgs/msg/Clock"),
@@ -107,6 +121,9 @@ class SimNode(StepConsumer):
         self.pub_state = self.create_publisher(JointState, TOPIC_JOINT_STATES, QOS_STATE)
         self.pub_cmd = self.create_publisher(JointState, TOPIC_JOINT_COMMANDS, QOS_STATE)
         self.clock_ns = -1  # the last /clock published in this node's life (ns)
+        self.clock_wall = 0.0  # when it was published (steady s)
+        # a real-time run waiting for its steps: /clock said again (see repeat_clock)
+        steady_timer(self, CLOCK_REPEAT, self.repeat_clock)
         self.begin_sim(self.settings.values())
         self.start_lifecycle()
 
@@ -187,14 +204,29 @@ class SimNode(StepConsumer):
             # the wall clock in a real-time run (until the resume's steps come)
             assert self.ledger is not None and self.ledger.hold is not None
             rest_s = self.ledger.hold.rest_ns / 1e9
-            until = (
-                max(self.paced_until(self.settings.values()["real_time_factor"]), rest_s)
-                if real_time
-                else rest_s
-            )
+            until = self.free_run_until(rest_s) if real_time else rest_s
             if until * 1e9 > max(self.last_step_ns, self.t_sim_ns):
                 self.simulate(None, None, until=until)
         self.emit()
+
+    def free_run_until(self, rest_s: float) -> float:
+        """How far the clock of a real-time run at rest after a pause goes now
+        (s): on with the wall clock, from where it stands. Found more than
+        FREE_RUN_LEAP wall seconds beyond its next sample, it does not leap
+        there: the pacing goes on from the clock."""
+        factor = self.settings.values()["real_time_factor"]
+        clock = max((self.next_sample - 1) / self.rate, rest_s)  # the last sample computed, or the rest
+        allowed = self.paced_until(factor)
+        if allowed - (clock + 1.0 / self.rate) > FREE_RUN_LEAP * factor:
+            self.wall_pace0, self.pace_sim0, self.pace_factor = time.monotonic(), clock, factor
+            return clock
+        return max(allowed, rest_s)
+
+    def earliest_step_ns(self) -> int | None:
+        """The last sample computed (ns, rounded up): the trackers take no step before it."""
+        if self.next_sample == 0:
+            return None
+        return ns_not_before((self.next_sample - 1) / self.rate)  # as the trackers have it
 
     def settle(self, until_ns: int) -> None:
         self.simulate(None, None, until=until_ns / 1e9 + self.settings.values()["settle_time"])
@@ -380,6 +412,7 @@ class SimNode(StepConsumer):
         acts = self.encoder.encode(stamps, block["act_pos"][:n], block["act_vel"][:n])
         if n:
             self.clock_ns = int(stamps[n - 1])
+            self.clock_wall = time.monotonic()
         bag = self.bag if not self.record_failure else None
         topics = (
             self.bag_topics["clock"][0],
@@ -403,6 +436,20 @@ class SimNode(StepConsumer):
                     bag = None
         if n:
             self.reached(int(t_ns[n - 1]))
+
+    def repeat_clock(self) -> None:
+        """In a real-time run the clock stands still while the node waits for
+        the next steps, and the profile node sends them only as the clock
+        comes within its look-ahead: a reader of /clock that matched the
+        node's writer after its last sample (discovery under load; /clock is
+        volatile) would wait for a clock that waits for it. So the last
+        /clock goes out again every CLOCK_REPEAT s while nothing else does
+        (not recorded: the bag has it once)."""
+        if self.plan is None or not self.paces() or self.clock_ns < 0:
+            return
+        if time.monotonic() - self.clock_wall >= CLOCK_REPEAT:
+            self.pub_clock.publish(encode_clocks(np.array([self.clock_ns], np.int64))[0])
+            self.clock_wall = time.monotonic()
 
     def paced_until(self, factor: float) -> float:
         """Simulated time (s) the wall clock allows in real-time mode. A new

@@ -76,6 +76,9 @@ def report_run(result: Any, wall: float, command: str = "run", *, stops: bool = 
         print(f"  max tracking error {_number(x, 'max_tracking_error_steps', '.3f')} steps")
     if "lost_steps" in x:
         print(f"  lost steps         {x['lost_steps']}")
+    if "late_steps" in x:  # steps that came behind the consumer's clock, executed at it
+        behind = _number(x, "late_steps_behind_max_ms", ".3f")
+        print(f"  late steps         {x['late_steps']}  (up to {behind} ms behind the clock, executed at it)")
     if r.stalls:
         # a stall of the producers: as fast as possible nothing waits on the steps, so one that
         # ends with every step done is a warning; in real time the axes ran out of steps (ERROR)

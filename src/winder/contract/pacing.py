@@ -6,15 +6,19 @@ the joints' commanded positions are the step counts of the last row due
 held time column, no loop over rows. :class:`CommandHistory` keeps the
 positions commanded over the last second or more, so that a measured position
 can be compared with what was commanded over the stretch before it was
-measured (:func:`following_error`).
+measured (:func:`following_error`). :class:`LateSteps` books the steps that
+come behind a consumer's clock: they go at the clock (a drive cannot go back
+in time), counted, never refused (:func:`at_clock`).
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["CommandHistory", "Pacer", "following_error"]
+__all__ = ["CommandHistory", "LateSteps", "Pacer", "at_clock", "following_error", "ns_not_before"]
 
 
 class Pacer:
@@ -157,3 +161,81 @@ def following_error(
         measured < low, low - measured, np.where(measured > high, high - measured, 0.0)
     )
     return out
+
+
+def ns_not_before(t_s: float) -> int:
+    """The first whole ns not before ``t_s`` (s) as a consumer compares it:
+    ``ns / 1e9 >= t_s`` in floating point (a clock in s, as step times in ns)."""
+    ns = math.ceil(t_s * 1e9)
+    while ns / 1e9 < t_s:
+        ns += 1
+    while (ns - 1) / 1e9 >= t_s:
+        ns -= 1
+    return ns
+
+
+def at_clock(t_ns: npt.NDArray[np.int64], clock_ns: int) -> tuple[npt.NDArray[np.int64], int, int]:
+    """When steps timed ``t_ns`` (non-decreasing, ns) go on a consumer whose
+    clock stands at ``clock_ns``: each step timed before the clock goes at the
+    clock, the others at their time. (times, how many were behind, how far
+    the first of them was behind in ns); ``t_ns`` itself when none was."""
+    n = int(np.searchsorted(t_ns, clock_ns, side="left"))  # the steps strictly before the clock
+    if n == 0:
+        return t_ns, 0, 0
+    out = t_ns.copy()
+    out[:n] = clock_ns
+    return out, n, clock_ns - int(t_ns[0])
+
+
+class LateSteps:
+    """The steps of a run that came behind the consumer's clock (in a
+    real-time run, steps timed for a moment its clock had already passed):
+    each is executed at the clock (:func:`at_clock`) and counted here, with
+    how far behind one came at most. They are reported once a run
+    (:meth:`report`), when they stopped coming, with the numbers."""
+
+    def __init__(self) -> None:
+        self.count = 0
+        self.behind_max_ns = 0
+        self.behind = False  # the last step taken came late: more may follow
+        self.reported = False  # the run's one report of them is out
+
+    def take(self, t_ns: npt.NDArray[np.int64], clock_ns: int | None) -> npt.NDArray[np.int64]:
+        """The times steps timed ``t_ns`` (non-decreasing) are executed at,
+        the clock at ``clock_ns`` (None: the consumer takes any time); the late
+        ones counted."""
+        if clock_ns is None or t_ns.size == 0:
+            self.behind = False
+            return t_ns
+        out, n, behind = at_clock(t_ns, clock_ns)
+        self.behind = n == t_ns.size
+        if n:
+            self.count += n
+            self.behind_max_ns = max(self.behind_max_ns, behind)
+        return out
+
+    @property
+    def behind_max_ms(self) -> float:
+        return self.behind_max_ns / 1e6
+
+    def text(self) -> str:
+        """The run's late steps in one line."""
+        return (
+            f"late steps: {self.count} steps came behind the clock, up to {self.behind_max_ms:.3f} ms "
+            "behind; executed at the clock, not at their time"
+        )
+
+    def report(self, *, closing: bool = False) -> str:
+        """The run's one report of its late steps (:meth:`text`): once a step
+        came on time after them, or when the run closes; "" before that, and
+        after the report."""
+        if not self.count or self.reported or (self.behind and not closing):
+            return ""
+        self.reported = True
+        return self.text()
+
+    def keys(self) -> dict[str, str]:
+        """The job report's keys: ``late_steps`` and ``late_steps_behind_max_ms``, if any came."""
+        if not self.count:
+            return {}
+        return {"late_steps": str(self.count), "late_steps_behind_max_ms": f"{self.behind_max_ms:.3f}"}

@@ -248,11 +248,15 @@ class RunLedger:
         """Book an event of this run; the transition it starts (already
         queued for :meth:`due`), or None. EventError if it is not this run's
         or contradicts what happened (an abort or pause claiming fewer steps
-        than were executed, or more than the job has)."""
+        than were executed, or more than the job has). A resume may come
+        after the first steps it times (steps and events travel on two
+        topics; a consumer held up takes both at once): its ``steps``, those
+        before the resumed motion, may be fewer than were executed."""
         if event.run_id != self.plan.run_id:
             raise EventError(f"run_id={event.run_id!r} is not the running run {self.plan.run_id!r}")
         total = self.plan.total_steps
-        if event.steps is not None and not self.executed_steps <= event.steps <= total:
+        least = 0 if event.kind == "resume" else self.executed_steps
+        if event.steps is not None and not least <= event.steps <= total:
             raise EventError(
                 f"{event.kind} after steps={event.steps} is invalid: {self.executed_steps} steps are "
                 f"executed already and the job has {total}"
@@ -355,8 +359,10 @@ class RunLedger:
 
     @property
     def at_rest(self) -> bool:
-        """Paused by the operator, every step up to the rest executed."""
-        return self.hold is not None and self.accounted >= self.hold.steps
+        """Paused by the operator, every step up to the rest executed and none
+        beyond it: a step beyond the rest is the resumed motion's, whose event
+        is on its way (steps and events travel on two topics)."""
+        return self.hold is not None and self.accounted == self.hold.steps
 
     @property
     def aborted(self) -> bool:

@@ -352,8 +352,11 @@ class CellWatch:
         if not ours:
             return  # another cell's (or nobody's): not this run's
         nodes = {st.name.split(":", 1)[0].rsplit("/", 1)[-1] for st in ours}
-        if len(nodes) == 1 and self.peers.admit_from(TOPIC_DIAGNOSTICS, gid, nodes.pop()):
-            self._on_diagnostics(msg)
+        if len(nodes) == 1:
+            # held while the graph does not name its publisher yet (a node's first
+            # status may come before): judged then, not refused as unnamed
+            take = lambda _raw: self._on_diagnostics(msg)  # noqa: E731 - the message already parsed
+            self.peers.deliver_from(TOPIC_DIAGNOSTICS, gid, raw, take, nodes)
         elif len(nodes) > 1:
             self.peers.refuse(
                 TOPIC_DIAGNOSTICS, self.peers.sender(TOPIC_DIAGNOSTICS, gid), gid, "mixed statuses"

@@ -13,6 +13,10 @@ What the base does (docs/CONTRACT.md, "What a consumer must do"):
 * stream checks (:class:`winder.contract.stream.StreamChecker`: gaps,
   repeats, reordering; step times that do not increase or lie beyond a job's
   longest duration), each reported once as an ERROR;
+* late steps: a step timed before the backend's clock (:meth:`earliest_step_ns`)
+  is executed at the clock, never refused, and counted
+  (:class:`winder.contract.pacing.LateSteps`): one ERROR per run, once
+  they stopped coming, and ``late_steps`` in the job report;
 * receipts on ``winder/progress`` (the interp node's flow control and its
   sign that the job is over): steps executed plus steps known missing;
 * operator events on ``winder/control`` (pause, resume, abort, override) and
@@ -41,6 +45,8 @@ What a backend implements (the hooks below; only :meth:`execute` is required):
   backend that paces: whether it takes the next chunk now, whether it holds
   accepted rows not executed yet, its due work on each pump, and whether work
   waits on the clock;
+* :meth:`earliest_step_ns` - a backend with a clock of its own: the
+  earliest time it can still execute a step at;
 * :meth:`settle` - every step is executed (or the abort's rest reached):
   bring the axes to rest until the given time; the run closes when nothing is
   pending;
@@ -66,6 +72,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import Int64MultiArray, String
 from trajectory_msgs.msg import JointTrajectory
 
+from winder.contract.pacing import LateSteps
 from winder.contract.params import bag_directory
 from winder.contract.run import EventError, JobReport, RunLedger, Transition, parse_control
 from winder.contract.stream import TIMED_COLUMNS, JobPlan, StreamChecker, parse_job_description
@@ -273,6 +280,13 @@ class StepConsumer(ManagedNode):
         """Whether execution follows the wall clock now (a real-time run)."""
         return False
 
+    def earliest_step_ns(self) -> int | None:
+        """The backend's clock (ns since the run's start): the earliest time it
+        can still execute a step at. A step timed before it is executed at it,
+        counted late and reported (a drive cannot go back in time). None: it
+        executes a step at any time given (the default)."""
+        return None
+
     def missing(self) -> str:
         """Why the backend cannot take a run now (its hardware is not there),
         in words; "" if it can. Announced as "waiting"."""
@@ -303,7 +317,9 @@ class StepConsumer(ManagedNode):
         self.inbox: deque[bytes] = deque()  # received chunks waiting to be executed
         self.inbox_since = time.monotonic()
         self.record_failure = ""  # why the bag stopped recording (a full disk), if it did
-        self.last_step_ns = -1
+        self.last_step_ns = -1  # time of the last step accepted, as the stream timed it
+        self.last_executed_ns = -1  # the time it is executed at (later if it came late)
+        self.late = LateSteps()
         self.path_recorded = False
         self.profile_recorded = False
         self.job_wall = time.monotonic()
@@ -579,6 +595,14 @@ class StepConsumer(ManagedNode):
             self.checker.missing += rows.shape[0]
             return None
         self.last_step_ns = int(rows[-1, 0])
+        timed = rows[:, 0]
+        times = self.late.take(timed, self.earliest_step_ns())
+        if times is not timed:
+            # behind the backend's clock (it ran past the time they were timed
+            # for): executed at the clock, counted; reported once a run (_work)
+            rows = rows.copy()
+            rows[:, 0] = times
+        self.last_executed_ns = int(rows[-1, 0])
         self.checked(seg, rows)
         index = self.checker.step_index(seg, rows[:, 2:]) if self.ledger.has_stops else None
         if self.ledger.note_rows(seg, rows[:, 0], index):
@@ -627,6 +651,9 @@ class StepConsumer(ManagedNode):
                 # nonlinear model took seconds over is no stall of the stream
                 self.last_chunk_wall = time.monotonic()
             self.receipt()
+        late = self.late.report()  # once a run, when they stopped coming
+        if late:
+            self.error(late)
         if not self.inbox:  # the run's last chunk may have been dropped, not executed
             self.settle_if_complete()
         self.work()
@@ -643,7 +670,7 @@ class StepConsumer(ManagedNode):
         self.ledger.missing_steps = self.checker.missing
         if not (self.checker.complete or self.ledger.aborted):
             return
-        self.settle(max(self.last_step_ns, 0))
+        self.settle(max(self.last_executed_ns, 0))
         self.finishing = True
 
     # -- what the backend tells -------------------------------------------------
@@ -696,6 +723,7 @@ class StepConsumer(ManagedNode):
             extra={
                 **({"longest_stall_s": f"{self.longest_stall:.1f}"} if self.stalls else {}),
                 **{k: str(v) for k, v in self.details().items()},
+                **self.late.keys(),
                 **self.intruder_keys(),
                 **self.event_keys(),
             },
@@ -747,6 +775,9 @@ class StepConsumer(ManagedNode):
             return
         self.closing()
         self.take_control()  # the run's last events go into its bag
+        late = self.late.report(closing=True)  # steps still coming late when the run closes
+        if late:
+            self.error(late)
         with signals_held():
             self._finish(complete)
 
@@ -854,8 +885,13 @@ class StepConsumer(ManagedNode):
         # one node's statuses, sent by that node (a stranger's status named like ours is not)
         node = ours[0].split(":", 1)[0].rsplit("/", 1)[-1]
         alone = all(n.split(":", 1)[0].rsplit("/", 1)[-1] == node for n in ours)
-        if alone and self.peers.admit_from(TOPIC_DIAGNOSTICS, gid, node):
-            self.record("diagnostics", self.t_ns, raw)
+        if alone:
+            # held while the graph does not name its sender yet (a node's first status can
+            # come before its discovery info), recorded at the time it came
+            t_ns = self.t_ns
+            self.peers.deliver_from(
+                TOPIC_DIAGNOSTICS, gid, raw, lambda r: self.record("diagnostics", t_ns, r), [node]
+            )
 
     def publish_status(
         self, task: str, level: int, text: str, values: dict[str, object], *, t_ns: int | None = None

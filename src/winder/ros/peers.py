@@ -20,8 +20,8 @@ from __future__ import annotations
 import os
 import socket
 import time
-from collections import deque
-from collections.abc import Callable
+from collections import Counter, deque
+from collections.abc import Callable, Collection
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -43,8 +43,21 @@ __all__ = ["Peers", "Solo"]
 UNKNOWN = "_UNKNOWN_"
 
 
-#: s a message is held for the graph to name its publisher (:meth:`Peers.deliver`)
+#: s a message is held for the graph to name its publisher (:meth:`Peers.deliver`),
+#: counted in the node's own time: a stretch in which the node did not run at
+#: all (its process held up, a host starved) does not count, as the graph
+#: could not be looked at meanwhile. Only a publisher that never gets named (a
+#: DDS writer of no ROS node) reaches it.
 HOLD = 2.0
+#: s between two looks at the held messages
+RETRY = 0.01
+#: a gap longer than this (s) between two looks is time the node did not run
+STALLED = 0.1
+
+#: a verdict on a message's sender: True act, False refused, None not known yet
+Judge = Callable[[str, bytes], bool | None]
+#: a held message: when (node's own time), its publisher's GID, payload, what acts on it, its judge
+Held = tuple[float, bytes, bytes, Callable[[bytes], None], Judge]
 
 
 class Peers:
@@ -71,8 +84,12 @@ class Peers:
         self.run = Intruders()  # of the current run (the owner resets it): for its report
         self.unnamed = 0  # messages from endpoints the graph did not name yet: not acted on
         #: messages held while the graph does not name their publisher yet, per topic
-        self.held: dict[str, deque[tuple[float, bytes, bytes, Callable[[bytes], None], str | None]]] = {}
+        #: (in arrival order; each publisher's in its own order)
+        self.held: dict[str, deque[Held]] = {}
+        self._held_from: Counter[tuple[str, bytes]] = Counter()  # (topic, GID) -> messages held
         self._retry_timer: Any = None
+        self._looked = 0.0  # time.monotonic() of the last look at the held messages
+        self._stalled = 0.0  # s the node did not run while messages were held (not counted in HOLD)
         #: called when a new foreign sender is refused (the node says so in its status at once)
         self.on_new: Callable[[], None] | None = None
         #: called after held messages were acted on (from the retry timer, not
@@ -176,37 +193,89 @@ class Peers:
         return False
 
     def deliver(
-        self, topic: str, gid: bytes, raw: bytes, act: Callable[[bytes], None], role: str | None = None
+        self,
+        topic: str,
+        gid: bytes,
+        raw: bytes,
+        act: Callable[[bytes], None],
+        role: str | None = None,
+        *,
+        judge: Judge | None = None,
     ) -> None:
         """``act(raw)`` if the message comes from the cell's node owning
-        ``topic`` (see :meth:`verdict`). A message whose publisher the graph
-        does not name yet (its node's discovery info is a little behind its
-        data) is held, with every later one of the topic behind it so that
-        their order stays, and judged again every 10 ms, for up to
-        :data:`HOLD` s; then it is refused as unnamed."""
-        held = self.held.get(topic)
-        if held:
-            held.append((time.monotonic(), gid, raw, act, role))
+        ``topic`` (see :meth:`verdict`; or as ``judge(topic, gid)`` says). A
+        message whose publisher the graph does not name yet (its node's
+        discovery info is a little behind its data) is held, with every later
+        one of that publisher behind it so that their order stays, and judged
+        again every 10 ms until the graph names it, for up to :data:`HOLD` s
+        of the node's own time; then it is refused as unnamed. Another
+        publisher's messages on the topic do not wait behind it."""
+        if judge is None:
+            judge = lambda t, g: self.verdict(t, g, role)  # noqa: E731 - the default judge
+        if self._held_from[topic, gid]:
+            self._hold(topic, gid, raw, act, judge)
             return
-        verdict = self.verdict(topic, gid, role)
+        verdict = judge(topic, gid)
         if verdict:
             act(raw)
         elif verdict is None:
-            self.held[topic] = deque([(time.monotonic(), gid, raw, act, role)])
-            if self._retry_timer is None:
-                self._retry_timer = steady_timer(self.node, 0.01, self._retry)
-            elif self._retry_timer.is_canceled():
-                self._retry_timer.reset()
+            self._hold(topic, gid, raw, act, judge)
+
+    def deliver_from(
+        self, topic: str, gid: bytes, raw: bytes, act: Callable[[bytes], None], names: Collection[str]
+    ) -> None:
+        """``act(raw)`` if the message speaks for the nodes ``names`` of this
+        cell (the statuses of a ``/diagnostics`` array) and that very node
+        sent it (:meth:`admit_from`), held as :meth:`deliver` holds one while
+        the graph does not name its publisher yet."""
+
+        def judge(t: str, g: bytes) -> bool | None:
+            if self.sender(t, g) is None:
+                return None
+            return all(self.admit_from(t, g, n) for n in sorted(names))
+
+        self.deliver(topic, gid, raw, act, judge=judge)
+
+    def _own_time(self) -> float:
+        """time.monotonic(), less the stretches in which the node did not run
+        while messages were held (see :data:`HOLD`)."""
+        return time.monotonic() - self._stalled
+
+    def _hold(self, topic: str, gid: bytes, raw: bytes, act: Callable[[bytes], None], judge: Judge) -> None:
+        if not self.held:
+            self._looked = time.monotonic()  # the gap since the last look is no stall: nothing was held
+        self.held.setdefault(topic, deque()).append((self._own_time(), gid, raw, act, judge))
+        self._held_from[topic, gid] += 1
+        if self._retry_timer is None:
+            self._retry_timer = steady_timer(self.node, RETRY, self._retry)
+        elif self._retry_timer.is_canceled():
+            self._retry_timer.reset()
 
     def _retry(self) -> None:
+        now = time.monotonic()
+        gap = now - self._looked
+        self._looked = now
+        if gap > STALLED:  # the node did not run (held up, starved): the graph was not looked at either
+            self._stalled += gap - RETRY
         acted = False
-        for topic, held in list(self.held.items()):
-            while held:
-                since, gid, raw, act, role = held[0]
-                verdict = self.verdict(topic, gid, role)
-                if verdict is None and time.monotonic() - since < HOLD:
-                    break
-                held.popleft()
+        for topic in list(self.held):
+            # taken out while judged: what is acted on may deliver more (held behind these)
+            held = self.held.pop(topic)
+            waiting: set[bytes] = set()  # publishers whose earlier message is still held
+            kept: deque[Held] = deque()
+            for item in held:
+                since, gid, raw, act, judge = item
+                if gid in waiting:
+                    kept.append(item)
+                    continue
+                verdict = judge(topic, gid)
+                if verdict is None and self._own_time() - since < HOLD:
+                    waiting.add(gid)
+                    kept.append(item)
+                    continue
+                self._held_from[topic, gid] -= 1
+                if not self._held_from[topic, gid]:
+                    del self._held_from[topic, gid]
                 if verdict:
                     act(raw)
                     acted = True
@@ -217,8 +286,9 @@ class Peers:
                             f"{self.topic(topic)}: a message from a publisher the graph did not name "
                             f"within {HOLD:g} s ignored (docs/SECURITY.md)"
                         )
-            if not held:
-                del self.held[topic]
+            kept.extend(self.held.pop(topic, ()))  # held meanwhile, behind them
+            if kept:
+                self.held[topic] = kept
         if not self.held and self._retry_timer is not None:
             self._retry_timer.cancel()
         if acted and self.on_late is not None:
@@ -333,6 +403,9 @@ class Solo:
             return
         if self.also is not None:
             self.also(raw, gid, statuses)
+        self._judge(raw, gid, statuses)
+
+    def _judge(self, raw: bytes, gid: bytes, statuses: list[Any]) -> None:
         if self.left:
             return
         for st in statuses:
@@ -344,7 +417,15 @@ class Solo:
                 continue
             name = st.name.split(":", 1)[0].rsplit("/", 1)[-1]
             who = self.peers.sender(TOPIC_DIAGNOSTICS, gid)
-            if who is None or (who.name, who.namespace) != (name, self.peers.ns):
+            if who is None:
+                # the graph does not name its sender yet (its discovery info is behind its
+                # first status): judged again once it does, not a second later
+                named = lambda t, g: None if self.peers.sender(t, g) is None else True  # noqa: E731
+                self.peers.deliver(
+                    TOPIC_DIAGNOSTICS, gid, raw, lambda _raw: self._judge(raw, gid, statuses), judge=named
+                )
+                return
+            if (who.name, who.namespace) != (name, self.peers.ns):
                 continue  # a status forged by another node: it cannot make this one leave
             other = f"{fully_qualified(name, self.peers.namespace)} (pid {pid} on {host})"
             if (int(started), pid) < (self.started_ns, self.me[0]):

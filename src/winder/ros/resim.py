@@ -126,7 +126,20 @@ def resimulate(
             # (winder.contract.trust.SIGNS) though it sends no untimed steps
             node.create_publisher(Int32MultiArray, TOPIC_STEPS, profile(STREAM))
             procs.start("sim_node", ros_args(sim_params, namespace))
-            failure = _wait(node, procs, lambda: ready.get("consumer") == "ready", 60.0, "the sim node ready")
+
+            def connected() -> bool:
+                # the sim node says ready once its readers have matched this node's writers; the
+                # description and the steps go to volatile readers, which get only what is sent
+                # after this side's writers have matched them in turn: waited for too
+                return (
+                    ready.get("consumer") == "ready"
+                    and pub_job.get_subscription_count() > 0
+                    and pub_steps.get_subscription_count() > 0
+                )
+
+            failure = _wait(
+                node, procs, connected, 60.0, "sim node ready with its job and step readers matched"
+            )
             if not failure:
                 pub_job.publish(_string(description))
                 if rec.path is not None:

@@ -164,25 +164,37 @@ class LiveView:
     def _forward(self, name: str, full: str) -> Any:
         """The callback of topic ``name``: its message served (logged at the
         time it arrived) if the cell's node owning the topic sent it, or if
-        no cell is in the namespace."""
+        no cell is in the namespace. Either is judged only once the graph
+        names the message's publisher: until then it is held
+        (:meth:`winder.ros.peers.Peers.deliver`), so that neither a cell's
+        node discovered after its first (latched) message nor a forger
+        heard before the cell's nodes is judged on a graph that does not
+        show them yet."""
         log = self.channels.log
         role = SHOWN[name]
         peers = self.peers
         assert peers is not None
 
+        def judge(topic: str, gid: bytes) -> bool | None:
+            if peers.sender(topic, gid) is None:
+                return None  # held until the graph names it
+            if self._no_cell():
+                return True
+            return peers.verdict(topic, gid, role)
+
         def take(raw: bytes, gid: bytes) -> None:
             stamp = time.time_ns()
-            if self._no_cell():
-                log(full, raw, stamp)
-            else:
-                peers.deliver(name, gid, raw, lambda r: log(full, r, stamp), role)
+            peers.deliver(name, gid, raw, lambda r: log(full, r, stamp), judge=judge)
 
         return take
 
     def _diagnostics(self, raw: bytes, gid: bytes) -> None:
         """A /diagnostics array, if any of its statuses is of the cell's
-        namespace and, with a cell there, the node they name sent it."""
-        assert self.peers is not None
+        namespace and, with a cell there, the node they name sent it; held,
+        as a topic's message is (:meth:`_forward`), until the graph names its
+        publisher (a node's first status may come before)."""
+        peers = self.peers
+        assert peers is not None
         msg = deserialize_message(raw, DiagnosticArray)
         named = {
             st.name.split(":", 1)[0].rsplit("/", 1)[-1]
@@ -191,11 +203,17 @@ class LiveView:
         }
         if not named:
             return
-        if not self._no_cell() and not all(
-            self.peers.admit_from(TOPIC_DIAGNOSTICS, gid, n) for n in sorted(named)
-        ):
-            return
-        self.channels.log(self.names[TOPIC_DIAGNOSTICS], raw, time.time_ns())
+        stamp = time.time_ns()
+
+        def judge(topic: str, gid: bytes) -> bool | None:
+            if peers.sender(topic, gid) is None:
+                return None  # held until the graph names it
+            if self._no_cell():
+                return True
+            return all(peers.admit_from(topic, gid, n) for n in sorted(named))
+
+        full = self.names[TOPIC_DIAGNOSTICS]
+        peers.deliver(TOPIC_DIAGNOSTICS, gid, raw, lambda r: self.channels.log(full, r, stamp), judge=judge)
 
     @property
     def ignored(self) -> str:

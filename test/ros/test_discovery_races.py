@@ -1,0 +1,371 @@
+"""Discovery races made deterministic (issue 40, "no discovery race left in
+the product"): a node held up (SIGSTOP, then SIGCONT) so that what it sends
+comes late, and a publisher that the graph names only after its first
+message. Each place that acts on what it hears waits for the sender to be
+named, or for the match it needs, never for a fixed time. Real processes
+over DDS, or a real rclpy node whose graph look-ups are held back.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from conftest import Procs, closed_bags, rosbags_read, spin_until
+from support import wait
+from support.cell import timed_rows
+from support.ros_probe import start_job
+
+from winder.record.reader import read_run
+
+pytestmark = pytest.mark.ros
+
+#: one 8-turn layer: 4096 fork steps, 2.4 s of real time at full speed
+JOB = {"turns_per_layer": 8, "layers": 1, "poles": 1, "fork_steps_per_rev": 512, "autostart": False}
+#: the profile node's look-ahead in these runs (its default), s
+LOOKAHEAD = 0.05
+
+
+def ready_states(ros: Any) -> dict[str, str]:
+    """What the probe hears on winder/ready (latched), role -> state."""
+    from diagnostic_msgs.msg import KeyValue
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    states: dict[str, str] = {}
+    latched = QoSProfile(
+        depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+    )
+    ros.create_subscription(KeyValue, "/winder/ready", lambda m: states.__setitem__(m.key, m.value), latched)
+    return states
+
+
+def test_a_consumer_that_takes_the_run_late_still_gets_its_look_ahead(
+    tmp_path: Path, procs: Procs, ros: Any
+) -> None:
+    """The sim node (real time) is held up (SIGSTOP) as the run starts, so
+    its winder/sim_config of the run reaches the profile node seconds after
+    the job description. The profile node waits for it (it said so), not a
+    fixed 1 s after which the steps went out without look-ahead: every step
+    chunk reached the sim node at most the look-ahead (and a margin) ahead
+    of its clock, and the run is done."""
+    bags = tmp_path / "bags"
+    ready = ready_states(ros)
+    sim = procs.start("sim_node", "-p", f"bag_dir:={bags}", "-p", "real_time:=true")
+    profile = procs.start("profile_node", "-p", f"lookahead:={LOOKAHEAD}")
+    procs.start("interp_node", *[a for k, v in JOB.items() for a in ("-p", f"{k}:={str(v).lower()}")])
+    # a first run: the interp node then knows the cell (it heard both roles ready), and the
+    # sim node's "ready" after it is at most a second old when the second run is asked for
+    reply = start_job(ros)
+    assert reply.success, reply.message
+    wait.until(lambda: closed_bags(bags), 120, f"the first run's bag in {bags}")
+    spin_until(
+        ros, lambda: ready.get("consumer") == "ready", 30, "the sim node ready again", heard=lambda: ready
+    )
+    os.kill(sim.pid, signal.SIGSTOP)
+    try:
+        reply = start_job(ros)
+        assert reply.success, reply.message
+        # the profile node has the job and waits: it says so after MODE_SAY (1 s), where the
+        # fixed wait it had sent the steps without look-ahead after 1 s
+        wait.until(
+            lambda: any(said in procs.log(profile) for said in ("steps wait for", "without look-ahead")),
+            30,
+            "the profile node's word on the held-up consumer's sim_config",
+            heard=lambda: procs.log(profile)[-1500:],
+        )
+    finally:
+        os.kill(sim.pid, signal.SIGCONT)
+    _first, bag = wait.until(
+        lambda: (lambda b: b if len(b) == 2 else None)(closed_bags(bags)),
+        120,
+        f"the second run's bag in {bags}",
+    )
+    log = procs.log(profile)
+    assert "without look-ahead" not in log, log
+    run = read_run(bag)
+    assert run.complete and run.report["state"] == "done", run.report
+    raw = rosbags_read(bag)
+    wall0 = int(json.loads(raw["/winder/sim_config"][0][1].data)["wall_start_ns"])
+    # each chunk as it reached the sim node: its first step's time against the run time of its arrival
+    leads = [int(np.asarray(m.data, np.int64)[0]) - (t - wall0) for t, m in raw["/winder/step_times"]]
+    assert max(leads) < 0.5e9, sorted(leads)[-5:]  # without look-ahead the last chunks came ~2 s early
+    assert timed_rows(raw).shape[0] == 4096
+
+
+# -- a sender the graph names late, a receiver that does not run for a while ----------------------
+
+
+@pytest.fixture
+def rclpy_default(procs: Procs) -> Any:
+    """rclpy's default context on the test's domain (the live view and the
+    cell watch make their nodes there), shut down after the test."""
+    import rclpy
+
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    rclpy.init(args=[], domain_id=procs.domain)
+    try:
+        yield rclpy
+    finally:
+        rclpy.try_shutdown()
+
+
+class HiddenGraph:
+    """A node's graph look-ups of publishers, with the endpoints of the nodes
+    in ``hidden`` left out until :meth:`show`: as this node's graph is
+    before a participant's discovery info comes (its data may come first)."""
+
+    def __init__(self, node: Any, hidden: set[str]) -> None:
+        self.hidden = hidden
+        real = node.get_publishers_info_by_topic
+
+        def look(topic: str, *args: Any, **kwargs: Any) -> Any:
+            return [i for i in real(topic, *args, **kwargs) if i.node_name not in self.hidden]
+
+        node.get_publishers_info_by_topic = look
+
+    def show(self) -> None:
+        self.hidden = set()
+
+
+def fake_cell(rclpy: Any, namespace: str) -> tuple[list[Any], Any]:
+    """An interp node's endpoints in ``namespace`` (so a cell plays a part
+    there), and a node ``sim_node`` publishing /diagnostics; (the two nodes,
+    sim_node's /diagnostics publisher)."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from std_msgs.msg import Int32MultiArray, String
+
+    from winder.ros.qos import QOS_DIAGNOSTICS, QOS_LATCHED, QOS_STREAM
+
+    interp = rclpy.create_node("interp_node", namespace=namespace)
+    interp.create_publisher(String, "winder/job", QOS_LATCHED)
+    interp.create_publisher(Int32MultiArray, "winder/steps", QOS_STREAM)
+    sim = rclpy.create_node("sim_node", namespace=namespace)
+    return [interp, sim], sim.create_publisher(DiagnosticArray, "/diagnostics", QOS_DIAGNOSTICS)
+
+
+def status(name: str, level: int = 0, message: str = "idle") -> Any:
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+
+    return DiagnosticArray(status=[DiagnosticStatus(name=name, level=bytes([level]), message=message)])
+
+
+def spin_executor(executor: Any, cond: Any, timeout: float, what: str, heard: Any = None) -> Any:
+    """Spin ``executor`` until ``cond()`` (:func:`support.wait.until`, one round a look)."""
+    return wait.until(lambda: (executor.spin_once(timeout_sec=0.01), cond())[1], timeout, what, heard=heard)
+
+
+def matched_both(pub: Any, node: Any, topic: str, timeout: float = 10.0) -> None:
+    """Until ``pub`` has a matched reader and ``node``'s subscription on ``topic`` a matched writer."""
+    [sub] = [s for s in node.subscriptions if s.topic_name == topic]
+    wait.until(
+        lambda: pub.get_subscription_count() > 0 and sub.get_publisher_count() > 0,
+        timeout,
+        f"{topic} matched both ways",
+    )
+
+
+def test_the_view_holds_a_status_heard_before_the_graph_names_its_sender(rclpy_default: Any) -> None:
+    """A cell plays a part in /c1; its sim node's first /diagnostics array
+    reaches the live view before the view's graph names the publisher. The
+    view holds it (it was refused as unnamed, and dropped) and shows it once
+    the graph names sim_node."""
+    from winder.record.foxglove import Channels
+    from winder.ros.view import LiveView
+
+    channels = Channels()
+    view = LiveView(channels, "/c1")
+    nodes, pub = fake_cell(rclpy_default, "/c1")
+    try:
+        view.attach()
+        assert view.node is not None and view.peers is not None and view.executor is not None
+        spin_executor(view.executor, lambda: not view._no_cell(), 10, "the fake cell in /c1 seen by the view")
+        graph = HiddenGraph(view.node, {"sim_node"})
+        matched_both(pub, view.node, "/diagnostics")
+        pub.publish(status("c1/sim_node: job"))
+        peers = view.peers
+        spin_executor(
+            view.executor,
+            lambda: peers.held.get("/diagnostics") or peers.unnamed or channels.counts["/diagnostics"],
+            10,
+            "the view's verdict on sim_node's status",
+        )
+        assert channels.counts["/diagnostics"] == 0  # not shown while its sender is not named
+        graph.show()
+        spin_executor(
+            view.executor,
+            lambda: channels.counts["/diagnostics"],
+            5,
+            "sim_node's status shown once the graph names it",
+            heard=lambda: (peers.unnamed, peers.intruders.summary()),
+        )
+        assert peers.unnamed == 0 and not peers.intruders.total
+    finally:
+        view.close()
+        for n in nodes:
+            n.destroy_node()
+
+
+def test_winder_run_holds_a_status_heard_before_the_graph_names_its_sender(rclpy_default: Any) -> None:
+    """``winder run``'s watch of the cell (CellWatch) hears sim_node's one-shot
+    stream ERROR before its graph names the publisher: it holds it and takes
+    it once named (it was refused as unnamed, and the run's summary lacked it)."""
+    from winder.ros.cell import CellWatch
+    from winder.ros.sender import SenderExecutor
+
+    node = rclpy_default.create_node("winder_cell", namespace="/c1")
+    executor = SenderExecutor()
+    executor.add_node(node)
+    watch = CellWatch(node, "/c1")
+    nodes, pub = fake_cell(rclpy_default, "/c1")
+    try:
+        graph = HiddenGraph(node, {"sim_node"})
+        matched_both(pub, node, "/diagnostics")
+        pub.publish(status("c1/sim_node: stream", 2, "segment 3: a gap"))
+        spin_executor(
+            executor,
+            lambda: watch.peers.held.get("/diagnostics") or watch.peers.unnamed or watch.errors,
+            10,
+            "the watch's verdict on sim_node's status",
+        )
+        assert not watch.errors
+        graph.show()
+        spin_executor(executor, lambda: watch.errors, 5, "sim_node's ERROR taken once the graph names it")
+        assert watch.errors == ["c1/sim_node: stream: segment 3: a gap"], watch.errors
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        for n in nodes:
+            n.destroy_node()
+
+
+def test_a_second_node_of_a_role_leaves_on_a_status_heard_before_its_sender_is_named(
+    rclpy_default: Any,
+) -> None:
+    """A profile node (Solo) hears the status of an earlier profile node of
+    its namespace before its graph names that status' publisher: it holds
+    the status and leaves once the graph names the sender (it skipped it,
+    and took the cell's runs until the next status a second later)."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+    from winder.ros.peers import Peers, Solo
+    from winder.ros.qos import QOS_DIAGNOSTICS
+    from winder.ros.sender import SenderExecutor
+
+    node = rclpy_default.create_node("profile_b", namespace="/c3")
+    executor = SenderExecutor()
+    executor.add_node(node)
+    left: list[str] = []
+    solo = Solo(node, "profile", Peers(node), left.append)
+    earlier = rclpy_default.create_node("profile_node", namespace="/c3")
+    pub = earlier.create_publisher(DiagnosticArray, "/diagnostics", QOS_DIAGNOSTICS)
+    try:
+        graph = HiddenGraph(node, {"profile_node"})
+        matched_both(pub, node, "/diagnostics")
+        values = {"role": "profile", "pid": "1", "host": "elsewhere", "started_ns": "1"}
+        st = DiagnosticStatus(name="c3/profile_node: job", message="idle")
+        st.values = [KeyValue(key=k, value=v) for k, v in values.items()]
+        pub.publish(DiagnosticArray(status=[st]))
+        spin_executor(
+            executor,
+            lambda: solo.peers.held.get("/diagnostics") or left,
+            10,
+            "the profile node's verdict on the earlier node's status",
+        )
+        assert not left  # its sender is not named yet: not acted on
+        graph.show()
+        spin_executor(executor, lambda: left, 5, "the later node leaving once the graph names the earlier")
+        assert "/c3/profile_node (pid 1 on elsewhere)" in left[0], left
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        earlier.destroy_node()
+
+
+def test_a_held_message_outlasts_a_stretch_in_which_its_node_did_not_run(procs: Procs, ros: Any) -> None:
+    """A message held for the graph to show its sender's part (the live
+    view's patient verdict) while the node does not run at all for longer
+    than the hold (its process held up): the hold counts the node's own
+    time, so the message is judged, and acted on, once the graph shows the
+    part, not refused at the first look after the node woke up."""
+    import time
+
+    from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+    from std_msgs.msg import Int64MultiArray
+
+    from winder.ros.peers import HOLD, Peers
+    from winder.ros.qos import QOS_LATCHED, QOS_STATE, QOS_STREAM
+
+    peers = Peers(ros, "/", patient=True)
+    sim = rclpy_node(ros, "sim_node")
+    sim.create_publisher(DiagnosticStatus, "/winder/state", QOS_LATCHED)
+    [gid] = wait.until(
+        lambda: [bytes(i.endpoint_gid) for i in ros.get_publishers_info_by_topic("/winder/state")],
+        10,
+        "sim_node's winder/state publisher on the graph",
+    )
+    acted: list[bytes] = []
+    peers.deliver("winder/state", gid, b"state", acted.append, "consumer")
+    assert peers.held.get("winder/state") and not acted  # named, but not the consumer yet
+    time.sleep(HOLD + 0.5)  # the stimulus: the node does not run (no executor turns), longer than the hold
+    ticks: list[float] = []
+    timer = ros.create_timer(0.05, lambda: ticks.append(time.monotonic()))
+    spin_until(ros, lambda: len(ticks) >= 2, 10, "two turns of the executor after the stretch")
+    ros.destroy_timer(timer)
+    assert peers.unnamed == 0, "refused at the first look after the node ran again"
+    # the sender now shows as the cell's step consumer (it publishes winder/progress, reads step times)
+    sim.create_publisher(KeyValue, "/winder/progress", QOS_STATE)
+    sim.create_subscription(Int64MultiArray, "/winder/step_times", lambda _m: None, QOS_STREAM)
+    spin_until(ros, lambda: acted, 5, "the held message acted on", heard=lambda: (peers.unnamed, peers.held))
+    assert acted == [b"state"] and peers.unnamed == 0
+
+
+def rclpy_node(ros: Any, name: str, namespace: str = "/") -> Any:
+    """Another node in the probe's context."""
+    import rclpy
+
+    return rclpy.create_node(name, namespace=namespace, context=ros.context)
+
+
+def test_a_clock_reader_matched_after_the_last_sample_still_hears_the_clock(
+    tmp_path: Path, procs: Procs, ros: Any
+) -> None:
+    """A real-time sim node that has run every step it was sent waits with
+    its clock standing still; the profile node sends more only as that clock
+    comes within its look-ahead. A /clock reader that matched the sim node's
+    writer after its last sample (the profile node's, made when the run's
+    sim_config came: late under load) heard nothing and the run stood still
+    for good ("step stream stalled ... at 2/2048 steps" in a loaded run of
+    test_bag_on_signals). Here the reader is made only once the steps sent
+    are executed: it hears the clock where it stands."""
+    from rosgraph_msgs.msg import Clock
+    from support.cell import FakeProfile
+
+    from winder.motion.job import Job
+    from winder.ros.qos import QOS_CLOCK
+
+    job = Job(job_id="still", turns_per_layer=2, layers=1, poles=1, fork_steps_per_rev=256)
+    bags = tmp_path / "bags"
+    procs.start("sim_node", "-p", f"bag_dir:={bags}", "-p", "real_time:=true", "-p", "stall_timeout:=60.0")
+    fake = FakeProfile(ros, job)
+    first = fake.chunks(10)[0]  # ten steps, 1 ms apart: the rest never comes
+    fake.send([first])
+
+    def executed() -> int:
+        done = [int(v.get("steps_done", 0)) for _, _, v in fake.statuses if v.get("run_id") is not None]
+        return max(done, default=0)
+
+    wait.spin_until(ros, lambda: executed() >= 10, 30, "the sim node's status with 10 steps done",
+                    heard=lambda: fake.statuses[-3:])  # fmt: skip
+    heard: list[Clock] = []
+    ros.create_subscription(Clock, "/clock", heard.append, QOS_CLOCK)  # matched only now
+    wait.spin_until(ros, lambda: heard, 10, "a /clock message on a reader matched after the last sample")
+    t_ns = heard[-1].clock.sec * 1_000_000_000 + heard[-1].clock.nanosec
+    assert t_ns >= int(first[-1, 0]), (
+        t_ns,
+        int(first[-1, 0]),
+    )  # where it stands: at the last step or past it
