@@ -144,6 +144,17 @@ def test_a_300_character_namespace_is_refused_before_rcl_sees_it(argv: list[str]
     assert "namespace='/xxxxxxxx" in line and "(301 characters) is invalid: 301 characters, at most" in line
 
 
+@pytest.mark.parametrize(
+    "argv", [["param", "get", "x" * 300, "rate"], ["lifecycle", "x" * 300, "get"]], ids=["param", "lifecycle"]
+)
+def test_a_300_character_node_name_is_refused_before_rcl_sees_it(argv: list[str]) -> None:
+    """``winder ctl param/lifecycle NODE``: a node whose services ROS could not name."""
+    r = run_cli("ctl", *argv, "--timeout", "1")
+    line = one_line(r.returncode, r.stderr)
+    assert "node='xxxxxxxx" in line and "(300 characters) is invalid" in line, line
+    assert "longer than the 247 characters ROS allows a name" in line, line
+
+
 @pytest.mark.ros
 @pytest.mark.parametrize("command", ["play", "resim"])
 def test_play_and_resim_refuse_it_too(command: str, bag: Any, tmp_path: Path) -> None:

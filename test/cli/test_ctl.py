@@ -9,16 +9,20 @@ table (winder.cli.exits).
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import Any
 
 import pytest
 from conftest import Procs, closed_bags, spin_until
+from support import wait
 from support.paths import ROOT
+from support.ros_probe import heard_diagnostics
 
 from winder.cli.exits import EXIT_ABORTED, EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from winder.procs import popen
@@ -293,3 +297,268 @@ def test_a_followed_run_that_is_aborted_ends_with_exit_3_and_a_busy_cell_refuses
         if follow.poll() is None:
             follow.kill()
             follow.wait()
+
+
+# -- a real-time cell mid-job: how old what state shows is, a killed node, the cell under load ----------
+
+#: a long real-time job: 2000 turns of 1024 steps at 2 rev/s, 1000 s; every test ends it long before
+LONG = ["--set", "turns_per_layer=2000", "--set", "layers=1", "--set", "poles=1"]
+#: the age ``winder ctl state`` gives a part: "(2.3 s ago)", "(4.1 s ago: silent)"
+AGO = re.compile(r"\((?:[^()]*; it said \S+ )?(\d+\.\d) s ago(?:: silent)?(?:; [^()]*)?\)$")
+
+
+def start_real_time_cell(procs: Procs, bags: Path) -> dict[str, subprocess.Popen[bytes]]:
+    return {
+        "sim_node": procs.start("sim_node", "-p", f"bag_dir:={bags}", "-p", "real_time:=true"),
+        "profile_node": procs.start("profile_node"),
+        "interp_node": procs.start("interp_node", "-p", "autostart:=false"),
+    }
+
+
+class Lines:
+    """The lines a process writes to its stdout, read as they come (a thread)."""
+
+    def __init__(self, p: subprocess.Popen[str]) -> None:
+        assert p.stdout is not None
+        self.lines: list[str] = []
+        self._thread = threading.Thread(target=self._read, args=(p.stdout,), daemon=True)
+        self._thread.start()
+
+    def _read(self, stream: Any) -> None:
+        for line in stream:
+            self.lines.append(line.rstrip("\n"))
+
+    def until(self, cond: Any, timeout: float, what: str, running: subprocess.Popen[str]) -> str:
+        """The first line (from ``start``) for which ``cond(line)``, waited for."""
+        return str(
+            wait.until(
+                lambda: next((ln for ln in list(self.lines) if cond(ln)), ""),
+                timeout,
+                what,
+                heard=lambda: self.lines[-10:],
+                running=running,
+            )
+        )
+
+
+def until_state(procs: Procs, cond: Any, what: str, timeout: float = 90) -> tuple[str, float, float]:
+    """``winder ctl state`` asked again until its output satisfies ``cond``;
+    that output, and when (time.monotonic()) that query started and ended."""
+    seen: list[str] = []
+
+    def ask() -> tuple[str, float, float] | None:
+        began = time.monotonic()
+        code, out, err = ctl(procs, "state", "--timeout", "10")
+        seen[:] = [f"exit {code}", *out.splitlines(), *err.splitlines()]
+        return (out, began, time.monotonic()) if code == EXIT_OK and cond(out) else None
+
+    found = wait.until(ask, timeout, what, heard=lambda: seen, poll=0.2)
+    return found[0], found[1], found[2]
+
+
+def node_rows(out: str) -> dict[str, list[str]]:
+    """The node lines of a ``winder ctl state`` output, by node: their words."""
+    return {
+        ln.split()[0]: ln.split()
+        for ln in out.splitlines()[2:]
+        if ln.startswith("  ") and "_node" in ln.split()[0]
+    }
+
+
+def under_way(seen: list[tuple[str, str, dict[str, str]]], run_id: str) -> bool:
+    """Whether the consumer said run ``run_id`` is running with steps executed."""
+    from conftest import is_consumer
+
+    return any(
+        is_consumer(n, v)
+        and v.get("run_id") == run_id
+        and v.get("state") == "running"
+        and v.get("steps_done", "0") != "0"
+        for n, _, v in seen
+    )
+
+
+def test_state_says_how_old_each_part_is(procs: Procs, ros: Any, tmp_path: Path) -> None:
+    """Every part `winder ctl state` shows says how long ago its node said
+    it. winder/state is latched and sent once per transition: its age is its
+    sending's, so a later query shows it older by the time between the two
+    (here: the nodes' next two statuses), while the nodes' statuses, sent
+    every second, stay young."""
+    start_cell(procs, tmp_path / "bags")
+    seen = heard_diagnostics(ros)
+    out, began, ended = until_state(
+        procs, lambda o: len(node_rows(o)) == 3, "a state showing the three nodes"
+    )
+    lines = out.splitlines()
+    assert lines[0].startswith("cell /  idle  no run yet"), out
+    for ln in (lines[0], *lines[2:5]):
+        assert AGO.search(ln), f"no age in {ln!r}: {out}"
+    assert re.fullmatch(
+        r"  ready     consumer ready \(\d+\.\d s ago\), profile ready \(\d+\.\d s ago\)", lines[1]
+    ), out
+    first = float(AGO.search(lines[0]).group(1))  # type: ignore[union-attr]
+    n = len(seen)
+    spin_until(
+        ros,
+        lambda: sum(name == "interp_node: job" for name, _, _ in seen[n:]) >= 2,
+        30,
+        "two more statuses of the interp node",
+    )
+    began2 = time.monotonic()
+    code, again, err = ctl(procs, "state")
+    ended2 = time.monotonic()
+    assert code == EXIT_OK, err
+    line = again.splitlines()[0]
+    assert line.startswith("cell /  idle  no run yet"), again  # no transition meanwhile: the same message
+    second = float(AGO.search(line).group(1))  # type: ignore[union-attr]
+    # each age was taken at some moment of its query; each shown rounded to 0.1 s
+    assert began2 - ended - 0.1 <= second - first <= ended2 - began + 0.1, (first, second, out, again)
+    for ln in again.splitlines()[2:5]:  # repeated every second: never as old as the latched state
+        assert float(AGO.search(ln).group(1)) < second, again  # type: ignore[union-attr]
+
+
+def test_a_consumer_killed_mid_run_is_shown_gone_not_busy(procs: Procs, ros: Any, tmp_path: Path) -> None:
+    """The consumer killed (SIGKILL: no goodbye) while a real-time run goes
+    on: a query after it shows no consumer, not its last latched `busy` and
+    `running`; a `state --watch` that heard it before says it fell silent,
+    then that it is gone once its participant has left the graph."""
+    cell = start_real_time_cell(procs, tmp_path / "bags")
+    seen = heard_diagnostics(ros)
+    code, out, err = ctl(procs, "start", *LONG, "--timeout", "60")
+    assert code == EXIT_OK, out + err
+    run_id = out.split()[1]
+    spin_until(ros, lambda: under_way(seen, run_id), 60, f"run {run_id} under way")
+    watch = popen(
+        [str(WINDER), "ctl", "state", "--watch", "--timeout", "60"],
+        env=procs.env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        lines = Lines(watch)
+        lines.until(
+            lambda ln: ln.split()[:3] == ["sim_node", "consumer", "running"],
+            60,
+            "the consumer running",
+            watch,
+        )
+        lines.until(
+            lambda ln: " running " in ln and run_id in ln and "steps" in ln, 60, "a change line", watch
+        )
+        os.kill(cell["sim_node"].pid, signal.SIGKILL)
+        cell["sim_node"].wait(30)
+        code, out, err = ctl(procs, "state")
+        assert code == EXIT_OK, out + err
+        assert "no consumer on the graph" in out and "consumer busy" not in out, out
+        assert "sim_node" not in node_rows(out), out
+        rows = node_rows(out)
+        assert rows["interp_node"][1] == "interp" and rows["profile_node"][1] == "profile", out
+        lines.until(
+            lambda ln: "silent: /sim_node" in ln, 60, "the watch saying the consumer fell silent", watch
+        )
+        lines.until(lambda ln: "gone: /sim_node" in ln, 60, "the watch saying the consumer is gone", watch)
+    finally:
+        if watch.poll() is None:
+            watch.send_signal(signal.SIGINT)
+            try:
+                watch.communicate(timeout=30)
+            except subprocess.TimeoutExpired:
+                watch.kill()
+                watch.wait()
+
+
+def _obeyed(
+    procs: Procs, ros: Any, bags: Path, run_id: str, *, hold: subprocess.Popen[bytes] | None = None
+) -> None:
+    """Pause, resume and abort run ``run_id`` of a real-time cell with
+    `winder ctl`; each obeyed: the cell says paused, running again, and the
+    bag is closed aborted, far short of the job's end. With ``hold`` (a node's
+    process): that process is stopped (SIGSTOP) for a second while the pause is asked."""
+    states: list[str] = []
+    from diagnostic_msgs.msg import DiagnosticStatus
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    latched = QoSProfile(
+        depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+    )
+    ros.create_subscription(
+        DiagnosticStatus,
+        "/winder/state",
+        lambda m: states.append({kv.key: kv.value for kv in m.values}["state"]),
+        latched,
+    )
+    if hold is None:
+        code, out, err = ctl(procs, "pause")
+    else:
+        os.kill(hold.pid, signal.SIGSTOP)
+        try:
+            pause = popen(
+                [str(WINDER), "ctl", "pause", "--timeout", "60"],
+                env=procs.env,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+                text=True,
+            )
+            time.sleep(1.0)  # the node held up for a second (the load; nothing is decided by it)
+        finally:
+            os.kill(hold.pid, signal.SIGCONT)
+        out, err = pause.communicate(timeout=120)
+        code = pause.returncode
+    assert code == EXIT_OK and f"run {run_id}: pausing" in out, out + err
+    spin_until(ros, lambda: "paused" in states, 60, "winder/state paused", heard=lambda: states)
+    code, out, err = ctl(procs, "resume")
+    assert code == EXIT_OK and f"run {run_id}: resuming" in out, out + err
+    n = len(states)
+    spin_until(
+        ros,
+        lambda: "running" in states[n:],
+        60,
+        "winder/state running after the resume",
+        heard=lambda: states,
+    )
+    code, out, err = ctl(procs, "abort")
+    assert code == EXIT_OK and f"run {run_id}: aborting" in out, out + err
+    wait.until(lambda: closed_bags(bags), 120, f"the bag of run {run_id} closed")
+    [bag] = closed_bags(bags)
+    run = read_run(bag)
+    assert run.plan.run_id == run_id and run.report["state"] == "aborted", run.report
+    assert [e["event"] for e in run.events] == ["pause", "resume", "abort"], run.events
+    done, total = int(run.report["steps_done"]), int(run.report["steps_total"])
+    assert 0 < done < total // 4, run.report  # aborted mid-job, not after the job was sent in full
+
+
+def test_a_real_time_run_is_paused_resumed_and_aborted_mid_job(
+    procs: Procs, ros: Any, tmp_path: Path
+) -> None:
+    bags = tmp_path / "bags"
+    start_real_time_cell(procs, bags)
+    seen = heard_diagnostics(ros)
+    code, out, err = ctl(procs, "start", *LONG, "--timeout", "60")
+    assert code == EXIT_OK, out + err
+    run_id = out.split()[1]
+    spin_until(ros, lambda: under_way(seen, run_id), 60, f"run {run_id} under way")
+    _obeyed(procs, ros, bags, run_id)
+
+
+def test_ctl_answers_a_cell_under_load(procs: Procs, ros: Any, tmp_path: Path) -> None:
+    """A busy loop on every core beside the cell, and the profile node held
+    up (SIGSTOP) for a second while a pause is asked: `winder ctl state`
+    shows every node of the running cell with its age, and the pause,
+    resume and abort are obeyed."""
+    for i in range(os.cpu_count() or 1):
+        procs.launch([sys.executable, "-c", "while True: pass"], f"busy{i}")
+    bags = tmp_path / "bags"
+    cell = start_real_time_cell(procs, bags)
+    seen = heard_diagnostics(ros)
+    code, out, err = ctl(procs, "start", *LONG, "--timeout", "60")
+    assert code == EXIT_OK, out + err
+    run_id = out.split()[1]
+    spin_until(ros, lambda: under_way(seen, run_id), 90, f"run {run_id} under way")
+    out, _, _ = until_state(procs, lambda o: len(node_rows(o)) == 3, "a state showing the cell's three nodes")
+    assert out.startswith(f"cell /  running  run {run_id}"), out
+    for node, role in (("interp_node", "interp"), ("profile_node", "profile"), ("sim_node", "consumer")):
+        row = node_rows(out)[node]
+        assert row[1:4] == [role, "running", run_id], out
+    assert all(AGO.search(ln) for ln in out.splitlines()[2:5]), out
+    _obeyed(procs, ros, bags, run_id, hold=cell["profile_node"])

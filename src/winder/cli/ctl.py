@@ -33,6 +33,12 @@ def _timeout(args: argparse.Namespace) -> float:
     return float(CELL_SPECS["timeout"].parse(args.timeout))
 
 
+def check_node_name(name: str, namespace: str) -> str:
+    from winder.contract.topics import check_node_name as check
+
+    return check(name, namespace)
+
+
 def _namespace(args: argparse.Namespace) -> str:
     from winder.contract.topics import check_namespace
 
@@ -53,7 +59,11 @@ def _fail(args: argparse.Namespace, message: str, code: int) -> int:
 
 
 def _guarded(args: argparse.Namespace, body: Any) -> int:
-    """Run ``body(ctl)`` and map what it raises to one line and an exit status."""
+    """Run ``body(ctl)`` and map what it raises to one line and an exit
+    status. Its session is closed when it returns: the process may then end
+    without the interpreter's teardown (:func:`winder.cli.lifetime.leave_when_done`)."""
+    from winder.cli.lifetime import leave_when_done
+
     ctl = _ros()
     try:
         return int(body(ctl))
@@ -65,6 +75,8 @@ def _guarded(args: argparse.Namespace, body: Any) -> int:
         return _fail(args, str(exc), getattr(args, "refused_code", EXIT_BAD_INPUT))
     except ValueError as exc:
         return _fail(args, str(exc), EXIT_BAD_INPUT)
+    finally:
+        leave_when_done()
 
 
 # -- pause, resume, abort, override ----------------------------------------------------------
@@ -76,16 +88,21 @@ def cmd_operate(args: argparse.Namespace) -> int:
 
     ns = _namespace(args)
     timeout = _timeout(args)
-    ctl = _ros()
-    if args.action == "override":
-        factor = OPERATION_SPECS["feed_override"].parse(args.value)
-        ok, message = ctl.set_parameter(f"{ns}/profile_node", "feed_override", factor, timeout=timeout)
-    else:
-        ok, message = ctl.trigger(f"{ns}/profile_node/{args.action}", timeout=timeout)
-    if not ok:
-        return _fail(args, message, EXIT_FAILED)
-    print(message)
-    return EXIT_OK
+    factor = OPERATION_SPECS["feed_override"].parse(args.value) if args.action == "override" else 0.0
+
+    def body(ctl: Any) -> int:
+        with ctl.Session(timeout) as session:  # its answer printed before the session closes
+            if args.action == "override":
+                node = f"{ns}/profile_node"
+                ok, message = ctl.set_parameter(node, "feed_override", factor, session=session)
+            else:
+                ok, message = ctl.trigger(f"{ns}/profile_node/{args.action}", session=session)
+            if not ok:
+                return _fail(args, message, EXIT_FAILED)
+            print(message, flush=True)
+        return EXIT_OK
+
+    return _guarded(args, body)
 
 
 # -- start -------------------------------------------------------------------------------------
@@ -140,17 +157,22 @@ def cmd_start(args: argparse.Namespace) -> int:
     def body(ctl: Any) -> int:
         values = run_values(args)  # checked before anything goes on the graph
         with ctl.Session(timeout) as session:
+            stock = ctl.node_name("interp_node", ns)
+            ctl.start_clients(session, stock)  # matched while the graph tells which node is the interp node
+            # its winder/ready says when to ask again after "not ready"; with --wait, the run is followed
+            view = ctl.watch_cell(session, ns, statuses=args.wait)
             interp = ctl.find_role(session, ns, "interp", "interp node (the publisher of winder/job)")
-            view = ctl.watch_cell(session, ns) if args.wait else None
+            if interp != stock:
+                ctl.start_clients(session, interp)
             try:
-                reply = ctl.start_run(session, interp, values)
+                reply = ctl.start_run(session, interp, values, view)
             except ctl.RefusedError as exc:
                 return _fail(args, str(exc), start_code(str(exc)))
             found = ctl.RUN_ID.search(reply)
             run_id = found.group(1) if found else ""
-            print(f"run {run_id}" if run_id else reply)
-            print(f"  {reply}")
-            if view is None:
+            print(f"run {run_id}" if run_id else reply, flush=True)
+            print(f"  {reply}", flush=True)
+            if not args.wait:
                 return EXIT_OK
             return wait_for_end(args, ctl, session, view, run_id, run_timeout)
 
@@ -235,8 +257,16 @@ def wait_for_end(
 # -- state -------------------------------------------------------------------------------------
 
 
-def state_lines(view: Any) -> list[str]:
-    """The cell's state as a few lines: the cell, the start handshake, each node."""
+def _ago(view: Any, sent: int, now_ns: int) -> str:
+    return f"{view.age(sent, now_ns):.1f} s ago"
+
+
+def state_lines(view: Any, now_ns: int | None = None) -> list[str]:
+    """The cell's state as a few lines: the cell, the start handshake, each
+    node; each with how long ago its node said it (at ``now_ns``, wall
+    clock), a node that has left the graph shown as gone, one whose
+    once-a-second messages are overdue as silent."""
+    now_ns = time.time_ns() if now_ns is None else now_ns
     s = view.state
     ns = view.namespace or "/"
     lines = []
@@ -244,11 +274,26 @@ def state_lines(view: Any) -> list[str]:
         where = _where(s)
         run = f"run {s['run_id']} (job {s.get('job_id') or '-'})" if s.get("run_id") else "no run yet"
         sim = f"  sim {float(s['sim_time_s']):.3f} s" if s.get("sim_time_s") and s.get("run_id") else ""
-        lines.append(f"cell {ns}  {s.get('state', '-')}  {run}" + (f"  {where}" if where else "") + sim)
+        when = _ago(view, view.state_ns, now_ns)
+        if view.gone(view.state_by):
+            when += f"; {view.state_by}, which said it, has left the graph"
+        lines.append(
+            f"cell {ns}  {s.get('state', '-')}  {run}" + (f"  {where}" if where else "") + f"{sim}  ({when})"
+        )
+    elif view.holders.get("consumer"):
+        lines.append(f"cell {ns}  (no winder/state heard from {', '.join(sorted(view.holders['consumer']))})")
     else:
-        lines.append(f"cell {ns}  (no winder/state heard: no consumer on the graph?)")
-    ready = ", ".join(f"{k} {v}" for k, v in sorted(view.ready.items())) or "-"
-    lines.append(f"  ready     {ready}")
+        lines.append(f"cell {ns}  (no winder/state heard: no consumer on the graph)")
+    said = []
+    for role, value in sorted(view.ready.items()):
+        sent = view.ready_ns.get(role, 0)
+        if view.ready_gone(role):
+            said.append(f"{role} gone (said {value} {_ago(view, sent, now_ns)})")
+        elif view.silent(sent, now_ns):
+            said.append(f"{role} {value} ({_ago(view, sent, now_ns)}: silent)")
+        else:
+            said.append(f"{role} {value} ({_ago(view, sent, now_ns)})")
+    lines.append(f"  ready     {', '.join(said) or '-'}")
     roles = view.roles()
     by_name = {st.name: role for role, st in roles.items()}
     for name in sorted(view.statuses):
@@ -261,10 +306,25 @@ def state_lines(view: Any) -> list[str]:
         if total != "0":
             share = 100 * float(v.get("progress") or 0)
             steps = f"  steps {v.get('steps_done', '0')}/{total} ({share:.1f} %)"
-        lines.append(f"  {node:<22} {role:<9} {v.get('state', '-'):<10} {v.get('run_id') or '-'}{steps}")
-    missing = [r for r in ("interp", "profile", "consumer") if r not in roles]
-    if missing:
-        lines.append(f"  no job status heard from: {', '.join(missing)}")
+        sim = f"  sim {float(v['sim_time_s']):.3f} s" if v.get("sim_time_s") and v.get("run_id") else ""
+        state = v.get("state", "-")
+        when = _ago(view, st.sent_ns, now_ns)
+        if view.gone(st.node):
+            when = f"left the graph; it said {state} {when}"
+            state = "gone"
+        elif view.silent(st.sent_ns, now_ns):
+            when += ": silent"
+        lines.append(f"  {node:<22} {role:<9} {state:<10} {v.get('run_id') or '-'}{steps}{sim}  ({when})")
+    for role in ("interp", "profile", "consumer"):
+        if role in roles:
+            continue
+        held = sorted(view.holders.get(role, ()))
+        if held:
+            lines.append(f"  no job status heard from the {role} {', '.join(held)} (on the graph)")
+        else:
+            lines.append(
+                f"  no {role} on the graph: no job status heard from one (gone, not started, or held up)"
+            )
     return lines
 
 
@@ -288,11 +348,22 @@ def change_line(view: Any) -> str:
         )
     ready = ", ".join(f"{k} {v}" for k, v in sorted(view.ready.items()))
     run = s.get("run_id") or c.get("run_id") or "-"
+    now_ns = time.time_ns()
+    gone = sorted({st.node for st in view.statuses.values() if view.gone(st.node)})
+    silent = sorted(
+        {
+            st.node
+            for st in view.statuses.values()
+            if not view.gone(st.node) and view.silent(st.sent_ns, now_ns)
+        }
+    )
     return (
         f"{s.get('state', '-'):<9} {run}"
         + (f"  {where}" if where else "")
         + progress
         + (f"  ready: {ready}" if ready else "")
+        + (f"  gone: {', '.join(gone)}" if gone else "")
+        + (f"  silent: {', '.join(silent)}" if silent else "")
     )
 
 
@@ -305,7 +376,7 @@ def cmd_state(args: argparse.Namespace) -> int:
         with ctl.Session(timeout) as session:
             view = ctl.cell_state(session, ns)
             for line in state_lines(view):
-                print(line)
+                print(line, flush=args.watch)
             if not args.watch:
                 return EXIT_OK
             last = ""
@@ -336,8 +407,9 @@ def cmd_param(args: argparse.Namespace) -> int:
     timeout = _timeout(args)
 
     def body(ctl: Any) -> int:
-        node = ctl.node_name(args.node, ns)
+        node = check_node_name(args.node, ns)  # as ROS takes it, or one line (exit 2)
         with ctl.Session(timeout) as session:
+            ctl.parameter_clients(session, node)  # matched while the graph fills
             session.find_node(node)
             if args.verb == "get":
                 print(ctl.get_parameter(session, node, args.name))
@@ -367,8 +439,9 @@ def cmd_lifecycle(args: argparse.Namespace) -> int:
     args.refused_code = EXIT_FAILED  # a transition the node tried and refused: the cell said no
 
     def body(ctl: Any) -> int:
-        node = ctl.node_name(args.node, ns)
+        node = check_node_name(args.node, ns)  # as ROS takes it, or one line (exit 2)
         with ctl.Session(timeout) as session:
+            ctl.lifecycle_clients(session, node)  # matched while the graph fills
             session.find_node(node)
             if args.transition == "get":
                 print(f"{node}: {ctl.lifecycle_state(session, node)}")

@@ -10,6 +10,7 @@ from collections.abc import Mapping, MutableMapping
 from pathlib import Path
 
 __all__ = [
+    "ANNOUNCEMENT",
     "DISCOVERY_SERVER_KEY",
     "LAN_PROFILE",
     "PROFILE",
@@ -20,6 +21,10 @@ __all__ = [
 ]
 
 PROFILE = Path(__file__).with_name("fastdds_profile.xml")
+#: s between two announcements of a participant in winder's profile (its
+#: ``leaseAnnouncement``): a newcomer has learnt of every process on its
+#: host within about one of them (``winder ctl``'s wait for a missing part)
+ANNOUNCEMENT = 0.25
 #: for a cell split across hosts over a lossy network: UDP only, datagrams within one MTU
 LAN_PROFILE = Path(__file__).with_name("fastdds_lan.xml")
 #: the variables Fast DDS reads its XML profiles from (2.x reads the first, 3.x the second)

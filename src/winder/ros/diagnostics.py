@@ -10,9 +10,22 @@ from collections.abc import Callable
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile
 
 from winder.contract.topics import PROCESS_KEYS, TOPIC_DIAGNOSTICS
 from winder.ros.qos import QOS_DIAGNOSTICS
+
+#: The statuses' writer: /diagnostics' QoS (winder.contract.qos), but
+#: transient-local, so that a reader that asks for it (``winder ctl state``)
+#: has each node's last statuses the moment it matches, not at the node's
+#: next one (up to 1 s). A volatile reader, the default, gets only new ones,
+#: as before.
+QOS_DIAGNOSTICS_KEPT = QoSProfile(
+    depth=QOS_DIAGNOSTICS.depth,
+    reliability=QOS_DIAGNOSTICS.reliability,
+    history=QOS_DIAGNOSTICS.history,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
 
 
 class Diagnostics:
@@ -31,7 +44,7 @@ class Diagnostics:
         self.process = dict(zip(PROCESS_KEYS, started, strict=True))
         #: what the node refused from foreign senders, in words ("" if nothing): its statuses say it
         self.foreign: Callable[[], str] | None = None
-        self.pub = node.create_publisher(DiagnosticArray, TOPIC_DIAGNOSTICS, QOS_DIAGNOSTICS)
+        self.pub = node.create_publisher(DiagnosticArray, TOPIC_DIAGNOSTICS, QOS_DIAGNOSTICS_KEPT)
 
     def publish(self, task: str, level: int, message: str, values: dict[str, object]) -> None:
         self.pub.publish(self.status(task, level, message, values))
