@@ -479,6 +479,13 @@ def test_a_restarted_node_leaves_the_cell_able_to_run_the_next_job(
     # the restarted node, the same name in another process, is not taken for the cell's
     # (a second cell's node would look just so)
     replies: list[str] = []
+    # a small next job: the 2 s stall_abort that ends the first run quickly gives a big job up
+    # on a loaded machine, where the consumer computes one batch of steps for longer than that
+    # without a receipt (seen in a fresh-clone CI run: given up at 770304/786688 steps)
+    from support.ros_probe import set_params
+
+    [res] = set_params(ros, "interp_node", {"turns_per_layer": 3})
+    assert res.successful, res.reason
 
     def taken() -> bool:
         seen.clear()
@@ -781,7 +788,8 @@ def test_a_new_real_time_factor_changes_the_rate_not_the_time_elapsed(
     spin_until(ros, lambda: ticks[-1][0] > changed + 1.0, 30, "a second at the new rate")
     sim = np.array([s for w, s in ticks if w >= changed])
     walls = np.array([w for w, s in ticks if w >= changed])
-    assert np.all(np.diff(np.array([s for _, s in ticks])) > 0)  # never backwards
+    # never backwards (a real-time sim waiting for steps says the same time again: sim_node.CLOCK_REPEAT)
+    assert np.all(np.diff(np.array([s for _, s in ticks])) >= 0)
     # the first ticks after the change continue from `before` (no jump to 10x the
     # elapsed time), and the rate afterwards is about the new factor
     assert sim[0] < before + 10.0 * (walls[0] - changed) + 1.0, (before, sim[0])
