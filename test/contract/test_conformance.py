@@ -646,7 +646,10 @@ def test_a_consumer_that_ignores_the_abort_does_not_wedge_the_cell(cell: Cell) -
     stall_abort after the run ended, the interp node reports it once (ERROR
     status, log line) and the next start goes ahead: the naive consumer takes
     the new run and completes it."""
-    stall_abort = 1.5
+    # the interp node gives a run up after stall_abort without receipts: long enough that a
+    # loaded machine's pause in the naive consumer's receipts does not end the run before the
+    # abort does (at 1.5 s a parallel run under load saw 'given up', never 'aborted')
+    stall_abort = 3.0
     cell.start_consumer(NAIVE)
     # the consumer acknowledges steps as it executes them: a small window keeps
     # the run being timed while it goes on, so ~/abort has something to stop

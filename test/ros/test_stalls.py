@@ -134,3 +134,35 @@ def test_a_stall_in_real_time_is_an_error(tmp_path: Path, procs: Procs, ros: Any
     said = [lvl for lvl, m in levels if "step stream stalled" in m]
     assert said and all(lvl == DiagnosticStatus.ERROR[0] for lvl in said), levels[-10:]
     assert "as fast as possible" not in next(m for _, m in levels if "step stream stalled" in m)
+
+
+def test_the_smallest_driver_runs_without_a_wait_or_a_stall(tmp_path: Path, procs: Procs, ros: Any) -> None:
+    """The driver docs/ARCHITECTURE.md promises (test/consumers/minimal_driver.py:
+    ``execute`` only, ``begin`` not overridden) still says on winder/sim_config
+    that it does not pace: the profile node does not wait for its word (it
+    waited 10 s a run, and the driver's stall watch reported a stall)."""
+    import sys
+
+    from support.paths import TEST
+
+    seen = heard_diagnostics(ros)
+    driver = TEST / "consumers" / "minimal_driver.py"
+    procs.launch(
+        [sys.executable, str(driver), "--ros-args", "-p", f"bag_dir:={tmp_path / 'bags'}", "-p",
+         "stall_timeout:=1.0"],
+        "minimal_driver",
+    )  # fmt: skip
+    profile = procs.start("profile_node")
+    procs.start("interp_node", "-p", "turns_per_layer:=4", "-p", "layers:=1", "-p", "poles:=1")
+
+    def final() -> dict[str, str] | None:
+        done = [v for n, _, v in seen if is_consumer(n, v) and v.get("state") in ("done", "incomplete")]
+        return done[-1] if done else None
+
+    wait.spin_until(ros, final, 60, "the driver's final report", heard=lambda: seen[-5:])
+    report = final()
+    assert report is not None and report["state"] == "done", report
+    assert report["stalls"] == "0", report
+    assert not stalls(seen), stalls(seen)
+    log = procs.log(profile)
+    assert "wait for" not in log and "without look-ahead" not in log, log

@@ -88,6 +88,9 @@ ROLE = "profile"
 MODE_WAIT = 10.0
 #: after this long (s) waiting for it, the wait is said once in the log
 MODE_SAY = 1.0
+#: s the graph must show the cell's consumer without a winder/sim_config writer before
+#: it is taken as one that publishes none (a node's endpoints are discovered one by one)
+MODE_ABSENT = 1.0
 #: Steps timed per pass in a real-time run (the rest wait for the clock).
 RELEASE_BLOCK = 4096
 
@@ -145,6 +148,8 @@ class ProfileNode(ManagedNode):
         self.lookahead_ns: int | None = None
         self.mode_known = False
         self.mode_said = False  # the wait for the run's sim_config was said in the log
+        #: consumers seen without a sim_config writer, and since when (steady s)
+        self.unconfigured: dict[Who, float] = {}
         self.job_wall = 0.0
         self.clock_origin_ns = 0
         self.t_now_ns = -1  # the cell's clock, as time since the run's start (real-time runs)
@@ -381,8 +386,16 @@ class ProfileNode(ManagedNode):
             return self.mode_known
         consumer = self.peers.owner("consumer")
         if consumer is not None and not self.configures(consumer):
-            self.mode_known = True  # it publishes no configuration: it does not pace, nothing to wait for
-            return True
+            # it publishes no configuration: it does not pace, nothing to wait for. Told
+            # from the graph, whose endpoints of one node come one by one: only once no
+            # sim_config writer of it has shown for MODE_ABSENT s (remembered for the node)
+            first = self.unconfigured.setdefault(consumer, time.monotonic())
+            if time.monotonic() - first >= MODE_ABSENT:
+                self.mode_known = True
+                return True
+            return False
+        if consumer is not None:
+            self.unconfigured.pop(consumer, None)
         waited = time.monotonic() - self.job_wall
         run = self.plan.run_id or self.plan.job_id
         if consumer is not None and waited <= MODE_WAIT:

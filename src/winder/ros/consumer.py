@@ -381,6 +381,10 @@ class StepConsumer(ManagedNode):
         self.checker = StreamChecker(plan)
         self.announce()
         config = self.begin(plan, values)
+        if config is None and self.pub_config is not None:
+            # a backend that configures nothing still says whether it paces: the profile node
+            # waits for this word while the consumer publishes on winder/sim_config
+            config = {"real_time": self.paces()}
         config_raw = b""
         if config is not None and self.pub_config is not None:
             doc = {**config, "run_id": plan.run_id, "wall_start_ns": self.wall0_ns}
@@ -900,7 +904,8 @@ class StepConsumer(ManagedNode):
         once: an ERROR raised just before the run closes is in its bag too."""
         status = self.diag.status(task, level, text, values)
         self.record("diagnostics", self.t_ns if t_ns is None else t_ns, serialize_message(status))
-        self.diag.pub.publish(status)
+        if self.context.ok():  # at a shutdown the bag still gets it: the run's end must not raise here
+            self.diag.pub.publish(status)
 
     def watch(self) -> None:
         """The stall watch (every 0.5 s)."""
