@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from support.paths import BIN
+from support.cli import run_cli as cli_run
 
 from winder.cli import commands as cli
 
@@ -21,15 +21,8 @@ LONG_NS = "/" + "x" * 300
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
-    env = {**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
-    return subprocess.run(
-        [str(BIN / "winder"), *args],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        env=env,
-        stdin=subprocess.DEVNULL,
-    )
+    """``winder *args`` seen from this host only (support.cli.run_cli)."""
+    return cli_run(*args, env={**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"})
 
 
 def one_line(code: int, err: str, want: int = 2) -> str:

@@ -230,16 +230,21 @@ def test_lifecycle_transitions_and_an_invalid_one(procs: Procs, ros: Any, tmp_pa
     assert all(p.poll() is None for p, _ in procs.procs)  # the invalid transition hurt no node
 
 
-def test_state_watch_prints_each_change_until_ctrl_c(procs: Procs, tmp_path: Path) -> None:
-    bags = tmp_path / "bags"
-    start_cell(procs, bags, "-p", "turns_per_layer:=4", "-p", "layers:=1", "-p", "poles:=1")
-    watch = popen(
+def state_watch(procs: Procs) -> subprocess.Popen[str]:
+    """``winder ctl state --watch`` on the test's domain, its output piped."""
+    return popen(
         [str(WINDER), "ctl", "state", "--watch", "--timeout", "60"],
         env=procs.env,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
     )
+
+
+def test_state_watch_prints_each_change_until_ctrl_c(procs: Procs, tmp_path: Path) -> None:
+    bags = tmp_path / "bags"
+    start_cell(procs, bags, "-p", "turns_per_layer:=4", "-p", "layers:=1", "-p", "poles:=1")
+    watch = state_watch(procs)
     try:
         assert watch.stdout is not None
         first = watch.stdout.readline()
@@ -428,13 +433,7 @@ def test_a_consumer_killed_mid_run_is_shown_gone_not_busy(procs: Procs, ros: Any
     assert code == EXIT_OK, out + err
     run_id = out.split()[1]
     spin_until(ros, lambda: under_way(seen, run_id), 60, f"run {run_id} under way")
-    watch = popen(
-        [str(WINDER), "ctl", "state", "--watch", "--timeout", "60"],
-        env=procs.env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
+    watch = state_watch(procs)
     try:
         lines = Lines(watch)
         lines.until(

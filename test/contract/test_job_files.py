@@ -19,6 +19,7 @@ import pytest
 from conftest import Procs
 from ruamel.yaml import YAML
 from support import wait
+from support.bags import finished_run
 from support.paths import ROOT
 
 from winder.contract.jobfile import SECTION_ALIASES, JobFileError, load_job_file
@@ -290,14 +291,7 @@ def test_the_interp_node_takes_a_job_file_in_one_start_run_call(
     started = start(job)
     assert started.successful, started.reason
     run_id = re.match(r"run (\S+) started", started.reason).group(1)  # type: ignore[union-attr]
-    wait.until(  # the bag is there from its first moment: wait for its final report
-        lambda: (bags / run_id / "metadata.yaml").exists() and read_run(bags / run_id).report.get("state"),
-        60,
-        f"the final report of run {run_id} in its bag",
-        heard=lambda: sorted(b.name for b in bags.iterdir()) if bags.is_dir() else "no bags",
-        poll=0.2,  # each look reads the bag
-    )
-    run = read_run(bags / run_id)
+    run = finished_run(bags, run_id)
     assert run.complete and run.job_id == "filed" and run.plan.job.poles == 2
     assert run.profile == "trapezoid" and run.profile_config["ramp_source"] == "job"
 

@@ -27,6 +27,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from ruamel.yaml import YAML
 from support import wait
+from support.bags import finished_run
 from support.paths import ROOT
 
 from winder.motion.job import Job, JobError
@@ -489,16 +490,7 @@ def test_the_interp_node_refuses_a_coil_that_does_not_fit_and_keeps_running(
     good = start_run(ros, {"job_file": str(fits)})
     assert good.successful, good.reason
     run_id = re.match(r"run (\S+) started", good.reason).group(1)  # type: ignore[union-attr]
-    from winder.record.reader import read_run
-
-    wait.until(  # the bag is there from its first moment: wait for its final report
-        lambda: (bags / run_id / "metadata.yaml").exists() and read_run(bags / run_id).report.get("state"),
-        60,
-        f"the final report of run {run_id} in its bag",
-        heard=lambda: sorted(b.name for b in bags.iterdir()) if bags.is_dir() else "no bags",
-        poll=0.2,  # each look reads the bag
-    )
-    run = read_run(bags / run_id)
+    run = finished_run(bags, run_id)
     assert run.complete and run.plan.job.window_width == 0.048 and run.plan.job.layer_turns == 4
     assert run.plan.job_file_sha256 == hashlib.sha256(fits.read_bytes()).hexdigest()
     out = subprocess.run(

@@ -29,15 +29,9 @@ pytestmark = pytest.mark.ros
 JOB_PARAMS = ["turns_per_layer:=120", "layers:=2", "poles:=2", "job_id:=stall"]
 
 
-def stalls(seen: list[tuple[str, str, dict[str, str]]]) -> list[tuple[str, str]]:
-    return [(n, m) for n, m, _ in seen if "step stream stalled" in m]
-
-
-def test_a_transient_stall_as_fast_as_possible_is_a_warning(tmp_path: Path, procs: Procs, ros: Any) -> None:
-    """The interp node held (``SIGSTOP``) with a small in-flight window: the
-    stream runs dry within milliseconds, whatever the machine's load, until
-    the consumer has reported the stall; then it goes on to the end."""
-    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+def heard_levels(ros: Any) -> list[tuple[int, str]]:
+    """Every status the probe hears on /diagnostics from now on: (level, message)."""
+    from diagnostic_msgs.msg import DiagnosticArray
 
     levels: list[tuple[int, str]] = []
     ros.create_subscription(
@@ -46,6 +40,20 @@ def test_a_transient_stall_as_fast_as_possible_is_a_warning(tmp_path: Path, proc
         lambda m: levels.extend((s.level[0], s.message) for s in m.status),
         100,
     )
+    return levels
+
+
+def stalls(seen: list[tuple[str, str, dict[str, str]]]) -> list[tuple[str, str]]:
+    return [(n, m) for n, m, _ in seen if "step stream stalled" in m]
+
+
+def test_a_transient_stall_as_fast_as_possible_is_a_warning(tmp_path: Path, procs: Procs, ros: Any) -> None:
+    """The interp node held (``SIGSTOP``) with a small in-flight window: the
+    stream runs dry within milliseconds, whatever the machine's load, until
+    the consumer has reported the stall; then it goes on to the end."""
+    from diagnostic_msgs.msg import DiagnosticStatus
+
+    levels = heard_levels(ros)
     seen = heard_diagnostics(ros)
     bags = tmp_path / "bags"
     procs.start("sim_node", "-p", f"bag_dir:={bags}", "-p", "stall_timeout:=0.5")
@@ -102,15 +110,9 @@ def test_the_run_summary_warns_of_stalls(capsys: pytest.CaptureFixture[str]) -> 
 
 def test_a_stall_in_real_time_is_an_error(tmp_path: Path, procs: Procs, ros: Any) -> None:
     """The axes run out of steps: an ERROR while it lasts, whatever comes after."""
-    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+    from diagnostic_msgs.msg import DiagnosticStatus
 
-    levels: list[tuple[int, str]] = []
-    ros.create_subscription(
-        DiagnosticArray,
-        "/diagnostics",
-        lambda m: levels.extend((s.level[0], s.message) for s in m.status),
-        100,
-    )
+    levels = heard_levels(ros)
     bags = tmp_path / "bags"
     procs.start(
         "sim_node",

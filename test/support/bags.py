@@ -164,6 +164,21 @@ class SessionBags:
         self.running.clear()
 
 
+def finished_run(bags: Path, run_id: str, timeout: float = 60) -> Any:
+    """The run ``run_id`` as read from ``bags/run_id`` (winder.record.reader.read_run),
+    once its bag holds the final report: the bag is there from the run's first moment."""
+    from winder.record.reader import read_run
+
+    wait.until(
+        lambda: (bags / run_id / "metadata.yaml").exists() and read_run(bags / run_id).report.get("state"),
+        timeout,
+        f"the final report of run {run_id} in its bag",
+        heard=lambda: sorted(b.name for b in bags.iterdir()) if bags.is_dir() else "no bags",
+        poll=0.2,  # each look reads the bag
+    )
+    return read_run(bags / run_id)
+
+
 def mcap_size(bag_dir: Path) -> int:
     """The bytes of the .mcap files of the bags in ``bag_dir`` now. A bag opens
     in a hidden directory renamed once it is set up: a file listed there may be

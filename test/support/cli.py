@@ -8,9 +8,15 @@ from support.paths import BIN
 from winder.procs import run
 
 
-def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
+def run_cli(*args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
+    """``winder *args`` (in ``env``: this process' environment if None), dying with the test process."""
     return run(
-        [str(BIN / "winder"), *args], capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL
+        [str(BIN / "winder"), *args],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        stdin=subprocess.DEVNULL,
+        env=env,
     )
 
 
