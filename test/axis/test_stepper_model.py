@@ -44,12 +44,6 @@ PITCH = 2 * math.pi / 40
 # -- oracles -------------------------------------------------------------------
 
 
-
-
-
-
-
-
 def decimal_step(wn: float, zeta: float, tau: float) -> tuple[float, float]:
     """s(tau), s'(tau) with 60 digits: e^(-sigma tau) and the power series of cosh / sinh
     in q = (sigma^2 - w_n^2) tau^2, valid on both sides of critical damping."""

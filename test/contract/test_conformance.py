@@ -716,9 +716,50 @@ def test_a_consumer_that_ignores_the_abort_does_not_wedge_the_cell(cell: Cell) -
     assert cell.interp is not None
     lines = [ln for ln in cell.procs.log(cell.interp).splitlines() if "ignores the abort" in ln]
     assert len(lines) == 1 and "ERROR" in lines[0] and run_id in lines[0], lines
-    # it publishes no winder/sim_config (it does not pace): nobody waits for one, nobody warns
+    # it publishes no winder/sim_config: not waited for, not warned about; its steps are paced
+    # on the profile node's wall clock (said once a run, at INFO), so an abort has a run to stop
     assert cell.profile is not None
-    assert "sim_config" not in cell.procs.log(cell.profile), cell.procs.log(cell.profile)
+    said = [ln for ln in cell.procs.log(cell.profile).splitlines() if "sim_config" in ln]
+    assert said and all("[INFO]" in ln and "paced on the wall clock" in ln for ln in said), said
+
+
+#: a run long enough to abort late in it (16384 steps, about 4.2 s at RAMP)
+ABORT_JOB = {**JOB, "turns_per_layer": 16}
+
+
+@pytest.mark.parametrize("subject", [*CONSUMERS, NAIVE], ids=[c.id for c in [*CONSUMERS, NAIVE]])
+def test_an_abort_is_honoured_until_the_axes_rest(cell: Cell, subject: ConsumerSpec) -> None:
+    """Late in a real-time run (over 60 % of its steps executed), with the
+    cell's default window and look-ahead, ~/abort is honoured: the consumer
+    executes the abort's braking steps and no step beyond them, and (if it
+    follows winder/control) ends the run aborted. The naive consumer sends
+    no winder/sim_config: the profile node paces its steps on its wall
+    clock, so the abort has a run to stop there too (it used to be sent the
+    whole run at once and refuse the abort: "no run is being timed")."""
+    cell.start_consumer(subject)
+    cell.start_upstream(ABORT_JOB)
+    cell.handshake()
+    run_id, total = cell.start()
+    # (winder/state comes from a StepConsumer; the naive consumer's receipts say it runs)
+    cell.wait(lambda: cell.taken(run_id) >= total * 0.6, 20, f"60 % of run {run_id} acknowledged")
+    reply = cell.call("abort")
+    assert reply.success and "aborting" in reply.message, f"{reply.message}\n{cell.logs()}"
+    cell.wait(
+        lambda: [e for e in cell.events if e.get("event") == "abort" and e.get("run_id") == run_id],
+        10,
+        f"the abort of run {run_id} on winder/control",
+    )
+    [abort] = [e for e in cell.events if e.get("event") == "abort" and e.get("run_id") == run_id]
+    assert abort["steps"] < total, abort
+    if subject is NAIVE:  # it ignores winder/control: it executes what it is sent, and nothing more comes
+        cell.wait(lambda: cell.taken(run_id) == abort["steps"], 10, f"the receipts of run {run_id}'s abort")
+        cell.pause_for(1.0)
+    else:
+        report = cell.ends(run_id)
+        v = report.values
+        assert v["state"] == "aborted", f"run {run_id} ended {v['state']}: {report.message}"
+        assert int(v["steps_done"]) + int(v["steps_missing"]) == abort["steps"], (v, abort)
+    assert cell.taken(run_id) <= abort["steps"], (cell.taken(run_id), abort)
 
 
 def test_an_abort_ends_aborted_when_its_braking_steps_were_not_sent_yet(cell: Cell) -> None:

@@ -121,8 +121,9 @@ def test_unwritable_paths_are_one_line_naming_the_path(tmp_path: Path) -> None:
         write_text(plain / "x.txt" / "y", "x")
     with pytest.raises(OutputError, match=r"^/proc/winder\.txt: cannot be written: "):
         write_text("/proc/winder.txt", "x")
-    with pytest.raises(OutputError, match=r"^/proc/winder_dir: cannot be written: "), new_directory(
-        "/proc/winder_dir"
+    with (
+        pytest.raises(OutputError, match=r"^/proc/winder_dir: cannot be written: "),
+        new_directory("/proc/winder_dir"),
     ):
         pass
     with pytest.raises(FileExistsError), new_directory(plain):

@@ -30,12 +30,6 @@ RAMP = {k: s.default for k, s in PROFILE_SPECS.items()}
 FAST = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 
-
-
-
-
-
-
 def ramp_distance(v: float, A: float, J: float) -> float:
     """Closed form: distance of the S-curve ramp from v to rest, zero acceleration at both ends."""
     T = 2 * math.sqrt(v / J) if v * J <= A * A else v / A + A / J

@@ -165,9 +165,7 @@ def test_no_module_imports_itself_through_others() -> None:
     modules hold one concern between them."""
     graph = import_graph()
     loops = circles(graph)
-    ties = [
-        "; ".join(f"{a} -> {b}" for a in loop for b in sorted(graph[a]) if b in loop) for loop in loops
-    ]
+    ties = ["; ".join(f"{a} -> {b}" for a in loop for b in sorted(graph[a]) if b in loop) for loop in loops]
     assert not loops, f"import circles: {ties}"
 
 

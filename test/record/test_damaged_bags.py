@@ -29,8 +29,6 @@ FLIPS = 60  # per compression mode
 CUTS = 20
 
 
-
-
 def messages(raw: RawBag) -> Counter[tuple[str, int, bytes]]:
     return Counter((raw.connections[cid].topic, t, bytes(d)) for cid, t, d in raw.messages)
 

@@ -151,8 +151,6 @@ def test_the_same_job_twice_gives_two_runs_on_one_clock(tmp_path: Path, procs: P
         assert {"running", "done"} <= states[node], states
 
 
-
-
 def test_the_readme_controller_runs_a_cell(tmp_path: Path, procs: Procs) -> None:
     """docs/cell_controller.py, the docs' example of a line controller,
     against the three node executables started one by one, the consumer under
@@ -278,10 +276,6 @@ def test_start_run_sets_up_and_starts_in_one_call(tmp_path: Path, procs: Procs, 
     assert run.complete and run.plan.job.poles == 2
     assert run.profile == "trapezoid" and run.profile_config["v_max"] == 3000.0
     assert run.profile_config["ramp_source"] == "job"
-
-
-
-
 
 
 def test_winder_run_ignores_other_cells_errors(tmp_path: Path, procs: Procs, ros: Any) -> None:

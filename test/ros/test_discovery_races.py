@@ -19,7 +19,7 @@ import pytest
 from conftest import Procs, closed_bags, rosbags_read, spin_until
 from support import wait
 from support.cell import timed_rows
-from support.ros_probe import start_job
+from support.ros_probe import ready_states, start_job
 
 from winder.record.reader import read_run
 
@@ -29,19 +29,6 @@ pytestmark = pytest.mark.ros
 JOB = {"turns_per_layer": 8, "layers": 1, "poles": 1, "fork_steps_per_rev": 512, "autostart": False}
 #: the profile node's look-ahead in these runs (its default), s
 LOOKAHEAD = 0.05
-
-
-def ready_states(ros: Any) -> dict[str, str]:
-    """What the probe hears on winder/ready (latched), role -> state."""
-    from diagnostic_msgs.msg import KeyValue
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-
-    states: dict[str, str] = {}
-    latched = QoSProfile(
-        depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
-    )
-    ros.create_subscription(KeyValue, "/winder/ready", lambda m: states.__setitem__(m.key, m.value), latched)
-    return states
 
 
 def test_a_consumer_that_takes_the_run_late_still_gets_its_look_ahead(

@@ -229,3 +229,47 @@ def test_steps_behind_the_clock_are_executed_at_it_counted_and_reported(
         [m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec for _, m in raw["/winder/joint_states"]]
     )
     assert np.all(np.diff(stamps) == period), np.unique(np.diff(stamps))
+
+
+def test_a_consumer_late_with_its_sim_config_can_still_be_paused_and_aborted(
+    tmp_path: Path, procs: Procs, ros: Any
+) -> None:
+    """Issue 41: a real-time consumer whose set-up of a run takes 12 s
+    (test/consumers/slow_start.py), so its winder/sim_config of the run
+    comes after the profile node's MODE_WAIT (10 s). The profile node paces
+    the steps on its wall clock meanwhile (it used to send every step at
+    once, "without look-ahead", and then refuse pause and abort, "no run is
+    being timed", for the rest of the run); the consumer's sim_config takes
+    over when it comes; a pause and then an abort in the middle of the run
+    are honoured: the run ends aborted at the abort's steps, short of the
+    total."""
+    cell = Cell(ros)
+    bags = tmp_path / "bags"
+    long_job = {**JOB, "turns_per_layer": 24}  # 12288 steps, about 6.4 s
+    procs.env["SLOW_START_S"] = "12"
+    slow = TEST / "consumers" / "slow_start.py"
+    sim = procs.launch(
+        [sys.executable, str(slow), "--ros-args", "-p", f"bag_dir:={bags}", "-p", "real_time:=true"],
+        "slow_start",
+    )
+    profile = procs.start("profile_node")
+    procs.start("interp_node", *[a for k, v in long_job.items() for a in ("-p", f"{k}:={v}")])
+    wait.log_has(lambda: procs.log(profile), "10 s at most", 60, running=profile)  # waiting for it
+    cell.until(lambda: "running" in cell.states and cell.clock_ns >= 1_000_000_000, "1 s of the run's clock")
+    assert "pausing" in cell.call("/profile_node/pause")
+    cell.until(lambda: cell.states[-1:] == ["paused"], "the axes to rest")
+    assert "resuming" in cell.call("/profile_node/resume")
+    cell.until(lambda: cell.states[-1:] == ["running"], "the resume's running state")
+    rested = cell.clock_ns
+    cell.until(lambda: cell.clock_ns >= rested + 500_000_000, "0.5 s more of the run")
+    assert "aborting" in cell.call("/profile_node/abort")
+    bag = cell.finished(bags)
+    run = read_run(bag)
+    events = control_events(rosbags_read(bag))
+    assert [e["event"] for e in events] == ["pause", "resume", "abort"], events
+    abort = events[-1]
+    assert run.report["state"] == "aborted", run.report
+    assert int(run.report["steps_done"]) == abort["steps"] < 12288, (run.report, abort)
+    assert "Traceback" not in procs.log(sim)
+    said = procs.log(profile)
+    assert "paced on the wall clock" in said and "its own clock paces them from now on" in said, said

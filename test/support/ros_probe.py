@@ -145,3 +145,16 @@ def set_params(node: Any, target: str, values: dict[str, Any]) -> list[Any]:
             continue
         return list(fut.result().results)
     raise AssertionError(f"no reply from {target}/set_parameters in 30 s")
+
+
+def ready_states(ros: Any) -> dict[str, str]:
+    """What the probe hears on winder/ready (latched), role -> state."""
+    from diagnostic_msgs.msg import KeyValue
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    states: dict[str, str] = {}
+    latched = QoSProfile(
+        depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+    )
+    ros.create_subscription(KeyValue, "/winder/ready", lambda m: states.__setitem__(m.key, m.value), latched)
+    return states

@@ -20,8 +20,15 @@ time law of the running job from the moment they take effect; the job's
 winder/control as it takes effect. Steps are timed when they are sent: in a
 real-time run (the consumer's winder/sim_config says so) no further than
 ``lookahead`` ahead of the cell's clock, so a command takes effect within it;
-otherwise as soon as they arrive, and a command takes effect after the last
-step sent. A resume in real time is timed ``lookahead`` ahead of the
+in a run the consumer says runs as fast as possible, as soon as they arrive,
+and a command takes effect after the last step sent. A consumer that says
+nothing (no winder/sim_config for the run within MODE_WAIT, or none at all)
+is taken to execute the steps in real time from the first one: the steps go
+out ``lookahead`` ahead of this node's wall clock since then, so a pause or
+an abort is honoured within it whatever the consumer; its sim_config, when
+it comes, takes over. Once every step is sent, a pause or abort is answered
+(the run ends within the look-ahead) until the consumer's clock has passed
+the last step. A resume in real time is timed ``lookahead`` ahead of the
 consumer's clock as it runs on at rest: the clock last heard (the one waiting
 in the reader taken first), carried on by the wall time since it was heard.
 """
@@ -42,6 +49,7 @@ from rclpy.exceptions import InvalidHandle
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
 from rclpy.subscription import Subscription
+from rclpy.timer import Timer
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Int32MultiArray, Int64MultiArray, String
 from std_srvs.srv import Trigger
@@ -83,8 +91,8 @@ ROLE = "profile"
 #: consumer is on the graph and publishes one: a consumer that takes the run
 #: late (a loaded host, a process held up) is waited for, not guessed at (a
 #: fixed 1 s sent a real-time run's steps without look-ahead under load).
-#: Past it, or with no consumer left, the steps go out without look-ahead,
-#: said once with what was waited for.
+#: Past it, or with no consumer left, the steps are paced on the wall clock
+#: (``lookahead`` ahead of it, as for a real-time consumer), said once.
 MODE_WAIT = 10.0
 #: after this long (s) waiting for it, the wait is said once in the log
 MODE_SAY = 1.0
@@ -155,6 +163,10 @@ class ProfileNode(ManagedNode):
         self.t_now_ns = -1  # the cell's clock, as time since the run's start (real-time runs)
         self.t_now_wall = 0.0  # when it was heard (time.monotonic())
         self.clock_factor = 1.0  # the consumer's real_time_factor: its clock's s per wall s
+        #: a run paced on this node's wall clock (the consumer said nothing): when its
+        #: first step went out (time.monotonic()), and the timer that moves its clock
+        self.wall_origin: float | None = None
+        self.wall_timer: Timer | None = None
         #: a programmed stop waiting for ~/resume (stop_resume call): the stops
         #: still ahead, and the one the job waits at
         self.holds: list[tuple[int, int]] = []
@@ -381,7 +393,7 @@ class ProfileNode(ManagedNode):
         cell's consumer (as the graph shows it: the node this one knew when
         it said ready) publishes one, it is waited for, however late it
         takes the run, up to MODE_WAIT s; past that, or with no consumer on
-        the graph any more, the steps go out without look-ahead (said once)."""
+        the graph any more, the steps are paced on the wall clock (said once)."""
         if self.mode_known or self.plan is None:
             return self.mode_known
         consumer = self.peers.owner("consumer")
@@ -391,7 +403,7 @@ class ProfileNode(ManagedNode):
             # sim_config writer of it has shown for MODE_ABSENT s (remembered for the node)
             first = self.unconfigured.setdefault(consumer, time.monotonic())
             if time.monotonic() - first >= MODE_ABSENT:
-                self.mode_known = True
+                self.pace_by_wall(f"{consumer.fq} publishes none", warn=False)
                 return True
             return False
         if consumer is not None:
@@ -409,11 +421,40 @@ class ProfileNode(ManagedNode):
         why = (
             f"none from {consumer.fq} within {MODE_WAIT:g} s" if consumer else "no step consumer on the graph"
         )
-        self.get_logger().warning(
-            f"no {TOPIC_SIM_CONFIG} for run {run} ({why}): steps are sent without look-ahead"
+        self.pace_by_wall(why)
+        return True
+
+    def pace_by_wall(self, why: str, warn: bool = True) -> None:
+        """The consumer said nothing of how it runs: it is taken to execute
+        the steps in real time from the first one (a drive does), so the
+        steps go out ``lookahead`` ahead of this node's wall clock, started
+        now, and a pause or abort is honoured within it. Said once: a
+        warning when the consumer's sim_config was waited for in vain."""
+        assert self.plan is not None
+        lookahead = self.settings.values()["lookahead"]
+        (self.get_logger().warning if warn else self.get_logger().info)(
+            f"no {TOPIC_SIM_CONFIG} for run {self.plan.run_id or self.plan.job_id} ({why}): its steps are "
+            f"paced on the wall clock from now, {lookahead:g} s ahead (a consumer that runs as fast as "
+            f"possible says so in its {TOPIC_SIM_CONFIG}: real_time false)"
         )
         self.mode_known = True
-        return True
+        self.lookahead_ns = round(lookahead * 1e9)
+        self.wall_origin = time.monotonic()
+        self.t_now_ns, self.t_now_wall, self.clock_factor = 0, self.wall_origin, 1.0
+        if self.wall_timer is None:
+            self.wall_timer = steady_timer(self, max(lookahead / 4, 0.005), self.wall_tick)
+
+    def wall_tick(self) -> None:
+        """The wall-paced run's clock moves on: the steps it brings into the
+        look-ahead go out."""
+        self.wall_now()
+        self.release()
+
+    def wall_now(self) -> None:
+        """A wall-paced run's clock: the wall time since its first step."""
+        if self.wall_origin is not None:
+            now = time.monotonic()
+            self.t_now_ns, self.t_now_wall = round((now - self.wall_origin) * 1e9), now
 
     def configures(self, consumer: Who) -> bool:
         """Whether the graph shows ``consumer`` publishing winder/sim_config."""
@@ -436,10 +477,11 @@ class ProfileNode(ManagedNode):
         """The consumer's configuration of the run: a real-time run gets the
         look-ahead, and the clock it is measured on. It may come before the
         job description does: the last one is kept for it. One that comes
-        after the steps went out without look-ahead (MODE_WAIT passed) still
-        sets it, from then on."""
+        after MODE_WAIT passed takes over the wall clock's pacing from then
+        on (and a run as fast as possible gets its steps at once)."""
         self.last_sim_config = msg
-        if self.plan is None or self.lookahead_ns is not None or self.run_over():
+        late = self.wall_origin is not None
+        if self.plan is None or (self.lookahead_ns is not None and not late) or self.run_over():
             return
         try:
             config = json.loads(msg.data)
@@ -454,12 +496,20 @@ class ProfileNode(ManagedNode):
                 f"{time.monotonic() - self.job_wall:.1f} s; its steps go out"
             )
         origin = config.get("clock_origin_ns")
-        if config.get("real_time") is True and isinstance(origin, int):
-            if self.mode_known:
-                self.get_logger().warning(
-                    f"run {run}: the consumer's {TOPIC_SIM_CONFIG} came after steps went out without "
-                    "look-ahead: the look-ahead holds from now on"
+        real_time = config.get("real_time") is True and isinstance(origin, int)
+        if late:
+            self.end_wall_clock()
+            self.lookahead_ns, self.t_now_ns = None, -1
+            self.get_logger().warning(
+                f"run {run}: the consumer's {TOPIC_SIM_CONFIG} came after its steps were paced on the wall "
+                + (
+                    "clock: its own clock paces them from now on"
+                    if real_time
+                    else "clock: the rest goes out now"
                 )
+            )
+        if real_time:
+            assert isinstance(origin, int)
             self.clock_origin_ns = origin
             factor = config.get("real_time_factor")
             self.clock_factor = 1.0
@@ -515,6 +565,13 @@ class ProfileNode(ManagedNode):
         if self.sub_clock is not None:
             self.destroy_subscription(self.sub_clock)
             self.sub_clock = None
+        self.end_wall_clock()
+
+    def end_wall_clock(self) -> None:
+        if self.wall_timer is not None:
+            self.destroy_timer(self.wall_timer)
+            self.wall_timer = None
+        self.wall_origin = None
 
     # -- operation -------------------------------------------------------
     @staticmethod
@@ -527,10 +584,13 @@ class ProfileNode(ManagedNode):
         at the later of the clock and the last step sent (within the
         look-ahead), otherwise after the last step sent. (ok, one line)."""
         tl, plan = self.timeline, self.plan
-        if tl is None or plan is None or self.run_over():
+        if tl is None or plan is None:
             return False, f"{kind} refused: no run is being timed"
         if self.lookahead_ns is not None:
             self.take_clock()  # the clock as fresh as it is here
+            self.wall_now()
+        if self.run_over():
+            return self.in_tail(kind, plan)
         real_time = self.lookahead_ns is not None and self.t_now_ns >= 0
         if real_time and kind == "resume":
             # the consumer's clock ran on while it rested: the resume is timed from
@@ -559,6 +619,30 @@ class ProfileNode(ManagedNode):
         self.release()
         self.report()
         return True, message
+
+    def in_tail(self, kind: str, plan: JobPlan) -> tuple[bool, str]:
+        """A command once every step of the run is sent. In a real-time run
+        whose axes have not reached the last step yet (the consumer's clock,
+        carried on by the wall time since it was heard), a pause or abort is
+        answered: the steps out are within the look-ahead, and the axes stop
+        at the run's end, that soon. Otherwise the run is over for the time
+        law: refused with why."""
+        run = plan.run_id or plan.job_id
+        tl = self.timeline
+        if tl is not None and tl.aborted:
+            return False, f"{kind} refused: run {run} is aborted already; its axes come to rest"
+        now = self.clock_at_rest_ns()
+        if self.lookahead_ns is not None and now >= 0 and now < self.t_sent_ns and kind in ("pause", "abort"):
+            left = (self.t_sent_ns - now) / 1e9
+            message = (
+                f"run {run}: {kind}: every step is already sent (within the look-ahead): the axes "
+                f"stop at the run's end at {self.t_sent_ns / 1e9:.6f} s, {left:.3f} s from now"
+            )
+            self.get_logger().info(message)
+            return True, message
+        if self.lookahead_ns is None:
+            return False, f"{kind} refused: run {run} runs as fast as possible and every step is timed"
+        return False, f"{kind} refused: run {run}'s axes are at its end: nothing left to {kind}"
 
     def publish_event(self, event: dict[str, Any], t_request: int) -> None:
         """An operator event on winder/control, with the run and the latency
