@@ -65,6 +65,10 @@ def _hangup(signum: int, frame: FrameType | None) -> None:
     os.kill(os.getpid(), signal.SIGTERM)
 
 
+#: the signals that end a node
+_ENDING = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}
+
+
 def install_signal_handlers() -> None:
     """Signals that end a node let it finish its callback and close its bag
     (see :func:`_stop_quietly`); installed before ``rclpy.init``, which chains
@@ -103,11 +107,18 @@ def spin_all(factories: list[Callable[[], Node]], args: list[str] | None = None)
     try:
         if _signalled:  # before rclpy's handlers were there to shut the context down
             return
-        for factory in factories:
-            nodes.append(factory())
-        executor = SenderExecutor()  # takes attributed subscriptions with their publisher (winder.ros.sender)
-        for node in nodes:
-            executor.add_node(node)
+        # a signal that comes while the nodes and the executor are made waits until they are:
+        # one that shut the context down in the middle of rclpy's executor set-up left a
+        # half-made guard condition whose finaliser printed a traceback at exit (fresh-clone CI)
+        signal.pthread_sigmask(signal.SIG_BLOCK, _ENDING)
+        try:
+            for factory in factories:
+                nodes.append(factory())
+            executor = SenderExecutor()  # takes attributed subscriptions with their publisher
+            for node in nodes:
+                executor.add_node(node)
+        finally:
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, _ENDING)
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
