@@ -30,7 +30,9 @@ named and namespaced as ros2_control makes them, behaving as documented:
   ``position_state_following_offset`` of one joint); beyond the mock,
   ``--lag JOINT=TAU`` gives a joint a first-order lag of TAU s and
   ``--stuck JOINT`` freezes one, ``--silent-after S`` stops the broadcaster
-  S s after the first command (a dead state stream).
+  S s after the first command (a dead state stream), ``--corrupt-after S``
+  makes it report ``--corrupt-value`` (default inf) for every joint from S s
+  after the first command on (a broken encoder word).
 
 Like the controller manager, which "independent of the kernel installed"
 configures SCHED_FIFO with priority 50 for its main thread (its user
@@ -98,6 +100,8 @@ def main() -> None:
     ap.add_argument("--lag", action="append", default=[], metavar="JOINT=TAU")
     ap.add_argument("--stuck", action="append", default=[], metavar="JOINT")
     ap.add_argument("--silent-after", type=float, default=math.inf)
+    ap.add_argument("--corrupt-after", type=float, default=math.inf)
+    ap.add_argument("--corrupt-value", type=float, default=math.inf)
     args = ap.parse_args(argv)
     joints = args.joints.split(",")
     if args.controller is None:
@@ -190,8 +194,11 @@ def main() -> None:
             velocity[i] = (state[i] - before) / period if period > 0 else 0.0
         # update: the broadcaster publishes the states, the forward controller writes its command
         if now - first_command[0] < args.silent_after:
+            measured = list(state)
+            if now - first_command[0] >= args.corrupt_after:
+                measured = [args.corrupt_value] * len(joints)
             msg = JointState(
-                name=joints, position=list(state), velocity=list(velocity), effort=[0.0] * len(joints)
+                name=joints, position=measured, velocity=list(velocity), effort=[0.0] * len(joints)
             )
             msg.header.stamp = cm.get_clock().now().to_msg()
             pub.publish(msg)

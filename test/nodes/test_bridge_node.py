@@ -646,3 +646,61 @@ def test_sigint_mid_run_closes_a_readable_bag(tmp_path: Path, procs: Procs, ros:
     assert report["state"] == "incomplete" and 0 < int(report["steps_done"]) < int(report["steps_total"])
     assert int(report["commands_sent"]) == len(raw[COMMANDS]) > 100
     assert "Traceback" not in procs.log(bridge)
+
+
+STRANGER = TEST / "consumers" / "stranger.py"
+
+
+def test_joint_states_from_another_node_change_nothing(tmp_path: Path, procs: Procs, ros: Any) -> None:
+    """A neighbour publishes joint states for the bridge's joints on the same
+    topic, 100 rad and infinity in turn at 200 Hz, from before the cell
+    starts (issue 41: with job_origin start_position it became the run's
+    origin in 2 of 5 tries, a first command of 100 rad or inf, and any such
+    message stopped a run with a servo fault). Only the broadcaster counts:
+    the run is done, every command is the job's steps from the stand-in's
+    zero (exact), the neighbour's messages are counted in the report and
+    named in one warning."""
+    bags = tmp_path / "bags"
+    neighbour = procs.launch([sys.executable, str(STRANGER), "--joints", ",".join(JOINTS)], "neighbour")
+    wait.log_has(lambda: procs.log(neighbour), "neighbour up", 30, running=neighbour)
+    start_standin(procs)
+    bridge = start_cell(
+        procs,
+        bags,
+        *("-p", "job_origin:=start_position", "-p", "max_following_error.fork:=5.0"),
+        *("-p", "max_following_error.pole:=1.0", "-p", "max_following_error.feed:=0.01"),
+    )
+    [bag] = wait_for_bags(bags, 1)
+    raw = rosbags_read(bag)
+    report = final_report(raw)
+    assert report["state"] == "done", report["servo_fault"] or report
+    check_commands(raw, report)  # from zero, exactly the steps: the neighbour was never the origin
+    _, pos = commands(raw)
+    assert np.isfinite(pos).all() and np.abs(pos).max() < 60.0
+    assert int(report["foreign_joint_states"]) > 10, report
+    assert report["foreign_joint_state_publishers"] == "/neighbour", report
+    warned = [ln for ln in procs.log(bridge).splitlines() if "joint states from /neighbour" in ln]
+    assert len(warned) == 1 and "WARN" in warned[0] and "/joint_state_broadcaster" in warned[0], warned
+    assert all(list(m.name) == JOINTS and max(m.position) < 60 for _, m in raw["/joint_states"])
+
+
+def test_a_broken_measurement_from_the_broadcaster_is_a_fault(tmp_path: Path, procs: Procs, ros: Any) -> None:
+    """The broadcaster itself reports infinity (a broken encoder word) 0.3 s
+    into the run: a servo fault that says so (the joint, the value, the
+    broadcaster), nothing commanded from it; between runs the bridge says
+    the hardware is not ready, with the same reason, and refuses a start."""
+    bags = tmp_path / "bags"
+    start_standin(procs, "--corrupt-after", "0.3")
+    bridge = start_cell(procs, bags, "-p", "job_origin:=start_position")
+    [bag] = wait_for_bags(bags, 1)
+    raw = rosbags_read(bag)
+    report = final_report(raw)
+    assert report["state"] == "incomplete", report
+    fault = report["servo_fault"]
+    assert "measured at inf" in fault and "not finite" in fault and "/joint_state_broadcaster" in fault, fault
+    _, pos = commands(raw)
+    assert np.isfinite(pos).all()
+    wait.log_has(lambda: procs.log(bridge), "waiting for the hardware: joint", 30, running=bridge)
+    ok, reply = call_start(ros)
+    assert not ok and "not ready" in reply, reply
+    assert "Traceback" not in procs.log(bridge)

@@ -14,7 +14,13 @@ the last row due times the joint's step length), ``clock`` (the cell's clock,
 (``real_time: true``, ``clock_origin_ns``: the profile node sends steps only
 its look-ahead ahead of that clock). In: ``joint_states``
 (sensor_msgs/JointState from a joint_state_broadcaster; joints by name,
-unknown names ignored). Both topics are relative: in the namespace of this
+unknown names ignored), trusted only from the node ``broadcaster`` names
+(by its publisher's GID, as the graph names it): another publisher's
+messages are ignored, counted (``foreign_joint_states``) and warned about
+once per node, so a neighbour can neither stop a run nor become its
+origin; a position from the broadcaster that is not finite or beyond
+±FAR_POSITION is a servo fault with its reason (between runs: the
+hardware is not ready), never an origin. Both topics are relative: in the namespace of this
 node, which must be the controller manager's (ros2_control puts a controller
 ``X`` of the controller manager in ``/ns`` at ``/ns/X``, so it listens on
 ``/ns/X/commands``, and the broadcaster publishes ``/ns/joint_states``). All
@@ -76,13 +82,14 @@ from winder.contract.cdr import CommandPayload, JointStateReader, clock_payload,
 from winder.contract.pacing import CommandHistory, Pacer, following_error
 from winder.contract.params import BRIDGE_SPECS, check_bridge
 from winder.contract.stream import JobPlan
-from winder.contract.topics import TOPIC_CLOCK, TOPIC_STEP_TIMES
+from winder.contract.topics import TOPIC_CLOCK, TOPIC_STEP_TIMES, check_node_name
 from winder.motion.job import AXES
-from winder.ros.chunks import waiting
 from winder.ros.consumer import StepConsumer
 from winder.ros.diagnostics import ERROR
-from winder.ros.graph import fully_qualified
+from winder.ros.graph import fully_qualified, publishers_by_gid
 from winder.ros.qos import QOS_CLOCK, QOS_STATE
+from winder.ros.sender import attributed
+from winder.ros.sender import waiting as taken_with_sender
 from winder.ros.spin import spin
 from winder.ros.timers import steady_timer
 
@@ -94,6 +101,11 @@ CLOCK_PERIOD_NS = 5_000_000
 #: a measurement stamped further than this from this host's clock is compared
 #: with the commands before it arrived (its stamp is on another clock)
 STAMP_TRUST_NS = 1_000_000_000
+#: a measured position beyond this (rad or m) is no position of a winding axis:
+#: a broken encoder word or a driver's sentinel, never an origin
+FAR_POSITION = 1e9
+#: a joint_states publisher the graph does not name yet is looked up again after this long
+GRAPH_LOOK_NS = 50_000_000
 #: between runs, the thread looks this often whether joint states still come
 IDLE_POLL = 0.1
 #: the hardware counts as there (winder/ready) while joint_states came within this
@@ -158,9 +170,14 @@ class BridgeNode(StepConsumer):
             self.resolve_topic_name(TOPIC_MEASURED),
             BRIDGE_TOPICS["joint_states"][1],
         )
-        self.sub_states = self.io.create_subscription(
-            JointState, self.bag_topics["joint_states"][0], lambda _m: None, QOS_STATE, raw=True
+        # taken with each message's publisher GID: only the broadcaster's count
+        self.sub_states = attributed(
+            self.io, JointState, self.bag_topics["joint_states"][0], lambda _m, _g: None, QOS_STATE
         )
+        self.state_publishers: dict[bytes, str] = {}  # joint_states publisher GID -> its node's full name
+        self.foreign_states: dict[str, int] = {}  # joint_states ignored, by the publishing node
+        self.graph_look_ns = 0  # when the graph was last asked for joint_states' publishers
+        self.hardware_bad = ""  # the broadcaster's last message between runs is no position
         self.guard = self.create_guard_condition(self.on_alarm)
         self.reader = JointStateReader(values["joints"])
         self.abort_clients: dict[str, Client] = {}
@@ -223,6 +240,8 @@ class BridgeNode(StepConsumer):
         self.axes: list[str] = list(values["axes"])
         self.limits = np.array([values[f"max_following_error.{a}"] for a in self.axes])
         self.units = [BRIDGE_SPECS[f"max_following_error.{a}"].unit for a in self.axes]
+        broadcaster = check_node_name(values["broadcaster"], self.get_namespace(), "broadcaster")
+        self.broadcaster = broadcaster
         if self.reader.joints != self.joints:
             self.reader = JointStateReader(self.joints)
         self.cmd = CommandPayload(len(self.joints))
@@ -355,6 +374,10 @@ class BridgeNode(StepConsumer):
             "max_command_gap_ms": f"{self.max_gap_ns / 1e6:.3f}",
             "joint_states_received": self.states_in_run,
             "late_steps": self.late_rows,
+            "foreign_joint_states": sum(self.foreign_states.values()),
+            "foreign_joint_state_publishers": ", ".join(
+                sorted(n for n, c in self.foreign_states.items() if c)
+            ),
             "max_step_lateness_ms": f"{self.max_late_ns / 1e6:.3f}",
             **errors,
             "servo_fault": self.fault_text,
@@ -403,7 +426,12 @@ class BridgeNode(StepConsumer):
             with self.lock:
                 self.pub_cmd = self.commands_publisher(values["controller"], values["interface"])
         if time.monotonic_ns() - self.heard_ns > HARDWARE_FRESH_NS:
-            return f"no {self.bag_topics['joint_states'][0]} for {HARDWARE_FRESH_NS / 1e9:g} s"
+            if self.hardware_bad:
+                return self.hardware_bad
+            return (
+                f"no {self.bag_topics['joint_states'][0]} from {self.broadcaster} for "
+                f"{HARDWARE_FRESH_NS / 1e9:g} s"
+            )
         if self.pub_cmd.get_subscription_count() == 0:
             return f"nobody subscribes to {self.bag_topics['commands'][0]}"
         return ""
@@ -415,8 +443,10 @@ class BridgeNode(StepConsumer):
         while not self.quit:
             if not self.go.wait(IDLE_POLL):
                 with self.lock:
-                    for _ in waiting(self.sub_states):
-                        self.heard_ns = time.monotonic_ns()
+                    for raw, gid in taken_with_sender(self.sub_states, 64):
+                        now = time.monotonic_ns()
+                        if self.from_broadcaster(gid, now):
+                            self.idle_measurement(raw, now)
                 continue
             due = time.monotonic_ns()
             while self.go.is_set() and not self.quit:
@@ -447,9 +477,10 @@ class BridgeNode(StepConsumer):
         # every CLOCK_PERIOD_NS (to the tick) once armed; a trajectory's tick is a batch apart
         look = self.trajectory or not self.armed or t >= self.next_clock
         if look:  # a take costs ~20 us even when nothing came: not every tick
-            for raw in waiting(self.sub_states):
-                self.heard_ns = now
-                self.measurement(raw, now)
+            for raw, gid in taken_with_sender(self.sub_states, 64):
+                if self.from_broadcaster(gid, now):
+                    self.heard_ns = now
+                    self.measurement(raw, now)
             if self.faulted:
                 return
         if not self.armed:
@@ -535,6 +566,56 @@ class BridgeNode(StepConsumer):
                 {"joint": self.joints[j], "axis": self.axes[j], "silent_s": f"{late / 1e9:.3f}"},
             )
 
+    def from_broadcaster(self, gid: bytes, now: int) -> bool:
+        """(Under the lock.) Whether a joint_states message with publisher
+        ``gid`` is the broadcaster's, by the node the graph names for it.
+        A publisher the graph does not name yet is asked for again (at most
+        every GRAPH_LOOK_NS) and its message ignored meanwhile; another
+        node's is ignored, counted and warned about once per node."""
+        who = self.state_publishers.get(gid)
+        if who is None and now - self.graph_look_ns >= GRAPH_LOOK_NS:
+            self.graph_look_ns = now
+            for g, w in publishers_by_gid(self.io, self.bag_topics["joint_states"][0]).items():
+                self.state_publishers[g] = fully_qualified(w.name, w.namespace)
+            who = self.state_publishers.get(gid)
+        if who is None:
+            return False  # not named yet: neither trusted nor blamed
+        if who == self.broadcaster:
+            return True
+        self.foreign_states[who] = self.foreign_states.get(who, 0) + 1
+        if self.foreign_states[who] == 1:
+            self.get_logger().warning(
+                f"{self.bag_topics['joint_states'][0]}: joint states from {who}, not from the broadcaster "
+                f"{self.broadcaster}: ignored (counted in the status' foreign_joint_states)"
+            )
+        return False
+
+    def idle_measurement(self, raw: bytes, now: int) -> None:
+        """(Under the lock.) The broadcaster's message between runs: the
+        hardware is there if it measures a position for every joint it
+        names that is one (finite, within ±FAR_POSITION)."""
+        got = self.reader.read(raw)
+        if got is None:
+            return
+        bad = self.no_position(got[1])
+        self.hardware_bad = bad
+        if not bad:
+            self.heard_ns = now
+
+    def no_position(self, pos: Any) -> str:
+        """Why a measurement's positions (NaN: a joint not in it) are no
+        positions of the joints, or ''."""
+        for j, x in enumerate(pos):
+            if x != x:  # NaN: not measured in this message
+                continue
+            if not abs(x) <= FAR_POSITION:
+                what = "not finite" if abs(x) == float("inf") else f"beyond ±{FAR_POSITION:g}"
+                return (
+                    f"joint {self.joints[j]} ({self.axes[j]} axis) measured at {x:g} {self.units[j]} by "
+                    f"{self.broadcaster}: {what}, no position of the axis"
+                )
+        return ""
+
     def measurement(self, raw: bytes, now: int) -> None:
         """(Under the lock.) One joint_states message of the run: recorded;
         before the run's time starts, checked against the job's start; then
@@ -564,6 +645,10 @@ class BridgeNode(StepConsumer):
             self.measured[seen] = pos[seen]
         self.outbox.append(("joint_states", self.t_tick, raw, False))
         self.states_in_run += 1
+        bad = self.no_position(pos)
+        if bad:  # a broken measurement: never an origin, never a position to follow
+            self.raise_fault(f"servo fault: {bad}", {"reason": bad})
+            return
         wall = time.time_ns()
         when = stamp if abs(stamp - wall) < STAMP_TRUST_NS else wall
         low, high = self.history.span(when - self.delay_ns, when)

@@ -15,7 +15,7 @@ from typing import Any
 
 from winder.contract.files import NAME_MAX, too_long_name
 from winder.contract.timing import MAX_JOB_SECONDS, plan_segment, plan_timing
-from winder.contract.topics import check_relative_name
+from winder.contract.topics import check_node_name, check_relative_name
 from winder.motion.job import AXES, FIELD_SPECS, Job, Segment
 from winder.motion.profile import KINDS
 from winder.spec import Spec, SpecError, shorten
@@ -592,6 +592,16 @@ BRIDGE_SPECS = {
             pattern_text="a controller name (letters, digits and _, starting with a letter)",
         ),
         Spec(
+            "broadcaster",
+            str,
+            "joint_state_broadcaster",
+            "the node whose joint_states the bridge trusts (ros2_control's joint_state_broadcaster): its "
+            "name in this node's namespace, or its full name /ns/name; joint states from any other "
+            "publisher are ignored, counted and warned about once",
+            pattern=r"/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*",
+            pattern_text="a node name, or its full name /ns/name (letters, digits and _)",
+        ),
+        Spec(
             "interface",
             str,
             "forward",
@@ -699,6 +709,8 @@ def check_bridge(values: dict[str, Any], namespace: str | None = None) -> None:
     if namespace is not None:
         try:
             check_relative_name("controller", values["controller"], namespace, CONTROLLER_TOPICS)
+            if "broadcaster" in values:
+                check_node_name(values["broadcaster"], namespace, "broadcaster")
         except ValueError as exc:
             raise SpecError(str(exc)) from None
     check_consumer(values)

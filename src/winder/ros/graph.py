@@ -27,7 +27,18 @@ from rclpy.node import Node
 from winder.contract.trust import SIGNS
 from winder.ros.dds import DISCOVERY_SERVER_KEY
 
-__all__ = ["Who", "consumers", "fully_qualified", "participant", "profile_nodes", "role_holders"]
+__all__ = [
+    "Who",
+    "consumers",
+    "fully_qualified",
+    "participant",
+    "profile_nodes",
+    "publishers_by_gid",
+    "role_holders",
+]
+
+#: what rmw puts for a node's name or namespace it has not learned yet
+UNKNOWN = "_UNKNOWN_"
 
 
 class Who(NamedTuple):
@@ -48,6 +59,19 @@ class Who(NamedTuple):
 def participant(gid: bytes | list[int]) -> str:
     """The DDS participant (process) of an endpoint's GID: its GUID prefix."""
     return bytes(gid)[:12].hex()
+
+
+def publishers_by_gid(node: Node, topic: str) -> dict[bytes, Who]:
+    """The publishers of ``topic`` (fully qualified) the graph names, by their
+    endpoint GID. An endpoint is on the graph before its node's name is (rmw
+    says _NODE_NAME_UNKNOWN_ until the node's discovery info comes): such an
+    endpoint is left out, to be asked for again."""
+    out = {}
+    for info in node.get_publishers_info_by_topic(topic):
+        if UNKNOWN not in info.node_name and UNKNOWN not in info.node_namespace:
+            gid = bytes(info.endpoint_gid)
+            out[gid] = Who(info.node_name, info.node_namespace, participant(gid))
+    return out
 
 
 def _ns(namespace: str) -> str:

@@ -32,16 +32,12 @@ from rclpy.subscription import Subscription
 
 from winder.contract.topics import PROCESS_KEYS, ROLE_KEY, TOPIC_DIAGNOSTICS, in_namespace
 from winder.contract.trust import OWNERS, ROLE_NAMES, SIGNS, Intruders
-from winder.ros.graph import Who, fully_qualified, participant, role_holders
+from winder.ros.graph import Who, fully_qualified, publishers_by_gid, role_holders
 from winder.ros.qos import QOS_DIAGNOSTICS
 from winder.ros.sender import attributed
 from winder.ros.timers import steady_timer
 
 __all__ = ["Peers", "Solo"]
-
-#: what rmw puts for a node's name or namespace it has not learned yet
-UNKNOWN = "_UNKNOWN_"
-
 
 #: s a message is held for the graph to name its publisher (:meth:`Peers.deliver`),
 #: counted in the node's own time: a stretch in which the node did not run at
@@ -113,13 +109,7 @@ class Peers:
         while the graph does not show it."""
         who = self.gids.get(gid)
         if who is None:
-            for info in self.node.get_publishers_info_by_topic(self.topic(topic)):
-                # an endpoint is on the graph before its node's name is (rmw
-                # says _NODE_NAME_UNKNOWN_ until the node's discovery info
-                # comes): not known yet, asked again next time
-                if UNKNOWN not in info.node_name and UNKNOWN not in info.node_namespace:
-                    gid_of = bytes(info.endpoint_gid)
-                    self.gids[gid_of] = Who(info.node_name, info.node_namespace, participant(gid_of))
+            self.gids.update(publishers_by_gid(self.node, self.topic(topic)))
             who = self.gids.get(gid)
         return who
 
