@@ -338,6 +338,31 @@ def test_two_runs_side_by_side_mark_their_differences(bag: Any) -> None:
     assert not any(_marked(run_cli("analyze", str(lin), "--no-plots").stdout).values())
 
 
+def test_runs_whose_rows_differ_side_by_side(bag: Any, tmp_path: Path) -> None:
+    """A run without joint samples (its "as wound" is one row, not three)
+    beside one with them: the table has every row of either run, in order,
+    and "-" in a run's column where it has none (it died with an IndexError
+    when ``winder analyze bags/rw400_*`` met such a pair: fresh-clone CI)."""
+    from winder.record.bag import BagRecorder
+    from winder.record.raw import read_raw
+
+    lin = bag("lin2k")
+    raw = read_raw(lin)
+    topics = {c.topic: c.msgtype for c in raw.connections.values() if c.topic != "/winder/joint_states"}
+    rec = BagRecorder(tmp_path / "no_joints", topics, compression="none")
+    for cid, t, data in raw.messages:
+        if raw.connections[cid].topic in topics:
+            rec.write(raw.connections[cid].topic, t, data, exact=True)
+    rec.close()
+    r = run_cli("analyze", str(lin), str(tmp_path / "no_joints"), "--no-plots")
+    assert r.returncode == 0, r.stderr
+    rows = {ln[2:].split("  ")[0].strip(): ln for ln in r.stdout.splitlines() if ln[:2] in ("* ", "  ")}
+    assert "as wound" in rows and "as wound: turns laid" in rows, r.stdout
+    # the run with samples has no plain "as wound" row, the other none of the three
+    assert rows["as wound"].split()[-1] == "samples)" and " - " in rows["as wound"], rows["as wound"]
+    assert rows["as wound: turns laid"].rstrip().endswith("-"), rows["as wound: turns laid"]
+
+
 def test_an_aborted_run_counts_the_steps_it_simulated(bag: Any) -> None:
     """An aborted job: the steps simulated, from the sim node's final report,
     equal the step rows the bag holds up to the abort's rest and the last

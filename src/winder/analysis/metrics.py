@@ -781,9 +781,12 @@ def format_table(analyses: list[Analysis]) -> str:
         [(n, v) for n, v in c if n in told or n not in ("programmed stops", "operator commands")]
         for c in cols
     ]
-    names = [r[0] for r in cols[0]]
+    # runs side by side may not have the same rows (one without joint samples has one "as
+    # wound" row, not three): every row any run has, in the order they come, "-" where a run has none
+    names = list(dict.fromkeys(n for c in cols for n, _ in c))
+    values = [dict(c) for c in cols]
     header = ["", *[a.label for a in analyses]]
-    body = [[n, *[c[i][1] for c in cols]] for i, n in enumerate(names)]
+    body = [[n, *[v.get(n, "-") for v in values]] for n in names]
     differs = setup_differences(analyses)
     if len(analyses) > 1:
         for r in body:
