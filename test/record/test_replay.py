@@ -534,6 +534,16 @@ def test_a_signal_ends_the_player_paused_or_playing(
     assert "interrupted" in err and "Traceback" not in err, err
 
 
+def catches(pid: int, signum: int) -> bool:
+    """Whether process ``pid`` has a handler of its own for ``signum`` (its SigCgt mask)."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return False
+    mask = next((ln.split()[1] for ln in status.splitlines() if ln.startswith("SigCgt:")), "0")
+    return bool(int(mask, 16) >> (signum - 1) & 1)
+
+
 @pytest.mark.parametrize(
     ("sig", "after"), [("SIGTERM", 0.1), ("SIGINT", 0.6), ("SIGTERM", 1.1), ("SIGINT", 1.6)]
 )
@@ -544,10 +554,15 @@ def test_a_signal_at_any_moment_of_the_start_ends_the_player(
     at the graph: 'interrupted', status 130, no traceback. rclpy's own
     handlers once shut the context down under the player's service thread
     (SIGSEGV, about 1 Ctrl-C in 15 on a loaded machine, caught by CI), and a
-    signal between rclpy's init and the node ended with a traceback."""
+    signal between rclpy's init and the node ended with a traceback.
+    ``after`` counts from the moment the command's first line has run (it
+    catches SIGTERM): before it, the interpreter itself is starting, and a
+    SIGTERM there kills any Python program (0.1 s after the spawn was that
+    moment on a loaded machine, fresh-clone CI)."""
     import signal
 
     p = play(procs, ops_bag, "--start-paused")
+    wait.until(lambda: catches(p.pid, signal.SIGTERM), 30, "the command's handlers", running=p)
     time.sleep(after)  # the signal's moment is the subject (any moment of the start): not a wait
     p.send_signal(getattr(signal, sig))
     out, err = p.communicate(timeout=20)
