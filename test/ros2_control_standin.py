@@ -32,7 +32,10 @@ named and namespaced as ros2_control makes them, behaving as documented:
   ``--stuck JOINT`` freezes one, ``--silent-after S`` stops the broadcaster
   S s after the first command (a dead state stream), ``--corrupt-after S``
   makes it report ``--corrupt-value`` (default inf) for every joint from S s
-  after the first command on (a broken encoder word).
+  after the first command on (a broken encoder word); ``--homing`` adds a
+  ``homing_controller`` node whose ``~/home`` (std_srvs/Trigger) homes every
+  joint: the mock's positions go to 0, the home switches' place (a real
+  machine's drives run to their switches; the bridge's ``homing_service``).
 
 Like the controller manager, which "independent of the kernel installed"
 configures SCHED_FIFO with priority 50 for its main thread (its user
@@ -62,6 +65,7 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
 
@@ -102,6 +106,7 @@ def main() -> None:
     ap.add_argument("--silent-after", type=float, default=math.inf)
     ap.add_argument("--corrupt-after", type=float, default=math.inf)
     ap.add_argument("--corrupt-value", type=float, default=math.inf)
+    ap.add_argument("--homing", action="store_true")
     args = ap.parse_args(argv)
     joints = args.joints.split(",")
     if args.controller is None:
@@ -170,6 +175,18 @@ def main() -> None:
         f = 1.0 if t_b <= t_a else min(max((now - t_a) / (t_b - t_a), 0.0), 1.0)
         command[:] = [a + (b - a) * f for a, b in zip(p_a, p_b, strict=True)]
 
+    homing = rclpy.create_node("homing_controller") if args.homing else None
+
+    def on_home(_req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:
+        command[:] = [0.0] * len(joints)  # at the switches: the joints' zero
+        state[:] = [0.0] * len(joints)
+        last_msg[0], traj[0] = None, None  # the controller's last command is no longer in force
+        resp.success, resp.message = True, f"homed {', '.join(joints)}"
+        log.info(resp.message)
+        return resp
+
+    if homing is not None:
+        homing.create_service(Trigger, "~/home", on_home)
     reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
     if args.interface == "trajectory":
         ctrl.create_subscription(JointTrajectory, "~/joint_trajectory", on_trajectory, reliable)
@@ -209,7 +226,8 @@ def main() -> None:
 
     cm.create_timer(dt, update, clock=Clock(clock_type=ClockType.STEADY_TIME))
     ex = SingleThreadedExecutor()
-    for n in (cm, ctrl, jsb):
+    nodes = [n for n in (cm, ctrl, jsb, homing) if n is not None]
+    for n in nodes:
         ex.add_node(n)
     cm.get_logger().info(f"stand-in up: joints {joints}, {args.controller}, {args.rate:g} Hz, {policy}")
     try:
@@ -217,7 +235,7 @@ def main() -> None:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
-        for n in (cm, ctrl, jsb):
+        for n in nodes:
             n.destroy_node()
         rclpy.try_shutdown()
 

@@ -704,3 +704,78 @@ def test_a_broken_measurement_from_the_broadcaster_is_a_fault(tmp_path: Path, pr
     ok, reply = call_start(ros)
     assert not ok and "not ready" in reply, reply
     assert "Traceback" not in procs.log(bridge)
+
+
+def test_a_job_beyond_a_soft_limit_is_refused_before_any_command(
+    tmp_path: Path, procs: Procs, ros: Any
+) -> None:
+    """max_position.feed 5 mm; the job's feed travels 1000 steps of 10 um
+    (10 mm, worked out from the job here): the run is refused when it would
+    be armed, in one line naming the joint, where the job takes it and the
+    limit; no command, no clock. Within the limits the same job runs."""
+    job = Job(**JOB)
+    travel = max(s.start[0] + s.delta[0] for s in job.segments()) * job.feed_step
+    assert travel == pytest.approx(0.01)
+    bags = tmp_path / "bags"
+    start_standin(procs)
+    bridge = start_cell(procs, bags, "-p", "max_position.feed:=0.005", "-p", "min_position.feed:=-0.001")
+    [bag] = wait_for_bags(bags, 1)
+    raw = rosbags_read(bag)
+    report = final_report(raw)
+    assert report["state"] == "incomplete" and report["steps_done"] == "0", report
+    want = (
+        f"the run cannot start: the job takes joint feed_screw (feed axis) to {travel:.6g} m, beyond "
+        "max_position.feed = 0.005 m (soft limit)"
+    )
+    assert want in report["servo_fault"], report["servo_fault"]
+    assert not raw.get(COMMANDS) and not raw.get("/clock")
+    assert "Traceback" not in procs.log(bridge)
+
+
+def test_bad_soft_limits_are_refused_in_one_line(tmp_path: Path, procs: Procs) -> None:
+    """min_position above max_position: the node refuses the setting and says
+    which, in one line (it stays up, blocked)."""
+    bridge = procs.start("bridge_node", "-p", "min_position.fork:=2.0", "-p", "max_position.fork:=1.0")
+    log = wait.log_has(
+        lambda: procs.log(bridge),
+        "min_position.fork=2 is invalid with max_position.fork=1",
+        30,
+        running=bridge,
+    )
+    assert "Traceback" not in log
+
+
+def test_a_run_waits_for_homing_when_it_is_required(tmp_path: Path, procs: Procs, ros: Any) -> None:
+    """require_homing, the stand-in's homing controller as homing_service,
+    the joints somewhere unknown at first (feed 2 mm off the job's start):
+    the bridge says it waits ("not homed") and the interp node does not
+    start; ~/home calls the homing controller (the joints go to their
+    zero) and says so; the run then starts on its own (autostart) and is
+    done, every command exact from zero."""
+    from std_srvs.srv import Trigger
+
+    bags = tmp_path / "bags"
+    start_standin(procs, "--homing", "--initial", "feed_screw=0.002")
+    bridge = start_cell(
+        procs,
+        bags,
+        *("-p", "require_homing:=true", "-p", "homing_service:=homing_controller/home"),
+        *("-p", "max_following_error.fork:=5.0", "-p", "max_following_error.pole:=1.0"),
+        *("-p", "max_following_error.feed:=0.01", "-p", "max_position.feed:=0.02"),
+    )
+    wait.log_has(lambda: procs.log(bridge), "the axes are not homed (require_homing)", 30, running=bridge)
+    assert not closed_bags(bags)  # nothing started
+    client = ros.create_client(Trigger, "/bridge_node/home")
+    spin_until(ros, client.service_is_ready, 30, "/bridge_node/home")
+    future = client.call_async(Trigger.Request())
+    spin_until(ros, future.done, 30, "the reply of ~/home")
+    reply = future.result()
+    assert reply.success, reply.message
+    assert reply.message.startswith("homed by /homing_controller/home; "), reply.message
+    assert "soft limits: feed [-1e+09, 0.02] m" in reply.message, reply.message
+    [bag] = wait_for_bags(bags, 1)
+    raw = rosbags_read(bag)
+    report = final_report(raw)
+    assert report["state"] == "done", report["servo_fault"] or report
+    check_commands(raw, report)
+    assert "Traceback" not in procs.log(bridge)

@@ -44,6 +44,18 @@ naming the joint, the error and the limit, the profile node's ``~/abort``
 called (so the interp node stops sending and is ready for a new start), and
 the run closed incomplete with its bag.
 
+Soft limits and homing: ``min_position.<axis>``/``max_position.<axis>``
+bound what a run may command. Every command is one of the job's positions
+from the run's origin, so the job's extent (its segments' corners) is
+checked against them when the run is armed, before the first command: a job
+that would leave them is refused (a servo fault naming the joint, the
+position and the limit), nothing moves. With ``require_homing`` a run is not
+taken (the consumer says ``waiting``: "not homed") until ``~/home`` has run:
+it calls ``homing_service`` (the drive's or a homing controller's
+std_srvs/Trigger) or, without one, references the axes where they stand; the
+reference is lost with the broadcaster (no joint_states for a second). The
+limits are the joints' positions after homing, as a CNC's are.
+
 Threads: the hardware side runs in a thread of its own, on the steady clock:
 during a run, a tick every 1/``rate`` s sends the command, and every 5 ms
 the clock and takes the measured states that came (checks them, queues them
@@ -70,6 +82,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 import rclpy
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.client import Client
 from rclpy.task import Future
 from rosgraph_msgs.msg import Clock
@@ -80,7 +93,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from winder.contract.cdr import CommandPayload, JointStateReader, clock_payload, trajectory_payload
 from winder.contract.pacing import CommandHistory, Pacer, following_error
-from winder.contract.params import BRIDGE_SPECS, check_bridge
+from winder.contract.params import BRIDGE_SPECS, NO_LIMIT, check_bridge
 from winder.contract.stream import JobPlan
 from winder.contract.topics import TOPIC_CLOCK, TOPIC_STEP_TIMES, check_node_name
 from winder.motion.job import AXES
@@ -178,6 +191,10 @@ class BridgeNode(StepConsumer):
         self.foreign_states: dict[str, int] = {}  # joint_states ignored, by the publishing node
         self.graph_look_ns = 0  # when the graph was last asked for joint_states' publishers
         self.hardware_bad = ""  # the broadcaster's last message between runs is no position
+        self.idle_pos = np.full(len(values["joints"]), np.nan)  # the joints as last measured between runs
+        self.homed = False  # ~/home ran, and the broadcaster was not lost since
+        self.homing_clients: dict[str, Client] = {}
+        self.create_service(Trigger, "~/home", self.on_home)
         self.guard = self.create_guard_condition(self.on_alarm)
         self.reader = JointStateReader(values["joints"])
         self.abort_clients: dict[str, Client] = {}
@@ -239,6 +256,12 @@ class BridgeNode(StepConsumer):
         self.joints: list[str] = list(values["joints"])
         self.axes: list[str] = list(values["axes"])
         self.limits = np.array([values[f"max_following_error.{a}"] for a in self.axes])
+        self.pos_lo = np.array([values[f"min_position.{a}"] for a in self.axes])
+        self.pos_hi = np.array([values[f"max_position.{a}"] for a in self.axes])
+        self.require_homing = bool(values["require_homing"])
+        self.homing_service = str(values["homing_service"])
+        #: the job's extent in each joint's step counts (its corners' least and greatest)
+        self.extent = (np.zeros(len(self.axes), np.int64), np.zeros(len(self.axes), np.int64))
         self.units = [BRIDGE_SPECS[f"max_following_error.{a}"].unit for a in self.axes]
         broadcaster = check_node_name(values["broadcaster"], self.get_namespace(), "broadcaster")
         self.broadcaster = broadcaster
@@ -272,8 +295,13 @@ class BridgeNode(StepConsumer):
         which = [AXES.index(a) for a in values["axes"]]
         start = np.array([plan.segments[0].start[i] if plan.segments else 0 for i in which], np.int64)
         pacer = Pacer([2 + i for i in which], start, np.array([plan.joint_step[i] for i in which]))
+        corners = np.array(
+            [c for seg in plan.segments for c in self.corners(seg.start, seg.pieces or (seg.delta,))]
+            or [[0, 0, 0]]
+        )[:, which]
         with self.lock:
             self.new_run(values)
+            self.extent = (corners.min(axis=0), corners.max(axis=0))
             self.pacer = pacer
             self.history = CommandHistory(pacer.position.copy())
             self.outbox.clear()
@@ -303,6 +331,16 @@ class BridgeNode(StepConsumer):
             "joint_state_timeout": self.timeout_ns / 1e9,
             "settle_time": self.settle_ns / 1e9,
         }
+
+    @staticmethod
+    def corners(start: tuple[int, ...], pieces: tuple[tuple[int, ...], ...]) -> list[list[int]]:
+        """A segment's corners (cell axis order, step counts): its start and
+        the end of each straight piece; it is straight between them."""
+        out, at = [list(start)], list(start)
+        for piece in pieces:
+            at = [a + d for a, d in zip(at, piece, strict=True)]
+            out.append(at)
+        return out
 
     def paces(self) -> bool:
         return True
@@ -414,6 +452,11 @@ class BridgeNode(StepConsumer):
         if self.plan is None and self.abort_client is None:
             self.abort_client = self.profile_abort_client()  # early: its replies match by a fault
         why = self.hardware_missing()
+        if why and self.homed:
+            self.homed = False
+            self.get_logger().warning(f"the axes' reference is lost ({why}): home them again (~/home)")
+        if not why and self.require_homing and not self.homed:
+            why = f"the axes are not homed (require_homing): call {self.get_fully_qualified_name()}/home"
         if why != self.missing_said:
             self.missing_said = why
             if why:
@@ -435,6 +478,63 @@ class BridgeNode(StepConsumer):
         if self.pub_cmd.get_subscription_count() == 0:
             return f"nobody subscribes to {self.bag_topics['commands'][0]}"
         return ""
+
+    # -- homing -------------------------------------------------------------------
+    async def on_home(self, _req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:
+        """~/home: refused during a run or without the hardware; else the
+        homing service called (if one is set) and, once it says so, the axes
+        are homed: the soft limits hold for the positions measured from now."""
+        try:
+            resp.success, resp.message = await self.home()
+        except Exception as exc:  # a reply, always: the caller would wait for ever
+            resp.success, resp.message = False, f"home failed: {type(exc).__name__}: {exc}"
+        (self.get_logger().info if resp.success else self.get_logger().warning)(resp.message)
+        return resp
+
+    async def home(self) -> tuple[bool, str]:
+        if self.plan is not None:
+            return False, f"home refused: run {self.plan.run_id or self.plan.job_id} is on"
+        values = self.settings.values()
+        why = self.hardware_missing()
+        if why:
+            return False, f"home refused: {why}"
+        service, name = str(values["homing_service"]), ""
+        if service:
+            name = service if service.startswith("/") else self.resolve_service_name(service)
+            client = self.homing_clients.get(name)
+            if client is None:
+                # a group of its own: the reply comes while ~/home's callback (the node's default,
+                # mutually exclusive group) waits for it, which would otherwise hold it back for ever
+                client = self.homing_clients[name] = self.create_client(
+                    Trigger, name, callback_group=MutuallyExclusiveCallbackGroup()
+                )
+            if not client.service_is_ready():
+                return (
+                    False,
+                    f"home refused: no service {name} (homing_service): is the homing controller up?",
+                )
+            reply = await client.call_async(Trigger.Request())
+            if reply is None or not reply.success:
+                return False, f"home failed: {name} said: {reply.message if reply else 'nothing'}"
+        self.homed = True
+        with self.lock:
+            at = self.idle_pos.copy()
+        where = ", ".join(
+            f"{j} {x:.6g} {u}" for j, x, u in zip(self.joints, at.tolist(), self.units, strict=True)
+        )
+        limits = [
+            f"{a} [{lo:g}, {hi:g}] {u}"
+            for a, lo, hi, u in zip(
+                self.axes,
+                [values[f"min_position.{a}"] for a in self.axes],
+                [values[f"max_position.{a}"] for a in self.axes],
+                self.units,
+                strict=True,
+            )
+            if lo > -NO_LIMIT or hi < NO_LIMIT
+        ]
+        how = f"by {name}" if service else f"where they stand: {where}"
+        return True, f"homed {how}; soft limits: {', '.join(limits) or 'none set'}"
 
     # -- the command thread --------------------------------------------------------
     def command_loop(self) -> None:
@@ -601,6 +701,8 @@ class BridgeNode(StepConsumer):
         self.hardware_bad = bad
         if not bad:
             self.heard_ns = now
+            seen = ~np.isnan(got[1])
+            self.idle_pos[seen] = got[1][seen]
 
     def no_position(self, pos: Any) -> str:
         """Why a measurement's positions (NaN: a joint not in it) are no
@@ -743,6 +845,8 @@ class BridgeNode(StepConsumer):
         if self.origin_here:  # the job starts where the joints are
             self.pacer.set_origin(self.measured)
             self.history = CommandHistory(self.pacer.position.copy())
+        if self.beyond_limits():
+            return
         self.t0_ns = now
         self.wall_t0 = time.time_ns()  # the same instant on the system clock: the trajectories' stamps
         self.point_t, self.point_pos = self.point_t[:0], self.point_pos[:0]
@@ -754,6 +858,34 @@ class BridgeNode(StepConsumer):
             f"run armed: commanding {', '.join(self.joints)} at {self.rate:g} Hz{batches} "
             f"on {self.bag_topics['commands'][0]}"
         )
+
+    def beyond_limits(self) -> bool:
+        """(Under the lock, at arming.) The job's extent from the run's origin
+        against the soft limits: a fault naming the first joint it would take
+        beyond one (True), before any command."""
+        assert self.pacer is not None
+        lo = self.pacer.offset + self.extent[0] * self.pacer.step_len
+        hi = self.pacer.offset + self.extent[1] * self.pacer.step_len
+        for j in range(len(self.joints)):
+            for side, at, limit, past in (
+                ("min", lo[j], self.pos_lo[j], lo[j] < self.pos_lo[j]),
+                ("max", hi[j], self.pos_hi[j], hi[j] > self.pos_hi[j]),
+            ):
+                if past:
+                    unit = self.units[j]
+                    self.raise_fault(
+                        f"servo fault: the run cannot start: the job takes joint {self.joints[j]} "
+                        f"({self.axes[j]} axis) to {at:.6g} {unit}, beyond {side}_position.{self.axes[j]} = "
+                        f"{limit:g} {unit} (soft limit); nothing was commanded",
+                        {
+                            "joint": self.joints[j],
+                            "axis": self.axes[j],
+                            "at": f"{at:.6g}",
+                            "limit": f"{limit:g}",
+                        },
+                    )
+                    return True
+        return False
 
     def raise_fault(self, text: str, values: dict[str, object]) -> None:
         """(Under the lock, in the thread.) No further command at once; the

@@ -573,6 +573,8 @@ class _NamesSpec(Spec):
 #: The unit, default and largest value of each axis' following-error limit
 #: (winder.motion.job: feed in m, fork and pole in rad).
 _FOLLOWING_ERROR = {"feed": ("m", 1e-3, 1.0), "fork": ("rad", 0.2, 100.0), "pole": ("rad", 0.05, 100.0)}
+#: a soft limit this far out is none (rad or m: no winding axis goes there)
+NO_LIMIT = 1e9
 
 #: The settings of the ros2_control bridge (winder_bridge's bridge_node): the
 #: consumer's, and how it drives a forward_command_controller and watches the
@@ -691,6 +693,40 @@ BRIDGE_SPECS = {
         )
         for axis in AXES
     },
+    **{
+        f"{side}_position.{axis}": Spec(
+            f"{side}_position.{axis}",
+            float,
+            sign * NO_LIMIT,
+            f"{axis} axis: soft limit, the {'lowest' if side == 'min' else 'highest'} position a run may "
+            f"command (the joint's position, {unit}); a run whose job would pass it is refused before its "
+            f"first command. {sign * NO_LIMIT:g} = none",
+            unit,
+            -NO_LIMIT,
+            NO_LIMIT,
+        )
+        for axis in AXES
+        for side, sign in (("min", -1.0), ("max", 1.0))
+        for unit in (_FOLLOWING_ERROR[axis][0],)
+    },
+    **_table(
+        Spec(
+            "require_homing",
+            bool,
+            False,
+            "a run is refused until the axes are homed (~/home) since the node started or since the "
+            "broadcaster was last lost; without it the broadcaster's positions are taken as absolute",
+        ),
+        Spec(
+            "homing_service",
+            str,
+            "",
+            "the std_srvs/Trigger service ~/home calls to home the axes (relative to this node's namespace, "
+            "or /full/name); empty: the axes are referenced where they stand (absolute encoders)",
+            pattern=r"(/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*)?",
+            pattern_text="a service name, or empty",
+        ),
+    ),
     **CONSUMER_SPECS,
 }
 
@@ -719,6 +755,13 @@ def check_bridge(values: dict[str, Any], namespace: str | None = None) -> None:
             f"batch={values['batch']:g} is invalid with rate={values['rate']:g}: a trajectory must hold at "
             f"least one point (batch >= 1/rate = {1 / values['rate']:g} s)"
         )
+    for axis in AXES:
+        lo, hi = values.get(f"min_position.{axis}", -NO_LIMIT), values.get(f"max_position.{axis}", NO_LIMIT)
+        if not lo < hi:
+            raise SpecError(
+                f"min_position.{axis}={lo:g} is invalid with max_position.{axis}={hi:g}: the soft limits "
+                "must leave a range (min < max)"
+            )
     joints, axes = values["joints"], values["axes"]
     if len(axes) != len(joints):
         raise SpecError(
