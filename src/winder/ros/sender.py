@@ -172,6 +172,12 @@ class SenderExecutor(SingleThreadedExecutor):
     """rclpy's single-threaded executor, but the messages of an
     :func:`attributed` subscription are taken with their publisher's GID."""
 
+    def __init__(self, **kwargs: Any) -> None:
+        # rclpy's finaliser reads it: a signal that shuts the context down while
+        # __init__ runs would leave it unset (an AttributeError printed at exit)
+        self._sigint_gc = None  # type: ignore[assignment]
+        super().__init__(**kwargs)
+
     def _take_subscription(self, sub: Subscription) -> Any:
         taker: _Taker | None = getattr(sub, "winder_taker", None)
         if taker is None:
