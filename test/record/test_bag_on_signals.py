@@ -22,7 +22,7 @@ import time
 from pathlib import Path
 
 import pytest
-from conftest import BIN, next_domain, release_domain, rosbags_read
+from conftest import BIN, Procs, next_domain, release_domain, rosbags_read
 from support import wait
 from support.bags import mcap_size
 from support.cli import run_cli
@@ -215,3 +215,69 @@ def test_the_next_run_removes_a_sigkilled_open(tmp_path: Path) -> None:
     rec = BagRecorder(bag_dir / "run2", {"/winder/job": "std_msgs/msg/String"})
     rec.close()
     assert sorted(os.listdir(bag_dir)) == ["run2"]
+
+
+#: a job that runs far longer than the test waits for: the bag is open when its writer is killed
+LONG_JOB = ["--job-id", "killed", "--turns-per-layer", "20", "--layers", "10", "--poles", "4"]
+
+
+def test_a_bag_left_unclosed_by_a_sigkill_is_named_with_its_mend(procs: Procs, tmp_path: Path) -> None:
+    """``kill -9`` of the one-process cell (``winder_container``) the moment
+    its run's bag appears: the bag is left unclosed (rosbags does not open
+    it). ``winder run`` says so in its one error line,
+    naming ``winder bag recover <bag>``; so do the next start of a sim node
+    recording into the same bag_dir, the next ``winder run`` there and
+    ``winder analyze``; ``winder play`` and ``winder resim`` refuse it in
+    one line naming the same. Once recovered, nothing names it any more."""
+    from winder.record.bag import unclosed_bags
+
+    bag_dir = tmp_path / "bags"
+    cell = procs.launch(
+        [str(BIN / "winder"), "run", "--one-process", "--bag-dir", str(bag_dir), *LONG_JOB], "run"
+    )
+    log = lambda: procs.log(cell)  # noqa: E731 - what the cell said, if a wait fails
+    visible = lambda: [e for e in entries(bag_dir) if not e.startswith(".")]  # noqa: E731
+    wait.until(visible, 60, "the run's bag directory", heard=log, poll=0, running=cell)
+    [container] = [pid for pid, cmd in children(cell.pid).items() if "winder_container" in cmd]
+    os.kill(container, signal.SIGKILL)
+    code = cell.wait(timeout=60)
+    [name] = visible()
+    bag = bag_dir / name
+    mend = f"`winder bag recover {bag}`"
+    said = log()
+    assert code != 0 and "Traceback" not in said, said
+    [failed] = [line for line in said.splitlines() if line.startswith("winder run:")]
+    assert "winder_container exited" in failed and mend in failed, said
+    with pytest.raises(Exception):  # noqa: B017 - whichever the reference reader raises
+        rosbags_read(bag)
+    assert unclosed_bags(bag_dir) == [bag]
+    # the next start of a consumer recording there: one line, in its log
+    sim = procs.start("sim_node", "-p", f"bag_dir:={bag_dir}")
+    line = next(
+        x for x in wait.log_has(lambda: procs.log(sim), mend, 30, running=sim).splitlines() if mend in x
+    )
+    assert "left unclosed" in line and str(bag_dir) in line, line
+    procs.stop(sim)
+    # the next `winder run` there says it before it starts its cell
+    small = ["--job-id", "next", "--turns-per-layer", "2", "--layers", "1", "--poles", "1"]
+    r = subprocess.run(
+        [str(BIN / "winder"), "run", "--bag-dir", str(bag_dir), *small],
+        env=procs.env,
+        capture_output=True,
+        text=True,
+        timeout=240,
+        stdin=subprocess.DEVNULL,
+    )
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert any(mend in x and "WARNING" in x for x in r.stdout.splitlines()), r.stdout
+    # the commands that read it: analyze reads it as far as it is whole and names the mend,
+    # play and resim refuse it in one line naming it
+    r = run_cli("analyze", "--no-plots", str(bag))
+    assert r.returncode == 0 and mend in r.stdout, r.stdout + r.stderr
+    for command in ("play", "resim"):
+        r = run_cli(command, str(bag))
+        assert r.returncode == 2 and "Traceback" not in r.stderr, r.stdout + r.stderr
+        assert len(r.stderr.strip().splitlines()) == 1 and mend in r.stderr, r.stderr
+    r = run_cli("bag", "recover", str(bag))
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert unclosed_bags(bag_dir) == []  # recovered beside it: not named again

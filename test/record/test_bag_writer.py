@@ -65,3 +65,54 @@ def test_unknown_compression_is_a_one_line_error(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match=expected):
         BagRecorder(tmp_path / "b", TOPICS, compression="lz5")
     assert not (tmp_path / "b").exists()
+
+
+def test_a_bag_its_writer_left_unclosed_is_found_and_a_live_or_closed_one_is_not(tmp_path: Path) -> None:
+    """A writer SIGKILLed mid-bag leaves it unclosed (metadata.yaml says
+    ``recording``, the .mcap has no summary): :func:`unclosed_bags` finds it
+    and :func:`unclosed_line` names ``winder bag recover`` for it. A bag
+    being written now (its writer holds the file's lock) is not taken for
+    one, nor a closed one, nor one already recovered beside it."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    from winder.record.bag import being_written, unclosed, unclosed_bags, unclosed_line
+    from winder.record.raw import recover
+
+    bag_dir = tmp_path / "bags"
+    first = [("/winder/job", 0, string_payload('{"job": "x"}'))]
+    killed = bag_dir / "killed"
+    script = f"""
+import os, signal
+import numpy as np
+from pathlib import Path
+from winder.contract.cdr import MultiArrayCodec
+from winder.contract.stream import TIMED_COLUMNS
+from winder.record.bag import BagRecorder
+rec = BagRecorder(Path({str(killed)!r}), {TOPICS!r}, first={first!r})
+codec = MultiArrayCodec(TIMED_COLUMNS, np.int64)
+for i in range(20):  # several chunks reach the file before the kill
+    rec.write("/winder/step_times", 1000 * i, codec.encode(np.full((8192, 5), i, np.int64)))
+rec._hand_over()
+rec._queue.put(None)
+rec._thread.join()  # all of it in the file but for the pending chunk, the summary never written
+os.kill(os.getpid(), signal.SIGKILL)
+"""
+    r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert r.returncode == -signal.SIGKILL, r.stderr
+    live = BagRecorder(bag_dir / "live", TOPICS, first=first)
+    try:
+        done = BagRecorder(bag_dir / "done", TOPICS, first=first)
+        done.close()
+        assert unclosed(killed) and being_written(bag_dir / "live") and not unclosed(bag_dir / "live")
+        assert not being_written(killed) and not unclosed(bag_dir / "done")
+        assert unclosed_bags(bag_dir) == [killed]
+    finally:
+        live.close()
+    assert unclosed_bags(bag_dir) == [killed]  # closed now, as "done"
+    line = unclosed_line(unclosed_bags(bag_dir), f"bag_dir {bag_dir}")
+    assert "\n" not in line and f"`winder bag recover {killed}`" in line, line
+    recover(killed)  # into killed_recovered, beside it
+    assert unclosed_bags(bag_dir) == [] and os.path.isdir(f"{killed}_recovered")

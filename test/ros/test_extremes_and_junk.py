@@ -561,6 +561,8 @@ def test_a_full_disk_mid_job_closes_the_job_and_keeps_what_was_written(
         spin_until(ros, lambda: closed() is not None, 120, f"the job to close on the full disk ({kind})")
         message, _ = closed()  # type: ignore[misc]
         assert "recording stopped" in message and ("disk full" in message or "file size limit" in message)
+        # no promise a full disk cannot keep: the bag is not closed, and the message says what mends it
+        assert "stays readable" not in message and "`winder bag recover " in message, message
         assert sim.poll() is None, "the sim node died"
         wait.spin_for(ros, 1.0)  # the subject is what does not happen: the node does not die a moment later
         assert sim.poll() is None

@@ -443,7 +443,17 @@ def analyze(run: Run, stride_time: float = STRIDE_TIME, digested: Digest | None 
             if run.recovered
             else f"sim state {run.report.get('state', 'unknown')}"
         )
-        notes.append(f"incomplete recording ({why}): figures cover what was recorded")
+        mend = ""
+        if run.recovered and not run.closed:
+            from winder.record.bag import being_written
+
+            mend = (
+                "; it is still being recorded"
+                if being_written(run.path)
+                else f"; it was left unclosed (its writer killed, or its disk full): `winder bag recover "
+                f"{run.path}` writes it out closed, for ros2 bag and Foxglove"
+            )
+        notes.append(f"incomplete recording ({why}): figures cover what was recorded{mend}")
     simulated = int(_num(run.report, "steps_done", -1))
     reported_total = int(_num(run.report, "steps_total", -1))
     if 0 <= reported_total != run.plan.total_steps:

@@ -145,10 +145,16 @@ def cmd_bag_recover(args: argparse.Namespace) -> int:
     """Write the readable part of a cut-short or damaged recording as a closed
     bag, and say what it holds and why it is incomplete. Complete means: the
     file whole, no damaged chunk, and (a winder run) the run's final report."""
+    from winder.record.bag import being_written
     from winder.record.reader import read_raw, recover
 
     try:
         raw = read_raw(args.bag)
+        if being_written(raw.path):
+            raise ValueError(
+                f"{raw.path}: still being recorded (its writer holds it): recover it once its writer "
+                "has ended"
+            )
         told, final, wall0 = _run_told(args.bag)
         total = sum(raw.counts.values())
         if raw.closed and not raw.recovered and not raw.damaged:
@@ -268,9 +274,11 @@ def register(sub: argparse._SubParsersAction[Any]) -> None:
     r = bag_sub.add_parser(
         "recover",
         help="write the whole messages of a cut-short recording as a complete bag",
-        description="Read a recording whose MCAP file was cut short (no footer, no metadata.yaml) "
-        "up to its first incomplete record and write every whole message into a new, closed "
-        "rosbag2 directory BAG_recovered.",
+        description="Read a recording whose MCAP file was cut short (no summary and footer: its "
+        "writer was SIGKILLed, crashed or lost its power, or its disk filled; its metadata.yaml, if "
+        "any, still says winder_bag: recording) up to its first incomplete record and write every "
+        "whole message into a new, closed rosbag2 directory BAG_recovered, which ros2 bag, Foxglove "
+        "and rosbags open. A bag closed at SIGINT or SIGTERM needs none of this.",
     )
     r.add_argument("bag", metavar="BAG", help="bag directory or .mcap file")
     r.add_argument("--output", default=None, help="the new bag directory (default: BAG_recovered)")

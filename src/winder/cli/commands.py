@@ -223,11 +223,17 @@ def cmd_run(args: argparse.Namespace) -> int:
                     label = {"sim": "external consumer", "profile": "external profile"}[name]
                     print(f"  {label:<18} {told}  (set through its parameter services before the job)")
             print(f"  DDS profile        {describe_profile()}")
-        if sim["record"] and "sim" not in external:
+        from winder.record.bag import unclosed_bags, unclosed_line
+
+        local_bags = sim["record"] and "sim" not in external
+        if local_bags:
             probe = next(p for p in (bag_dir, *bag_dir.parents) if p.exists())
             free = shutil.disk_usage(probe).free
             room = f"{free / 2**30:.1f} GiB" if free >= 2**30 else f"{free / 2**20:.1f} MiB"
             print(f"  recording into     {bag_dir}  ({room} free)")
+        left_before = unclosed_bags(bag_dir) if local_bags else []
+        if left_before:  # an earlier run's consumer SIGKILLed, or its disk full
+            print(f"  WARNING            {unclosed_line(left_before, 'bag_dir')}")
         domain, discovery, source = cell_network()
         server = os.environ.get(DISCOVERY_SERVER_KEY, "").strip()
         if server:  # Fast DDS makes every participant a client of the server(s) named there
@@ -260,7 +266,9 @@ def cmd_run(args: argparse.Namespace) -> int:
         if view is None or view.node is None:  # the cell is down, every node of this process destroyed
             leave_when_done()
         bar.close()
-        return report_run(result, time.monotonic() - t0, stops=bool(stops))
+        # this run's bag, if its consumer was killed (or its disk filled) before it was closed
+        left = [b for b in unclosed_bags(bag_dir) if b not in left_before] if local_bags else []
+        return report_run(result, time.monotonic() - t0, stops=bool(stops), unclosed=left)
     finally:
         interrupts.restore()
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -37,18 +38,23 @@ def _told_by_bag(bag: str) -> tuple[str, str]:
     return stops_text(run.plan), commands_text(run.events, run.plan)
 
 
-def report_run(result: Any, wall: float, command: str = "run", *, stops: bool = True) -> int:
+def report_run(
+    result: Any, wall: float, command: str = "run", *, stops: bool = True, unclosed: Sequence[Path] = ()
+) -> int:
     """The summary of a finished run (``winder run``, ``winder resim``) and
     the exit status (:mod:`winder.cli.exits`): done, aborted cleanly, a node
     died before the run ended, or failed (with errors, or no final report).
     ``stops``: the job has programmed stops (else the bag is read for the
-    summary's stops and commands only when the consumer booked commands)."""
+    summary's stops and commands only when the consumer booked commands).
+    ``unclosed``: the run's bag, if its consumer left it unclosed (killed, a
+    full disk: :func:`winder.record.bag.unclosed`), named with what mends it."""
     s = result.summary
     if not s:
-        print(
-            f"winder {command}: the cell did not finish: {result.message} (node logs in {result.log_dir})",
-            file=sys.stderr,
-        )
+        from winder.record.bag import unclosed_line
+
+        left = f"; {unclosed_line(unclosed)}" if unclosed else ""
+        logs = f"(node logs in {result.log_dir})"
+        print(f"winder {command}: the cell did not finish: {result.message} {logs}{left}", file=sys.stderr)
         if getattr(result, "occupied", False) or getattr(result, "refused", False):
             return EXIT_BAD_INPUT  # another cell in the namespace, or a setting or start refused: nothing ran
         return EXIT_NODE_DIED if result.node_died else EXIT_FAILED
@@ -100,7 +106,9 @@ def report_run(result: Any, wall: float, command: str = "run", *, stops: bool = 
     if result.errors:
         print(f"  ERROR reports      {len(result.errors)}, first: {result.errors[0]}")
     # messages from nodes that are not the cell's, refused: by each node of the cell, and this command
-    foreign = getattr(result, "intruders", "") or x.get("intruders", "")
+    # (the cell's own nodes left out: winder.ros.cell; the consumer's report is read only by a
+    # caller whose result does not say, so that what was left out does not come back through it)
+    foreign = result.intruders if hasattr(result, "intruders") else x.get("intruders", "")
     if foreign:
         print(f"  ignored, foreign   {foreign}")
     if r.state == "aborted" and not r.errors and not result.errors:

@@ -9,6 +9,7 @@ that Foxglove, ``ros2 bag`` and rosbags open the bag without winder installed.
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import os
 import queue
 import re
@@ -34,10 +35,14 @@ __all__ = [
     "STATE_KEY",
     "BagRecorder",
     "bag_qos",
+    "being_written",
     "cdr_exact",
     "new_bag_path",
     "remove_stale_staging",
     "signals_held",
+    "unclosed",
+    "unclosed_bags",
+    "unclosed_line",
 ]
 
 
@@ -53,7 +58,6 @@ def signals_held() -> Iterator[None]:
         yield
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, old)
-
 
 
 def new_bag_path(directory: Path, job_id: str) -> Path:
@@ -229,6 +233,121 @@ def remove_stale_staging(directory: Path) -> list[Path]:
     return removed
 
 
+# -- bags a writer left unclosed ------------------------------------------------------
+#
+# A bag's .mcap is locked (flock, exclusive) by its writer from the bag's open
+# to its close: the lock goes with the writer's process, however it ends. A bag
+# whose metadata.yaml still says ``winder_bag: recording`` while nobody holds
+# that lock, and whose .mcap does not end with the MCAP magic, was left
+# unclosed: its writer was SIGKILLed (or crashed, or lost its power), or its
+# disk filled up. winder's reader reads such a bag as far as it is whole;
+# rosbags, ``ros2 bag`` and Foxglove refuse it until ``winder bag recover``
+# writes it out closed.
+
+_STATE_LINE = re.compile(rf"^\s*{STATE_KEY}:\s*['\"]?(?P<state>[A-Za-z_-]+)['\"]?\s*$", re.M)
+_RECOVERED_FROM = re.compile(r"^\s*winder_recovered_from:\s*['\"]?(?P<name>[^'\"\s]+)['\"]?\s*$", re.M)
+#: metadata.yaml larger than this is not looked into (rosbag2 writes a few kB per topic)
+_METADATA_BYTES = 1 << 20
+_MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+
+def _metadata_text(bag: Path) -> str:
+    meta = bag / "metadata.yaml"
+    try:
+        if meta.is_symlink() or meta.stat().st_size > _METADATA_BYTES:
+            return ""
+        return meta.read_text(errors="replace")
+    except OSError:
+        return ""
+
+
+def _mcap_files(bag: Path) -> list[Path]:
+    """The .mcap files of a bag (its directory, its metadata.yaml or the file itself)."""
+    try:
+        if bag.is_file():
+            return [bag] if bag.suffix == ".mcap" else _mcap_files(bag.parent)
+        return sorted(p for p in bag.glob("*.mcap") if p.is_file() and not p.is_symlink())
+    except OSError:
+        return []
+
+
+def being_written(bag: Path) -> bool:
+    """Whether a writer holds the bag's .mcap now (it is being recorded)."""
+    for f in _mcap_files(Path(bag)):
+        try:
+            fd = os.open(f, os.O_RDONLY | os.O_NOFOLLOW)
+        except OSError:
+            continue
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return True
+        except OSError:  # a file system without locks: nobody is known to hold it
+            continue
+        finally:
+            os.close(fd)  # (and its shared lock with it)
+    return False
+
+
+def _ends_whole(f: Path) -> bool:
+    try:
+        with f.open("rb") as fh:
+            size = fh.seek(0, os.SEEK_END)
+            if size < 2 * len(_MCAP_MAGIC):
+                return False
+            fh.seek(size - len(_MCAP_MAGIC))
+            return fh.read(len(_MCAP_MAGIC)) == _MCAP_MAGIC
+    except OSError:
+        return False
+
+
+def unclosed(bag: Path) -> bool:
+    """Whether ``bag`` (a winder bag directory) was left unclosed by its
+    writer: its metadata.yaml says ``recording``, no writer holds it, and its
+    .mcap lacks the MCAP end (see above). ``winder bag recover`` mends it."""
+    bag = Path(bag)
+    m = _STATE_LINE.search(_metadata_text(bag))
+    if m is None or m["state"] != "recording":
+        return False
+    files = _mcap_files(bag)
+    if not files or all(_ends_whole(f) for f in files):
+        return False  # killed between the file's close and metadata.yaml's: the file is whole
+    return not being_written(bag)
+
+
+def unclosed_bags(directory: Path) -> list[Path]:
+    """The bags directly under ``directory`` that a writer left unclosed
+    (:func:`unclosed`), sorted; a bag a recovered copy beside it comes from
+    (``winder bag recover``'s ``<bag>_recovered``) is not counted again."""
+    try:
+        entries = sorted(p for p in Path(directory).iterdir() if p.is_dir() and not p.name.startswith("."))
+    except OSError:
+        return []
+    recovered = set()
+    for entry in entries:
+        m = _RECOVERED_FROM.search(_metadata_text(entry)) if entry.name.endswith("_recovered") else None
+        if m is not None:
+            recovered.add(m["name"])
+    return [e for e in entries if e.name not in recovered and unclosed(e)]
+
+
+def unclosed_line(bags: Sequence[Path], where: str = "") -> str:
+    """One line saying that ``bags`` were left unclosed and what mends them;
+    ``where``: the directory they are in, named first ("" if not said)."""
+    if not bags:
+        return ""
+    head = f"{where} holds " if where else ""
+    if len(bags) == 1:
+        return (
+            f"{head}a bag left unclosed (its writer was killed or its disk filled; ros2 bag and Foxglove "
+            f"cannot open it): run `winder bag recover {bags[0]}`"
+        )
+    return (
+        f"{head}{len(bags)} bags left unclosed (their writer was killed or their disk filled; ros2 bag "
+        f"and Foxglove cannot open them): run `winder bag recover BAG` on each: {', '.join(map(str, bags))}"
+    )
+
+
 #: Payload bytes the writer thread may have queued before write() waits for it.
 QUEUE_BYTES = 64 << 20
 #: Messages are handed to the writer thread in batches of this many bytes or messages.
@@ -250,12 +369,18 @@ class BagRecorder:
     (``.<name>.opening-<pid>``), with the connections, the messages of
     ``first`` (the run's description) in a first chunk on disk, and a
     metadata.yaml that says ``winder_bag: recording`` in its ``custom_data``,
-    then renamed. Whatever ends the writer after that (SIGKILL included), the
-    bag has its metadata and a readable head (``winder bag recover``); a
+    then renamed. :meth:`close` writes the summary and metadata.yaml again
+    (temp file + rename, ``winder_bag: closed``): a bag closed so (at the
+    end of a run, at SIGINT or SIGTERM) every reader opens. A writer that
+    ends without its close (SIGKILL, a crash, a power loss) or whose disk
+    fills up leaves its bag unclosed: its metadata and a readable head, and
+    every whole record that reached the disk, which winder's reader reads
+    and ``winder bag recover`` writes out closed, but no summary, so that
+    rosbags, ``ros2 bag`` and Foxglove refuse it (:func:`unclosed` finds
+    such a bag: the writer holds a lock on its .mcap while it is open). A
     staging directory left by a killed writer is removed by the next bag
-    opened beside it. :meth:`close` writes the summary and metadata.yaml
-    again (temp file + rename, ``winder_bag: closed``); :meth:`discard`
-    removes the directory (a job that never ran leaves nothing behind).
+    opened beside it. :meth:`discard` removes the directory (a job that
+    never ran leaves nothing behind).
 
     The file is written by a thread of its own: :meth:`write` queues the
     payload (bytes, not to be changed afterwards) and returns, while chunk
@@ -328,6 +453,10 @@ class BagRecorder:
         self._writer = writer
         writer.open()
         storage = writer._storage()
+        # held till the file is closed, or its process ends however it ends: a bag whose
+        # metadata says "recording" and whom nobody holds was left unclosed (unclosed())
+        with contextlib.suppress(OSError):  # a file system without locks
+            fcntl.flock(storage.bio.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
         if self.compression != "none":
             storage.compression = self.compression
         self._storage = storage
@@ -423,14 +552,20 @@ class BagRecorder:
         if self._writer is not None:
             writer, self._writer = self._writer, None
             with signals_held():
-                self._stop()  # everything queued is in the file
-                if self._error is None:
-                    self._sync(writer)
-                    writer.set_custom_data(STATE_KEY, "closed")
-                    writer.close()  # the .mcap's summary, then metadata.yaml (temp file + rename)
-                else:  # what reached the file stays readable
+                try:
+                    self._stop()  # everything queued is in the file
+                    if self._error is None:
+                        self._sync(writer)
+                        writer.set_custom_data(STATE_KEY, "closed")
+                        writer.close()  # the .mcap's summary, then metadata.yaml (temp file + rename)
+                    else:  # the summary (if the disk takes it); metadata.yaml keeps saying "recording"
+                        with contextlib.suppress(Exception):
+                            writer.close()
+                finally:
+                    # the file closed (its lock let go) even when its close failed: the bag
+                    # is then one its writer left unclosed (unclosed(), winder bag recover)
                     with contextlib.suppress(Exception):
-                        writer.close()
+                        self._storage.bio.close()
             if self._error is not None:
                 raise RuntimeError(f"bag {self.path}: writing failed: {self._error}") from self._error
 

@@ -308,6 +308,7 @@ class StreamingMcapStorage:
         bio.close()
 
     def abort(self) -> None:
-        """Stop without a summary: the chunks written so far stay readable
-        (winder.record.raw recovers them)."""
+        """Stop without a summary: the chunks written so far stay in the file,
+        which winder.record.raw reads and ``winder bag recover`` writes out
+        closed; no other reader opens it without its summary."""
         self.bio.close()

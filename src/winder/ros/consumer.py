@@ -91,7 +91,14 @@ from winder.contract.topics import (
     status_values,
 )
 from winder.contract.trust import Intruders
-from winder.record.bag import BagRecorder, new_bag_path, run_bag_path, signals_held
+from winder.record.bag import (
+    BagRecorder,
+    new_bag_path,
+    run_bag_path,
+    signals_held,
+    unclosed_bags,
+    unclosed_line,
+)
 from winder.ros.chunks import TIMED_CDR
 from winder.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from winder.ros.managed import ManagedNode
@@ -218,6 +225,23 @@ class StepConsumer(ManagedNode):
             self.diag.publish(
                 "job", ERROR, str(self.settings.blocked()), status_values("blocked", role="consumer")
             )
+        else:
+            self.check_bag_dir()
+
+    def check_bag_dir(self) -> None:
+        """At start: the bags in ``bag_dir`` that a writer left unclosed (an
+        earlier run of this node SIGKILLed, a full disk), named in one line
+        with what mends them; the rest of the cell goes on as ever."""
+        values = self.settings.values()
+        if not values.get("record"):
+            return
+        try:
+            directory = bag_directory(values["bag_dir"])
+        except ValueError:
+            return
+        said = unclosed_line(unclosed_bags(directory), f"bag_dir {directory}")
+        if said:
+            self.get_logger().warning(said)
 
     #: whether this consumer publishes ``winder/sim_config`` (:meth:`begin` returns it)
     configures = True
@@ -800,7 +824,7 @@ class StepConsumer(ManagedNode):
             self.record("diagnostics", self.t_ns, serialize_message(final))
             try:
                 self.bag.close()
-            except (RuntimeError, OSError) as exc:  # what reached the file stays readable
+            except (RuntimeError, OSError) as exc:  # left unclosed: winder bag recover reads it
                 self.recording_failed(exc)
                 report, level, text = self.final_report(complete)  # no longer complete
                 final = self.diag.status("job", level, text, report.to_values())
@@ -860,7 +884,14 @@ class StepConsumer(ManagedNode):
         errno_ = getattr(cause, "errno", None)
         why = {28: "disk full", 27: "file size limit reached"}.get(errno_ or 0, one_line(cause))
         self.record_failure = why
-        self.error(f"recording stopped: {why}; what was written stays readable, the job is closed incomplete")
+        bag = self.bag.path if self.bag is not None else None
+        kept = (
+            f"the bag {bag} keeps what reached the disk but cannot be closed: `winder bag recover {bag}` "
+            "writes it out closed (winder's reader reads it as it is)"
+            if bag is not None
+            else "the bag keeps what reached the disk"
+        )
+        self.error(f"recording stopped: {why}; {kept}; the job is closed incomplete")
 
     def error(self, why: str) -> None:
         self.errors.append(why)
@@ -1004,9 +1035,11 @@ class StepConsumer(ManagedNode):
         )
 
     def shutdown(self) -> None:
-        """Close the bag of a running run (Ctrl-C): readable, marked incomplete.
-        The bag is closed even when the run's books cannot be (the context
-        went down under them): its file must not stay without a summary."""
+        """Close the bag of a running run (Ctrl-C, SIGTERM, SIGHUP): closed,
+        readable by every reader, the run marked incomplete. The bag is closed
+        even when the run's books cannot be (the context went down under
+        them): its file must not stay without a summary. (A SIGKILL runs
+        nothing here: its bag is left unclosed, for ``winder bag recover``.)"""
         bag = self.bag
         try:
             if self.plan is not None and bag is not None:
@@ -1015,5 +1048,8 @@ class StepConsumer(ManagedNode):
             if bag is not None and bag.is_open:
                 try:
                     bag.close()
-                except (RuntimeError, OSError) as exc:  # what reached the file stays readable
-                    self.get_logger().error(f"bag {bag.path}: {one_line(exc)}")
+                except (RuntimeError, OSError) as exc:  # left unclosed: winder bag recover reads it
+                    self.get_logger().error(
+                        f"bag {bag.path}: {one_line(exc)}; left unclosed: `winder bag recover {bag.path}` "
+                        "writes it out closed"
+                    )

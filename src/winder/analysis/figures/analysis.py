@@ -312,10 +312,7 @@ def _title(run: Run) -> str:
     model = f"{run.sim_config.model} motor model" if run.sim_config else "no motor model"
     shaper = shaper_text(run.profile_config)
     ramp = f"{run.profile or '?'} profile" + (f", {shaper}" if shaper else "")
-    return (
-        f"{run.label}: {j.shape}, "
-        f"{ramp}, {model} ({_ending(run)})"
-    )
+    return f"{run.label}: {j.shape}, {ramp}, {model} ({_ending(run)})"
 
 
 def _ending(run: Run) -> str:
