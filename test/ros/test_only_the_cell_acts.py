@@ -227,3 +227,38 @@ def test_play_into_a_live_cell_is_refused_and_forced_changes_nothing(tmp_path: P
     assert "/winder_player" in out, out
     live_bag = rosbags_read(bag_of(out))
     assert len(live_bag["/winder/job"]) == 1
+
+
+def test_resim_into_a_live_cell_is_refused_in_one_line(tmp_path: Path, procs: Procs) -> None:
+    """``winder resim`` of a recording whose namespace holds a live cell is
+    refused as ``winder play`` refuses it: one line naming the live cell,
+    exit status 2, no sim node started and no bag written (it ended with
+    "sim_node exited with status 2", status 4, no reason); the live run goes
+    on undisturbed, done."""
+    recorded_run = winder_run(procs, tmp_path / "rec", *JOB)
+    assert recorded_run.returncode == 0, recorded_run.stderr
+    bag = bag_of(recorded_run.stdout)
+    live = long_run(procs, tmp_path / "live")
+    try:
+        recording(live, tmp_path / "live")  # the live cell is up once its run records
+        refused = subprocess.run(
+            [str(BIN / "winder"), "resim", str(bag), "--bag-dir", str(tmp_path / "resim")],
+            env=procs.env,
+            capture_output=True,
+            text=True,
+            timeout=120,
+            stdin=subprocess.DEVNULL,
+        )
+        out, err = finish(live, tmp_path / "live")
+    finally:
+        if live.poll() is None:
+            live.kill()
+    assert refused.returncode == 2, refused.stdout + refused.stderr
+    lines = refused.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in refused.stderr, refused.stderr
+    said = r"winder resim: error: a live cell runs in / \(/(interp|profile|sim)_node[^)]*\) and .*"
+    assert re.fullmatch(said, lines[0]) and "ROS_DOMAIN_ID" in lines[0], lines[0]
+    assert not (tmp_path / "resim").exists() or not any((tmp_path / "resim").iterdir())
+    assert live.returncode == 0, out + err
+    assert "  state              done" in out and "(missing 0, gaps 0)" in out, out
+    assert "ignored, foreign" not in out, out

@@ -168,7 +168,7 @@ def cmd_resim(args: argparse.Namespace) -> int:
     import time
     from pathlib import Path
 
-    from winder.cli.common import Progress, ros_imports, values_from_args
+    from winder.cli.common import Progress, UserError, ros_imports, values_from_args
     from winder.cli.summary import report_run
     from winder.contract.params import SIM_SPECS, bag_directory, check_sim
     from winder.contract.topics import (
@@ -229,18 +229,24 @@ def cmd_resim(args: argparse.Namespace) -> int:
     print(f"  changed            {what or 'nothing: the recorded settings'}")
     domain, discovery, dsource = cell_network()
     print(f"  ROS domain         {domain} ({dsource}), discovery {discovery}")
+    from winder.ros.player import CellLiveError
+
     bar = Progress(1.0, "re-simulating")
     t0 = time.monotonic()
-    _, result = resimulate(
-        rec,
-        run.plan.text,
-        source,
-        sim,
-        namespace=ns,
-        domain=domain,
-        progress=lambda frac, sim_t: bar.update(frac, f"sim {float(sim_t):7.2f} s"),
-    )
-    bar.close()
+    try:
+        _, result = resimulate(
+            rec,
+            run.plan.text,
+            source,
+            sim,
+            namespace=ns,
+            domain=domain,
+            progress=lambda frac, sim_t: bar.update(frac, f"sim {float(sim_t):7.2f} s"),
+        )
+    except CellLiveError as exc:  # refused as winder play refuses it
+        raise UserError(str(exc)) from None
+    finally:
+        bar.close()
     print(f"  source             {source}")
     return report_run(result, time.monotonic() - t0, "resim")
 

@@ -335,13 +335,13 @@ def run_player(
         with interrupts.held():  # no signal between init and a node whose thread spins
             rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
             player = Player(plan, rate=rate, node_namespace=_namespace_of(plan), start_paused=start_paused)
-        live = [] if force else live_cell(player.node, _namespace_of(plan))
-        if live:
-            ns = _namespace_of(plan) or "/"
-            raise CellLiveError(
-                f"a live cell runs in {ns} ({', '.join(live)}) and reads the topics this bag would "
-                f"publish: its run would take the recording's messages for its own; play into another "
-                f"namespace (--namespace /replay), or give --force"
+        if not force:
+            refuse_live_cell(
+                player.node,
+                _namespace_of(plan),
+                "reads the topics this bag would publish: its run would take the recording's messages "
+                "for its own",
+                "play into another namespace (--namespace /replay), or give --force",
             )
         if wait_subscribers > 0:
             missing = player.wait_for_subscribers(wait_subscribers, first_reader=first_reader)
@@ -395,6 +395,17 @@ def live_cell(node: Any, namespace: str, look: float = LIVE_LOOK) -> list[str]:
         if found or time.monotonic() > deadline:
             return [fully_qualified(*who) for who in found]
         time.sleep(0.05)
+
+
+def refuse_live_cell(node: Any, namespace: str, harm: str, instead: str) -> None:
+    """:class:`CellLiveError`, one line, if a live cell runs in ``namespace``
+    (:func:`live_cell`): what the command would do to it (``harm``) and what
+    to do instead. ``winder play`` and ``winder resim`` refuse so."""
+    live = live_cell(node, namespace)
+    if live:
+        raise CellLiveError(
+            f"a live cell runs in {namespace or '/'} ({', '.join(live)}) and {harm}; {instead}"
+        )
 
 
 def _namespace_of(plan: PlayPlan) -> str:

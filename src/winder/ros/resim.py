@@ -45,6 +45,7 @@ from winder.contract.topics import (
 from winder.record.replay import PlayPlan
 from winder.ros.cell import CellResult, CellWatch, NodeProcesses, _result, cell_environment, ros_args
 from winder.ros.chunks import TIMED_CDR
+from winder.ros.player import refuse_live_cell
 from winder.ros.qos import profile
 from winder.ros.sender import SenderExecutor
 
@@ -101,8 +102,18 @@ def resimulate(
         executor.add_node(node)  # (node.executor is a weak reference: this one keeps it)
         failure = ""
         try:
+            # before this node declares the interp and profile node's endpoints and a sim node
+            # starts: a live cell here would take them for its own (and its sim node would leave)
+            refuse_live_cell(
+                node,
+                namespace,
+                "would take the re-simulation's messages for its own, and not let its sim node join",
+                "re-simulate once that cell has stopped, or on another ROS_DOMAIN_ID",
+            )
             watch = CellWatch(node, namespace)
             watch.run_id = run_id
+            # this run's nodes: the sim node, and this one, which plays the interp and the profile node
+            watch.started = {"sim_node", node.get_name()}
             done = [0]
             ready: dict[str, str] = {}
 
