@@ -1,5 +1,5 @@
-"""Ctrl-C and SIGTERM for a command whose ROS work runs in a thread beside
-the main thread (``winder play``).
+"""Ctrl-C, SIGTERM and SIGHUP for a command whose ROS work runs in a thread
+beside the main thread (``winder play``).
 
 rclpy's own handlers shut the context down from a thread of their own the
 moment a signal comes. A ROS thread still waiting on that context then
@@ -8,7 +8,7 @@ paused ``winder play`` on a loaded machine), and a signal between
 ``rclpy.init`` and the node's creation, or in the middle of importing rclpy,
 ended the command with a traceback or a false "not installed". So such a
 command initialises rclpy without its handlers and takes the signals here:
-a SIGINT or SIGTERM raises :class:`KeyboardInterrupt` in the main thread
+a SIGINT, SIGTERM or SIGHUP raises :class:`KeyboardInterrupt` in the main thread
 (reported "interrupted", status 130), at once, or, inside
 :meth:`Interrupts.held`, as the held section ends; once the cleanup has
 begun (:meth:`Interrupts.ending`) signals are ignored, so that it (stop the
@@ -31,12 +31,14 @@ from typing import Any
 
 __all__ = ["Interrupts", "deferred", "ignored"]
 
-#: the signals that end a command as Ctrl-C does
-SIGNALS = (signal.SIGINT, signal.SIGTERM)
+#: the signals that end a command as Ctrl-C does: SIGHUP too (its terminal went
+#: away), which by default killed the command outright, its DDS participant
+#: left on the graph for the whole lease and nothing said
+SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
 class Interrupts:
-    """SIGINT and SIGTERM as :class:`KeyboardInterrupt` in the main thread,
+    """SIGINT, SIGTERM and SIGHUP as :class:`KeyboardInterrupt` in the main thread,
     deferred while held, ignored once the cleanup began; :meth:`install`
     from the main thread."""
 
@@ -90,7 +92,7 @@ def deferred() -> Iterator[None]:
     """A section no signal may cut (a command's modules loading: a
     KeyboardInterrupt raised inside numpy's C-extension import, or inside a
     dataclass being made, comes out as another error with a traceback): a
-    SIGINT or SIGTERM that comes inside it raises as it ends. The handlers
+    SIGINT, SIGTERM or SIGHUP that comes inside it raises as it ends. The handlers
     before it are back after it. Outside the main thread, nothing is held."""
     if threading.current_thread() is not threading.main_thread():
         yield
@@ -105,7 +107,7 @@ def deferred() -> Iterator[None]:
 
 @contextlib.contextmanager
 def ignored() -> Iterator[None]:
-    """A cleanup no signal may interrupt: SIGINT and SIGTERM are ignored
+    """A cleanup no signal may interrupt: SIGINT, SIGTERM and SIGHUP are ignored
     inside it (main thread only), the handlers before it back after it."""
     if threading.current_thread() is not threading.main_thread():
         yield

@@ -1,4 +1,4 @@
-"""winder.interrupts: SIGINT and SIGTERM as one KeyboardInterrupt in the main
+"""winder.interrupts: SIGINT, SIGTERM and SIGHUP as one KeyboardInterrupt in the main
 thread, deferred while held, none during the cleanup. Real signals, sent to
 this process with os.kill; no ROS."""
 
@@ -20,7 +20,7 @@ def _deliver(sig: int) -> None:
         time.sleep(0.0001)
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
 def test_a_signal_is_a_keyboard_interrupt_and_the_handlers_come_back(sig: int) -> None:
     before = signal.getsignal(sig)
     interrupts = Interrupts().install()
@@ -79,7 +79,7 @@ def test_a_held_section_left_by_an_error_keeps_the_error() -> None:
         interrupts.restore()
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
 def test_deferred_raises_once_its_section_has_run_and_ignored_not_at_all(sig: int) -> None:
     """deferred(): the section runs to its end, the signal raises after it;
     ignored(): the signal is dropped; the handlers before either are back."""

@@ -10,14 +10,18 @@ test's domain watching the graph."""
 
 from __future__ import annotations
 
+import signal
 import subprocess
 from pathlib import Path
 from typing import Any
 
 import pytest
-from conftest import BIN, Procs
+from conftest import BIN, Procs, bag_closed, final_report, rosbags_read
 from support import wait
+from support.bags import mcap_size
 from support.ros_probe import spin_until
+
+from winder.procs import popen
 
 pytestmark = pytest.mark.ros
 
@@ -90,3 +94,37 @@ def test_winder_run_leaves_nothing_on_the_graph(
     assert "state              done" in out, out
     assert {"winder_cell", "interp_node", "profile_node", "sim_node"} <= seen, seen
     spin_until(ros, lambda: not names(ros), GONE_WITHIN, "the graph empty")
+
+
+def test_sighup_ends_winder_run_as_sigint_does(procs: Procs, ros: Any, tmp_path: Path) -> None:
+    """SIGHUP (its terminal closed) to ``winder run`` mid-run: it says it was
+    interrupted (status 130, no traceback), stops its cell, whose bag is
+    closed with the run's final report (incomplete), and its own node and
+    the cell's leave the graph at once. (SIGHUP killed it outright: status
+    -1, nothing said, ``/winder_cell`` on the graph for the whole DDS lease.)"""
+    bags = tmp_path / "bags"
+    cell = {"winder_cell", "interp_node", "profile_node", "sim_node"}
+    run = popen(
+        [str(BIN / "winder"), "run", "--bag-dir", str(bags), "--turns-per-layer", "400"],
+        env=procs.env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        stdin=subprocess.DEVNULL,
+        text=True,
+    )
+    try:
+        # mid-run: its bag holds its first chunks, and the probe sees the whole cell
+        wait.until(lambda: mcap_size(bags) > 30_000, 60, "the run's first 30 kB in its bag", running=run)
+        spin_until(ros, lambda: cell <= names(ros), 30, f"{sorted(cell)} on the graph")
+        run.send_signal(signal.SIGHUP)
+        out, err = run.communicate(timeout=60)
+    finally:
+        if run.poll() is None:
+            run.kill()
+            run.wait()
+    assert run.returncode == 130, out + err
+    assert err.strip().splitlines()[-1] == "winder run: interrupted" and "Traceback" not in err, err
+    spin_until(ros, lambda: not cell & names(ros), GONE_WITHIN, f"{sorted(cell)} gone from the graph")
+    [bag] = list(bags.iterdir())
+    assert bag_closed(bag)
+    assert final_report(rosbags_read(bag))["state"] == "incomplete"

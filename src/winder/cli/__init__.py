@@ -17,8 +17,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     that a Ctrl-C while the command's modules load ends it as one later
     does ("interrupted", status 130), not with a traceback of the import
     (the subcommands' own Ctrl-C is reported there, with their name).
-    SIGTERM ends a command as Ctrl-C does, from its first moment on."""
+    SIGTERM and SIGHUP (a closed terminal) end a command as Ctrl-C does,
+    from its first moment on."""
     signal.signal(signal.SIGTERM, _terminate)
+    signal.signal(signal.SIGHUP, _terminate)
     try:
         from winder.interrupts import deferred, ignored
 

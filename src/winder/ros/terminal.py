@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import sys
 from typing import Any
 
@@ -29,12 +30,18 @@ class KeyReader:
 
         keys = []
         while self.enabled and select.select([sys.stdin], [], [], 0)[0]:
-            keys.append(sys.stdin.read(1).lower())
+            key = sys.stdin.read(1)
+            if not key:  # the terminal hung up: nothing more will come
+                self.enabled = False
+                break
+            keys.append(key.lower())
         return keys
 
     def close(self) -> None:
         if self.saved is not None:
             import termios
 
-            termios.tcsetattr(sys.stdin.fileno(), termios.TCSADRAIN, self.saved)
-            self.saved = None
+            saved, self.saved = self.saved, None
+            # a terminal that hung up (SIGHUP) has nothing to restore
+            with contextlib.suppress(termios.error, OSError, ValueError):
+                termios.tcsetattr(sys.stdin.fileno(), termios.TCSADRAIN, saved)
