@@ -356,3 +356,178 @@ def test_a_clock_reader_matched_after_the_last_sample_still_hears_the_clock(
         t_ns,
         int(first[-1, 0]),
     )  # where it stands: at the last step or past it
+
+
+class PartHidden:
+    """A node's graph look-ups of publishers with those on ``topic`` left out
+    until :meth:`show`: as this node's graph is before the discovery of one
+    endpoint of a node whose others it knows (the graph learns a node's
+    endpoints one by one)."""
+
+    def __init__(self, node: Any, topic: str) -> None:
+        self.hidden: str | None = topic
+        real = node.get_publishers_info_by_topic
+
+        def look(name: str, *args: Any, **kwargs: Any) -> Any:
+            return [] if name == self.hidden else real(name, *args, **kwargs)
+
+        node.get_publishers_info_by_topic = look
+
+    def show(self) -> None:
+        self.hidden = None
+
+
+def test_a_nodes_message_heard_before_the_graph_shows_its_part_is_held_not_blamed(
+    rclpy_default: Any,
+) -> None:
+    """The interp node's readiness (:class:`Readiness`) hears the profile
+    node's latched word on winder/ready while its graph names the sender
+    but does not show its winder/path publisher yet, so not its part. It
+    holds the word and takes it once the part shows; the cell's own profile
+    node is never counted as foreign (it was refused, warned about, named
+    in the interp node's statuses and so in ``winder run``'s summary as
+    "ignored, foreign", and its word was lost till it was said again)."""
+    from diagnostic_msgs.msg import KeyValue
+    from std_msgs.msg import Int64MultiArray, String
+    from trajectory_msgs.msg import JointTrajectory
+
+    from winder.contract.topics import TOPIC_READY
+    from winder.ros.peers import Peers
+    from winder.ros.qos import QOS_EVENTS, QOS_LATCHED, QOS_STREAM
+    from winder.ros.ready import Readiness
+    from winder.ros.sender import SenderExecutor
+
+    node = rclpy_default.create_node("interp_node", namespace="/c5")
+    executor = SenderExecutor()
+    executor.add_node(node)
+    peers = Peers(node)
+    readiness = Readiness(node, peers=peers)
+    graph = PartHidden(node, "/c5/winder/path")
+    profile = rclpy_default.create_node("profile_node", namespace="/c5")
+    profile.create_publisher(Int64MultiArray, "winder/step_times", QOS_STREAM)
+    profile.create_publisher(String, "winder/control", QOS_EVENTS)
+    profile.create_publisher(JointTrajectory, "winder/path", QOS_LATCHED)
+    ready = profile.create_publisher(KeyValue, "winder/ready", QOS_LATCHED)
+    try:
+        matched_both(ready, node, "/c5/winder/ready")
+        wait.until(  # every other endpoint of the part named: only winder/path is not shown yet
+            lambda: all(
+                any(i.node_name == "profile_node" for i in node.get_publishers_info_by_topic(t))
+                for t in ("/c5/winder/ready", "/c5/winder/step_times", "/c5/winder/control")
+            ),
+            10,
+            "the profile node's other endpoints named on the graph",
+        )
+        ready.publish(KeyValue(key="profile", value="waiting"))
+        spin_executor(
+            executor,
+            lambda: peers.held.get(TOPIC_READY) or peers.intruders.total or readiness.states,
+            10,
+            "the interp side's verdict on the profile node's word",
+        )
+        assert not peers.intruders.total, peers.intruders.summary()
+        assert "profile" not in readiness.states  # not acted on while its part does not show
+        graph.show()
+        spin_executor(
+            executor,
+            lambda: readiness.states.get("profile"),
+            5,
+            "the word taken once the graph shows the profile node's part",
+            heard=lambda: (peers.unnamed, peers.intruders.summary()),
+        )
+        assert readiness.states == {"profile": "waiting"}
+        assert peers.intruders.total == 0 and peers.unnamed == 0
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        profile.destroy_node()
+
+
+def test_winder_runs_summary_never_lists_the_cells_own_nodes_as_foreign(
+    rclpy_default: Any, tmp_path: Path
+) -> None:
+    """The cell's sim node says (``intruders`` in its status) that it refused
+    the cell's own profile node (a discovery race: it heard it before its
+    graph showed it in its part), a stranger, and a node named like the
+    profile node in another process. ``winder run``'s summary (its
+    ``ignored, foreign`` line) lists the stranger and the other process'
+    node, never the cell's own nodes."""
+    from diagnostic_msgs.msg import KeyValue
+
+    from winder.ros.cell import CellWatch, _result
+    from winder.ros.sender import SenderExecutor
+
+    node = rclpy_default.create_node("winder_cell", namespace="/c1")
+    executor = SenderExecutor()
+    executor.add_node(node)
+    watch = CellWatch(node, "/c1")
+    watch.started = {"interp_node", "profile_node", "sim_node"}  # as run_cell sets it
+    nodes, pub = fake_cell(rclpy_default, "/c1")
+    said = (
+        "/c1/intruder (2 on /c1/winder/control); /c1/profile_node (1 on /c1/winder/ready); "
+        "/c1/profile_node (other process) (3 on /c1/winder/step_times)"
+    )
+    try:
+        matched_both(pub, node, "/diagnostics")
+        msg = status("c1/sim_node: job", message="running")
+        msg.status[0].values = [KeyValue(key="intruders", value=said)]
+        pub.publish(msg)
+        spin_executor(executor, lambda: watch.foreign, 10, "the sim node's status taken by the watch")
+        result = _result(watch, "", tmp_path)
+        assert result.intruders == (
+            "c1/sim_node: /c1/intruder (2 on /c1/winder/control); "
+            "/c1/profile_node (other process) (3 on /c1/winder/step_times)"
+        ), result.intruders
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        for n in nodes:
+            n.destroy_node()
+
+
+def test_a_sender_in_a_part_no_node_plays_is_refused_in_its_name_after_the_hold(
+    rclpy_default: Any,
+) -> None:
+    """The other side of the hold above: a node publishing on winder/control
+    in a namespace where no node plays the profile node's part (a forger)
+    is held, and refused in its name once the hold ends (:data:`HOLD` s of
+    the node's own time), never acted on."""
+    from std_msgs.msg import String
+
+    from winder.contract.topics import TOPIC_CONTROL
+    from winder.ros.peers import HOLD, Peers
+    from winder.ros.qos import QOS_EVENTS
+    from winder.ros.sender import SenderExecutor
+
+    node = rclpy_default.create_node("interp_node", namespace="/c6")
+    executor = SenderExecutor()
+    executor.add_node(node)
+    peers = Peers(node)
+    acted: list[Any] = []
+    peers.subscribe(String, TOPIC_CONTROL, acted.append, QOS_EVENTS)
+    forger = rclpy_default.create_node("forger", namespace="/c6")
+    pub = forger.create_publisher(String, "winder/control", QOS_EVENTS)
+    try:
+        matched_both(pub, node, "/c6/winder/control")
+        wait.until(
+            lambda: any(
+                i.node_name == "forger" for i in node.get_publishers_info_by_topic("/c6/winder/control")
+            ),
+            10,
+            "the forger named on the graph",
+        )
+        pub.publish(String(data='{"event": "abort"}'))
+        spin_executor(executor, lambda: peers.held.get(TOPIC_CONTROL), 10, "the forger's message held")
+        spin_executor(
+            executor,
+            lambda: peers.intruders.total,
+            HOLD + 10,
+            "the forger refused once the hold ends",
+            heard=lambda: (peers.unnamed, peers.held),
+        )
+        assert peers.intruders.summary() == "/c6/forger (1 on /c6/winder/control)"
+        assert not acted and peers.unnamed == 0
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        forger.destroy_node()

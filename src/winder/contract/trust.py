@@ -5,6 +5,7 @@ anyone else (docs/SECURITY.md). :class:`winder.ros.peers.Peers` applies it.
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from dataclasses import dataclass, field
 
 from winder.contract.topics import (
@@ -22,7 +23,7 @@ from winder.contract.topics import (
     TOPIC_STEPS,
 )
 
-__all__ = ["OWNERS", "ROLE_NAMES", "SHOWN", "SIGNS", "Intruders"]
+__all__ = ["OTHER_PROCESS", "OWNERS", "ROLE_NAMES", "SHOWN", "SIGNS", "Intruders", "without_senders"]
 
 #: The role whose node alone may publish each of the cell's topics that a
 #: node acts on (``winder/ready`` is owned by the role its key names, a
@@ -64,6 +65,10 @@ SIGNS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
 
 ROLE_NAMES = {"interp": "interp node", "profile": "profile node", "consumer": "step consumer"}
 
+#: what follows a refused sender's name when it is named like the cell's own node
+#: in that role but runs in another process (another cell's, an impersonator)
+OTHER_PROCESS = " (other process)"
+
 
 @dataclass
 class Intruders:
@@ -92,3 +97,17 @@ class Intruders:
             topics = [(t, n) for (s, t), n in sorted(self.counts.items()) if s == sender]
             parts.append(f"{sender} ({', '.join(f'{n} on {t}' for t, n in topics)})")
         return "; ".join(parts)
+
+
+def without_senders(summary: str, senders: Collection[str]) -> str:
+    """An :meth:`Intruders.summary` text without the entries of ``senders``
+    (fully qualified node names: the cell's own nodes, which a discovery
+    race may have had refused); an entry of a node named like one of them in
+    another process (:data:`OTHER_PROCESS`) stays."""
+    kept = []
+    for entry in summary.split("; ") if summary else []:
+        name, _, rest = entry.partition(" ")
+        if name in senders and not (" " + rest).startswith(OTHER_PROCESS):
+            continue
+        kept.append(entry)
+    return "; ".join(kept)

@@ -40,6 +40,7 @@ from std_srvs.srv import Trigger
 from winder.contract.jobfile import ros_text
 from winder.contract.run import JobReport
 from winder.contract.topics import ROLE_KEY, ROLES, TASK_JOB, TOPIC_DIAGNOSTICS, has_role, in_namespace
+from winder.contract.trust import without_senders
 from winder.interrupts import Interrupts
 from winder.procs import Children
 from winder.ros.dds import PROFILE_KEYS, use_profile
@@ -623,6 +624,20 @@ def _wait_for_job(
     return ""
 
 
+def _foreign(watch: CellWatch) -> str:
+    """What the cell's nodes and this process refused from foreign senders
+    (``ignored, foreign`` in the summary): ``<refuser>: <sender> (n on
+    <topic>)...``, each refuser's in one entry. Never the cell's own nodes: a
+    node that heard one of them before its graph showed it in its part
+    (a discovery race) may have refused and counted it."""
+    ns = watch.ns
+    own = {fully_qualified(name, ns) for name in watch.started}
+    own |= {r.target for r in watch.remote if r.target}  # the --external nodes found in their part
+    refused = {**watch.foreign, "winder run": watch.peers.intruders.summary()}
+    kept = {who: without_senders(what, own) for who, what in refused.items()}
+    return "; ".join(f"{who}: {what}" for who, what in kept.items() if what)
+
+
 def _result(watch: CellWatch, failure: str, log_dir: Path) -> CellResult:
     result = CellResult(False, message=failure, log_dir=log_dir, node_died=isinstance(failure, NodeExit))
     if watch.summary is not None:
@@ -632,8 +647,7 @@ def _result(watch: CellWatch, failure: str, log_dir: Path) -> CellResult:
     result.errors = list(watch.errors)
     result.occupied = bool(watch.occupied) and watch.summary is None
     result.refused = bool(watch.refused) and watch.summary is None
-    refused = {**watch.foreign, "winder run": watch.peers.intruders.summary()}
-    result.intruders = "; ".join(f"{who}: {what}" for who, what in refused.items() if what)
+    result.intruders = _foreign(watch)
     if watch.errors and not result.message:
         result.message = watch.errors[0]
     if result.ok and not watch.errors and not JobReport.from_values(result.summary).errors:

@@ -31,7 +31,7 @@ from rclpy.serialization import deserialize_message
 from rclpy.subscription import Subscription
 
 from winder.contract.topics import PROCESS_KEYS, ROLE_KEY, TOPIC_DIAGNOSTICS, in_namespace
-from winder.contract.trust import OWNERS, ROLE_NAMES, SIGNS, Intruders
+from winder.contract.trust import OTHER_PROCESS, OWNERS, ROLE_NAMES, SIGNS, Intruders
 from winder.ros.graph import Who, fully_qualified, publishers_by_gid, role_holders
 from winder.ros.qos import QOS_DIAGNOSTICS
 from winder.ros.sender import attributed
@@ -52,8 +52,11 @@ STALLED = 0.1
 
 #: a verdict on a message's sender: True act, False refused, None not known yet
 Judge = Callable[[str, bytes], bool | None]
-#: a held message: when (node's own time), its publisher's GID, payload, what acts on it, its judge
-Held = tuple[float, bytes, bytes, Callable[[bytes], None], Judge]
+#: what settles a message held for :data:`HOLD` s without a verdict (None: refused as unnamed)
+Expire = Callable[[str, bytes], None] | None
+#: a held message: when (node's own time), its publisher's GID, payload, what acts on it, its
+#: judge, what settles it at the end of its hold
+Held = tuple[float, bytes, bytes, Callable[[bytes], None], Judge, Expire]
 
 
 class Peers:
@@ -95,9 +98,9 @@ class Peers:
         self.warn = warn or (lambda text: node.get_logger().warning(text))
         #: what only the cell's own nodes may do here, in the warning ("show in the live view")
         self.what = what
-        #: hold (not refuse) a named sender's message while no node shows in the topic's role:
-        #: a reader without the cell's start handshake (the live view) may hear a node's
-        #: latched message before the graph shows the endpoints that give it its part
+        #: a message whose sender no node's part has shown by the end of its hold is
+        #: refused unnamed, not in the sender's name (the live view, which has no cell to
+        #: wait for: :meth:`verdict`)
         self.patient = patient
 
     # -- the graph ----------------------------------------------------------------
@@ -170,17 +173,45 @@ class Peers:
         """True: the message comes from the cell's node owning ``topic``
         (``role``, by default the owner in :data:`OWNERS`); False: from
         another node (counted, reported once per sender); None: the graph
-        does not name its publisher yet (or, ``patient``, shows nobody in the role)."""
+        does not name its publisher yet, or shows no node in the role yet.
+
+        The latter is a discovery race, not a stranger: the graph learns a
+        node's endpoints one by one, so the cell's own node's first message
+        (its latched "waiting" on ``winder/ready``) can come before the graph
+        shows the endpoints that give it its part. Refused then, that node
+        was counted, warned about and listed by ``winder run`` as foreign;
+        held (:meth:`deliver`), it is judged again once its part shows, and
+        a sender in whose role no node has shown by the end of the hold is
+        refused then, in its name (:meth:`_expired`)."""
         role = role or OWNERS[topic]
         who = self.sender(topic, gid)
         if who is None:
             return None
         if who == self.pinned.get(role) or who == self.owner(role):
             return True
-        if self.patient and not self.holders(role):
+        if not self.holders(role):
             return None  # nobody plays the part yet, as far as the graph shows: judged again
         self.refuse(topic, who, gid, f"not the cell's {ROLE_NAMES[role]}")
         return False
+
+    def _expired(self, topic: str, gid: bytes, role: str | None) -> None:
+        """A message held by :meth:`verdict` for :data:`HOLD` s: refused in its
+        sender's name if the graph names it (no node showed in the role
+        meanwhile), else as unnamed."""
+        role = role or OWNERS[topic]
+        who = None if self.patient else self.sender(topic, gid)
+        if who is None:
+            self._unnamed(topic)
+            return
+        self.refuse(topic, who, gid, f"not the cell's {ROLE_NAMES[role]}: no node plays that part here")
+
+    def _unnamed(self, topic: str) -> None:
+        self.unnamed += 1
+        if self.unnamed == 1:
+            self.warn(
+                f"{self.topic(topic)}: a message from a publisher the graph did not name "
+                f"within {HOLD:g} s ignored (docs/SECURITY.md)"
+            )
 
     def deliver(
         self,
@@ -195,21 +226,24 @@ class Peers:
         """``act(raw)`` if the message comes from the cell's node owning
         ``topic`` (see :meth:`verdict`; or as ``judge(topic, gid)`` says). A
         message whose publisher the graph does not name yet (its node's
-        discovery info is a little behind its data) is held, with every later
-        one of that publisher behind it so that their order stays, and judged
-        again every 10 ms until the graph names it, for up to :data:`HOLD` s
-        of the node's own time; then it is refused as unnamed. Another
-        publisher's messages on the topic do not wait behind it."""
+        discovery info is a little behind its data), or, judged by
+        :meth:`verdict`, one in whose role the graph shows no node yet, is
+        held, with every later one of that publisher behind it so that their
+        order stays, and judged again every 10 ms, for up to :data:`HOLD` s
+        of the node's own time; then it is refused (:meth:`_expired`, or as
+        unnamed). Another publisher's messages on the topic do not wait behind it."""
+        expire: Expire = None
         if judge is None:
             judge = lambda t, g: self.verdict(t, g, role)  # noqa: E731 - the default judge
+            expire = lambda t, g: self._expired(t, g, role)  # noqa: E731 - and its end of a hold
         if self._held_from[topic, gid]:
-            self._hold(topic, gid, raw, act, judge)
+            self._hold(topic, gid, raw, act, judge, expire)
             return
         verdict = judge(topic, gid)
         if verdict:
             act(raw)
         elif verdict is None:
-            self._hold(topic, gid, raw, act, judge)
+            self._hold(topic, gid, raw, act, judge, expire)
 
     def deliver_from(
         self, topic: str, gid: bytes, raw: bytes, act: Callable[[bytes], None], names: Collection[str]
@@ -231,10 +265,12 @@ class Peers:
         while messages were held (see :data:`HOLD`)."""
         return time.monotonic() - self._stalled
 
-    def _hold(self, topic: str, gid: bytes, raw: bytes, act: Callable[[bytes], None], judge: Judge) -> None:
+    def _hold(
+        self, topic: str, gid: bytes, raw: bytes, act: Callable[[bytes], None], judge: Judge, expire: Expire
+    ) -> None:
         if not self.held:
             self._looked = time.monotonic()  # the gap since the last look is no stall: nothing was held
-        self.held.setdefault(topic, deque()).append((self._own_time(), gid, raw, act, judge))
+        self.held.setdefault(topic, deque()).append((self._own_time(), gid, raw, act, judge, expire))
         self._held_from[topic, gid] += 1
         if self._retry_timer is None:
             self._retry_timer = steady_timer(self.node, RETRY, self._retry)
@@ -254,7 +290,7 @@ class Peers:
             waiting: set[bytes] = set()  # publishers whose earlier message is still held
             kept: deque[Held] = deque()
             for item in held:
-                since, gid, raw, act, judge = item
+                since, gid, raw, act, judge, expire = item
                 if gid in waiting:
                     kept.append(item)
                     continue
@@ -269,13 +305,10 @@ class Peers:
                 if verdict:
                     act(raw)
                     acted = True
+                elif verdict is None and expire is not None:
+                    expire(topic, gid)
                 elif verdict is None:
-                    self.unnamed += 1
-                    if self.unnamed == 1:
-                        self.warn(
-                            f"{self.topic(topic)}: a message from a publisher the graph did not name "
-                            f"within {HOLD:g} s ignored (docs/SECURITY.md)"
-                        )
+                    self._unnamed(topic)
             kept.extend(self.held.pop(topic, ()))  # held meanwhile, behind them
             if kept:
                 self.held[topic] = kept
@@ -307,7 +340,7 @@ class Peers:
             return
         sender = who.fq
         if any(who.participant != w.participant and who[:2] == w[:2] for w in self.pinned.values()):
-            sender += " (other process)"
+            sender += OTHER_PROCESS
         self.run.count(sender, self.topic(topic))
         if self.intruders.count(sender, self.topic(topic)):
             self.warn(
