@@ -431,6 +431,7 @@ def test_a_restarted_node_leaves_the_cell_able_to_run_the_next_job(
     first_run = next(v["run_id"] for _, _, v in seen if v.get("state") == "running" and v.get("run_id"))
     nodes[victim].kill()
     nodes[victim].wait()
+    killed = time.monotonic()
     nodes[victim] = procs.start(victim, *args[victim])
 
     def closed() -> bool:
@@ -497,7 +498,14 @@ def test_a_restarted_node_leaves_the_cell_able_to_run_the_next_job(
         return bool(reply.success)
 
     # asked again each second while the cell is "not ready"
+    first_ask = time.monotonic()
     wait.until(taken, 30, "a start taken by the restarted cell", heard=lambda: replies[-3:], poll=1.0)
+    if first_ask - killed < 8.0:  # the killed process' endpoints stay on the graph for its 10 s lease
+        # meanwhile the part has two nodes, the dead one the cell's: a start is not taken (one
+        # taken went to the dead profile node, and the run stalled: make flakes)
+        # (the dead node's "ready" gone stale, or, still fresh, two nodes in the part)
+        role = "profile" if victim == "profile_node" else "consumer"
+        assert "not ready" in replies[0] and role in replies[0], replies
     spin_until(
         ros, lambda: any(v.get("state") == "done" for n, _, v in seen if is_consumer(n, v)), 120, "job 2"
     )

@@ -156,4 +156,14 @@ class Readiness:
                 waiting.append(f"{r} silent for {silent:.1f} s")
             elif self.states[r] != "ready" and not (r in excused and self.states[r] == "busy"):
                 waiting.append(f"{r} {self.states[r]}")
+            else:
+                # a node killed and started again: until the dead process's endpoints leave the
+                # graph (its lease) the cell's node in the part is the dead one, whose last
+                # "ready" is still fresh; a start then went to it and stalled (make flakes)
+                holders = self.peers.holders(r)
+                if len(holders) > 1:
+                    names = ", ".join(sorted(w.fq for w in holders))
+                    waiting.append(
+                        f"{r}: {len(holders)} nodes in the part ({names}) until one leaves the graph"
+                    )
         return f"not ready: {', '.join(waiting)} (winder/ready)" if waiting else ""
