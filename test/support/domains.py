@@ -8,6 +8,7 @@ import fcntl
 import itertools
 import os
 import tempfile
+import time
 from pathlib import Path
 from typing import Any
 
@@ -36,10 +37,28 @@ current: dict[str, Any] = {"test": "", "ros": True}
 _cursor = itertools.count(os.getpid() * 7)
 
 
+#: a domain handed back rests this long before anyone takes it again: a process
+#: killed in it stays on the graph for the DDS lease (10 s, fastdds_profile.xml),
+#: and the next test there would find its nodes (make flakes: ctl took another
+#: test's fake profile node for the interp node)
+QUIET_S = 12.0
+
+
+def _lock_path(domain: int, kind: str) -> Path:
+    return Path(tempfile.gettempdir()) / f"winder-{kind}-domain-{domain}.lock"
+
+
 def lock_domain(domain: int, kind: str) -> Any:
     """The open lock file of ``domain`` for tests of ``kind`` (locked: no other
-    process holds it until it is closed), or None if another process holds it."""
-    lock = (Path(tempfile.gettempdir()) / f"winder-{kind}-domain-{domain}.lock").open("w")
+    process holds it until it is closed), or None if another process holds it
+    or it was handed back less than :data:`QUIET_S` ago."""
+    path = _lock_path(domain, kind)
+    try:
+        if time.time() - path.stat().st_mtime < QUIET_S:
+            return None
+    except FileNotFoundError:
+        pass
+    lock = path.open("a")  # not "w": opening must not touch the time it was handed back
     try:
         fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except OSError:
@@ -82,6 +101,7 @@ def release_domain(domain: int) -> None:
     """Hand a domain of :func:`next_domain` back (its processes are stopped)."""
     lock = _held.pop(domain, None)
     if lock is not None:
+        os.utime(lock.fileno())  # handed back now: it rests QUIET_S (see lock_domain)
         lock.close()
 
 
