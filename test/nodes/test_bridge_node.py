@@ -26,9 +26,9 @@ from conftest import Procs, closed_bags, final_report, rosbags_read, spin_until
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from support import wait
-from support.paths import TEST
+from support.paths import BIN, TEST
 
-from winder.motion.job import Job
+from winder.motion.job import AXES, Job
 
 pytestmark = pytest.mark.ros
 
@@ -40,6 +40,11 @@ JOB = {"turns_per_layer": 4, "layers": 1, "poles": 2, "fork_steps_per_rev": 512,
 #: the ramp; a look-ahead of 0.2 s (not 0.05) so that steps are not late on two busy shared cores
 RAMP = {"v_max": "4000.0", "a_max": "40000.0", "j_max": "1000000.0", "lookahead": "0.2"}
 COMMANDS = "/forward_position_controller/commands"
+#: following-error limits a whole run on the Python stand-in keeps within on two busy cores
+LOOSE = (
+    *("-p", "max_following_error.fork:=5.0", "-p", "max_following_error.pole:=1.0"),
+    *("-p", "max_following_error.feed:=0.01"),
+)
 
 
 def start_standin(procs: Procs, *args: str) -> subprocess.Popen[bytes]:
@@ -48,10 +53,14 @@ def start_standin(procs: Procs, *args: str) -> subprocess.Popen[bytes]:
 
 
 def start_cell(
-    procs: Procs, bags: Path, *bridge_params: str, ramp: dict[str, str] | None = None
+    procs: Procs,
+    bags: Path,
+    *bridge_params: str,
+    ramp: dict[str, str] | None = None,
+    interp: dict[str, str] | None = None,
 ) -> subprocess.Popen[bytes]:
     """bridge_node (joints mapped out of the cell's order), profile_node (``ramp``,
-    else RAMP) and interp_node (autostart); the bridge process."""
+    else RAMP) and interp_node (autostart; JOB and ``interp``); the bridge process."""
     bridge = procs.start(
         "bridge_node",
         "-p",
@@ -65,7 +74,9 @@ def start_cell(
         *bridge_params,
     )
     procs.start("profile_node", *[a for k, v in (ramp or RAMP).items() for a in ("-p", f"{k}:={v}")])
-    procs.start("interp_node", *[a for k, v in JOB.items() for a in ("-p", f"{k}:={v}")])
+    procs.start(
+        "interp_node", *[a for k, v in {**JOB, **(interp or {})}.items() for a in ("-p", f"{k}:={v}")]
+    )
     return bridge
 
 
@@ -340,8 +351,7 @@ def test_whole_job_commands_the_exact_steps_in_time(tmp_path: Path, procs: Procs
     bridge = start_cell(
         procs,
         bags,
-        *("-p", "max_following_error.fork:=5.0", "-p", "max_following_error.pole:=1.0"),
-        *("-p", "max_following_error.feed:=0.01"),
+        *LOOSE,
     )
     [bag] = wait_for_bags(bags, 1)
     raw = rosbags_read(bag)
@@ -407,8 +417,7 @@ def test_a_trajectory_controller_gets_every_point_exact_in_batches(
         procs,
         bags,
         *("-p", "interface:=trajectory", "-p", "controller:=joint_trajectory_controller"),
-        *("-p", "max_following_error.fork:=5.0", "-p", "max_following_error.pole:=1.0"),
-        *("-p", "max_following_error.feed:=0.01"),
+        *LOOSE,
         ramp={**RAMP, "lookahead": "0.02"},  # less than the bridge asks for: its ask must win
     )
     [bag] = wait_for_bags(bags, 1)
@@ -627,9 +636,7 @@ def test_sigint_mid_run_closes_a_readable_bag(tmp_path: Path, procs: Procs, ros:
     )
     bags = tmp_path / "bags"
     start_standin(procs)
-    bridge = start_cell(
-        procs, bags, *("-p", "max_following_error.fork:=5.0", "-p", "max_following_error.pole:=1.0")
-    )
+    bridge = start_cell(procs, bags, *LOOSE)
     wait.log_has(lambda: procs.log(bridge), "run armed", 60, "the bridge's run", running=bridge)
     # mid-run: the run's clock has gone 0.15 s (150 commands at 1 kHz) of its 0.65 s
     spin_until(
@@ -669,8 +676,8 @@ def test_joint_states_from_another_node_change_nothing(tmp_path: Path, procs: Pr
     bridge = start_cell(
         procs,
         bags,
-        *("-p", "job_origin:=start_position", "-p", "max_following_error.fork:=5.0"),
-        *("-p", "max_following_error.pole:=1.0", "-p", "max_following_error.feed:=0.01"),
+        *LOOSE,
+        *("-p", "job_origin:=start_position"),
     )
     [bag] = wait_for_bags(bags, 1)
     raw = rosbags_read(bag)
@@ -721,14 +728,22 @@ def test_a_job_beyond_a_soft_limit_is_refused_before_any_command(
     bags = tmp_path / "bags"
     start_standin(procs)
     bridge = start_cell(procs, bags, "-p", "max_position.feed:=0.005", "-p", "min_position.feed:=-0.001")
+    refused_before_any_command(
+        procs,
+        bridge,
+        bags,
+        f"the run cannot start: the job takes joint feed_screw (feed axis) to {travel:.6g} m, beyond "
+        "max_position.feed = 0.005 m (soft limit)",
+    )
+
+
+def refused_before_any_command(procs: Procs, bridge: subprocess.Popen[bytes], bags: Path, want: str) -> None:
+    """The run's bag: closed incomplete with no step done, its servo fault
+    saying ``want``, no command and no clock sent; no traceback."""
     [bag] = wait_for_bags(bags, 1)
     raw = rosbags_read(bag)
     report = final_report(raw)
     assert report["state"] == "incomplete" and report["steps_done"] == "0", report
-    want = (
-        f"the run cannot start: the job takes joint feed_screw (feed axis) to {travel:.6g} m, beyond "
-        "max_position.feed = 0.005 m (soft limit)"
-    )
     assert want in report["servo_fault"], report["servo_fault"]
     assert not raw.get(COMMANDS) and not raw.get("/clock")
     assert "Traceback" not in procs.log(bridge)
@@ -762,8 +777,8 @@ def test_a_run_waits_for_homing_when_it_is_required(tmp_path: Path, procs: Procs
         procs,
         bags,
         *("-p", "require_homing:=true", "-p", "homing_service:=homing_controller/home"),
-        *("-p", "max_following_error.fork:=5.0", "-p", "max_following_error.pole:=1.0"),
-        *("-p", "max_following_error.feed:=0.01", "-p", "max_position.feed:=0.02"),
+        *LOOSE,
+        *("-p", "max_position.feed:=0.02"),
     )
     wait.log_has(lambda: procs.log(bridge), "the axes are not homed (require_homing)", 30, running=bridge)
     assert not closed_bags(bags)  # nothing started
@@ -781,3 +796,89 @@ def test_a_run_waits_for_homing_when_it_is_required(tmp_path: Path, procs: Procs
     assert report["state"] == "done", report["servo_fault"] or report
     check_commands(raw, report)
     assert "Traceback" not in procs.log(bridge)
+
+
+#: the fork's peak in the bridge tests' job: RAMP's v_max (4000 steps/s, reached in a
+#: 2048-step layer: 0.1 s and 200 steps of ramp at a_max 40000) of 512 steps a turn
+FORK_PEAK = 4000 * 2 * math.pi / JOB["fork_steps_per_rev"]
+
+
+def test_a_job_faster_than_a_velocity_limit_is_refused_before_any_command(
+    tmp_path: Path, procs: Procs, ros: Any
+) -> None:
+    """max_velocity.fork 40 rad/s; the job's layers cruise at 49.1 rad/s
+    (worked out here from RAMP and the job): the run is refused when it
+    would be armed, in one line naming the axis, the job's peak and the
+    limit; no command, no clock."""
+    bags = tmp_path / "bags"
+    start_standin(procs)
+    bridge = start_cell(procs, bags, *LOOSE, "-p", "max_velocity.fork:=40.0")
+    refused_before_any_command(
+        procs,
+        bridge,
+        bags,
+        f"the run cannot start: the job drives the fork axis at up to {FORK_PEAK:.6g} rad/s, beyond "
+        "max_velocity.fork = 40 rad/s (soft limit); nothing was commanded",
+    )
+
+
+def windowed_speed(t_ns: np.ndarray, pos: np.ndarray, window_ns: int) -> float:
+    """The highest mean speed over ``window_ns`` of a position held from each
+    time to the next (a brute-force loop: each sample against the last one
+    at least a window before it)."""
+    best = 0.0
+    for i in range(len(t_ns)):
+        j = i
+        while j > 0 and t_ns[i] - t_ns[j] < window_ns:
+            j -= 1
+        if t_ns[i] - t_ns[j] >= window_ns:
+            best = max(best, abs(pos[i] - pos[j]) / (window_ns / 1e9))
+    return best
+
+
+def test_steps_past_a_velocity_limit_stop_the_run_before_they_are_due(
+    tmp_path: Path, procs: Procs, ros: Any
+) -> None:
+    """max_velocity.fork 55 rad/s, the job's peak 49.1: the run starts. It
+    rests at a programmed stop (stop_resume call) while the feed override is
+    set to 1.5 there, then resumes: the steps after the stop would drive
+    the fork at 73.6 rad/s. The bridge stops the run with a servo fault
+    naming the joint, the speed and the limit before they are due; no
+    command it sent moves the fork faster than the limit over 20 ms, beyond
+    what whole steps add (3 steps over the window)."""
+    from support.ros_probe import set_params
+
+    bags = tmp_path / "bags"
+    start_standin(procs)
+    bridge = start_cell(
+        procs,
+        bags,
+        *LOOSE,
+        "-p",
+        "max_velocity.fork:=55.0",
+        interp={"stops": "1:2", "stop_pause": "0.1", "stop_resume": "call"},
+    )
+    profile = next(p for p, _ in procs.procs if str(p.args[0]).endswith("profile_node"))
+    wait.log_has(lambda: procs.log(bridge), "run armed", 60, "the bridge's run", running=bridge)
+    wait.log_has(lambda: procs.log(profile), "waiting for ~/resume", 60, "the run at its stop")
+    [result] = set_params(ros, "profile_node", {"feed_override": 1.5})
+    assert result.successful, result.reason
+    out = subprocess.run(
+        [str(BIN / "winder"), "ctl", "resume"], env=procs.env, capture_output=True, text=True, timeout=60
+    )
+    assert out.returncode == 0, out.stdout + out.stderr
+    [bag] = wait_for_bags(bags, 1)
+    raw = rosbags_read(bag)
+    report = final_report(raw)
+    assert report["state"] == "incomplete", report
+    fault = report["servo_fault"]
+    assert "the steps would drive joint flyer (fork axis) at " in fault, fault
+    assert "beyond max_velocity.fork = 55 rad/s (soft limit); stopped before they were due" in fault, fault
+    # the steps commanded (to the last one sent), on their own times: never faster than the limit.
+    # (The commands' send times are not held to it: a command thread that falls behind, as this
+    # Python one does on a loaded machine, catches up in one command; max_command_gap_ms says so.)
+    rows, k = step_rows(raw), check_commands(raw, report)
+    fork = rows[: k.max(), 2 + AXES.index("fork")] * (2 * math.pi / JOB["fork_steps_per_rev"])
+    step = 2 * math.pi / JOB["fork_steps_per_rev"]
+    assert int(report["steps_done"]) >= 2 * 512  # it ran to the stop at turn 2, within the limit
+    assert windowed_speed(rows[: k.max(), 0], fork, 20_000_000) <= 55.0 + 3 * step / 0.02

@@ -55,6 +55,13 @@ it calls ``homing_service`` (the drive's or a homing controller's
 std_srvs/Trigger) or, without one, references the axes where they stand; the
 reference is lost with the broadcaster (no joint_states for a second). The
 limits are the joints' positions after homing, as a CNC's are.
+``max_velocity.<axis>``/``max_acceleration.<axis>`` bound how fast and how
+hard (:mod:`winder.contract.limits`): the run's job, timed with the ramp its
+profile node published on winder/profile_config, is checked when the run
+is armed (refused before any command), and every step is watched as it
+comes, ahead of its time by the look-ahead (a feed override, a ramp changed
+mid-run): steps that would pass a limit over 20 ms are a servo fault before
+they are due.
 
 Threads: the hardware side runs in a thread of its own, on the steady clock:
 during a run, a tick every 1/``rate`` s sends the command, and every 5 ms
@@ -74,6 +81,7 @@ fault's report) runs in the executor, woken by the step stream and every
 
 from __future__ import annotations
 
+import json
 import threading
 import time
 from collections import deque
@@ -84,18 +92,20 @@ import numpy.typing as npt
 import rclpy
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.client import Client
+from rclpy.serialization import deserialize_message
 from rclpy.task import Future
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
+from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
 from winder.contract.cdr import CommandPayload, JointStateReader, clock_payload, trajectory_payload
+from winder.contract.limits import LimitWatch, job_extent, job_limits
 from winder.contract.pacing import CommandHistory, Pacer, following_error
-from winder.contract.params import BRIDGE_SPECS, NO_LIMIT, check_bridge
+from winder.contract.params import BRIDGE_SPECS, NO_LIMIT, PROFILE_SPECS, check_bridge
 from winder.contract.stream import JobPlan
-from winder.contract.topics import TOPIC_CLOCK, TOPIC_STEP_TIMES, check_node_name
+from winder.contract.topics import TOPIC_CLOCK, TOPIC_PROFILE_CONFIG, TOPIC_STEP_TIMES, check_node_name
 from winder.motion.job import AXES
 from winder.ros.consumer import StepConsumer
 from winder.ros.diagnostics import ERROR
@@ -258,6 +268,16 @@ class BridgeNode(StepConsumer):
         self.limits = np.array([values[f"max_following_error.{a}"] for a in self.axes])
         self.pos_lo = np.array([values[f"min_position.{a}"] for a in self.axes])
         self.pos_hi = np.array([values[f"max_position.{a}"] for a in self.axes])
+        self.v_max = np.array([values[f"max_velocity.{a}"] for a in self.axes])
+        self.a_max = np.array([values[f"max_acceleration.{a}"] for a in self.axes])
+        self.limit_values = {
+            k: values[k] for a in self.axes for k in (f"max_velocity.{a}", f"max_acceleration.{a}")
+        }
+        self.limit_watch: LimitWatch | None = None  # the run's steps against max_velocity/max_acceleration
+        self.ramp_breach = ""  # the run's job, timed with its ramp, passes a limit (refused at arming)
+        self.ramp_checked = False
+        self.ramp_said = False
+        self.early_breach = ""  # steps past a limit came before the run was armed
         self.require_homing = bool(values["require_homing"])
         self.homing_service = str(values["homing_service"])
         #: the job's extent in each joint's step counts (its corners' least and greatest)
@@ -294,15 +314,14 @@ class BridgeNode(StepConsumer):
         self.pub_cmd = self.commands_publisher(values["controller"], values["interface"])
         which = [AXES.index(a) for a in values["axes"]]
         start = np.array([plan.segments[0].start[i] if plan.segments else 0 for i in which], np.int64)
-        pacer = Pacer([2 + i for i in which], start, np.array([plan.joint_step[i] for i in which]))
-        corners = np.array(
-            [c for seg in plan.segments for c in self.corners(seg.start, seg.pieces or (seg.delta,))]
-            or [[0, 0, 0]]
-        )[:, which]
+        step_len = np.array([plan.joint_step[i] for i in which])
+        pacer = Pacer([2 + i for i in which], start, step_len)
+        lo, hi = job_extent(plan.segments)
         with self.lock:
             self.new_run(values)
-            self.extent = (corners.min(axis=0), corners.max(axis=0))
+            self.extent = (lo[which], hi[which])
             self.pacer = pacer
+            self.limit_watch = LimitWatch([2 + i for i in which], start, step_len, self.v_max, self.a_max)
             self.history = CommandHistory(pacer.position.copy())
             self.outbox.clear()
             self.alarm = None
@@ -312,6 +331,7 @@ class BridgeNode(StepConsumer):
             self.running = True
         self.go.set()
         self.abort_client = self.profile_abort_client() or self.abort_client  # the run's profile node
+        self.check_ramp()
         return {
             "real_time": True,
             "clock_origin_ns": self.origin_ns,
@@ -332,15 +352,42 @@ class BridgeNode(StepConsumer):
             "settle_time": self.settle_ns / 1e9,
         }
 
-    @staticmethod
-    def corners(start: tuple[int, ...], pieces: tuple[tuple[int, ...], ...]) -> list[list[int]]:
-        """A segment's corners (cell axis order, step counts): its start and
-        the end of each straight piece; it is straight between them."""
-        out, at = [list(start)], list(start)
-        for piece in pieces:
-            at = [a + d for a, d in zip(at, piece, strict=True)]
-            out.append(at)
-        return out
+    def take_profile_config(self, raw: bytes) -> None:
+        super().take_profile_config(raw)
+        self.check_ramp()
+
+    def check_ramp(self) -> None:
+        """The run's job, timed with the ramp its profile node planned it with
+        (winder/profile_config), against max_velocity/max_acceleration: a job
+        that passes one is refused when the run is armed, before any command
+        (after that, at once). Without the ramp the steps are still watched
+        as they come (execute)."""
+        if self.plan is None or self.ramp_checked or self.profile_raw is None or not self.watching_limits():
+            return
+        try:
+            doc = json.loads(deserialize_message(self.profile_raw, String).data)
+            if (doc.get("job_id"), doc.get("run_id", "")) != (self.plan.job_id, self.plan.run_id):
+                return  # an earlier run's ramp; this run's is on its way
+            ramp = {k: doc[k] for k in (*PROFILE_SPECS, "feed_override") if k in doc}
+            _, why = job_limits(
+                self.plan.job,
+                ramp,
+                self.limit_values,
+                self.plan.stops,
+                self.plan.stop_pause,
+                self.plan.schedule,
+            )
+        except Exception as exc:  # a ramp this node cannot plan: the steps are watched as they come
+            self.get_logger().warning(f"the run's ramp cannot be checked against the limits: {exc}")
+            why = ""
+        with self.lock:  # the breach first: the command thread arms once the ramp is checked
+            self.ramp_breach = why
+            self.ramp_checked = True
+            if why and self.armed:
+                self.raise_fault(f"servo fault: {why} (soft limit); the run stops", {})
+
+    def watching_limits(self) -> bool:
+        return bool(((self.v_max < NO_LIMIT) | (self.a_max < NO_LIMIT)).any())
 
     def paces(self) -> bool:
         return True
@@ -356,6 +403,26 @@ class BridgeNode(StepConsumer):
             if self.armed and rows[0, 0] < sent:
                 self.late_rows += int(np.count_nonzero(rows[:, 0] < sent))
                 self.max_late_ns = max(self.max_late_ns, sent - int(rows[0, 0]))
+            if self.early_breach:
+                return  # the run is refused when it would be armed (try_arm)
+            over = self.limit_watch.feed(rows) if self.limit_watch is not None else None
+            if over is not None:
+                j = over.joint
+                unit = self.units[j] + ("/s" if over.kind == "velocity" else "/s^2")
+                what = (
+                    f"the steps would drive joint {self.joints[j]} ({self.axes[j]} axis) at {over.value:.6g} "
+                    f"{unit} over 20 ms"
+                )
+                limit = f"max_{over.kind}.{self.axes[j]} = {over.limit:g} {unit} (soft limit)"
+                if not self.armed:  # the whole job's check, when its ramp comes, says more: at arming
+                    self.early_breach = f"{what} {over.t_ns / 1e9:.3f} s into it, beyond {limit}"
+                    return
+                self.raise_fault(
+                    f"servo fault: {what} {over.t_ns / 1e9:.3f} s into the run, beyond {limit}; "
+                    "stopped before they were due",
+                    {"joint": self.joints[j], "axis": self.axes[j], "value": f"{over.value:.6g}"},
+                )
+                return
             self.pacer.add(rows)
 
     def holding(self) -> bool:
@@ -840,12 +907,31 @@ class BridgeNode(StepConsumer):
                     f"servo fault: the run cannot start: {self.why_not_armed} within {wait / 1e9:g} s", {}
                 )
             return
-        if self.pacer is None or self.pacer.held == 0:
+        if self.pacer is None or (self.pacer.held == 0 and not self.early_breach):
             return  # the axes are ready; the steps are on their way (the stall watch minds them)
+        if self.watching_limits() and not self.ramp_checked:
+            # the job is checked against max_velocity/max_acceleration before anything moves; a
+            # profile node that publishes no ramp leaves only the watch on the steps as they come
+            if now - self.begin_ns < ARM_WAIT_NS:
+                self.why_not_armed = (
+                    f"the run's ramp ({TOPIC_PROFILE_CONFIG}) is not here to check the limits"
+                )
+                return
+            if not self.ramp_said:
+                self.ramp_said = True
+                self.get_logger().warning(
+                    f"no {TOPIC_PROFILE_CONFIG} for this run within {ARM_WAIT_NS / 1e9:g} s: its job is not "
+                    "checked against the velocity and acceleration limits before it starts; its steps are, "
+                    "as they come"
+                )
         if self.origin_here:  # the job starts where the joints are
             self.pacer.set_origin(self.measured)
             self.history = CommandHistory(self.pacer.position.copy())
         if self.beyond_limits():
+            return
+        if self.ramp_breach or self.early_breach:
+            why = f"{self.ramp_breach} (soft limit)" if self.ramp_breach else self.early_breach
+            self.raise_fault(f"servo fault: the run cannot start: {why}; nothing was commanded", {})
             return
         self.t0_ns = now
         self.wall_t0 = time.time_ns()  # the same instant on the system clock: the trajectories' stamps

@@ -288,16 +288,108 @@ def cmd_check(args: argparse.Namespace) -> int:
     job = Job.from_dict(values_from_args(args, FIELD_SPECS, given["interp_node"]), check_fit=False)
     laid = job.winding
     doc = {"job_id": job.job_id, **report(laid)}
+    limits_why = ""
+    if args.limits:
+        doc["limits"], limits_why = axis_limits(job, given["profile_node"], args.limits)
     if args.json:
         print(json.dumps(doc, indent=2))
     else:
         for line in check_lines(job, doc):
             print(line)
-    why = laid.overflow()
+        if args.limits:
+            for line in limit_lines(doc["limits"], args.limits):
+                print(line)
+    why = laid.overflow() or limits_why
     if why:
         print(f"winder check: error: {why}", file=sys.stderr)
         return EXIT_BAD_INPUT
     return EXIT_OK
+
+
+def axis_limits(job: Job, ramp_given: dict[str, Any], path: str) -> tuple[dict[str, Any], str]:
+    """``winder check --limits``: the job, timed with the job file's ramp (the
+    profile node's defaults where it sets none), against the bridge's limits
+    in the parameters file ``path`` (its ``bridge_node`` section): each axis'
+    travel (from zero, as with job_origin zero), peak velocity and peak
+    acceleration over 20 ms beside its limits; and the first one passed, in
+    words ("" if none)."""
+    from winder.contract.jobfile import JobFileError, load_node_params
+    from winder.contract.limits import AXIS_UNITS, job_extent, job_limits
+    from winder.contract.params import BRIDGE_SPECS, NO_LIMIT, PROFILE_SPECS, check_bridge
+    from winder.motion.job import AXES
+    from winder.spec import SpecError
+
+    try:
+        given = load_node_params(path, "bridge_node", BRIDGE_SPECS)
+        values = {n: s.default for n, s in BRIDGE_SPECS.items()} | given
+        values["record"] = False  # the bag directory is the bridge's to probe, on its machine
+        check_bridge(values)
+    except (JobFileError, SpecError) as exc:
+        raise UserError(f"--limits {path}: {exc}") from None
+    ramp = {n: s.default for n, s in PROFILE_SPECS.items()} | ramp_given
+    try:
+        peaks, why = job_limits(job, ramp, values)
+    except ValueError as exc:
+        raise UserError(f"the job cannot be ramped: {exc}") from None
+    lo, hi = job_extent(job.segments())
+    out: dict[str, Any] = {}
+    for i, axis in enumerate(AXES):
+        step, p = job.joint_step[i], peaks[i]
+        travel = (float(lo[i] * step), float(hi[i] * step))
+        v_min, v_max = values[f"min_position.{axis}"], values[f"max_position.{axis}"]
+        if not why and values["job_origin"] == "zero" and (travel[0] < v_min or travel[1] > v_max):
+            side, at, limit = ("min", travel[0], v_min) if travel[0] < v_min else ("max", travel[1], v_max)
+            unit = AXIS_UNITS[axis]
+            why = f"the job takes the {axis} axis to {at:.6g} {unit}, beyond {side}_position.{axis} = "
+            why += f"{limit:g} {unit}"
+        out[axis] = {
+            "unit": AXIS_UNITS[axis],
+            "travel": list(travel),
+            "min_position": None if v_min <= -NO_LIMIT else v_min,
+            "max_position": None if v_max >= NO_LIMIT else v_max,
+            "peak_velocity": p.velocity,
+            "max_velocity": None
+            if values[f"max_velocity.{axis}"] >= NO_LIMIT
+            else values[f"max_velocity.{axis}"],
+            "peak_acceleration": p.windowed_acceleration,
+            "velocity_jump": p.jump,
+            "max_acceleration": (
+                None if values[f"max_acceleration.{axis}"] >= NO_LIMIT else values[f"max_acceleration.{axis}"]
+            ),
+        }
+    out["job_origin"] = values["job_origin"]
+    out["feed_override"] = ramp.get("feed_override", 1.0)
+    out["within"] = not why
+    return out, why
+
+
+def limit_lines(doc: dict[str, Any], path: str) -> list[str]:
+    """``winder check --limits``' table: each axis' travel, peaks and limits."""
+    from winder.motion.job import AXES
+
+    def lim(x: float | None) -> str:
+        return "-" if x is None else f"{x:g}"
+
+    origin = (
+        "from zero"
+        if doc["job_origin"] == "zero"
+        else "from where the joints stand (job_origin start_position)"
+    )
+    lines = [
+        f"  limits ({path}, bridge_node; travel {origin}, feed override {doc['feed_override']:g}):",
+        "    axis  unit  travel                       range           peak velocity  max       "
+        "peak accel (20 ms)  max",
+    ]
+    for axis in AXES:
+        a = doc[axis]
+        travel = f"{a['travel'][0]:.6g} .. {a['travel'][1]:.6g}"
+        span = f"[{lim(a['min_position'])}, {lim(a['max_position'])}]"
+        lines.append(
+            f"    {axis:<5} {a['unit']:<5} {travel:<28} {span:<15} {a['peak_velocity']:<14.6g} "
+            f"{lim(a['max_velocity']):<9} {a['peak_acceleration']:<19.6g} {lim(a['max_acceleration'])}"
+        )
+    lines.append(f"  within limits  {'yes' if doc['within'] else 'NO'}")
+    return lines
 
 
 def _coil_numbers(numbers: Sequence[int]) -> str:
@@ -555,6 +647,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("job_file", nargs="?", metavar="JOB_FILE", help=JOB_FILE_HELP)
     add_spec_arguments(p, FIELD_SPECS, "winding job (defaults: the RW400 paper set-up)")
     p.add_argument("--json", action="store_true", help="print the report as one JSON object")
+    p.add_argument(
+        "--limits",
+        metavar="PARAMS_FILE",
+        help="also check the job, timed with its ramp, against the bridge's soft limits in this ROS 2 "
+        "parameters file (its bridge_node section: min/max_position, max_velocity, max_acceleration "
+        "per axis); a job past one exits 2",
+    )
     p.set_defaults(func=cmd_check)
 
     p = sub.add_parser(

@@ -61,6 +61,7 @@ __all__ = [
     "check_interp_settings",
     "load_job_file",
     "load_job_file_hashed",
+    "load_node_params",
     "ros_scalar",
     "ros_text",
     "section_node",
@@ -94,13 +95,13 @@ def _flatten(prefix: str, value: Any, out: dict[str, Any]) -> None:
         out[prefix] = value
 
 
-def _read(path: Path) -> tuple[Any, str]:
+def _read(path: Path, what: str = "job file") -> tuple[Any, str]:
     from ruamel.yaml.error import YAMLError
 
     try:
         size = path.stat().st_size
     except FileNotFoundError:
-        raise JobFileError(f"{path}: no such job file") from None
+        raise JobFileError(f"{path}: no such {what}") from None
     except OSError as exc:
         raise JobFileError(f"{path}: cannot be read: {exc.strerror or exc}") from None
     if not path.is_file():
@@ -445,3 +446,40 @@ def _check_together(
             check(values)
         except SpecError as exc:
             raise JobFileError(f"{path}: {names[node]}: {exc}") from None
+
+
+def load_node_params(path: str | Path, node: str, specs: dict[str, Spec]) -> dict[str, Any]:
+    """The settings a ROS 2 parameters file gives the node ``node`` (its own
+    section, a namespace in front allowed, over ``/**``), each checked with
+    ``specs``; other nodes' sections are passed over (the file may be a
+    whole cell's, the controller manager's beside it). JobFileError (one
+    line) if the file cannot be read, the node has no section, or a value
+    is bad."""
+    p = Path(path).expanduser()
+    doc, _ = _read(p, "parameters file")
+    if not isinstance(doc, dict):
+        raise JobFileError(f"{p}: a ROS 2 parameters file is a map of node names to their ros__parameters")
+    out: dict[str, Any] = {}
+    keys = [k for k in doc if _written(str(k)) in (node, "/**")]
+    if not any(_written(str(k)) == node for k in keys):
+        raise JobFileError(f"{p}: no section for {node} (a map {node}: {{ros__parameters: ...}})")
+    for key in sorted(keys, key=lambda k: _written(str(k)) != "/**"):  # the node's own section last
+        body = doc[key]
+        if not isinstance(body, dict) or not isinstance(body.get("ros__parameters"), dict):
+            raise JobFileError(f"{p}: section {key!r} must hold a map ros__parameters")
+        flat: dict[str, Any] = {}
+        _flatten("", body["ros__parameters"], flat)
+        for name, value in flat.items():
+            if name not in specs:
+                if key == "/**":
+                    continue
+                raise JobFileError(f"{p}: {key}.ros__parameters.{name}: {node} has no setting {name!r}")
+            where = f"{key}.ros__parameters.{name}"
+            if isinstance(value, list):  # a string array (joints, axes): its spec says if it takes one
+                try:
+                    out[name] = specs[name].check(value)
+                except SpecError as exc:
+                    raise JobFileError(f"{p}: {where}: {exc}") from None
+            else:
+                out[name] = _check(p, where, specs[name], value)
+    return out

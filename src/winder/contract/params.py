@@ -709,6 +709,25 @@ BRIDGE_SPECS = {
         for side, sign in (("min", -1.0), ("max", 1.0))
         for unit in (_FOLLOWING_ERROR[axis][0],)
     },
+    **{
+        f"max_{kind}.{axis}": Spec(
+            f"max_{kind}.{axis}",
+            float,
+            NO_LIMIT,
+            f"{axis} axis: the highest {kind} a run may command ({unit}); a job that would pass it is "
+            f"refused before its first command, and steps that would pass it stop the run before they are "
+            f"due (measured over 20 ms). {NO_LIMIT:g} = none",
+            unit,
+            0.0,
+            NO_LIMIT,
+            low_open=True,
+        )
+        for axis in AXES
+        for kind, unit in (
+            ("velocity", f"{_FOLLOWING_ERROR[axis][0]}/s"),
+            ("acceleration", f"{_FOLLOWING_ERROR[axis][0]}/s^2"),
+        )
+    },
     **_table(
         Spec(
             "require_homing",
