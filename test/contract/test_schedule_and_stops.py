@@ -2,7 +2,7 @@
 would take them (issue 41): ``winder run --check`` passed ``jump@1``,
 ``pause@nan``, ``override@1=3``, ``pause@2,pause@1`` and a stop given twice,
 and the run was refused a minute later. One check
-(:func:`winder.contract.timeline.check_schedule`, :func:`winder.contract.params.stop_points`)
+(:func:`winder.motion.timeline.check_schedule`, :func:`winder.contract.params.stop_points`)
 serves the interp node, its job files and ``winder run --check``.
 """
 
@@ -14,8 +14,8 @@ import pytest
 
 from winder.cli import commands as cli
 from winder.contract.params import INTERP_SPECS, check_interp, stop_points
-from winder.contract.timeline import MAX_SCHEDULE, check_schedule, parse_schedule
 from winder.motion.job import Job
+from winder.motion.timeline import MAX_SCHEDULE, check_schedule, parse_schedule
 from winder.spec import SpecError
 
 BAD_SCHEDULES = [

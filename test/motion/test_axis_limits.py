@@ -1,4 +1,4 @@
-"""Axis limits (winder.contract.limits): a job's peaks against closed forms,
+"""Axis limits (winder.motion.limits): a job's peaks against closed forms,
 the watch on timed steps against a brute-force loop, and the promise between
 them: a job whose peaks are within the limits never trips the watch."""
 
@@ -14,11 +14,11 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from support.paths import BIN
 
-from winder.contract.limits import QUANTUM, WINDOW_NS, LimitWatch, job_extent, job_limits, job_peaks
-from winder.contract.params import NO_LIMIT, PROFILE_SPECS
-from winder.contract.timing import plan_timing
+from winder.contract.params import PROFILE_SPECS
 from winder.motion.interp import interpolate_pieces
 from winder.motion.job import Job
+from winder.motion.limits import NO_LIMIT, QUANTUM, WINDOW_NS, LimitWatch, job_extent, job_limits, job_peaks
+from winder.motion.timing import plan_timing
 
 DEFAULT_RAMP = {n: s.default for n, s in PROFILE_SPECS.items()}
 

@@ -25,10 +25,10 @@ from support.paths import ROOT
 from winder.contract.eq7 import step_deviation
 from winder.contract.params import PROFILE_SPECS
 from winder.contract.stream import StreamChecker, describe_job, parse_job_description
-from winder.contract.timeline import Command, Timeline
-from winder.contract.timing import plan_timing
 from winder.motion.interp import interpolate, interpolate_pieces
 from winder.motion.job import Job, JobError
+from winder.motion.timeline import Command, Timeline
+from winder.motion.timing import plan_timing
 from winder.record.reader import read_run
 
 JOBS = ROOT / "jobs"

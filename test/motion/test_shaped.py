@@ -18,10 +18,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from winder.contract.params import PROFILE_SPECS
-from winder.contract.timeline import Command, Timeline
-from winder.contract.timing import plan_segment, plan_timing, shaping_report
 from winder.motion.profile import Profile, plan
 from winder.motion.shaped import ShapedProfile
+from winder.motion.timeline import Command, Timeline
+from winder.motion.timing import plan_segment, plan_timing, shaping_report
 
 
 def zv(f_n: float, zeta: float) -> tuple[list[float], list[float]]:

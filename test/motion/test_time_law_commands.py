@@ -1,5 +1,5 @@
 """Feed hold, resume, abort and feed override on the time law,
-ROS-free: :mod:`winder.motion.retime` and :mod:`winder.contract.timeline`.
+ROS-free: :mod:`winder.motion.retime` and :mod:`winder.motion.timeline`.
 
 Oracles: ruckig's time-optimal velocity-mode stop (duration and distance from
 the same state), the closed forms of the trapezoid's braking distance and of
@@ -20,10 +20,10 @@ from scipy import integrate
 from support.oracles import ruckig_change, ruckig_stop
 
 from winder.contract.params import PROFILE_SPECS
-from winder.contract.timeline import Command, CommandError, Timeline, parse_schedule
-from winder.contract.timing import plan_timing
 from winder.motion.profile import EXP_CUT, plan
 from winder.motion.retime import continue_tail, motion_state, stop_tail
+from winder.motion.timeline import Command, CommandError, Timeline, parse_schedule
+from winder.motion.timing import plan_timing
 from winder.spec import SpecError
 
 RAMP = {k: s.default for k, s in PROFILE_SPECS.items()}

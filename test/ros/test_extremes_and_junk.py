@@ -24,7 +24,7 @@ from support.ros_probe import heard_diagnostics, start_job
 from winder.axis import StepperAxis
 from winder.cli import commands as cli
 from winder.contract.params import SIM_SPECS, bag_directory
-from winder.contract.timing import MAX_JOB_SECONDS
+from winder.motion.timing import MAX_JOB_SECONDS
 from winder.procs import popen
 from winder.spec import SpecError
 
@@ -61,7 +61,7 @@ def test_extreme_in_range_values_are_refused_in_one_line(
 
 def test_a_job_as_long_as_allowed_is_not_refused_for_its_length() -> None:
     from winder.contract.params import PROFILE_SPECS
-    from winder.contract.timing import plan_job
+    from winder.motion.timing import plan_job
 
     values = {k: s.default for k, s in PROFILE_SPECS.items()}
     # 1e6 steps at 2 steps/s: 5e5 s, under a week; 2e6 steps: over it

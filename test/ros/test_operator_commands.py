@@ -25,10 +25,10 @@ from support.oracles import ruckig_stop
 
 from winder.analysis.metrics import analyze
 from winder.contract.params import PROFILE_SPECS
-from winder.contract.timing import plan_segment
 from winder.motion.interp import interpolate
 from winder.motion.job import Job
 from winder.motion.retime import motion_state
+from winder.motion.timing import plan_segment
 from winder.procs import popen
 from winder.record.reader import read_run
 

@@ -23,8 +23,8 @@ from hypothesis import strategies as st
 
 from winder.analysis.metrics import analyze
 from winder.contract.params import PROFILE_SPECS, stop_place, stop_points
-from winder.contract.timing import plan_job, plan_segment, plan_timing
 from winder.motion.job import Job
+from winder.motion.timing import plan_job, plan_segment, plan_timing
 from winder.record.reader import read_run
 from winder.spec import SpecError
 

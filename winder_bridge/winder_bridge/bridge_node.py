@@ -56,7 +56,7 @@ std_srvs/Trigger) or, without one, references the axes where they stand; the
 reference is lost with the broadcaster (no joint_states for a second). The
 limits are the joints' positions after homing, as a CNC's are.
 ``max_velocity.<axis>``/``max_acceleration.<axis>`` bound how fast and how
-hard (:mod:`winder.contract.limits`): the run's job, timed with the ramp its
+hard (:mod:`winder.motion.limits`): the run's job, timed with the ramp its
 profile node published on winder/profile_config, is checked when the run
 is armed (refused before any command), and every step is watched as it
 comes, ahead of its time by the look-ahead (a feed override, a ramp changed
@@ -101,12 +101,12 @@ from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
 from winder.contract.cdr import CommandPayload, JointStateReader, clock_payload, trajectory_payload
-from winder.contract.limits import LimitWatch, job_extent, job_limits
 from winder.contract.pacing import CommandHistory, Pacer, following_error
-from winder.contract.params import BRIDGE_SPECS, NO_LIMIT, PROFILE_SPECS, check_bridge
+from winder.contract.params import BRIDGE_SPECS, PROFILE_SPECS, check_bridge
 from winder.contract.stream import JobPlan
 from winder.contract.topics import TOPIC_CLOCK, TOPIC_PROFILE_CONFIG, TOPIC_STEP_TIMES, check_node_name
 from winder.motion.job import AXES
+from winder.motion.limits import NO_LIMIT, LimitWatch, job_extent, job_limits
 from winder.ros.consumer import StepConsumer
 from winder.ros.diagnostics import ERROR
 from winder.ros.graph import fully_qualified, publishers_by_gid

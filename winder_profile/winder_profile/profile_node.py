@@ -13,7 +13,7 @@ the planned motion reaches k/N of the move. Segments follow each other with
 ``dwell`` seconds between them. The whole job is planned when its description
 arrives, so a step's time depends only on its index, never on arrival order.
 
-Operation (:mod:`winder.contract.timeline`): ``~/pause``, ``~/resume`` and
+Operation (:mod:`winder.motion.timeline`): ``~/pause``, ``~/resume`` and
 ``~/abort`` (std_srvs/Trigger) and the parameter ``feed_override`` change the
 time law of the running job from the moment they take effect; the job's
 ``schedule`` gives such commands at simulated times. Each is published on
@@ -57,8 +57,6 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from winder.contract.params import OPERATION_SPECS, PROFILE_SPECS, UNSHAPED, check_profile
 from winder.contract.stream import STEP_COLUMNS, TIMED_COLUMNS, JobPlan, StreamChecker, parse_job_description
-from winder.contract.timeline import Command, CommandError, Timeline, parse_schedule
-from winder.contract.timing import SegmentTiming, plan_timing, shaping_report
 from winder.contract.topics import (
     TOPIC_CLOCK,
     TOPIC_CONTROL,
@@ -71,6 +69,8 @@ from winder.contract.topics import (
     status_values,
 )
 from winder.motion.job import AXES
+from winder.motion.timeline import Command, CommandError, Timeline, parse_schedule
+from winder.motion.timing import SegmentTiming, plan_timing, shaping_report
 from winder.ros.chunks import STEPS_CDR, TIMED_CDR
 from winder.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from winder.ros.graph import Who, participant

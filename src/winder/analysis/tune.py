@@ -16,7 +16,7 @@ shaper (none, zv, zvd, ei) and jerk time (``1/f_n`` of the major axis, a
 quarter and a sixteenth of it), 20 peak speeds up to the torque's cruise
 limit; each speed takes the largest acceleration the torque leaves at that
 speed. Candidates are ranked by job time (the exact plan of every segment,
-:func:`winder.contract.timing.plan_timing`) and the fastest one whose moves
+:func:`winder.motion.timing.plan_timing`) and the fastest one whose moves
 the nonlinear model runs without a slip is the answer.
 """
 
@@ -31,9 +31,9 @@ import numpy as np
 
 from winder.axis.model import StepperAxis
 from winder.contract.params import PROFILE_SPECS, SIM_SPECS
-from winder.contract.timing import plan_timing
 from winder.motion.interp import interpolate
 from winder.motion.job import AXES, Job
+from winder.motion.timing import plan_timing
 
 __all__ = ["MARGIN", "Axis", "Candidate", "TuneResult", "axes_of", "check_limits", "check_size", "tune"]
 

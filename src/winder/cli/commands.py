@@ -51,11 +51,11 @@ from winder.contract.params import (
     stop_points,
 )
 from winder.contract.run import shaper_text
-from winder.contract.timing import plan_timing
 from winder.contract.topics import check_namespace
 from winder.interrupts import Interrupts, deferred
 from winder.motion.interp import dda, deviation_stats, min_deviation, point_by_point
 from winder.motion.job import FIELD_SPECS, Job
+from winder.motion.timing import plan_timing
 from winder.spec import Spec, SpecError
 
 __all__ = ["main"]
@@ -314,9 +314,9 @@ def axis_limits(job: Job, ramp_given: dict[str, Any], path: str) -> tuple[dict[s
     acceleration over 20 ms beside its limits; and the first one passed, in
     words ("" if none)."""
     from winder.contract.jobfile import JobFileError, load_node_params
-    from winder.contract.limits import AXIS_UNITS, job_extent, job_limits
-    from winder.contract.params import BRIDGE_SPECS, NO_LIMIT, PROFILE_SPECS, check_bridge
+    from winder.contract.params import BRIDGE_SPECS, PROFILE_SPECS, check_bridge
     from winder.motion.job import AXES
+    from winder.motion.limits import AXIS_UNITS, NO_LIMIT, job_extent, job_limits
     from winder.spec import SpecError
 
     try:

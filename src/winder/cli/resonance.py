@@ -209,8 +209,8 @@ def cmd_tune(args: argparse.Namespace) -> int:
     from winder.analysis.tune import axes_of, lost_steps, tune
     from winder.cli.common import Progress, job_file
     from winder.contract.params import PROFILE_SPECS
-    from winder.contract.timing import plan_timing
     from winder.motion.job import Job
+    from winder.motion.timing import plan_timing
 
     margin = _fraction("margin", args.margin)
     if args.apply and not args.job_file:

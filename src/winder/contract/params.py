@@ -14,10 +14,11 @@ from pathlib import Path
 from typing import Any
 
 from winder.contract.files import NAME_MAX, too_long_name
-from winder.contract.timing import MAX_JOB_SECONDS, plan_segment, plan_timing
 from winder.contract.topics import check_node_name, check_relative_name
 from winder.motion.job import AXES, FIELD_SPECS, Job, Segment
+from winder.motion.limits import NO_LIMIT
 from winder.motion.profile import KINDS
+from winder.motion.timing import MAX_JOB_SECONDS, plan_segment, plan_timing
 from winder.spec import Spec, SpecError, shorten
 
 __all__ = [
@@ -403,14 +404,14 @@ def check_interp(values: dict[str, Any], *, check_fit: bool = True, job: Job | N
     """Cross-field check of the interp node's settings (SpecError): the job
     (its coils fit their window, unless ``check_fit`` is False: a job that
     does not fit is then not laid out, and its stops and length are not
-    checked), its stops, schedule (:func:`winder.contract.timeline.check_schedule`),
+    checked), its stops, schedule (:func:`winder.motion.timeline.check_schedule`),
     ramp and length. ``job``: the job of ``values``, made already (``winder
     run --check``). The node's ``job_file`` is checked by
     :func:`winder.contract.jobfile.check_interp_settings`, which reads it."""
     if job is None:
         job = Job.from_dict({k: v for k, v in values.items() if k in FIELD_SPECS}, check_fit=check_fit)
     if values.get("schedule"):
-        from winder.contract.timeline import check_schedule
+        from winder.motion.timeline import check_schedule
 
         check_schedule(values["schedule"])
     ramp = run_ramp(values)
@@ -573,8 +574,6 @@ class _NamesSpec(Spec):
 #: The unit, default and largest value of each axis' following-error limit
 #: (winder.motion.job: feed in m, fork and pole in rad).
 _FOLLOWING_ERROR = {"feed": ("m", 1e-3, 1.0), "fork": ("rad", 0.2, 100.0), "pole": ("rad", 0.05, 100.0)}
-#: a soft limit this far out is none (rad or m: no winding axis goes there)
-NO_LIMIT = 1e9
 
 #: The settings of the ros2_control bridge (winder_bridge's bridge_node): the
 #: consumer's, and how it drives a forward_command_controller and watches the

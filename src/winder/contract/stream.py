@@ -140,7 +140,7 @@ class JobPlan:
     stop_pause: float = 0.0
     #: "auto": the job goes on after stop_pause; "call": it waits for ~/resume first
     stop_resume: str = "auto"
-    #: operator commands at simulated times (winder.contract.timeline.parse_schedule)
+    #: operator commands at simulated times (winder.motion.timeline.parse_schedule)
     schedule: str = ""
     #: a re-simulation (``winder resim``): the recording its steps come from, and that run's id
     source_bag: str = ""
@@ -211,7 +211,7 @@ def parse_job_description(text: str) -> JobPlan:
     if not isinstance(schedule, str):
         raise ValueError(f"job description: schedule {json.dumps(schedule)[:40]} is not a text")
     if schedule:
-        from winder.contract.timeline import parse_schedule
+        from winder.motion.timeline import parse_schedule
 
         try:
             parse_schedule(schedule)

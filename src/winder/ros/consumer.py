@@ -76,7 +76,6 @@ from winder.contract.pacing import LateSteps
 from winder.contract.params import bag_directory
 from winder.contract.run import EventError, JobReport, RunLedger, Transition, parse_control
 from winder.contract.stream import TIMED_COLUMNS, JobPlan, StreamChecker, parse_job_description
-from winder.contract.timing import MAX_JOB_SECONDS
 from winder.contract.topics import (
     TOPIC_CONTROL,
     TOPIC_DIAGNOSTICS,
@@ -91,6 +90,7 @@ from winder.contract.topics import (
     status_values,
 )
 from winder.contract.trust import Intruders
+from winder.motion.timing import MAX_JOB_SECONDS
 from winder.record.bag import (
     BagRecorder,
     new_bag_path,

@@ -36,14 +36,14 @@ from typing import Any, Protocol
 import numpy as np
 import numpy.typing as npt
 
-from winder.contract.params import NO_LIMIT
-from winder.contract.timeline import parse_schedule
-from winder.contract.timing import plan_timing
 from winder.motion.job import AXES, Job
 from winder.motion.shaped import Motion, ShapedProfile
+from winder.motion.timeline import parse_schedule
+from winder.motion.timing import plan_timing
 
 __all__ = [
     "AXIS_UNITS",
+    "NO_LIMIT",
     "WINDOW_NS",
     "AxisPeaks",
     "Breach",
@@ -55,6 +55,8 @@ __all__ = [
     "move_peaks",
 ]
 
+#: a limit this large is none (the default of every limit parameter of the bridge)
+NO_LIMIT = 1e9
 #: each axis' joint unit (as the job and JointState have them)
 AXIS_UNITS = {"feed": "m", "fork": "rad", "pole": "rad"}
 
@@ -127,7 +129,7 @@ def job_peaks(
     override: float = 1.0,
 ) -> list[AxisPeaks]:
     """Each axis' peaks (the order of ``joint_step``: the cell's AXES) for a
-    job's ``segments`` timed by ``timings`` (:func:`winder.contract.timing.plan_timing`),
+    job's ``segments`` timed by ``timings`` (:func:`winder.motion.timing.plan_timing`),
     at feed override ``override``."""
     n = len(joint_step)
     vel, acc, jump = np.zeros(n), np.zeros(n), np.zeros(n)

@@ -2,7 +2,7 @@
 
 A job's motion is a sequence of *moves* (a segment, or the part of one between
 programmed stops), each from rest to rest, planned by
-:func:`winder.contract.timing.plan_timing`. A :class:`Timeline` starts as that
+:func:`winder.motion.timing.plan_timing`. A :class:`Timeline` starts as that
 plan and takes commands at a simulated time ``t`` (ns since the job's start):
 
 * ``pause`` (feed hold): the move in motion at ``t`` stops with the
@@ -33,9 +33,9 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from winder.contract.timing import SegmentTiming
 from winder.motion.retime import continue_tail, from_rest, motion_state, stop_tail
 from winder.motion.shaped import Motion
+from winder.motion.timing import SegmentTiming
 from winder.spec import SpecError, shorten
 
 __all__ = [
