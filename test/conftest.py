@@ -91,8 +91,9 @@ class Procs:
 
     def stop(self, p: subprocess.Popen[bytes], sig: int = signal.SIGINT, timeout: float = 20.0) -> int:
         code, stopped = stop(p, sig, timeout)
-        if not stopped:
-            raise AssertionError(f"{p.args[0]} did not stop within {timeout} s")
+        if not stopped:  # its log ends with its threads' stacks (winder.procs.kill_telling_where)
+            tail = "\n".join(self.log(p).splitlines()[-60:])
+            raise AssertionError(f"{p.args[0]} did not stop within {timeout} s; its log ends:\n{tail}")
         return code
 
     def stop_all(self) -> None:

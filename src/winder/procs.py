@@ -18,6 +18,7 @@ Plain ``subprocess`` and ``ctypes``, no ROS: it is the bottom layer.
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import os
 import signal
@@ -72,7 +73,7 @@ def stop_all(
         try:
             p.wait(timeout=grace)
         except subprocess.TimeoutExpired:
-            p.kill()
+            kill_telling_where(p)
             p.wait()
             killed.append(p.pid)
     return killed
@@ -80,14 +81,41 @@ def stop_all(
 
 def stop(p: subprocess.Popen[Any], sig: int = signal.SIGINT, grace: float = 20.0) -> tuple[int, bool]:
     """Send ``sig`` to ``p`` (if it still runs), wait ``grace`` seconds, then
-    kill it: its exit status and whether it stopped by itself."""
+    kill it (after asking for its stacks: :func:`kill_telling_where`): its
+    exit status and whether it stopped by itself."""
     if p.poll() is None:
         p.send_signal(sig)
     try:
         return p.wait(timeout=grace), True
     except subprocess.TimeoutExpired:
-        p.kill()
+        kill_telling_where(p)
         return p.wait(), False
+
+
+#: a winder process writes every thread's Python stack to its stderr on this
+#: signal (:func:`stacks_on_signal`): ``kill -USR1 <pid>`` says where one hangs
+STACKS_SIGNAL = signal.SIGUSR1
+
+
+def stacks_on_signal() -> None:
+    """Write every thread's stack to stderr on :data:`STACKS_SIGNAL` (every
+    winder command and node calls this first). Harmless if never sent."""
+    import faulthandler
+
+    with contextlib.suppress(ValueError, OSError, AttributeError):  # no stderr, or not the main thread
+        faulthandler.register(STACKS_SIGNAL, all_threads=True, chain=False)
+
+
+def kill_telling_where(p: subprocess.Popen[Any], wait: float = 1.0) -> None:
+    """Kill ``p``, a process that did not stop when asked: first
+    :data:`STACKS_SIGNAL`, so that its log says where it hung, then SIGKILL."""
+    if p.poll() is None:
+        with contextlib.suppress(ProcessLookupError):
+            p.send_signal(STACKS_SIGNAL)
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            p.wait(timeout=wait)
+    if p.poll() is None:
+        p.kill()
 
 
 class Children:

@@ -25,7 +25,7 @@ from support.paths import ROOT
 from support.ros_probe import heard_diagnostics
 
 from winder.cli.exits import EXIT_ABORTED, EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
-from winder.procs import popen
+from winder.procs import kill_telling_where, popen
 from winder.record.reader import read_run
 
 pytestmark = pytest.mark.ros
@@ -259,7 +259,14 @@ def test_state_watch_prints_each_change_until_ctrl_c(procs: Procs, tmp_path: Pat
             seen.append(watch.stdout.readline())
         assert any(" running " in s for s in seen), seen
         os.kill(watch.pid, signal.SIGINT)
-        _, err = watch.communicate(timeout=30)
+        try:
+            _, err = watch.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            kill_telling_where(watch)  # its stderr: where it hung
+            _, err = watch.communicate()
+            raise AssertionError(
+                f"winder ctl state --watch did not stop on SIGINT within 30 s:\n{err}"
+            ) from None
         assert watch.returncode == EXIT_INTERRUPTED and "Traceback" not in err, err
     finally:
         if watch.poll() is None:

@@ -8,6 +8,7 @@ from collections.abc import Sequence
 from types import FrameType
 
 from winder.cli.lifetime import early_containers, ros_done
+from winder.procs import stacks_on_signal
 
 __all__ = ["main"]
 
@@ -21,6 +22,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from its first moment on."""
     signal.signal(signal.SIGTERM, _terminate)
     signal.signal(signal.SIGHUP, _terminate)
+    stacks_on_signal()  # kill -USR1: every thread's stack on stderr (where a command hangs)
     try:
         from winder.interrupts import deferred, ignored
 
