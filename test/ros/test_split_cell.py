@@ -65,13 +65,11 @@ def split_run(hosts: Hosts, procs: Procs, tmp_path: Path, extra: dict[str, str],
     bags = tmp_path / "bags"
     env_b = {**hosts.env("b", procs.env), **extra}
     env_a = {**hosts.env("a", procs.env), **extra}
-    sim = popen(
-        hosts.command("b", [str(BIN / "sim_node"), "--ros-args", "-p", f"bag_dir:={bags}"]),
-        env=env_b,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
+    # one of the test's processes: stopped with them (a process left running in a namespace taken
+    # down lives on, its shared-memory ports held, until the test worker ends)
+    procs.children.start(
+        hosts.command("b", [str(BIN / "sim_node"), "--ros-args", "-p", f"bag_dir:={bags}"]), "sim", env=env_b
     )
-    procs.procs.append((sim, tmp_path / "sim.log"))  # type: ignore[arg-type]
     rx = hosts.rx_bytes("b")
     r = subprocess.run(
         hosts.command(
