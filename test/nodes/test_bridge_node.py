@@ -28,7 +28,8 @@ from hypothesis import strategies as st
 from support import wait
 from support.paths import BIN, TEST
 
-from winder.motion.job import AXES, Job
+from winder.motion.axes import AXES
+from winder.motion.job import Job
 
 pytestmark = pytest.mark.ros
 

@@ -81,7 +81,8 @@ def test_stop_is_sigint_then_kill_after_the_grace(tmp_path: Path) -> None:
         [
             sys.executable,
             "-c",
-            "import signal, sys, time; signal.signal(signal.SIGINT, signal.SIG_IGN);"
+            "import signal, sys, time; from winder.procs import stacks_on_signal; stacks_on_signal();"
+            " signal.signal(signal.SIGINT, signal.SIG_IGN);"
             " print('ignoring SIGINT', flush=True); time.sleep(60)",
         ],
         "stubborn",
@@ -94,7 +95,9 @@ def test_stop_is_sigint_then_kill_after_the_grace(tmp_path: Path) -> None:
     assert children.stop_all(signal.SIGINT, grace=1.0) == ["stubborn"]
     assert time.monotonic() - t0 < 5
     assert polite.returncode != 0 and stubborn.returncode == -signal.SIGKILL
-    assert "ignoring SIGINT" in (tmp_path / "stubborn.log").read_text()
+    log = (tmp_path / "stubborn.log").read_text()
+    # a winder process asked for its stacks before the kill: its log says where it hung
+    assert "ignoring SIGINT" in log and "most recent call first" in log, log
     assert children.running() == []
 
 

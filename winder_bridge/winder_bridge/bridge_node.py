@@ -105,7 +105,7 @@ from winder.contract.pacing import CommandHistory, Pacer, following_error
 from winder.contract.params import BRIDGE_SPECS, PROFILE_SPECS, check_bridge
 from winder.contract.stream import JobPlan
 from winder.contract.topics import TOPIC_CLOCK, TOPIC_PROFILE_CONFIG, TOPIC_STEP_TIMES, check_node_name
-from winder.motion.job import AXES
+from winder.motion.axes import AXES
 from winder.motion.limits import NO_LIMIT, LimitWatch, job_extent, job_limits
 from winder.ros.consumer import StepConsumer
 from winder.ros.diagnostics import ERROR

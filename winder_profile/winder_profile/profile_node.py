@@ -68,7 +68,7 @@ from winder.contract.topics import (
     TOPIC_STEPS,
     status_values,
 )
-from winder.motion.job import AXES
+from winder.motion.axes import AXES
 from winder.motion.timeline import Command, CommandError, Timeline, parse_schedule
 from winder.motion.timing import SegmentTiming, plan_timing, shaping_report
 from winder.ros.chunks import STEPS_CDR, TIMED_CDR

@@ -49,7 +49,7 @@ from winder.contract.pacing import ns_not_before
 from winder.contract.params import MOTOR_FIELDS, SIM_SPECS, check_sim
 from winder.contract.stream import JobPlan
 from winder.contract.topics import TOPIC_CLOCK, TOPIC_JOINT_COMMANDS, TOPIC_JOINT_STATES
-from winder.motion.job import AXES
+from winder.motion.axes import AXES
 from winder.ros.consumer import StepConsumer
 from winder.ros.qos import QOS_CLOCK, QOS_STATE
 from winder.ros.spin import spin

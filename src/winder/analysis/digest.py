@@ -34,7 +34,7 @@ import numpy.typing as npt
 
 from winder.contract.eq7 import signed_path_distance, step_deviation
 from winder.contract.stream import JobPlan, SegmentPlan
-from winder.motion.job import AXES
+from winder.motion.axes import AXES
 
 __all__ = [
     "END_STRIDES",

@@ -30,12 +30,12 @@ from typing import TextIO
 import numpy as np
 
 from winder.contract.files import new_directory
-from winder.motion.job import AXES
+from winder.motion.axes import AXES, AXIS_TABLE
 from winder.record.reader import Run, Samples
 
 __all__ = ["export_csv"]
 
-UNITS = {"feed": ("m", "m/s"), "fork": ("rad", "rad/s"), "pole": ("rad", "rad/s")}
+UNITS = {a.name: (a.unit, a.velocity_unit) for a in AXIS_TABLE}
 
 
 def _samples(f: TextIO, s: Samples) -> int:

@@ -83,7 +83,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from winder.motion.job import AXES
+from winder.motion.axes import AXES
 from winder.record.reader import AxisConfig, Run
 
 __all__ = [

@@ -76,7 +76,7 @@ import numpy.typing as npt
 from winder.analysis.digest import STRIDE_TIME, Digest, SegmentKinematics, digest, turn_index
 from winder.contract.eq7 import layer_of_samples, sample_deviation
 from winder.contract.run import commands_text, shaper_text, stops_text
-from winder.motion.job import AXES
+from winder.motion.axes import AXES, AXIS_TABLE
 from winder.motion.profile import LIMITS
 from winder.record.reader import Run
 
@@ -101,7 +101,7 @@ __all__ = [
 
 FloatArray = npt.NDArray[np.float64]
 
-UNITS = {"feed": "m", "fork": "rad", "pole": "rad"}
+UNITS = {a.name: a.unit for a in AXIS_TABLE}
 
 
 @dataclass(frozen=True)

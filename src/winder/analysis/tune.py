@@ -31,8 +31,9 @@ import numpy as np
 
 from winder.axis.model import StepperAxis
 from winder.contract.params import PROFILE_SPECS, SIM_SPECS
+from winder.motion.axes import AXES
 from winder.motion.interp import interpolate
-from winder.motion.job import AXES, Job
+from winder.motion.job import Job
 from winder.motion.timing import plan_timing
 
 __all__ = ["MARGIN", "Axis", "Candidate", "TuneResult", "axes_of", "check_limits", "check_size", "tune"]

@@ -315,8 +315,9 @@ def axis_limits(job: Job, ramp_given: dict[str, Any], path: str) -> tuple[dict[s
     words ("" if none)."""
     from winder.contract.jobfile import JobFileError, load_node_params
     from winder.contract.params import BRIDGE_SPECS, PROFILE_SPECS, check_bridge
-    from winder.motion.job import AXES
-    from winder.motion.limits import AXIS_UNITS, NO_LIMIT, job_extent, job_limits
+    from winder.motion.axes import AXES
+    from winder.motion.axes import axis as axis_of
+    from winder.motion.limits import NO_LIMIT, job_extent, job_limits
     from winder.spec import SpecError
 
     try:
@@ -339,11 +340,11 @@ def axis_limits(job: Job, ramp_given: dict[str, Any], path: str) -> tuple[dict[s
         v_min, v_max = values[f"min_position.{axis}"], values[f"max_position.{axis}"]
         if not why and values["job_origin"] == "zero" and (travel[0] < v_min or travel[1] > v_max):
             side, at, limit = ("min", travel[0], v_min) if travel[0] < v_min else ("max", travel[1], v_max)
-            unit = AXIS_UNITS[axis]
+            unit = axis_of(axis).unit
             why = f"the job takes the {axis} axis to {at:.6g} {unit}, beyond {side}_position.{axis} = "
             why += f"{limit:g} {unit}"
         out[axis] = {
-            "unit": AXIS_UNITS[axis],
+            "unit": axis_of(axis).unit,
             "travel": list(travel),
             "min_position": None if v_min <= -NO_LIMIT else v_min,
             "max_position": None if v_max >= NO_LIMIT else v_max,
@@ -365,7 +366,7 @@ def axis_limits(job: Job, ramp_given: dict[str, Any], path: str) -> tuple[dict[s
 
 def limit_lines(doc: dict[str, Any], path: str) -> list[str]:
     """``winder check --limits``' table: each axis' travel, peaks and limits."""
-    from winder.motion.job import AXES
+    from winder.motion.axes import AXES
 
     def lim(x: float | None) -> str:
         return "-" if x is None else f"{x:g}"

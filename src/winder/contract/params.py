@@ -15,7 +15,8 @@ from typing import Any
 
 from winder.contract.files import NAME_MAX, too_long_name
 from winder.contract.topics import check_node_name, check_relative_name
-from winder.motion.job import AXES, FIELD_SPECS, Job, Segment
+from winder.motion.axes import AXES, FEED, FORK, POLE
+from winder.motion.job import FIELD_SPECS, Job, Segment
 from winder.motion.limits import NO_LIMIT
 from winder.motion.profile import KINDS
 from winder.motion.timing import MAX_JOB_SECONDS, plan_segment, plan_timing
@@ -573,7 +574,11 @@ class _NamesSpec(Spec):
 
 #: The unit, default and largest value of each axis' following-error limit
 #: (winder.motion.job: feed in m, fork and pole in rad).
-_FOLLOWING_ERROR = {"feed": ("m", 1e-3, 1.0), "fork": ("rad", 0.2, 100.0), "pole": ("rad", 0.05, 100.0)}
+_FOLLOWING_ERROR = {
+    "feed": (FEED.unit, 1e-3, 1.0),
+    "fork": (FORK.unit, 0.2, 100.0),
+    "pole": (POLE.unit, 0.05, 100.0),
+}
 
 #: The settings of the ros2_control bridge (winder_bridge's bridge_node): the
 #: consumer's, and how it drives a forward_command_controller and watches the

@@ -25,8 +25,9 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from winder.motion.axes import AXES
 from winder.motion.interp import interpolate_pieces, pieces_mismatch
-from winder.motion.job import AXES, Job
+from winder.motion.job import Job
 
 __all__ = [
     "STEP_COLUMNS",

@@ -17,11 +17,8 @@ parameters, job files, ``--bobbin.window-width``); the dataclass fields are
 the part after the last dot, or the name with its dot made ``_``
 (:data:`ATTRIBUTES`).
 
-Axes, in this order everywhere in winder (``AXES``):
-
-* ``feed`` - linear, ``feed_step`` metres per step;
-* ``fork`` - rotary, ``fork_steps_per_rev`` steps per revolution;
-* ``pole`` - rotary, ``pole_steps_per_rev`` steps per revolution.
+Axes, in this order everywhere in winder: :data:`winder.motion.axes.AXIS_TABLE`
+(feed, fork, pole; a segment's ``start`` and ``delta`` are in that order).
 
 Units are SI (metres, radians). Unrolled, a layer is the straight line from its
 start to (feed distance, flyer arc length) in the plane: the segment that
@@ -41,7 +38,6 @@ from winder.motion.coil import CORES, LAYS, Bobbin, Winding, layer_capacity, win
 from winder.spec import Spec, SpecError
 
 __all__ = [
-    "AXES",
     "FIELD_SPECS",
     "MAX_PIECES",
     "Coil",
@@ -51,7 +47,6 @@ __all__ = [
     "parse_coil_overrides",
 ]
 
-AXES = ("feed", "fork", "pole")
 #: Steps of one axis in one segment, at most: positions travel as int32.
 MAX_STEPS = 2**31 - 1
 #: Straight moves of a job, at most (its segments' pieces: an orthocyclic

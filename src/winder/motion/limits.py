@@ -36,13 +36,13 @@ from typing import Any, Protocol
 import numpy as np
 import numpy.typing as npt
 
-from winder.motion.job import AXES, Job
+from winder.motion.axes import AXES, AXIS_TABLE
+from winder.motion.job import Job
 from winder.motion.shaped import Motion, ShapedProfile
 from winder.motion.timeline import parse_schedule
 from winder.motion.timing import plan_timing
 
 __all__ = [
-    "AXIS_UNITS",
     "NO_LIMIT",
     "WINDOW_NS",
     "AxisPeaks",
@@ -57,8 +57,6 @@ __all__ = [
 
 #: a limit this large is none (the default of every limit parameter of the bridge)
 NO_LIMIT = 1e9
-#: each axis' joint unit (as the job and JointState have them)
-AXIS_UNITS = {"feed": "m", "fork": "rad", "pole": "rad"}
 
 #: velocity and acceleration are measured over this span (ns)
 WINDOW_NS = 20_000_000
@@ -281,5 +279,5 @@ def job_limits(
     overrides = [c.value for c in parse_schedule(schedule) if c.kind == "override"]
     override = max([float(ramp.get("feed_override", 1.0)), *overrides])
     peaks = job_peaks(segments, timings, job.joint_step, override)
-    units = [AXIS_UNITS[a] for a in AXES]
+    units = [a.unit for a in AXIS_TABLE]
     return peaks, breach(peaks, AXES, units, limits)

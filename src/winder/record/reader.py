@@ -55,7 +55,7 @@ from winder.contract.topics import (
     in_namespace,
     status_node,
 )
-from winder.motion.job import AXES
+from winder.motion.axes import AXES
 from winder.record.raw import BagError, RawBag, _typestore, read_raw, recover
 from winder.spec import shorten
 

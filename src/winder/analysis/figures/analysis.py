@@ -62,7 +62,7 @@ from winder.contract.eq7 import layer_of_samples, sample_deviation, signed_path_
 from winder.contract.files import OutputError, atomic_file, output_dir
 from winder.contract.run import shaper_text, where_text
 from winder.contract.stream import JobPlan
-from winder.motion.job import AXES
+from winder.motion.axes import AXES, AXIS_TABLE
 from winder.record.reader import Run
 
 __all__ = [
@@ -80,7 +80,7 @@ IntArray = npt.NDArray[np.int64]
 
 CMD, ACT, IDEAL = "tab:blue", "tab:orange", "k"
 #: joint units and the scale to show them in
-SHOW = {"feed": (1e3, "mm"), "fork": (1.0, "rad"), "pole": (1.0, "rad")}
+SHOW = {a.name: (a.show_scale, a.show_unit) for a in AXIS_TABLE}
 DPI = 100
 #: fixed margins (fractions of the figure): matplotlib's constrained layout
 #: measured every tick label of every panel and took most of the plotting time
