@@ -243,7 +243,7 @@ class SimNode(StepConsumer):
     def checked(self, seg: int, rows: npt.NDArray[np.int64]) -> None:
         """Eq. 7 of the commanded steps, as ``winder analyze`` computes it (winder.contract.eq7)."""
         assert self.plan is not None
-        if self.plan.segments[seg].kind == "layer":
+        if self.plan.segments[seg].kind.winds:
             self.dev_cmd.add(step_deviation(self.plan, seg, rows[:, 2:]))
 
     def details(self) -> dict[str, object]:

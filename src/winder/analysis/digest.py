@@ -386,9 +386,9 @@ class _Pass:
         lx, ly = plan.step_lengths[0], plan.step_lengths[1]
         job = plan.job
         first_layer = True
-        layer_steps = sum(s.steps for s in plan.segments if s.kind == "layer")
+        layer_steps = sum(s.steps for s in plan.segments if s.kind.winds)
         for i, s in enumerate(plan.segments):
-            if s.kind != "layer":
+            if not s.kind.winds:
                 continue
             norm = math.hypot(s.delta[0] * lx, s.delta[1] * ly)
             layer = LayerStats(

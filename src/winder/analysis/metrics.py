@@ -274,7 +274,7 @@ def axis_deviation(run: Run, digested: Digest | None = None) -> Deviation | None
     """Eq. 7 of the simulated axes (see module doc); None without joint states or steps."""
     d = digested if digested is not None else digest_run(run)
     plan = run.plan
-    if len(run.states) == 0 or d.rows == 0 or not any(s.kind == "layer" for s in plan.segments):
+    if len(run.states) == 0 or d.rows == 0 or not any(s.kind.winds for s in plan.segments):
         return None
     spr = plan.job.fork_steps_per_rev
     seg, x, y = winding_samples(run, d)

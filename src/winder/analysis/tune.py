@@ -140,7 +140,7 @@ def check_size(job: Job) -> None:
     anything is simulated or allocated."""
     longest = max(job.segments(), key=lambda s: s.steps, default=None)
     if longest is not None and longest.steps > MAX_MOVE_STEPS:
-        what = "layer" if longest.kind == "layer" else "pole index"
+        what = longest.kind.words
         raise ValueError(
             f"job {job.job_id}: a {what} of {longest.steps} steps is too long to tune: each distinct move "
             f"is simulated whole, at most {MAX_MOVE_STEPS} steps (fewer turns_per_layer or "

@@ -195,7 +195,7 @@ def as_wound(
     t = states.t
     feed = states.pos[:, 0]
     fork = states.pos[:, 1]
-    layer_segments = [s for s in job.segments() if s.kind == "layer"]
+    layer_segments = [s for s in job.segments() if s.kind.winds]
     ortho = getattr(job, "lay", "helical") == "orthocyclic"
     pitch = radial_pitch(d, "orthocyclic" if ortho else "helical")
     coil_start: dict[int, tuple[float, int]] = {}  # coil -> (start flange feed position m, direction)

@@ -92,7 +92,7 @@ def cmd_interp(args: argparse.Namespace) -> int:
         for first in range(0, seg.steps, INTERP_BLOCK):
             stop = min(seg.steps, first + INTERP_BLOCK)
             path = interpolate_pieces(seg.start, seg.pieces, first=first, stop=stop)
-            if seg.kind == "layer" and path.shape[0]:
+            if seg.kind.winds and path.shape[0]:
                 if len(seg.pieces) > 1:
                     dist = np.abs(
                         signed_path_distance(seg.start, seg.pieces, path[:, 0], path[:, 1], (lx, ly))

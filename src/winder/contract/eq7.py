@@ -41,10 +41,10 @@ def layer_of_samples(plan: JobPlan, seg_now: npt.ArrayLike, y: npt.ArrayLike) ->
     seg = np.asarray(seg_now, dtype=np.int64)
     yy = np.asarray(y, dtype=np.float64)
     out = np.full(seg.size, -1, np.int64)
-    layer_ids = [i for i, s in enumerate(plan.segments) if s.kind == "layer"]
+    layer_ids = [i for i, s in enumerate(plan.segments) if s.kind.winds]
     if not layer_ids or seg.size == 0:
         return out
-    kinds = np.array([s.kind == "layer" for s in plan.segments])
+    kinds = np.array([s.kind.winds for s in plan.segments])
     ok = (seg >= 0) & (seg < kinds.size)
     winding = np.zeros(seg.size, dtype=bool)
     winding[ok] = kinds[seg[ok]]

@@ -345,7 +345,7 @@ def stop_points(job: Job, text: str) -> list[tuple[int, int]]:
     items = [t for t in text.replace(" ", "").split(",") if t]
     if not items:
         return []
-    layers = {(s.pole, s.layer): s for s in job.segments() if s.kind == "layer"}
+    layers = {(s.pole, s.layer): s for s in job.segments() if s.kind.winds}
     turns_of: dict[int, list[int]] = {}  # per coil, its layers' turns
     seen: dict[tuple[int, int], str] = {}
     for item in items:

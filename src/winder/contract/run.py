@@ -294,7 +294,7 @@ class RunLedger:
         segs = self.plan.job.segments()
         if not 0 <= seg < len(segs):
             return (0, 0, 0)
-        if segs[seg].kind == "layer":
+        if segs[seg].kind.winds:
             return stop_place(self.plan.job, segs[seg], max(step, 0))
         return (segs[seg].pole + 1, 0, 0)
 
@@ -490,7 +490,7 @@ def where_text(plan: JobPlan, seg: int, step: int) -> str:
     if not 0 <= seg < len(segs):
         return ""
     s = segs[seg]
-    if s.kind != "layer":
+    if not s.kind.winds:
         return f"coil {s.pole + 1}, between layers"
     turns = plan.job.coil(s.pole).turns_per_layer
     return f"coil {s.pole + 1} turn {s.layer * turns + step / plan.job.fork_steps_per_rev:.2f}"

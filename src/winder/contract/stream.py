@@ -27,7 +27,7 @@ import numpy.typing as npt
 
 from winder.motion.axes import AXES
 from winder.motion.interp import interpolate_pieces, pieces_mismatch
-from winder.motion.job import Job
+from winder.motion.job import Job, SegmentKind
 
 __all__ = [
     "STEP_COLUMNS",
@@ -110,7 +110,7 @@ def describe_job(
 
 @dataclass(frozen=True)
 class SegmentPlan:
-    kind: str
+    kind: SegmentKind
     start: tuple[int, ...]
     delta: tuple[int, ...]
     steps: int
@@ -289,7 +289,7 @@ def _stops(doc: dict[str, Any], segments: list[Any]) -> tuple[tuple[tuple[int, i
         if not ok or not 0 <= item[0] < len(segments):
             raise ValueError(f"job description: stop {json.dumps(item)[:40]} is not [segment, step]")
         seg = segments[item[0]]
-        if seg.kind != "layer" or not 1 <= item[1] <= seg.steps:
+        if not seg.kind.winds or not 1 <= item[1] <= seg.steps:
             raise ValueError(f"job description: stop {item} is not a step of a layer segment")
         out.append((item[0], item[1]))
     return tuple(sorted(set(out))), float(pause)

@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import InitVar, dataclass, fields, replace
+from enum import StrEnum
 from typing import Any
 
 import numpy as np
@@ -44,6 +45,7 @@ __all__ = [
     "Job",
     "JobError",
     "Segment",
+    "SegmentKind",
     "parse_coil_overrides",
 ]
 
@@ -288,12 +290,30 @@ def parse_coil_overrides(text: str, poles: int, base: Coil) -> dict[int, Coil]:
     return out
 
 
+class SegmentKind(StrEnum):
+    """What a segment of a job does (its value is the word bags and job
+    descriptions carry)."""
+
+    LAYER = "layer"  #: lays a layer: the flyer turns while the feed advances (a line, or a cam)
+    INDEX = "index"  #: indexes the rotor to the next coil: the pole axis alone
+
+    @property
+    def words(self) -> str:
+        """The segment kind in a message."""
+        return "layer" if self is SegmentKind.LAYER else "pole index"
+
+    @property
+    def winds(self) -> bool:
+        """Whether wire is laid in it (a layer), so turns and stops fall in it."""
+        return self is SegmentKind.LAYER
+
+
 @dataclass(frozen=True)
 class Segment:
     """One straight move in steps: ``start`` + ``delta`` per axis (AXES order)."""
 
     index: int
-    kind: str  #: "layer" (feed + fork) or "index" (pole)
+    kind: SegmentKind
     start: tuple[int, int, int]
     delta: tuple[int, int, int]
     pole: int  #: coil being wound (or indexed to)
@@ -647,7 +667,7 @@ class Job:
         for pole in range(self.poles):
             if pole > 0:
                 delta = (0, 0, self.pole_position(pole) - self.pole_position(pole - 1))
-                out.append(Segment(len(out), "index", tuple(pos), delta, pole, -1))  # type: ignore[arg-type]
+                out.append(Segment(len(out), SegmentKind.INDEX, tuple(pos), delta, pole, -1))  # type: ignore[arg-type]
                 pos[2] += delta[2]
             coil = self.coil(pole)
             origin, first = pos[0], direction
@@ -655,7 +675,9 @@ class Job:
                 cam = self.layer_cam(pole, layer, origin, first, pos[0])
                 net = (sum(p[0] for p in cam), sum(p[1] for p in cam), 0)
                 begin = (pos[0], pos[1], pos[2])
-                out.append(Segment(len(out), "layer", begin, net, pole, layer, cam if len(cam) > 1 else ()))
+                out.append(
+                    Segment(len(out), SegmentKind.LAYER, begin, net, pole, layer, cam if len(cam) > 1 else ())
+                )
                 delta = net
                 pos[0] += delta[0]
                 pos[1] += delta[1]
@@ -759,7 +781,7 @@ class Job:
     def segment_speed(self, segment: Segment) -> float:
         """The fraction of ``v_max`` a segment runs at: ``first_layer_speed``
         on the first layer of every coil, else 1."""
-        return self.first_layer_speed if segment.kind == "layer" and segment.layer == 0 else 1.0
+        return self.first_layer_speed if segment.kind.winds and segment.layer == 0 else 1.0
 
     @property
     def total_steps(self) -> int:

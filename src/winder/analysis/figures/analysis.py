@@ -612,7 +612,7 @@ def _layers(plan: JobPlan) -> dict[int, tuple[float, int]]:
     out: dict[int, tuple[float, int]] = {}
     done = 0.0
     for i, s in enumerate(plan.segments):
-        if s.kind == "layer":
+        if s.kind.winds:
             turns = abs(s.delta[1]) // spr
             out[i] = (done, turns)
             done += turns
@@ -762,7 +762,7 @@ def _zoom_middle(run: Run, d: Digest, ax: Axes) -> None:
     spr = plan.job.fork_steps_per_rev
     lx, ly = plan.step_lengths[0], plan.step_lengths[1]
     js = plan.joint_step
-    first = next((i for i, s in enumerate(plan.segments) if s.kind == "layer"), None)
+    first = next((i for i, s in enumerate(plan.segments) if s.kind.winds), None)
     if first is None or first not in d.layers or d.layers[first].zoom is None:
         ax.text(0.5, 0.5, "no layer wound", ha="center", transform=ax.transAxes)
         return
