@@ -574,6 +574,16 @@ def test_step_times_vs_bisection(prob, n):
     check_steps(p, n)
 
 
+def test_step_times_exact_where_a_ramp_ends_at_a_vanishing_speed():
+    """A move that ends at 7.2e-200 steps/s (found by the property test
+    above): its last phase is solved from its end, where the speed is all
+    but zero; the sinh form lost 72 ulps of the distance there (asinh's
+    error at r ~ 1e296), the cubic root refined by Newton keeps it to
+    rounding. Bisection (first_time_ref) is the oracle."""
+    p = plan("scurve", 1.1, v_max=1, a_max=1, j_max=1, v_start=1, v_end=7.196265462462796e-200)
+    check_steps(p, 325)
+
+
 def test_step_times_small_n_and_arbitrary_positions():
     p = plan("scurve", 3.0, v_max=2, a_max=1, j_max=1, v_start=0.5, v_end=1.0)
     assert p.step_times(1).tolist() == [p.duration]

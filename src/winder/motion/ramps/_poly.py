@@ -96,12 +96,21 @@ def _stable_quadratic(d: F64, v: float, a: float) -> None:
     np.divide(d, r, out=d, where=r > 0.0)
 
 
+#: beyond this r the odd cubic is solved from its pure cubic root (:func:`_odd_cubic`)
+ODD_CUBIC_FAR = 1e6
+
+
 def _odd_cubic(d: F64, vz: float, j: float) -> None:
     """In place: the smallest root ``s >= 0`` of ``vz s + j s^3 / 6 = d`` (d >= 0).
 
     j > 0: ``s = 2c sinh(asinh(r)/3)``; j < 0: ``s = 2c sin(asin(r)/3)`` with
     ``c = sqrt(2 vz/|j|)``, ``r = 3 d / (|j| c^3)`` - no cancellation anywhere,
-    and ``s ~ d/vz`` for small d keeps full relative precision."""
+    and ``s ~ d/vz`` for small d keeps full relative precision. Beyond
+    ``r`` = :data:`ODD_CUBIC_FAR` (j > 0), where ``vz`` hardly counts, asinh's
+    absolute error (an ulp of ln 2r) would grow into sinh's result (72 ulps of
+    a move's distance at vz = 7e-200): there the pure cubic's root
+    ``(6 d / j)^(1/3)`` is refined by Newton (from above, on a convex
+    function: each relative step under 1/(1 + (2r)^(2/3)), then squared)."""
     c = math.sqrt(2.0 * vz / abs(j)) if vz > 0.0 else 0.0
     c3j = abs(j) * c * c * c
     scale = 3.0 / c3j if c3j > 0.0 else math.inf
@@ -109,17 +118,27 @@ def _odd_cubic(d: F64, vz: float, j: float) -> None:
         d *= 6.0 / abs(j)
         np.cbrt(d, out=d)
         return
-    d *= scale
-    if j > 0.0:
-        np.arcsinh(d, out=d)
-        d *= 1.0 / 3.0
-        np.sinh(d, out=d)
-    else:
+    if j < 0.0:
+        d *= scale
         np.minimum(d, 1.0, out=d)
         np.arcsin(d, out=d)
         d *= 1.0 / 3.0
         np.sin(d, out=d)
+        d *= 2.0 * c
+        return
+    far = d > ODD_CUBIC_FAR / scale
+    dd = d[far]
+    if dd.size:
+        s = np.cbrt(dd * (6.0 / j))
+        for _ in range(3):
+            s -= (s * (vz + s * s * (j / 6.0)) - dd) / (vz + s * s * (0.5 * j))
+    d *= scale
+    np.arcsinh(d, out=d)
+    d *= 1.0 / 3.0
+    np.sinh(d, out=d)
     d *= 2.0 * c
+    if dd.size:
+        d[far] = s
 
 
 # --------------------------------------------------------------------------- builders
