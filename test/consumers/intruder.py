@@ -26,8 +26,8 @@ import sys
 
 import numpy as np
 import rclpy
+from _spin import spin_until_stopped
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Int64MultiArray, String
@@ -171,13 +171,7 @@ def main() -> None:
         parser.error(f"--forge {','.join(bad)}: must be of {','.join(KINDS)}")
     rclpy.init()
     node = Intruder(forge, opts.period)
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+    spin_until_stopped(node)
 
 
 if __name__ == "__main__":

@@ -19,8 +19,8 @@ import time
 from collections import deque
 
 import rclpy
+from _spin import spin_until_stopped
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Int64MultiArray, String
@@ -105,13 +105,7 @@ class NaiveConsumer(Node):
 def main() -> None:
     rclpy.init(args=sys.argv)
     node = NaiveConsumer()
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+    spin_until_stopped(node)
 
 
 if __name__ == "__main__":

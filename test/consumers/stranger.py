@@ -13,7 +13,7 @@ import argparse
 import sys
 
 import rclpy
-from rclpy.executors import ExternalShutdownException
+from _spin import spin_until_stopped
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
@@ -43,13 +43,7 @@ def main() -> None:
 
     node.create_timer(1.0 / args.rate, publish)
     node.get_logger().info(f"neighbour up: {joints} at {values}, {args.rate:g} Hz")
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+    spin_until_stopped(node)
 
 
 if __name__ == "__main__":
