@@ -25,7 +25,7 @@ from support.paths import BIN
 from support.ros_probe import spin_until
 
 from winder.contract.topics import has_role
-from winder.procs import Children, stop
+from winder.procs import Children, signal_state, stop
 from winder.ros.dds import use_profile
 
 __all__ = [  # what test modules import from here besides the fixtures
@@ -103,10 +103,13 @@ class Procs:
         return self.children.log(p)
 
     def stop(self, p: subprocess.Popen[bytes], sig: int = signal.SIGINT, timeout: float = 20.0) -> int:
+        state = signal_state(p.pid)  # before the signal: what it blocks and ignores
         code, stopped = stop(p, sig, timeout)
         if not stopped:  # its log ends with its threads' stacks (winder.procs.kill_telling_where)
             tail = "\n".join(self.log(p).splitlines()[-60:])
-            raise AssertionError(f"{p.args[0]} did not stop within {timeout} s; its log ends:\n{tail}")
+            raise AssertionError(
+                f"{p.args[0]} did not stop within {timeout} s ({state}); its log ends:\n{tail}"
+            )
         return code
 
     def stop_all(self) -> None:

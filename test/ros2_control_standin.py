@@ -35,7 +35,8 @@ named and namespaced as ros2_control makes them, behaving as documented:
   after the first command on (a broken encoder word); ``--homing`` adds a
   ``homing_controller`` node whose ``~/home`` (std_srvs/Trigger) homes every
   joint: the mock's positions go to 0, the home switches' place (a real
-  machine's drives run to their switches; the bridge's ``homing_service``).
+  machine's drives run to their switches; the bridge's ``homing_service``);
+  ``--homing-silent`` adds one that never answers (a drive that hangs).
 
 Like the controller manager, which "independent of the kernel installed"
 configures SCHED_FIFO with priority 50 for its main thread (its user
@@ -63,6 +64,7 @@ from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.task import Future
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
@@ -107,6 +109,7 @@ def main() -> None:
     ap.add_argument("--corrupt-after", type=float, default=math.inf)
     ap.add_argument("--corrupt-value", type=float, default=math.inf)
     ap.add_argument("--homing", action="store_true")
+    ap.add_argument("--homing-silent", action="store_true")
     args = ap.parse_args(argv)
     joints = args.joints.split(",")
     if args.controller is None:
@@ -175,7 +178,7 @@ def main() -> None:
         f = 1.0 if t_b <= t_a else min(max((now - t_a) / (t_b - t_a), 0.0), 1.0)
         command[:] = [a + (b - a) * f for a, b in zip(p_a, p_b, strict=True)]
 
-    homing = rclpy.create_node("homing_controller") if args.homing else None
+    homing = rclpy.create_node("homing_controller") if args.homing or args.homing_silent else None
 
     def on_home(_req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:
         command[:] = [0.0] * len(joints)  # at the switches: the joints' zero
@@ -185,8 +188,12 @@ def main() -> None:
         log.info(resp.message)
         return resp
 
+    async def never_answer(_req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:
+        await Future()  # never done: the call is never answered
+        return resp
+
     if homing is not None:
-        homing.create_service(Trigger, "~/home", on_home)
+        homing.create_service(Trigger, "~/home", never_answer if args.homing_silent else on_home)
     reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
     if args.interface == "trajectory":
         ctrl.create_subscription(JointTrajectory, "~/joint_trajectory", on_trajectory, reliable)

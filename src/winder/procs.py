@@ -106,10 +106,38 @@ def stacks_on_signal() -> None:
         faulthandler.register(STACKS_SIGNAL, all_threads=True, chain=False)
 
 
+def signal_state(pid: int) -> str:
+    """The signals ``pid`` blocks, ignores and has pending (from /proc; "" where
+    there is none): why a process did not stop when asked."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return ""
+    out = []
+    for line in status.splitlines():
+        key, _, value = line.partition(":")
+        if key in ("SigBlk", "SigIgn", "SigPnd", "ShdPnd"):
+            mask = int(value.strip(), 16)
+            names = [signal.Signals(n).name for n in range(1, 65) if mask >> (n - 1) & 1 and n in _NAMED]
+            out.append(f"{key} {', '.join(names) or '-'}")
+    return "; ".join(out)
+
+
+_NAMED = {int(s) for s in signal.Signals}
+
+
 def kill_telling_where(p: subprocess.Popen[Any], wait: float = 1.0) -> None:
     """Kill ``p``, a process that did not stop when asked: first
-    :data:`STACKS_SIGNAL`, so that its log says where it hung, then SIGKILL."""
+    :data:`STACKS_SIGNAL`, so that its log says where it hung (and its signal
+    state, on stderr of this process), then SIGKILL."""
     if p.poll() is None:
+        state = signal_state(p.pid)
+        if state:
+            print(
+                f"pid {p.pid} did not stop: {state}",
+                file=sys.stderr,
+                flush=True,
+            )
         with contextlib.suppress(ProcessLookupError):
             p.send_signal(STACKS_SIGNAL)
         with contextlib.suppress(subprocess.TimeoutExpired):

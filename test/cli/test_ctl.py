@@ -25,7 +25,7 @@ from support.paths import ROOT
 from support.ros_probe import heard_diagnostics
 
 from winder.cli.exits import EXIT_ABORTED, EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
-from winder.procs import kill_telling_where, popen
+from winder.procs import kill_telling_where, popen, signal_state
 from winder.record.reader import read_run
 
 pytestmark = pytest.mark.ros
@@ -258,6 +258,7 @@ def test_state_watch_prints_each_change_until_ctrl_c(procs: Procs, tmp_path: Pat
             assert time.monotonic() < end and watch.poll() is None, seen
             seen.append(watch.stdout.readline())
         assert any(" running " in s for s in seen), seen
+        state = signal_state(watch.pid)  # what it blocks and ignores, should it not stop
         os.kill(watch.pid, signal.SIGINT)
         try:
             _, err = watch.communicate(timeout=30)
@@ -265,7 +266,7 @@ def test_state_watch_prints_each_change_until_ctrl_c(procs: Procs, tmp_path: Pat
             kill_telling_where(watch)  # its stderr: where it hung
             _, err = watch.communicate()
             raise AssertionError(
-                f"winder ctl state --watch did not stop on SIGINT within 30 s:\n{err}"
+                f"winder ctl state --watch did not stop on SIGINT within 30 s ({state}):\n{err}"
             ) from None
         assert watch.returncode == EXIT_INTERRUPTED and "Traceback" not in err, err
     finally:

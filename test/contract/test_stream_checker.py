@@ -244,3 +244,30 @@ def test_a_resimulation_names_its_source_and_nothing_else_changes() -> None:
         doc["source"] = bad
         with pytest.raises(ValueError, match="source"):
             parse_job_description(json.dumps(doc))
+
+
+@settings(max_examples=200, deadline=None)
+@given(jobs_and_chunks(), st.data())
+def test_a_chunk_continues_the_stream_exactly_when_it_lies_beyond_where_it_stands(
+    case, data: st.DataObject
+) -> None:
+    """After any prefix of the chunks: each later chunk continues the
+    stream, each earlier one (a repeat: the same job's next run) does not,
+    nor a chunk of another job; asking counts nothing."""
+    job, chunks = case
+    cut = data.draw(st.integers(0, len(chunks)))
+    c = checker(job)
+    for seg, pos in chunks[:cut]:
+        c.check(seg, pos)
+
+    def rows(seg: int, pos: np.ndarray) -> np.ndarray:
+        return np.column_stack([np.full(pos.shape[0], seg), pos])
+
+    columns = ("segment", "feed", "fork", "pole")
+    before = (c.done, c.rejected, c.missing, c.gaps)
+    for i, (seg, pos) in enumerate(chunks):
+        assert c.continues(rows(seg, pos), columns) == (i >= cut), (i, cut)
+    other = Job(job_id="o", turns_per_layer=7, layers=1, poles=1, fork_steps_per_rev=1000)
+    [far] = other.segments()
+    assert not c.continues(rows(len(job.segments()) + 5, interpolate(far.start, far.delta)), columns)
+    assert (c.done, c.rejected, c.missing, c.gaps) == before

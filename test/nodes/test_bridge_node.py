@@ -799,6 +799,115 @@ def test_a_run_waits_for_homing_when_it_is_required(tmp_path: Path, procs: Procs
     assert "Traceback" not in procs.log(bridge)
 
 
+def test_a_homing_service_that_never_answers_fails_homing_and_wedges_nothing(
+    tmp_path: Path, procs: Procs, ros: Any
+) -> None:
+    """The homing controller never answers (a hung drive), homing_timeout 2 s:
+    ~/home answers "home failed: no answer ... within 2 s" and the axes stay
+    unhomed; while it waits the bridge's other services answer (its
+    parameters read); a second ~/home meanwhile is refused at once. (Before:
+    the node's other callbacks stopped for good, parameters and statuses too.)"""
+    from std_srvs.srv import Trigger
+    from support.ros_probe import get_params
+
+    bags = tmp_path / "bags"
+    start_standin(procs, "--homing-silent")
+    bridge = start_cell(
+        procs,
+        bags,
+        *("-p", "require_homing:=true", "-p", "homing_service:=homing_controller/home"),
+        *("-p", "homing_timeout:=2.0"),
+    )
+    wait.log_has(lambda: procs.log(bridge), "the axes are not homed (require_homing)", 30, running=bridge)
+    client = ros.create_client(Trigger, "/bridge_node/home")
+    spin_until(ros, client.service_is_ready, 30, "/bridge_node/home")
+    first = client.call_async(Trigger.Request())
+    # while ~/home waits for the homing controller, the node serves the rest
+    assert get_params(ros, "bridge_node", ["homing_timeout"]) == [2.0]
+    second = client.call_async(Trigger.Request())
+    spin_until(ros, lambda: second.done() and first.done(), 30, "the replies of ~/home")
+    replies = sorted([first.result().message, second.result().message])
+    assert replies[1] == "home refused: homing is under way", replies
+    assert replies[0] == (
+        "home failed: no answer from /homing_controller/home within 2 s (homing_timeout); "
+        "the axes are not homed"
+    ), replies
+    assert not first.result().success and not second.result().success
+    assert not closed_bags(bags)  # still not homed: nothing started
+    assert "Traceback" not in procs.log(bridge)
+
+
+def start_unstepped_run(procs: Procs, ros: Any, bags: Path, *bridge_params: str) -> tuple[Any, Any]:
+    """The stand-in, the bridge and a fake planner (test/support/cell.py) that
+    sends a job description and never a step: (the bridge process, the fake)
+    once the bridge's run is on."""
+    import json
+
+    from support.cell import FakeProfile
+    from support.ros_probe import ready_states
+
+    from winder.contract.stream import describe_job
+
+    start_standin(procs)
+    bridge = procs.start(
+        "bridge_node",
+        *(
+            "-p",
+            f"bag_dir:={bags}",
+            "-p",
+            f"joints:=[{','.join(JOINTS)}]",
+            "-p",
+            f"axes:=[{','.join(AXES_OF)}]",
+        ),
+        *bridge_params,
+    )
+    fake = FakeProfile(ros, Job(**JOB))
+    ready = ready_states(ros)
+    spin_until(ros, lambda: ready.get("consumer") == "ready", 60, "the bridge ready (winder/ready)")
+    spin_until(ros, lambda: fake.pub_job.get_subscription_count() > 0, 30, "the bridge's job reader")
+    fake.pub_job.publish(fake.String(data=json.dumps(json.loads(describe_job(fake.job)))))
+    wait.log_has(lambda: procs.log(bridge), "run -: job br", 30, "the bridge's run", running=bridge)
+    return bridge, fake
+
+
+def test_a_run_whose_steps_never_come_closes_as_a_stall(tmp_path: Path, procs: Procs, ros: Any) -> None:
+    """A run gets its description and no step (a planner that died, or its
+    steps lost): nothing is commanded, the stall is reported after
+    stall_timeout and the run closed incomplete after stall_abort. (Before:
+    waiting to arm counted as work, so the stall watch never looked, and the
+    run waited for ever.)"""
+    bags = tmp_path / "bags"
+    bridge, _ = start_unstepped_run(procs, ros, bags, "-p", "stall_timeout:=0.5", "-p", "stall_abort:=3.0")
+    [bag] = wait_for_bags(bags, 1, timeout=30)
+    raw = rosbags_read(bag)
+    report = final_report(raw)
+    assert report["state"] == "incomplete" and report["steps_done"] == "0", report
+    assert "step stream stalled" in procs.log(bridge)
+    assert not raw.get(COMMANDS)
+
+
+def test_an_abort_before_the_run_is_armed_closes_it_at_once(tmp_path: Path, procs: Procs, ros: Any) -> None:
+    """The run waits for its steps, and an abort comes (its rest at step 0):
+    the run closes at once, aborted, nothing commanded; not after the stall
+    (stall_abort 60 s here). (Before: 'aborting' for as long as one waited.)"""
+    import json
+
+    bags = tmp_path / "bags"
+    bridge, fake = start_unstepped_run(procs, ros, bags, "-p", "stall_abort:=60.0")
+    from winder.ros.qos import QOS_EVENTS
+
+    abort = {"event": "abort", "run_id": "", "job_id": "br", "t_ns": 0, "t_rest_ns": 0, "steps": 0}
+    control = fake.node.create_publisher(fake.String, "/winder/control", QOS_EVENTS)  # as the profile node's
+    spin_until(ros, lambda: control.get_subscription_count() > 0, 30, "the bridge's control reader")
+    control.publish(fake.String(data=json.dumps(abort)))
+    [bag] = wait_for_bags(bags, 1, timeout=20)
+    raw = rosbags_read(bag)
+    report = final_report(raw)
+    assert report["steps_done"] == "0" and report["state"] in ("aborted", "incomplete"), report
+    assert "run aborted before it started: nothing was commanded" in procs.log(bridge)
+    assert not raw.get(COMMANDS)
+
+
 #: the fork's peak in the bridge tests' job: RAMP's v_max (4000 steps/s, reached in a
 #: 2048-step layer: 0.1 s and 200 steps of ramp at a_max 40000) of 512 steps a turn
 FORK_PEAK = 4000 * 2 * math.pi / JOB["fork_steps_per_rev"]

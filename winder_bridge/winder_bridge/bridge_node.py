@@ -90,7 +90,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 import rclpy
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.client import Client
 from rclpy.serialization import deserialize_message
 from rclpy.task import Future
@@ -204,7 +204,12 @@ class BridgeNode(StepConsumer):
         self.idle_pos = np.full(len(values["joints"]), np.nan)  # the joints as last measured between runs
         self.homed = False  # ~/home ran, and the broadcaster was not lost since
         self.homing_clients: dict[str, Client] = {}
-        self.create_service(Trigger, "~/home", self.on_home)
+        # ~/home waits for the homing service: in a group of its own (with that client and the
+        # wait's timer), so the wait never holds the node's other callbacks back (a coroutine
+        # holds its group until it ends: a homing service that never answered wedged the node)
+        self.homing_group = ReentrantCallbackGroup()
+        self.homing_now = False  # a ~/home is under way
+        self.create_service(Trigger, "~/home", self.on_home, callback_group=self.homing_group)
         self.guard = self.create_guard_condition(self.on_alarm)
         self.reader = JointStateReader(values["joints"])
         self.abort_clients: dict[str, Client] = {}
@@ -437,12 +442,27 @@ class BridgeNode(StepConsumer):
         machine)."""
         if self.plan is None or self.fault_text:
             return False
+        if not self.armed:
+            # waiting to arm is work while the steps to arm with are here (the joints or the
+            # ramp may still be on their way); without steps the run's clock does not run, so
+            # nothing booked on it comes, and the stall watch minds the stream (a run whose steps
+            # never came waited for ever, an abort of it too)
+            return self.pacer is not None and self.pacer.held > 0 and not self.abort_unarmed()
         if not self.finishing and self.ledger is not None and self.ledger.transitions_ahead:
             return True
-        return not self.armed or (self.settle_until is not None and self.t_tick < self.settle_until)
+        return self.settle_until is not None and self.t_tick < self.settle_until
+
+    def abort_unarmed(self) -> bool:
+        """The run was aborted before its time started: nothing was commanded."""
+        return not self.armed and self.ledger is not None and self.ledger.abort is not None
 
     def work(self) -> None:
         if self.plan is None or self.fault_text:
+            return
+        if self.abort_unarmed():  # nothing moved: the run closes at once, its abort done
+            self.stop_pacing()
+            self.get_logger().info("run aborted before it started: nothing was commanded")
+            self.finish(complete=False)
             return
         self.account()
         if not self.inbox:
@@ -551,10 +571,17 @@ class BridgeNode(StepConsumer):
         """~/home: refused during a run or without the hardware; else the
         homing service called (if one is set) and, once it says so, the axes
         are homed: the soft limits hold for the positions measured from now."""
+        if self.homing_now:
+            resp.success, resp.message = False, "home refused: homing is under way"
+            self.get_logger().warning(resp.message)
+            return resp
+        self.homing_now = True
         try:
             resp.success, resp.message = await self.home()
         except Exception as exc:  # a reply, always: the caller would wait for ever
             resp.success, resp.message = False, f"home failed: {type(exc).__name__}: {exc}"
+        finally:
+            self.homing_now = False
         (self.get_logger().info if resp.success else self.get_logger().warning)(resp.message)
         return resp
 
@@ -570,17 +597,23 @@ class BridgeNode(StepConsumer):
             name = service if service.startswith("/") else self.resolve_service_name(service)
             client = self.homing_clients.get(name)
             if client is None:
-                # a group of its own: the reply comes while ~/home's callback (the node's default,
-                # mutually exclusive group) waits for it, which would otherwise hold it back for ever
                 client = self.homing_clients[name] = self.create_client(
-                    Trigger, name, callback_group=MutuallyExclusiveCallbackGroup()
+                    Trigger, name, callback_group=self.homing_group
                 )
             if not client.service_is_ready():
                 return (
                     False,
                     f"home refused: no service {name} (homing_service): is the homing controller up?",
                 )
-            reply = await client.call_async(Trigger.Request())
+            call = client.call_async(Trigger.Request())
+            limit = float(values["homing_timeout"])
+            if not await self.done_within(call, limit):
+                client.remove_pending_request(call)
+                return False, (
+                    f"home failed: no answer from {name} within {limit:g} s (homing_timeout); "
+                    "the axes are not homed"
+                )
+            reply = call.result()
             if reply is None or not reply.success:
                 return False, f"home failed: {name} said: {reply.message if reply else 'nothing'}"
         self.homed = True
@@ -602,6 +635,24 @@ class BridgeNode(StepConsumer):
         ]
         how = f"by {name}" if service else f"where they stand: {where}"
         return True, f"homed {how}; soft limits: {', '.join(limits) or 'none set'}"
+
+    async def done_within(self, future: Future, timeout: float) -> bool:
+        """Await ``future`` for ``timeout`` s at most (the node's other callbacks
+        go on meanwhile): whether it is done."""
+        gate = Future(executor=self.executor)
+
+        def open_gate(*_: object) -> None:
+            if not gate.done():
+                gate.set_result(None)
+
+        future.add_done_callback(open_gate)
+        timer = self.create_timer(timeout, open_gate, callback_group=self.homing_group)
+        try:
+            await gate
+        finally:
+            timer.cancel()
+            self.destroy_timer(timer)
+        return bool(future.done())
 
     # -- the command thread --------------------------------------------------------
     def command_loop(self) -> None:

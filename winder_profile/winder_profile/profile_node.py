@@ -86,6 +86,8 @@ from winder.spec import SpecError, check_all
 
 #: this node's part in the cell (winder.contract.topics.ROLES), in every job status
 ROLE = "profile"
+#: chunks kept at most while no run takes them (its description on its way)
+MAX_EARLY = 4096
 #: How long (s) at most a run's steps wait for the consumer's winder/sim_config
 #: of the run (whether it runs in real time, and its clock) while the cell's
 #: consumer is on the graph and publishes one: a consumer that takes the run
@@ -305,12 +307,19 @@ class ProfileNode(ManagedNode):
 
     def time_chunk(self, raw: bytes) -> None:
         if self.plan is None or self.checker is None:
-            self.early.append(raw)  # the job description is on its way
+            self.keep_early(raw)  # the job description is on its way
             return
         try:
             rows = STEPS_CDR.decode(raw)
         except ValueError as exc:
             self.fail(f"bad steps chunk: {exc}")
+            return
+        if self.run_over() and not self.checker.continues(rows, STEP_COLUMNS):
+            # every step of the run is sent (or dropped past its abort): a chunk that does not go
+            # on from it is the next run's, whose description can come after its first steps (two
+            # topics). Taken for this run's, the next run's steps were dropped as duplicates and
+            # it never started (the same job again, adversarial pass of issue 41)
+            self.keep_early(raw)
             return
         verdict = self.checker.check_rows(rows, STEP_COLUMNS)
         if verdict.kind != "ok":
@@ -325,6 +334,11 @@ class ProfileNode(ManagedNode):
         seg = int(rows[0, 0])
         self.queue.append((rows, self.checker.step_index(seg, rows[:, 1:]).astype(np.int64)))
         self.release()
+
+    def keep_early(self, raw: bytes) -> None:
+        """Keep a chunk for the run whose description comes next (MAX_EARLY at most)."""
+        if len(self.early) < MAX_EARLY:
+            self.early.append(raw)
 
     def release(self) -> None:
         """Time and send the queued steps the law fixes now: all of them, or in

@@ -289,8 +289,10 @@ def cmd_check(args: argparse.Namespace) -> int:
     laid = job.winding
     doc = {"job_id": job.job_id, **report(laid)}
     limits_why = ""
+    if args.limits is not None and not args.limits.strip():
+        raise UserError("--limits is empty: give the bridge's parameters file (a bridge_node section)")
     if args.limits:
-        doc["limits"], limits_why = axis_limits(job, given["profile_node"], args.limits)
+        doc["limits"], limits_why = axis_limits(job, given["profile_node"], args.limits, given["interp_node"])
     if args.json:
         print(json.dumps(doc, indent=2))
     else:
@@ -306,18 +308,21 @@ def cmd_check(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def axis_limits(job: Job, ramp_given: dict[str, Any], path: str) -> tuple[dict[str, Any], str]:
+def axis_limits(
+    job: Job, ramp_given: dict[str, Any], path: str, interp_given: dict[str, Any]
+) -> tuple[dict[str, Any], str]:
     """``winder check --limits``: the job, timed with the job file's ramp (the
     profile node's defaults where it sets none), against the bridge's limits
-    in the parameters file ``path`` (its ``bridge_node`` section): each axis'
-    travel (from zero, as with job_origin zero), peak velocity and peak
+    in the parameters file ``path`` (its ``bridge_node`` section), at the
+    highest feed override its ``schedule`` (job file, interp_node) sets: each
+    axis' travel (from zero, as with job_origin zero), peak velocity and peak
     acceleration over 20 ms beside its limits; and the first one passed, in
     words ("" if none)."""
     from winder.contract.jobfile import JobFileError, load_node_params
     from winder.contract.params import BRIDGE_SPECS, PROFILE_SPECS, check_bridge
     from winder.motion.axes import AXES
     from winder.motion.axes import axis as axis_of
-    from winder.motion.limits import NO_LIMIT, job_extent, job_limits
+    from winder.motion.limits import NO_LIMIT, highest_override, job_extent, job_limits
     from winder.spec import SpecError
 
     try:
@@ -325,11 +330,14 @@ def axis_limits(job: Job, ramp_given: dict[str, Any], path: str) -> tuple[dict[s
         values = {n: s.default for n, s in BRIDGE_SPECS.items()} | given
         values["record"] = False  # the bag directory is the bridge's to probe, on its machine
         check_bridge(values)
-    except (JobFileError, SpecError) as exc:
+    except JobFileError as exc:  # it names the file
+        raise UserError(f"--limits: {exc}") from None
+    except SpecError as exc:
         raise UserError(f"--limits {path}: {exc}") from None
     ramp = {n: s.default for n, s in PROFILE_SPECS.items()} | ramp_given
     try:
-        peaks, why = job_limits(job, ramp, values)
+        schedule = str(interp_given.get("schedule", ""))
+        peaks, why = job_limits(job, ramp, values, schedule=schedule)
     except ValueError as exc:
         raise UserError(f"the job cannot be ramped: {exc}") from None
     lo, hi = job_extent(job.segments())
@@ -359,7 +367,7 @@ def axis_limits(job: Job, ramp_given: dict[str, Any], path: str) -> tuple[dict[s
             ),
         }
     out["job_origin"] = values["job_origin"]
-    out["feed_override"] = ramp.get("feed_override", 1.0)
+    out["feed_override"] = highest_override(ramp, schedule)
     out["within"] = not why
     return out, why
 

@@ -88,14 +88,21 @@ class JobFileError(SpecError):
 
 
 def _flatten(prefix: str, value: Any, out: dict[str, Any]) -> None:
+    """``value``'s settings by their dotted names into ``out``; ValueError if one
+    is given twice (``max_velocity.fork: 10`` beside ``max_velocity: {fork: 20}``:
+    ROS would take one of them, silently)."""
     if isinstance(value, dict):
         for k, v in value.items():
             _flatten(f"{prefix}.{k}" if prefix else str(k), v, out)
+    elif prefix in out:
+        raise ValueError(f"{prefix} is given twice (once dotted, once as a nested map)")
     else:
         out[prefix] = value
 
 
 def _read(path: Path, what: str = "job file") -> tuple[Any, str]:
+    """The YAML document of the file ``path`` (a ``what``) and its sha256;
+    JobFileError (one line) if it cannot be read or is no such file."""
     from ruamel.yaml.error import YAMLError
 
     try:
@@ -107,7 +114,7 @@ def _read(path: Path, what: str = "job file") -> tuple[Any, str]:
     if not path.is_file():
         raise JobFileError(f"{path}: not a file")
     if size > MAX_BYTES:
-        raise JobFileError(f"{path}: {size} bytes, more than a job file holds ({MAX_BYTES})")
+        raise JobFileError(f"{path}: {size} bytes, more than a {what} holds here ({MAX_BYTES})")
     try:
         data = path.read_bytes()
         text = data.decode("utf-8")
@@ -353,7 +360,10 @@ def _sections(path: Path, doc: Any) -> dict[str, dict[str, Any]]:
         if not isinstance(params, dict):
             raise JobFileError(f"{path}: {key}.ros__parameters must be a map of settings")
         flat: dict[str, Any] = {}
-        _flatten("", params, flat)
+        try:
+            _flatten("", params, flat)
+        except ValueError as exc:
+            raise JobFileError(f"{path}: section {key!r}: {exc}") from None
         out[str(key)] = flat
     return out
 
@@ -461,14 +471,23 @@ def load_node_params(path: str | Path, node: str, specs: dict[str, Spec]) -> dic
         raise JobFileError(f"{p}: a ROS 2 parameters file is a map of node names to their ros__parameters")
     out: dict[str, Any] = {}
     keys = [k for k in doc if _written(str(k)) in (node, "/**")]
-    if not any(_written(str(k)) == node for k in keys):
+    own = [str(k) for k in keys if _written(str(k)) == node]
+    if not own:
         raise JobFileError(f"{p}: no section for {node} (a map {node}: {{ros__parameters: ...}})")
+    if len(own) > 1:
+        raise JobFileError(
+            f"{p}: sections {', '.join(own)} all name {node}: which cell's is meant is not clear "
+            "(give one file per cell)"
+        )
     for key in sorted(keys, key=lambda k: _written(str(k)) != "/**"):  # the node's own section last
         body = doc[key]
         if not isinstance(body, dict) or not isinstance(body.get("ros__parameters"), dict):
             raise JobFileError(f"{p}: section {key!r} must hold a map ros__parameters")
         flat: dict[str, Any] = {}
-        _flatten("", body["ros__parameters"], flat)
+        try:
+            _flatten("", body["ros__parameters"], flat)
+        except ValueError as exc:
+            raise JobFileError(f"{p}: section {key!r}: {exc}") from None
         for name, value in flat.items():
             if name not in specs:
                 if key == "/**":

@@ -749,6 +749,17 @@ BRIDGE_SPECS = {
             pattern=r"(/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*)?",
             pattern_text="a service name, or empty",
         ),
+        Spec(
+            "homing_timeout",
+            float,
+            120.0,
+            "how long ~/home waits for homing_service to answer before it says homing failed (the axes "
+            "stay unhomed)",
+            "s",
+            0.0,
+            3600.0,
+            low_open=True,
+        ),
     ),
     **CONSUMER_SPECS,
 }

@@ -354,6 +354,25 @@ class StreamChecker:
             return self._reject("bad", f"a chunk spans segments {int(segment.min())}..{int(segment.max())}")
         return self.check(int(segment[0]), rows[:, col + 1 :])
 
+    def continues(self, rows: npt.NDArray[np.integer[Any]], columns: tuple[str, ...]) -> bool:
+        """Whether a chunk (rows of ``columns``) starts beyond where the stream
+        stands, on a segment of its job: steps still to come of this stream,
+        not a repeat and not another job's. Read only (nothing counted)."""
+        col = columns.index("segment")
+        if rows.ndim != 2 or rows.shape[0] == 0:
+            return False
+        segment, pos = int(rows[0, col]), rows[:, col + 1 :]
+        if not 0 <= segment < len(self.plan.segments):
+            return False
+        seg = self.plan.segments[segment]
+        if pos.shape[1] != len(seg.start):
+            return False
+        k0 = (int(pos[0, seg.major]) - seg.start[seg.major]) * (1 if seg.delta[seg.major] > 0 else -1)
+        if not 1 <= k0 <= seg.steps:
+            return False
+        at = int(self.step_index(self.segment, self.position[None, :])[0])
+        return bool(self._offsets[segment] + k0 > self._offsets[self.segment] + at)
+
     def check(self, segment: int, pos: npt.NDArray[np.integer[Any]]) -> ChunkVerdict:
         """Check one chunk: ``segment`` index and its (n, axes) positions."""
         segs = self.plan.segments

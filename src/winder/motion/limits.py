@@ -49,6 +49,7 @@ __all__ = [
     "Breach",
     "LimitWatch",
     "breach",
+    "highest_override",
     "job_extent",
     "job_limits",
     "job_peaks",
@@ -259,6 +260,13 @@ class LimitWatch:
         )
 
 
+def highest_override(ramp: dict[str, Any], schedule: str = "") -> float:
+    """The highest feed override a run will have: the profile node's
+    ``feed_override`` in ``ramp``, or one its ``schedule`` sets."""
+    overrides = [c.value for c in parse_schedule(schedule) if c.kind == "override"]
+    return max([float(ramp.get("feed_override", 1.0)), *overrides])
+
+
 def job_limits(
     job: Job,
     ramp: dict[str, Any],
@@ -276,8 +284,10 @@ def job_limits(
     timings, _ = plan_timing(
         ramp, [s.steps for s in segments], stops, pause, [job.segment_speed(s) for s in segments]
     )
-    overrides = [c.value for c in parse_schedule(schedule) if c.kind == "override"]
-    override = max([float(ramp.get("feed_override", 1.0)), *overrides])
+    override = highest_override(ramp, schedule)
     peaks = job_peaks(segments, timings, job.joint_step, override)
     units = [a.unit for a in AXIS_TABLE]
-    return peaks, breach(peaks, AXES, units, limits)
+    why = breach(peaks, AXES, units, limits)
+    if why and override != 1.0:
+        why += f", at feed override {override:g}"
+    return peaks, why
