@@ -92,6 +92,31 @@ def stop(p: subprocess.Popen[Any], sig: int = signal.SIGINT, grace: float = 20.0
         return p.wait(), False
 
 
+#: the signals that stop a winder command or node (SIGHUP: its terminal went away)
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+def take_stop_signals() -> None:
+    """Make SIGINT, SIGTERM and SIGHUP reach this process whatever it inherited
+    (main thread; every winder command and node calls this first). A process
+    started in the background of a script (``cmd &``: SIGINT ignored, as POSIX
+    has it), under ``nohup`` (SIGHUP ignored) or by a thread that blocks them
+    inherits that, and a ``kill -INT`` from whoever supervises it (a cell
+    runner, ros2 launch, a test) did nothing: ``winder play --foxglove`` and
+    ``winder ctl state --watch`` ran on until killed (make flakes, 3 of 3,
+    started with ``&``). As a ROS node does, winder stops on them: an ignored
+    one gets its default action back (SIGINT: KeyboardInterrupt), and none
+    stays blocked. Handlers installed later (rclpy's, a node's) take over."""
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return
+    for sig in STOP_SIGNALS:
+        if signal.getsignal(sig) is signal.SIG_IGN:
+            signal.signal(sig, signal.default_int_handler if sig == signal.SIGINT else signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
+
+
 #: a winder process writes every thread's Python stack to its stderr on this
 #: signal (:func:`stacks_on_signal`): ``kill -USR1 <pid>`` says where one hangs
 STACKS_SIGNAL = signal.SIGUSR1

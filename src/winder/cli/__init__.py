@@ -8,7 +8,7 @@ from collections.abc import Sequence
 from types import FrameType
 
 from winder.cli.lifetime import early_containers, ros_done
-from winder.procs import stacks_on_signal
+from winder.procs import stacks_on_signal, take_stop_signals
 
 __all__ = ["main"]
 
@@ -20,6 +20,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     (the subcommands' own Ctrl-C is reported there, with their name).
     SIGTERM and SIGHUP (a closed terminal) end a command as Ctrl-C does,
     from its first moment on."""
+    take_stop_signals()  # whatever the parent left ignored or blocked (a script's `winder ... &`)
     signal.signal(signal.SIGTERM, _terminate)
     signal.signal(signal.SIGHUP, _terminate)
     stacks_on_signal()  # kill -USR1: every thread's stack on stderr (where a command hangs)
