@@ -168,3 +168,43 @@ def test_the_smallest_driver_runs_without_a_wait_or_a_stall(tmp_path: Path, proc
     assert not stalls(seen), stalls(seen)
     log = procs.log(profile)
     assert "wait for" not in log and "without look-ahead" not in log, log
+
+
+def test_no_steps_yet_in_real_time_is_a_warning(tmp_path: Path, procs: Procs, ros: Any) -> None:
+    """A real-time run whose first steps are late (a profile node planning a
+    long job on a loaded machine took 3 s): the stall is said as a warning,
+    the axes waiting at rest with the run's time not started; when the steps
+    come the run completes with no ERROR. (Before: an ERROR, and an aborted
+    run exited 1, "failed", instead of 3.)"""
+    import json
+
+    from diagnostic_msgs.msg import DiagnosticStatus
+    from support.cell import FakeProfile
+
+    from winder.contract.stream import describe_job
+    from winder.motion.job import Job
+    from winder.ros.chunks import pack_timed
+
+    levels = heard_levels(ros)
+    seen = heard_diagnostics(ros)
+    bags = tmp_path / "bags"
+    procs.start("sim_node", "-p", f"bag_dir:={bags}", "-p", "stall_timeout:=0.5", "-p", "real_time:=true")
+    fake = FakeProfile(ros, Job(job_id="late", turns_per_layer=2, layers=1, poles=1, fork_steps_per_rev=256))
+    wait.spin_until(ros, lambda: fake.pub.get_subscription_count() > 0, 30, "the sim node's step reader")
+    wait.spin_until(ros, lambda: any(is_consumer(n, v) for n, _, v in seen), 30, "the sim node's status")
+    fake.pub_job.publish(fake.String(data=json.dumps(json.loads(describe_job(fake.job)))))
+    wait.spin_until(ros, lambda: stalls(seen), 30, "a stall report", heard=lambda: seen[-5:])
+    for chunk in fake.chunks(128):
+        fake.pub.publish(pack_timed(chunk))
+
+    def final() -> dict[str, str] | None:
+        done = [v for n, _, v in seen if is_consumer(n, v) and v.get("state") in ("done", "incomplete")]
+        return done[-1] if done else None
+
+    wait.spin_until(ros, final, 60, "the consumer's final report", heard=lambda: seen[-5:])
+    report = final()
+    assert report is not None and report["state"] == "done", report
+    said = [(lvl, m) for lvl, m in levels if "step stream stalled" in m]
+    assert said and all(lvl == DiagnosticStatus.WARN[0] for lvl, _ in said), said
+    assert "none yet: the axes wait at rest" in said[0][1], said
+    assert not [m for lvl, m in levels if lvl == DiagnosticStatus.ERROR[0]], levels
