@@ -168,6 +168,10 @@ def test_param_get_set_list_and_their_refusals(procs: Procs, ros: Any, tmp_path:
     code, _, err = ctl(procs, "param", "set", "interp_node", "managed", "true")  # read-only
     assert code == EXIT_BAD_INPUT and "managed" in one_line(err), err
     assert get_params(ros, "profile_node", ["v_max"]) == [3000.0]
+    # after the refused text the setting takes a number again (rclpy kept the text's type in the
+    # descriptor, which ctl types a value by: "v_max='2500' is invalid: must be a number")
+    code, out, err = ctl(procs, "param", "set", "profile_node", "v_max", "2500")
+    assert (code, out) == (EXIT_OK, "/profile_node: v_max = 2500.0\n"), err
     # an unknown parameter, an unknown node
     code, _, err = ctl(procs, "param", "get", "interp_node", "no_such_param")
     assert code == EXIT_BAD_INPUT and "no parameter 'no_such_param'" in one_line(err), err

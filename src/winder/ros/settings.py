@@ -146,12 +146,28 @@ class Settings:
             self.check({n: self.specs[n].check(v) for n, v in merged.items()})
         except SpecError as exc:
             self.node.get_logger().warning(f"parameter change rejected: {exc}")
+            self._keep_declared_types(params)
             return SetParametersResult(successful=False, reason=str(exc))
         self._values = None  # the new values are in place once this returns
         # a start-up rejection is resolved once that parameter is set validly
         names = {p.name for p in params}
         self.rejected = [r for r in self.rejected if r in self.specs and r not in names]
         return SetParametersResult(successful=True)
+
+    def _keep_declared_types(self, params: list[Parameter]) -> None:
+        """rclpy gives a dynamically typed parameter's descriptor the type of
+        a value it is about to set, before the callbacks may refuse it, and
+        keeps it when they do: after ``max_velocity.fork abc`` was refused
+        the descriptor said string, ``winder ctl param set`` (which types a
+        value by it) sent ``60.0`` as text, and the setting could not be set
+        again until the node restarted. The refused ones get their declared
+        type back (rclpy's own table: it offers no call for this)."""
+        table = getattr(self.node, "_descriptors", None)
+        if not isinstance(table, dict):
+            return
+        for p in params:
+            if p.name in self.specs and p.name in table:
+                table[p.name].type = descriptor(self.specs[p.name]).type
 
     def blocked(self) -> str | None:
         """Why the node must not run a job: start-up values it had to refuse."""
