@@ -573,3 +573,19 @@ def test_ctl_answers_a_cell_under_load(procs: Procs, ros: Any, tmp_path: Path) -
         assert row[1:4] == [role, "running", run_id], out
     assert all(AGO.search(ln) for ln in out.splitlines()[2:5]), out
     _obeyed(procs, ros, bags, run_id, hold=cell["profile_node"])
+
+
+def test_a_start_the_cell_is_never_ready_for_says_why_not_no_reply(procs: Procs, tmp_path: Path) -> None:
+    """The consumer waits for hardware that is not there (a bridge with no
+    controller manager): `winder ctl start --set ... --timeout 5` asks again
+    while the cell says not ready, and at the deadline says the cell's last
+    word, in one line (before: "no reply from /interp_node/start_run within
+    5 s", though every call was answered)."""
+    procs.start("bridge_node", "-p", f"bag_dir:={tmp_path / 'bags'}")
+    procs.start("profile_node")
+    procs.start("interp_node", "-p", "autostart:=false")
+    code, out, err = ctl(procs, "start", "--set", "turns_per_layer=4", "--timeout", "5")
+    line = one_line(err)
+    assert code == EXIT_FAILED, out + err  # the cell said no (the exit-code table)
+    assert "not ready" in line and "consumer" in line and "(still, after 5 s)" in line, line
+    assert "no reply" not in line, line

@@ -503,18 +503,27 @@ def start_run(session: Session, interp: str, values: dict[str, Any], view: CellV
     from std_srvs.srv import Trigger
 
     request = SetParametersAtomically.Request(parameters=[to_message(n, v) for n, v in values.items()])
+    refused = ""  # the cell's last "not ready"
     while True:
-        if values:
-            reply = session.call(SetParametersAtomically, f"{interp}/start_run", request)
-            ok, reason = bool(reply.result.successful), one_line(reply.result.reason)
-        else:  # start_run refuses an empty change (rclpy: "parameter list cannot be empty")
-            answer = session.call(Trigger, f"{interp}/start", Trigger.Request())
-            ok, reason = bool(answer.success), one_line(answer.message)
+        try:
+            if values:
+                reply = session.call(SetParametersAtomically, f"{interp}/start_run", request)
+                ok, reason = bool(reply.result.successful), one_line(reply.result.reason)
+            else:  # start_run refuses an empty change (rclpy: "parameter list cannot be empty")
+                answer = session.call(Trigger, f"{interp}/start", Trigger.Request())
+                ok, reason = bool(answer.success), one_line(answer.message)
+        except UnansweredError:
+            if refused:  # the deadline came while asking again: the cell's own word, not "no reply"
+                raise RefusedError(f"{refused} (still, after {session.timeout:g} s)") from None
+            raise
+        refused = reason
         if ok:
             return reason
         lasting = any(word in reason for word in LASTING)
-        if not reason.startswith(NOT_READY) or lasting or time.monotonic() + 0.1 > session.deadline:
+        if not reason.startswith(NOT_READY) or lasting:
             raise RefusedError(reason or "start refused (no reason given)")
+        if time.monotonic() + 0.1 > session.deadline:
+            raise RefusedError(f"{reason} (still, after {session.timeout:g} s)")
         asked = time.monotonic()
         said = dict(view.ready_ns) if view is not None else {}
         while time.monotonic() - asked < NOT_READY_RETRY and time.monotonic() < session.deadline:
