@@ -73,6 +73,9 @@ def test_the_default_job_peaks_at_the_documented_flyer_speed() -> None:
     assert peaks[1].velocity == pytest.approx(2048 * 2 * math.pi / 1024, rel=1e-12)
     assert why == ("the job drives the fork axis at up to 12.5664 rad/s, beyond max_velocity.fork = 10 rad/s")
     assert job_limits(Job(), DEFAULT_RAMP, {"max_velocity.fork": 12.6})[1] == ""
+    # a limit a hair below the peak: the digits that tell them apart
+    _, why = job_limits(Job(), DEFAULT_RAMP, {"max_velocity.fork": 12.56637})
+    assert "at up to 12.5663706 rad/s, beyond max_velocity.fork = 12.56637 rad/s" in why, why
     # a scheduled override counts: 1.2 x 12.566 = 15.08 rad/s
     _, why = job_limits(Job(), DEFAULT_RAMP, {"max_velocity.fork": 13.0}, schedule="override@1=1.2")
     assert "15.0796 rad/s" in why

@@ -163,6 +163,16 @@ def job_peaks(
     ]
 
 
+def _apart(value: float, limit: float) -> tuple[str, str]:
+    """``value`` and ``limit`` in words, with the digits that tell them apart
+    (12.56637 past 12.56637061 read "12.5664 beyond 12.5664" at 6 digits)."""
+    for digits in (6, 9, 12, 17):
+        a, b = f"{value:.{digits}g}", f"{limit:.{digits}g}"
+        if a != b:
+            return a, b
+    return a, b
+
+
 def breach(
     peaks: Sequence[AxisPeaks], axes: Sequence[str], units: Sequence[str], values: dict[str, Any]
 ) -> str:
@@ -172,15 +182,17 @@ def breach(
         v_lim = float(values.get(f"max_velocity.{axis}", NO_LIMIT))
         a_lim = float(values.get(f"max_acceleration.{axis}", NO_LIMIT))
         if p.velocity > v_lim:
+            got, lim = _apart(p.velocity, v_lim)
             return (
-                f"the job drives the {axis} axis at up to {p.velocity:.6g} {unit}/s, beyond "
-                f"max_velocity.{axis} = {v_lim:g} {unit}/s"
+                f"the job drives the {axis} axis at up to {got} {unit}/s, beyond "
+                f"max_velocity.{axis} = {lim} {unit}/s"
             )
         if p.windowed_acceleration > a_lim:
+            got, lim = _apart(p.windowed_acceleration, a_lim)
             how = f" ({p.jump:.6g} {unit}/s of it at once)" if p.jump else ""
             return (
-                f"the job accelerates the {axis} axis at up to {p.windowed_acceleration:.6g} {unit}/s^2 "
-                f"over {WINDOW_S * 1e3:g} ms{how}, beyond max_acceleration.{axis} = {a_lim:g} {unit}/s^2"
+                f"the job accelerates the {axis} axis at up to {got} {unit}/s^2 "
+                f"over {WINDOW_S * 1e3:g} ms{how}, beyond max_acceleration.{axis} = {lim} {unit}/s^2"
             )
     return ""
 
