@@ -34,7 +34,7 @@ import numpy.typing as npt
 
 from winder.contract.eq7 import signed_path_distance, step_deviation
 from winder.contract.stream import JobPlan, SegmentPlan
-from winder.motion.axes import AXES
+from winder.motion.axes import AXES, FEED, FORK
 
 __all__ = [
     "END_STRIDES",
@@ -316,7 +316,7 @@ class LayerStats:
                     s.pieces or (s.delta,),
                     rows[m, 2],
                     rows[m, 3],
-                    (plan.step_lengths[0], plan.step_lengths[1]),
+                    (plan.step_lengths[FEED.index], plan.step_lengths[FORK.index]),
                 )
                 self.zoom_rows.append(np.vstack([rows[m, 3].astype(np.float64), signed]))
 
@@ -383,24 +383,24 @@ class _Pass:
             self.moves[i] = list(itertools.pairwise(ends))
         self.d = Digest()
         self.stride_time = stride_time
-        lx, ly = plan.step_lengths[0], plan.step_lengths[1]
+        lx, ly = plan.step_lengths[FEED.index], plan.step_lengths[FORK.index]
         job = plan.job
         first_layer = True
         layer_steps = sum(s.steps for s in plan.segments if s.kind.winds)
         for i, s in enumerate(plan.segments):
             if not s.kind.winds:
                 continue
-            norm = math.hypot(s.delta[0] * lx, s.delta[1] * ly)
+            norm = math.hypot(s.delta[FEED.index] * lx, s.delta[FORK.index] * ly)
             layer = LayerStats(
                 i,
                 s,
                 lx * ly / norm if norm else 0.0,
-                abs(s.delta[1]) // job.fork_steps_per_rev,  # this layer's turns (its coil's)
+                abs(s.delta[FORK.index]) // job.fork_steps_per_rev,  # this layer's turns (its coil's)
                 job.fork_steps_per_rev,
                 path_stride=max(1, layer_steps // PATH_POINTS),
             )
             if first_layer:
-                y_mid = s.start[1] + s.delta[1] // 2
+                y_mid = s.start[FORK.index] + s.delta[FORK.index] // 2
                 layer.zoom = (y_mid - job.fork_steps_per_rev // 16, y_mid + job.fork_steps_per_rev // 16)
                 first_layer = False
             self.d.layers[i] = layer

@@ -76,7 +76,7 @@ import numpy.typing as npt
 from winder.analysis.digest import STRIDE_TIME, Digest, SegmentKinematics, digest, turn_index
 from winder.contract.eq7 import layer_of_samples, sample_deviation
 from winder.contract.run import commands_text, shaper_text, stops_text
-from winder.motion.axes import AXES, AXIS_TABLE
+from winder.motion.axes import AXES, AXIS_TABLE, FORK
 from winder.motion.profile import LIMITS
 from winder.record.reader import Run
 
@@ -284,10 +284,10 @@ def axis_deviation(run: Run, digested: Digest | None = None) -> Deviation | None
     for i in (int(v) for v in np.unique(seg)):
         m = seg == i
         s = plan.segments[i]
-        yr = y[m] - s.start[1]
+        yr = y[m] - s.start[FORK.index]
         dist = every[m]
         dists.append(dist)
-        tids.append(turn_index(np.abs(yr), spr, abs(s.delta[1]) // spr))
+        tids.append(turn_index(np.abs(yr), spr, abs(s.delta[FORK.index]) // spr))
         layers.append(
             LayerDeviation(
                 i, segs[i].pole, segs[i].layer, int(dist.size), float(dist.mean()), float(dist.max())

@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from winder.motion.axes import FEED, FORK
 from winder.motion.coil import radial_pitch
 from winder.motion.job import Segment
 from winder.record.reader import Run
@@ -203,10 +204,13 @@ def as_wound(
     for seg in layer_segments:
         n = job.layer_turns_of(seg.pole, seg.layer)
         if seg.pole not in coil_start:
-            going = 1 if seg.delta[0] >= 0 else -1
-            if ortho and seg.delta[0] == 0:  # a one-turn layer: the first crossover names the way
+            going = 1 if seg.delta[FEED.index] >= 0 else -1
+            if ortho and seg.delta[FEED.index] == 0:  # a one-turn layer: the first crossover names the way
                 going = next((1 if p[0] > 0 else -1 for p in seg.pieces if p[0]), 1)
-            coil_start[seg.pole] = (seg.start[0] * feed_step - (going * d / 2 if ortho else 0.0), going)
+            coil_start[seg.pole] = (
+                seg.start[FEED.index] * feed_step - (going * d / 2 if ortho else 0.0),
+                going,
+            )
         flange, coil_dir = coil_start[seg.pole]
         width = _window_width(job, n, d / 2 if ortho and seg.layer % 2 else 0.0)
         result.window_m = max(result.window_m, width)
@@ -289,9 +293,9 @@ def _lay(
     hi = min(int(np.searchsorted(t, t1, side="left")) + 2, t.size)
     if hi - lo < 2:
         return []
-    direction = 1 if seg.delta[1] >= 0 else -1
+    direction = 1 if seg.delta[FORK.index] >= 0 else -1
     angle = np.maximum.accumulate(direction * fork[lo:hi])  # progress along the layer, non-decreasing
-    base = direction * seg.start[1] * fork_rad
+    base = direction * seg.start[FORK.index] * fork_rad
     at = base + marks * fork_rad
     reached = at[:, 2] <= angle[-1]
     if not reached.any():
@@ -301,7 +305,9 @@ def _lay(
     measured = np.interp(when, t[lo:hi], feed[lo:hi])
     # the cam as commanded: feed (steps) against fork progress, through the pieces' ends
     knots_fork = np.concatenate([[0.0], np.cumsum([abs(p[1]) for p in seg.pieces])])
-    knots_feed = seg.start[0] + np.concatenate([[0.0], np.cumsum([p[0] for p in seg.pieces])])
+    knots_feed = seg.start[FEED.index] + np.concatenate(
+        [[0.0], np.cumsum([p[FEED.index] for p in seg.pieces])]
+    )
     intended = np.interp(marks[reached, 1], knots_fork, knots_feed) * feed_step
     moved = measured[:, 2] - measured[:, 0]
     return list(

@@ -53,6 +53,7 @@ from winder.contract.params import (
 from winder.contract.run import shaper_text
 from winder.contract.topics import check_namespace
 from winder.interrupts import Interrupts, deferred
+from winder.motion.axes import FEED, FORK
 from winder.motion.interp import dda, deviation_stats, min_deviation, point_by_point
 from winder.motion.job import FIELD_SPECS, Job
 from winder.motion.timing import plan_timing
@@ -99,7 +100,11 @@ def cmd_interp(args: argparse.Namespace) -> int:
                     )
                 else:
                     dist = line_distance(
-                        path[:, :2], seg.delta[0], seg.delta[1], step_lengths=(lx, ly), origin=seg.start[:2]
+                        path[:, :2],
+                        seg.delta[FEED.index],
+                        seg.delta[FORK.index],
+                        step_lengths=(lx, ly),
+                        origin=seg.start[:2],
                     )
                 total_dev += float(np.sum(dist))
                 max_dev = max(max_dev, float(dist.max()))

@@ -26,6 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from winder.contract.stream import JobPlan
+from winder.motion.axes import FEED, FORK
 from winder.motion.interp import line_distance
 
 __all__ = ["layer_of_samples", "sample_deviation", "signed_path_distance", "step_deviation"]
@@ -49,8 +50,8 @@ def layer_of_samples(plan: JobPlan, seg_now: npt.ArrayLike, y: npt.ArrayLike) ->
     winding = np.zeros(seg.size, dtype=bool)
     winding[ok] = kinds[seg[ok]]
     yw = yy[winding]
-    starts = np.array([plan.segments[i].start[1] for i in layer_ids], dtype=np.float64)
-    forward = all(plan.segments[i].delta[1] > 0 for i in layer_ids)
+    starts = np.array([plan.segments[i].start[FORK.index] for i in layer_ids], dtype=np.float64)
+    forward = all(plan.segments[i].delta[FORK.index] > 0 for i in layer_ids)
     if forward and np.all(np.diff(starts) > 0):  # the fork always turns forward: its ranges tile the axis
         which = np.clip(np.searchsorted(starts, yw, side="right") - 1, 0, len(layer_ids) - 1)
     else:
@@ -59,7 +60,7 @@ def layer_of_samples(plan: JobPlan, seg_now: npt.ArrayLike, y: npt.ArrayLike) ->
         # before or after it if the axis is still (or already) in that one's range
         rank = np.full(len(plan.segments), -1, np.int64)
         rank[layer_ids] = np.arange(len(layer_ids))
-        ends = starts + np.array([plan.segments[i].delta[1] for i in layer_ids], dtype=np.float64)
+        ends = starts + np.array([plan.segments[i].delta[FORK.index] for i in layer_ids], dtype=np.float64)
         lo, hi = np.minimum(starts, ends), np.maximum(starts, ends)
         which = np.maximum(rank[seg[winding]], 0)
         for step in (-1, 1):
@@ -79,7 +80,7 @@ def sample_deviation(plan: JobPlan, layer: npt.ArrayLike, x: npt.ArrayLike, y: n
     xx = np.asarray(x, dtype=np.float64)
     yy = np.asarray(y, dtype=np.float64)
     out = np.full(lay.size, np.nan)
-    lengths = (plan.step_lengths[0], plan.step_lengths[1])
+    lengths = (plan.step_lengths[FEED.index], plan.step_lengths[FORK.index])
     for i in (int(v) for v in np.unique(lay[lay >= 0])):
         m = lay == i
         s = plan.segments[i]
@@ -97,7 +98,9 @@ def _path_distance(
     """The eq. 5 distance (m) of points (x, y in steps) to a layer's path: its
     one line, or the cam piece whose fork range holds each point."""
     if len(pieces) == 1:
-        rel = np.column_stack([np.asarray(x, np.float64) - start[0], np.asarray(y, np.float64) - start[1]])
+        rel = np.column_stack(
+            [np.asarray(x, np.float64) - start[FEED.index], np.asarray(y, np.float64) - start[FORK.index]]
+        )
         return line_distance(rel, pieces[0][0], pieces[0][1], step_lengths=lengths)
     return np.abs(signed_path_distance(start, pieces, x, y, lengths))
 
@@ -117,7 +120,9 @@ def signed_path_distance(
     fork = np.concatenate([[0], np.cumsum([abs(p[1]) for p in pieces])])
     feed = np.concatenate([[0], np.cumsum([p[0] for p in pieces])])
     sign = 1 if sum(p[1] for p in pieces) >= 0 else -1
-    which = np.clip(np.searchsorted(fork, (yy - start[1]) * sign, side="right") - 1, 0, len(pieces) - 1)
+    which = np.clip(
+        np.searchsorted(fork, (yy - start[FORK.index]) * sign, side="right") - 1, 0, len(pieces) - 1
+    )
     out = np.zeros(xx.size)
     for i in (int(v) for v in np.unique(which)):
         dx, dy = pieces[i][0], pieces[i][1]
@@ -125,7 +130,7 @@ def signed_path_distance(
         if norm == 0:
             continue
         m = which == i
-        cross = dx * (yy[m] - start[1] - sign * fork[i]) - (xx[m] - start[0] - feed[i]) * dy
+        cross = dx * (yy[m] - start[FORK.index] - sign * fork[i]) - (xx[m] - start[FEED.index] - feed[i]) * dy
         out[m] = cross * (lengths[0] * lengths[1] / norm)
     return out
 
@@ -136,7 +141,13 @@ def step_deviation(plan: JobPlan, segment: int, pos: npt.ArrayLike) -> FloatArra
     ``segment`` to its ideal line."""
     s = plan.segments[segment]
     p = np.asarray(pos)[:, :2]
-    lengths = (plan.step_lengths[0], plan.step_lengths[1])
+    lengths = (plan.step_lengths[FEED.index], plan.step_lengths[FORK.index])
     if len(s.pieces) > 1:
         return _path_distance(s.start, s.pieces, p[:, 0], p[:, 1], lengths)
-    return line_distance(p, s.delta[0], s.delta[1], step_lengths=lengths, origin=(s.start[0], s.start[1]))
+    return line_distance(
+        p,
+        s.delta[FEED.index],
+        s.delta[FORK.index],
+        step_lengths=lengths,
+        origin=(s.start[FEED.index], s.start[FORK.index]),
+    )

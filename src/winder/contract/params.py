@@ -380,10 +380,10 @@ def stop_points(job: Job, text: str) -> list[tuple[int, int]]:
             within -= per_layer[layer]
             layer += 1
         seg = layers[coil - 1, layer]
-        if abs(seg.delta[1]) < abs(seg.delta[0]) and within + 1 < per_layer[layer]:
+        if abs(seg.delta[FORK.index]) < abs(seg.delta[FEED.index]) and within + 1 < per_layer[layer]:
             raise SpecError(
                 f"stops={shorten(text)} is invalid: turn {turn} ends inside a layer whose feed steps "
-                f"({abs(seg.delta[0])}) outnumber its fork steps: stop at a layer's end instead"
+                f"({abs(seg.delta[FEED.index])}) outnumber its fork steps: stop at a layer's end instead"
             )
         # the layer's end (its last step, whichever axis leads, after the reversal dwell)
         last = within + 1 == per_layer[layer]
