@@ -76,7 +76,7 @@ import numpy.typing as npt
 from winder.analysis.digest import STRIDE_TIME, Digest, SegmentKinematics, digest, turn_index
 from winder.contract.eq7 import layer_of_samples, sample_deviation
 from winder.contract.run import commands_text, shaper_text, stops_text
-from winder.motion.axes import AXES, AXIS_TABLE, FORK
+from winder.motion.axes import AXES, AXIS_TABLE, FEED, FORK
 from winder.motion.profile import LIMITS
 from winder.record.reader import Run
 
@@ -263,8 +263,8 @@ def winding_samples(run: Run, digested: Digest) -> tuple[npt.NDArray[np.int64], 
     if digested.sample_segment.size != len(run.states):
         z = np.zeros(0)
         return np.zeros(0, np.int64), z, z
-    x = run.states.pos[:, 0] / js[0]  # steps, float
-    y = run.states.pos[:, 1] / js[1]
+    x = run.states.pos[:, FEED.index] / js[FEED.index]  # steps, float
+    y = run.states.pos[:, FORK.index] / js[FORK.index]
     layer = layer_of_samples(plan, digested.sample_segment, y)
     keep = layer >= 0
     return layer[keep], x[keep], y[keep]

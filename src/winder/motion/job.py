@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from winder.motion.axes import FEED, FORK, POLE
 from winder.motion.coil import CORES, LAYS, Bobbin, Winding, layer_capacity, winding
 from winder.spec import Spec, SpecError
 
@@ -668,7 +669,7 @@ class Job:
             if pole > 0:
                 delta = (0, 0, self.pole_position(pole) - self.pole_position(pole - 1))
                 out.append(Segment(len(out), SegmentKind.INDEX, tuple(pos), delta, pole, -1))  # type: ignore[arg-type]
-                pos[2] += delta[2]
+                pos[POLE.index] += delta[POLE.index]
             coil = self.coil(pole)
             origin, first = pos[0], direction
             for layer in range(coil.layers):
@@ -679,8 +680,8 @@ class Job:
                     Segment(len(out), SegmentKind.LAYER, begin, net, pole, layer, cam if len(cam) > 1 else ())
                 )
                 delta = net
-                pos[0] += delta[0]
-                pos[1] += delta[1]
+                pos[FEED.index] += delta[FEED.index]
+                pos[FORK.index] += delta[FORK.index]
                 direction = -direction
         return out
 

@@ -62,7 +62,7 @@ from winder.contract.eq7 import layer_of_samples, sample_deviation, signed_path_
 from winder.contract.files import OutputError, atomic_file, output_dir
 from winder.contract.run import shaper_text, where_text
 from winder.contract.stream import JobPlan
-from winder.motion.axes import AXES, AXIS_TABLE
+from winder.motion.axes import AXES, AXIS_TABLE, FEED, FORK
 from winder.record.reader import Run
 
 __all__ = [
@@ -613,7 +613,7 @@ def _layers(plan: JobPlan) -> dict[int, tuple[float, int]]:
     done = 0.0
     for i, s in enumerate(plan.segments):
         if s.kind.winds:
-            turns = abs(s.delta[1]) // spr
+            turns = abs(s.delta[FORK.index]) // spr
             out[i] = (done, turns)
             done += turns
     return out
@@ -639,15 +639,19 @@ def _signed_samples(run: Run, d: Digest) -> tuple[IntArray, FloatArray]:
     n = len(run.states)
     if n == 0 or d.sample_segment.size != n:
         return np.full(n, -1, np.int64), np.full(n, np.nan)
-    x = run.states.pos[:, 0] / js[0]
-    y = run.states.pos[:, 1] / js[1]
+    x = run.states.pos[:, FEED.index] / js[FEED.index]
+    y = run.states.pos[:, FORK.index] / js[FORK.index]
     layer = layer_of_samples(plan, d.sample_segment, y)
     dist = sample_deviation(plan, layer, x, y)
     for i in (int(v) for v in np.unique(layer[layer >= 0])):
         m = layer == i
         s = plan.segments[i]
         cross = signed_path_distance(
-            s.start, s.pieces or (s.delta,), x[m], y[m], (plan.step_lengths[0], plan.step_lengths[1])
+            s.start,
+            s.pieces or (s.delta,),
+            x[m],
+            y[m],
+            (plan.step_lengths[FEED.index], plan.step_lengths[FORK.index]),
         )
         dist[m] = np.where(cross < 0, -dist[m], dist[m])
     return layer, dist
@@ -745,12 +749,12 @@ def _turns_wound(run: Run, layer: IntArray, layers: dict[int, tuple[float, int]]
     n = len(plan.segments)
     before, turns, start = np.zeros(n), np.zeros(n), np.zeros(n)
     for i, (b, t) in layers.items():
-        before[i], turns[i], start[i] = b, t, plan.segments[i].start[1]
+        before[i], turns[i], start[i] = b, t, plan.segments[i].start[FORK.index]
     out = np.full(layer.size, np.nan)
     m = layer >= 0
     if np.any(m):
         lay = layer[m]
-        y = run.states.pos[m, 1] / plan.joint_step[1]
+        y = run.states.pos[m, FORK.index] / plan.joint_step[FORK.index]
         out[m] = before[lay] + np.clip(np.abs(y - start[lay]) / plan.job.fork_steps_per_rev, 0, turns[lay])
     return out
 
@@ -760,7 +764,7 @@ def _zoom_middle(run: Run, d: Digest, ax: Axes) -> None:
     step and sample, signed distance to the line."""
     plan = run.plan
     spr = plan.job.fork_steps_per_rev
-    lx, ly = plan.step_lengths[0], plan.step_lengths[1]
+    lx, ly = plan.step_lengths[FEED.index], plan.step_lengths[FORK.index]
     js = plan.joint_step
     first = next((i for i, s in enumerate(plan.segments) if s.kind.winds), None)
     if first is None or first not in d.layers or d.layers[first].zoom is None:
@@ -775,13 +779,21 @@ def _zoom_middle(run: Run, d: Digest, ax: Axes) -> None:
         ax.plot(fork / spr, dist * 1e6, ".-", color=CMD, lw=0.5, ms=3, label="commanded steps")
     st = run.states
     if len(st):
-        x = st.pos[:, 0] / js[0] - s.start[0]
-        y = st.pos[:, 1] / js[1] - s.start[1]
-        m = (y + s.start[1] >= y_lo) & (y + s.start[1] <= y_hi)
+        x = st.pos[:, FEED.index] / js[FEED.index] - s.start[FEED.index]
+        y = st.pos[:, FORK.index] / js[FORK.index] - s.start[FORK.index]
+        m = (y + s.start[FORK.index] >= y_lo) & (y + s.start[FORK.index] <= y_hi)
         dist = signed_path_distance(
-            s.start, s.pieces or (s.delta,), x[m] + s.start[0], y[m] + s.start[1], (lx, ly)
+            s.start, s.pieces or (s.delta,), x[m] + s.start[FEED.index], y[m] + s.start[FORK.index], (lx, ly)
         )
-        ax.plot((y[m] + s.start[1]) / spr, dist * 1e6, "o-", color=ACT, ms=3, lw=0.8, label="simulated axes")
+        ax.plot(
+            (y[m] + s.start[FORK.index]) / spr,
+            dist * 1e6,
+            "o-",
+            color=ACT,
+            ms=3,
+            lw=0.8,
+            label="simulated axes",
+        )
     ax.axhline(0, color=IDEAL, lw=0.8, label="ideal line")
     ax.set_xlabel("fork position (turns)")
     ax.set_ylabel("signed distance to the ideal line (um)")
@@ -823,12 +835,12 @@ def _per_turn_axes(
     that turn), each sample measured against the layer whose fork range holds it."""
     plan = run.plan
     spr = plan.job.fork_steps_per_rev
-    y = run.states.pos[:, 1] / plan.joint_step[1] if len(run.states) else np.zeros(0)
+    y = run.states.pos[:, FORK.index] / plan.joint_step[FORK.index] if len(run.states) else np.zeros(0)
     xs, ys = [], []
     for i in (int(v) for v in np.unique(layer[layer >= 0])):
         m = layer == i
         before, turns = layers[i]
-        tid = turn_index(np.abs(y[m] - plan.segments[i].start[1]), spr, turns)
+        tid = turn_index(np.abs(y[m] - plan.segments[i].start[FORK.index]), spr, turns)
         sums, counts = np.bincount(tid, weights=np.abs(dist[m])), np.bincount(tid)
         seen = np.flatnonzero(counts > 0)
         xs.append(before + seen + 0.5)
