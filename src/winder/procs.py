@@ -34,11 +34,17 @@ _PR_SET_PDEATHSIG = 1
 
 def die_with_parent(sig: int = signal.SIGINT) -> Callable[[], None]:
     """A ``preexec_fn`` for :class:`subprocess.Popen`: the child gets ``sig``
-    when the process that started it dies (on Linux; elsewhere nothing). If
+    when the process that started it dies (on Linux; elsewhere nothing), with
+    its default action and unblocked, whatever this process inherited. If
     the parent died before the child set this up, the child signals itself."""
     parent = os.getpid()
 
     def _preexec() -> None:
+        # the signal must be able to end the child however this process was started: a
+        # death signal ignored (inherited from a script's `cmd &`) or blocked is lost, and a
+        # node still loading when its parent was killed lived on (test_no_node_outlives_...)
+        signal.signal(sig, signal.SIG_DFL)
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {sig})
         if sys.platform.startswith("linux"):
             ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, sig)
             if os.getppid() != parent:  # the parent is already gone: the kernel will not tell

@@ -5,6 +5,7 @@ batches and still equal the exact response; no node outlives `winder run`."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -25,7 +26,7 @@ from winder.axis import StepperAxis
 from winder.cli import commands as cli
 from winder.contract.params import SIM_SPECS, bag_directory
 from winder.motion.timing import MAX_JOB_SECONDS
-from winder.procs import popen
+from winder.procs import popen, signal_state
 from winder.spec import SpecError
 
 # (arguments, what the one line must name): each value is inside its own
@@ -176,7 +177,15 @@ def test_no_node_outlives_a_killed_winder_run(tmp_path: Path, procs: Procs) -> N
         def alive() -> list[int]:
             return [k for k in kids if Path(f"/proc/{k}").exists() and not _zombie(k)]
 
-        wait.until(lambda: not alive(), 20, "the end of the nodes of the killed winder run", heard=alive)
+        def said() -> list[str]:  # which process lives on, and what it does with its signals
+            out = []
+            for k in alive():
+                with contextlib.suppress(OSError):
+                    argv = Path(f"/proc/{k}/cmdline").read_bytes().replace(b"\0", b" ").decode()[-120:]
+                    out.append(f"{k} {argv} ({signal_state(k)})")
+            return out
+
+        wait.until(lambda: not alive(), 20, "the end of the nodes of the killed winder run", heard=said)
     finally:
         if p.poll() is None:
             p.kill()
