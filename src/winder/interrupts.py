@@ -50,6 +50,8 @@ class Interrupts:
 
     def install(self) -> Interrupts:
         for sig in SIGNALS:
+            if sig == signal.SIGHUP and signal.getsignal(sig) is signal.SIG_IGN:
+                continue  # nohup: the command outlives its terminal
             self.previous[sig] = signal.signal(sig, self._on_signal)
         return self
 

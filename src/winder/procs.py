@@ -112,15 +112,24 @@ def take_stop_signals() -> None:
     ``winder ctl state --watch`` ran on until killed (make flakes, 3 of 3,
     started with ``&``). As a ROS node does, winder stops on them: an ignored
     one gets its default action back (SIGINT: KeyboardInterrupt), and none
-    stays blocked. Handlers installed later (rclpy's, a node's) take over."""
+    stays blocked. Handlers installed later (rclpy's, a node's) take over.
+    An ignored SIGHUP stays ignored: that is ``nohup``'s whole point (a run
+    that outlives its ssh session), and :func:`hangup_ignored` tells the
+    callers not to take it."""
     import threading
 
     if threading.current_thread() is not threading.main_thread():
         return
-    for sig in STOP_SIGNALS:
+    for sig in (signal.SIGINT, signal.SIGTERM):
         if signal.getsignal(sig) is signal.SIG_IGN:
             signal.signal(sig, signal.default_int_handler if sig == signal.SIGINT else signal.SIG_DFL)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
+
+
+def hangup_ignored() -> bool:
+    """Whether SIGHUP is ignored here (started under ``nohup``): then a
+    winder process leaves it so, and outlives its terminal."""
+    return signal.getsignal(signal.SIGHUP) is signal.SIG_IGN
 
 
 #: a winder process writes every thread's Python stack to its stderr on this

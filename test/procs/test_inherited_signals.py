@@ -64,13 +64,61 @@ def test_sigint_stops_a_process_started_with_it_ignored_and_blocked(
         preexec_fn=ignoring_and_blocking_sigint(),
     )
     try:
-        # up, with its own SIGINT handler (before: SIGINT stayed ignored, and blocked)
-        wait.until(lambda: caught(p.pid, signal.SIGINT) or p.poll() is not None, 60, "its SIGINT handler")
+        # winder's handlers in (SIGTERM's: Python has none of its own), and SIGINT taken
+        # (before: it stayed ignored, and blocked)
+        wait.until(lambda: caught(p.pid, signal.SIGTERM) or p.poll() is not None, 60, "its signal handlers")
+        assert caught(p.pid, signal.SIGINT)
         assert p.poll() is None
         p.send_signal(signal.SIGINT)
         _, err = p.communicate(timeout=30)
         assert p.returncode == code, err
         assert "Traceback" not in err, err
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+
+
+def ignoring_sighup() -> Callable[[], None]:
+    """A ``preexec_fn``: as ``nohup`` starts a command (SIGHUP ignored)."""
+    dies = die_with_parent()
+
+    def preexec() -> None:
+        dies()
+        signal.signal(signal.SIGHUP, signal.SIG_IGN)
+
+    return preexec
+
+
+def ignored(pid: int, signum: int) -> bool:
+    status = Path(f"/proc/{pid}/status").read_text()
+    mask = next((ln.split()[1] for ln in status.splitlines() if ln.startswith("SigIgn:")), "0")
+    return bool(int(mask, 16) >> (signum - 1) & 1)
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize("argv", [["winder", "ctl", "state", "--watch", "--timeout", "60"], ["sim_node"]])
+def test_under_nohup_sighup_stays_ignored(procs: Procs, tmp_path: Path, argv: list[str]) -> None:
+    """`nohup winder run ... &` is how a long run outlives an ssh session: a
+    winder command or node started with SIGHUP ignored leaves it ignored
+    (it takes SIGINT), and stops on SIGINT."""
+    p = subprocess.Popen(
+        [str(BIN / argv[0]), *argv[1:]],
+        env=procs.env,
+        cwd=tmp_path,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=ignoring_sighup(),
+    )
+    try:
+        # winder's handlers in (SIGTERM's: Python has none of its own): SIGHUP left alone
+        wait.until(lambda: caught(p.pid, signal.SIGTERM) or p.poll() is not None, 60, "its signal handlers")
+        assert p.poll() is None
+        assert ignored(p.pid, signal.SIGHUP) and not caught(p.pid, signal.SIGHUP)
+        p.send_signal(signal.SIGINT)
+        _, err = p.communicate(timeout=30)
+        assert p.returncode in (0, 130) and "Traceback" not in err, err
     finally:
         if p.poll() is None:
             p.kill()

@@ -8,7 +8,7 @@ from collections.abc import Sequence
 from types import FrameType
 
 from winder.cli.lifetime import early_containers, ros_done
-from winder.procs import stacks_on_signal, take_stop_signals
+from winder.procs import hangup_ignored, stacks_on_signal, take_stop_signals
 
 __all__ = ["main"]
 
@@ -22,7 +22,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     from its first moment on."""
     take_stop_signals()  # whatever the parent left ignored or blocked (a script's `winder ... &`)
     signal.signal(signal.SIGTERM, _terminate)
-    signal.signal(signal.SIGHUP, _terminate)
+    if not hangup_ignored():  # under nohup the command outlives its terminal
+        signal.signal(signal.SIGHUP, _terminate)
     stacks_on_signal()  # kill -USR1: every thread's stack on stderr (where a command hangs)
     try:
         from winder.interrupts import deferred, ignored

@@ -69,9 +69,12 @@ def install_signal_handlers() -> None:
     """Signals that end a node let it finish its callback and close its bag
     (see :func:`_stop_quietly`); installed before ``rclpy.init``, which chains
     its handlers to these."""
+    from winder.procs import hangup_ignored
+
     signal.signal(signal.SIGINT, _stop_quietly)
     signal.signal(signal.SIGTERM, _stop_quietly)
-    signal.signal(signal.SIGHUP, _hangup)
+    if not hangup_ignored():  # under nohup a node outlives its terminal
+        signal.signal(signal.SIGHUP, _hangup)
     sys.unraisablehook = _quiet_rclpy_finalisers
 
 
