@@ -105,3 +105,34 @@ def test_one_stop_says_whether_the_child_stopped_by_itself(tmp_path: Path) -> No
     p = Children(tmp_path).start([sys.executable, "-c", "import time; time.sleep(60)"], "sleeper")
     code, by_itself = stop(p, signal.SIGTERM, grace=10.0)
     assert (code, by_itself) == (-signal.SIGTERM, True)
+
+
+def test_a_child_whose_parent_is_gone_before_it_is_set_up_ends_at_once(tmp_path: Path) -> None:
+    """The parent dies between the fork and the child's prctl (here: the
+    preexec made for another parent, so the child sees another parent id):
+    the child signals itself. The parent had a Python SIGINT handler at the
+    fork (winder run has one), which the child still had until its exec:
+    the signal went to it and was lost at the exec, and the child lived on
+    (a node of a SIGKILLed winder run, spinning an hour later). Now the
+    child gives the signal its default action first: it ends, never execs."""
+    script = textwrap.dedent(
+        """
+        import signal, subprocess, sys
+        from winder.procs import die_with_parent
+        signal.signal(signal.SIGINT, lambda *_: None)  # a Python handler, as winder run has
+        pre = die_with_parent()
+        import os
+        if os.fork() == 0:  # a child process that starts the grandchild with its parent's preexec
+            p = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"], preexec_fn=pre)
+            try:
+                code = p.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                code = "alive"
+            print(code, flush=True)
+            os._exit(0)
+        os.wait()
+        """
+    )
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert out.stdout.strip() == str(-signal.SIGINT), out.stdout + out.stderr
