@@ -105,8 +105,8 @@ from winder.contract.pacing import CommandHistory, Pacer, following_error
 from winder.contract.params import BRIDGE_SPECS, PROFILE_SPECS, check_bridge
 from winder.contract.stream import JobPlan
 from winder.contract.topics import TOPIC_CLOCK, TOPIC_PROFILE_CONFIG, TOPIC_STEP_TIMES, check_node_name
-from winder.motion.axes import AXES
-from winder.motion.limits import NO_LIMIT, LimitWatch, job_extent, job_limits
+from winder.motion.axes import AXES, axis
+from winder.motion.limits import NO_LIMIT, LimitWatch, job_extent, job_limits, travel_past
 from winder.ros.consumer import StepConsumer
 from winder.ros.diagnostics import ERROR
 from winder.ros.graph import fully_qualified, publishers_by_gid
@@ -392,7 +392,8 @@ class BridgeNode(StepConsumer):
                 self.raise_fault(f"servo fault: {why} (soft limit); the run stops", {})
 
     def watching_limits(self) -> bool:
-        return bool(((self.v_max < NO_LIMIT) | (self.a_max < NO_LIMIT)).any())
+        """The run has a velocity or an acceleration limit to hold."""
+        return self.limit_watch is not None and self.limit_watch.active
 
     def paces(self) -> bool:
         return True
@@ -413,7 +414,8 @@ class BridgeNode(StepConsumer):
             over = self.limit_watch.feed(rows) if self.limit_watch is not None else None
             if over is not None:
                 j = over.joint
-                unit = self.units[j] + ("/s" if over.kind == "velocity" else "/s^2")
+                ax = axis(self.axes[j])
+                unit = ax.velocity_unit if over.kind == "velocity" else ax.acceleration_unit
                 what = (
                     f"the steps would drive joint {self.joints[j]} ({self.axes[j]} axis) at {over.value:.6g} "
                     f"{unit} over 20 ms"
@@ -1003,26 +1005,22 @@ class BridgeNode(StepConsumer):
         assert self.pacer is not None
         lo = self.pacer.offset + self.extent[0] * self.pacer.step_len
         hi = self.pacer.offset + self.extent[1] * self.pacer.step_len
-        for j in range(len(self.joints)):
-            for side, at, limit, past in (
-                ("min", lo[j], self.pos_lo[j], lo[j] < self.pos_lo[j]),
-                ("max", hi[j], self.pos_hi[j], hi[j] > self.pos_hi[j]),
-            ):
-                if past:
-                    unit = self.units[j]
-                    self.raise_fault(
-                        f"servo fault: the run cannot start: the job takes joint {self.joints[j]} "
-                        f"({self.axes[j]} axis) to {at:.6g} {unit}, beyond {side}_position.{self.axes[j]} = "
-                        f"{limit:g} {unit} (soft limit); nothing was commanded",
-                        {
-                            "joint": self.joints[j],
-                            "axis": self.axes[j],
-                            "at": f"{at:.6g}",
-                            "limit": f"{limit:g}",
-                        },
-                    )
-                    return True
-        return False
+        past = travel_past(lo, hi, self.pos_lo, self.pos_hi)
+        if past is None:
+            return False
+        j, unit = past.index, self.units[past.index]
+        self.raise_fault(
+            f"servo fault: the run cannot start: the job takes joint {self.joints[j]} "
+            f"({self.axes[j]} axis) to {past.at:.6g} {unit}, beyond {past.side}_position.{self.axes[j]} = "
+            f"{past.limit:g} {unit} (soft limit); nothing was commanded",
+            {
+                "joint": self.joints[j],
+                "axis": self.axes[j],
+                "at": f"{past.at:.6g}",
+                "limit": f"{past.limit:g}",
+            },
+        )
+        return True
 
     def raise_fault(self, text: str, values: dict[str, object]) -> None:
         """(Under the lock, in the thread.) No further command at once; the

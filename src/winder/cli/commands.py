@@ -325,9 +325,8 @@ def axis_limits(
     words ("" if none)."""
     from winder.contract.jobfile import JobFileError, load_node_params
     from winder.contract.params import BRIDGE_SPECS, PROFILE_SPECS, check_bridge
-    from winder.motion.axes import AXES
-    from winder.motion.axes import axis as axis_of
-    from winder.motion.limits import NO_LIMIT, highest_override, job_extent, job_limits
+    from winder.motion.axes import AXES, AXIS_TABLE
+    from winder.motion.limits import NO_LIMIT, highest_override, job_extent, job_limits, travel_past
     from winder.spec import SpecError
 
     try:
@@ -346,30 +345,33 @@ def axis_limits(
     except ValueError as exc:
         raise UserError(f"the job cannot be ramped: {exc}") from None
     lo, hi = job_extent(job.segments())
+    step = np.asarray(job.joint_step)
+    travel_lo, travel_hi = lo * step, hi * step
+    lows = [values[f"min_position.{a}"] for a in AXES]
+    highs = [values[f"max_position.{a}"] for a in AXES]
+    past = travel_past(travel_lo, travel_hi, lows, highs) if values["job_origin"] == "zero" else None
+    if not why and past is not None:
+        axis, unit = AXES[past.index], AXIS_TABLE[past.index].unit
+        why = f"the job takes the {axis} axis to {past.at:.6g} {unit}, beyond {past.side}_position.{axis} = "
+        why += f"{past.limit:g} {unit}"
+
+    def limit(name: str) -> float | None:  # a limit set, or None (none: +-NO_LIMIT)
+        value = float(values[name])
+        return None if abs(value) >= NO_LIMIT else value
+
     out: dict[str, Any] = {}
-    for i, axis in enumerate(AXES):
-        step, p = job.joint_step[i], peaks[i]
-        travel = (float(lo[i] * step), float(hi[i] * step))
-        v_min, v_max = values[f"min_position.{axis}"], values[f"max_position.{axis}"]
-        if not why and values["job_origin"] == "zero" and (travel[0] < v_min or travel[1] > v_max):
-            side, at, limit = ("min", travel[0], v_min) if travel[0] < v_min else ("max", travel[1], v_max)
-            unit = axis_of(axis).unit
-            why = f"the job takes the {axis} axis to {at:.6g} {unit}, beyond {side}_position.{axis} = "
-            why += f"{limit:g} {unit}"
+    for i, ax in enumerate(AXIS_TABLE):
+        p, axis = peaks[i], ax.name
         out[axis] = {
-            "unit": axis_of(axis).unit,
-            "travel": list(travel),
-            "min_position": None if v_min <= -NO_LIMIT else v_min,
-            "max_position": None if v_max >= NO_LIMIT else v_max,
+            "unit": ax.unit,
+            "travel": [float(travel_lo[i]), float(travel_hi[i])],
+            "min_position": limit(f"min_position.{axis}"),
+            "max_position": limit(f"max_position.{axis}"),
             "peak_velocity": p.velocity,
-            "max_velocity": None
-            if values[f"max_velocity.{axis}"] >= NO_LIMIT
-            else values[f"max_velocity.{axis}"],
+            "max_velocity": limit(f"max_velocity.{axis}"),
             "peak_acceleration": p.windowed_acceleration,
             "velocity_jump": p.jump,
-            "max_acceleration": (
-                None if values[f"max_acceleration.{axis}"] >= NO_LIMIT else values[f"max_acceleration.{axis}"]
-            ),
+            "max_acceleration": limit(f"max_acceleration.{axis}"),
         }
     out["job_origin"] = values["job_origin"]
     out["feed_override"] = highest_override(ramp, schedule)

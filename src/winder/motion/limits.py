@@ -48,12 +48,14 @@ __all__ = [
     "AxisPeaks",
     "Breach",
     "LimitWatch",
+    "Past",
     "breach",
     "highest_override",
     "job_extent",
     "job_limits",
     "job_peaks",
     "move_peaks",
+    "travel_past",
 ]
 
 #: a limit this large is none (the default of every limit parameter of the bridge)
@@ -112,6 +114,31 @@ def job_extent(segments: Sequence[_Segment], axes: int = len(AXES)) -> tuple[npt
         else:
             lo, hi = np.minimum(lo, corners.min(axis=0)), np.maximum(hi, corners.max(axis=0))
     return lo, hi
+
+
+@dataclass(frozen=True)
+class Past:
+    """A travel past a soft limit: the axis' (or joint's) index, the side
+    (``min``, ``max``), where the travel goes and the limit (m or rad)."""
+
+    index: int
+    side: str
+    at: float
+    limit: float
+
+
+def travel_past(
+    lo: npt.ArrayLike, hi: npt.ArrayLike, lows: npt.ArrayLike, highs: npt.ArrayLike
+) -> Past | None:
+    """The first axis whose travel ``lo``..``hi`` leaves its range
+    ``lows``..``highs`` (``min_position``, ``max_position``); None if none does."""
+    arrays = (np.asarray(x, np.float64) for x in (lo, hi, lows, highs))
+    for j, (a, b, low, high) in enumerate(zip(*arrays, strict=True)):
+        if a < low:
+            return Past(j, "min", float(a), float(low))
+        if b > high:
+            return Past(j, "max", float(b), float(high))
+    return None
 
 
 def move_peaks(motion: Motion) -> tuple[float, float]:
@@ -173,12 +200,11 @@ def _apart(value: float, limit: float) -> tuple[str, str]:
     return a, b
 
 
-def breach(
-    peaks: Sequence[AxisPeaks], axes: Sequence[str], units: Sequence[str], values: dict[str, Any]
-) -> str:
+def breach(peaks: Sequence[AxisPeaks], values: dict[str, Any]) -> str:
     """The first limit (``max_velocity.<axis>``, ``max_acceleration.<axis>``
-    in ``values``) a job's ``peaks`` pass, in words; "" if none."""
-    for p, axis, unit in zip(peaks, axes, units, strict=True):
+    in ``values``) a job's ``peaks`` (AXES order) pass, in words; "" if none."""
+    for p, ax in zip(peaks, AXIS_TABLE, strict=True):
+        axis, unit = ax.name, ax.unit
         v_lim = float(values.get(f"max_velocity.{axis}", NO_LIMIT))
         a_lim = float(values.get(f"max_acceleration.{axis}", NO_LIMIT))
         if p.velocity > v_lim:
@@ -298,8 +324,7 @@ def job_limits(
     )
     override = highest_override(ramp, schedule)
     peaks = job_peaks(segments, timings, job.joint_step, override)
-    units = [a.unit for a in AXIS_TABLE]
-    why = breach(peaks, AXES, units, limits)
+    why = breach(peaks, limits)
     if why and override != 1.0:
         why += f", at feed override {override:g}"
     return peaks, why
