@@ -146,18 +146,32 @@ def stacks_on_signal() -> None:
         faulthandler.register(STACKS_SIGNAL, all_threads=True, chain=False)
 
 
-def signal_state(pid: int) -> str:
-    """The signals ``pid`` blocks, ignores and has pending (from /proc; "" where
-    there is none): why a process did not stop when asked."""
+def signal_masks(pid: int) -> dict[str, int]:
+    """The signal masks of ``pid`` from /proc (``SigBlk``, ``SigIgn``,
+    ``SigCgt``: has a handler, ``SigPnd``, ``ShdPnd``); {} once it is gone."""
     try:
         status = Path(f"/proc/{pid}/status").read_text()
     except OSError:
-        return ""
-    out = []
+        return {}
+    out = {}
     for line in status.splitlines():
         key, _, value = line.partition(":")
-        if key in ("SigBlk", "SigIgn", "SigPnd", "ShdPnd"):
-            mask = int(value.strip(), 16)
+        if key in ("SigBlk", "SigIgn", "SigCgt", "SigPnd", "ShdPnd"):
+            out[key] = int(value.strip(), 16)
+    return out
+
+
+def in_mask(pid: int, mask: str, signum: int) -> bool:
+    """Whether ``signum`` is in ``pid``'s ``mask`` (:func:`signal_masks`)."""
+    return bool(signal_masks(pid).get(mask, 0) >> (signum - 1) & 1)
+
+
+def signal_state(pid: int) -> str:
+    """The signals ``pid`` blocks, ignores and has pending (from /proc; "" where
+    there is none): why a process did not stop when asked."""
+    out = []
+    for key, mask in signal_masks(pid).items():
+        if key != "SigCgt":
             names = [signal.Signals(n).name for n in range(1, 65) if mask >> (n - 1) & 1 and n in _NAMED]
             out.append(f"{key} {', '.join(names) or '-'}")
     return "; ".join(out)

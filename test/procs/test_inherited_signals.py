@@ -2,7 +2,8 @@
 SIGINT ignored (a script's ``winder ... &``: POSIX has a background job
 ignore it) or blocked (started from a thread that blocks it). Before, such a
 process ran on until killed (make flakes, started with ``&``: ``winder ctl
-state --watch`` and ``winder play --foxglove``, 3 rounds of 3)."""
+state --watch`` and ``winder play --foxglove``, 3 rounds of 3). Under
+``nohup`` (SIGHUP ignored) SIGHUP stays ignored."""
 
 from __future__ import annotations
 
@@ -16,44 +17,42 @@ from conftest import Procs
 from support import wait
 from support.paths import BIN
 
-from winder.procs import die_with_parent
+from winder.procs import die_with_parent, in_mask
+
+#: the processes tried: a command (stops "interrupted", 130) and a node (closes, 0)
+PROCESSES = pytest.mark.parametrize(
+    ("argv", "code"),
+    [(["winder", "ctl", "state", "--watch", "--timeout", "60"], 130), (["sim_node"], 0)],
+    ids=["winder ctl state --watch", "sim_node"],
+)
 
 
-def caught(pid: int, signum: int) -> bool:
-    """Whether ``pid`` has a handler of its own for ``signum`` (its SigCgt mask)."""
-    try:
-        status = Path(f"/proc/{pid}/status").read_text()
-    except OSError:
-        return False
-    mask = next((ln.split()[1] for ln in status.splitlines() if ln.startswith("SigCgt:")), "0")
-    return bool(int(mask, 16) >> (signum - 1) & 1)
-
-
-def ignoring_and_blocking_sigint() -> Callable[[], None]:
-    """A ``preexec_fn``: the child dies with this process, and starts with
-    SIGINT ignored and blocked, as such a parent leaves it."""
+def starting_with(change: Callable[[], None]) -> Callable[[], None]:
+    """A ``preexec_fn``: the child dies with this process, and ``change``
+    (in the child, before exec) leaves its signals as such a parent would."""
     dies = die_with_parent()  # made here: it notes this process as the parent
 
     def preexec() -> None:
         dies()
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        change()
 
     return preexec
 
 
-@pytest.mark.ros
-@pytest.mark.parametrize(
-    ("argv", "code"),
-    [
-        (["winder", "ctl", "state", "--watch", "--timeout", "60"], 130),  # the command's "interrupted"
-        (["sim_node"], 0),  # a node: it closes and exits 0
-    ],
-    ids=["winder ctl state --watch", "sim_node"],
-)
-def test_sigint_stops_a_process_started_with_it_ignored_and_blocked(
-    procs: Procs, tmp_path: Path, argv: list[str], code: int
-) -> None:
+def ignore_and_block_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+
+
+def ignore_sighup() -> None:  # as nohup does
+    signal.signal(signal.SIGHUP, signal.SIG_IGN)
+
+
+def started(
+    procs: Procs, tmp_path: Path, argv: list[str], change: Callable[[], None]
+) -> subprocess.Popen[str]:
+    """``argv`` started with its signals as ``change`` leaves them, once
+    winder's handlers are in (SIGTERM's: Python has none of its own)."""
     p = subprocess.Popen(
         [str(BIN / argv[0]), *argv[1:]],
         env=procs.env,
@@ -61,14 +60,24 @@ def test_sigint_stops_a_process_started_with_it_ignored_and_blocked(
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
         text=True,
-        preexec_fn=ignoring_and_blocking_sigint(),
+        preexec_fn=starting_with(change),
     )
     try:
-        # winder's handlers in (SIGTERM's: Python has none of its own), and SIGINT taken
-        # (before: it stayed ignored, and blocked)
-        wait.until(lambda: caught(p.pid, signal.SIGTERM) or p.poll() is not None, 60, "its signal handlers")
-        assert caught(p.pid, signal.SIGINT)
+        wait.until(
+            lambda: in_mask(p.pid, "SigCgt", signal.SIGTERM) or p.poll() is not None,
+            60,
+            "its signal handlers",
+        )
         assert p.poll() is None
+    except BaseException:
+        p.kill()
+        p.wait()
+        raise
+    return p
+
+
+def stops_on_sigint(p: subprocess.Popen[str], code: int) -> None:
+    try:
         p.send_signal(signal.SIGINT)
         _, err = p.communicate(timeout=30)
         assert p.returncode == code, err
@@ -79,47 +88,22 @@ def test_sigint_stops_a_process_started_with_it_ignored_and_blocked(
             p.wait()
 
 
-def ignoring_sighup() -> Callable[[], None]:
-    """A ``preexec_fn``: as ``nohup`` starts a command (SIGHUP ignored)."""
-    dies = die_with_parent()
-
-    def preexec() -> None:
-        dies()
-        signal.signal(signal.SIGHUP, signal.SIG_IGN)
-
-    return preexec
-
-
-def ignored(pid: int, signum: int) -> bool:
-    status = Path(f"/proc/{pid}/status").read_text()
-    mask = next((ln.split()[1] for ln in status.splitlines() if ln.startswith("SigIgn:")), "0")
-    return bool(int(mask, 16) >> (signum - 1) & 1)
+@pytest.mark.ros
+@PROCESSES
+def test_sigint_stops_a_process_started_with_it_ignored_and_blocked(
+    procs: Procs, tmp_path: Path, argv: list[str], code: int
+) -> None:
+    p = started(procs, tmp_path, argv, ignore_and_block_sigint)
+    assert in_mask(p.pid, "SigCgt", signal.SIGINT)  # taken (before: it stayed ignored, and blocked)
+    stops_on_sigint(p, code)
 
 
 @pytest.mark.ros
-@pytest.mark.parametrize("argv", [["winder", "ctl", "state", "--watch", "--timeout", "60"], ["sim_node"]])
-def test_under_nohup_sighup_stays_ignored(procs: Procs, tmp_path: Path, argv: list[str]) -> None:
+@PROCESSES
+def test_under_nohup_sighup_stays_ignored(procs: Procs, tmp_path: Path, argv: list[str], code: int) -> None:
     """`nohup winder run ... &` is how a long run outlives an ssh session: a
     winder command or node started with SIGHUP ignored leaves it ignored
     (it takes SIGINT), and stops on SIGINT."""
-    p = subprocess.Popen(
-        [str(BIN / argv[0]), *argv[1:]],
-        env=procs.env,
-        cwd=tmp_path,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-        text=True,
-        preexec_fn=ignoring_sighup(),
-    )
-    try:
-        # winder's handlers in (SIGTERM's: Python has none of its own): SIGHUP left alone
-        wait.until(lambda: caught(p.pid, signal.SIGTERM) or p.poll() is not None, 60, "its signal handlers")
-        assert p.poll() is None
-        assert ignored(p.pid, signal.SIGHUP) and not caught(p.pid, signal.SIGHUP)
-        p.send_signal(signal.SIGINT)
-        _, err = p.communicate(timeout=30)
-        assert p.returncode in (0, 130) and "Traceback" not in err, err
-    finally:
-        if p.poll() is None:
-            p.kill()
-            p.wait()
+    p = started(procs, tmp_path, argv, ignore_sighup)
+    assert in_mask(p.pid, "SigIgn", signal.SIGHUP) and not in_mask(p.pid, "SigCgt", signal.SIGHUP)
+    stops_on_sigint(p, code)

@@ -29,6 +29,7 @@ from support.cli import assert_one_line_error, run_cli
 from support.oracles import params, superpose
 
 from winder.contract.qos import qos_of
+from winder.procs import in_mask
 from winder.record.raw import read_raw
 from winder.record.reader import read_run
 
@@ -536,12 +537,7 @@ def test_a_signal_ends_the_player_paused_or_playing(
 
 def catches(pid: int, signum: int) -> bool:
     """Whether process ``pid`` has a handler of its own for ``signum`` (its SigCgt mask)."""
-    try:
-        status = Path(f"/proc/{pid}/status").read_text()
-    except OSError:
-        return False
-    mask = next((ln.split()[1] for ln in status.splitlines() if ln.startswith("SigCgt:")), "0")
-    return bool(int(mask, 16) >> (signum - 1) & 1)
+    return in_mask(pid, "SigCgt", signum)
 
 
 @pytest.mark.parametrize(

@@ -43,6 +43,12 @@ def heard_levels(ros: Any) -> list[tuple[int, str]]:
     return levels
 
 
+def final_of(seen: list[tuple[str, str, dict[str, str]]]) -> dict[str, str] | None:
+    """The consumer's last final report heard (done or incomplete), None before one."""
+    done = [v for n, _, v in seen if is_consumer(n, v) and v.get("state") in ("done", "incomplete")]
+    return done[-1] if done else None
+
+
 def stalls(seen: list[tuple[str, str, dict[str, str]]]) -> list[tuple[str, str]]:
     return [(n, m) for n, m, _ in seen if "step stream stalled" in m]
 
@@ -75,12 +81,8 @@ def test_a_transient_stall_as_fast_as_possible_is_a_warning(tmp_path: Path, proc
     finally:
         os.kill(interp.pid, signal.SIGCONT)
 
-    def final() -> dict[str, str] | None:
-        done = [v for n, _, v in seen if is_consumer(n, v) and v.get("state") in ("done", "incomplete")]
-        return done[-1] if done else None
-
-    wait.spin_until(ros, final, 180, "the consumer's final report", heard=lambda: seen[-5:])
-    report = final()
+    wait.spin_until(ros, lambda: final_of(seen), 180, "the consumer's final report", heard=lambda: seen[-5:])
+    report = final_of(seen)
     assert report is not None
     assert report["state"] == "done" and report["steps_missing"] == "0", report
     assert int(report["stalls"]) >= 1 and float(report["longest_stall_s"]) >= 0.5, report
@@ -157,12 +159,8 @@ def test_the_smallest_driver_runs_without_a_wait_or_a_stall(tmp_path: Path, proc
     profile = procs.start("profile_node")
     procs.start("interp_node", "-p", "turns_per_layer:=4", "-p", "layers:=1", "-p", "poles:=1")
 
-    def final() -> dict[str, str] | None:
-        done = [v for n, _, v in seen if is_consumer(n, v) and v.get("state") in ("done", "incomplete")]
-        return done[-1] if done else None
-
-    wait.spin_until(ros, final, 60, "the driver's final report", heard=lambda: seen[-5:])
-    report = final()
+    wait.spin_until(ros, lambda: final_of(seen), 60, "the driver's final report", heard=lambda: seen[-5:])
+    report = final_of(seen)
     assert report is not None and report["state"] == "done", report
     assert report["stalls"] == "0", report
     assert not stalls(seen), stalls(seen)
@@ -197,12 +195,8 @@ def test_no_steps_yet_in_real_time_is_a_warning(tmp_path: Path, procs: Procs, ro
     for chunk in fake.chunks(128):
         fake.pub.publish(pack_timed(chunk))
 
-    def final() -> dict[str, str] | None:
-        done = [v for n, _, v in seen if is_consumer(n, v) and v.get("state") in ("done", "incomplete")]
-        return done[-1] if done else None
-
-    wait.spin_until(ros, final, 60, "the consumer's final report", heard=lambda: seen[-5:])
-    report = final()
+    wait.spin_until(ros, lambda: final_of(seen), 60, "the consumer's final report", heard=lambda: seen[-5:])
+    report = final_of(seen)
     assert report is not None and report["state"] == "done", report
     said = [(lvl, m) for lvl, m in levels if "step stream stalled" in m]
     assert said and all(lvl == DiagnosticStatus.WARN[0] for lvl, _ in said), said
