@@ -17,7 +17,7 @@ from conftest import Procs
 from support import wait
 from support.paths import BIN
 
-from winder.procs import die_with_parent, in_mask
+from winder.procs import die_with_parent, in_mask, kill_telling_where, signal_state
 
 #: the processes tried: a command (stops "interrupted", 130) and a node (closes, 0)
 PROCESSES = pytest.mark.parametrize(
@@ -77,15 +77,16 @@ def started(
 
 
 def stops_on_sigint(p: subprocess.Popen[str], code: int) -> None:
+    p.send_signal(signal.SIGINT)
     try:
-        p.send_signal(signal.SIGINT)
         _, err = p.communicate(timeout=30)
-        assert p.returncode == code, err
-        assert "Traceback" not in err, err
-    finally:
-        if p.poll() is None:
-            p.kill()
-            p.wait()
+    except subprocess.TimeoutExpired:
+        state = signal_state(p.pid)
+        kill_telling_where(p)
+        _, err = p.communicate()
+        pytest.fail(f"no stop 30 s after SIGINT ({state}); its stacks:\n{err}")
+    assert p.returncode == code, err
+    assert "Traceback" not in err, err
 
 
 @pytest.mark.ros

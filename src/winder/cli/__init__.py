@@ -8,6 +8,7 @@ from collections.abc import Sequence
 from types import FrameType
 
 from winder.cli.lifetime import early_containers, ros_done
+from winder.interrupts import deferred, ignored
 from winder.procs import hangup_ignored, stacks_on_signal, take_stop_signals
 
 __all__ = ["main"]
@@ -20,13 +21,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     (the subcommands' own Ctrl-C is reported there, with their name).
     SIGTERM and SIGHUP (a closed terminal) end a command as Ctrl-C does,
     from its first moment on."""
-    take_stop_signals()  # whatever the parent left ignored or blocked (a script's `winder ... &`)
-    signal.signal(signal.SIGTERM, _terminate)
-    if not hangup_ignored():  # under nohup the command outlives its terminal
-        signal.signal(signal.SIGHUP, _terminate)
     stacks_on_signal()  # kill -USR1: every thread's stack on stderr (where a command hangs)
-    try:
-        from winder.interrupts import deferred, ignored
+    try:  # a SIGINT from the moment it is taken on ends the command "interrupted" (a traceback before)
+        take_stop_signals()  # whatever the parent left ignored or blocked (a script's `winder ... &`)
+        signal.signal(signal.SIGTERM, _terminate)
+        if not hangup_ignored():  # under nohup the command outlives its terminal
+            signal.signal(signal.SIGHUP, _terminate)
 
         with deferred():  # a signal while the modules load is taken once they are loaded
             if argv is None:  # the console script: a cell's container can start while the command loads
