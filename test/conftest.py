@@ -117,6 +117,20 @@ class Procs:
 
 
 @pytest.fixture
+def hangup_taken() -> Iterator[None]:
+    """SIGHUP at its default action in this process (and so in the processes
+    a test starts) for one test: a test of what SIGHUP does. Under ``nohup``
+    (``nohup make test &``) it arrives ignored, winder then leaves it so by
+    design (``winder.procs.hangup_ignored``), and such a test would try
+    nothing (a fresh-clone run under nohup: 3 failures)."""
+    before = signal.signal(signal.SIGHUP, signal.SIG_DFL)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGHUP, before)
+
+
+@pytest.fixture
 def procs(tmp_path: Path) -> Iterator[Procs]:
     log_dir = tmp_path / "logs"
     log_dir.mkdir()

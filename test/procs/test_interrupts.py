@@ -20,6 +20,7 @@ def _deliver(sig: int) -> None:
         time.sleep(0.0001)
 
 
+@pytest.mark.usefixtures("hangup_taken")
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
 def test_a_signal_is_a_keyboard_interrupt_and_the_handlers_come_back(sig: int) -> None:
     before = signal.getsignal(sig)
@@ -79,6 +80,7 @@ def test_a_held_section_left_by_an_error_keeps_the_error() -> None:
         interrupts.restore()
 
 
+@pytest.mark.usefixtures("hangup_taken")
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
 def test_deferred_raises_once_its_section_has_run_and_ignored_not_at_all(sig: int) -> None:
     """deferred(): the section runs to its end, the signal raises after it;

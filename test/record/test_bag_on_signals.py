@@ -175,6 +175,7 @@ def check_bags(bag_dir: Path, killed: bool, tmp: Path) -> str:
 
 
 @pytest.mark.parametrize("phase", PHASES)
+@pytest.mark.usefixtures("hangup_taken")  # under nohup too, SIGHUP is the terminal's hangup
 @pytest.mark.parametrize(("sig", "whom"), SIGNALS, ids=[f"{s.name}-{w}" for s, w in SIGNALS])
 def test_a_signal_at_any_phase_leaves_a_readable_or_recoverable_bag(
     tmp_path: Path, phase: str, sig: signal.Signals, whom: str

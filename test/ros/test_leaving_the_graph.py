@@ -96,6 +96,7 @@ def test_winder_run_leaves_nothing_on_the_graph(
     spin_until(ros, lambda: not names(ros), GONE_WITHIN, "the graph empty")
 
 
+@pytest.mark.usefixtures("hangup_taken")
 def test_sighup_ends_winder_run_as_sigint_does(procs: Procs, ros: Any, tmp_path: Path) -> None:
     """SIGHUP (its terminal closed) to ``winder run`` mid-run: it says it was
     interrupted (status 130, no traceback), stops its cell, whose bag is
