@@ -11,8 +11,10 @@ namespace), never by a node name; several tests run it as ``axes``
 (``--ros-args -r __node:=axes``).
 
 Subjects (``CONSUMERS``): ``sim_node`` (in real time), ``bridge_node`` (the
-ros2_control bridge, driving test/ros2_control_standin.py), and any
-executable named by the environment::
+ros2_control bridge, driving test/ros2_control_standin.py), the library's
+mock drive (``winder.ros.mock_backend``: a ``Backend`` of three methods in a
+``DriverNode``) paced and as fast as possible, and any executable named by
+the environment::
 
     WINDER_CONSUMER="my_driver --ros-args -p port:=/dev/ttyUSB0" \\
         .venv/bin/python -m pytest test/contract/test_conformance.py
@@ -31,6 +33,10 @@ and, in some tests, ``-r __node:=axes``.
 Adding a consumer (the ros2_control bridge, a driver) is one
 :class:`ConsumerSpec` in ``CONSUMERS``: its command line, its parameters for
 these tests, and the processes it needs.
+
+A subject that runs as fast as possible (``paced=False``) ends a run before
+an operator could act on it: it takes the tests that need no run going on
+(the handshake, a whole job, the report), the others take ``PACED``.
 
 The checks, each a test: the handshake; a whole job; pause and resume;
 abort, then ready and a second job; a start refused while busy; a stall
@@ -107,6 +113,9 @@ class ConsumerSpec:
     command: tuple[str, ...]
     params: dict[str, str] = field(default_factory=dict)
     extra: tuple[tuple[str, ...], ...] = ()
+    #: it executes the steps at their times (a drive); False: as fast as it can, so a run ends
+    #: before an operator could act on it, and only the tests that need no run going on take it
+    paced: bool = True
 
 
 #: the ros2_control stand-in's joints (test/ros2_control_standin.py), out of the cell's axis order
@@ -127,6 +136,14 @@ CONSUMERS = [
             "max_following_error.feed": "0.01",
         },
         extra=((sys.executable, str(TEST / "ros2_control_standin.py"), "--joints", ",".join(BRIDGE_JOINTS)),),
+    ),
+    # the library's mock drive (winder.ros.mock_backend): a Backend of three methods, no more
+    ConsumerSpec("mock_driver", (sys.executable, "-m", "winder.ros.mock_backend"), {"lag": "0.005"}),
+    ConsumerSpec(
+        "mock_driver_fast",
+        (sys.executable, "-m", "winder.ros.mock_backend"),
+        {"real_time": "false"},
+        paced=False,
     ),
 ]
 if os.environ.get("WINDER_CONSUMER", "").strip():
@@ -149,6 +166,17 @@ NAIVE = ConsumerSpec("naive_consumer", (sys.executable, str(TEST / "consumers" /
 
 @pytest.fixture(params=CONSUMERS, ids=[c.id for c in CONSUMERS])
 def consumer(request: pytest.FixtureRequest) -> ConsumerSpec:
+    spec: ConsumerSpec = request.param
+    return spec
+
+
+#: the subjects that execute the steps at their times: a run is going on long enough to act on
+PACED = [c for c in CONSUMERS if c.paced]
+
+
+@pytest.fixture(params=PACED, ids=[c.id for c in PACED])
+def paced(request: pytest.FixtureRequest) -> ConsumerSpec:
+    """A subject of the tests that act on a run while it goes on."""
     spec: ConsumerSpec = request.param
     return spec
 
@@ -460,10 +488,10 @@ def test_a_whole_job(cell: Cell, consumer: ConsumerSpec) -> None:
     cell.wait(lambda: cell.ready_since(busy), 5, "the consumer's ready after the run")
 
 
-def test_pause_and_resume(cell: Cell, consumer: ConsumerSpec) -> None:
+def test_pause_and_resume(cell: Cell, paced: ConsumerSpec) -> None:
     """~/pause: pausing, paused (no step executed while at rest, no stall
     reported); ~/resume: running; the run completes with every step."""
-    cell.start_consumer(consumer)
+    cell.start_consumer(paced)
     cell.start_upstream()
     cell.handshake()
     run_id, total = cell.start()
@@ -489,10 +517,10 @@ def test_pause_and_resume(cell: Cell, consumer: ConsumerSpec) -> None:
     assert report.values.get("stalls", "0") == "0", report.values
 
 
-def test_abort_then_ready_and_a_second_job(cell: Cell, consumer: ConsumerSpec) -> None:
+def test_abort_then_ready_and_a_second_job(cell: Cell, paced: ConsumerSpec) -> None:
     """~/abort: aborting, aborted; the final report aborted after the abort's
     steps; ready again, and a second job starts and completes."""
-    cell.start_consumer(consumer, name="axes")
+    cell.start_consumer(paced, name="axes")
     cell.start_upstream()
     cell.handshake()
     run_id, total = cell.start()
@@ -514,9 +542,9 @@ def test_abort_then_ready_and_a_second_job(cell: Cell, consumer: ConsumerSpec) -
     check_done(cell, second, total2, cell.ends(second))
 
 
-def test_a_start_while_busy_is_refused(cell: Cell, consumer: ConsumerSpec) -> None:
+def test_a_start_while_busy_is_refused(cell: Cell, paced: ConsumerSpec) -> None:
     """~/start during a run: refused with the reason; the run goes on to done."""
-    cell.start_consumer(consumer)
+    cell.start_consumer(paced)
     cell.start_upstream()
     cell.handshake()
     run_id, total = cell.start()
@@ -527,13 +555,13 @@ def test_a_start_while_busy_is_refused(cell: Cell, consumer: ConsumerSpec) -> No
     check_done(cell, run_id, total, cell.ends(run_id))
 
 
-def test_a_stall_is_reported_and_the_run_closed(cell: Cell, consumer: ConsumerSpec) -> None:
+def test_a_stall_is_reported_and_the_run_closed(cell: Cell, paced: ConsumerSpec) -> None:
     """The profile node stopped (SIGSTOP) mid-run: an ERROR mentioning the
     stall within stall_timeout, the run closed incomplete after stall_abort
     (winder/state failed); once the profile node goes on (SIGCONT), the
     consumer is ready and the cell runs the next job."""
     stall = {"stall_timeout": 0.5, "stall_abort": 2.0}
-    cell.start_consumer(consumer, stall=stall)
+    cell.start_consumer(paced, stall=stall)
     cell.start_upstream()
     cell.handshake()
     run_id, _ = cell.start()
@@ -590,17 +618,17 @@ def test_a_stall_is_reported_and_the_run_closed(cell: Cell, consumer: ConsumerSp
     check_done(cell, second, total2, cell.ends(second))
 
 
-def test_a_killed_consumer_restarted(cell: Cell, consumer: ConsumerSpec) -> None:
+def test_a_killed_consumer_restarted(cell: Cell, paced: ConsumerSpec) -> None:
     """SIGKILL the consumer mid-run and start it again: the interp node gives
     the run up after its stall_abort, and the cell starts and completes a new job."""
-    proc = cell.start_consumer(consumer, name="axes")
+    proc = cell.start_consumer(paced, name="axes")
     cell.start_upstream()
     cell.handshake()
     run_id, _ = cell.start()
     cell.running(run_id, 200)
     proc.kill()
     proc.wait()
-    cell.start_consumer(consumer)
+    cell.start_consumer(paced)
     cell.given_up(run_id)
     second, total2 = cell.start(timeout=30)
     check_done(cell, second, total2, cell.ends(second))
@@ -727,7 +755,7 @@ def test_a_consumer_that_ignores_the_abort_does_not_wedge_the_cell(cell: Cell) -
 ABORT_JOB = {**JOB, "turns_per_layer": 16}
 
 
-@pytest.mark.parametrize("subject", [*CONSUMERS, NAIVE], ids=[c.id for c in [*CONSUMERS, NAIVE]])
+@pytest.mark.parametrize("subject", [*PACED, NAIVE], ids=[c.id for c in [*PACED, NAIVE]])
 def test_an_abort_is_honoured_until_the_axes_rest(cell: Cell, subject: ConsumerSpec) -> None:
     """Late in a real-time run (over 60 % of its steps executed), with the
     cell's default window and look-ahead, ~/abort is honoured: the consumer

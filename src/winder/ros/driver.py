@@ -1,0 +1,332 @@
+"""A hardware driver as a :class:`Backend`: a few methods, and a node that
+does the rest.
+
+A drive behind the cell needs to be told two things - a run starts here,
+and these steps are due now - and to tell one back: where its axes are.
+That is the whole of :class:`Backend`, modelled on ros2_control's
+``SystemInterface`` (``on_activate``, ``write``, ``read``): a driver author
+writes those methods and nothing else. :class:`DriverNode` holds the
+backend and owes the cell everything a consumer must do (the
+:class:`winder.ros.consumer.StepConsumer` duties: handshake, stream checks,
+receipts, operator events, stops, stall watch, reports, the bag) plus what a
+driver author once had to find in another driver's code:
+
+* its lifecycle starts at the end of its making;
+* a paced backend (one that executes each step at its time, as a drive
+  does) gets its rows as their time comes on the node's clock. The clock
+  starts with the run's first rows (before them the profile node would take
+  a running clock for steps to release), runs with the wall clock, and
+  stands at the last step received while the next ones are on their way (a
+  drive without steps holds its position; a clock that ran on would make
+  every step after a hiccup late), except where the run's time must go on
+  without steps: at rest after a pause (every step up to its rest executed;
+  the resume is timed ahead of this clock) and the settling at the end. It goes out on
+  ``/clock`` every :data:`CLOCK_PERIOD_NS` and into the bag;
+* steps that still come behind that clock are executed at it and counted late;
+* receipts after every write, so the interp node's flow control and the
+  run's close follow execution; the run settles ``settle_time`` s after its
+  last step (an abort's rest), then closes;
+* ``winder/joint_states`` (the backend's :meth:`Backend.read`, in joint
+  units) at every clock tick, recorded, and the largest following error in
+  the report.
+
+:class:`winder.ros.mock_backend.MockBackend` is a working backend (the
+commands followed at once or with a first-order lag, as
+``mock_components/GenericSystem`` does) that passes the conformance suite;
+a driver starts from it.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any, ClassVar, Protocol, runtime_checkable
+
+import numpy as np
+import numpy.typing as npt
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+
+from winder.contract.cdr import JointStateEncoder, encode_clocks
+from winder.contract.params import CONSUMER_SPECS, check_consumer
+from winder.contract.stream import JobPlan
+from winder.contract.topics import TOPIC_CLOCK, TOPIC_JOINT_STATES
+from winder.motion.axes import AXIS_TABLE, Axis
+from winder.ros.consumer import StepConsumer
+from winder.ros.qos import QOS_CLOCK, QOS_STATE
+from winder.ros.timers import steady_timer
+from winder.spec import Spec
+
+__all__ = ["CLOCK_PERIOD_NS", "DRIVER_SPECS", "Backend", "DriverNode", "RunStart"]
+
+#: the paced clock's period: /clock, winder/joint_states and the due rows every 10 ms
+CLOCK_PERIOD_NS = 10_000_000
+
+#: the settings every driver node has, besides the consumer's and its backend's own
+DRIVER_SPECS: dict[str, Spec] = {
+    "settle_time": Spec(
+        "settle_time", float, 0.05, "rest after the run's last step before it closes", "s", 0.0, 60.0
+    ),
+}
+
+
+@dataclass(frozen=True)
+class RunStart:
+    """What a backend is told when a run starts.
+
+    ``axes``: the cell's axes, in the order of a row's position columns
+    (``rows[:, 2 + axis.index]``); ``joint_step``: each axis' joint units
+    (m or rad) per step; ``start``: the step position each axis starts at
+    (where the last run left it); ``settings``: the node's parameters, the
+    backend's own among them."""
+
+    job_id: str
+    run_id: str
+    axes: tuple[Axis, ...]
+    joint_step: tuple[float, ...]
+    start: npt.NDArray[np.int64]
+    total_steps: int
+    settings: dict[str, Any]
+
+
+@runtime_checkable
+class Backend(Protocol):
+    """A drive (or a simulation of one) behind the cell: what a hardware
+    driver writes. Only :meth:`begin`, :meth:`write` and :meth:`read` are
+    needed; the others have defaults (inherit from ``Backend`` to get them).
+    Every method is called from the node's executor thread, one at a time."""
+
+    #: the backend's own parameters (name -> Spec), declared on the node beside the consumer's
+    specs: ClassVar[dict[str, Spec]] = {}
+
+    def paces(self, settings: dict[str, Any]) -> bool:
+        """Whether it executes each step at its time (a drive: True), so that
+        the node hands rows over as they fall due on its clock; False: as
+        fast as it can, every row at once (a simulation, a dry run)."""
+        return True
+
+    def missing(self) -> str:
+        """Why it cannot take a run now (no drive there), in words; "" if it can."""
+        return ""
+
+    def begin(self, run: RunStart) -> dict[str, object]:
+        """A run starts: set the axes up. Returns the configuration to publish
+        on winder/sim_config and record (anything JSON can hold)."""
+        ...
+
+    def write(self, t_ns: int, rows: npt.NDArray[np.int64]) -> None:
+        """Command these rows ``[t_ns, segment, position per axis...]`` (step
+        positions, in time order), all due by ``t_ns`` (the run's time): they
+        count as executed when this returns."""
+        ...
+
+    def read(self, t_ns: int) -> npt.NDArray[np.float64]:
+        """Where the axes are at run time ``t_ns``, in steps (one per axis,
+        in the order of :attr:`RunStart.axes`)."""
+        ...
+
+    def fault(self) -> str:
+        """What went wrong (a servo fault, a lost step), in words; "" if nothing.
+        A fault closes the run incomplete at once."""
+        return ""
+
+    def status(self) -> dict[str, object]:
+        """Its own keys for the job status and the final report."""
+        return {}
+
+    def end(self) -> None:
+        """The run closed and is reported: release what it held."""
+        return None
+
+
+class DriverNode(StepConsumer):
+    """A consumer node around a :class:`Backend` (see the module doc)."""
+
+    #: publishes /clock and winder/joint_states, recorded as the simulator's are
+    TOPICS: ClassVar[dict[str, tuple[str, str]]] = {
+        "clock": (TOPIC_CLOCK, "rosgraph_msgs/msg/Clock"),
+        "joint_states": (TOPIC_JOINT_STATES, "sensor_msgs/msg/JointState"),
+    }
+
+    def __init__(self, backend: Backend, name: str = "driver", hardware_id: str | None = None) -> None:
+        if not isinstance(backend, Backend):
+            raise TypeError(f"{type(backend).__name__} is not a winder Backend (begin, write, read)")
+        self.backend = backend
+        specs = {**CONSUMER_SPECS, **DRIVER_SPECS, **type(backend).specs}
+        super().__init__(name, specs, check_consumer, hardware_id=hardware_id or name, topics=self.TOPICS)
+        self.pub_clock = self.create_publisher(Clock, TOPIC_CLOCK, QOS_CLOCK)
+        self.pub_states = self.create_publisher(JointState, TOPIC_JOINT_STATES, QOS_STATE)
+        self.clock_ns = -1  # the last /clock published in this node's life
+        self.clock_timer = steady_timer(self, CLOCK_PERIOD_NS / 1e9, self.tick)
+        self.clock_timer.cancel()  # runs while a paced run's clock does
+        self.begin_run(False)
+        self.start_lifecycle()
+
+    def begin_run(self, paced: bool) -> None:
+        self.paced = paced
+        self.queue: list[npt.NDArray[np.int64]] = []  # accepted rows waiting for their time (paced)
+        self.started = False  # the run's time runs: its first rows came
+        self.t_ns_clock = 0  # the run's time on this node's clock (ns)
+        self.wall_ns = 0  # the steady time it was last moved at
+        self.horizon_ns = 0  # the time of the last row accepted
+        self.origin_ns = 0  # the run's time 0 on the cell's clock
+        self.commanded: npt.NDArray[np.int64] = np.zeros(len(AXIS_TABLE), np.int64)
+        self.settle_until: int | None = None
+        self.next_tick_ns = 0
+        self.following = 0.0  # the largest |command - measured| seen (steps)
+        self.joint_step = np.ones(len(AXIS_TABLE))
+
+    # -- the consumer's hooks, in terms of the backend ---------------------------------
+    def begin(self, plan: JobPlan, values: dict[str, Any]) -> dict[str, object]:
+        self.begin_run(self.backend.paces(values))
+        self.origin_ns = 0 if self.clock_ns < 0 else self.clock_ns + CLOCK_PERIOD_NS
+        start = np.array(plan.segments[0].start if plan.segments else [0] * len(AXIS_TABLE), np.int64)
+        self.commanded = start.copy()
+        self.joint_step = np.array(plan.joint_step, float)
+        self.encoder = JointStateEncoder([a.name for a in AXIS_TABLE], plan.job_id)
+        run = RunStart(
+            plan.job_id, plan.run_id, AXIS_TABLE, plan.joint_step, start.copy(), plan.total_steps, values
+        )
+        config = self.backend.begin(run)
+        return {**config, "real_time": self.paced, "clock_origin_ns": self.origin_ns}
+
+    def paces(self) -> bool:
+        return self.paced
+
+    def execute(self, rows: npt.NDArray[np.int64]) -> None:
+        if not self.paced:
+            self.hand_over(int(rows[-1, 0]), rows)
+            return
+        if not self.started:  # the run's time starts with its first rows
+            self.started, self.wall_ns = True, time.monotonic_ns()
+            self.clock_timer.reset()
+        self.horizon_ns = int(rows[-1, 0])
+        self.queue.append(rows)
+
+    def holding(self) -> bool:
+        return bool(self.queue)
+
+    def pending(self) -> bool:
+        """Rows wait for their time, the axes settle, or an operator state is
+        booked ahead of the clock (a pause's rest after its last step)."""
+        if self.plan is None or self.ledger is None:
+            return False
+        if self.queue or (self.finishing and not self.rested()):
+            return True
+        return self.paced and self.started and bool(self.ledger.transitions_ahead)
+
+    def earliest_step_ns(self) -> int | None:
+        return self.now_ns() if self.paced and self.started else None
+
+    def work(self) -> None:
+        if self.plan is None:
+            return
+        fault = self.backend.fault()
+        if fault:
+            self.error(f"{self.hardware_id}: {fault}; the run stops")
+            self.finish(complete=False)
+            return
+        if self.paced and self.started:
+            t = self.now_ns()
+            due = self.take_due(t)
+            if due is not None:
+                self.hand_over(t, due)
+            self.reached(t)
+            if not self.queue and not self.inbox:
+                self.settle_if_complete()
+
+    def settle(self, until_ns: int) -> None:
+        self.settle_until = until_ns + round(self.settings.values()["settle_time"] * 1e9)
+        if not self.paced:
+            self.reached(self.settle_until)
+
+    def rested(self) -> bool:
+        """The settle time after the run's last step has passed."""
+        return self.settle_until is None or not self.paced or self.now_ns() >= self.settle_until
+
+    def closing(self) -> None:
+        if self.paced and self.started and self.plan is not None:
+            self.publish_states(self.now_ns())
+
+    def faults(self) -> str:
+        return self.backend.fault()
+
+    def details(self) -> dict[str, object]:
+        return {"max_following_error_steps": f"{self.following:.4f}", **self.backend.status()}
+
+    def missing(self) -> str:
+        return self.backend.missing()
+
+    def end(self) -> None:
+        self.clock_timer.cancel()
+        self.queue = []
+        self.backend.end()
+
+    # -- the paced clock ---------------------------------------------------------------------
+    def now_ns(self) -> int:
+        """The run's time now (ns), the clock moved on (see the module doc)."""
+        if not self.started:
+            return 0
+        now = time.monotonic_ns()
+        t = self.t_ns_clock + (now - self.wall_ns)
+        self.wall_ns = now
+        ledger = self.ledger
+        free = self.finishing or (ledger is not None and ledger.at_rest)
+        if not free:
+            t = min(t, max(self.horizon_ns, self.t_ns_clock))  # it waits for the next steps
+        self.t_ns_clock = t
+        return t
+
+    def tick(self) -> None:
+        """Every CLOCK_PERIOD_NS of a paced run: the due rows, the clock, the joint states."""
+        if self.plan is None or not self.started:
+            self.clock_timer.cancel()
+            return
+        self.pump()
+        if self.plan is None:  # the pump closed the run
+            return
+        t = self.now_ns()
+        stamp = self.origin_ns + t
+        clock = encode_clocks([stamp])[0]
+        self.clock_ns = stamp
+        self.pub_clock.publish(clock)
+        self.record("clock", t, clock, exact=True)
+        self.publish_states(t)
+
+    def take_due(self, t_ns: int) -> npt.NDArray[np.int64] | None:
+        """The queued rows due by ``t_ns``, in order; the rest stay queued."""
+        out: list[npt.NDArray[np.int64]] = []
+        while self.queue:
+            rows = self.queue[0]
+            n = int(np.searchsorted(rows[:, 0], t_ns, side="right"))
+            if n == 0:
+                break
+            out.append(rows[:n])
+            if n < rows.shape[0]:
+                self.queue[0] = rows[n:]
+                break
+            self.queue.pop(0)
+        if not out:
+            return None
+        return out[0] if len(out) == 1 else np.concatenate(out)
+
+    def hand_over(self, t_ns: int, rows: npt.NDArray[np.int64]) -> None:
+        """Rows to the backend, then booked: executed, receipts, the run's time."""
+        self.backend.write(t_ns, rows)
+        self.commanded = rows[-1, 2:].copy()
+        self.executed(rows.shape[0])
+        self.receipt()
+        if not self.paced:
+            self.reached(t_ns)
+            self.publish_states(t_ns)
+
+    def publish_states(self, t_ns: int) -> None:
+        """winder/joint_states: where the backend says the axes are (joint units), recorded."""
+        measured = np.asarray(self.backend.read(t_ns), float)
+        self.following = max(self.following, float(np.max(np.abs(measured - self.commanded))))
+        stamp = np.array([self.origin_ns + t_ns], np.int64)
+        msg = self.encoder.encode(stamp, (measured * self.joint_step)[None, :], np.zeros((1, measured.size)))[
+            0
+        ]
+        self.pub_states.publish(msg)
+        self.record("joint_states", t_ns, msg, exact=True)
