@@ -13,7 +13,9 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Spec", "SpecError", "shorten"]
+from winder.errors import BadInputError
+
+__all__ = ["Spec", "SpecError", "interval", "shorten"]
 
 
 def shorten(text: str, keep: int = 60) -> str:
@@ -26,8 +28,14 @@ def shorten(text: str, keep: int = 60) -> str:
     return f"{text[:keep] + '...' + text[-8:]!r} ({len(text)} characters)"
 
 
-class SpecError(ValueError):
+class SpecError(BadInputError):
     """A setting is out of range; the message names it, its value and the range."""
+
+
+def interval(low: float, high: float, *, low_open: bool = False, high_open: bool = False) -> str:
+    """A range as every message writes it: ``[0.05, 2]``, ``(0, 1e+07]``, ``[0, 1)``.
+    A range kept as a constant is written from it, never retyped."""
+    return f"{'(' if low_open else '['}{low:g}, {high:g}{')' if high_open else ']'}"
 
 
 @dataclass(frozen=True)
@@ -57,7 +65,7 @@ class Spec:
         unit = f" {self.unit}" if self.unit else ""
         if self.kind is int:
             return f"{lo}{int(self.low)}, {int(self.high)}]{unit}"
-        return f"{lo}{self.low:g}, {self.high:g}]{unit}"
+        return interval(self.low, self.high, low_open=self.low_open) + unit
 
     def help(self) -> str:
         return f"{self.description}; {self.range_text()}; default {self.default!r}"

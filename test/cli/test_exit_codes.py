@@ -2,7 +2,8 @@
 docs/RELIABILITY.md is the code's (winder.cli.exits), and each class really ends with its
 code, made to happen with the real cell: a bad option, a run aborted by its
 schedule, a run whose consumer is killed, Ctrl-C, a refused ``winder ctl``,
-an output that cannot be written."""
+an output that cannot be written (an internal error, a bug, is made to happen
+in test_errors.py)."""
 
 from __future__ import annotations
 
@@ -23,6 +24,7 @@ from winder.cli.exits import (
     EXIT_ABORTED,
     EXIT_BAD_INPUT,
     EXIT_FAILED,
+    EXIT_INTERNAL,
     EXIT_INTERRUPTED,
     EXIT_NODE_DIED,
     EXIT_OK,
@@ -62,7 +64,7 @@ def test_the_documented_table_is_the_codes_table() -> None:
     table = {int(code): (name.strip(), when.strip()) for code, name, when in rows}
     assert table == EXIT_TABLE
     codes = [EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_ABORTED, EXIT_NODE_DIED, EXIT_OUTPUT]
-    assert sorted(EXIT_TABLE) == [*codes, EXIT_INTERRUPTED] and len(set(codes)) == len(codes)
+    assert sorted(EXIT_TABLE) == [*codes, EXIT_INTERNAL, EXIT_INTERRUPTED] and len(set(codes)) == len(codes)
 
 
 def test_bad_input_and_unwritable_output(tmp_path: Path) -> None:

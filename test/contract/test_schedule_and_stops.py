@@ -21,9 +21,9 @@ from winder.spec import SpecError
 BAD_SCHEDULES = [
     ("jump@1", "'jump@1' must be KIND@SECONDS"),
     ("pause@nan", "'pause@nan' must be KIND@SECONDS"),
-    ("pause@inf", "SECONDS in [0, 1e6]"),
-    ("pause@1e308", "SECONDS in [0, 1e6]"),
-    ("pause@-1", "SECONDS in [0, 1e6]"),
+    ("pause@inf", "SECONDS in [0, 1e+06]"),
+    ("pause@1e308", "SECONDS in [0, 1e+06]"),
+    ("pause@-1", "SECONDS in [0, 1e+06]"),
     ("override@1=3", "override factor 3 is not in [0.05, 2]"),
     ("override@1=nan", "override factor nan is not in [0.05, 2]"),
     ("override@1", "KIND@SECONDS"),

@@ -147,7 +147,9 @@ def test_override_tail_holds_the_new_limits(D, lv, la, lj, f, where, kind):
     assert math.isclose(tail.distance, D - p, rel_tol=1e-9, abs_tol=1e-9)
     dt = 1e-12 * tail.duration
     _, v0, a0, _ = tail.sample(np.array([dt]))
-    assert math.isclose(float(v0[0]), v, rel_tol=1e-9, abs_tol=1e-9 * V + 2 * A * dt)
+    # within dt the speed moves by at most the tail's acceleration: A, or f·V/tau = f·A for an
+    # exponential ramp towards f·V (at f = 2 exactly the old bound 2·A·dt: failed by 1e-11)
+    assert math.isclose(float(v0[0]), v, rel_tol=1e-9, abs_tol=1e-9 * V + 2 * max(1.0, f) * A * dt)
     if kind == "scurve":  # jerk-limited: the acceleration is continuous
         assert math.isclose(float(a0[0]), a, rel_tol=1e-9, abs_tol=1e-9 * A + 2 * J * dt)
     # past the transition (the first phase edge at rest acceleration within the new
@@ -295,7 +297,7 @@ def test_a_pause_between_moves_holds_the_next_one():
         ("halt@1", "KIND@SECONDS"),
         ("override@1", "KIND@SECONDS"),
         ("override@1=5", r"\[0.05, 2\]"),
-        ("pause@-1", r"\[0, 1e6\]"),
+        ("pause@-1", r"\[0, 1e\+06\]"),
     ],
 )
 def test_schedule_errors_name_the_item(text, match):

@@ -1,6 +1,6 @@
 """The import rules of docs/ARCHITECTURE.md, read from the code itself.
 
-* Arrows only go down the layers: ``procs`` < ``interrupts`` < ``spec`` < ``shaping`` <
+* Arrows only go down the layers: ``errors`` < ``procs`` < ``interrupts`` < ``spec`` < ``shaping`` <
   ``motion`` < ``axis`` < ``contract`` < ``record`` < ``analysis`` < ``ros`` < ``cli``; a module may
   import its own layer and those below, never one above.
 * No circles: no module of the library imports, through any chain of
@@ -26,6 +26,7 @@ from support.paths import ROOT
 
 SRC = ROOT / "src" / "winder"
 LAYERS = (
+    "errors",
     "procs",
     "interrupts",
     "spec",

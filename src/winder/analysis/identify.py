@@ -83,6 +83,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from winder.errors import BadBagError, BadInputError
 from winder.motion.axes import AXES
 from winder.record.reader import AxisConfig, Run
 
@@ -195,9 +196,9 @@ def axis_record(run: Run, axis: str) -> AxisRecord:
     """The signals of ``axis`` (feed, fork or pole) in motor angle; the step
     events are read from the recording when needed, a chunk at a time."""
     if run.sim_config is None:
-        raise ValueError(f"{run.path}: no winder/sim_config message: the motor constants are unknown")
+        raise BadBagError(f"{run.path}: no winder/sim_config message: the motor constants are unknown")
     if axis not in AXES:
-        raise ValueError(f"axis={axis!r} is invalid: must be one of {', '.join(AXES)}")
+        raise BadInputError(f"axis={axis!r} is invalid: must be one of {', '.join(AXES)}")
     i = AXES.index(axis)
     motor = run.sim_config.axes[axis]
     sa = motor.motor_step_angle
@@ -270,7 +271,7 @@ class _Integrator:
         t = rec.t
         self.n = t.size
         if self.n >= 3 and np.any(np.diff(t) <= 0):
-            raise ValueError(f"{rec.axis}: joint sample times do not increase")
+            raise BadBagError(f"{rec.axis}: joint sample times do not increase")
         size = max(self.n - 1, 0)
         self.q = np.zeros(size)
         self.steps_in = np.zeros(size, np.int64)
@@ -469,7 +470,7 @@ def mras(eq: Equations, gain: float = GAIN, *, damping: bool = True) -> Mras:
     """The thesis' MRAS with Landau's discrete law (module doc); ``damping=False``
     is the thesis' own J-only law (D taken as 0)."""
     if not (math.isfinite(gain) and gain > 0):
-        raise ValueError(f"gain={gain!r} is invalid: must be a finite number > 0")
+        raise BadInputError(f"gain={gain!r} is invalid: must be a finite number > 0")
     sel = np.nonzero(eq.moving)[0]
     sel = sel[sel >= 1]
     y = eq.dw[sel] - eq.dw[sel - 1]
@@ -651,13 +652,13 @@ def resonance(k: float, J: float, D: float, suffix: str = "") -> dict[str, float
 def identify(run: Run, gain: float = GAIN, window: float = WINDOW) -> Identification:
     """Identify J and D of every axis of a recorded run."""
     if not (math.isfinite(window) and window > 0):
-        raise ValueError(f"window={window!r} is invalid: must be a finite number of seconds > 0")
+        raise BadInputError(f"window={window!r} is invalid: must be a finite number of seconds > 0")
     if not (math.isfinite(gain) and gain > 0):
-        raise ValueError(f"gain={gain!r} is invalid: must be a finite number > 0")
+        raise BadInputError(f"gain={gain!r} is invalid: must be a finite number > 0")
     if run.sim_config is None:
-        raise ValueError(f"{run.path}: no winder/sim_config message: the motor constants are unknown")
+        raise BadBagError(f"{run.path}: no winder/sim_config message: the motor constants are unknown")
     if len(run.states) < 3:
-        raise ValueError(f"{run.path}: fewer than 3 joint states recorded: nothing to identify")
+        raise BadBagError(f"{run.path}: fewer than 3 joint states recorded: nothing to identify")
     notes = list(run.notes)
     rate = run.sim_config.publish_rate
     if rate < 1000:

@@ -31,14 +31,28 @@ import numpy as np
 
 from winder.axis.model import StepperAxis
 from winder.contract.params import PROFILE_SPECS, SIM_SPECS
+from winder.errors import BadInputError
 from winder.motion.axes import AXES
 from winder.motion.interp import interpolate
 from winder.motion.job import Job
 from winder.motion.timing import plan_timing
+from winder.spec import interval
 
-__all__ = ["MARGIN", "Axis", "Candidate", "TuneResult", "axes_of", "check_limits", "check_size", "tune"]
+__all__ = [
+    "MARGIN",
+    "MARGIN_RANGE",
+    "Axis",
+    "Candidate",
+    "TuneResult",
+    "axes_of",
+    "check_limits",
+    "check_size",
+    "tune",
+]
 
 MARGIN = 0.3
+#: the torque margin, at least and below (the high end open: no torque left at all)
+MARGIN_RANGE = (0.0, 1.0)
 SHAPERS = ("none", "zv", "zvd", "ei")
 JERK_TIMES = (1.0, 0.25, 0.0625)  #: jerk phase in periods of the major axis' resonance
 SPEEDS = 20
@@ -141,7 +155,7 @@ def check_size(job: Job) -> None:
     longest = max(job.segments(), key=lambda s: s.steps, default=None)
     if longest is not None and longest.steps > MAX_MOVE_STEPS:
         what = longest.kind.words
-        raise ValueError(
+        raise BadInputError(
             f"job {job.job_id}: a {what} of {longest.steps} steps is too long to tune: each distinct move "
             f"is simulated whole, at most {MAX_MOVE_STEPS} steps (fewer turns_per_layer or "
             "fork_steps_per_rev)"
@@ -201,8 +215,10 @@ def tune(
     """The fastest ramp for ``job`` on ``axes`` with the torque ``margin``
     and no lost step (see the module doc). ``profile``: the current ramp
     (its v_start and dwell are kept)."""
-    if not 0.0 <= margin < 1.0:
-        raise ValueError(f"margin={margin!r} is invalid: must be in [0, 1)")
+    if not MARGIN_RANGE[0] <= margin < MARGIN_RANGE[1]:
+        raise BadInputError(
+            f"margin={margin!r} is invalid: must be in {interval(*MARGIN_RANGE, high_open=True)}"
+        )
     check_size(job)
     current = {n: s.default for n, s in PROFILE_SPECS.items()}
     current.update(profile)
@@ -213,9 +229,9 @@ def tune(
     v_cap = min(speed_limit(axes, ratios, margin), PROFILE_SPECS["v_max"].high or math.inf)
     # the major axis of most of the job: its resonance sets the jerk time and the shaper
     major = max(range(len(AXES)), key=lambda i: sum(n * r[i] for n, r in moves))
-    f_n, zeta = axes[major].f_n, min(axes[major].zeta, 0.95)
+    f_n, zeta = axes[major].f_n, min(axes[major].zeta, PROFILE_SPECS["shaper_damping"].high or 0.0)
     if not (math.isfinite(v_cap) and v_cap > 0):
-        raise ValueError(f"margin={margin:g}: the motors have no torque left for any speed")
+        raise BadInputError(f"margin={margin:g}: the motors have no torque left for any speed")
     candidates: list[Candidate] = []
     for shaper in SHAPERS:
         for jt in JERK_TIMES:
@@ -245,4 +261,4 @@ def tune(
         checked.append(Candidate(cand.shaper, cand.jerk_time, cand.ramp, cand.job_time, lost))
         if lost == 0:
             return TuneResult(cand.ramp, cand.job_time, cur_ns / 1e9, lost_steps(job, current, axes), checked)
-    raise ValueError(f"margin={margin:g}: every ramp tried loses steps in the nonlinear model")
+    raise BadInputError(f"margin={margin:g}: every ramp tried loses steps in the nonlinear model")

@@ -9,6 +9,8 @@ from collections.abc import Sequence
 import numpy as np
 import numpy.typing as npt
 
+from winder.errors import BadInputError
+
 FloatArray = npt.NDArray[np.float64]
 ArrayLike = float | Sequence[float] | npt.NDArray[np.floating]
 
@@ -20,7 +22,7 @@ def _positive(name: str, value: object, unit: str, *, allow_zero: bool = False) 
         v = math.nan
     if isinstance(value, bool) or not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
         bound = ">= 0" if allow_zero else "> 0"
-        raise ValueError(f"{name}={value!r} is invalid: must be finite and {bound} ({unit})")
+        raise BadInputError(f"{name}={value!r} is invalid: must be finite and {bound} ({unit})")
     return v
 
 

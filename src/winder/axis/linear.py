@@ -38,6 +38,7 @@ import numpy.typing as npt
 from winder.axis._checks import ArrayLike, FloatArray
 from winder.axis._protocol import Motor
 from winder.axis._steps import _StepQueue
+from winder.errors import BadInputError
 
 __all__ = ["MODAL_ZETA", "LinearTracker"]
 
@@ -69,9 +70,9 @@ class LinearTracker:
         self._cmd = 0.0  # theta1 after the applied steps (rad)
         zeta = axis.damping_ratio
         if method not in ("auto", "modal", "scan"):
-            raise ValueError(f"method={method!r} is invalid: must be 'auto', 'modal' or 'scan'")
+            raise BadInputError(f"method={method!r} is invalid: must be 'auto', 'modal' or 'scan'")
         if method == "modal" and not zeta < MODAL_ZETA:
-            raise ValueError(f"method='modal' needs damping ratio < {MODAL_ZETA}, this axis has {zeta!r}")
+            raise BadInputError(f"method='modal' needs damping ratio < {MODAL_ZETA}, this axis has {zeta!r}")
         self._modal = method == "modal" or (method == "auto" and zeta < MODAL_ZETA)
         if self._modal:
             wn = axis.natural_frequency

@@ -66,6 +66,7 @@ import numpy.typing as npt
 from winder.axis._checks import ArrayLike, FloatArray, _angles, _positive, _vector
 from winder.axis.linear import LinearTracker
 from winder.axis.nonlinear import Load, LoadStep, NonlinearTracker
+from winder.errors import BadInputError
 
 __all__ = [
     "G_CM_S2",
@@ -166,7 +167,7 @@ class StepperAxis:
             or not isinstance(self.phases, (int, np.integer))
             or not (1 <= self.phases <= 16)
         ):
-            raise ValueError(f"phases={self.phases!r} is invalid: must be an integer in [1, 16]")
+            raise BadInputError(f"phases={self.phases!r} is invalid: must be an integer in [1, 16]")
         K = self.Zr * self.peak_torque
         wn = math.sqrt(K / self.J) if K > 0 else 0.0
         zeta = self.D / (2.0 * math.sqrt(K * self.J)) if K * self.J > 0 else math.inf
@@ -174,7 +175,7 @@ class StepperAxis:
         # model can compute: K underflowing to 0 (L or i_a of 1e-300), w_n
         # overflowing (J of 1e-300), zeta infinite
         if not (0.0 < K < math.inf and 0.0 < wn <= MAX_NATURAL_FREQUENCY and math.isfinite(zeta)):
-            raise ValueError(
+            raise BadInputError(
                 f"Zr={self.Zr:g}, L={self.L:g} H, i_a={self.i_a:g} A, J={self.J:g} kg*m**2, D={self.D:g} "
                 f"give K={K:.3g} N*m/rad, w_n={wn:.3g} rad/s, zeta={zeta:.3g}: the model needs K > 0, "
                 f"a finite zeta and w_n in (0, {MAX_NATURAL_FREQUENCY:g}] rad/s"
@@ -186,7 +187,7 @@ class StepperAxis:
         """The 2012 paper's motor (:data:`PAPER`), optionally with some values replaced."""
         unknown = sorted(set(overrides) - set(PAPER))
         if unknown:
-            raise ValueError(f"paper({unknown[0]}=...) is invalid: only {list(PAPER)} can be replaced")
+            raise BadInputError(f"paper({unknown[0]}=...) is invalid: only {list(PAPER)} can be replaced")
         p = {**PAPER, **overrides}
         return cls(p["Zr"], p["L"], p["i_a"], p["J"], p["D"])
 
@@ -412,7 +413,7 @@ class StepperAxis:
         no_slips = (np.empty(0), np.empty(0, dtype=np.int64))
         if model == "linear":
             if isinstance(load, LoadStep) or load != 0.0:
-                raise ValueError(f"load={load!r} is invalid with model='linear': must be 0")
+                raise BadInputError(f"load={load!r} is invalid with model='linear': must be 0")
             theta, omega = self.linear_tracker().advance(st, sa, ts)
             slip_t, slips = no_slips
         elif model == "nonlinear":
@@ -421,7 +422,7 @@ class StepperAxis:
             theta, omega = tr.advance(st, sa, ts)
             slip_t, slips = tr.slip_times, tr.slips
         else:
-            raise ValueError(f"model={model!r} is invalid: must be 'nonlinear' or 'linear'")
+            raise BadInputError(f"model={model!r} is invalid: must be 'nonlinear' or 'linear'")
         return SimResult(
             t=ts,
             theta=theta,

@@ -21,8 +21,12 @@ import numpy.typing as npt
 from winder.axis._checks import ArrayLike, FloatArray, _positive
 from winder.axis._protocol import Motor
 from winder.axis._steps import _StepQueue
+from winder.errors import BadInputError
 
 __all__ = ["Load", "LoadStep", "NonlinearTracker"]
+
+#: the integrator's relative tolerance, at least and at most
+RTOL_RANGE = (1e-15, 1e-3)
 
 
 @dataclass(frozen=True)
@@ -41,7 +45,7 @@ class LoadStep:
         for name in ("time", "torque", "before"):
             v = getattr(self, name)
             if not math.isfinite(float(v)):
-                raise ValueError(f"LoadStep.{name}={v!r} is invalid: must be finite")
+                raise BadInputError(f"LoadStep.{name}={v!r} is invalid: must be finite")
 
 
 Load = float | LoadStep
@@ -80,13 +84,15 @@ class NonlinearTracker:
         else:
             v = float(load)
             if not math.isfinite(v):
-                raise ValueError(f"load={load!r} is invalid: must be a finite torque (N*m) or LoadStep")
+                raise BadInputError(f"load={load!r} is invalid: must be a finite torque (N*m) or LoadStep")
             self._lt, self._l_before, self._l_after = math.inf, v, v
         if not math.isfinite(t0):
-            raise ValueError(f"t0={t0!r} is invalid: must be finite (s)")
+            raise BadInputError(f"t0={t0!r} is invalid: must be finite (s)")
         _positive("max_phase_step", max_phase_step, "rad")
-        if not (1e-15 <= rtol <= 1e-3):
-            raise ValueError(f"rtol={rtol!r} is invalid: must be in [1e-15, 1e-3]")
+        if not (RTOL_RANGE[0] <= rtol <= RTOL_RANGE[1]):
+            raise BadInputError(
+                f"rtol={rtol!r} is invalid: must be in [{RTOL_RANGE[0]:g}, {RTOL_RANGE[1]:g}]"
+            )
         self._rate = axis.natural_frequency * max(1.0, 2.0 * axis.damping_ratio)
         self._hmax = max_phase_step / self._rate
         self._tol_e = rtol * axis.tooth_pitch

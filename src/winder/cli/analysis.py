@@ -1,6 +1,7 @@
 """``winder analyze``, ``winder identify`` and ``winder bag recover``: the
 commands that read recordings back. Registered into the ``winder``
-parser by :func:`register`; errors are ValueErrors, which ``winder``'s main
+parser by :func:`register`; errors are BadInputErrors (a BadBagError for a
+recording that cannot be used, :mod:`winder.errors`), which ``winder``'s main
 prints as one line with exit status 2.
 """
 
@@ -12,7 +13,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from winder.cli.common import UserError
 from winder.cli.exits import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK
+from winder.errors import BadBagError, BadInputError
 
 __all__ = ["register"]
 
@@ -23,7 +26,7 @@ def _positive(name: str, text: str) -> float:
     except ValueError:
         value = math.nan
     if not (math.isfinite(value) and value > 0):
-        raise ValueError(f"{name}={text!r} is invalid: must be a number > 0")
+        raise UserError(f"{name}={text!r} is invalid: must be a number > 0")
     return value
 
 
@@ -70,7 +73,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
                 print(f"winder analyze: a figure could not be drawn: {'; '.join(failed)}", file=sys.stderr)
                 return EXIT_FAILED
     except OSError as exc:
-        raise ValueError(_os_error(exc)) from None
+        raise UserError(_os_error(exc)) from None
     return EXIT_OK
 
 
@@ -95,7 +98,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
                 out = _plots_for(run.path, args.plots_dir, len(runs) > 1)
                 _say([f"plot: {p}" for p in plot_identification(run, ident, out)], args.json)
     except OSError as exc:
-        raise ValueError(_os_error(exc)) from None
+        raise UserError(_os_error(exc)) from None
     return EXIT_OK
 
 
@@ -111,7 +114,7 @@ def _run_told(path: str) -> tuple[str, bool | None, int]:
 
     try:
         run = read_run(path)
-    except ValueError:  # not a winder bag, or several cells: only its messages are told
+    except BadInputError:  # not a winder bag, or several cells: only its messages are told
         return "", None, 0
     state = run.report.get("state", "")
     final = state in FINAL_STATES
@@ -151,7 +154,7 @@ def cmd_bag_recover(args: argparse.Namespace) -> int:
     try:
         raw = read_raw(args.bag)
         if being_written(raw.path):
-            raise ValueError(
+            raise BadBagError(
                 f"{raw.path}: still being recorded (its writer holds it): recover it once its writer "
                 "has ended"
             )
@@ -169,7 +172,7 @@ def cmd_bag_recover(args: argparse.Namespace) -> int:
             return EXIT_OK
         out, saved = recover(args.bag, args.output)
     except OSError as exc:
-        raise ValueError(_os_error(exc)) from None
+        raise UserError(_os_error(exc)) from None
     last = max((t for _, t, _ in raw.messages), default=0)
     for note in raw.notes:
         print(f"note: {note}")
@@ -198,19 +201,19 @@ def cmd_export(args: argparse.Namespace) -> int:
     try:
         run = read_run(args.bag, args.namespace)
         if run.damaged:
-            raise ValueError(
+            raise BadBagError(
                 f"{run.path}: damaged recording: {len(run.damaged)} chunk(s) skipped (first: "
                 f"{run.damaged[0]}); exported rows would hide the gap, so nothing is written"
             )
         if run.recovered:
-            raise ValueError(
+            raise BadBagError(
                 f"{run.path}: the recording was cut short; `winder bag recover {run.path}` writes its "
                 "whole messages as a complete bag, which exports"
             )
         out = Path(args.csv) if args.csv else Path(f"{run.path}_csv")
         rows = export_csv(run, out)
     except OSError as exc:
-        raise ValueError(_os_error(exc)) from None
+        raise UserError(_os_error(exc)) from None
     for name, n in rows.items():
         print(f"{out / name}  {n} row{'' if n == 1 else 's'}")
     print(f"{out / 'run.json'}  job, motors, ramp, final report")

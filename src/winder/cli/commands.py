@@ -2,6 +2,9 @@
 
 Every error ends as one line on stderr and the exit status of its class
 (:mod:`winder.cli.exits`: 2 bad input, 5 an output not written, ...); no traceback.
+The error family (:mod:`winder.errors`) says which: a :class:`BadInputError` is
+the user's to fix (2), an exception outside the family a bug (70, its traceback
+in a file: :mod:`winder.cli.crash`).
 """
 
 from __future__ import annotations
@@ -32,13 +35,14 @@ from winder.cli.common import (
 )
 from winder.cli.exits import (
     EXIT_BAD_INPUT,
+    EXIT_FAILED,
+    EXIT_INTERNAL,
     EXIT_INTERRUPTED,
     EXIT_OK,
     EXIT_OUTPUT,
 )
 from winder.cli.lifetime import leave_when_done, take_early
 from winder.cli.summary import report_run
-from winder.contract.files import OutputError
 from winder.contract.params import (
     INTERP_SPECS,
     OPERATION_SPECS,
@@ -52,12 +56,13 @@ from winder.contract.params import (
 )
 from winder.contract.run import shaper_text
 from winder.contract.topics import check_namespace
+from winder.errors import BadInputError, OutputError, RefusedError, UnavailableError
 from winder.interrupts import Interrupts, deferred
 from winder.motion.axes import FEED, FORK
 from winder.motion.interp import dda, deviation_stats, min_deviation, point_by_point
 from winder.motion.job import FIELD_SPECS, Job
 from winder.motion.timing import plan_timing
-from winder.spec import Spec, SpecError
+from winder.spec import Spec
 
 __all__ = ["main"]
 
@@ -342,7 +347,7 @@ def axis_limits(
     try:
         schedule = str(interp_given.get("schedule", ""))
         peaks, why = job_limits(job, ramp, values, schedule=schedule)
-    except ValueError as exc:
+    except BadInputError as exc:
         raise UserError(f"the job cannot be ramped: {exc}") from None
     lo, hi = job_extent(job.segments())
     step = np.asarray(job.joint_step)
@@ -724,15 +729,43 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_BAD_INPUT
     try:
         return func(args)
-    except OutputError as exc:
-        print(f"winder {args.command}: error: {exc}", file=sys.stderr)
-        return EXIT_OUTPUT
-    except (SpecError, UserError, ValueError, FileNotFoundError) as exc:
-        print(f"winder {args.command}: error: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print(f"winder {args.command}: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except Exception as exc:  # one line and the exit status of its kind; a bug's traceback to a file
+        code, line = error_exit(args.command, exc, argv)
+        print(line, file=sys.stderr)
+        return code
+
+
+#: the input an OSError names that a user gave (a path that is not there, or not
+#: what it must be): the user's to fix, as a BadInputError
+USER_PATH_ERRORS = (FileNotFoundError, IsADirectoryError, NotADirectoryError)
+
+
+def error_exit(command: str, exc: Exception, argv: Sequence[str] | None = None) -> tuple[int, str]:
+    """The exit status and the one line of an exception a command raised: the
+    error family's kinds (:mod:`winder.errors`) by what the user must do; any
+    other exception is an internal error (a bug), its traceback written to a
+    file the line names (:mod:`winder.cli.crash`)."""
+    head = f"winder {command}: error:"
+    if isinstance(exc, OutputError):
+        return EXIT_OUTPUT, f"{head} {exc}"
+    if isinstance(exc, BadInputError):
+        return EXIT_BAD_INPUT, f"{head} {exc}"
+    if isinstance(exc, USER_PATH_ERRORS):
+        what = f"{exc.filename}: {exc.strerror}" if exc.filename and exc.strerror else _one_line(exc)
+        return EXIT_BAD_INPUT, f"{head} {what}"
+    if isinstance(exc, (RefusedError, UnavailableError)):
+        return EXIT_FAILED, f"{head} {exc}"
+    from winder.cli.crash import internal_error_line
+
+    return EXIT_INTERNAL, internal_error_line(command, exc, None if argv is None else ["winder", *argv])
+
+
+def _one_line(exc: BaseException) -> str:
+    lines = [s.strip() for s in str(exc).splitlines() if s.strip()]
+    return lines[0] if lines else type(exc).__name__
 
 
 if __name__ == "__main__":

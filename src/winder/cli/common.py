@@ -17,6 +17,7 @@ import time
 from collections.abc import Iterator
 from typing import Any
 
+from winder.errors import BadInputError
 from winder.interrupts import Interrupts
 from winder.motion.job import FIELD_SPECS, Job
 from winder.spec import Spec
@@ -53,8 +54,8 @@ CELL_SPECS: dict[str, Spec] = {
 }
 
 
-class UserError(Exception):
-    """An error the user can fix; printed as one line, exit status EXIT_BAD_INPUT."""
+class UserError(BadInputError):
+    """An error the user can fix (an option, the install); printed as one line, exit status EXIT_BAD_INPUT."""
 
 
 @contextlib.contextmanager

@@ -19,7 +19,9 @@ import time
 from pathlib import Path
 from typing import Any
 
+from winder.cli.common import UserError
 from winder.cli.exits import EXIT_ABORTED, EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK
+from winder.errors import BadInputError
 
 __all__ = ["register"]
 
@@ -73,7 +75,7 @@ def _guarded(args: argparse.Namespace, body: Any) -> int:
         return _fail(args, str(exc), EXIT_BAD_INPUT)
     except ctl.RefusedError as exc:
         return _fail(args, str(exc), getattr(args, "refused_code", EXIT_BAD_INPUT))
-    except ValueError as exc:
+    except BadInputError as exc:  # a bad option, job file or setting; a bare ValueError is a bug
         return _fail(args, str(exc), EXIT_BAD_INPUT)
     finally:
         leave_when_done()
@@ -118,16 +120,16 @@ def run_values(args: argparse.Namespace) -> dict[str, Any]:
     values: dict[str, Any] = {}
     if args.job_file:
         path = Path(args.job_file).expanduser().absolute()  # the caller's working directory, not the node's
-        load_job_file(path)  # JobFileError (a ValueError): one line naming the file tried
+        load_job_file(path)  # JobFileError (a BadInputError): one line naming the file tried
         values["job_file"] = str(path)
     for item in args.set or ():
         key, eq, text = item.partition("=")
         key = key.strip()
         if not eq or not key:
-            raise ValueError(f"--set {item!r} is invalid: must be key=value (--set turns_per_layer=40)")
+            raise UserError(f"--set {item!r} is invalid: must be key=value (--set turns_per_layer=40)")
         spec = INTERP_SPECS.get(key)
         if spec is None or key == "job_file_sha256":
-            raise ValueError(
+            raise UserError(
                 f"--set {key}: the interp node has no setting {key!r} (winder run --help and "
                 "winder ctl param list interp_node name them; the ramp is ramp.profile, ramp.v_max, ...)"
             )
@@ -475,17 +477,20 @@ def register(sub: argparse._SubParsersAction[Any]) -> None:
         "services and the cell's topics (what ros2 service call, ros2 param and ros2 lifecycle do, "
         "on the pip install). Each waits at most --timeout seconds and names what it waited for.",
     )
+    from winder.contract.params import OPERATION_SPECS
+
+    factors = OPERATION_SPECS["feed_override"].range_text()  # OVERRIDE_RANGE, winder.motion.timeline
     verbs = ctl.add_subparsers(dest="action", metavar="ACTION", parser_class=type(ctl))
     verbs.required = True
     for action, text in (
         ("pause", "brake to rest (feed hold)"),
         ("resume", "go on after a pause, or a programmed stop that waits for a call"),
         ("abort", "brake to rest and end the run"),
-        ("override", "scale v_max by X in [0.05, 2] from now on (the profile node's feed_override)"),
+        ("override", f"scale v_max by X in {factors} from now on (the profile node's feed_override)"),
     ):
         p = verbs.add_parser(action, help=text, description=text)
         if action == "override":
-            p.add_argument("value", metavar="X", help="the override factor, in [0.05, 2]")
+            p.add_argument("value", metavar="X", help=f"the override factor, in {factors}")
         _common(p)
         p.set_defaults(func=cmd_operate)
 

@@ -10,6 +10,7 @@ __all__ = [
     "EXIT_ABORTED",
     "EXIT_BAD_INPUT",
     "EXIT_FAILED",
+    "EXIT_INTERNAL",
     "EXIT_INTERRUPTED",
     "EXIT_NODE_DIED",
     "EXIT_OK",
@@ -23,6 +24,8 @@ EXIT_BAD_INPUT = 2
 EXIT_ABORTED = 3
 EXIT_NODE_DIED = 4
 EXIT_OUTPUT = 5
+#: sysexits.h's EX_SOFTWARE: an internal software error
+EXIT_INTERNAL = 70
 EXIT_INTERRUPTED = 130
 
 #: code -> (name, when), in the words of docs/RELIABILITY.md
@@ -51,6 +54,12 @@ EXIT_TABLE: dict[int, tuple[str, str]] = {
         "output not written",
         "a file or directory the command writes cannot be written (no permission, a file where a "
         "directory should be, no space left); nothing half-written is left",
+    ),
+    EXIT_INTERNAL: (
+        "internal error",
+        "a bug in winder, not the input: one line names the exception and the file its traceback was "
+        "written to (`$XDG_STATE_HOME/winder/crash/`, by default `~/.local/state/winder/crash/`); "
+        "please report it with that file",
     ),
     EXIT_INTERRUPTED: ("interrupted", "Ctrl-C (SIGINT): the cell's nodes were stopped"),
 }

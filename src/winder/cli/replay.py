@@ -1,6 +1,7 @@
 """``winder play`` and ``winder resim``: recorded jobs back onto a ROS graph,
 and through another motor. Registered into the ``winder`` parser
-by :func:`register`; user errors are ValueErrors (one line, exit status 2).
+by :func:`register`; user errors are UserErrors (:mod:`winder.errors`'s BadInputError: one line,
+exit status 2).
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ import math
 import sys
 from typing import Any
 
+from winder.cli.common import UserError
 from winder.cli.exits import EXIT_FAILED, EXIT_OK
 
 __all__ = ["register"]
@@ -26,7 +28,7 @@ def _number(name: str, text: str, low: float, high: float, *, low_open: bool = F
     ok = math.isfinite(value) and (value > low if low_open else value >= low) and value <= high
     if not ok:
         bound = f"({low:g}" if low_open else f"[{low:g}"
-        raise ValueError(f"{name}={text!r} is invalid: must be a number in {bound}, {high:g}]")
+        raise UserError(f"{name}={text!r} is invalid: must be a number in {bound}, {high:g}]")
     return value
 
 
@@ -41,7 +43,7 @@ def cmd_play(args: argparse.Namespace) -> int:
     # also waits for a first reader to come; --no-wait publishes at once, as ros2 bag play does
     given = args.wait_for_subscribers is not None
     if given and args.no_wait:
-        raise ValueError("--no-wait and --wait-for-subscribers exclude each other: give one")
+        raise UserError("--no-wait and --wait-for-subscribers exclude each other: give one")
     wait = 0.0 if args.no_wait else WAIT_DEFAULT
     if given:
         wait = _number("wait_for_subscribers", args.wait_for_subscribers, 0.0, 3600.0)
@@ -58,7 +60,7 @@ def cmd_play(args: argparse.Namespace) -> int:
             namespace=args.namespace,
         )
     except OSError as exc:
-        raise ValueError(f"{exc.filename}: {exc.strerror or exc}") from None
+        raise UserError(f"{exc.filename}: {exc.strerror or exc}") from None
     if fox_port is not None:
         from winder.cli.view import serve_bag
 
@@ -194,7 +196,7 @@ def cmd_resim(args: argparse.Namespace) -> int:
         ]
         plan = plan_play(args.bag, topics=[t for t in wanted if run.counts.get(t)])
     except OSError as exc:
-        raise ValueError(f"{exc.filename}: {exc.strerror or exc}") from None
+        raise UserError(f"{exc.filename}: {exc.strerror or exc}") from None
     recorded = _recorded_sim(run)
     sim = values_from_args(args, SIM_SPECS, recorded)
     check_sim(sim)

@@ -1,7 +1,7 @@
 """``winder resonance`` and ``winder tune``: what input shaping
 does to a move's residual vibration, and the fastest ramp a job's motors
 allow without losing a step. Registered into the ``winder`` parser by
-:func:`register`; user errors are ValueErrors (one line, exit status 2), an
+:func:`register`; user errors are UserErrors (BadInputErrors: one line, exit status 2), an
 output that cannot be written an OutputError (exit status 5).
 """
 
@@ -14,6 +14,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from winder.cli.common import UserError
 from winder.cli.exits import EXIT_OK
 from winder.contract.files import OutputError, atomic_file, check_writable, write_text
 
@@ -22,13 +23,17 @@ __all__ = ["register"]
 TUNED_KEYS = ("profile", "v_max", "a_max", "j_max", "shaper", "shaper_freq", "shaper_damping")
 
 
-def _fraction(name: str, text: str) -> float:
+def _margin(text: str) -> float:
+    from winder.analysis.tune import MARGIN_RANGE
+    from winder.spec import interval
+
     try:
         value = float(text)
     except ValueError:
         value = math.nan
-    if not (math.isfinite(value) and 0.0 <= value < 1.0):
-        raise ValueError(f"{name}={text!r} is invalid: must be a number in [0, 1)")
+    if not (math.isfinite(value) and MARGIN_RANGE[0] <= value < MARGIN_RANGE[1]):
+        words = interval(*MARGIN_RANGE, high_open=True)
+        raise UserError(f"margin={text!r} is invalid: must be a number in {words}")
     return value
 
 
@@ -37,11 +42,15 @@ MAX_ZETAS = 8
 
 
 def _zetas(text: str) -> list[float]:
+    """Damping ratios, each in the range of the ramp's shaper_damping setting."""
+    from winder.contract.params import PROFILE_SPECS
     from winder.spec import shorten
 
+    spec = PROFILE_SPECS["shaper_damping"]
+    low, high = spec.low or 0.0, spec.high or 0.0
     parts = text.split(",")
     if len(parts) > MAX_ZETAS:
-        raise ValueError(
+        raise UserError(
             f"zetas={shorten(text)} is invalid: {len(parts)} damping ratios, at most {MAX_ZETAS} "
             "(each is simulated with every shaper and model)"
         )
@@ -51,9 +60,10 @@ def _zetas(text: str) -> list[float]:
             z = float(part)
         except ValueError:
             z = math.nan
-        if not (math.isfinite(z) and 0.0 <= z <= 0.95):
-            raise ValueError(
-                f"zetas={shorten(text)} is invalid: must be damping ratios in [0, 0.95], comma-separated"
+        if not (math.isfinite(z) and low <= z <= high):
+            raise UserError(
+                f"zetas={shorten(text)} is invalid: must be damping ratios in {spec.range_text()}, "
+                "comma-separated"
             )
         out.append(z)
     return out
@@ -145,7 +155,7 @@ def _axes_from(args: argparse.Namespace, sim: dict[str, Any]) -> tuple[dict[str,
 
 
 def _writable(path: Path) -> tuple[Path, os.stat_result]:
-    """The file ``path`` names (a symlink followed) and its status; ValueError
+    """The file ``path`` names (a symlink followed) and its status; UserError
     (one line) if it cannot be read or is read-only."""
     import stat
 
@@ -153,11 +163,9 @@ def _writable(path: Path) -> tuple[Path, os.stat_result]:
     try:
         st = target.stat()
     except OSError as exc:
-        raise ValueError(f"{path}: cannot be read: {exc.strerror or exc}") from None
+        raise UserError(f"{path}: cannot be read: {exc.strerror or exc}") from None
     if not st.st_mode & (stat.S_IWUSR | stat.S_IWGRP | stat.S_IWOTH):
-        raise ValueError(
-            f"{path}: read-only (mode {stat.S_IMODE(st.st_mode):04o}): --apply does not write it"
-        )
+        raise UserError(f"{path}: read-only (mode {stat.S_IMODE(st.st_mode):04o}): --apply does not write it")
     return target, st
 
 
@@ -169,7 +177,7 @@ def _apply(path: Path, ramp: dict[str, Any]) -> list[str]:
     them: every section of the file that names it (``profile_node``,
     ``/cell1/profile_node``), and ``/**`` where it already holds one of them;
     with none, a ``profile_node`` section in the namespace of the file's other
-    sections. ValueError (one line) for a file that cannot be read,
+    sections. UserError (one line) for a file that cannot be read,
     OutputError for one that cannot be written."""
     from ruamel.yaml import YAML
     from ruamel.yaml.error import YAMLError
@@ -182,7 +190,7 @@ def _apply(path: Path, ramp: dict[str, Any]) -> list[str]:
     try:
         doc = yaml.load(target.read_text())
     except (OSError, YAMLError) as exc:
-        raise ValueError(f"{path}: cannot be read: {str(exc).splitlines()[0]}") from None
+        raise UserError(f"{path}: cannot be read: {str(exc).splitlines()[0]}") from None
     keys = [str(k) for k in doc]
     sections = [k for k in keys if section_node(k) == "profile_node"]
     shared = [
@@ -212,9 +220,9 @@ def cmd_tune(args: argparse.Namespace) -> int:
     from winder.motion.job import Job
     from winder.motion.timing import plan_timing
 
-    margin = _fraction("margin", args.margin)
+    margin = _margin(args.margin)
     if args.apply and not args.job_file:
-        raise ValueError("--apply needs a JOB_FILE to write the tuned ramp into")
+        raise UserError("--apply needs a JOB_FILE to write the tuned ramp into")
     if args.apply:
         _writable(Path(args.job_file))  # before the tuning, not after it
     if not args.no_plots:

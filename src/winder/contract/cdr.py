@@ -28,6 +28,8 @@ from typing import Generic, TypeVar
 import numpy as np
 import numpy.typing as npt
 
+from winder.errors import BadInputError
+
 __all__ = [
     "CommandPayload",
     "JointStateEncoder",
@@ -223,13 +225,13 @@ class MultiArrayCodec(Generic[IntT]):
         if the payload is not such a chunk (other layout, truncated)."""
         h = len(self._expect)
         if len(raw) < h or any(raw[a:b] != self._expect[a:b] for a, b in self._fixed):
-            raise ValueError(f"chunk layout is not (steps, {self.label}): {self._describe(raw)}")
+            raise BadInputError(f"chunk layout is not (steps, {self.label}): {self._describe(raw)}")
         n, stride = struct.unpack_from("<II", raw, 4 + self._size0)
         (count,) = struct.unpack_from("<I", raw, 4 + self._count)
         if stride != n * self.cols or count != n * self.cols:
-            raise ValueError(f"chunk holds {count} values, layout says {n} x {self.cols}")
+            raise BadInputError(f"chunk holds {count} values, layout says {n} x {self.cols}")
         if len(raw) < h + count * self.dtype.itemsize:
-            raise ValueError(f"chunk is truncated: {len(raw)} bytes for {n} x {self.cols} values")
+            raise BadInputError(f"chunk is truncated: {len(raw)} bytes for {n} x {self.cols} values")
         return np.frombuffer(raw, self.dtype, count, h).reshape(n, self.cols)
 
     @staticmethod

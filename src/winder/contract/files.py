@@ -30,6 +30,8 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, Any
 
+from winder.errors import OutputError
+
 __all__ = [
     "OutputError",
     "atomic_file",
@@ -40,11 +42,6 @@ __all__ = [
     "too_long_name",
     "write_text",
 ]
-
-
-class OutputError(Exception):
-    """A file or directory a command writes cannot be written; the message
-    is one line naming it and the reason."""
 
 
 def _reason(exc: OSError) -> str:

@@ -52,6 +52,7 @@ from winder.contract.params import (
     check_profile,
     check_sim,
 )
+from winder.errors import BadInputError
 from winder.spec import Spec, SpecError
 
 __all__ = [
@@ -95,7 +96,7 @@ def _flatten(prefix: str, value: Any, out: dict[str, Any]) -> None:
         for k, v in value.items():
             _flatten(f"{prefix}.{k}" if prefix else str(k), v, out)
     elif prefix in out:
-        raise ValueError(f"{prefix} is given twice (once dotted, once as a nested map)")
+        raise BadInputError(f"{prefix} is given twice (once dotted, once as a nested map)")
     else:
         out[prefix] = value
 

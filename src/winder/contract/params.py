@@ -14,11 +14,13 @@ from pathlib import Path
 from typing import Any
 
 from winder.contract.files import NAME_MAX, too_long_name
+from winder.contract.stream import STOP_PAUSE_RANGE
 from winder.contract.topics import check_node_name, check_relative_name
 from winder.motion.axes import AXES, FEED, FORK, POLE
 from winder.motion.job import FIELD_SPECS, Job, Segment
 from winder.motion.limits import NO_LIMIT
 from winder.motion.profile import KINDS
+from winder.motion.timeline import OVERRIDE_RANGE
 from winder.motion.timing import MAX_JOB_SECONDS, plan_segment, plan_timing
 from winder.spec import Spec, SpecError, shorten
 
@@ -150,8 +152,7 @@ OPERATION_SPECS = _table(
         "scales v_max of the running job (and the next ones) from the moment it is set, with a "
         "jerk-limited change of speed (a CNC's feed override)",
         "",
-        0.05,
-        2.0,
+        *OVERRIDE_RANGE,
     ),
     Spec(
         "lookahead",
@@ -259,8 +260,7 @@ INTERP_SPECS.update(
             1.0,
             "simulated time the axes rest at each programmed stop before the job goes on",
             "s",
-            0.0,
-            3600.0,
+            *STOP_PAUSE_RANGE,
         ),
         "stop_resume": Spec(
             "stop_resume",

@@ -31,6 +31,7 @@ import numpy.typing as npt
 from winder.contract.params import stop_place
 from winder.contract.stream import JobPlan
 from winder.contract.topics import PROCESS_KEYS, status_values
+from winder.errors import BadInputError
 
 __all__ = [
     "EVENT_KINDS",
@@ -56,7 +57,7 @@ EVENT_KINDS = ("pause", "resume", "abort", "override")
 MAX_EVENT_BYTES = 4096
 
 
-class EventError(ValueError):
+class EventError(BadInputError):
     """A ``winder/control`` message that is not an event of this run, or one
     that contradicts what the run already did (one line, the reason)."""
 

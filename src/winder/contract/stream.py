@@ -25,12 +25,15 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from winder.errors import BadInputError
 from winder.motion.axes import AXES
 from winder.motion.interp import interpolate_pieces, pieces_mismatch
 from winder.motion.job import Job, SegmentKind
+from winder.spec import interval
 
 __all__ = [
     "STEP_COLUMNS",
+    "STOP_PAUSE_RANGE",
     "TIMED_COLUMNS",
     "ChunkVerdict",
     "JobPlan",
@@ -43,6 +46,9 @@ __all__ = [
 STEP_COLUMNS = ("segment", *AXES)
 TIMED_COLUMNS = ("t_ns", "segment", *AXES)
 FORMAT = "winder.job/1"
+#: s the axes may rest at a programmed stop, at least and at most (the interp
+#: node's stop_pause setting, and what a job description may say)
+STOP_PAUSE_RANGE = (0.0, 3600.0)
 
 
 #: a run id: ``<job_id>_<UTC date>_<UTC time with ms>_<n>`` (:func:`make_run_id`)
@@ -157,7 +163,7 @@ class JobPlan:
 def _expect(doc: dict[str, Any], key: str, kind: type | tuple[type, ...], what: str) -> Any:
     value = doc.get(key)
     if not isinstance(value, kind) or isinstance(value, bool):
-        raise ValueError(f"job description: {key!r} is {json.dumps(value)[:40]}, expected {what}")
+        raise BadInputError(f"job description: {key!r} is {json.dumps(value)[:40]}, expected {what}")
     return value
 
 
@@ -169,30 +175,32 @@ def parse_job_description(text: str) -> JobPlan:
     try:
         doc = json.loads(text)
     except (json.JSONDecodeError, RecursionError) as exc:
-        raise ValueError(f"job description is not JSON: {str(exc).splitlines()[0]}") from None
+        raise BadInputError(f"job description is not JSON: {str(exc).splitlines()[0]}") from None
     if not isinstance(doc, dict):
-        raise ValueError(f"job description is a JSON {type(doc).__name__}, expected an object")
+        raise BadInputError(f"job description is a JSON {type(doc).__name__}, expected an object")
     if doc.get("format") != FORMAT:
-        raise ValueError(
+        raise BadInputError(
             f"job description format is {json.dumps(doc.get('format'))[:40]}, expected {FORMAT!r}"
         )
     run_id = doc.get("run_id", "")
     if not isinstance(run_id, str) or (run_id and not RUN_ID.match(run_id)):
-        raise ValueError(
+        raise BadInputError(
             f"job description: run_id {json.dumps(run_id)[:60]} is not a run id (<job_id>_<date>_<time>_<n>)"
         )
     ramp = doc.get("ramp")
     if ramp is not None and not isinstance(ramp, dict):
-        raise ValueError(f"job description: ramp {json.dumps(ramp)[:60]} is not an object of ramp settings")
+        raise BadInputError(
+            f"job description: ramp {json.dumps(ramp)[:60]} is not an object of ramp settings"
+        )
     fields = _expect(doc, "job", dict, "an object of job fields")
     try:
         job = Job.from_dict(fields)
     except TypeError as exc:  # a field missing or of another shape
-        raise ValueError(f"job description: bad job fields: {exc}") from None
+        raise BadInputError(f"job description: bad job fields: {exc}") from None
     expected = job.segments()
     listed = _expect(doc, "segments", list, "a list of segments")
     if len(listed) != len(expected):
-        raise ValueError(f"job description lists {len(listed)} segments, its job has {len(expected)}")
+        raise BadInputError(f"job description lists {len(listed)} segments, its job has {len(expected)}")
     segs = []
     for e, s in zip(expected, listed, strict=True):
         if not isinstance(s, dict) or (s.get("kind"), s.get("start"), s.get("delta"), s.get("steps")) != (
@@ -201,27 +209,31 @@ def parse_job_description(text: str) -> JobPlan:
             list(e.delta),
             e.steps,
         ):
-            raise ValueError(f"job description: segment {e.index} does not match its job fields")
+            raise BadInputError(f"job description: segment {e.index} does not match its job fields")
         major = int(np.argmax(np.abs(e.delta)))
         segs.append(SegmentPlan(e.kind, tuple(e.start), tuple(e.delta), e.steps, major, e.pieces))
     stops, stop_pause = _stops(doc, expected)
     stop_resume = doc.get("stop_resume", "auto")
     if stop_resume not in ("auto", "call"):
-        raise ValueError(f"job description: stop_resume {json.dumps(stop_resume)[:40]} is not auto or call")
+        raise BadInputError(
+            f"job description: stop_resume {json.dumps(stop_resume)[:40]} is not auto or call"
+        )
     schedule = doc.get("schedule", "")
     if not isinstance(schedule, str):
-        raise ValueError(f"job description: schedule {json.dumps(schedule)[:40]} is not a text")
+        raise BadInputError(f"job description: schedule {json.dumps(schedule)[:40]} is not a text")
     if schedule:
         from winder.motion.timeline import parse_schedule
 
         try:
             parse_schedule(schedule)
         except ValueError as exc:
-            raise ValueError(f"job description: {exc}") from None
+            raise BadInputError(f"job description: {exc}") from None
     source_bag, source_run_id = _source(doc)
     digest = doc.get("job_file_sha256", "")
     if not isinstance(digest, str) or not re.fullmatch(r"([0-9a-f]{64})?", digest):
-        raise ValueError(f"job description: job_file_sha256 {json.dumps(digest)[:72]} is not a sha256 (hex)")
+        raise BadInputError(
+            f"job description: job_file_sha256 {json.dumps(digest)[:72]} is not a sha256 (hex)"
+        )
     total = sum(e.steps for e in expected)
     derived = {
         "total_steps": total,
@@ -230,7 +242,9 @@ def parse_job_description(text: str) -> JobPlan:
     }
     for key, value in derived.items():
         if doc.get(key) != value:
-            raise ValueError(f"job description: {key} {json.dumps(doc.get(key))[:40]} does not match its job")
+            raise BadInputError(
+                f"job description: {key} {json.dumps(doc.get(key))[:40]} does not match its job"
+            )
     return JobPlan(
         job=job,
         joint_step=tuple(job.joint_step),
@@ -259,9 +273,9 @@ def _source(doc: dict[str, Any]) -> tuple[str, str]:
     bag = source.get("bag") if isinstance(source, dict) else None
     run = source.get("run_id", "") if isinstance(source, dict) else None
     if not isinstance(bag, str) or not bag or len(bag) > 4096 or not isinstance(run, str):
-        raise ValueError(f"job description: source {json.dumps(source)[:60]} is not {{bag, run_id}}")
+        raise BadInputError(f"job description: source {json.dumps(source)[:60]} is not {{bag, run_id}}")
     if run and not RUN_ID.match(run):
-        raise ValueError(f"job description: source run_id {json.dumps(run)[:60]} is not a run id")
+        raise BadInputError(f"job description: source run_id {json.dumps(run)[:60]} is not a run id")
     return bag, run
 
 
@@ -280,17 +294,19 @@ def _stops(doc: dict[str, Any], segments: list[Any]) -> tuple[tuple[tuple[int, i
     listed = doc.get("stops", [])
     pause = doc.get("stop_pause", 0.0)
     if not isinstance(listed, list) or not isinstance(pause, (int, float)) or isinstance(pause, bool):
-        raise ValueError("job description: stops must be a list and stop_pause a number")
-    if not (math.isfinite(pause) and 0 <= pause <= 3600):
-        raise ValueError(f"job description: stop_pause {pause!r} is not in [0, 3600] s")
+        raise BadInputError("job description: stops must be a list and stop_pause a number")
+    if not (math.isfinite(pause) and STOP_PAUSE_RANGE[0] <= pause <= STOP_PAUSE_RANGE[1]):
+        raise BadInputError(
+            f"job description: stop_pause {pause!r} is not in {interval(*STOP_PAUSE_RANGE)} s"
+        )
     out = []
     for item in listed:
         ok = isinstance(item, list) and len(item) == 2 and all(type(x) is int for x in item)
         if not ok or not 0 <= item[0] < len(segments):
-            raise ValueError(f"job description: stop {json.dumps(item)[:40]} is not [segment, step]")
+            raise BadInputError(f"job description: stop {json.dumps(item)[:40]} is not [segment, step]")
         seg = segments[item[0]]
         if not seg.kind.winds or not 1 <= item[1] <= seg.steps:
-            raise ValueError(f"job description: stop {item} is not a step of a layer segment")
+            raise BadInputError(f"job description: stop {item} is not a step of a layer segment")
         out.append((item[0], item[1]))
     return tuple(sorted(set(out))), float(pause)
 

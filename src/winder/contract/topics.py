@@ -15,6 +15,7 @@ from __future__ import annotations
 import re
 from collections.abc import Collection, Mapping, Sequence
 
+from winder.errors import BadInputError
 from winder.spec import shorten
 
 TOPIC_JOB = "winder/job"
@@ -108,7 +109,7 @@ def check_namespace(namespace: str, option: str = "namespace", longest: str = LO
     ValueError (one line) naming ``option``, the value (shortened) and the
     rule otherwise, before anything reaches rcl (whose refusal is a traceback)."""
     if not isinstance(namespace, str):
-        raise ValueError(f"{option}={namespace!r} is invalid: must be a text, /name[/name...]")
+        raise BadInputError(f"{option}={namespace!r} is invalid: must be a text, /name[/name...]")
     if namespace in ("", "/"):
         return ""
     body = namespace[1:] if namespace.startswith("/") else namespace
@@ -116,13 +117,13 @@ def check_namespace(namespace: str, option: str = "namespace", longest: str = LO
     bad = next((t for t in tokens if not _TOKEN.fullmatch(t)), None)
     if bad is not None:
         why = "an empty name ('//' or a trailing '/')" if bad == "" else f"the name {shorten(bad)}"
-        raise ValueError(
+        raise BadInputError(
             f"{option}={shorten(namespace)} is invalid: it has {why}; a namespace is /name[/name...], "
             "each name letters, digits and '_', not starting with a digit"
         )
     most = min(MAX_NAMESPACE_LENGTH, MAX_NAME_LENGTH - 1 - len(longest))
     if 1 + len(body) > most:
-        raise ValueError(
+        raise BadInputError(
             f"{option}={shorten(namespace)} is invalid: {1 + len(body)} characters, at most {most}: ROS "
             f"bounds a name to {MAX_NAME_LENGTH} characters, and the longest the cell forms under its "
             f"namespace is /{longest}"
@@ -139,19 +140,19 @@ def check_node_name(name: str, namespace: str = "", option: str = "node") -> str
     line: ``option``, the value shortened, the rule) otherwise."""
     text = name.strip("/") if isinstance(name, str) else ""
     if not text:
-        raise ValueError(f"{option}={name!r} is invalid: must be a node name, or its full name /ns/name")
+        raise BadInputError(f"{option}={name!r} is invalid: must be a node name, or its full name /ns/name")
     ns = namespace.strip("/")
     full = "/" + text if name.startswith("/") else (f"/{ns}/{text}" if ns else f"/{text}")
     bad = next((t for t in full[1:].split("/") if not _TOKEN.fullmatch(t)), None)
     if bad is not None:
         why = "an empty name ('//')" if bad == "" else f"the name {shorten(bad)}"
-        raise ValueError(
+        raise BadInputError(
             f"{option}={shorten(name)} is invalid: it has {why}; a node is NAME or /NS/NAME, each name "
             "letters, digits and '_', not starting with a digit"
         )
     service = max(NODE_SERVICES, key=len)
     if len(full) + 1 + len(service) > MAX_NAME_LENGTH:
-        raise ValueError(
+        raise BadInputError(
             f"{option}={shorten(name)} is invalid: its service {shorten(full + '/' + service)} would be "
             f"longer than the {MAX_NAME_LENGTH} characters ROS allows a name (the node's full name: at most "
             f"{MAX_NAME_LENGTH - 1 - len(service)})"
@@ -168,11 +169,11 @@ def check_relative_name(option: str, value: str, namespace: str = "", suffixes: 
     :data:`MAX_NAME_LENGTH`. ValueError (one line: the setting, the value
     shortened, the rule) otherwise; the value as given."""
     if not isinstance(value, str) or not value:
-        raise ValueError(f"{option}={value!r} is invalid: must be a name (letters, digits, '_' and '/')")
+        raise BadInputError(f"{option}={value!r} is invalid: must be a name (letters, digits, '_' and '/')")
     bad = next((t for t in value.split("/") if not _TOKEN.fullmatch(t)), None)
     if bad is not None:
         why = "an empty name ('//', or a '/' at an end)" if bad == "" else f"the name {shorten(bad)}"
-        raise ValueError(
+        raise BadInputError(
             f"{option}={shorten(value)} is invalid: it has {why}; a relative topic name is name[/name...], "
             "each name letters, digits and '_', not starting with a digit"
         )
@@ -181,7 +182,7 @@ def check_relative_name(option: str, value: str, namespace: str = "", suffixes: 
     full = f"{base}/{value}{tail}"
     if len(full) > MAX_NAME_LENGTH:
         most = MAX_NAME_LENGTH - len(base) - 1 - len(tail)
-        raise ValueError(
+        raise BadInputError(
             f"{option}={shorten(value)} is invalid: it names the topic {shorten(full)}, longer than the "
             f"{MAX_NAME_LENGTH} characters ROS allows a name; in the namespace {base or '/'} it may have "
             f"at most {max(most, 0)} characters"

@@ -19,6 +19,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from winder.errors import BadInputError
+
 __all__ = ["AXES", "AXIS_TABLE", "FEED", "FORK", "POLE", "Axis", "axis"]
 
 
@@ -65,4 +67,4 @@ def axis(name: str) -> Axis:
     for a in AXIS_TABLE:
         if a.name == name:
             return a
-    raise ValueError(f"axis {name!r} is not one of {', '.join(AXES)}")
+    raise BadInputError(f"axis {name!r} is not one of {', '.join(AXES)}")

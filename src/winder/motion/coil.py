@@ -42,6 +42,8 @@ from dataclasses import dataclass
 from fractions import Fraction
 from typing import Any
 
+from winder.errors import BadInputError
+
 __all__ = [
     "CORES",
     "FIT_TOLERANCE",
@@ -240,7 +242,7 @@ def wind_coil(
     auto, each layer as many turns as fit it; needs the window width) of
     ``d`` wire (copper ``d_bare``) laid ``lay`` in ``bobbin``."""
     if turns_per_layer is None and bobbin.window_width <= 0:
-        raise ValueError("turns_per_layer=auto needs the window width")
+        raise BadInputError("turns_per_layer=auto needs the window width")
     p = radial_pitch(d, lay)
     out = []
     for number in range(1, layers + 1):

@@ -34,6 +34,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from winder.errors import BadInputError
+
 __all__ = [
     "MAX_STEPS",
     "DeviationStats",
@@ -59,12 +61,12 @@ IntPath = npt.NDArray[np.int64]
 
 def _check_delta(name: str, value: object) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise ValueError(
+        raise BadInputError(
             f"{name}={value!r} is invalid: must be an integer number of steps in [-{MAX_STEPS}, {MAX_STEPS}]"
         )
     v = int(value)
     if abs(v) > MAX_STEPS:
-        raise ValueError(f"{name}={v} is invalid: must be in [-{MAX_STEPS}, {MAX_STEPS}] steps")
+        raise BadInputError(f"{name}={v} is invalid: must be in [-{MAX_STEPS}, {MAX_STEPS}] steps")
     return v
 
 
@@ -136,10 +138,10 @@ def dda(dx: int, dy: int, bits: int = 10, *, preload: bool = True) -> IntPath:
     dx = _check_delta("dx", dx)
     dy = _check_delta("dy", dy)
     if isinstance(bits, bool) or not isinstance(bits, (int, np.integer)) or not 1 <= bits <= 40:
-        raise ValueError(f"bits={bits!r} is invalid: must be an integer in [1, 40]")
+        raise BadInputError(f"bits={bits!r} is invalid: must be an integer in [1, 40]")
     cap = 1 << int(bits)
     if max(abs(dx), abs(dy)) > cap:
-        raise ValueError(
+        raise BadInputError(
             f"bits={bits} is too small for the move ({dx}, {dy}): "
             f"the register must hold max(|dx|, |dy|) <= 2**bits = {cap}"
         )
@@ -417,7 +419,7 @@ def _distance_scale(dx: int, dy: int, step_lengths: tuple[float, float]) -> floa
     """Factor from |F| (steps squared) to the physical distance |F| / |OE| (eq. 5)."""
     lx, ly = (float(v) for v in step_lengths)
     if not (math.isfinite(lx) and math.isfinite(ly) and lx > 0 and ly > 0):
-        raise ValueError(f"step_lengths={step_lengths!r} is invalid: must be two finite numbers > 0")
+        raise BadInputError(f"step_lengths={step_lengths!r} is invalid: must be two finite numbers > 0")
     return lx * ly / math.hypot(dx * lx, dy * ly)
 
 

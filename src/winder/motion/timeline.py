@@ -11,7 +11,7 @@ plan and takes commands at a simulated time ``t`` (ns since the job's start):
 * ``resume``: the rest of that move is planned from rest, from ``t`` (or from
   the moment the axes came to rest, if later); the moves after it follow with
   their planned rests between them.
-* ``override`` ``f`` in [0.05, 2]: ``v_max`` becomes ``f`` times the ramp's;
+* ``override`` ``f`` in :data:`OVERRIDE_RANGE` ([0.05, 2]): ``v_max`` becomes ``f`` times the ramp's;
   the move in motion changes its speed with a jerk-limited transition
   (:func:`winder.motion.retime.continue_tail`) unless it is already braking
   for its end, and every later move is planned with it.
@@ -33,14 +33,17 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from winder.errors import BadInputError
 from winder.motion.retime import continue_tail, from_rest, motion_state, stop_tail
 from winder.motion.shaped import Motion
 from winder.motion.timing import SegmentTiming
-from winder.spec import SpecError, shorten
+from winder.spec import SpecError, interval, shorten
 
 __all__ = [
     "COMMANDS",
     "OVERRIDE_RANGE",
+    "OVERRIDE_TEXT",
+    "SCHEDULE_SECONDS",
     "Command",
     "CommandError",
     "Timeline",
@@ -49,7 +52,13 @@ __all__ = [
 ]
 
 COMMANDS = ("pause", "resume", "abort", "override")
+#: a feed override's factor, at least and at most: the one place it is written
+#: (the profile node's feed_override setting, the schedule, the messages)
 OVERRIDE_RANGE = (0.05, 2.0)
+#: the range as every message writes it
+OVERRIDE_TEXT = interval(*OVERRIDE_RANGE)
+#: a scheduled command's time (s since the run's start), at least and at most
+SCHEDULE_SECONDS = (0.0, 1e6)
 _SNAP = 1e-9  # relative: a stop this close to a move's end ends the move
 
 
@@ -59,7 +68,7 @@ def _reached(position: float) -> float:
     return position * (1 + _SNAP) + _SNAP
 
 
-class CommandError(ValueError):
+class CommandError(BadInputError):
     """A command the job cannot take now (one line: why)."""
 
 
@@ -97,12 +106,14 @@ def _schedule_items(text: str) -> list[tuple[str, Command]]:
             raise SpecError(rule) from None
         if (
             kind not in COMMANDS
-            or not (math.isfinite(t) and 0.0 <= t <= 1e6)
+            or not (math.isfinite(t) and SCHEDULE_SECONDS[0] <= t <= SCHEDULE_SECONDS[1])
             or (kind == "override") != bool(value)
         ):
-            raise SpecError(rule + "; SECONDS in [0, 1e6]")
+            raise SpecError(f"{rule}; SECONDS in {interval(*SCHEDULE_SECONDS)}")
         if kind == "override" and not OVERRIDE_RANGE[0] <= f <= OVERRIDE_RANGE[1]:
-            raise SpecError(f"schedule={shorten(text)} is invalid: override factor {f:g} is not in [0.05, 2]")
+            raise SpecError(
+                f"schedule={shorten(text)} is invalid: override factor {f:g} is not in {OVERRIDE_TEXT}"
+            )
         out.append((item, Command(round(t * 1e9), kind, f)))
     return out
 
@@ -394,7 +405,7 @@ class Timeline:
     def _override(self, cmd: Command) -> dict[str, Any]:
         f = cmd.value
         if not OVERRIDE_RANGE[0] <= f <= OVERRIDE_RANGE[1]:
-            raise CommandError(f"feed_override={f:g} is invalid: must be in [0.05, 2]")
+            raise CommandError(f"feed_override={f:g} is invalid: must be in {OVERRIDE_TEXT}")
         self.factor = f
         v = self.v_max * f
         note = "applied"

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from winder.errors import BadInputError
 from winder.motion.profile import LIMITS, plan
 from winder.motion.shaped import Motion, ShapedProfile, shape
 
@@ -36,7 +37,7 @@ def plan_segment(values: dict[str, Any], steps: int, speed: float = 1.0) -> Moti
     kind = values["profile"]
     v_max = values["v_max"] * speed
     if values["v_start"] > v_max:
-        raise ValueError(
+        raise BadInputError(
             f"first_layer_speed={speed:g} is invalid with v_max={values['v_max']:g}: the first layer's "
             f"speed {v_max:g} steps/s is below v_start={values['v_start']:g} steps/s"
         )
@@ -47,7 +48,7 @@ def plan_segment(values: dict[str, Any], steps: int, speed: float = 1.0) -> Moti
     try:
         profile = plan(kind, float(steps), **kw)
     except (ZeroDivisionError, OverflowError):
-        raise ValueError(
+        raise BadInputError(
             f"profile={kind} with {limits}: the limits are too far apart to plan a {steps}-step move "
             "in floating point"
         ) from None
@@ -55,7 +56,7 @@ def plan_segment(values: dict[str, Any], steps: int, speed: float = 1.0) -> Moti
     if kind_s != "none":
         profile = shape(profile, kind_s, values["shaper_freq"], values["shaper_damping"])
     if not math.isfinite(profile.duration) or profile.duration > MAX_JOB_SECONDS:
-        raise ValueError(
+        raise BadInputError(
             f"profile={kind} with {limits}: a {steps}-step move takes {profile.duration:.3g} s, "
             f"more than a job may last ({MAX_JOB_SECONDS:g} s)"
         )
@@ -75,7 +76,7 @@ def plan_job(
     durations = np.array([round(p.duration * 1e9) + dwell_ns for p in profiles], dtype=np.float64)
     total = float(durations.sum()) - dwell_ns
     if total > MAX_JOB_SECONDS * 1e9:
-        raise ValueError(
+        raise BadInputError(
             f"the job takes {total / 1e9:.4g} s with profile={values['profile']}, v_max={values['v_max']:g}: "
             f"more than a job may last ({MAX_JOB_SECONDS:g} s); raise the limits or split the job"
         )
@@ -163,7 +164,7 @@ def plan_timing(
         rest = pause_ns if n in stops_here else 0  # a stop at a segment's end: the pause after it
         t0 += timing.duration_ns + dwell_ns + rest
         if t0 > MAX_JOB_SECONDS * 1e9:
-            raise ValueError(
+            raise BadInputError(
                 f"the job takes more than {MAX_JOB_SECONDS:g} s with profile={values['profile']}, "
                 f"v_max={values['v_max']:g}: more than a job may last; raise the limits or split the job"
             )

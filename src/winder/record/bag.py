@@ -28,6 +28,7 @@ from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, W
 from winder.contract.files import fsync_path
 from winder.contract.params import BAG_COMPRESSIONS
 from winder.contract.qos import Qos, qos_of
+from winder.errors import BadInputError
 from winder.record.mcap_storage import StreamingMcapStorage
 from winder.record.msgtypes import typestore_for
 
@@ -65,7 +66,7 @@ def new_bag_path(directory: Path, job_id: str) -> Path:
     with ``_2``, ``_3``... if that exists (rosbags never writes into an
     existing directory, and neither do we)."""
     if not re.match(r"^[A-Za-z0-9_\-]+$", job_id):
-        raise ValueError(f"job_id={job_id!r} cannot name a bag")
+        raise BadInputError(f"job_id={job_id!r} cannot name a bag")
     stamp = time.strftime("%Y%m%d_%H%M%S", time.gmtime())
     base = directory / f"{job_id}_{stamp}"
     path, n = base, 1
@@ -79,7 +80,7 @@ def run_bag_path(directory: Path, run_id: str) -> Path:
     """The directory of a run's bag: ``<directory>/<run id>`` (``_2``... if
     that exists: a run id is unique, but a directory may be copied in)."""
     if not re.match(r"^[A-Za-z0-9_\-]+$", run_id):
-        raise ValueError(f"run_id={run_id!r} cannot name a bag")
+        raise BadInputError(f"run_id={run_id!r} cannot name a bag")
     path, n = directory / run_id, 1
     while path.exists():
         n += 1
@@ -401,7 +402,7 @@ class BagRecorder:
         custom: Mapping[str, str] | None = None,
     ) -> None:
         if compression not in COMPRESSIONS:
-            raise ValueError(f"compression={compression!r} is invalid: must be one of {COMPRESSIONS}")
+            raise BadInputError(f"compression={compression!r} is invalid: must be one of {COMPRESSIONS}")
         self.path = Path(path)
         self.compression = compression
         self._conns: dict[str, int] = {}  # topic -> channel id

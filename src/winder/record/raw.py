@@ -38,6 +38,7 @@ from mcap.opcode import Opcode
 from mcap.records import Channel, Chunk, Message, Schema
 
 from winder.contract.files import new_directory
+from winder.errors import BadBagError
 
 __all__ = ["BagError", "Connection", "RawBag", "read_raw", "recover"]
 
@@ -46,7 +47,7 @@ MAGIC = b"\x89MCAP0\r\n"
 METADATA_BYTES = 16 << 20
 
 
-class BagError(ValueError):
+class BagError(BadBagError):
     """A recording cannot be read; the message says which file and why, in one line."""
 
 
@@ -290,7 +291,7 @@ def _chunk_data(chunk: Chunk) -> bytes:
         import lz4.frame
 
         return lz4.frame.decompress(chunk.data)  # type: ignore[no-any-return]
-    raise ValueError(f"unsupported chunk compression {chunk.compression!r}")
+    raise BagError(f"unsupported chunk compression {chunk.compression!r}")
 
 
 #: the steps of a walk: it pauses after every top-level record it has added to

@@ -21,6 +21,7 @@ from pathlib import Path
 
 from winder.contract.qos import Qos, qos_of
 from winder.contract.topics import TOPIC_DIAGNOSTICS, TOPIC_JOB, check_namespace
+from winder.errors import BadInputError
 from winder.record.raw import BagError, Connection, RawBag, read_raw
 
 __all__ = ["PlayPlan", "PlayTopic", "offered_qos", "plan_play", "play_qos"]
@@ -171,12 +172,12 @@ def plan_play(
     ``clock``: the recorded simulated clock is published too (it is left out
     otherwise: a replay does not drive a graph's time unless asked)."""
     if not (start_offset >= 0 and start_offset < 1e7):
-        raise ValueError(f"start_offset={start_offset!r} is invalid: must be a number of seconds >= 0")
+        raise BadInputError(f"start_offset={start_offset!r} is invalid: must be a number of seconds >= 0")
     for p in (*topics, *exclude):
         try:
             re.compile(p)
         except re.error as exc:
-            raise ValueError(f"topic pattern {p!r} is invalid: {exc}") from None
+            raise BadInputError(f"topic pattern {p!r} is invalid: {exc}") from None
     raw = read_raw(path, keep=lambda _t: False)
     _check_as_analyze(path, raw.topics())  # first: what analyze refuses is refused in its words
     if raw.recovered or not raw.closed:
@@ -194,7 +195,7 @@ def plan_play(
     target = recorded_ns if namespace is None else check_namespace(namespace)
     unknown = [p for p in topics if not any(_matches(t, [p]) for t in counts)]
     if unknown:
-        raise ValueError(
+        raise BadInputError(
             f"topics={unknown[0]!r} is invalid: no topic of the recording matches it "
             f"(it has {', '.join(sorted(counts))})"
         )
@@ -226,11 +227,11 @@ def plan_play(
                 topic, _renamed(topic, recorded_ns, target), conn.msgtype, counts[topic], recorded, source
             )
     if not chosen:
-        raise ValueError(f"{raw.path}: nothing to play: every topic is left out ({skipped})")
+        raise BadInputError(f"{raw.path}: nothing to play: every topic is left out ({skipped})")
     first, last, in_order = _span(raw, list(chosen))
     start = first + round(start_offset * 1e9)
     if start > last:
-        raise ValueError(
+        raise BadInputError(
             f"start_offset={start_offset:g} is invalid: the recording lasts {(last - first) / 1e9:.3f} s"
         )
     return PlayPlan(raw, chosen, recorded_ns, first, last, start, in_order, skipped)

@@ -41,6 +41,7 @@ from winder.contract.jobfile import ros_text
 from winder.contract.run import JobReport
 from winder.contract.topics import ROLE_KEY, ROLES, TASK_JOB, TOPIC_DIAGNOSTICS, has_role, in_namespace
 from winder.contract.trust import without_senders
+from winder.errors import BadInputError
 from winder.interrupts import Interrupts
 from winder.procs import Children
 from winder.ros.dds import PROFILE_KEYS, use_profile
@@ -699,7 +700,7 @@ def run_cell(
     if (one_process or early is not None) and external:
         if early is not None:
             early.cancel()
-        raise ValueError(
+        raise BadInputError(
             f"one_process with external={sorted(external)} is invalid: one process holds the whole cell"
         )
     one_process = one_process or early is not None

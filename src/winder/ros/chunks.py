@@ -17,6 +17,7 @@ from std_msgs.msg import Int32MultiArray, Int64MultiArray, MultiArrayDimension
 
 from winder.contract.cdr import MultiArrayCodec
 from winder.contract.stream import STEP_COLUMNS, TIMED_COLUMNS
+from winder.errors import BadInputError
 
 
 def _layout(msg: Int32MultiArray | Int64MultiArray, rows: int, columns: Sequence[str]) -> None:
@@ -79,11 +80,11 @@ def unpack(msg: Int32MultiArray | Int64MultiArray, columns: Sequence[str]) -> np
     dims = msg.layout.dim
     cols = len(columns)
     if len(dims) != 2 or dims[1].size != cols or dims[1].label != ",".join(columns):
-        raise ValueError(
+        raise BadInputError(
             f"chunk layout {[(d.label, d.size) for d in dims]} is not (steps, {','.join(columns)})"
         )
     dtype = np.int32 if isinstance(msg, Int32MultiArray) else np.int64
     data = np.frombuffer(msg.data, dtype=dtype)
     if data.size != dims[0].size * cols:
-        raise ValueError(f"chunk holds {data.size} values, layout says {dims[0].size} x {cols}")
+        raise BadInputError(f"chunk holds {data.size} values, layout says {dims[0].size} x {cols}")
     return data.reshape(dims[0].size, cols)

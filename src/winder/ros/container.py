@@ -39,6 +39,7 @@ import sys
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
+from winder.errors import BadInputError
 from winder.ros.early import ARGS_ON_STDIN
 from winder.ros.spin import install_signal_handlers, signalled, spin_all
 
@@ -50,7 +51,7 @@ __all__ = ["load", "main"]
 USAGE = "usage: winder_container [--args-on-stdin] MODULE:CLASS [MODULE:CLASS ...] [--ros-args ...]"
 
 
-class LoadError(ValueError):
+class LoadError(BadInputError):
     """A node class named on the command line that cannot be made."""
 
 

@@ -32,6 +32,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
+from winder.errors import BadInputError, RefusedError, UnavailableError
 from winder.ros.dds import ANNOUNCEMENT
 
 __all__ = [
@@ -60,16 +61,15 @@ GRAPH_POLL = 0.01
 RESEND = 1.0
 
 
-class UnansweredError(Exception):
+class UnansweredError(UnavailableError):
     """Nothing came in time; the message names what was waited for."""
 
 
-class NoSuchNodeError(Exception):
+class NoSuchNodeError(UnavailableError):
     """The node named is not on the graph; the message names the nodes that are."""
 
 
-class RefusedError(Exception):
-    """The node refused the request; the message is its reason, in one line."""
+# RefusedError (winder.errors): the node refused the request; the message is its reason, in one line
 
 
 def one_line(text: str) -> str:
@@ -313,7 +313,7 @@ def parse_value(node: str, name: str, text: str, descriptor: Any) -> Any:
     }.get(kind)
     if ok is not None and not ok(value) and not descriptor.dynamic_typing:
         must = _TYPE_WORDS.get(kind, "of its declared type")
-        raise ValueError(f"{name}={text!r} is invalid: must be {must}{range_words(descriptor)} ({node})")
+        raise BadInputError(f"{name}={text!r} is invalid: must be {must}{range_words(descriptor)} ({node})")
     return value
 
 
@@ -344,7 +344,7 @@ def describe(session: Session, node: str, names: list[str]) -> list[Any]:
     listed = session.call(ListParameters, f"{node}/list_parameters", ListParameters.Request(), reads=True)
     have = set(listed.result.names)
     missing = next((n for n in names if n not in have), names[0])
-    raise ValueError(f"{node} has no parameter {missing!r} (winder ctl param list {node} names them)")
+    raise BadInputError(f"{node} has no parameter {missing!r} (winder ctl param list {node} names them)")
 
 
 def get_parameter(session: Session, node: str, name: str) -> str:
@@ -435,7 +435,9 @@ def lifecycle_transition(session: Session, node: str, action: str) -> tuple[str,
     ]
     if not match:
         can = ", ".join(dict.fromkeys(labels)) or "none"
-        raise ValueError(f"{node} cannot {action} from its state {before!r} (transitions from there: {can})")
+        raise BadInputError(
+            f"{node} cannot {action} from its state {before!r} (transitions from there: {can})"
+        )
     request = ChangeState.Request()
     request.transition.id = match[0].id
     done = session.call(ChangeState, f"{node}/change_state", request)

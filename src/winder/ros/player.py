@@ -35,6 +35,7 @@ from std_srvs.srv import Trigger
 
 from winder.contract.topics import TOPIC_JOB
 from winder.contract.trust import SIGNS
+from winder.errors import BadBagError, BadInputError
 from winder.interrupts import Interrupts
 from winder.record.replay import PlayPlan, PlayTopic
 from winder.ros.qos import profile
@@ -59,7 +60,7 @@ def message_class(msgtype: str) -> Any:
     try:
         return getattr(importlib.import_module(f"{pkg}.{kind}"), name)
     except (ImportError, AttributeError):
-        raise ValueError(f"message type {msgtype} is not installed here; it cannot be published") from None
+        raise BadBagError(f"message type {msgtype} is not installed here; it cannot be published") from None
 
 
 @dataclass
@@ -368,7 +369,7 @@ def run_player(
         rclpy.try_shutdown()
 
 
-class CellLiveError(Exception):
+class CellLiveError(BadInputError):
     """``winder play`` would publish onto a namespace where a live cell runs."""
 
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 import importlib
 import pkgutil
 
+from winder.errors import BadInputError
 from winder.motion.ramps import _poly
 from winder.motion.ramps.base import EXP_CUT, MOVES, RAMPS, Phase, Profile, Ramp, Seg, plan, register
 
@@ -46,4 +47,6 @@ def ramp(kind: str) -> Ramp:
     try:
         return RAMPS[kind]
     except KeyError:
-        raise ValueError(f"kind={kind!r} is invalid: must be one of {', '.join(map(repr, RAMPS))}") from None
+        raise BadInputError(
+            f"kind={kind!r} is invalid: must be one of {', '.join(map(repr, RAMPS))}"
+        ) from None

@@ -25,6 +25,7 @@ from typing import Any, NamedTuple, Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from winder.errors import BadInputError
 from winder.motion.ramps._scurve import Infeasible
 
 __all__ = [
@@ -232,7 +233,7 @@ def speed(name: str, x: object, v_max: float | None) -> float:
 def needed(name: str, x: float | None, kind: str) -> float:
     """A limit the ramp ``kind`` needs: not None."""
     if x is None:
-        raise ValueError(f"{name}=None is invalid: kind={kind!r} needs a finite number > 0")
+        raise BadInputError(f"{name}=None is invalid: kind={kind!r} needs a finite number > 0")
     return x
 
 
@@ -492,7 +493,7 @@ class Profile:
         n = int(n)
         D = self.distance
         if not (D > 0.0 and math.isfinite(D)):
-            raise ValueError(f"distance={D!r}: the motion covers no distance, it has no steps")
+            raise BadInputError(f"distance={D!r}: the motion covers no distance, it has no steps")
         out = np.arange(1, n + 1, dtype=np.float64)
         out *= D
         out /= n
@@ -608,7 +609,7 @@ def plan(
         return ramp.plan(D, v0, v1, V, A, J, tc, exp_cut)
     except Infeasible as e:
         lim = ", ".join(f"{k}={x!r}" for k, x in (("a_max", A), ("j_max", J), ("tau", tc)) if x)
-        raise ValueError(
+        raise BadInputError(
             f"distance={distance!r} is invalid: too short for v_start={v0!r} -> v_end={v1!r} "
             f"({kind}, {lim}); a monotone move needs distance >= {e.d_min!r}"
         ) from None
