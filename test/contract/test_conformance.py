@@ -297,7 +297,10 @@ class Cell:
         """The tail of every process' log, for a failure message."""
         out = []
         for p, path in self.procs.procs:
-            text = path.read_text(errors="replace").strip().splitlines()[-15:]
+            lines = path.read_text(errors="replace").strip().splitlines()
+            # a process that ended: from its first ERROR or traceback on (what ended it), else the tail
+            first = next((i for i, line in enumerate(lines) if "ERROR" in line or "Traceback" in line), None)
+            text = lines[first:][:60] if p.poll() is not None and first is not None else lines[-15:]
             argv = p.args if isinstance(p.args, list) else [p.args]
             out.append(f"--- {Path(str(argv[0])).name} ({path.name}, exit {p.poll()}):\n" + "\n".join(text))
         return "\n".join(out)

@@ -45,6 +45,27 @@ def test_a_held_command_is_followed_as_a_first_order_lag(
             assert math.isclose(x, want, rel_tol=1e-9, abs_tol=1e-9 * (abs(c) + abs(x0) + 1))
 
 
+@given(
+    st.floats(1e-3, 1.0),
+    st.integers(-1000, 1000),
+    st.integers(-1000, 1000),
+    st.integers(-1000, 1000),
+    st.lists(st.integers(1, 10**9), min_size=3, max_size=3),
+)
+def test_each_row_is_a_step_of_the_command_at_its_own_time(
+    lag: float, x0: int, c1: int, c2: int, gaps: list[int]
+) -> None:
+    """Two rows handed over in one write, at t1 and t2, read at t3: the lag
+    followed the start until t1, c1 until t2, c2 until t3 (not one jump at the write)."""
+    t1 = gaps[0]
+    t2, t3 = t1 + gaps[1], t1 + gaps[1] + gaps[2]
+    mock = started(lag, [x0, 0, 0])
+    mock.write(t2, np.array([[t1, 0, c1, 0, 0], [t2, 0, c2, 0, 0]], np.int64))
+    x2 = c1 + (x0 - c1) * math.exp(-(t2 - t1) / 1e9 / lag)
+    x3 = c2 + (x2 - c2) * math.exp(-(t3 - t2) / 1e9 / lag)
+    assert math.isclose(mock.read(t3)[0], x3, rel_tol=1e-9, abs_tol=1e-9 * 3000)
+
+
 def test_without_a_lag_the_axes_are_where_they_are_told() -> None:
     mock = started(0.0, [5, 6, 7])
     assert list(mock.read(0)) == [5, 6, 7]

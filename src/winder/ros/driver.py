@@ -50,7 +50,7 @@ from sensor_msgs.msg import JointState
 from winder.contract.cdr import JointStateEncoder, encode_clocks
 from winder.contract.params import CONSUMER_SPECS, check_consumer
 from winder.contract.stream import JobPlan
-from winder.contract.topics import TOPIC_CLOCK, TOPIC_JOINT_STATES
+from winder.contract.topics import TOPIC_CLOCK, TOPIC_JOINT_COMMANDS, TOPIC_JOINT_STATES
 from winder.motion.axes import AXIS_TABLE, Axis
 from winder.ros.consumer import StepConsumer
 from winder.ros.qos import QOS_CLOCK, QOS_STATE
@@ -142,9 +142,10 @@ class Backend(Protocol):
 class DriverNode(StepConsumer):
     """A consumer node around a :class:`Backend` (see the module doc)."""
 
-    #: publishes /clock and winder/joint_states, recorded as the simulator's are
+    #: publishes /clock, winder/joint_commands and winder/joint_states, recorded as the simulator's are
     TOPICS: ClassVar[dict[str, tuple[str, str]]] = {
         "clock": (TOPIC_CLOCK, "rosgraph_msgs/msg/Clock"),
+        "joint_commands": (TOPIC_JOINT_COMMANDS, "sensor_msgs/msg/JointState"),
         "joint_states": (TOPIC_JOINT_STATES, "sensor_msgs/msg/JointState"),
     }
 
@@ -156,6 +157,7 @@ class DriverNode(StepConsumer):
         super().__init__(name, specs, check_consumer, hardware_id=hardware_id or name, topics=self.TOPICS)
         self.pub_clock = self.create_publisher(Clock, TOPIC_CLOCK, QOS_CLOCK)
         self.pub_states = self.create_publisher(JointState, TOPIC_JOINT_STATES, QOS_STATE)
+        self.pub_commands = self.create_publisher(JointState, TOPIC_JOINT_COMMANDS, QOS_STATE)
         self.clock_ns = -1  # the last /clock published in this node's life
         self.clock_timer = steady_timer(self, CLOCK_PERIOD_NS / 1e9, self.tick)
         self.clock_timer.cancel()  # runs while a paced run's clock does
@@ -175,6 +177,9 @@ class DriverNode(StepConsumer):
         self.next_tick_ns = 0
         self.following = 0.0  # the largest |command - measured| seen (steps)
         self.joint_step = np.ones(len(AXIS_TABLE))
+        #: the last sample published (run time, commanded and measured steps): velocities are differences
+        self.last_sample: tuple[int, npt.NDArray[np.float64], npt.NDArray[np.float64]] | None = None
+        self.last_published = -1  # the run time of the last sample published
 
     # -- the consumer's hooks, in terms of the backend ---------------------------------
     def begin(self, plan: JobPlan, values: dict[str, Any]) -> dict[str, object]:
@@ -285,7 +290,9 @@ class DriverNode(StepConsumer):
         self.pump()
         if self.plan is None:  # the pump closed the run
             return
-        t = self.now_ns()
+        # the time the pump handed the rows over up to: a later look at the clock (the pump
+        # took 30 ms on a loaded machine) showed a command behind it, then a leap
+        t = self.t_ns
         stamp = self.origin_ns + t
         clock = encode_clocks([stamp])[0]
         self.clock_ns = stamp
@@ -321,12 +328,29 @@ class DriverNode(StepConsumer):
             self.publish_states(t_ns)
 
     def publish_states(self, t_ns: int) -> None:
-        """winder/joint_states: where the backend says the axes are (joint units), recorded."""
+        """winder/joint_commands (the commanded position) and winder/joint_states
+        (where the backend says the axes are), in joint units, each velocity the
+        mean since an earlier sample; recorded, as the simulator's are."""
         measured = np.asarray(self.backend.read(t_ns), float)
-        self.following = max(self.following, float(np.max(np.abs(measured - self.commanded))))
+        commanded = self.commanded.astype(float)
+        self.following = max(self.following, float(np.max(np.abs(measured - commanded))))
+        if t_ns <= self.last_published:
+            return  # one sample a time (the clock stood at the last step; a tick and the closing)
+        self.last_published = t_ns
+        last = self.last_sample
+        dt = (t_ns - last[0]) / 1e9 if last is not None else 0.0
         stamp = np.array([self.origin_ns + t_ns], np.int64)
-        msg = self.encoder.encode(stamp, (measured * self.joint_step)[None, :], np.zeros((1, measured.size)))[
-            0
-        ]
-        self.pub_states.publish(msg)
-        self.record("joint_states", t_ns, msg, exact=True)
+        for key, pub, now, before in (
+            ("joint_commands", self.pub_commands, commanded, last[1] if last else None),
+            ("joint_states", self.pub_states, measured, last[2] if last else None),
+        ):
+            vel = (now - before) / dt if before is not None and dt > 0 else np.zeros_like(now)
+            pos_j, vel_j = (now * self.joint_step)[None, :], (vel * self.joint_step)[None, :]
+            msg = self.encoder.encode(stamp, pos_j, vel_j)[0]
+            if self.context.ok():  # at a Ctrl-C the run closes with the context gone: the bag still has it
+                pub.publish(msg)
+            self.record(key, t_ns, msg, exact=True)
+        if last is None or t_ns - last[0] >= CLOCK_PERIOD_NS // 2:
+            # a velocity is the mean over half a clock period at least: two ticks close
+            # together on a busy machine made one step over 0.1 ms a speed 5 times the real one
+            self.last_sample = (t_ns, commanded, measured)

@@ -53,8 +53,15 @@ class MockBackend(Backend):
         return {"backend": "mock", "lag": self.lag}
 
     def write(self, t_ns: int, rows: npt.NDArray[np.int64]) -> None:
+        """Each row is a step of the command at its own time (the axes follow
+        the staircase, not a jump once a tick); they are followed up to ``t_ns``."""
+        if self.lag > 0.0:
+            for t_row, *pos in rows[:, [0, *range(2, rows.shape[1])]].tolist():
+                self.follow(max(int(t_row), self.t_ns))
+                self.command = np.array(pos, float)
+        else:
+            self.command = rows[-1, 2:].astype(float)
         self.follow(t_ns)
-        self.command = rows[-1, 2:].astype(float)
         self.writes += 1
 
     def read(self, t_ns: int) -> npt.NDArray[np.float64]:
