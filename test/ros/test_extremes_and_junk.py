@@ -800,6 +800,8 @@ def test_a_new_real_time_factor_changes_the_rate_not_the_time_elapsed(
     procs.start("profile_node")
     procs.start("interp_node")
     spin_until(ros, lambda: bool(ticks) and ticks[-1][1] > 1.5, 60, "1.5 s of simulated time")
+    t_first = next(w for w, s in ticks if s > 0.0)
+    spin_until(ros, lambda: ticks[-1][0] > t_first + 1.2, 30, "a second of ticks at 1 x")
     before = ticks[-1][1]
     [res] = set_params(ros, "sim_node", {"real_time_factor": 10.0})
     assert res.successful, res.reason
@@ -813,7 +815,13 @@ def test_a_new_real_time_factor_changes_the_rate_not_the_time_elapsed(
     # elapsed time), and the rate afterwards is about the new factor
     assert sim[0] < before + 10.0 * (walls[0] - changed) + 1.0, (before, sim[0])
     rate = (sim[-1] - sim[0]) / (walls[-1] - walls[0])
-    assert 3.0 < rate < 15.0, rate
+    # the rate rose (the factor took effect) and not past the new factor; on a machine too
+    # busy for 10 x (load 15 on 2 cores: 1.7 x) the rise is what the machine gives, so it is
+    # measured against the rate of the second before the change, on the same machine
+    old = [(w, s) for w, s in ticks if changed - 1.0 <= w < changed]
+    old_rate = (old[-1][1] - old[0][1]) / (old[-1][0] - old[0][0])
+    assert 0.5 < old_rate < 1.5, old_rate  # 1 x before
+    assert 1.4 * old_rate < rate < 15.0, (old_rate, rate)
 
 
 @pytest.mark.ros

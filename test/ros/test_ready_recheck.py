@@ -52,7 +52,10 @@ def test_a_waiting_node_looks_often_then_seldom_then_not(
         spin_for(executor, 1.55)  # to 2.0 s: after FAST_WAIT (0.5 s), a look every 0.25 s
         late = [t - t0 for t in looks if t - t0 > 0.8]
         assert 3 <= len(late) <= 6, late  # 0.25 s apart over 1.2 s: ~5; at 0.05 s it would be ~24
-        assert all(b - a > 0.2 for a, b in itertools.pairwise(late)), late
+        # most 0.25 s apart: a timer that fired late is followed by one on time, closer
+        # (0.19 s under load 15); looking at 0.05 s would be the count's failure above
+        gaps = sorted(b - a for a, b in itertools.pairwise(late))
+        assert gaps[len(gaps) // 2] > 0.2, late
         announcer.announce("ready")
         n = len(looks)
         spin_for(executor, 0.6)

@@ -322,8 +322,15 @@ def test_a_signal_at_any_moment_ends_run_foxglove(
     traceback (2 of 40 under load)."""
     import signal
 
+    from winder.procs import in_mask
+
     bags = tmp_path / "bags"
     run = winder(procs, "run", *LONG, "--bag-dir", str(bags), "--foxglove", "0")
+    # from the moment it takes SIGTERM: before it, the interpreter is still starting and the
+    # signal's default action ends it (-15, 0.2 s after the start on a machine at load 15)
+    wait.until(
+        lambda: in_mask(run.pid, "SigCgt", signal.SIGTERM) or run.poll() is not None, 30, "its handlers"
+    )
     time.sleep(after)  # the signal's moment is the subject (any moment of the start): not a wait
     run.send_signal(getattr(signal, sig))
     run.wait(timeout=30)
