@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from hypothesis import settings
 from rosbags.highlevel import AnyReader
 from support import domains
 from support.bags import SessionBags
@@ -27,6 +28,11 @@ from support.ros_probe import spin_until
 from winder.contract.topics import has_role
 from winder.procs import Children, signal_state, stop
 from winder.ros.dds import use_profile
+
+# no deadline on an example: a property is about values, and its speed is the
+# benchmarks' to measure (hypothesis' 200 ms default failed test_interp on a machine at load 15)
+settings.register_profile("winder", deadline=None)
+settings.load_profile("winder")
 
 __all__ = [  # what test modules import from here besides the fixtures
     "BIN",
