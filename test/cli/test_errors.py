@@ -298,6 +298,7 @@ INTERNAL_VALUE_ERRORS: dict[str, tuple[int, str]] = {
     "motion/interp.py::pieces_mismatch": (2, "rows and windows the checker computes"),
     "motion/interp.py::line_distance": (1, "point arrays the analysis builds"),
     "motion/interp.py::deviation_stats": (1, "path arrays the analysis builds"),
+    "motion/job.py::Segment.turn_end": (2, "a turn the code asks of a segment (stop_points checks stops)"),
     "motion/ramps/base.py::Profile.sample": (1, "sample times the code makes"),
     "motion/ramps/base.py::Profile.times_at": (1, "positions the code makes"),
     "motion/ramps/jog.py::JogRamp.plan": (1, "an API misuse: a jog is planned by jog()"),

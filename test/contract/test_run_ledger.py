@@ -14,11 +14,11 @@ from hypothesis import strategies as st
 
 from winder.contract.params import stop_points
 from winder.contract.run import (
+    ControlEvent,
     EventError,
     JobReport,
     RunLedger,
     StopPhase,
-    parse_control,
 )
 from winder.contract.stream import describe_job, parse_job_description
 from winder.contract.topics import STATUS_KEYS
@@ -40,11 +40,11 @@ def event(kind: str, **doc: object) -> str:
     return json.dumps({"event": kind, "run_id": RUN, "t_ns": 10, **doc})
 
 
-# -- parse_control -----------------------------------------------------------------
+# -- ControlEvent.from_wire -----------------------------------------------------------------
 
 
 def test_a_well_formed_event_is_read_field_by_field() -> None:
-    e = parse_control(event("abort", t_rest_ns=20, steps=7, segment=1, step=3))
+    e = ControlEvent.from_wire(event("abort", t_rest_ns=20, steps=7, segment=1, step=3))
     assert (e.kind, e.run_id, e.t_ns, e.t_rest_ns, e.steps, e.segment, e.step) == (
         "abort",
         RUN,
@@ -54,8 +54,8 @@ def test_a_well_formed_event_is_read_field_by_field() -> None:
         1,
         3,
     )
-    o = parse_control(event("override", factor=0.5))
-    assert (o.kind, o.factor, o.t_rest_ns, o.steps) == ("override", 0.5, 10, None)
+    o = ControlEvent.from_wire(event("override", factor=0.5))
+    assert (o.kind, o.factor, o.rest_ns, o.t_rest_ns, o.steps) == ("override", 0.5, 10, None, None)
 
 
 @pytest.mark.parametrize(
@@ -79,7 +79,7 @@ def test_a_well_formed_event_is_read_field_by_field() -> None:
 )
 def test_anything_else_is_refused_in_one_line_naming_the_key(text: str, names: str) -> None:
     with pytest.raises(EventError) as err:
-        parse_control(text)
+        ControlEvent.from_wire(text)
     assert names in str(err.value) and "\n" not in str(err.value)
 
 
@@ -100,13 +100,13 @@ json_values = st.recursive(
 @settings(max_examples=400, deadline=None)
 def test_any_json_is_an_event_or_a_one_line_refusal(doc: dict[str, object]) -> None:
     try:
-        e = parse_control(json.dumps(doc))
+        e = ControlEvent.from_wire(json.dumps(doc))
     except EventError as exc:
         assert "\n" not in str(exc)
         return
     # accepted: what was accepted is exactly what the document says
     assert e.kind == doc["event"] and e.run_id == doc["run_id"] and e.t_ns == doc["t_ns"] >= 0
-    assert e.t_rest_ns == doc.get("t_rest_ns", doc["t_ns"]) >= e.t_ns
+    assert e.rest_ns == doc.get("t_rest_ns", doc["t_ns"]) >= e.t_ns
     if e.kind in ("pause", "abort"):
         assert isinstance(doc["steps"], int) and e.steps == doc["steps"] >= 0
 
@@ -118,19 +118,21 @@ def test_an_event_of_another_run_or_against_what_was_executed_changes_nothing() 
     ledger = RunLedger(plan_of())
     ledger.executed(40)
     with pytest.raises(EventError, match="not the running run"):
-        ledger.apply(parse_control(event("abort", steps=50).replace(RUN, "other_20261125_101010123_1")))
+        ledger.apply(
+            ControlEvent.from_wire(event("abort", steps=50).replace(RUN, "other_20261125_101010123_1"))
+        )
     with pytest.raises(EventError, match="40 steps are executed already"):
-        ledger.apply(parse_control(event("abort", steps=10)))  # claims fewer steps than ran
+        ledger.apply(ControlEvent.from_wire(event("abort", steps=10)))  # claims fewer steps than ran
     total = ledger.plan.total_steps
     with pytest.raises(EventError, match=f"the job has {total}"):
-        ledger.apply(parse_control(event("pause", steps=total + 1)))
+        ledger.apply(ControlEvent.from_wire(event("pause", steps=total + 1)))
     assert ledger.abort is None and ledger.hold is None and ledger.due(10**12) == []
 
 
 def test_an_abort_ends_the_run_once_its_steps_are_executed_and_takes_no_more_events() -> None:
     ledger = RunLedger(plan_of())
     ledger.executed(40)
-    first = ledger.apply(parse_control(event("abort", t_rest_ns=90, steps=55, segment=0, step=55)))
+    first = ledger.apply(ControlEvent.from_wire(event("abort", t_rest_ns=90, steps=55, segment=0, step=55)))
     assert first is not None and first.state == "aborting"
     assert not ledger.aborted
     ledger.executed(14)
@@ -138,7 +140,7 @@ def test_an_abort_ends_the_run_once_its_steps_are_executed_and_takes_no_more_eve
     ledger.missing_steps = 1  # a step known missing counts as accounted for
     assert ledger.aborted
     with pytest.raises(EventError, match="after the run's abort"):
-        ledger.apply(parse_control(event("resume")))
+        ledger.apply(ControlEvent.from_wire(event("resume")))
 
 
 @pytest.mark.parametrize("missing", [0, 1])
@@ -150,7 +152,7 @@ def test_a_resume_that_comes_after_its_first_steps_ends_the_rest(missing: int) -
     not refused, and announced at its time."""
     ledger = RunLedger(plan_of())
     ledger.executed(5)
-    ledger.apply(parse_control(event("pause", t_ns=100, t_rest_ns=300, steps=20)))
+    ledger.apply(ControlEvent.from_wire(event("pause", t_ns=100, t_rest_ns=300, steps=20)))
     ledger.executed(14)
     assert ledger.held and not ledger.at_rest
     ledger.executed(1)
@@ -158,7 +160,7 @@ def test_a_resume_that_comes_after_its_first_steps_ends_the_rest(missing: int) -
     ledger.executed(1 - missing)
     ledger.missing_steps = missing
     assert ledger.held and not ledger.at_rest  # the 21st: the motion goes on
-    first = ledger.apply(parse_control(event("resume", t_ns=900, steps=20)))
+    first = ledger.apply(ControlEvent.from_wire(event("resume", t_ns=900, steps=20)))
     assert first is not None and not ledger.held and not ledger.at_rest
     assert [(t.t_ns, t.state) for t in ledger.due(10**9)] == [
         (100, "pausing"),
@@ -167,24 +169,24 @@ def test_a_resume_that_comes_after_its_first_steps_ends_the_rest(missing: int) -
     ]
     # a pause or an abort claiming fewer steps than were executed is still refused
     with pytest.raises(EventError, match="21 steps are executed already" if not missing else "20 steps"):
-        ledger.apply(parse_control(event("pause", t_ns=950, t_rest_ns=960, steps=19)))
+        ledger.apply(ControlEvent.from_wire(event("pause", t_ns=950, t_rest_ns=960, steps=19)))
 
 
 def test_pause_and_resume_are_announced_in_time_order_as_execution_reaches_them() -> None:
     ledger = RunLedger(plan_of())
     ledger.apply(
-        parse_control(
+        ControlEvent.from_wire(
             json.dumps({"event": "pause", "run_id": RUN, "t_ns": 100, "t_rest_ns": 300, "steps": 20})
         )
     )
-    ledger.apply(parse_control(json.dumps({"event": "resume", "run_id": RUN, "t_ns": 500})))
+    ledger.apply(ControlEvent.from_wire(json.dumps({"event": "resume", "run_id": RUN, "t_ns": 500})))
     assert [t.state for t in ledger.due(99)] == []
     assert ledger.transitions_ahead  # a wall-clock backend keeps telling its time
     assert [t.state for t in ledger.due(300)] == ["pausing", "paused"]
     assert ledger.op_state == "paused" and not ledger.held  # the resume is booked already
     assert ledger.transitions_ahead
     assert [(t.t_ns, t.state) for t in ledger.due(10**9)] == [(500, "running")]
-    assert ledger.op_state == "" and ledger.due(10**10) == [] and not ledger.transitions_ahead
+    assert ledger.op_state is None and ledger.due(10**10) == [] and not ledger.transitions_ahead
 
 
 @given(st.integers(1, 12), st.sampled_from(["auto", "call"]), st.data())

@@ -16,7 +16,6 @@ every status of the run reports it and the sim node names the run's bag after it
 
 from __future__ import annotations
 
-import json
 import os
 import time
 from collections.abc import Iterator
@@ -32,6 +31,8 @@ from std_srvs.srv import Trigger
 
 from winder.contract.jobfile import check_interp_settings, load_job_file_hashed
 from winder.contract.params import INTERP_SPECS, run_ramp, stop_points
+from winder.contract.run import ControlEvent, EventError
+from winder.contract.states import EventKind, JobState, ReadyState
 from winder.contract.stream import describe_job, make_run_id
 from winder.contract.topics import TOPIC_CONTROL, TOPIC_JOB, TOPIC_PROGRESS, TOPIC_STEPS, status_values
 from winder.motion.interp import interpolate_pieces
@@ -99,7 +100,9 @@ class InterpNode(ManagedNode):
         self.busy_wall = 0.0  # since when the consumer says busy on winder/ready (0: it does not)
         self.abort_ignored = ""  # the report on it, made once per run
         if self.settings.blocked():
-            self.diag.publish("job", ERROR, str(self.settings.blocked()), status_values("blocked", role=ROLE))
+            self.diag.publish(
+                "job", ERROR, str(self.settings.blocked()), status_values(JobState.BLOCKED, role=ROLE)
+            )
         self.start_lifecycle()
 
     # -- lifecycle (winder.ros.managed) ----------------------------------------
@@ -204,7 +207,7 @@ class InterpNode(ManagedNode):
 
     def on_ready(self) -> None:
         """A change on winder/ready: note since when the consumer says busy."""
-        if self.readiness.states.get("consumer") != "busy":
+        if self.readiness.states.get("consumer") is not ReadyState.BUSY:
             self.busy_wall = 0.0
         elif not self.busy_wall:
             self.busy_wall = time.monotonic()
@@ -222,7 +225,10 @@ class InterpNode(ManagedNode):
         now = time.monotonic()
         if self.job is None or not self.ended_wall or not self.busy_wall:
             return False
-        if self.readiness.states.get("consumer") != "busy" or now - self.readiness.heard["consumer"] > FRESH:
+        if (
+            self.readiness.states.get("consumer") is not ReadyState.BUSY
+            or now - self.readiness.heard["consumer"] > FRESH
+        ):
             return False  # not busy, or not heard from lately: nothing to excuse
         stuck = now - max(self.ended_wall, self.busy_wall, self.progress_wall)
         if stuck <= self.settings.values()["stall_abort"]:
@@ -273,7 +279,7 @@ class InterpNode(ManagedNode):
             return False, self.cannot_start()
         blocked = self.settings.blocked()
         if blocked:
-            self.diag.publish("job", ERROR, blocked, status_values("blocked", role=ROLE))
+            self.diag.publish("job", ERROR, blocked, status_values(JobState.BLOCKED, role=ROLE))
             return False, blocked
         waiting = self.cannot_start()
         if waiting:
@@ -282,7 +288,9 @@ class InterpNode(ManagedNode):
         try:
             job = Job.from_dict({k: values[k] for k in FIELD_SPECS})
         except SpecError as exc:
-            self.diag.publish("job", ERROR, f"job rejected: {exc}", status_values("blocked", role=ROLE))
+            self.diag.publish(
+                "job", ERROR, f"job rejected: {exc}", status_values(JobState.BLOCKED, role=ROLE)
+            )
             return False, f"job rejected: {exc}"
         self.runs += 1
         self.job = job
@@ -359,15 +367,15 @@ class InterpNode(ManagedNode):
         The profile node brings the axes to rest and the sim node closes the
         run aborted; events of other runs, or not JSON, change nothing."""
         try:
-            event = json.loads(msg.data)
-        except (json.JSONDecodeError, RecursionError):
+            event = ControlEvent.from_wire(msg.data)
+        except EventError:
             return
-        if not isinstance(event, dict) or event.get("event") != "abort" or self.job is None:
+        if event.kind is not EventKind.ABORT or self.job is None:
             return
-        if event.get("run_id") != self.run_id or self.aborted:
+        if event.run_id != self.run_id or self.aborted:
             return
-        steps = event.get("steps")
-        self.pending = self.up_to(steps) if isinstance(steps, int) else None
+        steps = event.steps
+        self.pending = self.up_to(steps) if steps is not None else None
         self.ended_wall = time.monotonic()
         self.operator_abort = True
         total = self.job.total_steps
@@ -441,16 +449,18 @@ class InterpNode(ManagedNode):
             return
         blocked = self.settings.blocked()
         if blocked:  # repeated, as a status is: late listeners hear it too
-            self.diag.publish("job", ERROR, blocked, status_values("blocked", role=ROLE))
+            self.diag.publish("job", ERROR, blocked, status_values(JobState.BLOCKED, role=ROLE))
             return
         if self.job is None:
-            self.diag.publish("job", OK, "idle: no job started", status_values("idle", role=ROLE))
+            self.diag.publish("job", OK, "idle: no job started", status_values(JobState.IDLE, role=ROLE))
             return
         total = self.job.total_steps
         ignored = self.ignores_abort()  # checked every second: reported once, as soon as it holds
-        state = "incomplete" if self.aborted else ("running" if self.running() else "done")
+        state = (
+            JobState.INCOMPLETE if self.aborted else (JobState.RUNNING if self.running() else JobState.DONE)
+        )
         if self.operator_abort:
-            state = "aborted"
+            state = JobState.ABORTED
         sending = "sending" if self.pending is not None else "all sent"
         self.diag.publish(
             "job",

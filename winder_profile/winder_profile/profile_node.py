@@ -39,6 +39,7 @@ import json
 import struct
 import time
 from collections import deque
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -55,7 +56,9 @@ from std_msgs.msg import Int32MultiArray, Int64MultiArray, String
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
+from winder.contract.events import ControlEvent
 from winder.contract.params import OPERATION_SPECS, PROFILE_SPECS, UNSHAPED, check_profile
+from winder.contract.states import EventKind, EventSource, JobState, ReadyState
 from winder.contract.stream import STEP_COLUMNS, TIMED_COLUMNS, JobPlan, StreamChecker, parse_job_description
 from winder.contract.topics import (
     TOPIC_CLOCK,
@@ -134,8 +137,8 @@ class ProfileNode(ManagedNode):
         # the 1 Hz report repeats both (and is the only timer)
         steady_timer(self, 1.0, self.report)
         self.create_service(Trigger, "~/resume", self.on_resume)
-        self.create_service(Trigger, "~/pause", lambda _q, r: self.reply(r, *self.command("pause")))
-        self.create_service(Trigger, "~/abort", lambda _q, r: self.reply(r, *self.command("abort")))
+        self.create_service(Trigger, "~/pause", lambda _q, r: self.reply(r, *self.command(EventKind.PAUSE)))
+        self.create_service(Trigger, "~/abort", lambda _q, r: self.reply(r, *self.command(EventKind.ABORT)))
         self.pub_control = self.create_publisher(String, TOPIC_CONTROL, QOS_EVENTS)
         attributed(self, String, TOPIC_SIM_CONFIG, self.on_sim_config_raw, QOS_LATCHED_READER)
         self.sim_config_topic = self.resolve_topic_name(TOPIC_SIM_CONFIG)
@@ -243,7 +246,7 @@ class ProfileNode(ManagedNode):
                 return
             values, source = self.settings.values(), "profile_node"
         try:
-            segments = job.job.segments()
+            segments = job.segments
             timing, duration_ns = plan_timing(
                 values,
                 [s.steps for s in segments],
@@ -287,9 +290,11 @@ class ProfileNode(ManagedNode):
             f"{duration_ns / 1e9:.3f} s"
         )
         override = self.settings.values()["feed_override"]
-        commands = [Command(0, "override", override)] if override != 1.0 else []
+        commands = [Command(0, EventKind.OVERRIDE, override)] if override != 1.0 else []
         for cmd in commands + parse_schedule(job.schedule):  # checked with the description
-            source = "schedule" if cmd.t_ns or cmd.kind != "override" else "setting"
+            source = (
+                EventSource.SCHEDULE if cmd.t_ns or cmd.kind != EventKind.OVERRIDE else EventSource.SETTING
+            )
             try:
                 self.publish_event(self.timeline.apply(cmd, source), cmd.t_ns)
             except CommandError as exc:
@@ -593,7 +598,7 @@ class ProfileNode(ManagedNode):
         resp.success, resp.message = ok, message
         return resp
 
-    def command(self, kind: str, value: float = 1.0) -> tuple[bool, str]:
+    def command(self, kind: EventKind, value: float = 1.0) -> tuple[bool, str]:
         """Apply an operator command to the running run now: in a real-time run
         at the later of the clock and the last step sent (within the
         look-ahead), otherwise after the last step sent. (ok, one line)."""
@@ -606,7 +611,7 @@ class ProfileNode(ManagedNode):
         if self.run_over():
             return self.in_tail(kind, plan)
         real_time = self.lookahead_ns is not None and self.t_now_ns >= 0
-        if real_time and kind == "resume":
+        if real_time and kind is EventKind.RESUME:
             # the consumer's clock ran on while it rested: the resume is timed from
             # where that clock is now, not from where it was last heard (the resumed
             # steps came behind it, and a sim node died of them: issue 40)
@@ -614,19 +619,19 @@ class ProfileNode(ManagedNode):
         else:
             t_req = self.t_now_ns if real_time else max(self.t_sent_ns, 0)
         t = max(self.t_sent_ns, t_req, 0)
-        if kind == "resume" and self.lookahead_ns is not None:
+        if kind is EventKind.RESUME and self.lookahead_ns is not None:
             t = max(t, t_req + self.lookahead_ns)  # the new steps reach the consumer before they are due
         try:
-            event = tl.apply(Command(t, kind, value))
+            effect = tl.apply(Command(t, kind, value))
         except CommandError as exc:
             return False, f"{kind} refused: {exc}"
-        self.publish_event(event, t_req)
-        rest = f"at rest after {event.get('steps')} steps at {event.get('t_rest_ns', 0) / 1e9:.6f} s"
+        event = self.publish_event(effect, t_req)
+        rest = f"at rest after {event.steps} steps at {(event.t_rest_ns or 0) / 1e9:.6f} s"
         what = {
-            "pause": f"pausing: {rest}",
-            "abort": f"aborting: {rest}",
-            "resume": f"resuming at {t / 1e9:.6f} s",
-            "override": f"feed override {value:g}: {event.get('note', '')}",
+            EventKind.PAUSE: f"pausing: {rest}",
+            EventKind.ABORT: f"aborting: {rest}",
+            EventKind.RESUME: f"resuming at {t / 1e9:.6f} s",
+            EventKind.OVERRIDE: f"feed override {value:g}: {event.note or ''}",
         }[kind]
         message = f"run {plan.run_id or plan.job_id}: {what}"
         self.get_logger().info(message)
@@ -634,7 +639,7 @@ class ProfileNode(ManagedNode):
         self.report()
         return True, message
 
-    def in_tail(self, kind: str, plan: JobPlan) -> tuple[bool, str]:
+    def in_tail(self, kind: EventKind, plan: JobPlan) -> tuple[bool, str]:
         """A command once every step of the run is sent. In a real-time run
         whose axes have not reached the last step yet (the consumer's clock,
         carried on by the wall time since it was heard), a pause or abort is
@@ -646,7 +651,7 @@ class ProfileNode(ManagedNode):
         if tl is not None and tl.aborted:
             return False, f"{kind} refused: run {run} is aborted already; its axes come to rest"
         now = self.clock_at_rest_ns()
-        if self.lookahead_ns is not None and now >= 0 and now < self.t_sent_ns and kind in ("pause", "abort"):
+        if self.lookahead_ns is not None and now >= 0 and now < self.t_sent_ns and kind.stops:
             left = (self.t_sent_ns - now) / 1e9
             message = (
                 f"run {run}: {kind}: every step is already sent (within the look-ahead): the axes "
@@ -658,27 +663,30 @@ class ProfileNode(ManagedNode):
             return False, f"{kind} refused: run {run} runs as fast as possible and every step is timed"
         return False, f"{kind} refused: run {run}'s axes are at its end: nothing left to {kind}"
 
-    def publish_event(self, event: dict[str, Any], t_request: int) -> None:
-        """An operator event on winder/control, with the run and the latency
-        from the request (simulated time) to the moment it takes effect."""
+    def publish_event(self, effect: dict[str, Any], t_request: int) -> ControlEvent:
+        """An operator event on winder/control: the time law's account of a
+        command (``effect``) with the run and the latency from the request
+        (simulated time) to the moment it takes effect. The event published."""
         assert self.plan is not None
-        doc = {"run_id": self.plan.run_id, "job_id": self.plan.job_id, **event}
-        doc["t_request_ns"] = t_request
-        doc["latency_ns"] = int(event["t_ns"]) - t_request
-        self.pub_control.publish(String(data=json.dumps(doc)))
+        event = ControlEvent.from_doc(
+            effect, run_id=self.plan.run_id, job_id=self.plan.job_id, t_request_ns=t_request
+        )
+        event = replace(event, latency_ns=event.t_ns - t_request)
+        self.pub_control.publish(String(data=event.to_wire()))
+        return event
 
     def on_settings_set(self, params: list[Parameter]) -> None:
         """A new feed_override acts on the run being timed at once."""
         for p in params:
             if p.name == "feed_override" and self.timeline is not None and not self.run_over():
-                ok, why = self.command("override", float(p.value))
+                ok, why = self.command(EventKind.OVERRIDE, float(p.value))
                 if not ok:
                     self.get_logger().warning(why)
 
     def on_resume(self, _req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:
         """Go on after a pause, or after a programmed stop that waits for a call."""
         if self.timeline is not None and self.timeline.paused and not self.timeline.aborted:
-            return self.reply(resp, *self.command("resume"))
+            return self.reply(resp, *self.command(EventKind.RESUME))
         if self.waiting_at is None or self.plan is None:
             why = "resume refused: not paused, not at a programmed stop: nothing to resume"
             return self.reply(resp, False, why)
@@ -716,9 +724,9 @@ class ProfileNode(ManagedNode):
     def fail(self, why: str) -> None:
         self.error = why
         self.get_logger().error(why)
-        self.diag.publish("job", ERROR, why, self.values("incomplete"))
+        self.diag.publish("job", ERROR, why, self.values(JobState.INCOMPLETE))
 
-    def values(self, state: str) -> dict[str, object]:
+    def values(self, state: JobState) -> dict[str, object]:
         """This node's job status values in ``state`` (the common keys first)."""
         if self.plan is None:
             return status_values(state, role=ROLE, profile=self.settings.values()["profile"])
@@ -738,18 +746,18 @@ class ProfileNode(ManagedNode):
     def announce(self) -> None:
         """winder/ready: ready once the steps' subscription is matched (see connect())."""
         if self.settings.blocked():
-            self.ready.announce("blocked")
+            self.ready.announce(ReadyState.BLOCKED)
         elif not self.active:
-            self.ready.announce("inactive")
+            self.ready.announce(ReadyState.INACTIVE)
         elif (
             self.sub_steps is not None
             and self.sub_steps.get_publisher_count() > 0
             and self.solo.settled()  # and it is the cell's only profile node
             and not self.peers.knows("interp", "consumer")  # it tells the cell's nodes from others
         ):
-            self.ready.announce("ready")
+            self.ready.announce(ReadyState.READY)
         else:
-            self.ready.announce("waiting")
+            self.ready.announce(ReadyState.WAITING)
 
     def report(self) -> None:
         self.release()  # steps waiting for the run's mode (MODE_WAIT) go out
@@ -758,22 +766,26 @@ class ProfileNode(ManagedNode):
         self.ready.repeat()
         blocked = self.settings.blocked()
         if blocked:
-            self.diag.publish("job", ERROR, blocked, self.values("blocked"))
+            self.diag.publish("job", ERROR, blocked, self.values(JobState.BLOCKED))
             return
         if self.plan is None:
             if self.error:
-                self.diag.publish("job", ERROR, self.error, self.values("incomplete"))
+                self.diag.publish("job", ERROR, self.error, self.values(JobState.INCOMPLETE))
             else:
-                self.diag.publish("job", OK, "idle: waiting for a job", self.values("idle"))
+                self.diag.publish("job", OK, "idle: waiting for a job", self.values(JobState.IDLE))
             return
         total = self.plan.total_steps
         level = ERROR if self.error else (WARN if self.checker and self.checker.gaps else OK)
-        state = "incomplete" if self.error else ("done" if self.timed >= total else "running")
+        state = (
+            JobState.INCOMPLETE
+            if self.error
+            else (JobState.DONE if self.timed >= total else JobState.RUNNING)
+        )
         tl = self.timeline
         if not self.error and tl is not None and tl.aborted:
-            state = "aborted" if self.run_over() else "aborting"
+            state = JobState.ABORTED if self.run_over() else JobState.ABORTING
         elif (self.waiting_at is not None or (tl is not None and tl.paused)) and not self.error:
-            state = "paused"
+            state = JobState.PAUSED
         self.diag.publish(
             "job",
             level,

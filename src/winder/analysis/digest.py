@@ -33,8 +33,9 @@ import numpy as np
 import numpy.typing as npt
 
 from winder.contract.eq7 import signed_path_distance, step_deviation
-from winder.contract.stream import JobPlan, SegmentPlan
+from winder.contract.stream import JobPlan
 from winder.motion.axes import AXES, FEED, FORK
+from winder.motion.job import Segment
 
 __all__ = [
     "END_STRIDES",
@@ -264,7 +265,7 @@ class LayerStats:
     only) the signed distance of every step within 1/16 turn of its middle."""
 
     segment: int
-    plan: SegmentPlan
+    plan: Segment
     scale: float  #: metres per unit of |F|
     turns: int
     per_rev: int

@@ -76,6 +76,7 @@ import numpy.typing as npt
 from winder.analysis.digest import STRIDE_TIME, Digest, SegmentKinematics, digest, turn_index
 from winder.contract.eq7 import layer_of_samples, sample_deviation
 from winder.contract.run import commands_text, shaper_text, stops_text
+from winder.contract.states import EventKind, JobState
 from winder.motion.axes import AXES, AXIS_TABLE, FEED, FORK
 from winder.motion.profile import LIMITS
 from winder.record.reader import Run
@@ -206,7 +207,7 @@ def _no_deviation(layers: list[LayerDeviation]) -> Deviation:
 def command_deviation(run: Run, digested: Digest | None = None) -> Deviation:
     """Eq. 7 of the commanded steps: every step row of every layer segment."""
     d = digested if digested is not None else digest_run(run)
-    segs = run.plan.job.segments()
+    segs = run.plan.segments
     stats = [s for s in d.layers.values() if s.points]
     layers = [
         LayerDeviation(s.segment, segs[s.segment].pole, segs[s.segment].layer, s.points, s.mean, s.max)
@@ -280,7 +281,6 @@ def axis_deviation(run: Run, digested: Digest | None = None) -> Deviation | None
     seg, x, y = winding_samples(run, d)
     every = sample_deviation(plan, seg, x, y)  # the sim node's live figure is the same function's
     dists, tids, layers = [], [], []
-    segs = plan.job.segments()
     for i in (int(v) for v in np.unique(seg)):
         m = seg == i
         s = plan.segments[i]
@@ -289,9 +289,7 @@ def axis_deviation(run: Run, digested: Digest | None = None) -> Deviation | None
         dists.append(dist)
         tids.append(turn_index(np.abs(yr), spr, abs(s.delta[FORK.index]) // spr))
         layers.append(
-            LayerDeviation(
-                i, segs[i].pole, segs[i].layer, int(dist.size), float(dist.mean()), float(dist.max())
-            )
+            LayerDeviation(i, s.pole, s.layer, int(dist.size), float(dist.mean()), float(dist.max()))
         )
     return _summarise(dists, tids, layers, plan.job.wire_diameter)
 
@@ -392,7 +390,7 @@ def rests(run: Run) -> list[tuple[int, int]]:
     return [
         (e["segment"], e["step"])
         for e in run.events
-        if e.get("event") in ("pause", "abort")
+        if e.get("event") in (EventKind.PAUSE, EventKind.ABORT)
         and isinstance(e.get("segment"), int)
         and isinstance(e.get("step"), int)
     ]
@@ -430,7 +428,7 @@ def analyze(run: Run, stride_time: float = STRIDE_TIME, digested: Digest | None 
         )
     for e in run.events:
         notes.append(_event_note(e))
-    if run.report.get("state") == "aborted" and run.closed and not run.damaged:
+    if run.report.get("state") == JobState.ABORTED and run.closed and not run.damaged:
         notes.append(
             f"run aborted: it ended at rest after {run.report.get('steps_done', '?')} steps; "
             "the figures cover those"
@@ -608,13 +606,13 @@ def _event_note(e: dict[str, Any]) -> str:
     """One line for an operator event of the run."""
     t = f"{e['t_ns'] / 1e9:.3f} s"
     kind = e.get("event", "?")
-    if kind in ("pause", "abort"):
+    if kind in (EventKind.PAUSE, EventKind.ABORT):
         return (
             f"operator {kind} at {t} ({e.get('source', 'call')}): at rest at "
             f"{e.get('t_rest_ns', e['t_ns']) / 1e9:.3f} s after {e.get('steps', '?')} steps, "
             f"stop distance {float(e.get('stop_distance', 0.0)):.1f} steps"
         )
-    if kind == "override":
+    if kind == EventKind.OVERRIDE:
         return f"operator feed override x{e.get('factor', '?')} at {t}: {e.get('note', '')}"
     return f"operator {kind} at {t}"
 
@@ -645,7 +643,7 @@ def _steps(a: Analysis) -> str:
         return text
     missing = a.stream.get("steps_missing", 0)
     why = [
-        "aborted at rest" if a.state == "aborted" else a.state or "no state",
+        "aborted at rest" if a.state == JobState.ABORTED else a.state or "no state",
         *([f"{missing} steps never arrived"] if missing else []),
     ]
     return f"{text} ({', '.join(why)})"

@@ -196,13 +196,13 @@ def as_wound(
     t = states.t
     feed = states.pos[:, 0]
     fork = states.pos[:, 1]
-    layer_segments = [s for s in job.segments() if s.kind.winds]
+    layer_segments = [s for s in run.plan.segments if s.kind.winds]
     ortho = getattr(job, "lay", "helical") == "orthocyclic"
     pitch = radial_pitch(d, "orthocyclic" if ortho else "helical")
     coil_start: dict[int, tuple[float, int]] = {}  # coil -> (start flange feed position m, direction)
     result = AsWound(wire_m=d, window_m=0.0, tolerance_m=tol)
     for seg in layer_segments:
-        n = job.layer_turns_of(seg.pole, seg.layer)
+        n = seg.turns
         if seg.pole not in coil_start:
             going = 1 if seg.delta[FEED.index] >= 0 else -1
             if ortho and seg.delta[FEED.index] == 0:  # a one-turn layer: the first crossover names the way

@@ -15,6 +15,7 @@ from typing import Any
 
 from winder.cli.common import UserError
 from winder.cli.exits import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK
+from winder.contract.states import FINAL_JOB_STATES
 from winder.errors import BadBagError, BadInputError
 
 __all__ = ["register"]
@@ -103,7 +104,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
 
 
 #: the job states a consumer's final report ends a run with
-FINAL_STATES = ("done", "aborted", "incomplete")
+FINAL_STATES = FINAL_JOB_STATES
 
 
 def _run_told(path: str) -> tuple[str, bool | None, int]:

@@ -21,6 +21,7 @@ from typing import Any
 
 from winder.cli.common import UserError
 from winder.cli.exits import EXIT_ABORTED, EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK
+from winder.contract.states import EventKind, JobState
 from winder.errors import BadInputError
 
 __all__ = ["register"]
@@ -90,11 +91,11 @@ def cmd_operate(args: argparse.Namespace) -> int:
 
     ns = _namespace(args)
     timeout = _timeout(args)
-    factor = OPERATION_SPECS["feed_override"].parse(args.value) if args.action == "override" else 0.0
+    factor = OPERATION_SPECS["feed_override"].parse(args.value) if args.action == EventKind.OVERRIDE else 0.0
 
     def body(ctl: Any) -> int:
         with ctl.Session(timeout) as session:  # its answer printed before the session closes
-            if args.action == "override":
+            if args.action == EventKind.OVERRIDE:
                 node = f"{ns}/profile_node"
                 ok, message = ctl.set_parameter(node, "feed_override", factor, session=session)
             else:
@@ -188,7 +189,11 @@ def _run_timeout(args: argparse.Namespace) -> float:
 
 
 #: a run's end states in the consumer's final report, and the exit status of each
-END_CODES = {"done": EXIT_OK, "aborted": EXIT_ABORTED, "incomplete": EXIT_FAILED}
+END_CODES: dict[str, int] = {
+    JobState.DONE: EXIT_OK,
+    JobState.ABORTED: EXIT_ABORTED,
+    JobState.INCOMPLETE: EXIT_FAILED,
+}
 
 
 def wait_for_end(
@@ -228,11 +233,11 @@ def wait_for_end(
             state = mine.get("state", "")
             if state in END_CODES:
                 print(f"run {run_id}: {state}" + (f", bag {mine['bag']}" if mine.get("bag") else ""))
-                if state != "done":
+                if state != JobState.DONE:
                     return _fail(args, f"run {run_id} ended {state}", END_CODES[state])
                 return EXIT_OK
         theirs = status("interp")
-        if theirs.get("state") in ("incomplete", "aborted") and not given_up:
+        if theirs.get("state") in (JobState.INCOMPLETE, JobState.ABORTED) and not given_up:
             given_up = now
         if given_up and now - given_up > 5.0:
             return _fail(

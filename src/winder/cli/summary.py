@@ -11,6 +11,7 @@ from typing import Any
 
 from winder.cli.exits import EXIT_ABORTED, EXIT_BAD_INPUT, EXIT_FAILED, EXIT_NODE_DIED, EXIT_OK
 from winder.contract.run import JobReport, commands_text, stops_text
+from winder.contract.states import JobState
 
 __all__ = ["report_run"]
 
@@ -92,7 +93,7 @@ def report_run(
         print(
             f"  WARNING stalls     {r.stalls}, the step stream stood still"
             + (f" up to {longest} s" if longest else "")
-            + (", nothing lost" if r.state == "done" and not r.steps_missing else "")
+            + (", nothing lost" if r.state == JobState.DONE and not r.steps_missing else "")
         )
     # the stops and commands come from the bag: read only when the run had some (reading a
     # large bag takes a while; the final report counts the operator's events)
@@ -111,7 +112,7 @@ def report_run(
     foreign = result.intruders if hasattr(result, "intruders") else x.get("intruders", "")
     if foreign:
         print(f"  ignored, foreign   {foreign}")
-    if r.state == "aborted" and not r.errors and not result.errors:
+    if r.state == JobState.ABORTED and not r.errors and not result.errors:
         print(f"winder {command}: {result.message}", file=sys.stderr)
         return EXIT_ABORTED
     if not result.ok or r.errors or result.errors:

@@ -336,17 +336,20 @@ def run_ramp(values: dict[str, Any]) -> dict[str, Any] | None:
 def stop_points(job: Job, text: str) -> list[tuple[int, int]]:
     """The programmed stops ``text`` (``"coil:turn,..."``) of ``job`` as
     (segment, step index) pairs, sorted: the axes come to rest after step k of
-    layer segment s, exactly where the fork completes the turn. SpecError (one
+    layer segment s, exactly where the fork completes the turn. Answered by
+    the job's segments (:class:`winder.motion.job.Segment`: the layer that
+    holds the coil's turn, and where in it the turn ends). SpecError (one
     line) for a coil or turn the job does not have, a stop given twice, or a
     stop inside a layer whose major axis is not the fork (its turns do not
     fall on step indices)."""
     out: list[tuple[int, int]] = []
-    spr = job.fork_steps_per_rev
     items = [t for t in text.replace(" ", "").split(",") if t]
     if not items:
         return []
-    layers = {(s.pole, s.layer): s for s in job.segments() if s.kind.winds}
-    turns_of: dict[int, list[int]] = {}  # per coil, its layers' turns
+    layers_of: dict[int, list[Segment]] = {}  # per coil (from 0), its layer segments in order
+    for s in job.segments():
+        if s.kind.winds:
+            layers_of.setdefault(s.pole, []).append(s)
     seen: dict[tuple[int, int], str] = {}
     for item in items:
         try:
@@ -360,10 +363,8 @@ def stop_points(job: Job, text: str) -> list[tuple[int, int]]:
                 f"stops={shorten(text)} is invalid: coil {coil} is not in [1, {job.poles}] (poles)"
             )
         wound = job.coil(coil - 1)
-        if coil not in turns_of:
-            turns_of[coil] = [job.layer_turns_of(coil - 1, layer) for layer in range(wound.layers)]
-        per_layer = turns_of[coil]
-        per_coil = sum(per_layer)
+        layers = layers_of.get(coil - 1, [])
+        per_coil = layers[-1].last_turn if layers else 0
         if not 1 <= turn <= per_coil:
             raise SpecError(
                 f"stops={shorten(text)} is invalid: turn {turn} of coil {coil} is not in [1, {per_coil}] "
@@ -375,30 +376,24 @@ def stop_points(job: Job, text: str) -> list[tuple[int, int]]:
                 f"{item}); each stop once"
             )
         seen[coil, turn] = item
-        layer, within = 0, turn - 1
-        while within >= per_layer[layer]:
-            within -= per_layer[layer]
-            layer += 1
-        seg = layers[coil - 1, layer]
-        if abs(seg.delta[FORK.index]) < abs(seg.delta[FEED.index]) and within + 1 < per_layer[layer]:
+        seg = next(s for s in layers if s.first_turn < turn <= s.last_turn)
+        within = turn - seg.first_turn  # the turn within its layer, from 1
+        if within < seg.turns and not seg.stops_inside:
             raise SpecError(
                 f"stops={shorten(text)} is invalid: turn {turn} ends inside a layer whose feed steps "
                 f"({abs(seg.delta[FEED.index])}) outnumber its fork steps: stop at a layer's end instead"
             )
-        # the layer's end (its last step, whichever axis leads, after the reversal dwell)
-        last = within + 1 == per_layer[layer]
-        out.append((seg.index, seg.steps if last else (within + 1) * spr))
+        # a turn's end; the layer's last: its end (its last step, whichever axis leads, after the dwell)
+        out.append((seg.index, seg.turn_end(within)))
     return sorted(out)
 
 
 def stop_place(job: Job, segment: Segment, k: int) -> tuple[int, int, int]:
     """(coil, layer, turn), from 1, of a programmed stop after step ``k`` of
     the layer ``segment``: the inverse of :func:`stop_points` (the turn is
-    counted over the coil's layers)."""
-    turns = job.layer_turns_of(segment.pole, segment.layer)
-    before = sum(job.layer_turns_of(segment.pole, layer) for layer in range(segment.layer))
-    within = turns if k == segment.steps else min(k // job.fork_steps_per_rev, turns)
-    return segment.pole + 1, segment.layer + 1, before + within
+    counted over the coil's layers: :meth:`Segment.turn_at`). ``job``: the
+    segment's (kept for the callers; the segment knows its turns)."""
+    return segment.pole + 1, segment.layer + 1, segment.turn_at(k)
 
 
 def check_interp(values: dict[str, Any], *, check_fit: bool = True, job: Job | None = None) -> None:

@@ -4,9 +4,10 @@ stops, the abort point, and the job report.
 Every step consumer (the simulator, a hardware driver: :class:`winder.ros.consumer.StepConsumer`)
 keeps the same books about the run it executes:
 
-* :class:`ControlEvent`: one operator event of ``winder/control`` (pause,
-  resume, abort, override), parsed and checked: :func:`parse_control` refuses
-  anything that is not a well-formed event, in one line.
+* :class:`ControlEvent` (:mod:`winder.contract.events`): one operator event
+  of ``winder/control`` (pause, resume, abort, override), read and checked
+  by :meth:`ControlEvent.from_wire`, which refuses anything that is not a
+  well-formed event, in one line.
 * :class:`RunLedger`: what the run has executed and what it must do next:
   the programmed stops met in the stream (:class:`ProgrammedStop`), the
   operator's pause (:class:`Hold`) and abort (:class:`AbortPoint`), and the
@@ -19,7 +20,6 @@ keeps the same books about the run it executes:
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field, fields
 from enum import Enum
@@ -28,10 +28,11 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from winder.contract.events import EVENT_KINDS, ControlEvent, EventError
 from winder.contract.params import stop_place
+from winder.contract.states import CellState, EventKind
 from winder.contract.stream import JobPlan
 from winder.contract.topics import PROCESS_KEYS, status_values
-from winder.errors import BadInputError
 
 __all__ = [
     "EVENT_KINDS",
@@ -45,89 +46,10 @@ __all__ = [
     "StopPhase",
     "Transition",
     "commands_text",
-    "parse_control",
     "shaper_text",
     "stops_text",
     "where_text",
 ]
-
-#: the operator events of ``winder/control``
-EVENT_KINDS = ("pause", "resume", "abort", "override")
-#: a control message longer than this is no event
-MAX_EVENT_BYTES = 4096
-
-
-class EventError(BadInputError):
-    """A ``winder/control`` message that is not an event of this run, or one
-    that contradicts what the run already did (one line, the reason)."""
-
-
-@dataclass(frozen=True)
-class ControlEvent:
-    """One operator event as the profile node publishes it when it takes
-    effect: ``t_ns`` when it takes effect, ``t_rest_ns`` when the axes are at
-    rest (pause, abort), ``steps`` the steps of the run up to that rest,
-    ``(segment, step)`` where the rest is, ``factor`` a feed override's."""
-
-    kind: str
-    run_id: str
-    t_ns: int
-    t_rest_ns: int
-    steps: int | None = None
-    segment: int = -1
-    step: int = 0
-    factor: float | None = None
-
-
-def _int(doc: dict[str, Any], key: str, default: int | None = None) -> int | None:
-    value = doc.get(key, default)
-    if value is None:
-        return None
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise EventError(f"{key}={value!r} is invalid: must be an integer")
-    return value
-
-
-def parse_control(text: str) -> ControlEvent:
-    """The event in a ``winder/control`` message's JSON text; EventError (one
-    line naming the key) for anything else."""
-    if len(text) > MAX_EVENT_BYTES:
-        raise EventError(f"a control message of {len(text)} bytes is no event (at most {MAX_EVENT_BYTES})")
-    try:
-        doc = json.loads(text)
-    except (ValueError, RecursionError) as exc:
-        raise EventError(f"not JSON: {exc}") from None
-    if not isinstance(doc, dict):
-        raise EventError("not a JSON object")
-    kind = doc.get("event")
-    if kind not in EVENT_KINDS:
-        raise EventError(f"event={kind!r} is invalid: must be one of {', '.join(EVENT_KINDS)}")
-    run_id = doc.get("run_id")
-    if not isinstance(run_id, str):
-        raise EventError(f"run_id={run_id!r} is invalid: must be a string")
-    t_ns = _int(doc, "t_ns")
-    if t_ns is None or t_ns < 0:
-        raise EventError(f"t_ns={doc.get('t_ns')!r} is invalid: must be an integer >= 0")
-    rest = _int(doc, "t_rest_ns", t_ns)
-    assert rest is not None
-    if rest < t_ns:
-        raise EventError(f"t_rest_ns={rest} is invalid: must be >= t_ns ({t_ns})")
-    steps = _int(doc, "steps")
-    if kind in ("pause", "abort") and (steps is None or steps < 0):
-        raise EventError(
-            f"steps={doc.get('steps')!r} is invalid: a {kind} names the steps up to its rest (>= 0)"
-        )
-    factor = doc.get("factor")
-    if kind == "override":
-        if isinstance(factor, bool) or not isinstance(factor, (int, float)) or not math.isfinite(factor):
-            raise EventError(f"factor={factor!r} is invalid: an override names a finite factor")
-        factor = float(factor)
-    else:
-        factor = None
-    segment = _int(doc, "segment", -1)
-    step = _int(doc, "step", 0)
-    assert segment is not None and step is not None
-    return ControlEvent(kind, run_id, t_ns, rest, steps, segment, step, factor)
 
 
 class StopPhase(str, Enum):
@@ -176,11 +98,14 @@ class Transition:
     reaches ``t_ns``; ``place`` is (coil, layer, turn) (0s where not known)."""
 
     t_ns: int
-    state: str  #: one of winder.contract.topics.CELL_STATES
+    state: CellState
     text: str
     place: tuple[int, int, int]
     #: a programmed stop's transition (its job status says which stop), else an operator's
     stop: str = ""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "state", CellState(self.state))
 
 
 @dataclass
@@ -198,8 +123,8 @@ class RunLedger:
     stops: list[ProgrammedStop] = field(default_factory=list)
     hold: Hold | None = None
     abort: AbortPoint | None = None
-    #: the operator state announced last ("" while running)
-    op_state: str = ""
+    #: the operator state announced last (None while running)
+    op_state: CellState | None = None
     #: operator events booked (pause, resume, abort, override)
     events: int = 0
     _pending: list[Transition] = field(default_factory=list)
@@ -207,7 +132,7 @@ class RunLedger:
 
     def __post_init__(self) -> None:
         if self.plan.stops:
-            segs = self.plan.job.segments()
+            segs = self.plan.segments
             self._places = {(g, k): stop_place(self.plan.job, segs[g], k) for g, k in self.plan.stops}
 
     # -- what came --------------------------------------------------------
@@ -256,7 +181,7 @@ class RunLedger:
         if event.run_id != self.plan.run_id:
             raise EventError(f"run_id={event.run_id!r} is not the running run {self.plan.run_id!r}")
         total = self.plan.total_steps
-        least = 0 if event.kind == "resume" else self.executed_steps
+        least = 0 if event.kind is EventKind.RESUME else self.executed_steps
         if event.steps is not None and not least <= event.steps <= total:
             raise EventError(
                 f"{event.kind} after steps={event.steps} is invalid: {self.executed_steps} steps are "
@@ -267,22 +192,24 @@ class RunLedger:
         where = self._where(event.segment, event.step)
         self.events += 1
         first: Transition | None = None
-        if event.kind == "pause":
+        if event.kind is EventKind.PAUSE:
             assert event.steps is not None
-            first = Transition(event.t_ns, "pausing", "pausing: braking to rest", where)
+            first = Transition(event.t_ns, CellState.PAUSING, "pausing: braking to rest", where)
             self._queue(
-                first, Transition(event.t_rest_ns, "paused", f"paused after {event.steps} steps", where)
+                first,
+                Transition(event.rest_ns, CellState.PAUSED, f"paused after {event.steps} steps", where),
             )
-            self.hold = Hold(event.t_rest_ns, event.steps)
-        elif event.kind == "resume":
-            first = Transition(event.t_ns, "running", "resumed", where)
+            self.hold = Hold(event.rest_ns, event.steps)
+        elif event.kind is EventKind.RESUME:
+            first = Transition(event.t_ns, CellState.RUNNING, "resumed", where)
             self._queue(first)
             self.hold = None
-        elif event.kind == "abort":
+        elif event.kind is EventKind.ABORT:
             assert event.steps is not None
-            first = Transition(event.t_ns, "aborting", f"aborting: at rest after {event.steps} steps", where)
+            text = f"aborting: at rest after {event.steps} steps"
+            first = Transition(event.t_ns, CellState.ABORTING, text, where)
             self._queue(first)
-            self.abort, self.hold = AbortPoint(event.t_rest_ns, event.steps), None
+            self.abort, self.hold = AbortPoint(event.rest_ns, event.steps), None
         return first
 
     def _queue(self, *ts: Transition) -> None:
@@ -292,7 +219,7 @@ class RunLedger:
     def _where(self, seg: int, step: int) -> tuple[int, int, int]:
         """(coil, layer, turn) of step ``step`` of segment ``seg``; the coil
         alone between layers; zeros if the segment is unknown."""
-        segs = self.plan.job.segments()
+        segs = self.plan.segments
         if not 0 <= seg < len(segs):
             return (0, 0, 0)
         if segs[seg].kind.winds:
@@ -309,7 +236,11 @@ class RunLedger:
                 p.phase = StopPhase.PAUSED
                 out.append(
                     Transition(
-                        p.t_stop_ns, "paused", f"paused at turn {p.label} (coil:turn)", p.place, p.label
+                        p.t_stop_ns,
+                        CellState.PAUSED,
+                        f"paused at turn {p.label} (coil:turn)",
+                        p.place,
+                        p.label,
                     )
                 )
             if p.phase is StopPhase.PAUSED and p.t_resume_ns is not None and p.t_resume_ns <= upto_ns:
@@ -317,7 +248,7 @@ class RunLedger:
                 out.append(
                     Transition(
                         p.t_resume_ns,
-                        "running",
+                        CellState.RUNNING,
                         f"resumed after the stop at turn {p.label}",
                         p.place,
                         p.label,
@@ -325,7 +256,7 @@ class RunLedger:
                 )
         while self._pending and self._pending[0].t_ns <= upto_ns:
             t = self._pending.pop(0)
-            self.op_state = "" if t.state == "running" else t.state
+            self.op_state = None if t.state is CellState.RUNNING else t.state
             out.append(t)
         out.sort(key=lambda t: t.t_ns)
         return out
@@ -477,7 +408,7 @@ def stops_text(plan: JobPlan) -> str:
     if it has none."""
     if not plan.stops:
         return ""
-    segs = plan.job.segments()
+    segs = plan.segments
     places = [stop_place(plan.job, segs[seg], step) for seg, step in plan.stops if 0 <= seg < len(segs)]
     labels = ", ".join(f"{coil}:{turn}" for coil, _, turn in places)
     goes_on = "auto" if plan.stop_resume == "auto" else "waits for a resume"
@@ -486,15 +417,15 @@ def stops_text(plan: JobPlan) -> str:
 
 def where_text(plan: JobPlan, seg: int, step: int) -> str:
     """Where step ``step`` of segment ``seg`` is: the coil and the turn into
-    it (fractional), or the coil alone between layers."""
-    segs = plan.job.segments()
+    it (fractional: the turns of its coil's layers before it and the fork's
+    turns into this one), or the coil alone between layers."""
+    segs = plan.segments
     if not 0 <= seg < len(segs):
         return ""
     s = segs[seg]
     if not s.kind.winds:
         return f"coil {s.pole + 1}, between layers"
-    turns = plan.job.coil(s.pole).turns_per_layer
-    return f"coil {s.pole + 1} turn {s.layer * turns + step / plan.job.fork_steps_per_rev:.2f}"
+    return f"coil {s.pole + 1} turn {s.first_turn + step / s.turn_steps:.2f}"
 
 
 def commands_text(events: list[dict[str, Any]] | tuple[dict[str, Any], ...], plan: JobPlan) -> str:
@@ -506,7 +437,7 @@ def commands_text(events: list[dict[str, Any]] | tuple[dict[str, Any], ...], pla
         kind = str(e.get("event", "?"))
         t = e.get("t_ns")
         at = f" at {t / 1e9:.3f} s" if isinstance(t, int) else ""
-        if kind in ("pause", "abort"):
+        if kind in (EventKind.PAUSE, EventKind.ABORT):
             rest = e.get("t_rest_ns", t)
             where = (
                 where_text(plan, e["segment"], e["step"])
@@ -515,7 +446,7 @@ def commands_text(events: list[dict[str, Any]] | tuple[dict[str, Any], ...], pla
             )
             detail = [f"at rest {rest / 1e9:.3f} s" if isinstance(rest, int) else "", where]
             told.append(f"{kind}{at} ({', '.join(d for d in detail if d)})")
-        elif kind == "override":
+        elif kind == EventKind.OVERRIDE:
             factor = e.get("factor")
             told.append(f"override x{factor:g}{at}" if isinstance(factor, (int, float)) else f"override{at}")
         else:

@@ -28,7 +28,7 @@ import numpy.typing as npt
 from winder.errors import BadInputError
 from winder.motion.axes import AXES
 from winder.motion.interp import interpolate_pieces, pieces_mismatch
-from winder.motion.job import Job, SegmentKind
+from winder.motion.job import Job, Segment
 from winder.spec import interval
 
 __all__ = [
@@ -114,29 +114,20 @@ def describe_job(
     return json.dumps(doc, separators=(",", ":"))
 
 
-@dataclass(frozen=True)
-class SegmentPlan:
-    kind: SegmentKind
-    start: tuple[int, ...]
-    delta: tuple[int, ...]
-    steps: int
-    major: int  #: index of the axis with the most steps
-    #: the straight pieces of the move (a layer laid by a cam), else (delta,)
-    pieces: tuple[tuple[int, ...], ...] = ()
-
-    @property
-    def end(self) -> tuple[int, ...]:
-        return tuple(a + b for a, b in zip(self.start, self.delta, strict=True))
+#: the segments of a job plan are its job's own :class:`winder.motion.job.Segment`
+#: records (this name: the plan's segment type before there was one type)
+SegmentPlan = Segment
 
 
 @dataclass(frozen=True)
 class JobPlan:
-    """A parsed job description."""
+    """A parsed job description. ``segments``: its job's, laid out once
+    (:meth:`Job.segments`, the same tuple)."""
 
     job: Job
     joint_step: tuple[float, ...]
     step_lengths: tuple[float, ...]
-    segments: tuple[SegmentPlan, ...]
+    segments: tuple[Segment, ...]
     total_steps: int
     text: str = field(repr=False)
     run_id: str = ""  #: the run this job description started ("" in bags before run ids)
@@ -201,7 +192,6 @@ def parse_job_description(text: str) -> JobPlan:
     listed = _expect(doc, "segments", list, "a list of segments")
     if len(listed) != len(expected):
         raise BadInputError(f"job description lists {len(listed)} segments, its job has {len(expected)}")
-    segs = []
     for e, s in zip(expected, listed, strict=True):
         if not isinstance(s, dict) or (s.get("kind"), s.get("start"), s.get("delta"), s.get("steps")) != (
             e.kind,
@@ -210,8 +200,6 @@ def parse_job_description(text: str) -> JobPlan:
             e.steps,
         ):
             raise BadInputError(f"job description: segment {e.index} does not match its job fields")
-        major = int(np.argmax(np.abs(e.delta)))
-        segs.append(SegmentPlan(e.kind, tuple(e.start), tuple(e.delta), e.steps, major, e.pieces))
     stops, stop_pause = _stops(doc, expected)
     stop_resume = doc.get("stop_resume", "auto")
     if stop_resume not in ("auto", "call"):
@@ -249,7 +237,7 @@ def parse_job_description(text: str) -> JobPlan:
         job=job,
         joint_step=tuple(job.joint_step),
         step_lengths=tuple(job.step_lengths),
-        segments=tuple(segs),
+        segments=expected,
         total_steps=total,
         text=text,
         run_id=run_id,
@@ -289,7 +277,7 @@ def with_source(text: str, run_id: str, bag: str) -> str:
     return json.dumps(doc, separators=(",", ":"))
 
 
-def _stops(doc: dict[str, Any], segments: list[Any]) -> tuple[tuple[tuple[int, int], ...], float]:
+def _stops(doc: dict[str, Any], segments: Sequence[Segment]) -> tuple[tuple[tuple[int, int], ...], float]:
     """The programmed stops of a job description, checked against its segments."""
     listed = doc.get("stops", [])
     pause = doc.get("stop_pause", 0.0)

@@ -15,6 +15,7 @@ from __future__ import annotations
 import re
 from collections.abc import Collection, Mapping, Sequence
 
+from winder.contract.states import CellState, JobState, ReadyState
 from winder.errors import BadInputError
 from winder.spec import shorten
 
@@ -34,7 +35,7 @@ TOPIC_STATE = "winder/state"
 #: idle, running, pausing (braking for a pause), paused (at rest: a pause or a
 #: programmed stop), aborting (braking for an abort), done, aborted (ended at
 #: rest by an abort), failed (ended incomplete otherwise)
-CELL_STATES = ("idle", "running", "pausing", "paused", "aborting", "done", "aborted", "failed")
+CELL_STATES = tuple(CellState)
 CELL_STATE_KEYS = ("state", "job_id", "run_id", "coil", "layer", "turn", "sim_time_s")
 TOPIC_DIAGNOSTICS = "/diagnostics"
 #: Operator commands as they take effect (std_msgs/String, JSON, reliable,
@@ -201,7 +202,7 @@ def check_relative_name(option: str, value: str, namespace: str = "", suffixes: 
 #: for 3 s no longer counts (its node is gone).
 TOPIC_READY = "winder/ready"
 READY_ROLES = ("consumer", "profile")
-READY_STATES = ("ready", "waiting", "busy", "blocked", "inactive")
+READY_STATES = tuple(ReadyState)
 
 
 #: The keys every node's ``"<node>: job"`` status carries, in every state, so
@@ -235,9 +236,7 @@ LEGACY_NAMES = {"interp": "interp_node", "profile": "profile_node", "consumer": 
 #: it was ended by an abort, the axes at rest; incomplete: it ended short
 #: otherwise (stalled for good, cut off...); blocked: the node's settings are
 #: refused, it takes no run
-JOB_STATES = (
-    "idle", "running", "pausing", "paused", "aborting", "stalled", "done", "aborted", "incomplete", "blocked",
-)  # fmt: skip
+JOB_STATES = tuple(JobState)
 
 
 def status_values(

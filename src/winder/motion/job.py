@@ -27,6 +27,7 @@ start to (feed distance, flyer arc length) in the plane: the segment that
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping
 from dataclasses import InitVar, dataclass, fields, replace
@@ -311,18 +312,30 @@ class SegmentKind(StrEnum):
 
 @dataclass(frozen=True)
 class Segment:
-    """One straight move in steps: ``start`` + ``delta`` per axis (AXES order)."""
+    """One move of a job, in steps: ``start`` + ``delta`` per axis (AXES
+    order), and where it is in the winding: its coil (``pole``), layer and
+    turns. The one record of a segment every node, the bag's reader and the
+    analysis use (:attr:`Job.segments`; a job description's plan holds the
+    same records). It answers what its callers ask: its turns, its fork
+    range, whether the axes may stop inside it and after which step each of
+    its turns ends (:meth:`turn_end`, :meth:`turn_at`)."""
 
     index: int
     kind: SegmentKind
     start: tuple[int, int, int]
     delta: tuple[int, int, int]
-    pole: int  #: coil being wound (or indexed to)
-    layer: int  #: layer within the coil (-1 for an index move)
+    pole: int  #: coil being wound (or indexed to), from 0
+    layer: int  #: layer within the coil, from 0 (-1 for an index move)
     #: a layer laid by a cam of the flyer (orthocyclic, or with a reversal
     #: dwell): its straight pieces, each a delta in steps (AXES order), the
     #: fork the major axis of each, summing to ``delta``; () for one straight move
     cam: tuple[tuple[int, int, int], ...] = ()
+    turns: int = 0  #: turns laid in it (0 for an index move)
+    #: turns of its coil laid before it (its coil's earlier layers): its
+    #: first turn is turn ``first_turn + 1`` of the coil
+    first_turn: int = 0
+    #: fork steps of one turn (the job's ``fork_steps_per_rev``; 0 for an index move)
+    turn_steps: int = 0
 
     @property
     def pieces(self) -> tuple[tuple[int, int, int], ...]:
@@ -337,6 +350,65 @@ class Segment:
     def steps(self) -> int:
         """Number of interpolation steps: the major axis' step count."""
         return max(abs(d) for d in self.delta)
+
+    @property
+    def major(self) -> int:
+        """Index of the axis with the most steps (the first of equals): the
+        step index counts its steps."""
+        return max(range(len(self.delta)), key=lambda i: abs(self.delta[i]))
+
+    @property
+    def fork_range(self) -> tuple[int, int]:
+        """The fork positions (steps) it spans, low and high: the flyer turns
+        one way through a segment."""
+        a, b = self.start[FORK.index], self.start[FORK.index] + self.delta[FORK.index]
+        return (a, b) if a <= b else (b, a)
+
+    @property
+    def last_turn(self) -> int:
+        """The coil's turn (from 1) its last turn is; ``first_turn`` for an index move."""
+        return self.first_turn + self.turns
+
+    @property
+    def stops_inside(self) -> bool:
+        """Whether the axes may stop inside it at a turn's end: a layer whose
+        every step is a fork step (the fork its major axis), so each of its
+        turns ends on a step index. Any segment may stop at its end."""
+        return self.kind.winds and abs(self.delta[FORK.index]) >= abs(self.delta[FEED.index])
+
+    def turn_end(self, turn: int) -> int:
+        """The step index after which its turn ``turn`` (from 1, counted
+        within the segment) is complete: the fork at the turn's end; the
+        segment's last step (after the reversal dwell) for its last turn.
+        ValueError for a turn it does not have, or one inside a layer that
+        may not stop inside (:attr:`stops_inside`)."""
+        if not 1 <= turn <= self.turns:
+            raise ValueError(f"segment {self.index} has turns 1..{self.turns}, not {turn}")
+        if turn == self.turns:
+            return self.steps
+        if not self.stops_inside:
+            raise ValueError(f"segment {self.index}: its turns do not end on step indices")
+        return turn * self.turn_steps
+
+    @property
+    def stop_points(self) -> tuple[int, ...]:
+        """The step indices the axes may stop after within it, each the end
+        of one of its turns (:meth:`turn_end`), ascending: every turn's end in
+        a layer that may stop inside, else its end alone; () for an index move."""
+        if not self.kind.winds or self.turns < 1:
+            return ()
+        if not self.stops_inside:
+            return (self.steps,)
+        return tuple(self.turn_end(t) for t in range(1, self.turns + 1))
+
+    def turn_at(self, k: int) -> int:
+        """The coil's turn (from 1; 0 before its first) completed after step
+        ``k`` of this layer: the inverse of :meth:`turn_end` over the coil's
+        turns; ``first_turn`` for an index move."""
+        if not self.kind.winds:
+            return self.first_turn
+        within = self.turns if k >= self.steps else min(max(k, 0) // self.turn_steps, self.turns)
+        return self.first_turn + within
 
 
 @dataclass(frozen=True)
@@ -650,16 +722,19 @@ class Job:
         last index lands exactly on a full revolution)."""
         return round(pole * self.pole_steps_per_rev / self.poles)
 
-    def segments(self) -> list[Segment]:
+    def segments(self) -> tuple[Segment, ...]:
         """The ordered moves of the job, in steps: per coil its layers (each a
         straight line, or a cam of the flyer: :meth:`layer_cam`), and the
         pole index between coils. Laid out once per job (a job does not
-        change): each call returns a new list of the same segments."""
-        made: tuple[Segment, ...] | None = getattr(self, "_segments", None)
-        if made is None:
-            made = tuple(self._lay_out())
-            object.__setattr__(self, "_segments", made)
-        return list(made)
+        change): every call returns the same tuple."""
+        return self._laid_out
+
+    @functools.cached_property
+    def _laid_out(self) -> tuple[Segment, ...]:
+        # a frozen dataclass: cached_property stores in the instance's
+        # __dict__ past the frozen __setattr__; not a field, so neither
+        # compared, hashed nor copied by dataclasses.replace
+        return tuple(self._lay_out())
 
     def _lay_out(self) -> list[Segment]:
         out: list[Segment] = []
@@ -672,13 +747,27 @@ class Job:
                 pos[POLE.index] += delta[POLE.index]
             coil = self.coil(pole)
             origin, first = pos[0], direction
+            before = 0  # turns of this coil laid before the layer
             for layer in range(coil.layers):
                 cam = self.layer_cam(pole, layer, origin, first, pos[0])
                 net = (sum(p[0] for p in cam), sum(p[1] for p in cam), 0)
                 begin = (pos[0], pos[1], pos[2])
+                turns = self.layer_turns_of(pole, layer)
                 out.append(
-                    Segment(len(out), SegmentKind.LAYER, begin, net, pole, layer, cam if len(cam) > 1 else ())
+                    Segment(
+                        len(out),
+                        SegmentKind.LAYER,
+                        begin,
+                        net,
+                        pole,
+                        layer,
+                        cam if len(cam) > 1 else (),
+                        turns=turns,
+                        first_turn=before,
+                        turn_steps=self.fork_steps_per_rev,
+                    )
                 )
+                before += turns
                 delta = net
                 pos[FEED.index] += delta[FEED.index]
                 pos[FORK.index] += delta[FORK.index]
@@ -784,8 +873,9 @@ class Job:
         on the first layer of every coil, else 1."""
         return self.first_layer_speed if segment.kind.winds and segment.layer == 0 else 1.0
 
-    @property
+    @functools.cached_property
     def total_steps(self) -> int:
+        """Steps of the whole job (its segments' steps), counted once."""
         return sum(s.steps for s in self.segments())
 
     def to_dict(self) -> dict[str, Any]:

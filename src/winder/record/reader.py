@@ -40,6 +40,7 @@ import numpy as np
 import numpy.typing as npt
 
 from winder.contract.cdr import joint_state_names
+from winder.contract.states import JobState
 from winder.contract.stream import TIMED_COLUMNS, JobPlan, parse_job_description
 from winder.contract.topics import (
     TOPIC_CONTROL,
@@ -269,7 +270,7 @@ class Run:
 
     @property
     def complete(self) -> bool:
-        return self.closed and not self.damaged and self.report.get("state") == "done"
+        return self.closed and not self.damaged and self.report.get("state") == JobState.DONE
 
     @property
     def steps(self) -> IntArray:

@@ -39,6 +39,7 @@ from std_srvs.srv import Trigger
 
 from winder.contract.jobfile import ros_text
 from winder.contract.run import JobReport
+from winder.contract.states import FINAL_JOB_STATES, JobState
 from winder.contract.topics import ROLE_KEY, ROLES, TASK_JOB, TOPIC_DIAGNOSTICS, has_role, in_namespace
 from winder.contract.trust import without_senders
 from winder.errors import BadInputError
@@ -385,7 +386,7 @@ class CellWatch:
             if consumer and values.get("run_id") and values["run_id"] == self.run_id:
                 self.progress = float(values.get("progress", 0.0))
                 self.sim_time = values.get("sim_time_s", "0")
-                if values.get("state") in ("done", "aborted", "incomplete"):
+                if values.get("state") in FINAL_JOB_STATES:
                     self.summary = values
                     self.message = st.message
             elif st.level == bytes([ERROR]) and in_namespace(st.name, self.ns):
@@ -643,7 +644,7 @@ def _result(watch: CellWatch, failure: str, log_dir: Path) -> CellResult:
     result = CellResult(False, message=failure, log_dir=log_dir, node_died=isinstance(failure, NodeExit))
     if watch.summary is not None:
         result.summary = watch.summary
-        result.ok = watch.summary.get("state") == "done"
+        result.ok = watch.summary.get("state") == JobState.DONE
         result.message = watch.message
     result.errors = list(watch.errors)
     result.occupied = bool(watch.occupied) and watch.summary is None

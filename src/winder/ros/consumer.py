@@ -74,7 +74,8 @@ from trajectory_msgs.msg import JointTrajectory
 
 from winder.contract.pacing import LateSteps
 from winder.contract.params import bag_directory
-from winder.contract.run import EventError, JobReport, RunLedger, Transition, parse_control
+from winder.contract.run import ControlEvent, EventError, JobReport, RunLedger, Transition
+from winder.contract.states import CellState, EventKind, JobState, ReadyState
 from winder.contract.stream import TIMED_COLUMNS, JobPlan, StreamChecker, parse_job_description
 from winder.contract.topics import (
     TOPIC_CONTROL,
@@ -220,10 +221,10 @@ class StepConsumer(ManagedNode):
         self.profile_raw: bytes | None = None
         self.last_report: JobReport | None = None
         self.last_level, self.last_text = OK, ""
-        self.cell_state("idle", "no job yet")
+        self.cell_state(CellState.IDLE, "no job yet")
         if self.settings.blocked():
             self.diag.publish(
-                "job", ERROR, str(self.settings.blocked()), status_values("blocked", role="consumer")
+                "job", ERROR, str(self.settings.blocked()), status_values(JobState.BLOCKED, role="consumer")
             )
         else:
             self.check_bag_dir()
@@ -426,7 +427,7 @@ class StepConsumer(ManagedNode):
             f"run {plan.run_id or '-'}: job {plan.job_id}, {plan.total_steps} steps"
             + (f", recording to {self.bag.path}" if self.bag else "")
         )
-        self.cell_state("running", f"run {plan.run_id or plan.job_id} started", where=(1, 1, 0))
+        self.cell_state(CellState.RUNNING, f"run {plan.run_id or plan.job_id} started", where=(1, 1, 0))
         self.report()  # the run is on: its status at once, not at the next second
         events, self.early_events = list(self.early_events), deque(maxlen=100)
         for event in events:  # the run's own events that came before its description; others dropped
@@ -549,7 +550,7 @@ class StepConsumer(ManagedNode):
         run not started here yet are kept for it; anything that does not
         parse, or contradicts the run, changes nothing (reported once)."""
         try:
-            event = parse_control(deserialize_message(raw, String).data)
+            event = ControlEvent.from_wire(deserialize_message(raw, String).data)
         except Exception:  # EventError, or not even a String: no event to act on
             return
         if self.plan is None or self.ledger is None or event.run_id != self.plan.run_id:
@@ -566,7 +567,7 @@ class StepConsumer(ManagedNode):
                 self.get_logger().warning(f"winder/control: event refused: {exc}")
             return
         self.record("control", self.t_ns, raw)  # when it was heard; its own times are inside
-        if event.kind == "override":
+        if event.kind is EventKind.OVERRIDE:
             self.get_logger().info(f"feed override {event.factor} from {event.t_ns / 1e9:.6f} s")
 
     def take_control(self) -> None:
@@ -721,8 +722,7 @@ class StepConsumer(ManagedNode):
             self.cell_state(t.state, f"run {self.plan.run_id}: {t.text}", where=t.place, t_ns=t.t_ns)
             return
         self.cell_state(t.state, t.text, where=t.place, t_ns=t.t_ns)
-        values = self.job_report("running").to_values()
-        values["state"] = t.state
+        values = self.job_report(JobState(t.state)).to_values()
         values["stop"] = t.stop
         self.publish_status("job", OK, f"run {self.plan.run_id}: {t.text}", values, t_ns=t.t_ns)
 
@@ -732,7 +732,7 @@ class StepConsumer(ManagedNode):
         return self.ledger is not None and self.ledger.at_rest and not self.finishing
 
     # -- reports ------------------------------------------------------------------
-    def job_report(self, state: str) -> JobReport:
+    def job_report(self, state: JobState) -> JobReport:
         assert self.plan is not None and self.checker is not None
         return JobReport(
             state,
@@ -779,7 +779,9 @@ class StepConsumer(ManagedNode):
             self.ledger.missing_steps = self.checker.missing
         aborted = self.aborted()
         complete = complete and not self.record_failure and not aborted
-        report = self.job_report("done" if complete else ("aborted" if aborted else "incomplete"))
+        report = self.job_report(
+            JobState.DONE if complete else (JobState.ABORTED if aborted else JobState.INCOMPLETE)
+        )
         faults = self.faults()
         ok = (complete or aborted) and not self.errors and not faults
         level = OK if ok else (WARN if complete or aborted else ERROR)
@@ -813,9 +815,15 @@ class StepConsumer(ManagedNode):
         assert self.plan is not None
         report, level, text = self.final_report(complete)
         job = self.plan.job
-        ended = {"done": "done", "aborted": "aborted"}.get(report.state, "failed")
+        ended = {JobState.DONE: CellState.DONE, JobState.ABORTED: CellState.ABORTED}.get(
+            JobState(report.state), CellState.FAILED
+        )
         final_coil = job.coil(job.poles - 1)
-        last = (job.poles, final_coil.layers, job.turns_of(job.poles - 1)) if ended == "done" else (0, 0, 0)
+        last = (
+            (job.poles, final_coil.layers, job.turns_of(job.poles - 1))
+            if ended is CellState.DONE
+            else (0, 0, 0)
+        )
         self.cell_state(ended, text, where=last)
         final = self.diag.status("job", level, text, report.to_values())
         if self.bag is not None:
@@ -840,7 +848,7 @@ class StepConsumer(ManagedNode):
             self.diag.pub.publish(final)
 
     def cell_state(
-        self, state: str, text: str, where: tuple[int, int, int] = (0, 0, 0), t_ns: int | None = None
+        self, state: CellState, text: str, where: tuple[int, int, int] = (0, 0, 0), t_ns: int | None = None
     ) -> None:
         """winder/state: the cell's state at a transition, latched, and into the bag."""
         plan = self.plan
@@ -856,7 +864,7 @@ class StepConsumer(ManagedNode):
             "sim_time_s": f"{t / 1e9:.6f}",
         }
         msg = DiagnosticStatus(
-            level=bytes([ERROR if state == "failed" else OK]),
+            level=bytes([ERROR if state == CellState.FAILED else OK]),
             name=f"{self.get_fully_qualified_name().lstrip('/')}: state",
             message=text,
             hardware_id=self.hardware_id,
@@ -1006,16 +1014,16 @@ class StepConsumer(ManagedNode):
         matched, so neither the run's description nor a chunk of it can go
         out before this node hears it."""
         if self.plan is not None:
-            state = "busy"
+            state = ReadyState.BUSY
         elif self.settings.blocked():
-            state = "blocked"
+            state = ReadyState.BLOCKED
         elif not self.active:
-            state = "inactive"
+            state = ReadyState.INACTIVE
         else:
             heard = self.sub_times.get_publisher_count() > 0 and self.sub_job.get_publisher_count() > 0
             # and it can tell the cell's own interp and profile node from anyone else
             known = heard and self.solo.settled() and not self.peers.knows("interp", "profile")
-            state = "ready" if known and not self.missing() else "waiting"
+            state = ReadyState.READY if known and not self.missing() else ReadyState.WAITING
         self.ready.announce(state)
 
     def report(self) -> None:
@@ -1027,13 +1035,17 @@ class StepConsumer(ManagedNode):
                 self.diag.publish("job", self.last_level, self.last_text, self.last_report.to_values())
             else:
                 why = self.settings.blocked()
-                values = status_values("blocked" if why else "idle", role="consumer")
+                values = status_values(JobState.BLOCKED if why else JobState.IDLE, role="consumer")
                 self.diag.publish("job", ERROR if why else OK, why or "idle: waiting for a job", values)
             return
         self.receipt()
-        state = "stalled" if self.stalled else ("paused" if self.ledger.at_stop else "running")
-        if self.ledger.op_state and not self.stalled:
-            state = self.ledger.op_state
+        state = (
+            JobState.STALLED
+            if self.stalled
+            else (JobState.PAUSED if self.ledger.at_stop else JobState.RUNNING)
+        )
+        if self.ledger.op_state is not None and not self.stalled:
+            state = JobState(self.ledger.op_state)
         self.publish_status(
             "job",
             self.stall_level() if self.stalled else OK,

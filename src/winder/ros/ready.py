@@ -19,6 +19,7 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 
+from winder.contract.states import ReadyState
 from winder.contract.topics import READY_ROLES, READY_STATES, TOPIC_READY
 from winder.ros.peers import Peers
 from winder.ros.qos import QOS_LATCHED, QOS_LATCHED_READER
@@ -50,7 +51,7 @@ class Announcer:
         assert role in READY_ROLES
         self.role = role
         self.pub = node.create_publisher(KeyValue, TOPIC_READY, QOS_LATCHED)
-        self.state = ""
+        self.state: ReadyState | None = None
         self.timer = self.slow_timer = None
         self.waiting_since = 0.0
         if recheck is not None:
@@ -67,23 +68,24 @@ class Announcer:
                 self.slow_timer.reset()
         self.recheck()
 
-    def announce(self, state: str) -> None:
+    def announce(self, state: ReadyState | str) -> None:
         assert state in READY_STATES
+        state = ReadyState(state)
         if state != self.state:
             self.state = state
             self.pub.publish(KeyValue(key=self.role, value=state))
         if self.timer is None or self.slow_timer is None:
             return
         looking = not (self.timer.is_canceled() and self.slow_timer.is_canceled())
-        if state == "waiting" and not looking:
+        if state is ReadyState.WAITING and not looking:
             self.waiting_since = time.monotonic()
             self.timer.reset()
-        elif state != "waiting" and looking:
+        elif state is not ReadyState.WAITING and looking:
             self.timer.cancel()
             self.slow_timer.cancel()
 
     def repeat(self) -> None:
-        if self.state:
+        if self.state is not None:
             self.pub.publish(KeyValue(key=self.role, value=self.state))
 
 
@@ -103,7 +105,7 @@ class Readiness:
         self, node: Node, on_change: Callable[[], None] | None = None, peers: Peers | None = None
     ) -> None:
         self.node = node
-        self.states: dict[str, str] = {}
+        self.states: dict[str, ReadyState] = {}
         self.heard: dict[str, float] = {}  # role -> monotonic time of its last announcement
         self.on_change = on_change
         # an announcement counts only from the cell's node in the role it names
@@ -138,7 +140,7 @@ class Readiness:
         fresh = time.monotonic() - self.heard.get(msg.key, -math.inf) <= FRESH
         self.heard[msg.key] = time.monotonic()
         if self.states.get(msg.key) != msg.value or not fresh:
-            self.states[msg.key] = msg.value
+            self.states[msg.key] = ReadyState(msg.value)
             if self.on_change is not None:
                 self.on_change()
 
@@ -154,7 +156,9 @@ class Readiness:
                 waiting.append(f"{r} not heard from")
             elif silent > FRESH:
                 waiting.append(f"{r} silent for {silent:.1f} s")
-            elif self.states[r] != "ready" and not (r in excused and self.states[r] == "busy"):
+            elif self.states[r] is not ReadyState.READY and not (
+                r in excused and self.states[r] is ReadyState.BUSY
+            ):
                 waiting.append(f"{r} {self.states[r]}")
             else:
                 # a node killed and started again: until the dead process's endpoints leave the

@@ -30,6 +30,7 @@ from std_msgs.msg import Int32MultiArray, Int64MultiArray, String
 from trajectory_msgs.msg import JointTrajectory
 
 from winder.contract.qos import EVENTS, LATCHED, STATE, STREAM
+from winder.contract.states import ReadyState
 from winder.contract.stream import RESIM_TAG, make_run_id, with_source
 from winder.contract.topics import (
     READY_STATES,
@@ -143,7 +144,7 @@ def resimulate(
                 # description and the steps go to volatile readers, which get only what is sent
                 # after this side's writers have matched them in turn: waited for too
                 return (
-                    ready.get("consumer") == "ready"
+                    ready.get("consumer") == ReadyState.READY
                     and pub_job.get_subscription_count() > 0
                     and pub_steps.get_subscription_count() > 0
                 )

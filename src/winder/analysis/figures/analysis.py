@@ -61,6 +61,7 @@ from winder.analysis.metrics import Analysis, digest_run, paired_error
 from winder.contract.eq7 import layer_of_samples, sample_deviation, signed_path_distance
 from winder.contract.files import OutputError, atomic_file, output_dir
 from winder.contract.run import shaper_text, where_text
+from winder.contract.states import EventKind, JobState
 from winder.contract.stream import JobPlan
 from winder.motion.axes import AXES, AXIS_TABLE, FEED, FORK
 from winder.record.reader import Run
@@ -320,8 +321,8 @@ def _ending(run: Run) -> str:
     where the axes came to rest), cut short, or incomplete."""
     if run.complete:
         return "complete"
-    abort = next((e for e in reversed(run.events) if e.get("event") == "abort"), None)
-    if run.report.get("state") == "aborted" and abort is not None:
+    abort = next((e for e in reversed(run.events) if e.get("event") == EventKind.ABORT), None)
+    if run.report.get("state") == JobState.ABORTED and abort is not None:
         rest = abort.get("t_rest_ns", abort["t_ns"]) / 1e9
         seg, step = abort.get("segment"), abort.get("step")
         where = where_text(run.plan, seg, step) if isinstance(seg, int) and isinstance(step, int) else ""
@@ -369,18 +370,18 @@ def _mark_events(ax: Axes, run: Run, label: bool) -> None:
     for e in run.events:
         t = e["t_ns"] / 1e9
         kind = e.get("event")
-        if kind in ("pause", "abort"):
-            color = "black" if kind == "pause" else "tab:red"
+        if kind in (EventKind.PAUSE, EventKind.ABORT):
+            color = "black" if kind == EventKind.PAUSE else "tab:red"
             ax.axvline(t, color=color, lw=1.0, label=once(f"{kind} takes effect"), gid=BACKGROUND)
             ax.axvline(e.get("t_rest_ns", e["t_ns"]) / 1e9, color=color, lw=0.8, ls=":",
                        label=once(f"{kind}: at rest"), gid=BACKGROUND)  # fmt: skip
-            pause = e if kind == "pause" else None
-        elif kind == "resume":
+            pause = e if kind == EventKind.PAUSE else None
+        elif kind == EventKind.RESUME:
             ax.axvline(t, color="tab:green", lw=1.0, label=once("resume"), gid=BACKGROUND)
             if pause is not None:
                 ax.axvspan(pause["t_ns"] / 1e9, t, color="tab:gray", alpha=0.12, gid=BACKGROUND)
             pause = None
-        elif kind == "override":
+        elif kind == EventKind.OVERRIDE:
             name = once(f"override x{e.get('factor', 1.0):g}")
             ax.axvline(t, color="tab:purple", lw=1.0, ls="--", label=name, gid=BACKGROUND)
     if pause is not None:
@@ -809,7 +810,7 @@ def _zoom_worst(run: Run, analysis: Analysis, layer: IntArray, signed: FloatArra
     k = int(np.nanargmax(np.abs(signed)))
     tk = float(st.t[k])
     m = np.abs(st.t - tk) <= 0.4
-    seg = run.plan.job.segments()
+    seg = run.plan.segments
     lay = int(layer[k])
     cmd = next((r.max for r in analysis.command.layers if r.segment == lay), math.nan)
     if math.isfinite(cmd):
