@@ -351,7 +351,7 @@ def _axis_motion(run: Run, d: Digest) -> dict[str, AxisMotion]:
         acc = np.gradient(st.vel, st.t, axis=0)
         jerk = np.gradient(acc, st.t, axis=0)
     else:
-        acc = jerk = np.zeros((0, 3))
+        acc = jerk = np.zeros((0, len(AXES)))
     out = {}
     for ax, name in enumerate(AXES):
         err = diff[:, ax] / js[ax]

@@ -58,7 +58,7 @@ from winder.contract.run import shaper_text
 from winder.contract.topics import check_namespace
 from winder.errors import BadInputError, OutputError, RefusedError, UnavailableError
 from winder.interrupts import Interrupts, deferred
-from winder.motion.axes import FEED, FORK
+from winder.motion.axes import AXIS_TABLE, FEED, FORK
 from winder.motion.interp import dda, deviation_stats, min_deviation, point_by_point
 from winder.motion.job import FIELD_SPECS, Job
 from winder.motion.timing import plan_timing
@@ -93,7 +93,7 @@ def cmd_interp(args: argparse.Namespace) -> int:
     total_dev = 0.0
     max_dev = 0.0
     layer_points = 0
-    position = list(segments[0].start) if segments else [0, 0, 0]
+    position = list(segments[0].start) if segments else [0] * len(AXIS_TABLE)
     for seg in segments:
         for first in range(0, seg.steps, INTERP_BLOCK):
             stop = min(seg.steps, first + INTERP_BLOCK)

@@ -166,7 +166,7 @@ class Samples:
 
     @classmethod
     def empty(cls) -> Samples:
-        return cls(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)))
+        return cls(np.zeros(0), np.zeros((0, len(AXES))), np.zeros((0, len(AXES))))
 
     def __len__(self) -> int:
         return int(self.t.size)

@@ -405,8 +405,8 @@ def motion_figure(run: Run, d: Digest) -> Figure:
     velocity, swings with the step ripple far beyond the command's: it is
     drawn as dots, those beyond the panel's scale as marks at its edge."""
     st = run.states
-    acc = np.asarray(np.gradient(st.vel, st.t, axis=0)) if len(st) >= 3 else np.zeros((0, 3))
-    jerk = np.asarray(np.gradient(acc, st.t, axis=0)) if len(st) >= 3 else np.zeros((0, 3))
+    acc = np.asarray(np.gradient(st.vel, st.t, axis=0)) if len(st) >= 3 else np.zeros((0, len(AXES)))
+    jerk = np.asarray(np.gradient(acc, st.t, axis=0)) if len(st) >= 3 else np.zeros((0, len(AXES)))
     shown = [c for c in range(len(AXES)) if d.moved[c] > 0] or list(range(len(AXES)))
     cols = len(shown)
     width = max(1.0 + 4.7 * cols, 12.0)  # 12 in at least: a figure of one or two columns too
