@@ -191,10 +191,14 @@ def interpolate(
 ) -> IntPath:
     """Minimum-deviation steps of a straight move in any number of axes.
 
-    ``start`` and ``delta`` are integer vectors (steps); at most two axes of
-    ``delta`` may be non-zero (a winding layer moves feed and fork, an index
-    move one axis). Returns the absolute positions after each step, (N, axes),
-    or only the rows first..stop-1.
+    ``start`` and ``delta`` are integer vectors (steps). A winding layer moves
+    feed and fork, an index move one axis; a move of three or more axes (a
+    follower driven with the flyer, as a tensioner or a traverse is) steps its
+    major axis (the largest ``|delta|``, the first of equals) every row and
+    each other axis by the rule in its own plane with the major: each minor's
+    deviation is the smallest it can be, as if it moved alone with the major.
+    Returns the absolute positions after each step, (N, axes), or only the
+    rows first..stop-1.
     """
     s = np.asarray(start, dtype=np.int64)
     d = np.asarray(delta, dtype=np.int64)
@@ -202,7 +206,7 @@ def interpolate(
         raise ValueError(f"start {s.shape} and delta {d.shape} must be vectors of equal length")
     moving = np.flatnonzero(d)
     if moving.size > 2:
-        raise ValueError(f"delta={d.tolist()} moves {moving.size} axes: at most 2 may move at once")
+        return _interpolate_many(s, d, moving, first, stop)
     axes = list(moving) + [i for i in range(d.size) if i not in moving][: 2 - moving.size]
     if moving.size == 0:
         return np.empty((0, d.size), dtype=np.int64)
@@ -214,6 +218,27 @@ def interpolate(
     out[:] = s
     for col, ax in enumerate(axes[: plane.shape[1]]):
         out[:, ax] += plane[:, col]
+    return out
+
+
+def _interpolate_many(
+    s: npt.NDArray[np.int64],
+    d: npt.NDArray[np.int64],
+    moving: npt.NDArray[np.intp],
+    first: int,
+    stop: int | None,
+) -> IntPath:
+    """:func:`interpolate` of a move of three or more axes: each minor in its
+    plane with the major (the first of the largest ``|delta|``)."""
+    major = int(moving[np.argmax(np.abs(d[moving]))])
+    minors = [int(ax) for ax in moving if ax != major]
+    # the major first: each plane has its rows, the major's column the same in every one
+    planes = [min_deviation(int(d[major]), int(d[ax]), start=first, stop=stop) for ax in minors]
+    out = np.empty((planes[0].shape[0], d.size), dtype=np.int64)
+    out[:] = s
+    out[:, major] += planes[0][:, 0]
+    for ax, plane in zip(minors, planes, strict=True):
+        out[:, ax] += plane[:, 1]
     return out
 
 
@@ -244,8 +269,18 @@ def path_mismatch(
     if p.ndim != 2 or p.shape[1] != len(d):
         raise ValueError(f"pos has shape {p.shape}: must be (n, {len(d)})")
     moving = [i for i, v in enumerate(d) if v]
-    if len(moving) > 2:
-        raise ValueError(f"delta={d} moves {len(moving)} axes: at most 2 may move at once")
+    if len(moving) > 2:  # each minor in its plane with the major, as interpolate; the others still
+        major = max(moving, key=lambda i: (abs(d[i]), -i))
+        hits = [
+            path_mismatch([s[major], s[ax]], [d[major], d[ax]], first, p[:, [major, ax]])
+            for ax in moving
+            if ax != major
+        ]
+        still = [i for i in range(len(d)) if i not in moving]
+        if still:  # an axis the move does not move stays at its start
+            off = np.flatnonzero(np.any(p[:, still] != np.asarray(s)[still], axis=1))
+            hits.append(int(off[0]) if off.size else -1)
+        return min((h for h in hits if h >= 0), default=-1)
     for i in moving:
         _check_delta(f"delta[{i}]", d[i])
     n = p.shape[0]
