@@ -114,7 +114,7 @@ from winder.ros.qos import QOS_CLOCK, QOS_STATE
 from winder.ros.sender import attributed
 from winder.ros.sender import waiting as taken_with_sender
 from winder.ros.spin import spin
-from winder.ros.timers import steady_timer
+from winder.ros.upstream import ProfileAbort
 
 #: the measured joint states (joint_state_broadcaster's default topic, relative)
 TOPIC_MEASURED = "joint_states"
@@ -137,8 +137,6 @@ HARDWARE_FRESH_NS = 1_000_000_000
 #: states and the controller before it is refused; nothing moves meanwhile
 ARM_WAIT_NS = 2_000_000_000
 #: the profile node's ~/abort is asked again after this long without an answer, this often at most
-ABORT_RETRY = 1.0
-ABORT_TRIES = 5
 #: rows held at most (accepted, not due): further chunks wait in the inbox
 MAX_HELD = 1 << 16
 #: interface trajectory: each trajectory holds the points of this many batches ahead
@@ -212,11 +210,7 @@ class BridgeNode(StepConsumer):
         self.create_service(Trigger, "~/home", self.on_home, callback_group=self.homing_group)
         self.guard = self.create_guard_condition(self.on_alarm)
         self.reader = JointStateReader(values["joints"])
-        self.abort_clients: dict[str, Client] = {}
-        self.abort_client: Client | None = None
-        self.abort_future: Future | None = None
-        self.abort_timer: Any = None
-        self.abort_tries = 0
+        self.upstream = ProfileAbort(self, self.peers)  # the profile node told to abort at a fault
         # shared with the command thread, under self.lock
         self.lock = threading.Lock()
         self.running = False  # a run is on: the thread ticks
@@ -335,7 +329,7 @@ class BridgeNode(StepConsumer):
             self.origin_ns = 0 if self.clock_ns < 0 else self.clock_ns + CLOCK_PERIOD_NS
             self.running = True
         self.go.set()
-        self.abort_client = self.profile_abort_client() or self.abort_client  # the run's profile node
+        self.upstream.find()  # the run's profile node
         self.check_ramp()
         return {
             "real_time": True,
@@ -538,8 +532,8 @@ class BridgeNode(StepConsumer):
     def missing(self) -> str:
         """The hardware is not there (no joint_states for a while, or nobody
         subscribes to the commands): a run is not started into the void."""
-        if self.plan is None and self.abort_client is None:
-            self.abort_client = self.profile_abort_client()  # early: its replies match by a fault
+        if self.plan is None and self.upstream.client is None:
+            self.upstream.find()  # early: its replies match by a fault
         why = self.hardware_missing()
         if why and self.homed:
             self.homed = False
@@ -1058,63 +1052,8 @@ class BridgeNode(StepConsumer):
         self.publish_status(
             "servo", ERROR, text, {"job_id": self.plan.job_id, "run_id": self.plan.run_id, **values}
         )
-        self.tell_profile_to_abort()
+        self.upstream.ask(TOPIC_STEP_TIMES)
         self.finish(complete=False)
-
-    def profile_abort_client(self) -> Client | None:
-        """The ``~/abort`` service of the cell's profile node, found by its role
-        on the graph, not its name: the node whose step times this node acts
-        on (``peers.owner``: the one pinned, or the only one the graph shows;
-        None while the graph shows none, or two and none pinned)."""
-        who = self.peers.owner("profile")
-        if who is None:
-            return None
-        service = fully_qualified(who.name, who.namespace) + "/abort"
-        if service not in self.abort_clients:
-            self.abort_clients[service] = self.create_client(Trigger, service)
-        return self.abort_clients[service]
-
-    def tell_profile_to_abort(self) -> None:
-        client = self.abort_client or self.profile_abort_client()
-        if client is None:
-            self.get_logger().error(
-                f"no profile node in {self.get_namespace()} (none publishes {TOPIC_STEP_TIMES}): "
-                "nothing to abort"
-            )
-            return
-        if not client.service_is_ready():
-            self.get_logger().warning(f"{client.srv_name} not ready: the abort request may be lost")
-        self.abort_tries = 0
-        self.ask_abort(client)
-
-    def ask_abort(self, client: Client) -> None:
-        """One abort request; asked again after ABORT_RETRY s without an answer
-        (a DDS service may drop a reply while its response topic still matches)."""
-        if self.abort_timer is not None:
-            self.destroy_timer(self.abort_timer)
-            self.abort_timer = None
-        if self.abort_future is not None and not self.abort_future.done():
-            client.remove_pending_request(self.abort_future)
-            if self.abort_tries >= ABORT_TRIES:
-                self.get_logger().error(f"{client.srv_name}: no answer to {ABORT_TRIES} abort requests")
-                return
-        self.abort_tries += 1
-        future = client.call_async(Trigger.Request())
-        future.add_done_callback(lambda f: self.abort_answered(client.srv_name, f))
-        self.abort_future = future
-        self.abort_timer = steady_timer(self, ABORT_RETRY, lambda: self.ask_abort(client))
-
-    def abort_answered(self, service: str, future: Future) -> None:
-        if self.abort_timer is not None:
-            self.destroy_timer(self.abort_timer)
-            self.abort_timer = None
-        resp = future.result()
-        if resp is None:
-            self.get_logger().error(f"{service}: no answer")
-        elif resp.success:
-            self.get_logger().info(f"{service}: {resp.message}")
-        else:
-            self.get_logger().warning(f"{service} refused: {resp.message}")
 
     def shutdown(self) -> None:
         super().shutdown()

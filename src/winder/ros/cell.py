@@ -389,6 +389,10 @@ class CellWatch:
                 if values.get("state") in FINAL_JOB_STATES:
                     self.summary = values
                     self.message = st.message
+            elif values.get("run_id") and values["run_id"] != self.run_id:
+                # another run's: the consumer keeps telling how the last run ended (a failed
+                # run's final report, at ERROR) until the next one starts; not this run's error
+                continue
             elif st.level == bytes([ERROR]) and in_namespace(st.name, self.ns):
                 # this cell's nodes only: another cell on the graph (or a cell in
                 # /c10 next to /c1, or any cell next to one without a namespace)

@@ -216,6 +216,7 @@ class StepConsumer(ManagedNode):
         self.plan: JobPlan | None = None
         self.reset()
         self.early: list[bytes] = []
+        self.twin: bytes | None = None  # see take_job
         self.early_events: deque[bytes] = deque(maxlen=100)  # winder/control of a run not started here yet
         self.path_raw: bytes | None = None
         self.profile_raw: bytes | None = None
@@ -433,6 +434,9 @@ class StepConsumer(ManagedNode):
         for event in events:  # the run's own events that came before its description; others dropped
             self.handle_control(event, early=True)
         early, self.early = self.fresh(plan, self.early), []
+        # the run's first chunk taken from before its description may be a twin: the
+        # last run's of the same job (same steps, same times), closed early here
+        self.twin = early[0] if early else None
         # the stall watch counts from now, the run set up (its plan, its bag):
         # on a machine starting other cells that alone took over 2 s
         self.last_chunk_wall = time.monotonic()
@@ -602,6 +606,14 @@ class StepConsumer(ManagedNode):
     def accept(self, raw: bytes) -> npt.NDArray[np.int64] | None:
         """The rows of a chunk that may be executed, or None (reported)."""
         assert self.checker is not None and self.ledger is not None
+        if self.twin is not None and raw == self.twin:
+            # the run's first chunk again, byte for byte: the one taken from before the run's
+            # description was the last run's twin (a run closed early here, the same job started
+            # again at once: chunks carry no run id); executing either is the same, and this one
+            # is not a repeat of the stream (it was "steps 1..2 arrived again", an ERROR)
+            self.twin = None
+            self.get_logger().info("the run's first chunk came again: the earlier one was the last run's")
+            return None
         try:
             rows = TIMED_CDR.decode(raw)
         except ValueError as exc:

@@ -38,7 +38,10 @@ a driver starts from it.
 
 from __future__ import annotations
 
+import json
 import time
+import traceback
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, ClassVar, Protocol, runtime_checkable
 
@@ -50,11 +53,13 @@ from sensor_msgs.msg import JointState
 from winder.contract.cdr import JointStateEncoder, encode_clocks
 from winder.contract.params import CONSUMER_SPECS, check_consumer
 from winder.contract.stream import JobPlan
-from winder.contract.topics import TOPIC_CLOCK, TOPIC_JOINT_COMMANDS, TOPIC_JOINT_STATES
+from winder.contract.topics import TOPIC_CLOCK, TOPIC_JOINT_COMMANDS, TOPIC_JOINT_STATES, TOPIC_STEP_TIMES
 from winder.motion.axes import AXIS_TABLE, Axis
-from winder.ros.consumer import StepConsumer
+from winder.ros.consumer import StepConsumer, one_line
+from winder.ros.diagnostics import ERROR
 from winder.ros.qos import QOS_CLOCK, QOS_STATE
 from winder.ros.timers import steady_timer
+from winder.ros.upstream import ProfileAbort
 from winder.spec import Spec
 
 __all__ = ["CLOCK_PERIOD_NS", "DRIVER_SPECS", "Backend", "DriverNode", "RunStart"]
@@ -66,6 +71,15 @@ CLOCK_PERIOD_NS = 10_000_000
 DRIVER_SPECS: dict[str, Spec] = {
     "settle_time": Spec(
         "settle_time", float, 0.05, "rest after the run's last step before it closes", "s", 0.0, 60.0
+    ),
+    "position_tolerance": Spec(
+        "position_tolerance",
+        float,
+        1.0,
+        "how far an axis may be from its last command when the run closes (else it closes incomplete)",
+        "steps",
+        0.0,
+        1e9,
     ),
 }
 
@@ -153,6 +167,8 @@ class DriverNode(StepConsumer):
         if not isinstance(backend, Backend):
             raise TypeError(f"{type(backend).__name__} is not a winder Backend (begin, write, read)")
         self.backend = backend
+        self.broken = ""  # a driver error of this run (an exception in the backend), if any
+        self.said: set[str] = set()  # the backend's methods whose error between runs was said
         specs = {**CONSUMER_SPECS, **DRIVER_SPECS, **type(backend).specs}
         super().__init__(name, specs, check_consumer, hardware_id=hardware_id or name, topics=self.TOPICS)
         self.pub_clock = self.create_publisher(Clock, TOPIC_CLOCK, QOS_CLOCK)
@@ -161,6 +177,7 @@ class DriverNode(StepConsumer):
         self.clock_ns = -1  # the last /clock published in this node's life
         self.clock_timer = steady_timer(self, CLOCK_PERIOD_NS / 1e9, self.tick)
         self.clock_timer.cancel()  # runs while a paced run's clock does
+        self.upstream = ProfileAbort(self, self.peers)  # told to abort the run at a fault
         self.begin_run(False)
         self.start_lifecycle()
 
@@ -183,7 +200,9 @@ class DriverNode(StepConsumer):
 
     # -- the consumer's hooks, in terms of the backend ---------------------------------
     def begin(self, plan: JobPlan, values: dict[str, Any]) -> dict[str, object]:
-        self.begin_run(self.backend.paces(values))
+        self.broken = ""
+        self.upstream.find()  # the run's profile node, before any fault
+        self.begin_run(bool(self.call("paces", True, self.backend.paces, values)))
         self.origin_ns = 0 if self.clock_ns < 0 else self.clock_ns + CLOCK_PERIOD_NS
         start = np.array(plan.segments[0].start if plan.segments else [0] * len(AXIS_TABLE), np.int64)
         self.commanded = start.copy()
@@ -192,8 +211,14 @@ class DriverNode(StepConsumer):
         run = RunStart(
             plan.job_id, plan.run_id, AXIS_TABLE, plan.joint_step, start.copy(), plan.total_steps, values
         )
-        config = self.backend.begin(run)
-        return {**config, "real_time": self.paced, "clock_origin_ns": self.origin_ns}
+        config = self.call("begin", {}, self.backend.begin, run)
+        try:
+            json.dumps(config)
+        except (TypeError, ValueError) as exc:
+            self.bug("begin", f"returned a configuration JSON cannot hold ({exc})")
+            config = {}
+        # the backend's own keys under "drive": none of them can stand for a key of the contract's
+        return {"drive": config, "real_time": self.paced, "clock_origin_ns": self.origin_ns}
 
     def paces(self) -> bool:
         return self.paced
@@ -226,9 +251,16 @@ class DriverNode(StepConsumer):
     def work(self) -> None:
         if self.plan is None:
             return
-        fault = self.backend.fault()
+        fault = self.faults()
         if fault:
-            self.error(f"{self.hardware_id}: {fault}; the run stops")
+            if not self.broken:  # the drive's own fault (a driver error was said where it happened)
+                self.get_logger().error(f"{fault}; the run stops")
+            ids: dict[str, object] = {"job_id": self.plan.job_id, "run_id": self.plan.run_id}
+            self.publish_status("drive", ERROR, f"{fault}; the run stops", ids)
+            self.upstream.ask(TOPIC_STEP_TIMES)  # the rest of the cell stops sending this run's steps
+            self.finish(complete=False)
+            return
+        if self.finishing and self.rested() and not self.in_position():
             self.finish(complete=False)
             return
         if self.paced and self.started:
@@ -245,6 +277,27 @@ class DriverNode(StepConsumer):
         if not self.paced:
             self.reached(self.settle_until)
 
+    def in_position(self) -> bool:
+        """At the run's end: every axis within ``position_tolerance`` steps of
+        its last command (CONTRACT.md: done is at the job's end position); if
+        not, said as the run's fault."""
+        got = self.call("read", None, self.backend.read, self.t_ns)
+        try:
+            error = np.abs(np.asarray(got, float).reshape(len(AXIS_TABLE)) - self.commanded)
+        except (TypeError, ValueError):
+            return True  # (said by publish_states: a read that cannot be used)
+        tolerance = self.settings.values()["position_tolerance"]
+        worst = int(np.argmax(error))
+        if not error[worst] > tolerance:
+            return True
+        settle = self.settings.values()["settle_time"]
+        self.broken = (
+            f"axes not in position {settle:g} s after the last step: {AXIS_TABLE[worst].name} "
+            f"{error[worst]:.1f} steps from its command (position_tolerance {tolerance:g})"
+        )
+        self.get_logger().error(self.broken)
+        return False
+
     def rested(self) -> bool:
         """The settle time after the run's last step has passed."""
         return self.settle_until is None or not self.paced or self.now_ns() >= self.settle_until
@@ -254,18 +307,43 @@ class DriverNode(StepConsumer):
             self.publish_states(self.now_ns())
 
     def faults(self) -> str:
-        return self.backend.fault()
+        return self.broken or str(self.call("fault", "", self.backend.fault))
 
     def details(self) -> dict[str, object]:
-        return {"max_following_error_steps": f"{self.following:.4f}", **self.backend.status()}
+        status = self.call("status", {}, self.backend.status)
+        return {
+            "max_following_error_steps": f"{self.following:.4f}",
+            **(status if isinstance(status, dict) else {}),
+        }
 
     def missing(self) -> str:
-        return self.backend.missing()
+        return str(self.call("missing", "", self.backend.missing))
 
     def end(self) -> None:
         self.clock_timer.cancel()
         self.queue = []
-        self.backend.end()
+        self.call("end", None, self.backend.end)
+
+    # -- a backend that fails --------------------------------------------------------------
+    def call(self, what: str, default: Any, fn: Callable[..., Any], *args: Any) -> Any:
+        """``fn(*args)``, a method of the backend; an exception in it is a bug of
+        the driver: said once with its traceback, the run closed incomplete at
+        the next pump (a fault), the node goes on and takes the next run."""
+        try:
+            return fn(*args)
+        except Exception as exc:
+            self.bug(what, f"raised {type(exc).__name__}: {one_line(exc)}", trace=traceback.format_exc())
+            return default
+
+    def bug(self, what: str, text: str, trace: str = "") -> None:
+        why = f"backend.{what}() {text}"
+        plan = getattr(self, "plan", None)  # (None: while the node is being made)
+        if not self.broken and plan is not None:
+            self.broken = f"driver error: {why}"
+            self.get_logger().error(f"{self.broken}; the run stops" + (f"\n{trace}" if trace else ""))
+        elif plan is None and what not in self.said:  # between runs (missing, end): once a method
+            self.said.add(what)
+            self.get_logger().error(f"driver error: {why}" + (f"\n{trace}" if trace else ""))
 
     # -- the paced clock ---------------------------------------------------------------------
     def now_ns(self) -> int:
@@ -319,7 +397,7 @@ class DriverNode(StepConsumer):
 
     def hand_over(self, t_ns: int, rows: npt.NDArray[np.int64]) -> None:
         """Rows to the backend, then booked: executed, receipts, the run's time."""
-        self.backend.write(t_ns, rows)
+        self.call("write", None, self.backend.write, t_ns, rows)
         self.commanded = rows[-1, 2:].copy()
         self.executed(rows.shape[0])
         self.receipt()
@@ -331,7 +409,16 @@ class DriverNode(StepConsumer):
         """winder/joint_commands (the commanded position) and winder/joint_states
         (where the backend says the axes are), in joint units, each velocity the
         mean since an earlier sample; recorded, as the simulator's are."""
-        measured = np.asarray(self.backend.read(t_ns), float)
+        got = self.call("read", None, self.backend.read, t_ns)
+        try:
+            measured = np.asarray(got, float).reshape(len(AXIS_TABLE))
+        except (TypeError, ValueError):
+            measured = None
+        if measured is None or not np.all(np.isfinite(measured)):
+            if got is not None:  # (None: it raised, said already)
+                want = f"want {len(AXIS_TABLE)} finite step positions"
+                self.bug("read", f"returned {repr(got)[:60]}: {want}")
+            return
         commanded = self.commanded.astype(float)
         self.following = max(self.following, float(np.max(np.abs(measured - commanded))))
         if t_ns <= self.last_published:

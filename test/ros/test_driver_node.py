@@ -1,0 +1,53 @@
+"""winder.ros.driver.DriverNode with a backend that fails: an exception in a
+driver's method is a bug of the driver, not of the cell. The run closes
+incomplete, named (``driver error: backend.write() raised ...``, once, with
+its traceback in the driver's log), ``winder run`` exits 1 "failed", and the
+node stays up and takes the next run to done."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+from conftest import BIN, Procs
+from support.paths import TEST
+
+pytestmark = pytest.mark.ros
+
+SMALL = ["--job-id", "faulty", "--turns-per-layer", "2", "--layers", "1", "--poles", "1"]
+
+
+#: what goes wrong (faulty_drive.py --fail) -> what the run's report says
+FAILURES = {
+    "write": "driver error: backend.write() raised RuntimeError: the drive's buffer index ran past its end",
+    "begin": "driver error: backend.begin() raised OSError: /dev/ttyDRIVE: no such device",
+    "json": "driver error: backend.begin() returned a configuration JSON cannot hold",
+    "nan": "driver error: backend.read() returned array([nan, nan, nan]): want 3 finite step positions",
+    "stuck": "axes not in position 0.05 s after the last step: fork",
+}
+
+
+@pytest.mark.parametrize("fail", list(FAILURES))
+def test_a_driver_that_fails_closes_its_run_and_takes_the_next(procs: Procs, fail: str) -> None:
+    drive = procs.launch(
+        [sys.executable, str(TEST / "consumers" / "faulty_drive.py"), "--fail", fail, "--fail-run", "1"],
+        "faulty_drive",
+    )
+    run = [str(BIN / "winder"), "run", "--external", "sim", *SMALL, "--timeout", "120"]
+    run += ["--start-timeout", "60"]
+    options = {"env": procs.env, "capture_output": True, "text": True, "timeout": 180}
+    first = subprocess.run(run, stdin=subprocess.DEVNULL, **options)  # type: ignore[call-overload]
+    said = first.stdout + first.stderr
+    assert first.returncode == 1, said
+    assert FAILURES[fail] in said, said
+    assert "Traceback" not in said, said
+    assert drive.poll() is None, procs.log(drive)
+    log = procs.log(drive)
+    errors = [line for line in log.splitlines() if line.startswith("[ERROR]")]
+    assert len(errors) == 1 and FAILURES[fail] in errors[0], log  # said once
+    if fail in ("write", "begin"):  # an exception: its traceback in the driver's log, once
+        assert log.count("Traceback") == 1 and 'faulty_drive.py", line' in log, log
+    second = subprocess.run(run, stdin=subprocess.DEVNULL, **options)  # type: ignore[call-overload]
+    assert second.returncode == 0, second.stdout + second.stderr
+    assert "  state              done" in second.stdout, second.stdout
