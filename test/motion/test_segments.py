@@ -208,10 +208,9 @@ def test_a_layers_stop_points_are_its_turns_ends(job: Job) -> None:
             s.turn_end(s.turns + 1)
 
 
-def test_stop_points_follow_layers_of_unequal_turns() -> None:
-    """Orthocyclic, auto: the shifted layers hold one turn less; a stop is
-    found in the layer that holds the turn, not at turns_per_layer x layer."""
-    job = Job.from_dict(
+def orthocyclic_auto() -> Job:
+    """An orthocyclic coil of three auto layers: the shifted layer holds a turn less."""
+    return Job.from_dict(
         {
             "lay": "orthocyclic",
             "lay.crossover": 120.0,
@@ -221,6 +220,12 @@ def test_stop_points_follow_layers_of_unequal_turns() -> None:
             "poles": 1,
         }
     )
+
+
+def test_stop_points_follow_layers_of_unequal_turns() -> None:
+    """Orthocyclic, auto: the shifted layers hold one turn less; a stop is
+    found in the layer that holds the turn, not at turns_per_layer x layer."""
+    job = orthocyclic_auto()
     layers = [s for s in job.segments() if s.kind.winds]
     turns = [s.turns for s in layers]
     assert turns[0] == turns[1] + 1, turns  # the shifted layer holds one less
@@ -330,16 +335,7 @@ def test_todays_description_is_the_recorded_one() -> None:
 def test_where_a_run_rests_counts_the_turns_of_layers_of_unequal_turns() -> None:
     from winder.contract.run import where_text
 
-    job = Job.from_dict(
-        {
-            "lay": "orthocyclic",
-            "lay.crossover": 120.0,
-            "turns_per_layer": "auto",
-            "bobbin.window_width": 0.0101,
-            "layers": 3,
-            "poles": 1,
-        }
-    )
+    job = orthocyclic_auto()
     plan = parse_job_description(describe_job(job))
     assert [s.turns for s in plan.segments] == [4, 3, 4]
     assert [where_text(plan, i, 0) for i in range(3)] == [
