@@ -51,3 +51,35 @@ def test_a_driver_that_fails_closes_its_run_and_takes_the_next(procs: Procs, fai
     second = subprocess.run(run, stdin=subprocess.DEVNULL, **options)  # type: ignore[call-overload]
     assert second.returncode == 0, second.stdout + second.stderr
     assert "  state              done" in second.stdout, second.stdout
+
+
+def test_winder_run_ends_when_its_external_consumer_dies_mid_run(procs: Procs) -> None:
+    """SIGKILL the external driver mid-run: ``winder run --external sim``
+    says the consumer left the graph and ends non-zero, once the graph no
+    longer shows it (its lease), instead of waiting out its --timeout."""
+    import signal
+
+    from support import wait
+
+    drive = procs.launch([sys.executable, str(TEST / "consumers" / "faulty_drive.py")], "faulty_drive")
+    long_job = ["--job-id", "killed", "--turns-per-layer", "40", "--layers", "1", "--poles", "1"]
+    long_job += ["--timeout", "600", "--start-timeout", "60"]
+    run = subprocess.Popen(
+        [str(BIN / "winder"), "run", "--external", "sim", *long_job],
+        env=procs.env,
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    try:
+        wait.log_has(lambda: procs.log(drive), "run killed_", 60, "the driver's run")
+        drive.send_signal(signal.SIGKILL)
+        out, _ = run.communicate(timeout=120)  # the lease (about 10 s) and CONSUMER_GONE_S, not 600 s
+    finally:
+        if run.poll() is None:
+            run.kill()
+            run.wait()
+    assert run.returncode not in (0, None), out
+    assert "the step consumer left the graph mid-run" in out, out
+    assert "Traceback" not in out, out

@@ -290,6 +290,8 @@ class CellWatch:
         #: the pids of the nodes this process started (None: it started none, they run elsewhere)
         self.own = own
         self.started: set[str] = set()  #: names of the nodes this process started (set by run_cell)
+        #: an external consumer on the graph: when it was last looked for, and last seen (monotonic s)
+        self.consumer_look = self.consumer_seen = 0.0
         self.occupied = ""  #: another cell's node heard in this namespace, in words
         self.refused = ""  #: why the job was refused before it started (a setting, the start call)
         self.foreign: dict[str, str] = {}  #: node -> what it refused from foreign senders
@@ -623,11 +625,38 @@ def _wait_for_job(
             if dead:
                 return dead
             now = time.monotonic()
+            gone = _consumer_gone(node, watch, now)
+            if gone:
+                return gone
             if not watch.accepted and now > t_start:
                 return f"the job did not start within {waited:g} s: waiting for {watch.waiting_for()}"
             if now > t_end:
                 return f"job did not finish within {timeout:g} s"
     return ""
+
+
+#: s an external consumer may be missing from the graph mid-run before the run is given up
+CONSUMER_GONE_S = 3.0
+
+
+def _consumer_gone(node: Node, watch: CellWatch, now: float) -> str:
+    """A consumer this process did not start (``--external sim``) that left
+    the graph while the run goes on (stopped, killed: its participant gone
+    or its lease out) ends the wait, named, after CONSUMER_GONE_S s: before,
+    ``winder run`` waited for a final report that could not come until its
+    ``--timeout`` (an hour). One look at the graph a second."""
+    if not watch.accepted or NODES["sim"] in watch.started:
+        return ""  # a consumer started here is watched as a process (procs.dead)
+    if now - watch.consumer_look < 1.0:
+        return ""
+    watch.consumer_look = now
+    if consumers(node, watch.ns) or not watch.consumer_seen:
+        watch.consumer_seen = now
+        return ""
+    if now - watch.consumer_seen < CONSUMER_GONE_S:
+        return ""
+    where = watch.ns or "/"
+    return f"the step consumer left the graph mid-run (none in {where} for {now - watch.consumer_seen:.0f} s)"
 
 
 def _foreign(watch: CellWatch) -> str:
