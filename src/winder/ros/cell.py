@@ -650,11 +650,11 @@ def _consumer_gone(node: Node, watch: CellWatch, now: float) -> str:
     if now - watch.consumer_look < 1.0:
         return ""
     watch.consumer_look = now
-    if consumers(node, watch.ns) or not watch.consumer_seen:
+    if consumers(node, watch.ns):
         watch.consumer_seen = now
         return ""
-    if now - watch.consumer_seen < CONSUMER_GONE_S:
-        return ""
+    if not watch.consumer_seen or now - watch.consumer_seen < CONSUMER_GONE_S:
+        return ""  # (never seen on this node's graph: nothing it could tell went)
     where = watch.ns or "/"
     return f"the step consumer left the graph mid-run (none in {where} for {now - watch.consumer_seen:.0f} s)"
 
