@@ -83,3 +83,18 @@ def test_winder_run_ends_when_its_external_consumer_dies_mid_run(procs: Procs) -
     assert run.returncode not in (0, None), out
     assert "the step consumer left the graph mid-run" in out, out
     assert "Traceback" not in out, out
+
+
+def test_winder_run_names_why_its_external_consumer_is_blocked(procs: Procs) -> None:
+    """A driver started with a value it refuses holds the default and takes no
+    job: it says so, and ``winder run`` names its reason when the start gives
+    up (it said only "consumer blocked")."""
+    drive = procs.launch(
+        [sys.executable, "-m", "winder.ros.mock_backend", "--ros-args", "-p", "settle_time:=-1.0"], "mock"
+    )
+    run = [str(BIN / "winder"), "run", "--external", "sim", *SMALL, "--start-timeout", "8"]
+    options = {"env": procs.env, "capture_output": True, "text": True, "timeout": 120}
+    r = subprocess.run(run, stdin=subprocess.DEVNULL, **options)  # type: ignore[call-overload]
+    assert r.returncode != 0, r.stdout + r.stderr
+    assert "settings rejected at start: settle_time" in r.stderr, r.stdout + r.stderr
+    assert "the node holds the default 0.05 and takes no job until a valid value is set" in procs.log(drive)

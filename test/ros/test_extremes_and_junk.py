@@ -644,7 +644,7 @@ def test_extreme_in_range_parameters_are_refused_and_the_node_lives(
     # use ("settings rejected at start"), or as text that is no number
     first_line = log.splitlines()[0]
     assert ROS_EXTREMES[executable][0][0] in first_line, log
-    assert "rejected at start" in first_line or "keeping the default" in first_line, log
+    assert "rejected at start" in first_line or "holds the default" in first_line, log
     assert "Traceback" not in log
 
 

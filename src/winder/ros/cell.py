@@ -290,6 +290,7 @@ class CellWatch:
         #: the pids of the nodes this process started (None: it started none, they run elsewhere)
         self.own = own
         self.started: set[str] = set()  #: names of the nodes this process started (set by run_cell)
+        self.consumer_blocked = ""  #: why the consumer is blocked (its job status), if it is
         #: an external consumer on the graph: when it was last looked for, and last seen (monotonic s)
         self.consumer_look = self.consumer_seen = 0.0
         self.occupied = ""  #: another cell's node heard in this namespace, in words
@@ -339,7 +340,8 @@ class CellWatch:
         pending = next((r for r in self.remote if not r.done), None)
         if pending is not None:
             return pending.waiting
-        return f"the cell to be ready ({self.not_ready or 'no reply to ~/start yet'})"
+        blocked = f": {self.consumer_blocked}" if self.consumer_blocked else ""
+        return f"the cell to be ready ({self.not_ready or 'no reply to ~/start yet'}){blocked}"
 
     def _look(self, force: bool = False) -> None:
         """The consumer's node name(s) from the graph (at most every GRAPH_POLL s)."""
@@ -381,6 +383,8 @@ class CellWatch:
                 consumer = has_role(st.name, values, "consumer", self.ns, self.consumer_nodes)
             if consumer:
                 self.heard_consumer = True
+                # a consumer blocked by its settings says why in its job status: named when the start waits
+                self.consumer_blocked = st.message if values.get("state") == JobState.BLOCKED else ""
             asked = self._request is not None  # a run the interp node had before we asked is not ours
             if asked and has_role(st.name, values, "interp", self.ns) and values.get("run_id"):
                 self.job_seen = True  # the start request got through

@@ -46,6 +46,12 @@ def descriptor(spec: Spec) -> ParameterDescriptor:
     return d
 
 
+#: what a node does with a value refused at start: it holds the default, and takes no job
+#: until a valid value is set (it said "keeping the default" and then refused every run)
+HELD = "the node holds the default"
+UNTIL = " and takes no job until a valid value is set (ros2 param set, winder ctl param set)"
+
+
 class Settings:
     """A node's settings declared as ROS parameters from a winder spec table.
 
@@ -71,7 +77,7 @@ class Settings:
             try:
                 node.declare_parameter(name, spec.default, descriptor(spec))
             except (InvalidParameterValueException, InvalidParameterTypeException) as exc:
-                log.error(f"{self._reason_for_override(name, exc)}; keeping the default {spec.default!r}")
+                log.error(f"{self._reason_for_override(name, exc)}; {HELD} {spec.default!r}{UNTIL}")
                 node.declare_parameter(name, spec.default, descriptor(spec), ignore_override=True)
                 self.rejected.append(name)
                 continue
@@ -79,7 +85,7 @@ class Settings:
             try:
                 value = spec.check(given)
             except SpecError as exc:
-                log.error(f"{exc}; keeping the default {spec.default!r}")
+                log.error(f"{exc}; {HELD} {spec.default!r}{UNTIL}")
                 node.set_parameters([Parameter(name, value=spec.default)])
                 self.rejected.append(name)
                 continue
