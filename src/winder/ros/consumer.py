@@ -217,6 +217,7 @@ class StepConsumer(ManagedNode):
         self.reset()
         self.early: list[bytes] = []
         self.twin: bytes | None = None  # see take_job
+        self.twin_taken = False
         self.early_events: deque[bytes] = deque(maxlen=100)  # winder/control of a run not started here yet
         self.path_raw: bytes | None = None
         self.profile_raw: bytes | None = None
@@ -437,6 +438,7 @@ class StepConsumer(ManagedNode):
         # the run's first chunk taken from before its description may be a twin: the
         # last run's of the same job (same steps, same times), closed early here
         self.twin = early[0] if early else None
+        self.twin_taken = False  # the first is that chunk itself (not a twin): it is accepted
         # the stall watch counts from now, the run set up (its plan, its bag):
         # on a machine starting other cells that alone took over 2 s
         self.last_chunk_wall = time.monotonic()
@@ -606,7 +608,9 @@ class StepConsumer(ManagedNode):
     def accept(self, raw: bytes) -> npt.NDArray[np.int64] | None:
         """The rows of a chunk that may be executed, or None (reported)."""
         assert self.checker is not None and self.ledger is not None
-        if self.twin is not None and raw == self.twin:
+        if self.twin is not None and raw == self.twin and not self.twin_taken:
+            self.twin_taken = True  # the early chunk itself: accepted as any other
+        elif self.twin is not None and raw == self.twin:
             # the run's first chunk again, byte for byte: the one taken from before the run's
             # description was the last run's twin (a run closed early here, the same job started
             # again at once: chunks carry no run id); executing either is the same, and this one

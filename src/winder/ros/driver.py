@@ -260,9 +260,6 @@ class DriverNode(StepConsumer):
             self.upstream.ask(TOPIC_STEP_TIMES)  # the rest of the cell stops sending this run's steps
             self.finish(complete=False)
             return
-        if self.finishing and self.rested() and not self.in_position():
-            self.finish(complete=False)
-            return
         if self.paced and self.started:
             t = self.now_ns()
             due = self.take_due(t)
@@ -276,6 +273,15 @@ class DriverNode(StepConsumer):
         self.settle_until = until_ns + round(self.settings.values()["settle_time"] * 1e9)
         if not self.paced:
             self.reached(self.settle_until)
+
+    def finish(self, complete: bool) -> None:
+        """A run that would close complete does so only with its axes in
+        position and no driver error (checked here, where the base closes it:
+        a check in the pump came a moment before the settle time was up, and
+        the base then closed a run done whose axes were thousands of steps off)."""
+        if complete and self.plan is not None and (self.broken or not self.in_position()):
+            complete = False
+        super().finish(complete)
 
     def in_position(self) -> bool:
         """At the run's end: every axis within ``position_tolerance`` steps of
