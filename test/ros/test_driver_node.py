@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 from conftest import BIN, Procs
@@ -16,6 +17,11 @@ from support.paths import TEST
 pytestmark = pytest.mark.ros
 
 SMALL = ["--job-id", "faulty", "--turns-per-layer", "2", "--layers", "1", "--poles", "1"]
+
+
+def bags(tmp_path: Path) -> list[str]:
+    """The driver's bags in the test's own directory (not the repository's bags/)."""
+    return ["--ros-args", "-p", f"bag_dir:={tmp_path / 'bags'}"]
 
 
 #: what goes wrong (faulty_drive.py --fail) -> what the run's report says
@@ -29,9 +35,19 @@ FAILURES = {
 
 
 @pytest.mark.parametrize("fail", list(FAILURES))
-def test_a_driver_that_fails_closes_its_run_and_takes_the_next(procs: Procs, fail: str) -> None:
+def test_a_driver_that_fails_closes_its_run_and_takes_the_next(
+    procs: Procs, tmp_path: Path, fail: str
+) -> None:
     drive = procs.launch(
-        [sys.executable, str(TEST / "consumers" / "faulty_drive.py"), "--fail", fail, "--fail-run", "1"],
+        [
+            sys.executable,
+            str(TEST / "consumers" / "faulty_drive.py"),
+            "--fail",
+            fail,
+            "--fail-run",
+            "1",
+            *bags(tmp_path),
+        ],
         "faulty_drive",
     )
     run = [str(BIN / "winder"), "run", "--external", "sim", *SMALL, "--timeout", "120"]
@@ -53,7 +69,7 @@ def test_a_driver_that_fails_closes_its_run_and_takes_the_next(procs: Procs, fai
     assert "  state              done" in second.stdout, second.stdout
 
 
-def test_winder_run_ends_when_its_external_consumer_dies_mid_run(procs: Procs) -> None:
+def test_winder_run_ends_when_its_external_consumer_dies_mid_run(procs: Procs, tmp_path: Path) -> None:
     """SIGKILL the external driver mid-run: ``winder run --external sim``
     says the consumer left the graph and ends non-zero, once the graph no
     longer shows it (its lease), instead of waiting out its --timeout."""
@@ -61,7 +77,9 @@ def test_winder_run_ends_when_its_external_consumer_dies_mid_run(procs: Procs) -
 
     from support import wait
 
-    drive = procs.launch([sys.executable, str(TEST / "consumers" / "faulty_drive.py")], "faulty_drive")
+    drive = procs.launch(
+        [sys.executable, str(TEST / "consumers" / "faulty_drive.py"), *bags(tmp_path)], "faulty_drive"
+    )
     long_job = ["--job-id", "killed", "--turns-per-layer", "40", "--layers", "1", "--poles", "1"]
     long_job += ["--timeout", "600", "--start-timeout", "60"]
     run = subprocess.Popen(
@@ -85,12 +103,12 @@ def test_winder_run_ends_when_its_external_consumer_dies_mid_run(procs: Procs) -
     assert "Traceback" not in out, out
 
 
-def test_winder_run_names_why_its_external_consumer_is_blocked(procs: Procs) -> None:
+def test_winder_run_names_why_its_external_consumer_is_blocked(procs: Procs, tmp_path: Path) -> None:
     """A driver started with a value it refuses holds the default and takes no
     job: it says so, and ``winder run`` names its reason when the start gives
     up (it said only "consumer blocked")."""
     drive = procs.launch(
-        [sys.executable, "-m", "winder.ros.mock_backend", "--ros-args", "-p", "settle_time:=-1.0"], "mock"
+        [sys.executable, "-m", "winder.ros.mock_backend", *bags(tmp_path), "-p", "settle_time:=-1.0"], "mock"
     )
     run = [str(BIN / "winder"), "run", "--external", "sim", *SMALL, "--start-timeout", "8"]
     options = {"env": procs.env, "capture_output": True, "text": True, "timeout": 120}
