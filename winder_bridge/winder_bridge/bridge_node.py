@@ -136,7 +136,6 @@ HARDWARE_FRESH_NS = 1_000_000_000
 #: a run waits this long (or joint_state_timeout if longer) for the joint
 #: states and the controller before it is refused; nothing moves meanwhile
 ARM_WAIT_NS = 2_000_000_000
-#: the profile node's ~/abort is asked again after this long without an answer, this often at most
 #: rows held at most (accepted, not due): further chunks wait in the inbox
 MAX_HELD = 1 << 16
 #: interface trajectory: each trajectory holds the points of this many batches ahead

@@ -287,11 +287,10 @@ class DriverNode(StepConsumer):
         """At the run's end: every axis within ``position_tolerance`` steps of
         its last command (CONTRACT.md: done is at the job's end position); if
         not, said as the run's fault."""
-        got = self.call("read", None, self.backend.read, self.t_ns)
-        try:
-            error = np.abs(np.asarray(got, float).reshape(len(AXIS_TABLE)) - self.commanded)
-        except (TypeError, ValueError):
-            return True  # (said by publish_states: a read that cannot be used)
+        measured = self.measured(self.t_ns)
+        if measured is None:
+            return True  # a read that cannot be used: a driver error, said (self.broken)
+        error = np.abs(measured - self.commanded)
         tolerance = self.settings.values()["position_tolerance"]
         worst = int(np.argmax(error))
         if not error[worst] > tolerance:
@@ -411,10 +410,9 @@ class DriverNode(StepConsumer):
             self.reached(t_ns)
             self.publish_states(t_ns)
 
-    def publish_states(self, t_ns: int) -> None:
-        """winder/joint_commands (the commanded position) and winder/joint_states
-        (where the backend says the axes are), in joint units, each velocity the
-        mean since an earlier sample; recorded, as the simulator's are."""
+    def measured(self, t_ns: int) -> npt.NDArray[np.float64] | None:
+        """The backend's ``read(t_ns)`` as one finite step position per axis;
+        None (a driver error, said) if it raised or returned anything else."""
         got = self.call("read", None, self.backend.read, t_ns)
         try:
             measured = np.asarray(got, float).reshape(len(AXIS_TABLE))
@@ -424,6 +422,15 @@ class DriverNode(StepConsumer):
             if got is not None:  # (None: it raised, said already)
                 want = f"want {len(AXIS_TABLE)} finite step positions"
                 self.bug("read", f"returned {repr(got)[:60]}: {want}")
+            return None
+        return measured
+
+    def publish_states(self, t_ns: int) -> None:
+        """winder/joint_commands (the commanded position) and winder/joint_states
+        (where the backend says the axes are), in joint units, each velocity the
+        mean since an earlier sample; recorded, as the simulator's are."""
+        measured = self.measured(t_ns)
+        if measured is None:
             return
         commanded = self.commanded.astype(float)
         self.following = max(self.following, float(np.max(np.abs(measured - commanded))))
