@@ -15,17 +15,19 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from winder_sim.sim_node import SimNode
+from winder_sim.sim_node import SIM_TOPICS, SimEngine
 
+from winder.contract.params import SIM_SPECS, check_sim
 from winder.contract.stream import JobPlan
 from winder.ros.chunks import TIMED_CDR
+from winder.ros.consumer import StepConsumer
 from winder.ros.spin import spin
 
 #: s the clock is beyond the first step after a rest when that step comes
 LEAP_S = 1.0
 
 
-class LateClock(SimNode):
+class RestWatch(SimEngine):
     rested = False
 
     def begin(self, plan: JobPlan, values: dict[str, Any]) -> dict[str, object]:
@@ -33,19 +35,27 @@ class LateClock(SimNode):
         return super().begin(plan, values)
 
     def work(self) -> None:
-        if self.at_rest:
+        if self.run.at_rest:
             self.rested = True
         super().work()
 
+
+class LateClock(StepConsumer):
+    def __init__(self) -> None:
+        self.sim = RestWatch()
+        super().__init__(
+            "sim_node", SIM_SPECS, check_sim, self.sim, hardware_id="winder_sim", topics=SIM_TOPICS
+        )
+
     def accept(self, raw: bytes) -> npt.NDArray[np.int64] | None:
-        if self.rested and self.plan is not None:
-            self.rested = False
+        if self.sim.rested and self.plan is not None:
+            self.sim.rested = False
             try:
                 rows = TIMED_CDR.decode(raw)
             except ValueError:  # not a chunk: the base refuses it
                 return super().accept(raw)
             if rows.shape[0]:
-                self.simulate(None, None, until=int(rows[0, 0]) / 1e9 + LEAP_S)
+                self.sim.simulate(None, None, until=int(rows[0, 0]) / 1e9 + LEAP_S)
         return super().accept(raw)
 
 

@@ -1,5 +1,5 @@
 """The smallest hardware driver docs/ARCHITECTURE.md promises: a
-``StepConsumer`` with only ``execute`` (it takes each row at once, as fast
+``StepConsumer`` holding an engine with only ``execute`` (it takes each row at once, as fast
 as possible) and the consumer's own settings. test_stalls.py runs it behind
 the real interp and profile nodes.
 
@@ -13,18 +13,19 @@ import numpy.typing as npt
 
 from winder.contract.params import CONSUMER_SPECS, check_consumer
 from winder.ros.consumer import StepConsumer
+from winder.ros.engine import Engine
 from winder.ros.spin import spin
 
 
-class MinimalDriver(StepConsumer):
-    def __init__(self) -> None:
-        super().__init__("minimal_driver", CONSUMER_SPECS, check_consumer, hardware_id="minimal")
-        self.start_lifecycle()
-
+class AtOnce(Engine):
     def execute(self, rows: npt.NDArray[np.int64]) -> None:
-        self.executed(rows.shape[0])
-        self.reached(int(rows[-1, 0]))
+        self.run.executed(rows.shape[0])
+        self.run.reached(int(rows[-1, 0]))
+
+
+def minimal_driver() -> StepConsumer:
+    return StepConsumer("minimal_driver", CONSUMER_SPECS, check_consumer, AtOnce(), hardware_id="minimal")
 
 
 if __name__ == "__main__":
-    spin(MinimalDriver)
+    spin(minimal_driver)

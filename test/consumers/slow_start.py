@@ -17,20 +17,28 @@ import os
 import time
 from typing import Any
 
-from winder_sim.sim_node import SimNode
+from winder_sim.sim_node import SIM_TOPICS, SimEngine
 
+from winder.contract.params import SIM_SPECS, check_sim
 from winder.contract.stream import JobPlan
+from winder.ros.consumer import StepConsumer
 from winder.ros.spin import spin
 
 #: s the run's set-up takes (longer than the stall_timeout the test gives)
 SETUP_S = float(os.environ.get("SLOW_START_S", "3.0"))
 
 
-class SlowStart(SimNode):
+class SlowSetUp(SimEngine):
     def begin(self, plan: JobPlan, values: dict[str, Any]) -> dict[str, object]:
         time.sleep(SETUP_S)  # the slow set-up itself, on purpose: not a wait
         return super().begin(plan, values)
 
 
+def slow_start() -> StepConsumer:
+    return StepConsumer(
+        "sim_node", SIM_SPECS, check_sim, SlowSetUp(), hardware_id="winder_sim", topics=SIM_TOPICS
+    )
+
+
 if __name__ == "__main__":
-    spin(SlowStart)
+    spin(slow_start)

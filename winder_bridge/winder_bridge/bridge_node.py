@@ -92,6 +92,7 @@ import numpy.typing as npt
 import rclpy
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.client import Client
+from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from rclpy.task import Future
 from rosgraph_msgs.msg import Clock
@@ -109,6 +110,7 @@ from winder.motion.axes import AXES, axis
 from winder.motion.limits import NO_LIMIT, LimitWatch, job_extent, job_limits, travel_past
 from winder.ros.consumer import StepConsumer
 from winder.ros.diagnostics import ERROR
+from winder.ros.engine import Engine, RunPort
 from winder.ros.graph import fully_qualified, publishers_by_gid
 from winder.ros.qos import QOS_CLOCK, QOS_STATE
 from winder.ros.sender import attributed
@@ -152,7 +154,9 @@ BRIDGE_TOPICS = {
 # which matches ros2_control's SystemDefaultsQoS (reliable) on both topics.
 
 
-class BridgeNode(StepConsumer):
+class BridgeEngine(Engine):
+    """The hardware side of the bridge (see the module doc)."""
+
     #: the base's pump only accounts for what the command thread executed
     #: (receipts, the run's transitions, the bag): 0.25 s after the last
     #: pump is soon enough, and while the step chunks come (the look-ahead
@@ -160,39 +164,31 @@ class BridgeNode(StepConsumer):
     pump_period = 0.25
     pump_from_last = True
 
-    def __init__(self) -> None:
-        super().__init__(
-            "bridge_node",
-            BRIDGE_SPECS,
-            # the topics `controller` names must be names ROS takes in this node's namespace
-            lambda values: check_bridge(values, namespace=self.get_namespace()),
-            hardware_id="winder_bridge",
-            topics=BRIDGE_TOPICS,
-        )
-        values = self.settings.values()
+    def attach(self, node: Node, run: RunPort) -> None:
+        super().attach(node, run)
+        values = self.run.values()
         # The hardware side: a helper node no executor spins holds the joint
         # states' subscription (taken by the command thread) and the commands'
         # and clock's publishers (used by it), so that none of them wakes or
         # weighs on the executor. Their names are resolved here, with this
         # node's namespace and remappings.
         self.io = rclpy.create_node(
-            f"{self.get_name()}_io",
-            namespace=self.get_namespace(),
-            context=self.context,
+            f"{self.node.get_name()}_io",
+            namespace=self.node.get_namespace(),
+            context=self.node.context,
             use_global_arguments=False,
             enable_rosout=False,
             start_parameter_services=False,
         )
         self.controller = ""
         self.pub_cmd = self.commands_publisher(values["controller"], values["interface"])
-        self.pub_clock = self.io.create_publisher(Clock, self.resolve_topic_name(TOPIC_CLOCK), QOS_CLOCK)
-        self.bag_topics["joint_states"] = (
-            self.resolve_topic_name(TOPIC_MEASURED),
-            BRIDGE_TOPICS["joint_states"][1],
+        self.pub_clock = self.io.create_publisher(Clock, self.node.resolve_topic_name(TOPIC_CLOCK), QOS_CLOCK)
+        self.run.set_bag_topic(
+            "joint_states", self.node.resolve_topic_name(TOPIC_MEASURED), BRIDGE_TOPICS["joint_states"][1]
         )
         # taken with each message's publisher GID: only the broadcaster's count
         self.sub_states = attributed(
-            self.io, JointState, self.bag_topics["joint_states"][0], lambda _m, _g: None, QOS_STATE
+            self.io, JointState, self.run.bag_topic("joint_states"), lambda _m, _g: None, QOS_STATE
         )
         self.state_publishers: dict[bytes, str] = {}  # joint_states publisher GID -> its node's full name
         self.foreign_states: dict[str, int] = {}  # joint_states ignored, by the publishing node
@@ -206,10 +202,10 @@ class BridgeNode(StepConsumer):
         # holds its group until it ends: a homing service that never answered wedged the node)
         self.homing_group = ReentrantCallbackGroup()
         self.homing_now = False  # a ~/home is under way
-        self.create_service(Trigger, "~/home", self.on_home, callback_group=self.homing_group)
-        self.guard = self.create_guard_condition(self.on_alarm)
+        self.node.create_service(Trigger, "~/home", self.on_home, callback_group=self.homing_group)
+        self.guard = self.node.create_guard_condition(self.on_alarm)
         self.reader = JointStateReader(values["joints"])
-        self.upstream = ProfileAbort(self, self.peers)  # the profile node told to abort at a fault
+        self.upstream = ProfileAbort(self.node, self.run.peers)  # the profile node told to abort at a fault
         # shared with the command thread, under self.lock
         self.lock = threading.Lock()
         self.running = False  # a run is on: the thread ticks
@@ -226,7 +222,6 @@ class BridgeNode(StepConsumer):
         self.new_run(values)
         self.thread = threading.Thread(target=self.command_loop, name="bridge-commands", daemon=True)
         self.thread.start()
-        self.start_lifecycle()
 
     def commands_publisher(self, controller: str, interface: str = "forward") -> Any:
         """The publisher of ``<controller>/commands`` (interface forward) or
@@ -238,11 +233,11 @@ class BridgeNode(StepConsumer):
             self.io.destroy_publisher(self.pub_cmd)
         self.controller, self.interface_in_use = controller, interface
         if interface == "trajectory":
-            topic = self.resolve_topic_name(f"{controller}/joint_trajectory")
-            self.bag_topics["commands"] = (topic, TRAJECTORY_TYPE)
+            topic = self.node.resolve_topic_name(f"{controller}/joint_trajectory")
+            self.run.set_bag_topic("commands", topic, TRAJECTORY_TYPE)
             return self.io.create_publisher(JointTrajectory, topic, QOS_STATE)
-        topic = self.resolve_topic_name(f"{controller}/commands")
-        self.bag_topics["commands"] = (topic, BRIDGE_TOPICS["commands"][1])
+        topic = self.node.resolve_topic_name(f"{controller}/commands")
+        self.run.set_bag_topic("commands", topic, BRIDGE_TOPICS["commands"][1])
         return self.io.create_publisher(Float64MultiArray, topic, QOS_STATE)
 
     def new_run(self, values: dict[str, Any]) -> None:
@@ -281,7 +276,7 @@ class BridgeNode(StepConsumer):
         #: the job's extent in each joint's step counts (its corners' least and greatest)
         self.extent = (np.zeros(len(self.axes), np.int64), np.zeros(len(self.axes), np.int64))
         self.units = [BRIDGE_SPECS[f"max_following_error.{a}"].unit for a in self.axes]
-        broadcaster = check_node_name(values["broadcaster"], self.get_namespace(), "broadcaster")
+        broadcaster = check_node_name(values["broadcaster"], self.node.get_namespace(), "broadcaster")
         self.broadcaster = broadcaster
         if self.reader.joints != self.joints:
             self.reader = JointStateReader(self.joints)
@@ -340,8 +335,8 @@ class BridgeNode(StepConsumer):
                 if self.trajectory
                 else {}
             ),
-            "controller_topic": self.bag_topics["commands"][0],
-            "joint_states_topic": self.bag_topics["joint_states"][0],
+            "controller_topic": self.run.bag_topic("commands"),
+            "joint_states_topic": self.run.bag_topic("joint_states"),
             "joints": dict(zip(self.joints, self.axes, strict=True)),  # joint -> the cell axis it drives
             "job_origin": "start_position" if self.origin_here else "zero",
             "max_following_error": dict(zip(self.joints, self.limits.tolist(), strict=True)),
@@ -350,8 +345,7 @@ class BridgeNode(StepConsumer):
             "settle_time": self.settle_ns / 1e9,
         }
 
-    def take_profile_config(self, raw: bytes) -> None:
-        super().take_profile_config(raw)
+    def profile_config_heard(self) -> None:
         self.check_ramp()
 
     def check_ramp(self) -> None:
@@ -360,23 +354,24 @@ class BridgeNode(StepConsumer):
         that passes one is refused when the run is armed, before any command
         (after that, at once). Without the ramp the steps are still watched
         as they come (execute)."""
-        if self.plan is None or self.ramp_checked or self.profile_raw is None or not self.watching_limits():
+        raw = self.run.profile_config()
+        if self.run.plan is None or self.ramp_checked or raw is None or not self.watching_limits():
             return
         try:
-            doc = json.loads(deserialize_message(self.profile_raw, String).data)
-            if (doc.get("job_id"), doc.get("run_id", "")) != (self.plan.job_id, self.plan.run_id):
+            doc = json.loads(deserialize_message(raw, String).data)
+            if (doc.get("job_id"), doc.get("run_id", "")) != (self.run.plan.job_id, self.run.plan.run_id):
                 return  # an earlier run's ramp; this run's is on its way
             ramp = {k: doc[k] for k in (*PROFILE_SPECS, "feed_override") if k in doc}
             _, why = job_limits(
-                self.plan.job,
+                self.run.plan.job,
                 ramp,
                 self.limit_values,
-                self.plan.stops,
-                self.plan.stop_pause,
-                self.plan.schedule,
+                self.run.plan.stops,
+                self.run.plan.stop_pause,
+                self.run.plan.schedule,
             )
         except Exception as exc:  # a ramp this node cannot plan: the steps are watched as they come
-            self.get_logger().warning(f"the run's ramp cannot be checked against the limits: {exc}")
+            self.node.get_logger().warning(f"the run's ramp cannot be checked against the limits: {exc}")
             why = ""
         with self.lock:  # the breach first: the command thread arms once the ramp is checked
             self.ramp_breach = why
@@ -435,7 +430,7 @@ class BridgeNode(StepConsumer):
         with no rows left to pace the pump stopped before it was reached (the
         run stayed 'pausing', test_pause_and_resume[bridge_node] on a loaded
         machine)."""
-        if self.plan is None or self.fault_text:
+        if self.run.plan is None or self.fault_text:
             return False
         if not self.armed:
             # waiting to arm is work while the steps to arm with are here (the joints or the
@@ -443,25 +438,25 @@ class BridgeNode(StepConsumer):
             # nothing booked on it comes, and the stall watch minds the stream (a run whose steps
             # never came waited for ever, an abort of it too)
             return self.pacer is not None and self.pacer.held > 0 and not self.abort_unarmed()
-        if not self.finishing and self.ledger is not None and self.ledger.transitions_ahead:
+        if not self.run.finishing and self.run.transitions_ahead():
             return True
         return self.settle_until is not None and self.t_tick < self.settle_until
 
     def abort_unarmed(self) -> bool:
         """The run was aborted before its time started: nothing was commanded."""
-        return not self.armed and self.ledger is not None and self.ledger.abort is not None
+        return not self.armed and self.run.abort_booked()
 
     def work(self) -> None:
-        if self.plan is None or self.fault_text:
+        if self.run.plan is None or self.fault_text:
             return
         if self.abort_unarmed():  # nothing moved: the run closes at once, its abort done
             self.stop_pacing()
-            self.get_logger().info("run aborted before it started: nothing was commanded")
-            self.finish(complete=False)
+            self.node.get_logger().info("run aborted before it started: nothing was commanded")
+            self.run.finish(complete=False)
             return
         self.account()
-        if not self.inbox:
-            self.settle_if_complete()
+        if not self.run.chunks_waiting():
+            self.run.settle_if_complete()
 
     def settle(self, until_ns: int) -> None:
         self.settle_until = until_ns + self.settle_ns
@@ -474,7 +469,7 @@ class BridgeNode(StepConsumer):
         executed is accounted and every message is in the bag before the base
         closes it."""
         self.stop_pacing()
-        if self.plan is not None:
+        if self.run.plan is not None:
             self.account()
 
     def end(self) -> None:
@@ -512,53 +507,53 @@ class BridgeNode(StepConsumer):
             n, t = self.pacer.take_due(), self.t_tick
         self.drain()
         if n:
-            self.executed(n)
-        if not self.context.ok():  # Ctrl-C: the run closes, nothing more is published
-            self.t_ns = t
+            self.run.executed(n)
+        if not self.node.context.ok():  # Ctrl-C: the run closes, nothing more is published
+            self.run.t_ns = t
             return
         if n:
-            self.receipt()
-        self.reached(t)
+            self.run.receipt()
+        self.run.reached(t)
 
     def drain(self) -> None:
         """Everything the thread queued for the bag, in time order."""
         out = self.outbox
         while out:
             key, t, payload, exact = out.popleft()
-            self.record(key, t, payload, exact=exact)
+            self.run.record(key, t, payload, exact=exact)
 
     # -- readiness --------------------------------------------------------------
     def missing(self) -> str:
         """The hardware is not there (no joint_states for a while, or nobody
         subscribes to the commands): a run is not started into the void."""
-        if self.plan is None and self.upstream.client is None:
+        if self.run.plan is None and self.upstream.client is None:
             self.upstream.find()  # early: its replies match by a fault
         why = self.hardware_missing()
         if why and self.homed:
             self.homed = False
-            self.get_logger().warning(f"the axes' reference is lost ({why}): home them again (~/home)")
+            self.node.get_logger().warning(f"the axes' reference is lost ({why}): home them again (~/home)")
         if not why and self.require_homing and not self.homed:
-            why = f"the axes are not homed (require_homing): call {self.get_fully_qualified_name()}/home"
+            why = f"the axes are not homed (require_homing): call {self.node.get_fully_qualified_name()}/home"
         if why != self.missing_said:
             self.missing_said = why
             if why:
-                self.get_logger().info(f"waiting for the hardware: {why}")
+                self.node.get_logger().info(f"waiting for the hardware: {why}")
         return why
 
     def hardware_missing(self) -> str:
         if not self.running:  # the controller the next run will command (its settings may have changed)
-            values = self.settings.values()
+            values = self.run.values()
             with self.lock:
                 self.pub_cmd = self.commands_publisher(values["controller"], values["interface"])
         if time.monotonic_ns() - self.heard_ns > HARDWARE_FRESH_NS:
             if self.hardware_bad:
                 return self.hardware_bad
             return (
-                f"no {self.bag_topics['joint_states'][0]} from {self.broadcaster} for "
+                f"no {self.run.bag_topic('joint_states')} from {self.broadcaster} for "
                 f"{HARDWARE_FRESH_NS / 1e9:g} s"
             )
         if self.pub_cmd.get_subscription_count() == 0:
-            return f"nobody subscribes to {self.bag_topics['commands'][0]}"
+            return f"nobody subscribes to {self.run.bag_topic('commands')}"
         return ""
 
     # -- homing -------------------------------------------------------------------
@@ -568,7 +563,7 @@ class BridgeNode(StepConsumer):
         are homed: the soft limits hold for the positions measured from now."""
         if self.homing_now:
             resp.success, resp.message = False, "home refused: homing is under way"
-            self.get_logger().warning(resp.message)
+            self.node.get_logger().warning(resp.message)
             return resp
         self.homing_now = True
         try:
@@ -577,22 +572,22 @@ class BridgeNode(StepConsumer):
             resp.success, resp.message = False, f"home failed: {type(exc).__name__}: {exc}"
         finally:
             self.homing_now = False
-        (self.get_logger().info if resp.success else self.get_logger().warning)(resp.message)
+        (self.node.get_logger().info if resp.success else self.node.get_logger().warning)(resp.message)
         return resp
 
     async def home(self) -> tuple[bool, str]:
-        if self.plan is not None:
-            return False, f"home refused: run {self.plan.run_id or self.plan.job_id} is on"
-        values = self.settings.values()
+        if self.run.plan is not None:
+            return False, f"home refused: run {self.run.plan.run_id or self.run.plan.job_id} is on"
+        values = self.run.values()
         why = self.hardware_missing()
         if why:
             return False, f"home refused: {why}"
         service, name = str(values["homing_service"]), ""
         if service:
-            name = service if service.startswith("/") else self.resolve_service_name(service)
+            name = service if service.startswith("/") else self.node.resolve_service_name(service)
             client = self.homing_clients.get(name)
             if client is None:
-                client = self.homing_clients[name] = self.create_client(
+                client = self.homing_clients[name] = self.node.create_client(
                     Trigger, name, callback_group=self.homing_group
                 )
             if not client.service_is_ready():
@@ -634,19 +629,19 @@ class BridgeNode(StepConsumer):
     async def done_within(self, future: Future, timeout: float) -> bool:
         """Await ``future`` for ``timeout`` s at most (the node's other callbacks
         go on meanwhile): whether it is done."""
-        gate = Future(executor=self.executor)
+        gate = Future(executor=self.node.executor)
 
         def open_gate(*_: object) -> None:
             if not gate.done():
                 gate.set_result(None)
 
         future.add_done_callback(open_gate)
-        timer = self.create_timer(timeout, open_gate, callback_group=self.homing_group)
+        timer = self.node.create_timer(timeout, open_gate, callback_group=self.homing_group)
         try:
             await gate
         finally:
             timer.cancel()
-            self.destroy_timer(timer)
+            self.node.destroy_timer(timer)
         return bool(future.done())
 
     # -- the command thread --------------------------------------------------------
@@ -673,8 +668,8 @@ class BridgeNode(StepConsumer):
                     with self.lock:
                         self.tick()
                 except Exception as exc:  # the context is shutting down
-                    if self.context.ok():
-                        self.get_logger().error(f"command thread: {exc}")
+                    if self.node.context.ok():
+                        self.node.get_logger().error(f"command thread: {exc}")
                     self.go.clear()
 
     def tick(self) -> None:
@@ -753,7 +748,7 @@ class BridgeNode(StepConsumer):
             self.point_t, self.point_pos = self.point_t[passed:], self.point_pos[passed:]
         payload = trajectory_payload(
             self.wall_t0 + t,
-            self.plan.run_id if self.plan is not None else "",
+            self.run.plan.run_id if self.run.plan is not None else "",
             self.joints,
             self.point_t - t,
             self.point_pos,
@@ -774,7 +769,7 @@ class BridgeNode(StepConsumer):
             j = int(np.argmin(self.last_seen))
             self.raise_fault(
                 f"servo fault: joint {self.joints[j]} ({self.axes[j]} axis): no measured position on "
-                f"{self.bag_topics['joint_states'][0]} for {late / 1e6:.1f} ms, beyond "
+                f"{self.run.bag_topic('joint_states')} for {late / 1e6:.1f} ms, beyond "
                 f"joint_state_timeout = {self.timeout_ns / 1e9:g} s",
                 {"joint": self.joints[j], "axis": self.axes[j], "silent_s": f"{late / 1e9:.3f}"},
             )
@@ -788,7 +783,7 @@ class BridgeNode(StepConsumer):
         who = self.state_publishers.get(gid)
         if who is None and now - self.graph_look_ns >= GRAPH_LOOK_NS:
             self.graph_look_ns = now
-            for g, w in publishers_by_gid(self.io, self.bag_topics["joint_states"][0]).items():
+            for g, w in publishers_by_gid(self.io, self.run.bag_topic("joint_states")).items():
                 self.state_publishers[g] = fully_qualified(w.name, w.namespace)
             who = self.state_publishers.get(gid)
         if who is None:
@@ -797,8 +792,8 @@ class BridgeNode(StepConsumer):
             return True
         self.foreign_states[who] = self.foreign_states.get(who, 0) + 1
         if self.foreign_states[who] == 1:
-            self.get_logger().warning(
-                f"{self.bag_topics['joint_states'][0]}: joint states from {who}, not from the broadcaster "
+            self.node.get_logger().warning(
+                f"{self.run.bag_topic('joint_states')}: joint states from {who}, not from the broadcaster "
                 f"{self.broadcaster}: ignored (counted in the status' foreign_joint_states)"
             )
         return False
@@ -849,8 +844,8 @@ class BridgeNode(StepConsumer):
             if got is None:
                 self.bad_states += 1
                 if self.bad_states == 1:
-                    self.get_logger().warning(
-                        f"{self.bag_topics['joint_states'][0]}: a message that is not a JointState with "
+                    self.node.get_logger().warning(
+                        f"{self.run.bag_topic('joint_states')}: a message that is not a JointState with "
                         "one position per name: ignored"
                     )
                 return
@@ -942,7 +937,7 @@ class BridgeNode(StepConsumer):
             missing = [j for j, s in zip(self.joints, self.last_seen, strict=True) if s <= self.begin_ns]
             self.why_not_armed = f"no joint_states for {', '.join(missing)}"
         elif self.pub_cmd.get_subscription_count() == 0:
-            topic = self.bag_topics["commands"][0]
+            topic = self.run.bag_topic("commands")
             self.why_not_armed = f"nobody subscribes to {topic} (is {self.controller} loaded and active?)"
         else:
             self.why_not_armed = ""
@@ -965,7 +960,7 @@ class BridgeNode(StepConsumer):
                 return
             if not self.ramp_said:
                 self.ramp_said = True
-                self.get_logger().warning(
+                self.node.get_logger().warning(
                     f"no {TOPIC_PROFILE_CONFIG} for this run within {ARM_WAIT_NS / 1e9:g} s: its job is not "
                     "checked against the velocity and acceleration limits before it starts; its steps are, "
                     "as they come"
@@ -986,9 +981,9 @@ class BridgeNode(StepConsumer):
         self.next_clock = 0
         self.armed = True
         batches = f", a trajectory every {self.period_ns / 1e6:g} ms" if self.trajectory else ""
-        self.get_logger().info(
+        self.node.get_logger().info(
             f"run armed: commanding {', '.join(self.joints)} at {self.rate:g} Hz{batches} "
-            f"on {self.bag_topics['commands'][0]}"
+            f"on {self.run.bag_topic('commands')}"
         )
 
     def beyond_limits(self) -> bool:
@@ -1043,26 +1038,41 @@ class BridgeNode(StepConsumer):
     def servo_fault(self, text: str, values: dict[str, object]) -> None:
         """Stop the run: commands hold, the fault reported, the profile node
         told to abort (the rest of the cell stops sending), the run closed."""
-        if self.plan is None or self.fault_text:
+        if self.run.plan is None or self.fault_text:
             return
         self.stop_pacing()
         self.fault_text = text
-        self.get_logger().error(text)
-        self.publish_status(
-            "servo", ERROR, text, {"job_id": self.plan.job_id, "run_id": self.plan.run_id, **values}
+        self.node.get_logger().error(text)
+        self.run.publish_status(
+            "servo", ERROR, text, {"job_id": self.run.plan.job_id, "run_id": self.run.plan.run_id, **values}
         )
         self.upstream.ask(TOPIC_STEP_TIMES)
-        self.finish(complete=False)
+        self.run.finish(complete=False)
 
-    def shutdown(self) -> None:
-        super().shutdown()
+    def shutdown(self) -> bool:
         self.quit = True
         self.go.set()
         self.thread.join(timeout=1.0)
         # a command thread still waiting holds its node: its destruction waits for the
         # interpreter's teardown, which the process must then not skip (winder.ros.spin.leave)
-        self.let_go = not self.thread.is_alive()
+        let_go = not self.thread.is_alive()
         self.io.destroy_node()
+        return let_go
+
+
+class BridgeNode(StepConsumer):
+    """The bridge node: the cell's consumer in front of ros2_control."""
+
+    def __init__(self) -> None:
+        super().__init__(
+            "bridge_node",
+            BRIDGE_SPECS,
+            # the topics `controller` names must be names ROS takes in this node's namespace
+            lambda values: check_bridge(values, namespace=self.get_namespace()),
+            BridgeEngine(),
+            hardware_id="winder_bridge",
+            topics=BRIDGE_TOPICS,
+        )
 
 
 def main(args: list[str] | None = None) -> None:

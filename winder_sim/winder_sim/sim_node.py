@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
@@ -51,6 +52,7 @@ from winder.contract.stream import JobPlan
 from winder.contract.topics import TOPIC_CLOCK, TOPIC_JOINT_COMMANDS, TOPIC_JOINT_STATES
 from winder.motion.axes import AXES
 from winder.ros.consumer import StepConsumer
+from winder.ros.engine import Engine, RunPort
 from winder.ros.qos import QOS_CLOCK, QOS_STATE
 from winder.ros.spin import spin
 from winder.ros.timers import steady_timer
@@ -114,18 +116,20 @@ class Tally:
         return self.total / max(self.count, 1)
 
 
-class SimNode(StepConsumer):
-    def __init__(self) -> None:
-        super().__init__("sim_node", SIM_SPECS, check_sim, hardware_id="winder_sim", topics=SIM_TOPICS)
-        self.pub_clock = self.create_publisher(Clock, TOPIC_CLOCK, QOS_CLOCK)
-        self.pub_state = self.create_publisher(JointState, TOPIC_JOINT_STATES, QOS_STATE)
-        self.pub_cmd = self.create_publisher(JointState, TOPIC_JOINT_COMMANDS, QOS_STATE)
+class SimEngine(Engine):
+    """The simulated axes: the rows run through each axis' motor model, the
+    samples published at ``publish_rate`` Hz of simulated time (see the module doc)."""
+
+    def attach(self, node: Node, run: RunPort) -> None:
+        super().attach(node, run)
+        self.pub_clock = node.create_publisher(Clock, TOPIC_CLOCK, QOS_CLOCK)
+        self.pub_state = node.create_publisher(JointState, TOPIC_JOINT_STATES, QOS_STATE)
+        self.pub_cmd = node.create_publisher(JointState, TOPIC_JOINT_COMMANDS, QOS_STATE)
         self.clock_ns = -1  # the last /clock published in this node's life (ns)
         self.clock_wall = 0.0  # when it was published (steady s)
         # a real-time run waiting for its steps: /clock said again (see repeat_clock)
-        steady_timer(self, CLOCK_REPEAT, self.repeat_clock)
-        self.begin_sim(self.settings.values())
-        self.start_lifecycle()
+        steady_timer(node, CLOCK_REPEAT, self.repeat_clock)
+        self.begin_sim(run.values())
 
     def begin_sim(self, values: dict[str, Any]) -> None:
         """The simulation's state at a run's start."""
@@ -169,7 +173,7 @@ class SimNode(StepConsumer):
         }
 
     def paces(self) -> bool:
-        return bool(self.settings.values()["real_time"])
+        return bool(self.run.values()["real_time"])
 
     def batches(self) -> bool:
         return not self.paces()
@@ -185,27 +189,28 @@ class SimNode(StepConsumer):
 
     def free_running(self) -> bool:
         """A real-time run at rest after a pause: its clock goes on."""
-        return self.at_rest and self.paces()
+        return self.run.at_rest and self.paces()
 
     def execute(self, rows: npt.NDArray[np.int64]) -> None:
         self.advance(rows)
 
     def work(self) -> None:
-        if self.plan is None:
+        if self.run.plan is None:
             return
         real_time = self.paces()
         if self.rest is not None and not (real_time and self.out and self.ahead()):
             rest, self.rest = self.rest, None
             self.advance(rest)
-            if self.rest is None and not self.inbox:
-                self.settle_if_complete()
-        if self.at_rest and not (self.inbox or self.rest is not None or self.out):
+            if self.rest is None and not self.run.chunks_waiting():
+                self.run.settle_if_complete()
+        if self.run.at_rest and not (self.run.chunks_waiting() or self.rest is not None or self.out):
             # at rest after a pause: the samples go on to the rest, and on with
             # the wall clock in a real-time run (until the resume's steps come)
-            assert self.ledger is not None and self.ledger.hold is not None
-            rest_s = self.ledger.hold.rest_ns / 1e9
+            rest_ns = self.run.rest_ns()
+            assert rest_ns is not None
+            rest_s = rest_ns / 1e9
             until = self.free_run_until(rest_s) if real_time else rest_s
-            if until * 1e9 > max(self.last_step_ns, self.t_sim_ns):
+            if until * 1e9 > max(self.run.last_step_ns, self.t_sim_ns):
                 self.simulate(None, None, until=until)
         self.emit()
 
@@ -214,7 +219,7 @@ class SimNode(StepConsumer):
         (s): on with the wall clock, from where it stands. Found more than
         FREE_RUN_LEAP wall seconds beyond its next sample, it does not leap
         there: the pacing goes on from the clock."""
-        factor = self.settings.values()["real_time_factor"]
+        factor = self.run.values()["real_time_factor"]
         clock = max((self.next_sample - 1) / self.rate, rest_s)  # the last sample computed, or the rest
         allowed = self.paced_until(factor)
         if allowed - (clock + 1.0 / self.rate) > FREE_RUN_LEAP * factor:
@@ -229,7 +234,7 @@ class SimNode(StepConsumer):
         return ns_not_before((self.next_sample - 1) / self.rate)  # as the trackers have it
 
     def settle(self, until_ns: int) -> None:
-        self.simulate(None, None, until=until_ns / 1e9 + self.settings.values()["settle_time"])
+        self.simulate(None, None, until=until_ns / 1e9 + self.run.values()["settle_time"])
 
     def flush(self) -> None:
         while self.out:
@@ -242,9 +247,9 @@ class SimNode(StepConsumer):
 
     def checked(self, seg: int, rows: npt.NDArray[np.int64]) -> None:
         """Eq. 7 of the commanded steps, as ``winder analyze`` computes it (winder.contract.eq7)."""
-        assert self.plan is not None
-        if self.plan.segments[seg].kind.winds:
-            self.dev_cmd.add(step_deviation(self.plan, seg, rows[:, 2:]))
+        assert self.run.plan is not None
+        if self.run.plan.segments[seg].kind.winds:
+            self.dev_cmd.add(step_deviation(self.run.plan, seg, rows[:, 2:]))
 
     def details(self) -> dict[str, object]:
         return {
@@ -275,7 +280,7 @@ class SimNode(StepConsumer):
                 self.simulate(None, None, until=end)  # no step within the batch: samples only
             else:
                 self.simulate(rows[lo:hi], t_s[lo:hi], until=float(t_s[hi - 1]) if hi == n else end)
-            self.executed(hi - lo)
+            self.run.executed(hi - lo)
             lo = hi
             if lo < n:
                 if self.paces():
@@ -367,18 +372,18 @@ class SimNode(StepConsumer):
 
     def deviation_of_axes(self, segs: npt.NDArray[np.int64], act_pos: npt.NDArray[np.float64]) -> None:
         """Eq. 7 of the samples, as ``winder analyze`` computes it (winder.contract.eq7)."""
-        assert self.plan is not None
-        js = self.plan.joint_step
+        assert self.run.plan is not None
+        js = self.run.plan.joint_step
         x, y = act_pos[:, 0] / js[0], act_pos[:, 1] / js[1]
-        layer = layer_of_samples(self.plan, segs, y)
+        layer = layer_of_samples(self.run.plan, segs, y)
         if np.any(layer >= 0):
-            dist = sample_deviation(self.plan, layer, x, y)
+            dist = sample_deviation(self.run.plan, layer, x, y)
             self.dev_act.add(dist[layer >= 0])
 
     # -- out -------------------------------------------------------------
     def emit(self) -> None:
         """Publish queued samples: all of them, or as far as the wall clock allows."""
-        limit = self.paced_until(self.settings.values()["real_time_factor"]) if self.paces() else math.inf
+        limit = self.paced_until(self.run.values()["real_time_factor"]) if self.paces() else math.inf
         while self.out:
             block = self.out[0]
             ks = block["k"]
@@ -398,9 +403,7 @@ class SimNode(StepConsumer):
         simulated until they catch up with the clock."""
         if self.wall_pace0 == 0.0:
             return True
-        return (self.next_sample - 1) / self.rate > self.paced_until(
-            self.settings.values()["real_time_factor"]
-        )
+        return (self.next_sample - 1) / self.rate > self.paced_until(self.run.values()["real_time_factor"])
 
     def publish_samples(self, block: dict[str, Any], n: int) -> None:
         """The first ``n`` samples of a block: /clock first, then commands and
@@ -413,29 +416,18 @@ class SimNode(StepConsumer):
         if n:
             self.clock_ns = int(stamps[n - 1])
             self.clock_wall = time.monotonic()
-        bag = self.bag if not self.record_failure else None
-        topics = (
-            self.bag_topics["clock"][0],
-            self.bag_topics["joint_commands"][0],
-            self.bag_topics["joint_states"][0],
-        )
+        record = self.run.record
         for r in range(n):
             t = int(t_ns[r])
             self.t_sim_ns = t
             self.pub_clock.publish(clocks[r])
             self.pub_cmd.publish(cmds[r])
             self.pub_state.publish(acts[r])
-            if bag is not None:
-                log = self.wall0_ns + t
-                try:
-                    bag.write(topics[0], log, clocks[r], exact=True)
-                    bag.write(topics[1], log, cmds[r], exact=True)
-                    bag.write(topics[2], log, acts[r], exact=True)
-                except RuntimeError as exc:
-                    self.recording_failed(exc)
-                    bag = None
+            record("clock", t, clocks[r], exact=True)
+            record("joint_commands", t, cmds[r], exact=True)
+            record("joint_states", t, acts[r], exact=True)
         if n:
-            self.reached(int(t_ns[n - 1]))
+            self.run.reached(int(t_ns[n - 1]))
 
     def repeat_clock(self) -> None:
         """In a real-time run the clock stands still while the node waits for
@@ -445,7 +437,7 @@ class SimNode(StepConsumer):
         volatile) would wait for a clock that waits for it. So the last
         /clock goes out again every CLOCK_REPEAT s while nothing else does
         (not recorded: the bag has it once)."""
-        if self.plan is None or not self.paces() or self.clock_ns < 0:
+        if self.run.plan is None or not self.paces() or self.clock_ns < 0:
             return
         if time.monotonic() - self.clock_wall >= CLOCK_REPEAT:
             self.pub_clock.publish(encode_clocks(np.array([self.clock_ns], np.int64))[0])
@@ -462,6 +454,15 @@ class SimNode(StepConsumer):
             self.pace_sim0 += (now - self.wall_pace0) * self.pace_factor
             self.wall_pace0, self.pace_factor = now, factor
         return self.pace_sim0 + (now - self.wall_pace0) * factor
+
+
+class SimNode(StepConsumer):
+    """The sim node: the cell's consumer with simulated axes."""
+
+    def __init__(self) -> None:
+        super().__init__(
+            "sim_node", SIM_SPECS, check_sim, SimEngine(), hardware_id="winder_sim", topics=SIM_TOPICS
+        )
 
 
 def main(args: list[str] | None = None) -> None:

@@ -1,8 +1,11 @@
 """``StepConsumer``: everything a node behind the step stream owes the cell,
-written once. The simulator (``sim_node``) and the ros2_control bridge
-(``bridge_node``) are subclasses; a hardware driver is one more.
+written once, around an :class:`winder.ros.engine.Engine` that executes the
+rows. The simulator (``sim_node``: ``SimEngine``), the ros2_control bridge
+(``bridge_node``: ``BridgeEngine``) and a hardware driver
+(:class:`winder.ros.driver.DriverNode`: the drive engine around a driver's
+:class:`winder.ros.driver.Backend`) are each this class with an engine.
 
-What the base does (docs/CONTRACT.md, "What a consumer must do"):
+What it does (docs/CONTRACT.md, "What a consumer must do"):
 
 * handshake: ``winder/ready`` (role ``consumer``): ``ready`` once the step
   stream's publisher is matched and the node is active and its settings
@@ -13,7 +16,7 @@ What the base does (docs/CONTRACT.md, "What a consumer must do"):
 * stream checks (:class:`winder.contract.stream.StreamChecker`: gaps,
   repeats, reordering; step times that do not increase or lie beyond a job's
   longest duration), each reported once as an ERROR;
-* late steps: a step timed before the backend's clock (:meth:`earliest_step_ns`)
+* late steps: a step timed before the engine's clock (``Engine.earliest_step_ns``)
   is executed at the clock, never refused, and counted
   (:class:`winder.contract.pacing.LateSteps`): one ERROR per run, once
   they stopped coming, and ``late_steps`` in the job report;
@@ -30,29 +33,14 @@ What the base does (docs/CONTRACT.md, "What a consumer must do"):
   contract's keys (:class:`winder.contract.run.JobReport`), and the final
   report when the run closes;
 * recording (optional, parameter ``record``): a rosbag2/MCAP directory per
-  run holding the contract's topics and the backend's own, closed before
+  run holding the contract's topics and the engine's own, closed before
   the final report is announced.
 
-What a backend implements (the hooks below; only :meth:`execute` is required):
-
-* :meth:`begin` - a run starts: set up the axes; return the configuration to
-  publish on ``winder/sim_config`` (or None: nothing is published, and nobody
-  waits for it);
-* :meth:`execute` - accepted timed rows, in order; execute them now or as
-  they fall due, calling :meth:`executed` (steps done) and :meth:`reached`
-  (execution time) as it goes;
-* :meth:`accepts_more`, :meth:`holding`, :meth:`work`, :meth:`pending` - for a
-  backend that paces: whether it takes the next chunk now, whether it holds
-  accepted rows not executed yet, its due work on each pump, and whether work
-  waits on the clock;
-* :meth:`earliest_step_ns` - a backend with a clock of its own: the
-  earliest time it can still execute a step at;
-* :meth:`settle` - every step is executed (or the abort's rest reached):
-  bring the axes to rest until the given time; the run closes when nothing is
-  pending;
-* :meth:`flush` - a new run arrives while this one settles: finish at once;
-* :meth:`details` - the backend's own status keys;
-* :meth:`end` - the run closed (report published): release its resources.
+What the engine does (:class:`winder.ros.engine.Engine`: its hooks, and the
+run it sees through :class:`winder.ros.engine.RunPort`): set the axes up
+when a run begins, execute the accepted rows (now or as they fall due),
+tell what it executed and how far the run's time went, settle the axes,
+end. The lifecycle starts when the node is made, with its engine attached.
 """
 
 from __future__ import annotations
@@ -73,7 +61,6 @@ from std_msgs.msg import Int64MultiArray, String
 from trajectory_msgs.msg import JointTrajectory
 
 from winder.contract.pacing import LateSteps
-from winder.contract.params import bag_directory
 from winder.contract.run import ControlEvent, EventError, JobReport, RunLedger, Transition
 from winder.contract.states import CellState, EventKind, JobState, ReadyState
 from winder.contract.stream import TIMED_COLUMNS, JobPlan, StreamChecker, parse_job_description
@@ -87,25 +74,21 @@ from winder.contract.topics import (
     TOPIC_SIM_CONFIG,
     TOPIC_STATE,
     TOPIC_STEP_TIMES,
-    in_namespace,
     status_values,
 )
 from winder.contract.trust import Intruders
 from winder.motion.timing import MAX_JOB_SECONDS
 from winder.record.bag import (
-    BagRecorder,
-    new_bag_path,
-    run_bag_path,
     signals_held,
-    unclosed_bags,
-    unclosed_line,
 )
 from winder.ros.chunks import TIMED_CDR
 from winder.ros.diagnostics import ERROR, OK, WARN, Diagnostics
+from winder.ros.engine import Engine
 from winder.ros.managed import ManagedNode
 from winder.ros.peers import Peers, Solo
 from winder.ros.qos import QOS_EVENTS, QOS_LATCHED, QOS_LATCHED_READER, QOS_STATE, QOS_STREAM
 from winder.ros.ready import Announcer
+from winder.ros.run_bag import RunBag, one_line
 from winder.ros.sender import attributed, waiting
 from winder.ros.settings import Settings
 from winder.ros.timers import steady_timer
@@ -136,10 +119,6 @@ CONSUMER_TOPICS = {
 }
 
 
-def one_line(exc: BaseException) -> str:
-    return (str(exc).splitlines() or [type(exc).__name__])[0]
-
-
 class StepConsumer(ManagedNode):
     """The consumer half of the cell (see the module doc). ``specs`` must
     hold :data:`winder.contract.params.CONSUMER_SPECS`; ``topics`` are the
@@ -150,18 +129,20 @@ class StepConsumer(ManagedNode):
         name: str,
         specs: dict[str, Spec],
         check: Callable[[dict[str, Any]], None],
+        engine: Engine,
         *,
         hardware_id: str,
         topics: dict[str, tuple[str, str]] | None = None,
     ) -> None:
         super().__init__(name)
+        self.engine = engine
         self.settings = Settings(self, specs, check)
         self.diag = Diagnostics(self, hardware_id)
         self.hardware_id = hardware_id
         self.pub_progress = self.create_publisher(KeyValue, TOPIC_PROGRESS, QOS_STATE)
         self.pub_cell_state = self.create_publisher(DiagnosticStatus, TOPIC_STATE, QOS_LATCHED)
         self.pub_config = (
-            self.create_publisher(String, TOPIC_SIM_CONFIG, QOS_LATCHED) if self.configures else None
+            self.create_publisher(String, TOPIC_SIM_CONFIG, QOS_LATCHED) if self.engine.configures else None
         )
         self.ready = Announcer(self, "consumer", recheck=self.announce)
         # a job description starts a run now: volatile, so a consumer that
@@ -202,25 +183,20 @@ class StepConsumer(ManagedNode):
         )
         # pump() runs on events (a chunk, a job) and, while work waits on the
         # clock (pacing, batching), every 5 ms; idle, only the 1 Hz report runs
-        self.pump_timer = steady_timer(self, self.pump_period, self.pump)
+        self.pump_timer = steady_timer(self, self.engine.pump_period, self.pump)
         # a chunk or event held until the graph named its sender is acted on
         # later, from the peers' retry timer: the pump must run then too, or
         # the chunk would wait in the inbox for the next event
         self.peers.on_late = self.pump
         steady_timer(self, 0.5, self.watch)
         steady_timer(self, 1.0, self.report)
-        self.bag_topics = {
-            key: (name if name.startswith("/") else self.resolve_topic_name(name), kind)
-            for key, (name, kind) in {**CONSUMER_TOPICS, **(topics or {})}.items()
-        }
+        self.recording = RunBag(self, self.peers, {**CONSUMER_TOPICS, **(topics or {})}, self.error)
         self.plan: JobPlan | None = None
         self.reset()
         self.early: list[bytes] = []
         self.twin: bytes | None = None  # see take_job
         self.twin_taken = False
         self.early_events: deque[bytes] = deque(maxlen=100)  # winder/control of a run not started here yet
-        self.path_raw: bytes | None = None
-        self.profile_raw: bytes | None = None
         self.last_report: JobReport | None = None
         self.last_level, self.last_text = OK, ""
         self.cell_state(CellState.IDLE, "no job yet")
@@ -229,99 +205,12 @@ class StepConsumer(ManagedNode):
                 "job", ERROR, str(self.settings.blocked()), status_values(JobState.BLOCKED, role="consumer")
             )
         else:
-            self.check_bag_dir()
+            self.recording.check_dir(self.settings.values())
+        engine.attach(self, self)
+        self.start_lifecycle()
 
-    def check_bag_dir(self) -> None:
-        """At start: the bags in ``bag_dir`` that a writer left unclosed (an
-        earlier run of this node SIGKILLed, a full disk), named in one line
-        with what mends them; the rest of the cell goes on as ever."""
-        values = self.settings.values()
-        if not values.get("record"):
-            return
-        try:
-            directory = bag_directory(values["bag_dir"])
-        except ValueError:
-            return
-        said = unclosed_line(unclosed_bags(directory), f"bag_dir {directory}")
-        if said:
-            self.get_logger().warning(said)
-
-    #: whether this consumer publishes ``winder/sim_config`` (:meth:`begin` returns it)
-    configures = True
-    #: s between pumps while work waits on the clock (a backend with a pacing
-    #: thread of its own needs the pump less often)
-    pump_period = 0.005
-    #: whether each pump (a chunk's too) restarts the pump's period, so that
-    #: the timer fires only ``pump_period`` after the last pump: a backend
-    #: whose pump is a bookkeeping round, not its clock, wakes for the step
-    #: chunks alone while they come often enough
-    pump_from_last = False
     #: chunks kept for a run whose description has not come yet, at most
     EARLY_CHUNKS = 4096
-
-    # -- the hooks (see the module doc) -----------------------------------------
-    def begin(self, plan: JobPlan, values: dict[str, Any]) -> dict[str, object] | None:
-        """A run starts with these settings; the winder/sim_config document, or None."""
-        return None
-
-    def execute(self, rows: npt.NDArray[np.int64]) -> None:
-        """Execute accepted timed rows ``[t_ns, segment, axes...]`` (now or when due)."""
-        raise NotImplementedError
-
-    def accepts_more(self) -> bool:
-        """Whether the next chunk may be handed to :meth:`execute` now."""
-        return True
-
-    def batches(self) -> bool:
-        """Whether chunks are gathered and handed over many at a time (as fast as possible)."""
-        return False
-
-    def holding(self) -> bool:
-        """Accepted rows wait in the backend, not executed yet."""
-        return False
-
-    def work(self) -> None:
-        """The backend's due work, on every pump (pacing out what is due)."""
-
-    def pending(self) -> bool:
-        """Work waits on the clock: keep pumping every 5 ms; no stall."""
-        return False
-
-    def settle(self, until_ns: int) -> None:
-        """No more steps come: bring the axes to rest until ``until_ns``."""
-
-    def flush(self) -> None:
-        """A new run arrives while this one settles: finish what is pending at once."""
-
-    def details(self) -> dict[str, object]:
-        """The backend's own status keys (after the contract's)."""
-        return {}
-
-    def end(self) -> None:
-        """The run closed and is reported: release its resources."""
-
-    def resume_pacing(self) -> None:
-        """A programmed stop that waited for ``~/resume`` got its steps: pacing goes on from now."""
-
-    def paces(self) -> bool:
-        """Whether execution follows the wall clock now (a real-time run)."""
-        return False
-
-    def earliest_step_ns(self) -> int | None:
-        """The backend's clock (ns since the run's start): the earliest time it
-        can still execute a step at. A step timed before it is executed at it,
-        counted late and reported (a drive cannot go back in time). None: it
-        executes a step at any time given (the default)."""
-        return None
-
-    def missing(self) -> str:
-        """Why the backend cannot take a run now (its hardware is not there),
-        in words; "" if it can. Announced as "waiting"."""
-        return ""
-
-    def closing(self) -> None:
-        """The run is about to close: stop executing, account for what was
-        executed (:meth:`executed`, :meth:`reached`), record what is pending."""
 
     # -- lifecycle (winder.ros.managed) ----------------------------------------
     def in_run(self) -> bool:
@@ -338,17 +227,14 @@ class StepConsumer(ManagedNode):
         self.plan = None
         self.ledger: RunLedger | None = None
         self.checker: StreamChecker | None = None
-        self.bag: BagRecorder | None = None
         self.t_ns = 0  # execution time reached (ns) since the run's start
         self.wall0_ns = time.time_ns()  # wall-clock time of the run's start: the bag's time base
+        self.recording.start(None, self.wall0_ns)
         self.inbox: deque[bytes] = deque()  # received chunks waiting to be executed
         self.inbox_since = time.monotonic()
-        self.record_failure = ""  # why the bag stopped recording (a full disk), if it did
         self.last_step_ns = -1  # time of the last step accepted, as the stream timed it
         self.last_executed_ns = -1  # the time it is executed at (later if it came late)
         self.late = LateSteps()
-        self.path_recorded = False
-        self.profile_recorded = False
         self.job_wall = time.monotonic()
         self.finishing = False
         self.last_chunk_wall = time.monotonic()
@@ -388,7 +274,7 @@ class StepConsumer(ManagedNode):
             return
         if self.plan is not None and self.finishing:
             # every step of the last run is executed, it only settles: it closes complete now
-            self.flush()
+            self.engine.flush()
             self.finish(complete=True)
         elif self.plan is not None:
             self.error(
@@ -404,14 +290,15 @@ class StepConsumer(ManagedNode):
         self.reset()
         self.peers.run = Intruders()
         self.plan = plan
+        self.recording.start(plan, self.wall0_ns)
         self.ledger = RunLedger(plan)
         self.checker = StreamChecker(plan)
         self.announce()
-        config = self.begin(plan, values)
+        config = self.engine.begin(plan, values)
         if config is None and self.pub_config is not None:
             # a backend that configures nothing still says whether it paces: the profile node
             # waits for this word while the consumer publishes on winder/sim_config
-            config = {"real_time": self.paces()}
+            config = {"real_time": self.engine.paces()}
         config_raw = b""
         if config is not None and self.pub_config is not None:
             doc = {**config, "run_id": plan.run_id, "wall_start_ns": self.wall0_ns}
@@ -421,13 +308,15 @@ class StepConsumer(ManagedNode):
             self.pub_config.publish(msg_config)
             config_raw = serialize_message(msg_config)
         if values["record"]:
-            self.open_bag(plan, values, raw, config_raw)
+            why = self.recording.open(values, raw, config_raw)
+            if why:
+                self.error(f"job {plan.job_id} runs unrecorded: {why}")
         self.job_wall = time.monotonic()
-        self.record_path()
-        self.record_profile_config()
+        self.recording.record_path(self.t_ns)
+        self.recording.record_profile_config(self.t_ns)
         self.get_logger().info(
             f"run {plan.run_id or '-'}: job {plan.job_id}, {plan.total_steps} steps"
-            + (f", recording to {self.bag.path}" if self.bag else "")
+            + (f", recording to {self.recording.path}" if self.recording.path else "")
         )
         self.cell_state(CellState.RUNNING, f"run {plan.run_id or plan.job_id} started", where=(1, 1, 0))
         self.report()  # the run is on: its status at once, not at the next second
@@ -472,78 +361,18 @@ class StepConsumer(ManagedNode):
             )
         return early[stale:]
 
-    def open_bag(self, plan: JobPlan, values: dict[str, Any], job_raw: bytes, config_raw: bytes) -> None:
-        try:
-            directory = bag_directory(values["bag_dir"])
-            path = (
-                run_bag_path(directory, plan.run_id) if plan.run_id else new_bag_path(directory, plan.job_id)
-            )
-            # the run's description is in the bag from its first moment on: a
-            # node killed at any time after leaves a bag that tells which run it was
-            first = [(self.bag_topics["job"][0], self.wall0_ns, job_raw)]
-            if config_raw:
-                first.append((self.bag_topics["sim_config"][0], self.wall0_ns, config_raw))
-            # a re-simulation says so in metadata.yaml, where rosbag2 tools show it
-            custom = (
-                {
-                    "winder_run": "re-simulation",
-                    "winder_source_bag": plan.source_bag,
-                    "winder_source_run_id": plan.source_run_id,
-                }
-                if plan.source_bag
-                else {}
-            )
-            self.bag = BagRecorder(
-                path,
-                {name: kind for name, kind in self.bag_topics.values()},
-                compression=values["bag_compression"],
-                first=first,
-                custom=custom,
-            )
-        except (OSError, ValueError) as exc:  # the disk changed since bag_dir was accepted
-            self.error(f"job {plan.job_id} runs unrecorded: cannot open a bag: {one_line(exc)}")
-
     def on_path(self, raw: bytes, gid: bytes) -> None:
         self.peers.deliver(TOPIC_PATH, gid, raw, self.take_path)
 
     def take_path(self, raw: bytes) -> None:
-        self.path_raw = raw
-        self.record_path()
+        self.recording.take_path(raw, self.t_ns)
 
     def on_profile_config(self, raw: bytes, gid: bytes) -> None:
         self.peers.deliver(TOPIC_PROFILE_CONFIG, gid, raw, self.take_profile_config)
 
     def take_profile_config(self, raw: bytes) -> None:
-        self.profile_raw = raw
-        self.record_profile_config()
-
-    def record_profile_config(self) -> None:
-        """Record the ramp the profile node planned this run with, once."""
-        if self.plan is None or self.profile_raw is None or self.profile_recorded:
-            return
-        try:
-            doc = json.loads(deserialize_message(self.profile_raw, String).data)
-            ids = (doc.get("job_id"), doc.get("run_id", ""))
-        except (ValueError, AttributeError, RecursionError):
-            return
-        if ids != (self.plan.job_id, self.plan.run_id):
-            return  # an earlier run's ramp; this run's is on its way
-        self.profile_recorded = True
-        self.record("profile_config", self.t_ns, self.profile_raw)
-
-    def record_path(self) -> None:
-        """Record the current run's path once. Job and path travel on two
-        topics that match independently, so either may arrive first."""
-        if self.plan is None or self.path_raw is None or self.path_recorded:
-            return
-        try:
-            path = deserialize_message(self.path_raw, JointTrajectory)
-        except Exception:  # not a path: nothing of it is recorded
-            return
-        if path.header.frame_id != (self.plan.run_id or self.plan.job_id):
-            return  # an earlier run's path; this run's is on its way
-        self.path_recorded = True
-        self.record("path", self.t_ns, self.path_raw)
+        self.recording.take_profile_config(raw, self.t_ns)
+        self.engine.profile_config_heard()
 
     # -- operator events --------------------------------------------------------
     def on_control(self, raw: bytes, gid: bytes) -> None:
@@ -641,21 +470,18 @@ class StepConsumer(ManagedNode):
             return None
         self.last_step_ns = int(rows[-1, 0])
         timed = rows[:, 0]
-        times = self.late.take(timed, self.earliest_step_ns())
+        times = self.late.take(timed, self.engine.earliest_step_ns())
         if times is not timed:
             # behind the backend's clock (it ran past the time they were timed
             # for): executed at the clock, counted; reported once a run (_work)
             rows = rows.copy()
             rows[:, 0] = times
         self.last_executed_ns = int(rows[-1, 0])
-        self.checked(seg, rows)
+        self.engine.checked(seg, rows)
         index = self.checker.step_index(seg, rows[:, 2:]) if self.ledger.has_stops else None
         if self.ledger.note_rows(seg, rows[:, 0], index):
-            self.resume_pacing()
+            self.engine.resume_pacing()
         return rows
-
-    def checked(self, seg: int, rows: npt.NDArray[np.int64]) -> None:
-        """Accepted rows, before they are executed (the simulator measures their deviation)."""
 
     def pump(self) -> None:
         """Do the work that is due; keep the 5 ms timer running while work
@@ -664,23 +490,20 @@ class StepConsumer(ManagedNode):
         self.take_control()
         if self.plan is not None:
             self._work()
-        if self.plan is not None and (self.inbox or self.holding() or self.pending() or self.finishing):
-            if self.pump_from_last or self.pump_timer.is_canceled():
+        engine = self.engine
+        if self.plan is not None and (self.inbox or engine.holding() or engine.pending() or self.finishing):
+            if self.engine.pump_from_last or self.pump_timer.is_canceled():
                 self.pump_timer.reset()
         else:
             self.pump_timer.cancel()
 
     def _work(self) -> None:
         now = time.monotonic()
-        if (
-            self.inbox
-            and not (self.path_recorded and self.profile_recorded)
-            and now - self.job_wall < PATH_WAIT
-        ):
+        if self.inbox and not self.recording.has_plan_documents and now - self.job_wall < PATH_WAIT:
             return  # hold the steps briefly: the bag should have path and ramp before they run
-        batching = self.batches()
+        batching = self.engine.batches()
         gather = batching and 0 < len(self.inbox) < BATCH_CHUNKS and now - self.inbox_since < BATCH_WAIT
-        while self.inbox and not gather and not self.finishing and self.accepts_more():
+        while self.inbox and not gather and not self.finishing and self.engine.accepts_more():
             batch: list[npt.NDArray[np.int64]] = []
             size = 0
             while self.inbox and size < BATCH_STEPS:
@@ -691,7 +514,7 @@ class StepConsumer(ManagedNode):
                 if not batching:
                     break
             if batch:
-                self.execute(np.concatenate(batch) if len(batch) > 1 else batch[0])
+                self.engine.execute(np.concatenate(batch) if len(batch) > 1 else batch[0])
                 # the stall clock counts waiting for steps, not executing them: a batch the
                 # nonlinear model took seconds over is no stall of the stream
                 self.last_chunk_wall = time.monotonic()
@@ -701,24 +524,49 @@ class StepConsumer(ManagedNode):
             self.error(late)
         if not self.inbox:  # the run's last chunk may have been dropped, not executed
             self.settle_if_complete()
-        self.work()
-        if self.plan is not None and self.finishing and not self.pending():
+        self.engine.work()
+        if self.plan is not None and self.finishing and not self.engine.pending():
             self.finish(complete=True)
-        if self.record_failure and self.plan is not None:
+        if self.recording.failure and self.plan is not None:
             self.finish(complete=False)
 
     def settle_if_complete(self) -> None:
         """Once every step of the run is executed or counted missing (or the
         abort's rest is reached): the axes settle, then the run closes."""
-        if self.checker is None or self.ledger is None or self.finishing or self.holding():
+        if self.checker is None or self.ledger is None or self.finishing or self.engine.holding():
             return
         self.ledger.missing_steps = self.checker.missing
         if not (self.checker.complete or self.ledger.aborted):
             return
-        self.settle(max(self.last_executed_ns, 0))
+        self.engine.settle(max(self.last_executed_ns, 0))
         self.finishing = True
 
-    # -- what the backend tells -------------------------------------------------
+    # -- the engine's view of the run (winder.ros.engine.RunPort) ----------------------
+    def values(self) -> dict[str, Any]:
+        return self.settings.values()
+
+    def rest_ns(self) -> int | None:
+        hold = self.ledger.hold if self.ledger is not None else None
+        return hold.rest_ns if hold is not None else None
+
+    def transitions_ahead(self) -> bool:
+        return self.ledger is not None and bool(self.ledger.transitions_ahead)
+
+    def abort_booked(self) -> bool:
+        return self.ledger is not None and self.ledger.abort is not None
+
+    def chunks_waiting(self) -> bool:
+        return bool(self.inbox)
+
+    def profile_config(self) -> bytes | None:
+        return self.recording.profile_raw
+
+    def bag_topic(self, key: str) -> str:
+        return self.recording.topics[key][0]
+
+    def set_bag_topic(self, key: str, name: str, kind: str) -> None:
+        self.recording.topics[key] = (name, kind)
+
     def executed(self, n: int) -> None:
         """``n`` more steps of the run are executed."""
         if self.ledger is not None:
@@ -761,12 +609,12 @@ class StepConsumer(ManagedNode):
             chunks_rejected=self.checker.rejected,
             sim_time_s=self.t_ns / 1e9,
             wall_time_s=time.monotonic() - self.start_wall,
-            bag=str(self.bag.path.resolve()) if self.bag else "",
+            bag=str(self.recording.path.resolve()) if self.recording.path else "",
             errors=len(self.errors),
             stalls=self.stalls,
             extra={
                 **({"longest_stall_s": f"{self.longest_stall:.1f}"} if self.stalls else {}),
-                **{k: str(v) for k, v in self.details().items()},
+                **{k: str(v) for k, v in self.engine.details().items()},
                 **self.late.keys(),
                 **self.intruder_keys(),
                 **self.event_keys(),
@@ -785,7 +633,7 @@ class StepConsumer(ManagedNode):
 
     def aborted(self) -> bool:
         """The run was aborted and every step up to the rest is executed."""
-        return self.ledger is not None and self.ledger.aborted and not self.record_failure
+        return self.ledger is not None and self.ledger.aborted and not self.recording.failure
 
     def final_report(self, complete: bool) -> tuple[JobReport, int, str]:
         """The run's final status: report, level and message. A run whose
@@ -794,11 +642,11 @@ class StepConsumer(ManagedNode):
         if self.ledger is not None and self.checker is not None:
             self.ledger.missing_steps = self.checker.missing
         aborted = self.aborted()
-        complete = complete and not self.record_failure and not aborted
+        complete = complete and not self.recording.failure and not aborted
         report = self.job_report(
             JobState.DONE if complete else (JobState.ABORTED if aborted else JobState.INCOMPLETE)
         )
-        faults = self.faults()
+        faults = self.engine.faults()
         ok = (complete or aborted) and not self.errors and not faults
         level = OK if ok else (WARN if complete or aborted else ERROR)
         state = "complete" if complete else ("aborted, the axes at rest" if aborted else "incomplete")
@@ -809,17 +657,14 @@ class StepConsumer(ManagedNode):
             text += f", {faults}"
         return report, level, text
 
-    def faults(self) -> str:
-        """What the backend saw go wrong in a run that executed every step
-        (the simulator: lost steps), in words; "" if nothing."""
-        return ""
-
     def finish(self, complete: bool) -> None:
         """End the run: final report into the bag, close it, then announce it.
         Signals wait meanwhile, so a Ctrl-C cannot split the three."""
         if self.plan is None:
             return
-        self.closing()
+        if complete and not self.engine.complete():
+            complete = False
+        self.engine.closing()
         self.take_control()  # the run's last events go into its bag
         late = self.late.report(closing=True)  # steps still coming late when the run closes
         if late:
@@ -842,23 +687,22 @@ class StepConsumer(ManagedNode):
         )
         self.cell_state(ended, text, where=last)
         final = self.diag.status("job", level, text, report.to_values())
-        if self.bag is not None:
+        bag = self.recording.path
+        if bag is not None:
             # the final report goes into the bag too, and the bag is closed
             # before anyone hears "done": whoever stops us then finds it complete
             self.record("diagnostics", self.t_ns, serialize_message(final))
-            try:
-                self.bag.close()
-            except (RuntimeError, OSError) as exc:  # left unclosed: winder bag recover reads it
-                self.recording_failed(exc)
+            self.recording.close()
+            if self.recording.failure:  # left unclosed: winder bag recover reads it
                 report, level, text = self.final_report(complete)  # no longer complete
                 final = self.diag.status("job", level, text, report.to_values())
         if self.context.ok():
-            self.get_logger().info(text + (f"; bag {self.bag.path}" if self.bag else ""))
+            self.get_logger().info(text + (f"; bag {bag}" if bag else ""))
         self.last_report, self.last_level, self.last_text = report, level, text
         self.plan = None
         self.finishing = False
-        self.bag = None
-        self.end()
+        self.recording.start(None, self.wall0_ns)
+        self.engine.end()
         if self.context.ok():  # at Ctrl-C the context is already shut down
             self.announce()  # ready first: whoever hears "done" can start the next run at once
             self.diag.pub.publish(final)
@@ -894,28 +738,7 @@ class StepConsumer(ManagedNode):
     def record(self, key: str, t_ns: int, data: bytes, *, exact: bool = False) -> None:
         """One message into the run's bag, if it records. A failed write (a
         full disk) stops the recording; pump() then closes the run incomplete."""
-        if self.bag is None or not self.bag.is_open or self.record_failure:
-            return
-        try:
-            self.bag.write(self.bag_topics[key][0], self.wall0_ns + t_ns, data, exact=exact)
-        except RuntimeError as exc:
-            self.recording_failed(exc)
-
-    def recording_failed(self, exc: BaseException) -> None:
-        if self.record_failure:
-            return
-        cause = exc.__cause__ or exc
-        errno_ = getattr(cause, "errno", None)
-        why = {28: "disk full", 27: "file size limit reached"}.get(errno_ or 0, one_line(cause))
-        self.record_failure = why
-        bag = self.bag.path if self.bag is not None else None
-        kept = (
-            f"the bag {bag} keeps what reached the disk but cannot be closed: `winder bag recover {bag}` "
-            "writes it out closed (winder's reader reads it as it is)"
-            if bag is not None
-            else "the bag keeps what reached the disk"
-        )
-        self.error(f"recording stopped: {why}; {kept}; the job is closed incomplete")
+        self.recording.record(key, t_ns, data, exact=exact)
 
     def error(self, why: str) -> None:
         self.errors.append(why)
@@ -929,28 +752,9 @@ class StepConsumer(ManagedNode):
         )
 
     def on_diagnostics(self, raw: bytes, gid: bytes, statuses: list[Any]) -> None:
-        """Record the statuses of this cell's nodes, each sent by the node it
-        names: another cell's are its own bag's, a stranger's none (the
-        messages Solo takes on /diagnostics)."""
-        if self.bag is None:
-            return
-        names = [st.name for st in statuses]
-        own = self.get_fully_qualified_name().lstrip("/") + ":"
-        if all(n.startswith(own) for n in names):
-            return  # this node records its own statuses as it publishes them (publish_status)
-        ours = [n for n in names if in_namespace(n, self.get_namespace())]
-        if not ours:
-            return
-        # one node's statuses, sent by that node (a stranger's status named like ours is not)
-        node = ours[0].split(":", 1)[0].rsplit("/", 1)[-1]
-        alone = all(n.split(":", 1)[0].rsplit("/", 1)[-1] == node for n in ours)
-        if alone:
-            # held while the graph does not name its sender yet (a node's first status can
-            # come before its discovery info), recorded at the time it came
-            t_ns = self.t_ns
-            self.peers.deliver_from(
-                TOPIC_DIAGNOSTICS, gid, raw, lambda r: self.record("diagnostics", t_ns, r), [node]
-            )
+        """The statuses of this cell's nodes, into the run's bag (the messages
+        Solo takes on /diagnostics)."""
+        self.recording.statuses(raw, gid, [st.name for st in statuses], self.t_ns)
 
     def publish_status(
         self, task: str, level: int, text: str, values: dict[str, object], *, t_ns: int | None = None
@@ -968,7 +772,7 @@ class StepConsumer(ManagedNode):
             return
         # step chunks held until the graph names their sender (winder.ros.peers) are work that is here
         held = bool(self.peers.held.get(TOPIC_STEP_TIMES))
-        busy = bool(self.inbox) or self.holding() or self.pending() or held
+        busy = bool(self.inbox) or self.engine.holding() or self.engine.pending() or held
         if (self.ledger.waiting_for_resume or self.ledger.held) and not busy:
             self.last_chunk_wall = time.monotonic()
             for t in self.ledger.reach_stops():  # the axes are at the stop: say so
@@ -987,7 +791,7 @@ class StepConsumer(ManagedNode):
             self.stalled = True
             self.stalls += 1
             why = f"step stream stalled: no steps for {idle:.1f} s at {done} steps"
-            if not self.paces():
+            if not self.engine.paces():
                 why += " (as fast as possible: nothing waits on the steps; the run fails if steps are lost)"
             elif not self.checker or not self.checker.done:
                 why += " (none yet: the axes wait at rest, the run's time has not started)"
@@ -1010,7 +814,7 @@ class StepConsumer(ManagedNode):
         loaded machine made an aborted run exit 1, 'failed', make flakes)."""
         if not self.checker or not self.checker.done:
             return WARN
-        return ERROR if self.paces() else WARN
+        return ERROR if self.engine.paces() else WARN
 
     def receipt(self) -> None:
         """The steps of the run executed so far, or known missing, on
@@ -1039,7 +843,7 @@ class StepConsumer(ManagedNode):
             heard = self.sub_times.get_publisher_count() > 0 and self.sub_job.get_publisher_count() > 0
             # and it can tell the cell's own interp and profile node from anyone else
             known = heard and self.solo.settled() and not self.peers.knows("interp", "profile")
-            state = ReadyState.READY if known and not self.missing() else ReadyState.WAITING
+            state = ReadyState.READY if known and not self.engine.missing() else ReadyState.WAITING
         self.ready.announce(state)
 
     def report(self) -> None:
@@ -1075,7 +879,7 @@ class StepConsumer(ManagedNode):
         even when the run's books cannot be (the context went down under
         them): its file must not stay without a summary. (A SIGKILL runs
         nothing here: its bag is left unclosed, for ``winder bag recover``.)"""
-        bag = self.bag
+        bag = self.recording.recorder
         try:
             if self.plan is not None and bag is not None:
                 self.finish(complete=False)
@@ -1088,3 +892,6 @@ class StepConsumer(ManagedNode):
                         f"bag {bag.path}: {one_line(exc)}; left unclosed: `winder bag recover {bag.path}` "
                         "writes it out closed"
                     )
+            # a thread of the engine's still running holds the node: its destruction waits for
+            # the interpreter's teardown, which the process must then not skip (winder.ros.spin)
+            self.let_go = self.engine.shutdown()

@@ -47,6 +47,7 @@ from typing import Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 import numpy.typing as npt
+from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
@@ -55,14 +56,16 @@ from winder.contract.params import CONSUMER_SPECS, check_consumer
 from winder.contract.stream import JobPlan
 from winder.contract.topics import TOPIC_CLOCK, TOPIC_JOINT_COMMANDS, TOPIC_JOINT_STATES, TOPIC_STEP_TIMES
 from winder.motion.axes import AXIS_TABLE, Axis
-from winder.ros.consumer import StepConsumer, one_line
+from winder.ros.consumer import StepConsumer
 from winder.ros.diagnostics import ERROR
+from winder.ros.engine import Engine, RunPort
 from winder.ros.qos import QOS_CLOCK, QOS_STATE
+from winder.ros.run_bag import one_line
 from winder.ros.timers import steady_timer
 from winder.ros.upstream import ProfileAbort
 from winder.spec import Spec
 
-__all__ = ["CLOCK_PERIOD_NS", "DRIVER_SPECS", "Backend", "DriverNode", "RunStart"]
+__all__ = ["CLOCK_PERIOD_NS", "DRIVER_SPECS", "Backend", "DriveEngine", "DriverNode", "RunStart"]
 
 #: the paced clock's period: /clock, winder/joint_states and the due rows every 10 ms
 CLOCK_PERIOD_NS = 10_000_000
@@ -153,33 +156,27 @@ class Backend(Protocol):
         return None
 
 
-class DriverNode(StepConsumer):
-    """A consumer node around a :class:`Backend` (see the module doc)."""
+class DriveEngine(Engine):
+    """The engine around a :class:`Backend`: the paced clock, the settling,
+    the joint states and a backend's errors (see the module doc)."""
 
-    #: publishes /clock, winder/joint_commands and winder/joint_states, recorded as the simulator's are
-    TOPICS: ClassVar[dict[str, tuple[str, str]]] = {
-        "clock": (TOPIC_CLOCK, "rosgraph_msgs/msg/Clock"),
-        "joint_commands": (TOPIC_JOINT_COMMANDS, "sensor_msgs/msg/JointState"),
-        "joint_states": (TOPIC_JOINT_STATES, "sensor_msgs/msg/JointState"),
-    }
-
-    def __init__(self, backend: Backend, name: str = "driver", hardware_id: str | None = None) -> None:
+    def __init__(self, backend: Backend) -> None:
         if not isinstance(backend, Backend):
             raise TypeError(f"{type(backend).__name__} is not a winder Backend (begin, write, read)")
         self.backend = backend
         self.broken = ""  # a driver error of this run (an exception in the backend), if any
         self.said: set[str] = set()  # the backend's methods whose error between runs was said
-        specs = {**CONSUMER_SPECS, **DRIVER_SPECS, **type(backend).specs}
-        super().__init__(name, specs, check_consumer, hardware_id=hardware_id or name, topics=self.TOPICS)
-        self.pub_clock = self.create_publisher(Clock, TOPIC_CLOCK, QOS_CLOCK)
-        self.pub_states = self.create_publisher(JointState, TOPIC_JOINT_STATES, QOS_STATE)
-        self.pub_commands = self.create_publisher(JointState, TOPIC_JOINT_COMMANDS, QOS_STATE)
         self.clock_ns = -1  # the last /clock published in this node's life
-        self.clock_timer = steady_timer(self, CLOCK_PERIOD_NS / 1e9, self.tick)
-        self.clock_timer.cancel()  # runs while a paced run's clock does
-        self.upstream = ProfileAbort(self, self.peers)  # told to abort the run at a fault
         self.begin_run(False)
-        self.start_lifecycle()
+
+    def attach(self, node: Node, run: RunPort) -> None:
+        super().attach(node, run)
+        self.pub_clock = node.create_publisher(Clock, TOPIC_CLOCK, QOS_CLOCK)
+        self.pub_states = node.create_publisher(JointState, TOPIC_JOINT_STATES, QOS_STATE)
+        self.pub_commands = node.create_publisher(JointState, TOPIC_JOINT_COMMANDS, QOS_STATE)
+        self.clock_timer = steady_timer(node, CLOCK_PERIOD_NS / 1e9, self.tick)
+        self.clock_timer.cancel()  # runs while a paced run's clock does
+        self.upstream = ProfileAbort(node, run.peers)  # told to abort the run at a fault
 
     def begin_run(self, paced: bool) -> None:
         self.paced = paced
@@ -239,68 +236,66 @@ class DriverNode(StepConsumer):
     def pending(self) -> bool:
         """Rows wait for their time, the axes settle, or an operator state is
         booked ahead of the clock (a pause's rest after its last step)."""
-        if self.plan is None or self.ledger is None:
+        if self.run.plan is None:
             return False
-        if self.queue or (self.finishing and not self.rested()):
+        if self.queue or (self.run.finishing and not self.rested()):
             return True
-        return self.paced and self.started and bool(self.ledger.transitions_ahead)
+        return self.paced and self.started and self.run.transitions_ahead()
 
     def earliest_step_ns(self) -> int | None:
         return self.now_ns() if self.paced and self.started else None
 
     def work(self) -> None:
-        if self.plan is None:
+        if self.run.plan is None:
             return
         fault = self.faults()
         if fault:
             if not self.broken:  # the drive's own fault (a driver error was said where it happened)
-                self.get_logger().error(f"{fault}; the run stops")
-            ids: dict[str, object] = {"job_id": self.plan.job_id, "run_id": self.plan.run_id}
-            self.publish_status("drive", ERROR, f"{fault}; the run stops", ids)
+                self.node.get_logger().error(f"{fault}; the run stops")
+            ids: dict[str, object] = {"job_id": self.run.plan.job_id, "run_id": self.run.plan.run_id}
+            self.run.publish_status("drive", ERROR, f"{fault}; the run stops", ids)
             self.upstream.ask(TOPIC_STEP_TIMES)  # the rest of the cell stops sending this run's steps
-            self.finish(complete=False)
+            self.run.finish(complete=False)
             return
         if self.paced and self.started:
             t = self.now_ns()
             due = self.take_due(t)
             if due is not None:
                 self.hand_over(t, due)
-            self.reached(t)
-            if not self.queue and not self.inbox:
-                self.settle_if_complete()
+            self.run.reached(t)
+            if not self.queue and not self.run.chunks_waiting():
+                self.run.settle_if_complete()
 
     def settle(self, until_ns: int) -> None:
-        self.settle_until = until_ns + round(self.settings.values()["settle_time"] * 1e9)
+        self.settle_until = until_ns + round(self.run.values()["settle_time"] * 1e9)
         if not self.paced:
-            self.reached(self.settle_until)
+            self.run.reached(self.settle_until)
 
-    def finish(self, complete: bool) -> None:
-        """A run that would close complete does so only with its axes in
-        position and no driver error (checked here, where the base closes it:
-        a check in the pump came a moment before the settle time was up, and
-        the base then closed a run done whose axes were thousands of steps off)."""
-        if complete and self.plan is not None and (self.broken or not self.in_position()):
-            complete = False
-        super().finish(complete)
+    def complete(self) -> bool:
+        """A run closes complete only with its axes in position and no driver
+        error (checked where the consumer closes it: a check in the pump came a
+        moment before the settle time was up, and the run then closed done
+        whose axes were thousands of steps off)."""
+        return self.run.plan is None or not (self.broken or not self.in_position())
 
     def in_position(self) -> bool:
         """At the run's end: every axis within ``position_tolerance`` steps of
         its last command (CONTRACT.md: done is at the job's end position); if
         not, said as the run's fault."""
-        measured = self.measured(self.t_ns)
+        measured = self.measured(self.run.t_ns)
         if measured is None:
             return True  # a read that cannot be used: a driver error, said (self.broken)
         error = np.abs(measured - self.commanded)
-        tolerance = self.settings.values()["position_tolerance"]
+        tolerance = self.run.values()["position_tolerance"]
         worst = int(np.argmax(error))
         if not error[worst] > tolerance:
             return True
-        settle = self.settings.values()["settle_time"]
+        settle = self.run.values()["settle_time"]
         self.broken = (
             f"axes not in position {settle:g} s after the last step: {AXIS_TABLE[worst].name} "
             f"{error[worst]:.1f} steps from its command (position_tolerance {tolerance:g})"
         )
-        self.get_logger().error(self.broken)
+        self.node.get_logger().error(self.broken)
         return False
 
     def rested(self) -> bool:
@@ -308,7 +303,7 @@ class DriverNode(StepConsumer):
         return self.settle_until is None or not self.paced or self.now_ns() >= self.settle_until
 
     def closing(self) -> None:
-        if self.paced and self.started and self.plan is not None:
+        if self.paced and self.started and self.run.plan is not None:
             self.publish_states(self.now_ns())
 
     def faults(self) -> str:
@@ -342,13 +337,14 @@ class DriverNode(StepConsumer):
 
     def bug(self, what: str, text: str, trace: str = "") -> None:
         why = f"backend.{what}() {text}"
-        plan = getattr(self, "plan", None)  # (None: while the node is being made)
+        run = getattr(self, "run", None)
+        plan = run.plan if run is not None else None  # (None: while the node is being made)
         if not self.broken and plan is not None:
             self.broken = f"driver error: {why}"
-            self.get_logger().error(f"{self.broken}; the run stops" + (f"\n{trace}" if trace else ""))
+            self.node.get_logger().error(f"{self.broken}; the run stops" + (f"\n{trace}" if trace else ""))
         elif plan is None and what not in self.said:  # between runs (missing, end): once a method
             self.said.add(what)
-            self.get_logger().error(f"driver error: {why}" + (f"\n{trace}" if trace else ""))
+            self.node.get_logger().error(f"driver error: {why}" + (f"\n{trace}" if trace else ""))
 
     # -- the paced clock ---------------------------------------------------------------------
     def now_ns(self) -> int:
@@ -358,8 +354,7 @@ class DriverNode(StepConsumer):
         now = time.monotonic_ns()
         t = self.t_ns_clock + (now - self.wall_ns)
         self.wall_ns = now
-        ledger = self.ledger
-        free = self.finishing or (ledger is not None and ledger.at_rest)
+        free = self.run.finishing or self.run.at_rest
         if not free:
             t = min(t, max(self.horizon_ns, self.t_ns_clock))  # it waits for the next steps
         self.t_ns_clock = t
@@ -367,20 +362,20 @@ class DriverNode(StepConsumer):
 
     def tick(self) -> None:
         """Every CLOCK_PERIOD_NS of a paced run: the due rows, the clock, the joint states."""
-        if self.plan is None or not self.started:
+        if self.run.plan is None or not self.started:
             self.clock_timer.cancel()
             return
-        self.pump()
-        if self.plan is None:  # the pump closed the run
+        self.run.pump()
+        if self.run.plan is None:  # the pump closed the run
             return
         # the time the pump handed the rows over up to: a later look at the clock (the pump
         # took 30 ms on a loaded machine) showed a command behind it, then a leap
-        t = self.t_ns
+        t = self.run.t_ns
         stamp = self.origin_ns + t
         clock = encode_clocks([stamp])[0]
         self.clock_ns = stamp
         self.pub_clock.publish(clock)
-        self.record("clock", t, clock, exact=True)
+        self.run.record("clock", t, clock, exact=True)
         self.publish_states(t)
 
     def take_due(self, t_ns: int) -> npt.NDArray[np.int64] | None:
@@ -404,10 +399,10 @@ class DriverNode(StepConsumer):
         """Rows to the backend, then booked: executed, receipts, the run's time."""
         self.call("write", None, self.backend.write, t_ns, rows)
         self.commanded = rows[-1, 2:].copy()
-        self.executed(rows.shape[0])
-        self.receipt()
+        self.run.executed(rows.shape[0])
+        self.run.receipt()
         if not self.paced:
-            self.reached(t_ns)
+            self.run.reached(t_ns)
             self.publish_states(t_ns)
 
     def measured(self, t_ns: int) -> npt.NDArray[np.float64] | None:
@@ -447,10 +442,29 @@ class DriverNode(StepConsumer):
             vel = (now - before) / dt if before is not None and dt > 0 else np.zeros_like(now)
             pos_j, vel_j = (now * self.joint_step)[None, :], (vel * self.joint_step)[None, :]
             msg = self.encoder.encode(stamp, pos_j, vel_j)[0]
-            if self.context.ok():  # at a Ctrl-C the run closes with the context gone: the bag still has it
+            if self.node.context.ok():  # at a Ctrl-C the run closes without the context: the bag has it
                 pub.publish(msg)
-            self.record(key, t_ns, msg, exact=True)
+            self.run.record(key, t_ns, msg, exact=True)
         if last is None or t_ns - last[0] >= CLOCK_PERIOD_NS // 2:
             # a velocity is the mean over half a clock period at least: two ticks close
             # together on a busy machine made one step over 0.1 ms a speed 5 times the real one
             self.last_sample = (t_ns, commanded, measured)
+
+
+class DriverNode(StepConsumer):
+    """A consumer node around a :class:`Backend` (see the module doc)."""
+
+    #: publishes /clock, winder/joint_commands and winder/joint_states, recorded as the simulator's are
+    TOPICS: ClassVar[dict[str, tuple[str, str]]] = {
+        "clock": (TOPIC_CLOCK, "rosgraph_msgs/msg/Clock"),
+        "joint_commands": (TOPIC_JOINT_COMMANDS, "sensor_msgs/msg/JointState"),
+        "joint_states": (TOPIC_JOINT_STATES, "sensor_msgs/msg/JointState"),
+    }
+
+    def __init__(self, backend: Backend, name: str = "driver", hardware_id: str | None = None) -> None:
+        engine = DriveEngine(backend)
+        specs = {**CONSUMER_SPECS, **DRIVER_SPECS, **type(backend).specs}
+        super().__init__(
+            name, specs, check_consumer, engine, hardware_id=hardware_id or name, topics=self.TOPICS
+        )
+        self.backend = backend
