@@ -60,10 +60,9 @@ from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import Int64MultiArray, String
 from trajectory_msgs.msg import JointTrajectory
 
-from winder.contract.pacing import LateSteps
 from winder.contract.run import ControlEvent, EventError, JobReport, RunLedger, Transition
 from winder.contract.states import CellState, EventKind, JobState, ReadyState
-from winder.contract.stream import TIMED_COLUMNS, JobPlan, StreamChecker, parse_job_description
+from winder.contract.stream import JobPlan, StreamChecker, parse_job_description
 from winder.contract.topics import (
     TOPIC_CONTROL,
     TOPIC_DIAGNOSTICS,
@@ -77,13 +76,12 @@ from winder.contract.topics import (
     status_values,
 )
 from winder.contract.trust import Intruders
-from winder.motion.timing import MAX_JOB_SECONDS
 from winder.record.bag import (
     signals_held,
 )
-from winder.ros.chunks import TIMED_CDR
 from winder.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from winder.ros.engine import Engine
+from winder.ros.intake import EarlyChunks, RowGate
 from winder.ros.managed import ManagedNode
 from winder.ros.peers import Peers, Solo
 from winder.ros.qos import QOS_EVENTS, QOS_LATCHED, QOS_LATCHED_READER, QOS_STATE, QOS_STREAM
@@ -104,8 +102,6 @@ PATH_WAIT = 2.0
 BATCH_STEPS = 1 << 16
 BATCH_CHUNKS = 8
 BATCH_WAIT = 0.01
-#: Step times beyond the longest a job may last are refused, not executed.
-MAX_STEP_NS = round(MAX_JOB_SECONDS * 1e9)
 #: the contract's topics every consumer's bag holds: key -> (name, type)
 CONSUMER_TOPICS = {
     "job": (TOPIC_JOB, "std_msgs/msg/String"),
@@ -193,9 +189,7 @@ class StepConsumer(ManagedNode):
         self.recording = RunBag(self, self.peers, {**CONSUMER_TOPICS, **(topics or {})}, self.error)
         self.plan: JobPlan | None = None
         self.reset()
-        self.early: list[bytes] = []
-        self.twin: bytes | None = None  # see take_job
-        self.twin_taken = False
+        self.early = EarlyChunks(self.get_logger().warning)  # chunks that came between runs
         self.early_events: deque[bytes] = deque(maxlen=100)  # winder/control of a run not started here yet
         self.last_report: JobReport | None = None
         self.last_level, self.last_text = OK, ""
@@ -208,9 +202,6 @@ class StepConsumer(ManagedNode):
             self.recording.check_dir(self.settings.values())
         engine.attach(self, self)
         self.start_lifecycle()
-
-    #: chunks kept for a run whose description has not come yet, at most
-    EARLY_CHUNKS = 4096
 
     # -- lifecycle (winder.ros.managed) ----------------------------------------
     def in_run(self) -> bool:
@@ -226,15 +217,13 @@ class StepConsumer(ManagedNode):
         """Forget the last run."""
         self.plan = None
         self.ledger: RunLedger | None = None
-        self.checker: StreamChecker | None = None
+        self.gate: RowGate | None = None  # the run's chunks into rows
+        self.checker: StreamChecker | None = None  # the gate's stream checks
         self.t_ns = 0  # execution time reached (ns) since the run's start
         self.wall0_ns = time.time_ns()  # wall-clock time of the run's start: the bag's time base
         self.recording.start(None, self.wall0_ns)
         self.inbox: deque[bytes] = deque()  # received chunks waiting to be executed
         self.inbox_since = time.monotonic()
-        self.last_step_ns = -1  # time of the last step accepted, as the stream timed it
-        self.last_executed_ns = -1  # the time it is executed at (later if it came late)
-        self.late = LateSteps()
         self.job_wall = time.monotonic()
         self.finishing = False
         self.last_chunk_wall = time.monotonic()
@@ -292,7 +281,8 @@ class StepConsumer(ManagedNode):
         self.plan = plan
         self.recording.start(plan, self.wall0_ns)
         self.ledger = RunLedger(plan)
-        self.checker = StreamChecker(plan)
+        self.gate = RowGate(plan, self.error)
+        self.checker = self.gate.checker
         self.announce()
         config = self.engine.begin(plan, values)
         if config is None and self.pub_config is not None:
@@ -323,43 +313,13 @@ class StepConsumer(ManagedNode):
         events, self.early_events = list(self.early_events), deque(maxlen=100)
         for event in events:  # the run's own events that came before its description; others dropped
             self.handle_control(event, early=True)
-        early, self.early = self.fresh(plan, self.early), []
-        # the run's first chunk taken from before its description may be a twin: the
-        # last run's of the same job (same steps, same times), closed early here
-        self.twin = early[0] if early else None
-        self.twin_taken = False  # the first is that chunk itself (not a twin): it is accepted
+        early = self.early.take(plan)
         # the stall watch counts from now, the run set up (its plan, its bag):
         # on a machine starting other cells that alone took over 2 s
         self.last_chunk_wall = time.monotonic()
         for chunk in early:  # in order, before any taken from the queue
             self.receive(chunk)
         self.pump()
-
-    def fresh(self, plan: JobPlan, early: list[bytes]) -> list[bytes]:
-        """The chunks of the new run among those that came while no run was
-        going on. Chunks carry no run id, and one writer's are delivered in
-        order: those of a run closed early (an abort, a stall, a fault) that
-        were still on their way come first; the new run's begin with a chunk
-        whose first row is its first step. Everything before that is dropped
-        (said once); with no such chunk, all of them."""
-        start = None
-        if plan.segments:
-            first = np.asarray(plan.segments[0].start, np.int64)
-            for i in range(len(early) - 1, -1, -1):
-                try:
-                    rows = TIMED_CDR.decode(early[i])
-                except ValueError:
-                    continue
-                if rows.shape[0] and rows[0, 1] == 0 and np.abs(rows[0, 2:] - first).max() == 1:
-                    start = i
-                    break
-        stale = len(early) if start is None else start
-        if stale:
-            self.get_logger().warning(
-                f"run {plan.run_id or plan.job_id}: {stale} step chunks of an earlier run, still on "
-                "their way when it closed, dropped"
-            )
-        return early[stale:]
 
     def on_path(self, raw: bytes, gid: bytes) -> None:
         self.peers.deliver(TOPIC_PATH, gid, raw, self.take_path)
@@ -421,9 +381,7 @@ class StepConsumer(ManagedNode):
 
     def receive(self, raw: bytes) -> None:
         if self.plan is None or self.checker is None or self.finishing:
-            if len(self.early) >= self.EARLY_CHUNKS:
-                self.early.pop(0)  # a closed run's stream still coming: the oldest can only be stale
-            self.early.append(raw)
+            self.early.keep(raw)
             return
         self.last_chunk_wall = time.monotonic()
         if self.stalled:
@@ -436,49 +394,16 @@ class StepConsumer(ManagedNode):
 
     def accept(self, raw: bytes) -> npt.NDArray[np.int64] | None:
         """The rows of a chunk that may be executed, or None (reported)."""
-        assert self.checker is not None and self.ledger is not None
-        if self.twin is not None and raw == self.twin and not self.twin_taken:
-            self.twin_taken = True  # the early chunk itself: accepted as any other
-        elif self.twin is not None and raw == self.twin:
-            # the run's first chunk again, byte for byte: the one taken from before the run's
-            # description was the last run's twin (a run closed early here, the same job started
-            # again at once: chunks carry no run id); executing either is the same, and this one
-            # is not a repeat of the stream (it was "steps 1..2 arrived again", an ERROR)
-            self.twin = None
+        assert self.gate is not None and self.ledger is not None
+        if self.early.is_twin(raw):
             self.get_logger().info("the run's first chunk came again: the earlier one was the last run's")
             return None
-        try:
-            rows = TIMED_CDR.decode(raw)
-        except ValueError as exc:
-            self.error(f"bad step_times chunk: {exc}")
-            return None
-        verdict = self.checker.check_rows(rows, TIMED_COLUMNS)  # positions tell gaps, repeats, reordering
-        if verdict.kind != "ok":
-            self.error(verdict.message)
-        if not verdict.accept:
-            self.checker.rejected_steps += rows.shape[0]
+        rows = self.gate.rows(raw, self.engine.earliest_step_ns())
+        if rows is None:
             return None
         seg = int(rows[0, 1])
-        late = int(rows[-1, 0]) > MAX_STEP_NS
-        if late or np.any(rows[1:, 0] <= rows[:-1, 0]) or rows[0, 0] <= self.last_step_ns:
-            # in sequence by position but not in time: the steps cannot be
-            # executed; they count as missing, never silently run
-            why = f"later than a job may last ({MAX_JOB_SECONDS:g} s)" if late else "do not increase"
-            self.error(f"segment {seg}: step times {why}; {rows.shape[0]} steps dropped")
-            self.checker.done -= rows.shape[0]
-            self.checker.missing += rows.shape[0]
-            return None
-        self.last_step_ns = int(rows[-1, 0])
-        timed = rows[:, 0]
-        times = self.late.take(timed, self.engine.earliest_step_ns())
-        if times is not timed:
-            # behind the backend's clock (it ran past the time they were timed
-            # for): executed at the clock, counted; reported once a run (_work)
-            rows = rows.copy()
-            rows[:, 0] = times
-        self.last_executed_ns = int(rows[-1, 0])
         self.engine.checked(seg, rows)
-        index = self.checker.step_index(seg, rows[:, 2:]) if self.ledger.has_stops else None
+        index = self.gate.checker.step_index(seg, rows[:, 2:]) if self.ledger.has_stops else None
         if self.ledger.note_rows(seg, rows[:, 0], index):
             self.engine.resume_pacing()
         return rows
@@ -519,7 +444,7 @@ class StepConsumer(ManagedNode):
                 # nonlinear model took seconds over is no stall of the stream
                 self.last_chunk_wall = time.monotonic()
             self.receipt()
-        late = self.late.report()  # once a run, when they stopped coming
+        late = self.gate.late.report() if self.gate else ""  # once a run, when they stopped coming
         if late:
             self.error(late)
         if not self.inbox:  # the run's last chunk may have been dropped, not executed
@@ -538,7 +463,8 @@ class StepConsumer(ManagedNode):
         self.ledger.missing_steps = self.checker.missing
         if not (self.checker.complete or self.ledger.aborted):
             return
-        self.engine.settle(max(self.last_executed_ns, 0))
+        assert self.gate is not None
+        self.engine.settle(max(self.gate.last_executed_ns, 0))
         self.finishing = True
 
     # -- the engine's view of the run (winder.ros.engine.RunPort) ----------------------
@@ -554,6 +480,10 @@ class StepConsumer(ManagedNode):
 
     def abort_booked(self) -> bool:
         return self.ledger is not None and self.ledger.abort is not None
+
+    @property
+    def last_step_ns(self) -> int:
+        return self.gate.last_step_ns if self.gate is not None else -1
 
     def chunks_waiting(self) -> bool:
         return bool(self.inbox)
@@ -615,7 +545,7 @@ class StepConsumer(ManagedNode):
             extra={
                 **({"longest_stall_s": f"{self.longest_stall:.1f}"} if self.stalls else {}),
                 **{k: str(v) for k, v in self.engine.details().items()},
-                **self.late.keys(),
+                **(self.gate.late.keys() if self.gate else {}),
                 **self.intruder_keys(),
                 **self.event_keys(),
             },
@@ -666,7 +596,7 @@ class StepConsumer(ManagedNode):
             complete = False
         self.engine.closing()
         self.take_control()  # the run's last events go into its bag
-        late = self.late.report(closing=True)  # steps still coming late when the run closes
+        late = self.gate.late.report(closing=True) if self.gate else ""  # still coming late at the close
         if late:
             self.error(late)
         with signals_held():

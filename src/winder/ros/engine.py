@@ -42,10 +42,13 @@ class RunPort(Protocol):
     finishing: bool
     #: execution time reached since the run's start (ns)
     t_ns: int
-    #: the time of the last step accepted, as the stream timed it (ns; -1: none yet)
-    last_step_ns: int
     #: who sent what on the graph (the cell's own nodes: winder.ros.peers)
     peers: Peers
+
+    @property
+    def last_step_ns(self) -> int:
+        """The time of the last step accepted, as the stream timed it (ns; -1: none yet)."""
+        ...
 
     @property
     def at_rest(self) -> bool:
