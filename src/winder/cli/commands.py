@@ -298,6 +298,7 @@ def cmd_check(args: argparse.Namespace) -> int:
     job = Job.from_dict(values_from_args(args, FIELD_SPECS, given["interp_node"]), check_fit=False)
     laid = job.winding
     doc = {"job_id": job.job_id, **report(laid)}
+    add_takeup(job, doc, given["profile_node"], str(given["interp_node"].get("schedule", "")))
     limits_why = ""
     if args.limits is not None and not args.limits.strip():
         raise UserError("--limits is empty: give the bridge's parameters file (a bridge_node section)")
@@ -423,6 +424,29 @@ def _coil_numbers(numbers: Sequence[int]) -> str:
     return ", ".join(out)
 
 
+def add_takeup(job: Job, doc: dict[str, Any], ramp_given: dict[str, Any], schedule: str) -> None:
+    """Each layer's take-up at the job's speeds (the job file's ramp, the
+    profile node's defaults where it sets none, at the highest feed override
+    it will run at): the flyer's top speed and the wire's least and greatest
+    speed and greatest acceleration over a turn (winder.motion.takeup)."""
+    from winder.contract.params import PROFILE_SPECS
+    from winder.motion.limits import flyer_speeds
+    from winder.motion.takeup import layer_takeup
+
+    ramp = {n: s.default for n, s in PROFILE_SPECS.items()} | ramp_given
+    try:
+        speeds = flyer_speeds(job, ramp, schedule)
+    except BadInputError:  # a ramp that cannot plan the job: said where the job is run
+        speeds = {}
+    b = job.bobbin
+    for coil_doc in [{"coil": 1, "layers": doc["layers"]}, *doc["coils"]]:
+        for layer in coil_doc["layers"]:
+            omega = speeds.get((coil_doc["coil"] - 1, layer["layer"] - 1))
+            layer["flyer_speed_rad_s"] = omega
+            contour = b.contour(layer["radius_m"]) if omega is not None else None
+            layer.update(layer_takeup(contour, job.flyer_radius, omega or 0.0))
+
+
 def check_lines(job: Job, doc: dict[str, Any]) -> list[str]:
     """``winder check``'s text: the report :func:`cmd_check` prints."""
     from winder.motion.coil import mm
@@ -434,8 +458,9 @@ def check_lines(job: Job, doc: dict[str, Any]) -> list[str]:
     if b.core == "round":
         core = f"a round core of {length(b.core_diameter)}" if b.core_given else "a round core"
     else:
+        corners = f", corners r {length(b.core_corner_radius)}" if b.core_corner_radius else ""
         core = (
-            f"a rectangular core {length(b.core_width)} x {length(b.core_depth)}"
+            f"a rectangular core {length(b.core_width)} x {length(b.core_depth)}{corners}"
             if b.core_given
             else "a rectangular core"
         )
@@ -469,11 +494,20 @@ def check_lines(job: Job, doc: dict[str, Any]) -> list[str]:
             else f"coil{'s' if len(numbers) > 1 else ''} {_coil_numbers(numbers)}"
         )
         lines.append(f"  {which}:")
-        lines.append("    layer  turns  radius mm  turn length mm")
+        lines.append(
+            "    layer  turns  radius mm  turn length mm  take-up ratio  flyer rad/s  take-up m/s  "
+            "take-up accel m/s2"
+        )
         for layer in coil["layers"]:
             turn = "-" if layer["turn_length_m"] is None else f"{layer['turn_length_m'] * 1e3:.2f}"
+            ratio = "-" if layer["takeup_ratio"] is None else f"{layer['takeup_ratio']:.3f}"
+            omega = "-" if layer["flyer_speed_rad_s"] is None else f"{layer['flyer_speed_rad_s']:.4g}"
+            lo, hi = layer["takeup_speed_min_m_s"], layer["takeup_speed_max_m_s"]
+            speed = "-" if lo is None or hi is None else f"{lo:.3g}..{hi:.3g}"
+            acc = "-" if layer["takeup_accel_max_m_s2"] is None else f"{layer['takeup_accel_max_m_s2']:.4g}"
             lines.append(
-                f"    {layer['layer']:5d}  {layer['turns']:5d}  {layer['radius_m'] * 1e3:9.3f}  {turn:>14}"
+                f"    {layer['layer']:5d}  {layer['turns']:5d}  {layer['radius_m'] * 1e3:9.3f}  {turn:>14}  "
+                f"{ratio:>13}  {omega:>11}  {speed:>11}  {acc:>18}"
             )
     height = doc["window_height_m"]
     lines.append(

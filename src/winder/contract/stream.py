@@ -28,7 +28,7 @@ import numpy.typing as npt
 from winder.errors import BadInputError
 from winder.motion.axes import AXES
 from winder.motion.interp import interpolate_pieces, pieces_mismatch
-from winder.motion.job import Job, Segment
+from winder.motion.job import FIELD_SPECS, Job, Segment
 from winder.spec import interval
 
 __all__ = [
@@ -68,6 +68,10 @@ def make_run_id(job_id: str, counter: int, now: float | None = None) -> str:
     return f"{job_id}_{time.strftime('%Y%m%d_%H%M%S', time.gmtime(t))}{ms:03d}_{counter}"
 
 
+#: job fields added after the description's format was fixed (written only when set)
+LATER_FIELDS = frozenset({"bobbin.core_corner_radius"})
+
+
 def describe_job(
     job: Job,
     run_id: str = "",
@@ -94,7 +98,12 @@ def describe_job(
         "stop_resume": stop_resume,
         "schedule": schedule,
         "job_file_sha256": job_file_sha256,
-        "job": job.to_dict(),
+        # a field added to the job later goes out only when set: a description of a job
+        # without it reads as before, also by a node of an earlier winder (which refuses
+        # a field it does not know)
+        "job": {
+            k: v for k, v in job.to_dict().items() if k not in LATER_FIELDS or v != FIELD_SPECS[k].default
+        },
         "axes": list(AXES),
         "joint_step": list(job.joint_step),
         "step_lengths": list(job.step_lengths),

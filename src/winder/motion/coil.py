@@ -43,6 +43,7 @@ from fractions import Fraction
 from typing import Any
 
 from winder.errors import BadInputError
+from winder.motion.takeup import Contour, contour_of_layer, takeup_ratio
 
 __all__ = [
     "CORES",
@@ -90,6 +91,7 @@ class Bobbin:
     core_diameter: float = 0.0
     core_width: float = 0.0
     core_depth: float = 0.0
+    core_corner_radius: float = 0.0  #: a rect core's corners (0: sharp)
 
     @property
     def core_given(self) -> bool:
@@ -97,14 +99,38 @@ class Bobbin:
             return self.core_diameter > 0
         return self.core_width > 0 and self.core_depth > 0
 
+    def contour(self, radius: float) -> Contour | None:
+        """The wire's centre line of a layer whose centre lies ``radius``
+        above the core (None: the core is not given)."""
+        if not self.core_given:
+            return None
+        return contour_of_layer(
+            self.core,
+            radius,
+            diameter=self.core_diameter,
+            width=self.core_width,
+            depth=self.core_depth,
+            corner=self.core_corner_radius,
+        )
+
     def turn_length(self, radius: float) -> float | None:
         """Length of one turn whose centre lies ``radius`` above the core
-        (None: the core is not given)."""
+        (None: the core is not given): ``pi (D + 2 r_l)`` on a round core,
+        ``2a + 2b - (8 - 2 pi)(r_c + r_l)`` with ``a = w + 2 r_l``, ``b = t + 2 r_l``
+        on a rectangular one (``2 (w + t) + 2 pi r_l`` with sharp corners)."""
         if not self.core_given:
             return None
         if self.core == "round":
             return math.pi * (self.core_diameter + 2 * radius)
-        return 2 * (self.core_width + self.core_depth) + 2 * math.pi * radius
+        contour = self.contour(radius)
+        assert contour is not None
+        return contour.length
+
+    def takeup_ratio(self, radius: float) -> float | None:
+        """How much faster the flyer draws the wire off a corner than off a
+        flat over a turn of that layer (1 on a round core; None: not given)."""
+        contour = self.contour(radius)
+        return None if contour is None else takeup_ratio(contour)
 
 
 def radial_pitch(d: float, lay: str) -> float:
@@ -321,6 +347,7 @@ def _coil_dict(coil: CoilGeometry) -> dict[str, Any]:
                 "width_m": layer.width,
                 "radius_m": layer.radius,
                 "turn_length_m": layer.turn_length,
+                "takeup_ratio": coil.bobbin.takeup_ratio(layer.radius),
                 "wire_length_m": layer.length,
             }
             for layer in coil.layers
@@ -353,6 +380,7 @@ def report(laid: Winding) -> dict[str, Any]:
         "core_diameter_m": b.core_diameter if b.core == "round" else None,
         "core_width_m": b.core_width if b.core == "rect" else None,
         "core_depth_m": b.core_depth if b.core == "rect" else None,
+        "core_corner_radius_m": b.core_corner_radius if b.core == "rect" else None,
         "wire_diameter_m": first.d,
         "bare_diameter_m": first.d_bare,
         "window_width_m": b.window_width or None,

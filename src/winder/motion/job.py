@@ -184,6 +184,15 @@ FIELD_SPECS: dict[str, Spec] = {
             open_low=False,
         ),
         _f(
+            "bobbin.core_corner_radius",
+            0.0,
+            5.0,
+            "m",
+            "rectangular core's corner radius r_c (0 = sharp corners), at most half its smaller side",
+            0.0,
+            open_low=False,
+        ),
+        _f(
             "wire.bare_diameter",
             0.0,
             0.02,
@@ -439,6 +448,7 @@ class Job:
     core_diameter: float = FIELD_SPECS["bobbin.core_diameter"].default
     core_width: float = FIELD_SPECS["bobbin.core_width"].default
     core_depth: float = FIELD_SPECS["bobbin.core_depth"].default
+    core_corner_radius: float = FIELD_SPECS["bobbin.core_corner_radius"].default
     bare_diameter: float = FIELD_SPECS["wire.bare_diameter"].default
     lay: str = FIELD_SPECS["lay"].default
     crossover: float = FIELD_SPECS["lay.crossover"].default
@@ -473,6 +483,7 @@ class Job:
         object.__setattr__(self, "_base_turns", first if auto else base.turns_per_layer)
         if check_fit and not laid.fits:
             raise JobError(laid.overflow())
+        self._check_flyer_clears(laid)
         self._check_size(laid)
         checked = {(base.turns_per_layer, base.layers)}
         for p, c in enumerate(wound):
@@ -601,6 +612,18 @@ class Job:
                         "a dwell needs the flyer to lead"
                     )
 
+    def _check_flyer_clears(self, laid: Winding) -> None:
+        """The flyer's nozzle circles outside every layer (JobError, one line)."""
+        for i, coil in enumerate(laid.coils):
+            top = coil.layers[-1] if coil.layers else None
+            contour = self.bobbin.contour(top.radius) if top is not None else None
+            if top is not None and contour is not None and contour.h_max >= self.flyer_radius:
+                raise JobError(
+                    f"flyer_radius={self.flyer_radius:g} m is invalid: coil {i + 1}'s layer {top.number} "
+                    f"reaches {contour.h_max:g} m from the flyer's axis; the flyer must circle outside "
+                    "the coil"
+                )
+
     def _check_geometry(self) -> None:
         """The bobbin, wire and lay settings together (JobError, one line)."""
         if self.window_width > 0 and self.coil_length > 0 and self.window_width != self.coil_length:
@@ -630,6 +653,19 @@ class Job:
                     "bobbin.core=rect is invalid with only one of bobbin.core_width and bobbin.core_depth: "
                     "give both (or neither)"
                 )
+        corner = self.core_corner_radius
+        if corner > 0 and self.core != "rect":
+            raise JobError(
+                f"bobbin.core_corner_radius={corner:g} m is invalid with bobbin.core={self.core}: only a "
+                "rectangular core has corners"
+            )
+        half = min(self.core_width, self.core_depth) / 2
+        if corner > 0 and self.core_width > 0 and corner > half:
+            raise JobError(
+                f"bobbin.core_corner_radius={corner:g} m is invalid: must be at most half the core's smaller "
+                f"side, {half:g} m (bobbin.core_width {self.core_width:g} m x bobbin.core_depth "
+                f"{self.core_depth:g} m)"
+            )
         if self.crossover_at >= 360.0:
             raise JobError(f"lay.crossover_at={self.crossover_at:g} is invalid: must be in [0, 360) deg")
 
@@ -643,6 +679,7 @@ class Job:
             self.core_diameter,
             self.core_width,
             self.core_depth,
+            self.core_corner_radius,
         )
 
     @property

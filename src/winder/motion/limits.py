@@ -36,7 +36,7 @@ from typing import Any, Protocol
 import numpy as np
 import numpy.typing as npt
 
-from winder.motion.axes import AXES, AXIS_TABLE
+from winder.motion.axes import AXES, AXIS_TABLE, FORK
 from winder.motion.job import Job
 from winder.motion.shaped import Motion, ShapedProfile
 from winder.motion.timeline import parse_schedule
@@ -50,6 +50,7 @@ __all__ = [
     "LimitWatch",
     "Past",
     "breach",
+    "flyer_speeds",
     "highest_override",
     "job_extent",
     "job_limits",
@@ -328,3 +329,32 @@ def job_limits(
     if why and override != 1.0:
         why += f", at feed override {override:g}"
     return peaks, why
+
+
+def flyer_speeds(job: Job, ramp: dict[str, Any], schedule: str = "") -> dict[tuple[int, int], float]:
+    """The flyer's top speed (rad/s) in each layer laid, ``(coil, layer)``
+    from 0, with the ``ramp`` settings at the highest feed override the run
+    will have: the path's peak step rate over the layer's moves times the
+    fork's share of it (1 where the fork is the major axis, as in any layer
+    of more fork steps a turn than feed steps), at 2 pi /
+    ``fork_steps_per_rev`` rad a step. ValueError (one line) if the ramp
+    cannot plan the job."""
+    segments = job.segments()
+    timings, _ = plan_timing(
+        ramp, [s.steps for s in segments], speeds=[job.segment_speed(s) for s in segments]
+    )
+    k = highest_override(ramp, schedule) * 2 * np.pi / job.fork_steps_per_rev
+    out: dict[tuple[int, int], float] = {}
+    peaks: dict[int, float] = {}
+    for seg, timing in zip(segments, timings, strict=True):
+        if not seg.kind.winds:
+            continue
+        v = 0.0
+        for move in timing.profiles:
+            if id(move) not in peaks:
+                peaks[id(move)] = move_peaks(move)[0]
+            v = max(v, peaks[id(move)])
+        share = max(abs(p[FORK.index]) / max(abs(x) for x in p) for p in seg.pieces if any(p))
+        key = (seg.pole, seg.layer)
+        out[key] = max(out.get(key, 0.0), float(v * share * k))
+    return out
