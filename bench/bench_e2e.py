@@ -248,13 +248,13 @@ SPLIT = {  # sim node parts timed by replay_split, nested as the calls are: (own
     "accept (per chunk)": ("node", "accept"),
     "accept/TIMED_CDR.decode": ("codec", "decode"),
     "accept/StreamChecker.check": ("checker", "check"),
-    "accept/checked (eq. 7 of the commands)": ("node", "checked"),
-    "execute = advance (per batch of chunks)": ("node", "advance"),
-    "advance/simulate": ("node", "simulate"),
+    "accept/checked (eq. 7 of the commands)": ("engine", "checked"),
+    "execute = advance (per batch of chunks)": ("engine", "advance"),
+    "advance/simulate": ("engine", "simulate"),
     "advance/simulate/tracker.advance (x3 axes)": ("tracker", "advance"),
-    "advance/simulate/deviation_of_axes": ("node", "deviation_of_axes"),
-    "emit (200 Hz samples)": ("node", "emit"),
-    "emit/publish_samples (per block)": ("node", "publish_samples"),
+    "advance/simulate/deviation_of_axes": ("engine", "deviation_of_axes"),
+    "emit (200 Hz samples)": ("engine", "emit"),
+    "emit/publish_samples (per block)": ("engine", "publish_samples"),
     "emit/publish_samples/encode": ("encoder", "encode"),
     "Publisher.publish (all)": ("publisher", "publish"),
     "BagRecorder.write (all)": ("bag", "write"),
@@ -265,7 +265,7 @@ SPLIT = {  # sim node parts timed by replay_split, nested as the calls are: (own
 
 def replay_split(bag: Path) -> None:
     """Feed a recorded job's step_times chunks, as they arrived, to an in-process
-    SimNode (recording its own bag) and time its parts: where the sim node's
+    SimNode (recording its own bag) and time its parts (the node's and its SimEngine's): where the sim node's
     time goes, without DDS and without a profiler's overhead (each timed part
     is wrapped, ~1 us per call). Parts nest, so shares add up to more than 100%."""
     import rclpy
@@ -314,6 +314,7 @@ def replay_split(bag: Path) -> None:
 
     owners: dict[str, Any] = {
         "node": sim_module.SimNode,
+        "engine": sim_module.SimEngine,
         "sim_module": sim_module,
         "checker": stream_module.StreamChecker,
         "bag": bag_module.BagRecorder,
@@ -326,6 +327,8 @@ def replay_split(bag: Path) -> None:
         if owner in owners:
             wrap(owners[owner], attr, label)
     node = sim_module.SimNode()
+    sim = node.engine
+    assert isinstance(sim, sim_module.SimEngine)
     work = Path(tempfile.mkdtemp(prefix="winder-bench-replay-"))
     try:
         node.set_parameters([Parameter("bag_dir", value=str(work))])  # type: ignore[no-untyped-call]
@@ -339,10 +342,10 @@ def replay_split(bag: Path) -> None:
         if ramp_raw is not None:
             node.on_profile_config(ramp_raw, b"")
         for label, (owner, attr) in SPLIT.items():  # objects that exist once a job runs
-            if owner == "tracker" and node.axes:
-                wrap(type(node.axes[0].tracker), attr, label)
+            if owner == "tracker" and sim.axes:
+                wrap(type(sim.axes[0].tracker), attr, label)
             if owner == "publisher":
-                wrap(type(node.pub_state), attr, label)
+                wrap(type(sim.pub_state), attr, label)
         t0 = time.perf_counter()
         for data in chunks:
             node.on_step_times(data, b"")
@@ -356,7 +359,7 @@ def replay_split(bag: Path) -> None:
         rclpy.try_shutdown()  # type: ignore[attr-defined]
         shutil.rmtree(work, ignore_errors=True)
     done = node.last_report.steps_done if node.last_report is not None else 0
-    samples = int(node.next_sample)
+    samples = int(sim.next_sample)
     print(
         f"{len(chunks)} chunks, {done} steps, {samples} samples: {total:.2f} s, "
         f"{total / max(done, 1) * 1e6:.3f} us/step, {total / max(len(chunks), 1) * 1e3:.2f} ms per chunk"

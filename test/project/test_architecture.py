@@ -33,6 +33,7 @@ LAYERS = (
     "shaping",
     "motion",
     "axis",
+    "tension",
     "contract",
     "record",
     "analysis",

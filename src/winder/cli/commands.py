@@ -299,6 +299,9 @@ def cmd_check(args: argparse.Namespace) -> int:
     laid = job.winding
     doc = {"job_id": job.job_id, **report(laid)}
     add_takeup(job, doc, given["profile_node"], str(given["interp_node"].get("schedule", "")))
+    tension_why = add_tension(job, doc, given["consumer"])
+    if tension_why and doc["fits"]:  # the coil fits its bobbin, but its wire would not hold
+        doc["fits"], doc["overflow"] = False, tension_why
     limits_why = ""
     if args.limits is not None and not args.limits.strip():
         raise UserError("--limits is empty: give the bridge's parameters file (a bridge_node section)")
@@ -312,7 +315,7 @@ def cmd_check(args: argparse.Namespace) -> int:
         if args.limits:
             for line in limit_lines(doc["limits"], args.limits):
                 print(line)
-    why = laid.overflow() or limits_why
+    why = laid.overflow() or tension_why or limits_why
     if why:
         print(f"winder check: error: {why}", file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -447,6 +450,64 @@ def add_takeup(job: Job, doc: dict[str, Any], ramp_given: dict[str, Any], schedu
             layer.update(layer_takeup(contour, job.flyer_radius, omega or 0.0))
 
 
+def add_tension(job: Job, doc: dict[str, Any], sim_given: dict[str, Any]) -> str:
+    """The wire (``doc["wire"]``) and each layer's predicted tension at its
+    flyer's top speed (winder.tension.predict), with the job file's
+    tensioner (its sim_node section; defaults where it sets none); the first
+    layer that does not keep within the wire's maximum or the alarm band,
+    in one line naming it, the prediction, the limit and the highest flyer
+    speed that keeps it ("" if every layer does)."""
+    from winder.tension.predict import Bounds, fastest_within, predict_layer
+    from winder.tension.tensioner import tensioner_of
+
+    wire = job.wire
+    top = wire.max_tension * job.tension_derate
+    tensioner = tensioner_of(sim_given, wire.stiffness_per_length, job.set_tension)
+    bounds = Bounds(job.set_tension, job.tension_alarm, top)
+    m = wire.material
+    doc["wire"] = {
+        "material": m.name,
+        "bare_diameter_m": wire.bare_diameter,
+        "yield_stress_pa": m.yield_stress,
+        "modulus_pa": m.modulus,
+        "density_kg_m3": m.density,
+        "resistivity_ohm_m": m.resistivity,
+        "max_tension_n": wire.max_tension,
+        "set_tension_n": job.set_tension,
+        "warning_band_n": [
+            job.set_tension * (1 - job.tension_warning),
+            job.set_tension * (1 + job.tension_warning),
+        ],
+        "alarm_band_n": [bounds.low, bounds.high],
+        "derate": job.tension_derate,
+        "tensioner": tensioner.kind,
+        "span_stiffness_n_m": tensioner.stiffness,
+    }
+    why = ""
+    for coil_doc in [{"coil": 1, "layers": doc["layers"]}, *doc["coils"]]:
+        for layer in coil_doc["layers"]:
+            omega = layer["flyer_speed_rad_s"]
+            contour = job.bobbin.contour(layer["radius_m"])
+            if omega is None or contour is None:
+                layer.update(tension_peak_n=None, tension_min_n=None)
+                continue
+            got = predict_layer(contour, job.flyer_radius, omega, tensioner, wire)
+            layer.update(tension_peak_n=got.peak, tension_min_n=got.minimum)
+            breach = got.breach(bounds, wire) or tensioner.limit_words(got.peak, got.coordinate)
+            if breach and not why:
+                keep = fastest_within(contour, job.flyer_radius, omega, tensioner, wire, bounds)
+                which = (
+                    f"coil {coil_doc['coil']} layer {layer['layer']}"
+                    if job.poles > 1
+                    else f"layer {layer['layer']}"
+                )
+                why = (
+                    f"{which} at {omega:.4g} rad/s: {breach}; the highest flyer speed that keeps it is "
+                    f"{keep:.4g} rad/s, {keep / omega:.0%} of it ({tensioner.kind} tensioner)"
+                )
+    return why
+
+
 def check_lines(job: Job, doc: dict[str, Any]) -> list[str]:
     """``winder check``'s text: the report :func:`cmd_check` prints."""
     from winder.motion.coil import mm
@@ -480,8 +541,8 @@ def check_lines(job: Job, doc: dict[str, Any]) -> list[str]:
         window = "window unchecked"
     lines = [
         f"job {job.job_id}: {_count(job.poles, 'coil')}, {doc['lay']} lay on {core}",
-        f"  wire {mm(job.wire_diameter)} mm (copper {mm(doc['bare_diameter_m'])} mm), {window}, radial pitch "
-        f"{mm(doc['radial_pitch_m'])} mm",
+        f"  wire {mm(job.wire_diameter)} mm ({job.material} {mm(doc['bare_diameter_m'])} mm), {window}, "
+        f"radial pitch {mm(doc['radial_pitch_m'])} mm",
     ]
     groups: dict[str, list[int]] = {}
     for coil in doc["coils"]:
@@ -496,7 +557,7 @@ def check_lines(job: Job, doc: dict[str, Any]) -> list[str]:
         lines.append(f"  {which}:")
         lines.append(
             "    layer  turns  radius mm  turn length mm  take-up ratio  flyer rad/s  take-up m/s  "
-            "take-up accel m/s2"
+            "take-up accel m/s2  tension N"
         )
         for layer in coil["layers"]:
             turn = "-" if layer["turn_length_m"] is None else f"{layer['turn_length_m'] * 1e3:.2f}"
@@ -505,9 +566,11 @@ def check_lines(job: Job, doc: dict[str, Any]) -> list[str]:
             lo, hi = layer["takeup_speed_min_m_s"], layer["takeup_speed_max_m_s"]
             speed = "-" if lo is None or hi is None else f"{lo:.3g}..{hi:.3g}"
             acc = "-" if layer["takeup_accel_max_m_s2"] is None else f"{layer['takeup_accel_max_m_s2']:.4g}"
+            t_lo, t_hi = layer.get("tension_min_n"), layer.get("tension_peak_n")
+            tension = "-" if t_lo is None or t_hi is None else f"{t_lo:.3g}..{t_hi:.3g}"
             lines.append(
                 f"    {layer['layer']:5d}  {layer['turns']:5d}  {layer['radius_m'] * 1e3:9.3f}  {turn:>14}  "
-                f"{ratio:>13}  {omega:>11}  {speed:>11}  {acc:>18}"
+                f"{ratio:>13}  {omega:>11}  {speed:>11}  {acc:>18}  {tension:>9}"
             )
     height = doc["window_height_m"]
     lines.append(
@@ -527,6 +590,16 @@ def check_lines(job: Job, doc: dict[str, Any]) -> list[str]:
     lines.append(f"  resistance     {'-' if ohm is None else f'{ohm:.4g} ohm'} at 20 C{series}")
     side = {"start": "the start flange", "far": "the far flange"}[doc["finish_side"]]
     lines.append(f"  finish side    {side} ({len(doc['layers'])} layers)")
+    w = doc.get("wire")
+    if w is not None:
+        section = w["max_tension_n"] / w["yield_stress_pa"] * 1e6
+        band = w["alarm_band_n"]
+        lines.append(
+            f"  wire           {w['material']}, max tension {w['max_tension_n']:.4g} N (yield "
+            f"{w['yield_stress_pa'] / 1e6:.4g} MPa x bare section {section:.4g} mm2); set "
+            f"{w['set_tension_n']:.4g} N, alarm band {band[0]:.4g}..{band[1]:.4g} N, "
+            f"{w['tensioner']} tensioner"
+        )
     lines.append(f"  fits           {'yes' if doc['fits'] else 'NO: ' + doc['overflow']}")
     return lines
 

@@ -23,6 +23,7 @@ from winder.motion.profile import KINDS
 from winder.motion.timeline import OVERRIDE_RANGE
 from winder.motion.timing import MAX_JOB_SECONDS, plan_segment, plan_timing
 from winder.spec import Spec, SpecError, shorten
+from winder.tension.tensioner import TENSIONER_SPECS
 
 __all__ = [
     "CONSUMER_SPECS",
@@ -232,6 +233,9 @@ SIM_SPECS = {
         for axis in AXES
         for name, s in MOTOR_FIELDS.items()
     },
+    # the tensioner and the free span (winder.tension): `winder check` predicts each
+    # layer's tension with them
+    **TENSIONER_SPECS,
 }
 
 

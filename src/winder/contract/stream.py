@@ -69,7 +69,20 @@ def make_run_id(job_id: str, counter: int, now: float | None = None) -> str:
 
 
 #: job fields added after the description's format was fixed (written only when set)
-LATER_FIELDS = frozenset({"bobbin.core_corner_radius"})
+LATER_FIELDS = frozenset(
+    {
+        "bobbin.core_corner_radius",
+        "wire.material",
+        "wire.yield_stress",
+        "wire.modulus",
+        "wire.density",
+        "wire.resistivity",
+        "tension.set",
+        "tension.warning",
+        "tension.alarm",
+        "tension.derate",
+    }
+)
 
 
 def describe_job(

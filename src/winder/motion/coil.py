@@ -181,6 +181,7 @@ class CoilGeometry:
     lay: str
     layers: tuple[Layer, ...]
     asked: int | None  #: turns per layer asked (None: auto, as many as fit)
+    resistivity: float = RHO_COPPER_20C  #: the conductor's, ohm m at 20 C
 
     @property
     def pitch(self) -> float:
@@ -208,7 +209,7 @@ class CoilGeometry:
     def resistance(self) -> float | None:
         """Ohm at 20 C."""
         length = self.wire_length
-        return None if length is None else RHO_COPPER_20C * length / self.copper_area
+        return None if length is None else self.resistivity * length / self.copper_area
 
     @property
     def fill_factor(self) -> float | None:
@@ -262,7 +263,13 @@ class CoilGeometry:
 
 
 def wind_coil(
-    bobbin: Bobbin, d: float, d_bare: float, lay: str, turns_per_layer: int | None, layers: int
+    bobbin: Bobbin,
+    d: float,
+    d_bare: float,
+    lay: str,
+    turns_per_layer: int | None,
+    layers: int,
+    resistivity: float = RHO_COPPER_20C,
 ) -> CoilGeometry:
     """The coil of ``layers`` layers of ``turns_per_layer`` turns each (None:
     auto, each layer as many turns as fit it; needs the window width) of
@@ -280,7 +287,7 @@ def wind_coil(
         out.append(
             Layer(number, turns, offset, radius, bobbin.turn_length(radius), turns * d + offset, capacity)
         )
-    return CoilGeometry(bobbin, d, d_bare, lay, tuple(out), turns_per_layer)
+    return CoilGeometry(bobbin, d, d_bare, lay, tuple(out), turns_per_layer, resistivity)
 
 
 @dataclass(frozen=True)
@@ -303,7 +310,9 @@ class Winding:
         """Ohm at 20 C of the whole wire, every coil in series."""
         length = self.wire_length
         return (
-            None if length is None or not self.coils else RHO_COPPER_20C * length / self.coils[0].copper_area
+            None
+            if length is None or not self.coils
+            else self.coils[0].resistivity * length / self.coils[0].copper_area
         )
 
     @property
@@ -326,13 +335,19 @@ class Winding:
 
 
 def winding(
-    bobbin: Bobbin, d: float, d_bare: float, lay: str, coils: Sequence[tuple[int | None, int]]
+    bobbin: Bobbin,
+    d: float,
+    d_bare: float,
+    lay: str,
+    coils: Sequence[tuple[int | None, int]],
+    resistivity: float = RHO_COPPER_20C,
 ) -> Winding:
-    """Every coil ``(turns_per_layer or None for auto, layers)`` laid in ``bobbin``."""
+    """Every coil ``(turns_per_layer or None for auto, layers)`` laid in
+    ``bobbin``, of a conductor of ``resistivity`` (ohm m at 20 C)."""
     made: dict[tuple[int | None, int], CoilGeometry] = {}
     for key in coils:
         if key not in made:
-            made[key] = wind_coil(bobbin, d, d_bare, lay, *key)
+            made[key] = wind_coil(bobbin, d, d_bare, lay, *key, resistivity)
     return Winding(tuple(made[key] for key in coils))
 
 

@@ -38,6 +38,7 @@ import numpy as np
 
 from winder.motion.axes import FEED, FORK, POLE
 from winder.motion.coil import CORES, LAYS, Bobbin, Winding, layer_capacity, winding
+from winder.motion.material import MATERIALS, Material, Wire
 from winder.spec import Spec, SpecError
 
 __all__ = [
@@ -230,6 +231,63 @@ FIELD_SPECS: dict[str, Spec] = {
         ),
         _f("first_layer_speed", 0.0, 1.0, "", "speed of layer 1, a fraction of v_max", 1.0),
         Spec(
+            "wire.material",
+            str,
+            "copper",
+            "the conductor: copper or aluminium (annealed; its figures below, 0 = the material's)",
+            choices=tuple(MATERIALS),
+        ),
+        _f(
+            "wire.yield_stress",
+            0.0,
+            1e9,
+            "Pa",
+            "where the conductor starts to flow (0 = the material's)",
+            0.0,
+            open_low=False,
+        ),
+        _f(
+            "wire.modulus",
+            0.0,
+            1e12,
+            "Pa",
+            "the conductor's Young's modulus (0 = the material's)",
+            0.0,
+            open_low=False,
+        ),
+        _f(
+            "wire.density",
+            0.0,
+            3e4,
+            "kg/m3",
+            "the conductor's density (0 = the material's)",
+            0.0,
+            open_low=False,
+        ),
+        _f("wire.resistivity", 0.0, 1e-6, "ohm m", "at 20 C (0 = the material's)", 0.0, open_low=False),
+        _f(
+            "tension.set", 0.0, 1e4, "N", "the wire's set tension (0 = half its maximum)", 0.0, open_low=False
+        ),
+        _f(
+            "tension.warning",
+            0.0,
+            1.0,
+            "",
+            "the warning band: the set tension +- this fraction of it",
+            0.2,
+            open_low=False,
+        ),
+        _f(
+            "tension.alarm",
+            0.0,
+            1.0,
+            "",
+            "the alarm band: the set tension +- this fraction of it",
+            0.4,
+            open_low=False,
+        ),
+        _f("tension.derate", 0.05, 1.0, "", "the share of the wire's maximum tension a job may reach", 1.0),
+        Spec(
             "coil_overrides",
             str,
             "",
@@ -244,7 +302,10 @@ FIELD_SPECS: dict[str, Spec] = {
 #: the dataclass field of each job setting: the part after its last dot
 #: (``bobbin.window_width``: ``window_width``), but ``wire.bare_diameter``:
 #: ``bare_diameter`` and ``lay.crossover*``: ``crossover*``
-ATTRIBUTES = {name: name.rsplit(".", 1)[-1] for name in FIELD_SPECS}
+ATTRIBUTES = {
+    name: name.replace(".", "_") if name.startswith("tension.") else name.rsplit(".", 1)[-1]
+    for name in FIELD_SPECS
+}
 #: the job setting of each dataclass field
 SETTINGS = {attr: name for name, attr in ATTRIBUTES.items()}
 
@@ -455,12 +516,22 @@ class Job:
     crossover_at: float = FIELD_SPECS["lay.crossover_at"].default
     reversal_dwell: float = FIELD_SPECS["reversal_dwell"].default
     first_layer_speed: float = FIELD_SPECS["first_layer_speed"].default
+    material: str = FIELD_SPECS["wire.material"].default
+    yield_stress: float = FIELD_SPECS["wire.yield_stress"].default
+    modulus: float = FIELD_SPECS["wire.modulus"].default
+    density: float = FIELD_SPECS["wire.density"].default
+    resistivity: float = FIELD_SPECS["wire.resistivity"].default
+    tension_set: float = FIELD_SPECS["tension.set"].default
+    tension_warning: float = FIELD_SPECS["tension.warning"].default
+    tension_alarm: float = FIELD_SPECS["tension.alarm"].default
+    tension_derate: float = FIELD_SPECS["tension.derate"].default
     check_fit: InitVar[bool] = True
 
     def __post_init__(self, check_fit: bool) -> None:
         for f in fields(self):
             object.__setattr__(self, f.name, check_field(SETTINGS[f.name], getattr(self, f.name)))
         self._check_geometry()
+        self._check_wire()
         auto = self.turns_per_layer == AUTO
         base = Coil(0 if auto else int(self.turns_per_layer), self.layers, 1)
         coils = parse_coil_overrides(self.coil_overrides, self.poles, base)
@@ -473,6 +544,7 @@ class Job:
             self.bare_diameter or self.wire_diameter,
             self.lay,
             [(c.turns_per_layer or None, c.layers) for c in asked],
+            self.wire.material.resistivity,
         )
         object.__setattr__(self, "_winding", laid)
         wound = tuple(
@@ -612,6 +684,18 @@ class Job:
                         "a dwell needs the flyer to lead"
                     )
 
+    def _check_wire(self) -> None:
+        """The set tension against what the wire takes (JobError, one line)."""
+        wire = self.wire
+        top = wire.max_tension * self.tension_derate
+        if self.tension_set > top:
+            derate = f" x tension.derate {self.tension_derate:g}" if self.tension_derate < 1 else ""
+            raise JobError(
+                f"tension.set={self.tension_set:g} N is invalid: must be at most the wire's maximum "
+                f"{wire.max_tension:.4g} N{derate} (yield {wire.material.yield_stress / 1e6:.4g} MPa x bare "
+                f"section {wire.section * 1e6:.4g} mm2)"
+            )
+
     def _check_flyer_clears(self, laid: Winding) -> None:
         """The flyer's nozzle circles outside every layer (JobError, one line)."""
         for i, coil in enumerate(laid.coils):
@@ -668,6 +752,26 @@ class Job:
             )
         if self.crossover_at >= 360.0:
             raise JobError(f"lay.crossover_at={self.crossover_at:g} is invalid: must be in [0, 360) deg")
+
+    # -- the wire (winder.motion.material) ------------------------------------
+    @property
+    def wire(self) -> Wire:
+        """The wire: its material's figures, those the job sets in their place."""
+        base = MATERIALS[self.material]
+        mine = Material(
+            base.name,
+            self.yield_stress or base.yield_stress,
+            self.modulus or base.modulus,
+            self.density or base.density,
+            self.resistivity or base.resistivity,
+            base.hardening,
+        )
+        return Wire(mine, self.bare_diameter or self.wire_diameter)
+
+    @property
+    def set_tension(self) -> float:
+        """The set tension, N (``tension.set``, or half the wire's maximum)."""
+        return self.tension_set or self.wire.max_tension / 2
 
     # -- the coil as laid (winder.motion.coil) ------------------------------
     @property

@@ -1,0 +1,96 @@
+"""`winder check`'s wire: the `wire` object, each layer's predicted tension,
+and a job whose wire would not hold refused in one line (exit 2) that names
+the layer, the prediction, the limit and the flyer speed that keeps it."""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import subprocess
+from pathlib import Path
+
+import pytest
+from support.paths import ROOT
+
+from winder.motion.material import MATERIALS
+
+WINDER = ROOT / ".venv" / "bin" / "winder"
+RECT = ROOT / "jobs" / "ortho_rect.yaml"
+
+
+def check(path: Path, *args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [str(WINDER), "check", str(path), *args], capture_output=True, text=True, timeout=120
+    )
+
+
+def with_consumer(tmp_path: Path, line: str) -> Path:
+    """ortho_rect.yaml with one more setting in its sim_node section."""
+    text = RECT.read_text().replace(
+        "sim_node:\n  ros__parameters:\n", f"sim_node:\n  ros__parameters:\n    {line}\n", 1
+    )
+    out = tmp_path / "job.yaml"
+    out.write_text(text)
+    return out
+
+
+def test_the_wire_and_each_layers_tension_are_reported() -> None:
+    out = check(RECT, "--json")
+    assert out.returncode == 0, out.stderr
+    doc = json.loads(out.stdout)
+    wire = doc["wire"]
+    bare = 0.00045
+    assert wire["yield_stress_pa"] == 68.9e6 and wire["material"] == "copper"
+    assert math.isclose(wire["max_tension_n"], 68.9e6 * math.pi * bare**2 / 4, rel_tol=1e-12)
+    assert math.isclose(wire["set_tension_n"], wire["max_tension_n"] / 2, rel_tol=1e-12)
+    assert wire["tensioner"] == "dancer"
+    for layer in doc["layers"]:
+        assert layer["takeup_ratio"] > 1
+        assert (
+            wire["alarm_band_n"][0]
+            < layer["tension_min_n"]
+            <= layer["tension_peak_n"]
+            < wire["alarm_band_n"][1]
+        )
+    text = check(RECT).stdout
+    assert "wire           copper, max tension 10.96 N (yield 68.9 MPa x bare section 0.159 mm2)" in text
+
+
+def test_a_tensioner_that_cannot_follow_the_corners_is_refused_in_one_line(tmp_path: Path) -> None:
+    job = with_consumer(tmp_path, "tensioner.kind: servo")
+    out = check(job)
+    assert out.returncode == 2
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in out.stderr, out.stderr
+    m = re.fullmatch(
+        r"winder check: error: layer 1 at ([\d.]+) rad/s: predicted peak tension ([\d.]+) N passes the "
+        r"alarm band's top ([\d.]+) N \(tension\.set [\d.]+ N \+ tension\.alarm 0\.4\); the highest "
+        r"flyer speed that keeps it is ([\d.]+) rad/s, \d+% of it \(servo tensioner\)",
+        lines[0],
+    )
+    assert m, lines[0]
+    speed, peak, limit, keep = map(float, m.groups())
+    assert peak > limit and 0 < keep < speed
+    assert "fits           NO: layer 1" in out.stdout  # the report stands on stdout
+    doc = json.loads(check(job, "--json").stdout)
+    assert doc["fits"] is False and doc["overflow"] == lines[0].removeprefix("winder check: error: ")
+
+
+def test_a_set_tension_beyond_the_wire_is_refused() -> None:
+    out = check(RECT, "--tension.set", "11")
+    assert out.returncode == 2
+    assert out.stderr.strip() == (
+        "winder check: error: tension.set=11 N is invalid: must be at most the wire's maximum 10.96 N "
+        "(yield 68.9 MPa x bare section 0.159 mm2)"
+    )
+
+
+@pytest.mark.parametrize("material", ["copper", "aluminium"])
+def test_the_material_sets_the_resistance_and_the_maximum(material: str) -> None:
+    out = check(RECT, "--json", "--wire.material", material, "--tension.set", "1")
+    doc = json.loads(out.stdout)
+    m = MATERIALS[material]
+    section = math.pi * 0.00045**2 / 4
+    assert math.isclose(doc["resistance_ohm"], m.resistivity * doc["wire_length_m"] / section, rel_tol=1e-12)
+    assert math.isclose(doc["wire"]["max_tension_n"], m.yield_stress * section, rel_tol=1e-12)
