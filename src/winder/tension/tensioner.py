@@ -116,6 +116,15 @@ class Tensioner:
         c = np.array([[k, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]])  # tension error; arm travel
         return a, b, c, np.array([0.0, 0.0])
 
+    def held(self, states: Floats) -> Floats:
+        """The wire the span and the tensioner hold at ``states`` (rows), m,
+        beyond what they hold at rest: the span's stretch, and the dancer's
+        loop (twice its travel)."""
+        states = np.atleast_2d(states)
+        if self.kind == "servo":
+            return np.asarray(states[:, 0] / self.stiffness, dtype=np.float64)
+        return np.asarray(states[:, 0] + 2 * states[:, 1], dtype=np.float64)
+
     def steady(self, speed: float) -> Floats:
         """The state of a steady wind at ``speed`` m/s: the set tension, the arm centred."""
         if self.kind == "servo":
