@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from geometry_msgs.msg import WrenchStamped
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from rclpy.serialization import deserialize_message, serialize_message
@@ -13,7 +14,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Int32MultiArray, Int64MultiArray, MultiArrayDimension
 
-from winder.contract.cdr import JointStateEncoder, MultiArrayCodec, encode_clocks
+from winder.contract.cdr import JointStateEncoder, MultiArrayCodec, WrenchEncoder, encode_clocks
 from winder.contract.stream import STEP_COLUMNS, TIMED_COLUMNS
 
 TS = get_typestore(Stores.ROS2_JAZZY)
@@ -118,3 +119,24 @@ def test_step_chunk_decode_rejects_other_layouts() -> None:
         TIMED.decode(b"\x00\x01\x00")
     with pytest.raises(ValueError, match=r"^rows of shape \(4, 4\) must be \(n, 5\)"):
         TIMED.encode(np.zeros((4, 4)))
+
+
+@settings(max_examples=100, deadline=None)
+@given(
+    st.text(min_size=0, max_size=20),
+    st.lists(st.tuples(st.integers(0, 2**40), st.floats(allow_nan=False, width=64)), min_size=1, max_size=20),
+)
+def test_wrench_bytes_match_rclpy(frame: str, samples: list[tuple[int, float]]) -> None:
+    """winder/tension: the encoder's payload is rclpy's WrenchStamped (its length and
+    fields; rclpy leaves its alignment bytes uninitialised), and rosbags reads it."""
+    t = np.array([s[0] for s in samples], np.int64)
+    fx = np.array([s[1] for s in samples])
+    for raw, (t_ns, f) in zip(WrenchEncoder(frame).encode(t, fx), samples, strict=True):
+        msg = WrenchStamped()
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t_ns, 1_000_000_000)
+        msg.header.frame_id = frame
+        msg.wrench.force.x = f
+        assert len(raw) == len(serialize_message(msg))
+        assert deserialize_message(raw, WrenchStamped) == msg
+        strict = TS.deserialize_cdr(raw, "geometry_msgs/msg/WrenchStamped")
+        assert strict.header.frame_id == frame and strict.wrench.force.x == f

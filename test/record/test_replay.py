@@ -45,6 +45,7 @@ TYPES = {
     "std_msgs/msg/Int64MultiArray": ("std_msgs.msg", "Int64MultiArray"),
     "sensor_msgs/msg/JointState": ("sensor_msgs.msg", "JointState"),
     "rosgraph_msgs/msg/Clock": ("rosgraph_msgs.msg", "Clock"),
+    "geometry_msgs/msg/WrenchStamped": ("geometry_msgs.msg", "WrenchStamped"),
     "diagnostic_msgs/msg/DiagnosticArray": ("diagnostic_msgs.msg", "DiagnosticArray"),
     "diagnostic_msgs/msg/DiagnosticStatus": ("diagnostic_msgs.msg", "DiagnosticStatus"),
 }

@@ -39,23 +39,36 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
 from winder.axis import StepperAxis
-from winder.contract.cdr import JointStateEncoder, encode_clocks
+from winder.contract.cdr import JointStateEncoder, WrenchEncoder, encode_clocks
 from winder.contract.eq7 import layer_of_samples, sample_deviation, step_deviation
 from winder.contract.pacing import ns_not_before
 from winder.contract.params import MOTOR_FIELDS, SIM_SPECS, check_sim
 from winder.contract.stream import JobPlan
-from winder.contract.topics import TOPIC_CLOCK, TOPIC_JOINT_COMMANDS, TOPIC_JOINT_STATES
-from winder.motion.axes import AXES
+from winder.contract.topics import (
+    TOPIC_CLOCK,
+    TOPIC_JOINT_COMMANDS,
+    TOPIC_JOINT_STATES,
+    TOPIC_STEP_TIMES,
+    TOPIC_TENSION,
+)
+from winder.motion.axes import AXES, FORK
+from winder.motion.material import Wire
+from winder.motion.takeup import Contour
 from winder.ros.consumer import StepConsumer
+from winder.ros.diagnostics import ERROR
 from winder.ros.engine import Engine, RunPort
 from winder.ros.qos import QOS_CLOCK, QOS_STATE
 from winder.ros.spin import spin
 from winder.ros.timers import steady_timer
+from winder.ros.upstream import ProfileAbort
+from winder.tension.sim import WireSim
+from winder.tension.tensioner import tensioner_of
 
 #: Samples simulated in one go, at most: the node's memory is bounded by this,
 #: never by the simulated time a batch of steps covers (at 1 step/s, a chunk of
@@ -69,9 +82,12 @@ SAMPLE_BATCH = 1 << 15
 FREE_RUN_LEAP = 0.02
 #: s of wall time after which a real-time run waiting for steps says its /clock again
 CLOCK_REPEAT = 0.1
+#: the job report's key of the tensioner's largest excursion
+TRAVEL_KEY = {"dancer": "dancer_travel_max_m", "servo": "servo_feed_max_m_s"}
 #: the simulator's own recorded topics
 SIM_TOPICS = {
     "clock": (TOPIC_CLOCK, "rosgraph_msgs/msg/Clock"),
+    "tension": (TOPIC_TENSION, "geometry_msgs/msg/WrenchStamped"),
     "joint_states": (TOPIC_JOINT_STATES, "sensor_msgs/msg/JointState"),
     "joint_commands": (TOPIC_JOINT_COMMANDS, "sensor_msgs/msg/JointState"),
 }
@@ -125,6 +141,8 @@ class SimEngine(Engine):
         self.pub_clock = node.create_publisher(Clock, TOPIC_CLOCK, QOS_CLOCK)
         self.pub_state = node.create_publisher(JointState, TOPIC_JOINT_STATES, QOS_STATE)
         self.pub_cmd = node.create_publisher(JointState, TOPIC_JOINT_COMMANDS, QOS_STATE)
+        self.pub_tension = node.create_publisher(WrenchStamped, TOPIC_TENSION, QOS_STATE)
+        self.upstream = ProfileAbort(node, run.peers)  # told to abort the run when the wire breaks
         self.clock_ns = -1  # the last /clock published in this node's life (ns)
         self.clock_wall = 0.0  # when it was published (steady s)
         # a real-time run waiting for its steps: /clock said again (see repeat_clock)
@@ -145,6 +163,11 @@ class SimEngine(Engine):
         self.pace_factor = 0.0  # the real_time_factor since wall_pace0
         self.last_seg = -1  # the segment of the last step row simulated (-1: none yet)
         self.t_sim_ns = 0  # simulated time reached, since the run's start (ns)
+        self.wire: WireSim | None = None  # the wire, where the job gives its core
+        self.wire_bound: Wire | None = None
+        self.broken = ""  # the wire broke: where and how (the run stops)
+        self.broken_said = False
+        self.stretched = 0.0  # the highest stress past the wire's yield (Pa; 0: none)
 
     # -- the consumer's hooks ---------------------------------------------------
     def begin(self, plan: JobPlan, values: dict[str, Any]) -> dict[str, object]:
@@ -152,6 +175,13 @@ class SimEngine(Engine):
         # the run starts on the cell's clock one sample after the last one published
         self.origin_ns = 0 if self.clock_ns < 0 else self.clock_ns + round(1e9 / self.rate)
         self.encoder = JointStateEncoder(AXES, plan.job_id)
+        self.wire = self.wire_of(plan, values)
+        joints = list(AXES)
+        if self.wire is not None:
+            self.upstream.find()  # the run's profile node, before the wire can break
+            joints += ["supply", *(["dancer"] if self.wire.tensioner.kind == "dancer" else [])]
+            self.wrench = WrenchEncoder(plan.job_id)
+        self.state_encoder = JointStateEncoder(joints, plan.job_id)
         for i, axis in enumerate(AXES):
             sim = AxisSim(
                 make_axis(values, axis),
@@ -170,6 +200,39 @@ class SimEngine(Engine):
             "clock_origin_ns": self.origin_ns,
             "real_time": bool(values["real_time"]),
             "real_time_factor": values["real_time_factor"],
+            "wire": self.wire_config(plan),
+        }
+
+    def unrecorded(self) -> frozenset[str]:
+        return frozenset() if self.wire is not None else frozenset({"tension"})
+
+    def wire_of(self, plan: JobPlan, values: dict[str, Any]) -> WireSim | None:
+        """The run's wire: the flyer winds each layer on its contour (None:
+        the job does not give its core, so nothing of the wire is known)."""
+        job = plan.job
+        if not job.bobbin.core_given:
+            return None
+        contours: dict[int, Contour | None] = {}
+        for seg in plan.segments:
+            if seg.kind.winds:
+                layer = job.winding.coils[seg.pole].layers[seg.layer]
+                contours[seg.index] = job.bobbin.contour(layer.radius)
+        wire = job.wire
+        self.wire_bound = wire
+        tensioner = tensioner_of(values, wire.stiffness_per_length, job.set_tension)
+        return WireSim(tensioner, contours, job.flyer_radius, 1.0 / self.rate)
+
+    def wire_config(self, plan: JobPlan) -> dict[str, object] | None:
+        if self.wire is None or self.wire_bound is None:
+            return None
+        wire, t = self.wire_bound, self.wire.tensioner
+        return {
+            "material": wire.material.name,
+            "max_tension_n": wire.max_tension,
+            "breaking_load_n": wire.breaking_load,
+            "set_tension_n": t.set_tension,
+            "tensioner": t.kind,
+            "span_stiffness_n_m": t.stiffness,
         }
 
     def paces(self) -> bool:
@@ -196,6 +259,9 @@ class SimEngine(Engine):
 
     def work(self) -> None:
         if self.run.plan is None:
+            return
+        self.work_wire()
+        if self.run.plan is None:  # the wire broke: the run is closed
             return
         real_time = self.paces()
         if self.rest is not None and not (real_time and self.out and self.ahead()):
@@ -252,7 +318,19 @@ class SimEngine(Engine):
             self.dev_cmd.add(step_deviation(self.run.plan, seg, rows[:, 2:]))
 
     def details(self) -> dict[str, object]:
+        wire: dict[str, object] = {}
+        if self.wire is not None:
+            w = self.wire
+            wire = {
+                "tension_peak_n": f"{w.peak:.4g}",
+                "tension_min_n": f"{w.least:.4g}",
+                (
+                    "dancer_travel_max_m" if w.tensioner.kind == "dancer" else "servo_feed_max_m_s"
+                ): f"{w.travel:.4g}",
+                "wire_taken_m": f"{w.taken:.6g}",
+            }
         return {
+            **wire,
             "lost_steps": sum(a.lost_steps for a in self.axes),
             "max_tracking_error_steps": f"{max((a.max_error_steps for a in self.axes), default=0.0):.4f}",
             "mean_deviation_command_m": f"{self.dev_cmd.mean:.6e}",
@@ -263,7 +341,29 @@ class SimEngine(Engine):
 
     def faults(self) -> str:
         lost = sum(a.lost_steps for a in self.axes)
-        return f"{lost} steps lost" if lost else ""
+        said = [f"{lost} steps lost"] if lost else []
+        if self.broken:
+            said.append(self.broken)
+        elif self.stretched and self.wire_bound is not None:
+            m = self.wire_bound.material
+            rise = self.wire_bound.resistance_rise(self.stretched)
+            said.append(
+                f"the wire was stretched past its yield ({self.stretched / 1e6:.4g} MPa against "
+                f"{m.yield_stress / 1e6:.4g} MPa): its resistance rose by {rise:.3%} where it was"
+            )
+        return "; ".join(said)
+
+    def work_wire(self) -> None:
+        """A broken wire stops the run: said, the profile node asked to abort, the run closed."""
+        if not self.broken or self.broken_said or self.run.plan is None:
+            return
+        self.broken_said = True
+        plan = self.run.plan
+        self.node.get_logger().error(f"{self.broken}; the run stops")
+        ids: dict[str, object] = {"job_id": plan.job_id, "run_id": plan.run_id}
+        self.run.publish_status("wire", ERROR, f"{self.broken}; the run stops", ids)
+        self.upstream.ask(TOPIC_STEP_TIMES)
+        self.run.finish(complete=False)
 
     # -- the simulation -----------------------------------------------------------
     def advance(self, rows: npt.NDArray[np.int64]) -> None:
@@ -339,9 +439,43 @@ class SimEngine(Engine):
             act_vel[:, i] = omega / ax.step_angle * ax.joint_step
         if samples.size:
             self.deviation_of_axes(seg_of_sample, act_pos)
-            self.out.append(
-                {"k": ks, "cmd_pos": cmd_pos, "cmd_vel": cmd_vel, "act_pos": act_pos, "act_vel": act_vel}
+            block = {"k": ks, "cmd_pos": cmd_pos, "cmd_vel": cmd_vel, "act_pos": act_pos, "act_vel": act_vel}
+            if self.wire is not None:
+                block.update(self.wire_samples(samples, act_pos, act_vel, seg_of_sample))
+            self.out.append(block)
+
+    def wire_samples(
+        self,
+        samples: npt.NDArray[np.float64],
+        act_pos: npt.NDArray[np.float64],
+        act_vel: npt.NDArray[np.float64],
+        segs: npt.NDArray[np.int64],
+    ) -> dict[str, npt.NDArray[np.float64]]:
+        """The wire at the samples (winder.tension.sim), from the flyer's
+        simulated angle and speed; a stress past the yield is noted, one at
+        the tensile strength breaks the wire (the run stops: work_wire)."""
+        assert self.wire is not None and self.wire_bound is not None and self.run.plan is not None
+        fork = FORK.index
+        w = self.wire.advance(act_pos[:, fork], act_vel[:, fork], segs)
+        dancer = self.wire.tensioner.kind == "dancer"
+        pos = np.column_stack([w.supply, w.coordinate] if dancer else [w.supply])
+        vel = np.column_stack([w.supply_speed, w.coordinate_rate] if dancer else [w.supply_speed])
+        wire, m = self.wire_bound, self.wire_bound.material
+        stress = w.tension / wire.section + m.density * w.takeup**2 / 2
+        top = int(np.argmax(stress)) if stress.size else 0
+        if stress.size and not self.broken and stress[top] >= m.tensile_strength:
+            seg = self.run.plan.segments[int(segs[top])] if segs[top] >= 0 else None
+            where = (
+                f"coil {seg.pole + 1} layer {seg.layer + 1}, " if seg is not None and seg.kind.winds else ""
             )
+            self.broken = (
+                f"the wire broke {samples[top]:.3f} s into the run ({where}tension {w.tension[top]:.4g} N at "
+                f"{w.takeup[top]:.3g} m/s: {stress[top] / 1e6:.4g} MPa, its breaking load "
+                f"{wire.breaking_load:.4g} N, {m.tensile_strength / 1e6:.4g} MPa)"
+            )
+        elif stress.size and stress[top] > m.yield_stress:
+            self.stretched = max(self.stretched, float(stress[top]))
+        return {"tension": w.tension, "wire_pos": pos, "wire_vel": vel}
 
     @staticmethod
     def command_velocity(
@@ -412,7 +546,14 @@ class SimEngine(Engine):
         stamps = t_ns + self.origin_ns  # on the cell's clock
         clocks = encode_clocks(stamps)
         cmds = self.encoder.encode(stamps, block["cmd_pos"][:n], block["cmd_vel"][:n])
-        acts = self.encoder.encode(stamps, block["act_pos"][:n], block["act_vel"][:n])
+        if "tension" in block:
+            pos = np.hstack([block["act_pos"][:n], block["wire_pos"][:n]])
+            vel = np.hstack([block["act_vel"][:n], block["wire_vel"][:n]])
+            acts = self.state_encoder.encode(stamps, pos, vel)
+            wrenches = self.wrench.encode(stamps, block["tension"][:n])
+        else:
+            acts = self.encoder.encode(stamps, block["act_pos"][:n], block["act_vel"][:n])
+            wrenches = []
         if n:
             self.clock_ns = int(stamps[n - 1])
             self.clock_wall = time.monotonic()
@@ -426,6 +567,9 @@ class SimEngine(Engine):
             record("clock", t, clocks[r], exact=True)
             record("joint_commands", t, cmds[r], exact=True)
             record("joint_states", t, acts[r], exact=True)
+            if wrenches:
+                self.pub_tension.publish(wrenches[r])
+                record("tension", t, wrenches[r], exact=True)
         if n:
             self.run.reached(int(t_ns[n - 1]))
 

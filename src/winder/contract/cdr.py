@@ -35,6 +35,7 @@ __all__ = [
     "JointStateEncoder",
     "JointStateReader",
     "MultiArrayCodec",
+    "WrenchEncoder",
     "clock_payload",
     "encode_clocks",
     "joint_state_names",
@@ -125,6 +126,36 @@ class JointStateEncoder:
         block[:, o : o + 8 * self.n] = pos.view(np.uint8).reshape(m, 8 * self.n)
         o = 4 + self._vel
         block[:, o : o + 8 * self.n] = vel.view(np.uint8).reshape(m, 8 * self.n)
+        return [row.tobytes() for row in block]
+
+
+class WrenchEncoder:
+    """``geometry_msgs/WrenchStamped`` payloads with a fixed frame id: the
+    stamp and ``force.x`` vary per sample (a load cell's reading along the
+    wire, as ros2_control's force-torque broadcaster publishes it), the rest
+    is 0."""
+
+    def __init__(self, frame_id: str) -> None:
+        w = _Writer()
+        self._stamp = w.u32(0)
+        w.u32(0)  # nanosec
+        w.string(frame_id)
+        w.align(8)
+        self._force = len(w.buf)
+        w.buf += b"\x00" * 48  # force x, y, z; torque x, y, z
+        self._template = np.frombuffer(_HEADER + bytes(w.buf), dtype=np.uint8)
+
+    def encode(self, t_ns: npt.ArrayLike, force_x: npt.ArrayLike) -> list[bytes]:
+        """One payload per time: stamped ``t_ns``, ``force.x`` = ``force_x`` (N)."""
+        sec, nsec = _split_ns(np.asarray(t_ns))
+        fx = np.ascontiguousarray(force_x, dtype="<f8").reshape(-1)
+        m = sec.size
+        block = np.tile(self._template, (m, 1))
+        o = 4 + self._stamp
+        block[:, o : o + 4] = sec.view(np.uint8).reshape(m, 4)
+        block[:, o + 4 : o + 8] = nsec.view(np.uint8).reshape(m, 4)
+        o = 4 + self._force
+        block[:, o : o + 8] = fx.view(np.uint8).reshape(m, 8)
         return [row.tobytes() for row in block]
 
 

@@ -35,6 +35,7 @@ from winder.contract.topics import (
     TOPIC_STATE,
     TOPIC_STEP_TIMES,
     TOPIC_STEPS,
+    TOPIC_TENSION,
 )
 
 __all__ = ["CLOCK", "DIAGNOSTICS", "EVENTS", "LATCHED", "STATE", "STREAM", "TOPIC_QOS", "Qos", "qos_of"]
@@ -79,6 +80,7 @@ TOPIC_QOS: dict[str, Qos] = {
     TOPIC_STEP_TIMES: STREAM,
     TOPIC_JOINT_STATES: STATE,
     TOPIC_JOINT_COMMANDS: STATE,
+    TOPIC_TENSION: STATE,
     TOPIC_PROGRESS: STATE,
     TOPIC_CONTROL: EVENTS,
     TOPIC_CLOCK: CLOCK,

@@ -765,6 +765,7 @@ class Job:
             self.density or base.density,
             self.resistivity or base.resistivity,
             base.hardening,
+            max(base.tensile_strength, self.yield_stress),
         )
         return Wire(mine, self.bare_diameter or self.wire_diameter)
 

@@ -20,8 +20,9 @@ own (4 MPa for copper at 30 m/s), which adds to the pull.
 Materials (annealed, at 20 C): copper (IEC 60028: 1.7241e-8 ohm m; E 120
 GPa; 8 890 kg/m3; the charts' 68.9 MPa; hardening to about 220 MPa over
 30 % elongation) and aluminium (EC grade, 61 % IACS: 2.8264e-8 ohm m; E 69
-GPa; 2 703 kg/m3; yield about 28 MPa; about 0.2 GPa hardening). A job can
-set each figure of its own (``wire.yield_stress`` ...).
+GPa; 2 703 kg/m3; yield about 28 MPa, breaking at about 83 MPa). A job can
+set each figure of its own (``wire.yield_stress`` ...). The wire breaks
+where the stress reaches the tensile strength (copper about 220 MPa).
 """
 
 from __future__ import annotations
@@ -42,11 +43,12 @@ class Material:
     density: float  #: kg/m3
     resistivity: float  #: ohm m at 20 C
     hardening: float  #: Pa: tangent modulus above the yield
+    tensile_strength: float  #: Pa: where it breaks
 
 
 MATERIALS: dict[str, Material] = {
-    "copper": Material("copper", 68.9e6, 120e9, 8890.0, 1.7241e-8, 0.5e9),
-    "aluminium": Material("aluminium", 28e6, 69e9, 2703.0, 2.8264e-8, 0.2e9),
+    "copper": Material("copper", 68.9e6, 120e9, 8890.0, 1.7241e-8, 0.5e9, 220e6),
+    "aluminium": Material("aluminium", 28e6, 69e9, 2703.0, 2.8264e-8, 0.2e9, 83e6),
 }
 
 
@@ -66,6 +68,11 @@ class Wire:
     def max_tension(self) -> float:
         """The largest pull before it flows, N: yield stress x bare section."""
         return self.material.yield_stress * self.section
+
+    @property
+    def breaking_load(self) -> float:
+        """The pull that breaks it, N: tensile strength x bare section."""
+        return self.material.tensile_strength * self.section
 
     @property
     def stiffness_per_length(self) -> float:

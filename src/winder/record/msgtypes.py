@@ -32,6 +32,9 @@ DEFINITIONS = {
         "std_msgs/Header header\nstring[] name\nfloat64[] position\nfloat64[] velocity\nfloat64[] effort"
     ),
     "rosgraph_msgs/msg/Clock": "builtin_interfaces/Time clock",
+    "geometry_msgs/msg/Vector3": "float64 x\nfloat64 y\nfloat64 z",
+    "geometry_msgs/msg/Wrench": "Vector3 force\nVector3 torque",
+    "geometry_msgs/msg/WrenchStamped": "std_msgs/Header header\nWrench wrench",
     "diagnostic_msgs/msg/KeyValue": "string key\nstring value",
     "diagnostic_msgs/msg/DiagnosticStatus": (
         "byte OK=0\nbyte WARN=1\nbyte ERROR=2\nbyte STALE=3\n"

@@ -298,7 +298,7 @@ class StepConsumer(ManagedNode):
             self.pub_config.publish(msg_config)
             config_raw = serialize_message(msg_config)
         if values["record"]:
-            why = self.recording.open(values, raw, config_raw)
+            why = self.recording.open(values, raw, config_raw, self.engine.unrecorded())
             if why:
                 self.error(f"job {plan.job_id} runs unrecorded: {why}")
         self.job_wall = time.monotonic()

@@ -223,6 +223,11 @@ class Engine:
         lost steps), in words; "" if nothing."""
         return ""
 
+    def unrecorded(self) -> frozenset[str]:
+        """The bag keys of its own this run will not write (its bag does not
+        name those topics): asked once the run has begun."""
+        return frozenset()
+
     def details(self) -> dict[str, object]:
         """The engine's own status keys (after the contract's)."""
         return {}

@@ -61,6 +61,7 @@ class RunBag:
         self.failure = ""  # why the bag stopped recording (a full disk), if it did
         self.path_recorded = False
         self.profile_recorded = False
+        self.skipped: frozenset[str] = frozenset()  # keys whose topics this run's bag does not name
 
     @property
     def path(self) -> Path | None:
@@ -86,9 +87,12 @@ class RunBag:
         if said:
             self.node.get_logger().warning(said)
 
-    def open(self, values: dict[str, Any], job_raw: bytes, config_raw: bytes) -> str:
-        """Open the run's bag with its description (and configuration) in it;
-        the reason in one line if it cannot be, else ""."""
+    def open(
+        self, values: dict[str, Any], job_raw: bytes, config_raw: bytes, skip: frozenset[str] = frozenset()
+    ) -> str:
+        """Open the run's bag with its description (and configuration) in it,
+        naming every topic but those of the keys ``skip``; the reason in one
+        line if it cannot be, else ""."""
         plan = self.plan
         assert plan is not None
         try:
@@ -111,19 +115,20 @@ class RunBag:
             )
             self.recorder = BagRecorder(
                 path,
-                {name: kind for name, kind in self.topics.values()},
+                {name: kind for key, (name, kind) in self.topics.items() if key not in skip},
                 compression=values["bag_compression"],
                 first=first,
                 custom=custom,
             )
         except (OSError, ValueError) as exc:  # the disk changed since bag_dir was accepted
             return f"cannot open a bag: {one_line(exc)}"
+        self.skipped = skip
         return ""
 
     def record(self, key: str, t_ns: int, data: bytes, *, exact: bool = False) -> None:
         """One message into the run's bag, if it records. A failed write (a
         full disk) stops the recording (:attr:`failure`)."""
-        if self.recorder is None or not self.recorder.is_open or self.failure:
+        if self.recorder is None or not self.recorder.is_open or self.failure or key in self.skipped:
             return
         try:
             self.recorder.write(self.topics[key][0], self.wall0_ns + t_ns, data, exact=exact)

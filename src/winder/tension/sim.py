@@ -38,6 +38,8 @@ class WireSample:
     coordinate: Floats  #: dancer travel (m) or servo feed speed (m/s)
     supply: Floats  #: wire paid out since the run's start, m
     takeup: Floats  #: take-up speed, m/s
+    supply_speed: Floats  #: the supply's pay-out speed, m/s
+    coordinate_rate: Floats  #: the coordinate's rate (dancer, m/s; servo, m/s2)
 
 
 class WireSim:
@@ -51,7 +53,8 @@ class WireSim:
         self.tensioner = tensioner
         self.contours = contours
         self.radius = flyer_radius
-        self.system = Discrete(*tensioner.matrices(), period)
+        self.a, self.b, c, d = tensioner.matrices()
+        self.system = Discrete(self.a, self.b, c, d, period)
         self.period = period
         self.x = tensioner.steady(0.0)
         self.v = 0.0  # the take-up speed at the last sample
@@ -94,8 +97,16 @@ class WireSim:
         out = states @ self.system.c.T
         tension = np.maximum(self.tensioner.set_tension + out[:, 0], 0.0)
         held = self.tensioner.held(states)
+        rates = states @ self.a.T + v[:, None] * self.b[None, :]  # x' = A x + B v, exactly
         if n:
             self.peak = max(self.peak, float(tension.max()))
             self.least = min(self.least, float(tension.min()))
             self.travel = max(self.travel, float(np.abs(out[:, 1]).max()))
-        return WireSample(tension, out[:, 1].copy(), taken - held, v)
+        return WireSample(
+            tension,
+            out[:, 1].copy(),
+            taken - held,
+            v,
+            v - self.tensioner.held(rates),
+            (rates @ self.system.c.T)[:, 1],
+        )
