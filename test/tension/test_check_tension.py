@@ -74,7 +74,13 @@ def test_a_tensioner_that_cannot_follow_the_corners_is_refused_in_one_line(tmp_p
     assert peak > limit and 0 < keep < speed
     assert "fits           NO: layer 1" in out.stdout  # the report stands on stdout
     doc = json.loads(check(job, "--json").stdout)
-    assert doc["fits"] is False and doc["overflow"] == lines[0].removeprefix("winder check: error: ")
+    words = lines[0].removeprefix("winder check: error: ")
+    assert doc["fits"] is False and doc["overflow"] == words
+    # winder run refuses it in the same words, before anything starts
+    for argv in (["run", "--check", str(job)], ["run", str(job)]):
+        out = subprocess.run([str(WINDER), *argv], capture_output=True, text=True, timeout=60)
+        assert out.returncode == 2 and out.stdout == "", out.stdout + out.stderr
+        assert out.stderr == f"winder run: error: {words}\n"
 
 
 def test_a_set_tension_beyond_the_wire_is_refused() -> None:

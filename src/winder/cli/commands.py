@@ -181,6 +181,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     external = external_nodes(args)
     sim = values_from_args(args, SIM_SPECS, given["consumer"])
     check_sim({**sim, "record": False} if "sim" in external else sim)  # a remote bag_dir is its host's
+    why = wire_refusal(job, profile, str(extra.get("schedule", "")), sim)
+    if why:  # the words of winder check
+        raise UserError(why)
     cell = values_from_args(args, CELL_SPECS)
     args.namespace = check_namespace(args.namespace)
     from winder.cli.view import foxglove_host, foxglove_port, start_live_view
@@ -427,6 +430,18 @@ def _coil_numbers(numbers: Sequence[int]) -> str:
     return ", ".join(out)
 
 
+def wire_refusal(job: Job, ramp: dict[str, Any], schedule: str, consumer: dict[str, Any]) -> str:
+    """Why the job's wire would not hold at the run's speeds, in ``winder
+    check``'s words ("" if it holds, or the job does not give its core)."""
+    if not job.bobbin.core_given:
+        return ""
+    from winder.motion.coil import report
+
+    doc = report(job.winding)
+    add_takeup(job, doc, ramp, schedule)
+    return add_tension(job, doc, consumer)
+
+
 def add_takeup(job: Job, doc: dict[str, Any], ramp_given: dict[str, Any], schedule: str) -> None:
     """Each layer's take-up at the job's speeds (the job file's ramp, the
     profile node's defaults where it sets none, at the highest feed override
@@ -457,7 +472,7 @@ def add_tension(job: Job, doc: dict[str, Any], sim_given: dict[str, Any]) -> str
     layer that does not keep within the wire's maximum or the alarm band,
     in one line naming it, the prediction, the limit and the highest flyer
     speed that keeps it ("" if every layer does)."""
-    from winder.tension.predict import Bounds, fastest_within, predict_layer
+    from winder.tension.predict import Bounds, LayerTension, fastest_within, predict_layer
     from winder.tension.tensioner import tensioner_of
 
     wire = job.wire
@@ -484,6 +499,7 @@ def add_tension(job: Job, doc: dict[str, Any], sim_given: dict[str, Any]) -> str
         "span_stiffness_n_m": tensioner.stiffness,
     }
     why = ""
+    seen: dict[tuple[float, float], LayerTension] = {}  # coils laid alike: each layer worked out once
     for coil_doc in [{"coil": 1, "layers": doc["layers"]}, *doc["coils"]]:
         for layer in coil_doc["layers"]:
             omega = layer["flyer_speed_rad_s"]
@@ -491,7 +507,10 @@ def add_tension(job: Job, doc: dict[str, Any], sim_given: dict[str, Any]) -> str
             if omega is None or contour is None:
                 layer.update(tension_peak_n=None, tension_min_n=None)
                 continue
-            got = predict_layer(contour, job.flyer_radius, omega, tensioner, wire)
+            key = (layer["radius_m"], omega)
+            if key not in seen:
+                seen[key] = predict_layer(contour, job.flyer_radius, omega, tensioner, wire)
+            got = seen[key]
             layer.update(tension_peak_n=got.peak, tension_min_n=got.minimum)
             breach = got.breach(bounds, wire) or tensioner.limit_words(got.peak, got.coordinate)
             if breach and not why:
