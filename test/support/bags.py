@@ -54,6 +54,20 @@ CONFIGS: dict[str, list[str]] = {
     # the same job as lin2k with the other two ramps, default 200 Hz sampling
     "trap": ["--job-id", "trap", *SMALL, "--profile", "trapezoid"],
     "expo": ["--job-id", "expo", *SMALL, "--profile", "exponential"],
+    # the trapezoid job on a rectangular core: the sim node simulates the wire too
+    "wire": [
+        "--job-id",
+        "wire",
+        *SMALL,
+        "--profile",
+        "trapezoid",
+        "--bobbin.core",
+        "rect",
+        "--bobbin.core-width",
+        "0.012",
+        "--bobbin.core-depth",
+        "0.02",
+    ],
     # too fast for the pole axis: it falls out of step (pull-out speed T_m/D = 6.7 rad/s)
     "slip": [
         "--job-id",

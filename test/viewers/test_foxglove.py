@@ -49,6 +49,7 @@ URL = re.compile(r"ws://127\.0\.0\.1:(\d+)")
 LIVE_TOPICS = {
     "/winder/joint_states": "sensor_msgs/msg/JointState",
     "/winder/joint_commands": "sensor_msgs/msg/JointState",
+    "/winder/tension": "geometry_msgs/msg/WrenchStamped",
     "/winder/state": "diagnostic_msgs/msg/DiagnosticStatus",
     "/winder/progress": "diagnostic_msgs/msg/KeyValue",
     "/winder/path": "trajectory_msgs/msg/JointTrajectory",

@@ -37,7 +37,7 @@ Messages = dict[str, list[tuple[int, Any]]]
 @pytest.fixture(scope="module")
 def messages(bag: Any) -> Messages:
     """Every message of a recorded run, by topic: [(log time, message)]."""
-    return rosbags_read(bag("trap"))
+    return rosbags_read(bag("wire"))
 
 
 @pytest.fixture(scope="module")
@@ -167,8 +167,9 @@ def test_every_foxglove_path_resolves_on_a_recorded_run(foxglove: dict[str, Any]
             if kind == "Plot":
                 assert all(numeric(v) for v in values), f"{path}: not all numeric: {values[:3]}"
             checked += 1
-    # 12 joint curves, the sim node's progress, the cell state, the diagnostics, the motor set-up
-    assert checked == 16
+    # 12 joint curves, the sim node's progress, the cell state, the diagnostics, the motor set-up,
+    # the wire's tension, supply and dancer
+    assert checked == 19
     # every panel the layout tree shows is configured, and every configured panel is shown
     assert sorted(panel_ids(foxglove["layout"])) == sorted(foxglove["configById"])
 

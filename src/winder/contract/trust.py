@@ -21,6 +21,7 @@ from winder.contract.topics import (
     TOPIC_STATE,
     TOPIC_STEP_TIMES,
     TOPIC_STEPS,
+    TOPIC_TENSION,
 )
 
 __all__ = ["OTHER_PROCESS", "OWNERS", "ROLE_NAMES", "SHOWN", "SIGNS", "Intruders", "without_senders"]
@@ -42,12 +43,13 @@ OWNERS = {
 
 #: The role whose node alone may publish each topic a live view shows
 #: (``winder view``, ``winder run --foxglove``): those of :data:`OWNERS`, and
-#: the consumer's joint states, joint commands and clock, which no node of
-#: the cell acts on. (A ``/diagnostics`` status: the node it names.)
+#: the consumer's joint states, joint commands, wire tension and clock, which
+#: no node of the cell acts on. (A ``/diagnostics`` status: the node it names.)
 SHOWN = {
     **OWNERS,
     TOPIC_JOINT_STATES: "consumer",
     TOPIC_JOINT_COMMANDS: "consumer",
+    TOPIC_TENSION: "consumer",
     TOPIC_CLOCK: "consumer",
 }
 

@@ -57,6 +57,7 @@ from winder.contract.topics import (
     TOPIC_PROGRESS,
     TOPIC_SIM_CONFIG,
     TOPIC_STATE,
+    TOPIC_TENSION,
     in_namespace,
 )
 from winder.contract.trust import SHOWN, SIGNS
@@ -98,6 +99,7 @@ def _lossy(q: table.Qos) -> table.Qos:
 VIEW_TOPICS = (
     ViewTopic(TOPIC_JOINT_STATES, "sensor_msgs/msg/JointState", _lossy(table.STATE)),
     ViewTopic(TOPIC_JOINT_COMMANDS, "sensor_msgs/msg/JointState", _lossy(table.STATE)),
+    ViewTopic(TOPIC_TENSION, "geometry_msgs/msg/WrenchStamped", _lossy(table.STATE)),
     ViewTopic(TOPIC_STATE, "diagnostic_msgs/msg/DiagnosticStatus", table.LATCHED),
     ViewTopic(TOPIC_PROGRESS, "diagnostic_msgs/msg/KeyValue", _lossy(table.STATE)),
     ViewTopic(TOPIC_PATH, "trajectory_msgs/msg/JointTrajectory", table.LATCHED),
