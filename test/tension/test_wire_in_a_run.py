@@ -8,15 +8,19 @@ the run, said in one line."""
 from __future__ import annotations
 
 import json
+import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
 import scipy.signal
 from conftest import Procs, rosbags_read
+from support import wait
 from support.cell import only_bag, winder_run
+from support.paths import BIN
 
 from winder.motion.job import Job
+from winder.record.reader import read_run
 from winder.tension.tensioner import tensioner_of
 
 pytestmark = pytest.mark.ros
@@ -73,19 +77,72 @@ def test_the_recorded_tension_is_the_recorded_flyers(tmp_path: Path, procs: Proc
     assert np.allclose(pos[:, 3], taken - held, rtol=0, atol=1e-3 * taken[-1])
     report = {kv.key: kv.value for kv in bag["/diagnostics"][-1][1].status[0].values}
     assert float(report["tension_peak_n"]) >= float(report["tension_min_n"]) > 0
+    # winder's reader takes the same tension (its fast path against rosbags' decoder), and
+    # winder analyze draws it
+    run = read_run(only_bag(tmp_path))
+    assert np.array_equal(run.tension.tension, tension)
+    assert np.allclose(run.tension.t, t - t[0], rtol=0, atol=1e-9)
+    out = subprocess.run(
+        [str(BIN / "winder"), "analyze", str(only_bag(tmp_path)), "--plots-dir", str(tmp_path / "plots")],
+        capture_output=True,
+        text=True,
+        timeout=180,
+    )
+    assert out.returncode == 0, out.stderr
+    assert (tmp_path / "plots" / "wire.png").stat().st_size > 10_000
+
+
+BREAKS = """\
+interp_node:
+  ros__parameters:
+    job_id: breaks
+    wire_diameter: 0.0005
+    wire.bare_diameter: 0.00045
+    bobbin.core: rect
+    bobbin.core_width: 0.012
+    bobbin.core_depth: 0.02
+    bobbin.core_corner_radius: 0.001
+    flyer_radius: 0.03
+    turns_per_layer: 6
+    layers: 1
+    poles: 1
+    fork_steps_per_rev: 512
+profile_node:
+  ros__parameters:
+    v_max: 60000.0
+sim_node:
+  ros__parameters:
+    tensioner.kind: servo
+    tensioner.bandwidth: 2.0
+"""
 
 
 def test_a_wire_pulled_past_its_breaking_load_stops_the_run(tmp_path: Path, procs: Procs) -> None:
-    job = tmp_path / "servo.yaml"
-    job.write_text("sim_node:\n  ros__parameters:\n    tensioner.kind: servo\n    tensioner.bandwidth: 2.0\n")
-    r = winder_run(tmp_path, procs.domain, str(job), *RECT, "--layers", "1", "--v-max", "60000")
-    assert r.returncode == 1, r.stdout + r.stderr
-    assert "Traceback" not in r.stdout + r.stderr
-    assert "the wire broke " in r.stdout + r.stderr, r.stdout + r.stderr
-    assert "its breaking load 34.99 N, 220 MPa" in r.stdout + r.stderr
-    bag = rosbags_read(only_bag(tmp_path))
-    statuses = [s for _, m in bag["/diagnostics"] for s in m.status]
-    final = {kv.key: kv.value for kv in statuses[-1].values}
-    assert final["state"] == "incomplete"
-    wire = [s for s in statuses if s.name.endswith(": wire")]
-    assert wire and wire[0].level == 2 and wire[0].message.startswith("the wire broke "), wire
+    """A job `winder run` refuses (its predicted tension), started on the nodes
+    themselves (they do not predict it yet): the sim node's wire breaks, the run
+    stops incomplete, a `wire` ERROR names where."""
+    job = tmp_path / "breaks.yaml"
+    job.write_text(BREAKS)
+    refused = winder_run(tmp_path, procs.domain, str(job))
+    assert refused.returncode == 2 and "passes the wire's maximum" in refused.stderr, refused.stderr
+    bags = tmp_path / "nodes"
+    procs.start("sim_node", "--params-file", str(job), "-p", f"bag_dir:={bags}")
+    procs.start("profile_node", "--params-file", str(job))
+    procs.start("interp_node", "--params-file", str(job))
+    done = ("incomplete", "done", "aborted")
+    wait.until(
+        lambda: (
+            (metas := list(bags.glob("*/metadata.yaml")))
+            and read_run(metas[0].parent).report.get("state") in done
+        ),
+        60,
+        f"a bag in {bags} with its run's final report",
+        poll=0.2,
+    )
+    [meta] = list(bags.glob("*/metadata.yaml"))
+    run = read_run(meta.parent)
+    assert run.report["state"] == "incomplete", run.report
+    assert any(
+        ": wire: the wire broke " in e and "its breaking load 34.99 N, 220 MPa" in e for e in run.errors
+    ), run.errors
+    assert float(run.report["tension_peak_n"]) > 34.99

@@ -52,6 +52,7 @@ from winder.contract.topics import (
     TOPIC_SIM_CONFIG,
     TOPIC_STATE,
     TOPIC_STEP_TIMES,
+    TOPIC_TENSION,
     has_role,
     in_namespace,
     status_node,
@@ -70,6 +71,7 @@ __all__ = [
     "StepArray",
     "StepRows",
     "StepSource",
+    "TensionSamples",
     "read_raw",
     "read_run",
     "recover",
@@ -83,6 +85,7 @@ JOB, SIM_CONFIG, STEP_TIMES = TOPIC_JOB, TOPIC_SIM_CONFIG, TOPIC_STEP_TIMES
 JOINT_COMMANDS, JOINT_STATES = TOPIC_JOINT_COMMANDS, TOPIC_JOINT_STATES
 PROFILE_CONFIG, DIAGNOSTICS = TOPIC_PROFILE_CONFIG, TOPIC_DIAGNOSTICS
 CONTROL, STATE = TOPIC_CONTROL, TOPIC_STATE
+TENSION = TOPIC_TENSION
 
 
 # -- decoding ---------------------------------------------------------------------
@@ -170,6 +173,47 @@ class Samples:
 
     def __len__(self) -> int:
         return int(self.t.size)
+
+
+@dataclass(frozen=True)
+class TensionSamples:
+    """The wire's tension as recorded (winder/tension): times ``t`` (s,
+    simulated, from the run's start) and ``tension`` (N); empty where the run
+    did not simulate the wire."""
+
+    t: FloatArray
+    tension: FloatArray
+
+    @classmethod
+    def empty(cls) -> TensionSamples:
+        return cls(np.zeros(0), np.zeros(0))
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+
+def _wrench_samples(datas: list[bytes], topic: str) -> TensionSamples:
+    """Decode WrenchStamped payloads (stamp and force.x): all of one length
+    (one frame id, as the sim node writes them) at once with numpy, the first
+    checked against the rosbags decoder; others one by one."""
+    if not datas:
+        return TensionSamples.empty()
+    store = _typestore()
+    first = store.deserialize_cdr(datas[0], "geometry_msgs/msg/WrenchStamped")
+    size = len(datas[0])
+    if datas[0][1] == 1 and all(len(d) == size for d in datas):
+        (n,) = struct.unpack_from("<I", datas[0], 12)  # the frame id's length, its bytes after it
+        force = 4 + 12 + n
+        force += -(force - 4) % 8
+        block = np.frombuffer(b"".join(datas), dtype=np.uint8).reshape(len(datas), size)
+        sec = block[:, 4:8].copy().view("<i4")[:, 0].astype(np.float64)
+        nsec = block[:, 8:12].copy().view("<u4")[:, 0].astype(np.float64)
+        fx = block[:, force : force + 8].copy().view("<f8")[:, 0]
+        if fx[0] == first.wrench.force.x and sec[0] == first.header.stamp.sec:
+            return TensionSamples(sec + nsec * 1e-9, fx)
+    msgs = [store.deserialize_cdr(d, "geometry_msgs/msg/WrenchStamped") for d in datas]
+    t = np.array([m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for m in msgs])
+    return TensionSamples(t, np.array([m.wrench.force.x for m in msgs]))
 
 
 class StepSource(Protocol):
@@ -267,6 +311,8 @@ class Run:
     #: how the bag's MCAP chunks are compressed ("lz4", "zstd", "none"; several
     #: comma-separated if they differ; "" if it holds no chunks, e.g. sqlite3)
     compression: str = ""
+    #: the wire's tension (winder/tension), where the run simulated the wire
+    tension: TensionSamples = field(default_factory=TensionSamples.empty)
 
     @property
     def complete(self) -> bool:
@@ -427,7 +473,17 @@ def read_run(path: str | Path, namespace: str | None = None) -> Run:
     ns = _pick_namespace(raw.path, counts, namespace)
     topic = {
         key: f"{ns}/{key}"
-        for key in (JOB, SIM_CONFIG, PROFILE_CONFIG, CONTROL, STATE, STEP_TIMES, JOINT_COMMANDS, JOINT_STATES)
+        for key in (
+            JOB,
+            SIM_CONFIG,
+            PROFILE_CONFIG,
+            CONTROL,
+            STATE,
+            STEP_TIMES,
+            JOINT_COMMANDS,
+            JOINT_STATES,
+            TENSION,
+        )
     }
     decoded = _decode(raw, topic)
     streamed = _stream_pass(raw, topic)
@@ -467,7 +523,7 @@ def _deserialize(store: Any, bag: Path, topic: str, data: bytes, msgtype: str) -
 def _decode(raw: RawBag, topic: dict[str, str]) -> dict[str, list[Any]]:
     """The kept messages of the cell's topics and of /diagnostics, per topic,
     in file order, decoded."""
-    wanted = {*topic.values(), DIAGNOSTICS}
+    wanted = {*topic.values(), DIAGNOSTICS} - {topic[TENSION]}  # streamed (_stream_pass)
     store = _typestore()
     decoded: dict[str, list[Any]] = {t: [] for t in wanted}
     decoded[_DIAGNOSTIC_TIMES] = []  # the log time of each /diagnostics message
@@ -488,6 +544,7 @@ class _Streamed:
     commands: Samples
     states: Samples
     steps: StepSource
+    tension: TensionSamples
 
 
 def _stream_pass(raw: RawBag, topic: dict[str, str]) -> _Streamed:
@@ -505,9 +562,17 @@ def _stream_pass(raw: RawBag, topic: dict[str, str]) -> _Streamed:
     store = _typestore()
     pending: dict[str, list[bytes]] = {t: [] for t in joints}
     parts: dict[str, list[Samples]] = {t: [] for t in joints}
+    wrenches: list[bytes] = []
+    wrench_parts: list[TensionSamples] = []
     rows = 0
-    for batch in raw.stream({*joints, topic[STEP_TIMES]}):
+    for batch in raw.stream({*joints, topic[STEP_TIMES], topic[TENSION]}):
         for name, _, data in batch:
+            if name == topic[TENSION]:
+                wrenches.append(data)
+                if len(wrenches) >= _JOINT_BATCH:
+                    wrench_parts.append(_wrench_samples(wrenches, name))
+                    wrenches = []
+                continue
             if name == topic[STEP_TIMES]:
                 msg = _deserialize(store, raw.path, name, data, steps_type)
                 rows += _unpack_steps(msg, name).shape[0]
@@ -521,10 +586,20 @@ def _stream_pass(raw: RawBag, topic: dict[str, str]) -> _Streamed:
         if pending[name]:
             parts[name].append(_joint_samples(pending[name], name))
         samples[name] = _concat(parts[name])
+    if wrenches:
+        wrench_parts.append(_wrench_samples(wrenches, topic[TENSION]))
+    tension = (
+        TensionSamples(
+            np.concatenate([p.t for p in wrench_parts]), np.concatenate([p.tension for p in wrench_parts])
+        )
+        if wrench_parts
+        else TensionSamples.empty()
+    )
     return _Streamed(
         samples[topic[JOINT_COMMANDS]],
         samples[topic[JOINT_STATES]],
         StepRows(raw, topic[STEP_TIMES], steps_type, rows),
+        tension,
     )
 
 
@@ -578,6 +653,7 @@ def _assemble(
         profile_config=profile_config,
         events=_decode_events(decoded.get(topic[CONTROL], []), plan.run_id),
         compression=", ".join(sorted(raw.compressions)),
+        tension=TensionSamples(streamed.tension.t - origin, streamed.tension.tension),
     )
 
 

@@ -487,6 +487,56 @@ def motion_figure(run: Run, d: Digest) -> Figure:
 # -- operations.png -------------------------------------------------------------------------
 
 
+def wire_figure(run: Run) -> Figure:
+    """wire.png's figure: the wire's tension over the run as recorded, in the
+    job's bands (the set tension, the warning and alarm bands) and below the
+    wire's maximum; the layers' starts marked where the flyer's samples tell."""
+    job = run.plan.job
+    tension = run.tension
+    fig, _ = _figure((13, 8.0))
+    ax = fig.add_axes((0.07, 0.58, 0.72, 0.36))
+    zoom = fig.add_axes((0.07, 0.08, 0.72, 0.38))
+    set_n = job.set_tension
+    top = job.wire.max_tension * job.tension_derate
+    for frac, alpha, label in (
+        (job.tension_alarm, 0.10, f"alarm band (tension.alarm {job.tension_alarm:g})"),
+        (job.tension_warning, 0.16, f"warning band (tension.warning {job.tension_warning:g})"),
+    ):
+        ax.axhspan(set_n * (1 - frac), set_n * (1 + frac), color="tab:green", alpha=alpha, lw=0, label=label)
+    ax.axhline(set_n, color="tab:green", lw=0.8, label=f"set {set_n:.4g} N")
+    ax.axhline(top, color="tab:red", lw=1.0, ls="--", label=f"the wire's maximum {top:.4g} N")
+    _line(ax, tension.t, tension.tension, color=ACT, lw=0.6, label="simulated tension")
+    peak, least = float(tension.tension.max()), float(tension.tension.min())
+    ax.set_xlim(float(tension.t[0]), float(tension.t[-1]) if len(tension) > 1 else float(tension.t[0]) + 1)
+    ax.set_ylim(0.0, max(top, peak) * 1.08)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("wire tension (N)")
+    ax.set_title(
+        f"{run.label}: the wire ({job.wire.material.name}, {job.wire.bare_diameter * 1e3:g} mm): "
+        f"tension {least:.4g}..{peak:.4g} N",
+        loc="left",
+    )
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+    # two turns around the peak: the swing the corners make, twice a turn on a rectangle
+    k = int(np.argmax(tension.tension))
+    st = run.states
+    fork = AXES.index("fork")
+    w = abs(float(np.interp(tension.t[k], st.t, st.vel[:, fork]))) if len(st) else 0.0
+    half = 2 * math.pi / w if w > 1e-9 else 0.5
+    m = (tension.t >= tension.t[k] - half) & (tension.t <= tension.t[k] + half)
+    zoom.plot(tension.t[m], tension.tension[m], color=ACT, lw=0.9, marker=".", ms=2)
+    zoom.axhline(set_n, color="tab:green", lw=0.8)
+    zoom.set_xlabel("time (s)")
+    zoom.set_ylabel("wire tension (N)")
+    zoom.set_title(
+        f"around the peak, {peak:.4g} N at {tension.t[k]:.3f} s: two turns of the flyer ({w:.3g} rad/s)"
+        if w > 1e-9
+        else f"around the peak, {peak:.4g} N at {tension.t[k]:.3f} s",
+        loc="left",
+    )
+    return fig
+
+
 def _operations(run: Run, d: Digest, out: Path) -> Path:
     return _save(operations_figure(run, d), out / "operations.png")
 
@@ -856,7 +906,8 @@ def plot_analysis(
     run: Run, analysis: Analysis, out: Path | None = None, digested: Digest | None = None
 ) -> list[Path]:
     """Write motion.png, tracking.png, winding.png and wound.png (and
-    operations.png for a run with operator commands); return their paths. ``digested``: the run's
+    operations.png for a run with operator commands, wire.png for one that
+    simulated the wire); return their paths. ``digested``: the run's
     :func:`winder.analysis.metrics.digest_run`, if made already."""
     d = digested if digested is not None else digest_run(run)
     out = output_dir(plots_dir(run.path) if out is None else Path(out))
@@ -865,6 +916,7 @@ def plot_analysis(
     tracking = ["tracking"] if run.states.t.size else []
     figures = ["motion", *tracking, "winding"] + (["operations"] if run.events else [])
     figures += ["wound"] if run.states.t.size else []  # the cross-section needs the axes' samples
+    figures += ["wire"] if len(run.tension) else []  # where the run simulated the wire
     global _JOB
     _JOB = (run, analysis, d, out)
     try:
@@ -1010,6 +1062,8 @@ def _draw(name: str) -> Path:
             return _winding(run, analysis, d, out)
         if name == "wound":
             return _wound(run, d, out)
+        if name == "wire":
+            return _save(wire_figure(run), out / "wire.png")
         return _operations(run, d, out)
 
 
