@@ -100,3 +100,83 @@ def test_the_material_sets_the_resistance_and_the_maximum(material: str) -> None
     section = math.pi * 0.00045**2 / 4
     assert math.isclose(doc["resistance_ohm"], m.resistivity * doc["wire_length_m"] / section, rel_tol=1e-12)
     assert math.isclose(doc["wire"]["max_tension_n"], m.yield_stress * section, rel_tol=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("setting", "words"),
+    [
+        (
+            "tensioner.dancer_damping: 0.1",
+            r"the dancer would oscillate \(440 Hz, growing at [\d.]+ 1/s\) with "
+            r"tensioner\.dancer_damping 0\.1 N s/m and tensioner\.supply_gain 20 1/s on a span of "
+            r"3\.817e\+04 N/m: raise the damping or lower the supply gain",
+        ),
+        (
+            "tensioner.supply_gain: 1000",
+            r"the dancer would oscillate \(441 Hz.*tensioner\.supply_gain 1000 1/s",
+        ),
+        (
+            "tensioner.kind: servo\n    tensioner.force_limit: 1",
+            r"tensioner\.force_limit 1 N is below the set tension 5\.479 N: the servo cannot hold it",
+        ),
+    ],
+    ids=["low damping", "high supply gain", "weak servo"],
+)
+def test_a_tensioner_that_cannot_work_is_refused_in_one_line(
+    tmp_path: Path, setting: str, words: str
+) -> None:
+    """A dancer whose linear system has a pole in the right half-plane (checked
+    here against a long simulation of it growing) and a servo weaker than the
+    set tension: refused before any prediction, in one line, exit 2."""
+    job = with_consumer(tmp_path, setting)
+    for argv in (["check", str(job)], ["run", "--check", str(job)]):
+        out = subprocess.run([str(WINDER), *argv], capture_output=True, text=True, timeout=60)
+        assert out.returncode == 2, out.stdout + out.stderr
+        line = out.stderr.strip()
+        assert "\n" not in line and "Traceback" not in out.stderr
+        assert re.fullmatch(rf"winder (check|run): error: {words}.*", line), line
+
+
+def test_unstable_is_what_a_simulation_shows() -> None:
+    """Tensioner.unstable against the system itself: an impulse in the span dies
+    out or grows over a long run (scipy's lsim), as it says."""
+    import numpy as np
+    import scipy.signal
+
+    from winder.tension.tensioner import Tensioner
+
+    for damping, gain in ((1.0, 20.0), (0.1, 20.0), (1.0, 200.0), (5.0, 100.0)):
+        t = Tensioner("dancer", 38170.0, 5.0, damping=damping, supply_gain=gain)
+        a, b, c, d = t.matrices()
+        time = np.linspace(0.0, 4.0, 40001)
+        _, y, _ = scipy.signal.lsim(
+            (a, b[:, None], c, d[:, None]), np.zeros(time.size), time, X0=[1e-6, 0, 0, 0]
+        )
+        grows = np.abs(y[-4000:, 0]).max() > np.abs(y[:4000, 0]).max()
+        assert bool(t.unstable()) == grows, (damping, gain, t.unstable())
+
+
+@pytest.mark.parametrize(
+    ("args", "words"),
+    [
+        (
+            ["--tension.warning", "0.5", "--tension.alarm", "0.2"],
+            "tension.warning=0.5 is invalid: must be at most tension.alarm=0.2 (the warning band lies inside "
+            "the alarm band)",
+        ),
+        (
+            ["--bobbin.core", "rect", "--bobbin.core-corner-radius", "0.003"],
+            "bobbin.core_corner_radius=0.003 m is invalid without the core's size: give "
+            "bobbin.core_width and bobbin.core_depth",
+        ),
+    ],
+)
+def test_bands_and_corners_that_make_no_sense_are_refused(args: list[str], words: str) -> None:
+    out = subprocess.run([str(WINDER), "check", *args], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and out.stderr == f"winder check: error: {words}\n", out.stderr
+
+
+def test_derating_lowers_the_default_set_tension() -> None:
+    doc = json.loads(check(RECT, "--json", "--tension.derate", "0.3").stdout)
+    wire = doc["wire"]
+    assert math.isclose(wire["set_tension_n"], wire["max_tension_n"] * 0.3 / 2, rel_tol=1e-12)

@@ -77,6 +77,12 @@ def test_the_recorded_tension_is_the_recorded_flyers(tmp_path: Path, procs: Proc
     assert np.allclose(pos[:, 3], taken - held, rtol=0, atol=1e-3 * taken[-1])
     report = {kv.key: kv.value for kv in bag["/diagnostics"][-1][1].status[0].values}
     assert float(report["tension_peak_n"]) >= float(report["tension_min_n"]) > 0
+    # within the bands all through: said so, and in winder run's summary
+    assert report["tension_outside_alarm_s"] == report["tension_outside_warning_s"] == "0.000"
+    span = f"{report['tension_min_n']}..{report['tension_peak_n']} N"
+    assert f"  wire tension       {span}\n" in r.stdout, r.stdout
+    band = (tension < job.set_tension * 0.8) | (tension > job.set_tension * 1.2)
+    assert not band.any()
     # winder's reader takes the same tension (its fast path against rosbags' decoder), and
     # winder analyze draws it
     run = read_run(only_bag(tmp_path))

@@ -166,8 +166,11 @@ class SimEngine(Engine):
         self.wire: WireSim | None = None  # the wire, where the job gives its core
         self.wire_bound: Wire | None = None
         self.broken = ""  # the wire broke: where and how (the run stops)
+        self.broken_at: tuple[float, int] | None = None  # the supply paid out when it broke
         self.broken_said = False
         self.stretched = 0.0  # the highest stress past the wire's yield (Pa; 0: none)
+        self.outside = {"warning": 0, "alarm": 0}  # samples with the tension outside each band
+        self.bands: dict[str, tuple[float, float]] = {}
 
     # -- the consumer's hooks ---------------------------------------------------
     def begin(self, plan: JobPlan, values: dict[str, Any]) -> dict[str, object]:
@@ -218,8 +221,19 @@ class SimEngine(Engine):
                 layer = job.winding.coils[seg.pole].layers[seg.layer]
                 contours[seg.index] = job.bobbin.contour(layer.radius)
         wire = job.wire
-        self.wire_bound = wire
         tensioner = tensioner_of(values, wire.stiffness_per_length, job.set_tension)
+        why = tensioner.unstable()
+        if why:  # winder run and winder check refuse such a job; a run started otherwise goes without
+            self.node.get_logger().error(
+                f"run {plan.run_id or plan.job_id}: the wire is not simulated: {why}"
+            )
+            return None
+        self.wire_bound = wire
+        set_n = job.set_tension
+        self.bands = {
+            "warning": (set_n * (1 - job.tension_warning), set_n * (1 + job.tension_warning)),
+            "alarm": (set_n * (1 - job.tension_alarm), set_n * (1 + job.tension_alarm)),
+        }
         return WireSim(tensioner, contours, job.flyer_radius, 1.0 / self.rate)
 
     def wire_config(self, plan: JobPlan) -> dict[str, object] | None:
@@ -328,6 +342,8 @@ class SimEngine(Engine):
                     "dancer_travel_max_m" if w.tensioner.kind == "dancer" else "servo_feed_max_m_s"
                 ): f"{w.travel:.4g}",
                 "wire_taken_m": f"{w.taken:.6g}",
+                "tension_outside_warning_s": f"{self.outside['warning'] / self.rate:.3f}",
+                "tension_outside_alarm_s": f"{self.outside['alarm'] / self.rate:.3f}",
             }
         return {
             **wire,
@@ -344,13 +360,21 @@ class SimEngine(Engine):
         said = [f"{lost} steps lost"] if lost else []
         if self.broken:
             said.append(self.broken)
-        elif self.stretched and self.wire_bound is not None:
-            m = self.wire_bound.material
-            rise = self.wire_bound.resistance_rise(self.stretched)
-            said.append(
-                f"the wire was stretched past its yield ({self.stretched / 1e6:.4g} MPa against "
-                f"{m.yield_stress / 1e6:.4g} MPa): its resistance rose by {rise:.3%} where it was"
-            )
+        elif self.wire is not None and self.wire_bound is not None:
+            if self.outside["alarm"]:
+                low, high = self.bands["alarm"]
+                w = self.wire
+                said.append(
+                    f"the wire's tension left the alarm band ({low:.4g}..{high:.4g} N) for "
+                    f"{self.outside['alarm'] / self.rate:.3f} s ({w.least:.4g}..{w.peak:.4g} N)"
+                )
+            if self.stretched:
+                m = self.wire_bound.material
+                rise = self.wire_bound.resistance_rise(self.stretched)
+                said.append(
+                    f"the wire was stretched past its yield ({self.stretched / 1e6:.4g} MPa against "
+                    f"{m.yield_stress / 1e6:.4g} MPa): its resistance rose by {rise:.3%} where it was"
+                )
         return "; ".join(said)
 
     def work_wire(self) -> None:
@@ -358,7 +382,10 @@ class SimEngine(Engine):
         if not self.broken or self.broken_said or self.run.plan is None:
             return
         self.broken_said = True
+        self.flush()  # the samples up to the break and after it go out and into the bag first
         plan = self.run.plan
+        if plan is None:
+            return
         self.node.get_logger().error(f"{self.broken}; the run stops")
         ids: dict[str, object] = {"job_id": plan.job_id, "run_id": plan.run_id}
         self.run.publish_status("wire", ERROR, f"{self.broken}; the run stops", ids)
@@ -458,24 +485,42 @@ class SimEngine(Engine):
         fork = FORK.index
         w = self.wire.advance(act_pos[:, fork], act_vel[:, fork], segs)
         dancer = self.wire.tensioner.kind == "dancer"
+        tension = w.tension.copy()
         pos = np.column_stack([w.supply, w.coordinate] if dancer else [w.supply])
         vel = np.column_stack([w.supply_speed, w.coordinate_rate] if dancer else [w.supply_speed])
         wire, m = self.wire_bound, self.wire_bound.material
         stress = w.tension / wire.section + m.density * w.takeup**2 / 2
-        top = int(np.argmax(stress)) if stress.size else 0
-        if stress.size and not self.broken and stress[top] >= m.tensile_strength:
-            seg = self.run.plan.segments[int(segs[top])] if segs[top] >= 0 else None
-            where = (
-                f"coil {seg.pole + 1} layer {seg.layer + 1}, " if seg is not None and seg.kind.winds else ""
-            )
-            self.broken = (
-                f"the wire broke {samples[top]:.3f} s into the run ({where}tension {w.tension[top]:.4g} N at "
-                f"{w.takeup[top]:.3g} m/s: {stress[top] / 1e6:.4g} MPa, its breaking load "
-                f"{wire.breaking_load:.4g} N, {m.tensile_strength / 1e6:.4g} MPa)"
-            )
-        elif stress.size and stress[top] > m.yield_stress:
-            self.stretched = max(self.stretched, float(stress[top]))
-        return {"tension": w.tension, "wire_pos": pos, "wire_vel": vel}
+        start = 0
+        if self.broken_at is None and stress.size:
+            over = np.flatnonzero(stress >= m.tensile_strength)
+            if over.size:  # the first sample at the tensile strength: it breaks there
+                k = int(over[0])
+                self.broken_at = (float(pos[k, 0]), k)
+                seg = self.run.plan.segments[int(segs[k])] if segs[k] >= 0 else None
+                where = (
+                    f"coil {seg.pole + 1} layer {seg.layer + 1}, "
+                    if seg is not None and seg.kind.winds
+                    else ""
+                )
+                self.broken = (
+                    f"the wire broke {samples[k]:.3f} s into the run ({where}tension {w.tension[k]:.4g} N at "
+                    f"{w.takeup[k]:.3g} m/s: {stress[k] / 1e6:.4g} MPa, its breaking load "
+                    f"{wire.breaking_load:.4g} N, {m.tensile_strength / 1e6:.4g} MPa)"
+                )
+                start = k + 1
+            elif float(stress.max()) > m.yield_stress:
+                self.stretched = max(self.stretched, float(stress.max()))
+        for band, (low, high) in self.bands.items():
+            held = tension[: start or None]  # up to the break
+            self.outside[band] += int(np.count_nonzero((held < low) | (held > high)))
+        if self.broken_at is not None:
+            # from the break on the wire holds nothing: no tension, the supply stands, the arm at rest
+            paid, _ = self.broken_at
+            tension[start:] = 0.0
+            pos[start:] = 0.0
+            pos[start:, 0] = paid
+            vel[start:] = 0.0
+        return {"tension": tension, "wire_pos": pos, "wire_vel": vel}
 
     @staticmethod
     def command_velocity(

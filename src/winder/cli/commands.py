@@ -498,7 +498,13 @@ def add_tension(job: Job, doc: dict[str, Any], sim_given: dict[str, Any]) -> str
         "tensioner": tensioner.kind,
         "span_stiffness_n_m": tensioner.stiffness,
     }
-    why = ""
+    # a tensioner that oscillates, or cannot hold the set tension at all: no prediction holds
+    why = tensioner.unstable() or tensioner.limit_words(0.0, 0.0)
+    if why:
+        for coil_doc in [{"layers": doc["layers"]}, *doc["coils"]]:
+            for layer in coil_doc["layers"]:
+                layer.update(tension_peak_n=None, tension_min_n=None)
+        return why
     seen: dict[tuple[float, float], LayerTension] = {}  # coils laid alike: each layer worked out once
     for coil_doc in [{"coil": 1, "layers": doc["layers"]}, *doc["coils"]]:
         for layer in coil_doc["layers"]:
@@ -601,7 +607,7 @@ def check_lines(job: Job, doc: dict[str, Any]) -> list[str]:
         + (f" of a {mm(height)} mm window" if height else " (window height unchecked)")
     )
     fill = doc["fill_factor"]
-    lines.append(f"  fill factor    {'-' if fill is None else f'{fill:.3f}'} (copper area / window area)")
+    lines.append(f"  fill factor    {'-' if fill is None else f'{fill:.3f}'} (conductor area / window area)")
     wire_m, ohm = doc["wire_length_m"], doc["resistance_ohm"]
     coils = f"all {job.poles} coils" if job.poles > 1 else "1 coil"
     lines.append(f"  wire length    {length(wire_m, 'm')} ({coils})")

@@ -83,6 +83,13 @@ def report_run(
         print(f"  max tracking error {_number(x, 'max_tracking_error_steps', '.3f')} steps")
     if "lost_steps" in x:
         print(f"  lost steps         {x['lost_steps']}")
+    if "tension_peak_n" in x:  # the simulated wire
+        outside = float(x.get("tension_outside_alarm_s") or 0)
+        span = f"{x.get('tension_min_n', '-')}..{x['tension_peak_n']} N"
+        if outside > 0:
+            print(f"  WARNING wire       tension {span}, {outside:g} s outside the alarm band")
+        else:
+            print(f"  wire tension       {span}")
     if "late_steps" in x:  # steps that came behind the consumer's clock, executed at it
         behind = _number(x, "late_steps_behind_max_ms", ".3f")
         print(f"  late steps         {x['late_steps']}  (up to {behind} ms behind the clock, executed at it)")

@@ -198,7 +198,7 @@ FIELD_SPECS: dict[str, Spec] = {
             0.0,
             0.02,
             "m",
-            "copper diameter of the wire, without insulation (0 = wire_diameter)",
+            "the bare conductor's diameter, without insulation (0 = wire_diameter)",
             0.0,
             open_low=False,
         ),
@@ -686,6 +686,11 @@ class Job:
 
     def _check_wire(self) -> None:
         """The set tension against what the wire takes (JobError, one line)."""
+        if self.tension_warning > self.tension_alarm:
+            raise JobError(
+                f"tension.warning={self.tension_warning:g} is invalid: must be at most tension.alarm="
+                f"{self.tension_alarm:g} (the warning band lies inside the alarm band)"
+            )
         wire = self.wire
         top = wire.max_tension * self.tension_derate
         if self.tension_set > top:
@@ -743,8 +748,13 @@ class Job:
                 f"bobbin.core_corner_radius={corner:g} m is invalid with bobbin.core={self.core}: only a "
                 "rectangular core has corners"
             )
+        if corner > 0 and not self.core_width > 0:
+            raise JobError(
+                f"bobbin.core_corner_radius={corner:g} m is invalid without the core's size: give "
+                "bobbin.core_width and bobbin.core_depth"
+            )
         half = min(self.core_width, self.core_depth) / 2
-        if corner > 0 and self.core_width > 0 and corner > half:
+        if corner > 0 and corner > half:
             raise JobError(
                 f"bobbin.core_corner_radius={corner:g} m is invalid: must be at most half the core's smaller "
                 f"side, {half:g} m (bobbin.core_width {self.core_width:g} m x bobbin.core_depth "
@@ -771,8 +781,9 @@ class Job:
 
     @property
     def set_tension(self) -> float:
-        """The set tension, N (``tension.set``, or half the wire's maximum)."""
-        return self.tension_set or self.wire.max_tension / 2
+        """The set tension, N (``tension.set``, or half the wire's maximum
+        tension a job may reach: its maximum x ``tension.derate``)."""
+        return self.tension_set or self.wire.max_tension * self.tension_derate / 2
 
     # -- the coil as laid (winder.motion.coil) ------------------------------
     @property

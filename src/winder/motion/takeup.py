@@ -24,10 +24,12 @@ Its support function is ``h(theta) = (a/2 - r)|cos theta| + (b/2 - r)|sin
 theta| + r``, so over a turn
 
 * the turn is ``2a + 2b - (8 - 2 pi) r`` long;
-* ``h`` is least, ``min(a, b)/2``, when a flat lies along the wire, and
-  greatest, ``r + sqrt((a/2 - r)**2 + (b/2 - r)**2)``, with the wire
-  leaving a corner square to the diagonal: :func:`takeup_ratio` is their
-  quotient, twice a turn (four times on a square), 1 on a round core;
+* ``h`` is greatest, ``r + sqrt((a/2 - r)**2 + (b/2 - r)**2)``, with the
+  wire leaving a corner square to the diagonal: four times a turn, off each
+  corner; it is least where a flat lies along the wire, ``min(a, b)/2`` at
+  the two longer flats (``max(a, b)/2`` at the other two: four equal minima
+  on a square). :func:`takeup_ratio` is greatest over least, 1 on a round
+  core;
 * ``h'`` jumps by twice a flat's half-length at each flat: the take-up
   acceleration steps there by ``omega**2 x`` the flat's length (for a
   flyer far out; exactly :func:`Contour.step_at_flats`), and it is

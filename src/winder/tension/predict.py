@@ -1,8 +1,8 @@
 """The tension a layer will see, predicted before it is wound.
 
 A layer wound at its flyer's top speed ``omega`` draws its wire at ``omega
-h(psi)`` (:mod:`winder.motion.takeup`): a periodic input, twice a turn on a
-rectangle. The tensioner and free span (:mod:`winder.tension.tensioner`) are
+h(psi)`` (:mod:`winder.motion.takeup`): a periodic input, a peak off each
+of a rectangle's four corners. The tensioner and free span (:mod:`winder.tension.tensioner`) are
 linear, so the tension settles into a periodic steady state, computed
 exactly for the sampled input (:func:`winder.tension.lti.periodic_orbit`,
 :data:`SAMPLES` samples a turn, the input linear between them): its peak

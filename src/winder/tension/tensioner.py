@@ -133,9 +133,33 @@ class Tensioner:
         ki = self.supply_gain**2 / 4
         return np.array([0.0, 0.0, 0.0, speed / ki])
 
+    def unstable(self) -> str:
+        """Why these settings make the tensioner oscillate with this wire (a
+        pole of its linear system not in the left half-plane), in one line;
+        "" if they do not."""
+        a, _, _, _ = self.matrices()
+        poles = np.linalg.eigvals(a)
+        worst = complex(poles[int(np.argmax(poles.real))])
+        if worst.real < -1e-9 * max(1.0, abs(worst)):
+            return ""
+        hz = abs(worst.imag) / (2 * math.pi)
+        if self.kind == "servo":  # (a PI loop on a spring: stable for any positive gain)
+            return f"the servo tensioner's tension loop is unstable ({hz:.3g} Hz): raise tensioner.bandwidth"
+        return (
+            f"the dancer would oscillate ({hz:.3g} Hz, growing at {worst.real:.3g} 1/s) with "
+            f"tensioner.dancer_damping {self.damping:g} N s/m and tensioner.supply_gain "
+            f"{self.supply_gain:g} 1/s on a span of {self.stiffness:.4g} N/m: raise the damping or lower "
+            "the supply gain"
+        )
+
     def limit_words(self, peak: float, travel: float) -> str:
         """What the tensioner cannot do at a predicted peak tension and
         travel, in words ("" if it can)."""
+        if self.kind == "servo" and self.set_tension > self.force_limit:
+            return (
+                f"tensioner.force_limit {self.force_limit:g} N is below the set tension "
+                f"{self.set_tension:.4g} N: the servo cannot hold it"
+            )
         if self.kind == "servo" and peak > self.force_limit:
             return f"the servo tensioner holds at most {self.force_limit:g} N (tensioner.force_limit)"
         if self.kind == "dancer" and travel > self.stroke / 2:

@@ -490,7 +490,8 @@ def motion_figure(run: Run, d: Digest) -> Figure:
 def wire_figure(run: Run) -> Figure:
     """wire.png's figure: the wire's tension over the run as recorded, in the
     job's bands (the set tension, the warning and alarm bands) and below the
-    wire's maximum; the layers' starts marked where the flyer's samples tell."""
+    wire's maximum (times ``tension.derate``), and two turns of the flyer
+    around the peak in the same bands."""
     job = run.plan.job
     tension = run.tension
     fig, _ = _figure((13, 8.0))
@@ -504,7 +505,8 @@ def wire_figure(run: Run) -> Figure:
     ):
         ax.axhspan(set_n * (1 - frac), set_n * (1 + frac), color="tab:green", alpha=alpha, lw=0, label=label)
     ax.axhline(set_n, color="tab:green", lw=0.8, label=f"set {set_n:.4g} N")
-    ax.axhline(top, color="tab:red", lw=1.0, ls="--", label=f"the wire's maximum {top:.4g} N")
+    derated = f" x tension.derate {job.tension_derate:g}" if job.tension_derate < 1 else ""
+    ax.axhline(top, color="tab:red", lw=1.0, ls="--", label=f"the wire's maximum{derated}: {top:.4g} N")
     _line(ax, tension.t, tension.tension, color=ACT, lw=0.6, label="simulated tension")
     peak, least = float(tension.tension.max()), float(tension.tension.min())
     ax.set_xlim(float(tension.t[0]), float(tension.t[-1]) if len(tension) > 1 else float(tension.t[0]) + 1)
@@ -517,15 +519,22 @@ def wire_figure(run: Run) -> Figure:
         loc="left",
     )
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
-    # two turns around the peak: the swing the corners make, twice a turn on a rectangle
+    # two turns around the peak: the swing the corners make, four times a turn on a rectangle
     k = int(np.argmax(tension.tension))
     st = run.states
     fork = AXES.index("fork")
     w = abs(float(np.interp(tension.t[k], st.t, st.vel[:, fork]))) if len(st) else 0.0
     half = 2 * math.pi / w if w > 1e-9 else 0.5
     m = (tension.t >= tension.t[k] - half) & (tension.t <= tension.t[k] + half)
-    zoom.plot(tension.t[m], tension.tension[m], color=ACT, lw=0.9, marker=".", ms=2)
+    near = tension.tension[m]
+    for frac, alpha in ((job.tension_alarm, 0.10), (job.tension_warning, 0.16)):
+        zoom.axhspan(set_n * (1 - frac), set_n * (1 + frac), color="tab:green", alpha=alpha, lw=0)
     zoom.axhline(set_n, color="tab:green", lw=0.8)
+    zoom.axhline(top, color="tab:red", lw=1.0, ls="--")
+    zoom.plot(tension.t[m], near, color=ACT, lw=0.9, marker=".", ms=2)
+    lo, hi = float(min(near.min(), set_n)), float(max(near.max(), set_n))
+    pad = 0.1 * (hi - lo) or 0.05 * max(abs(hi), 1e-9)
+    zoom.set_ylim(lo - pad, hi + pad)
     zoom.set_xlabel("time (s)")
     zoom.set_ylabel("wire tension (N)")
     zoom.set_title(
