@@ -76,6 +76,8 @@ def test_a_tensioner_that_cannot_follow_the_corners_is_refused_in_one_line(tmp_p
     doc = json.loads(check(job, "--json").stdout)
     words = lines[0].removeprefix("winder check: error: ")
     assert doc["fits"] is False and doc["overflow"] == words
+    # the same tensioner given as an option instead of in the job file: the same words
+    assert check(RECT, "--tensioner.kind", "servo").stderr == out.stderr
     # winder run refuses it in the same words, before anything starts
     for argv in (["run", "--check", str(job)], ["run", str(job)]):
         out = subprocess.run([str(WINDER), *argv], capture_output=True, text=True, timeout=60)

@@ -63,6 +63,7 @@ from winder.motion.interp import dda, deviation_stats, min_deviation, point_by_p
 from winder.motion.job import FIELD_SPECS, Job
 from winder.motion.timing import plan_timing
 from winder.spec import Spec
+from winder.tension.tensioner import TENSIONER_SPECS
 
 __all__ = ["main"]
 
@@ -302,7 +303,8 @@ def cmd_check(args: argparse.Namespace) -> int:
     laid = job.winding
     doc = {"job_id": job.job_id, **report(laid)}
     add_takeup(job, doc, given["profile_node"], str(given["interp_node"].get("schedule", "")))
-    tension_why = add_tension(job, doc, given["consumer"])
+    tensioner = values_from_args(args, TENSIONER_SPECS, given["consumer"])
+    tension_why = add_tension(job, doc, tensioner)
     if tension_why and doc["fits"]:  # the coil fits its bobbin, but its wire would not hold
         doc["fits"], doc["overflow"] = False, tension_why
     limits_why = ""
@@ -795,10 +797,12 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser(
         "check",
         help="lay out a job's coil in its bobbin: turns per layer, build height, fill factor, wire "
-        "length, resistance, finish side; a coil that does not fit exits 2",
+        "length, resistance, finish side, the wire's take-up and tension; a coil that does not fit, or "
+        "whose wire would not hold, exits 2",
     )
     p.add_argument("job_file", nargs="?", metavar="JOB_FILE", help=JOB_FILE_HELP)
     add_spec_arguments(p, FIELD_SPECS, "winding job (defaults: the RW400 paper set-up)")
+    add_spec_arguments(p, TENSIONER_SPECS, "the tensioner (the consumer's settings: a job file's sim_node)")
     p.add_argument("--json", action="store_true", help="print the report as one JSON object")
     p.add_argument(
         "--limits",
