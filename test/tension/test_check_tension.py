@@ -65,8 +65,8 @@ def test_a_tensioner_that_cannot_follow_the_corners_is_refused_in_one_line(tmp_p
     assert len(lines) == 1 and "Traceback" not in out.stderr, out.stderr
     m = re.fullmatch(
         r"winder check: error: layer 1 at ([\d.]+) rad/s: predicted peak tension ([\d.]+) N passes the "
-        r"alarm band's top ([\d.]+) N \(tension\.set [\d.]+ N \+ tension\.alarm 0\.4\); the highest "
-        r"flyer speed that keeps it is ([\d.]+) rad/s, \d+% of it \(servo tensioner\)",
+        r"wire's maximum ([\d.]+) N \(yield 68\.9 MPa x bare section 0\.159 mm2\); the highest flyer "
+        r"speed at which its steady swing keeps it is ([\d.]+) rad/s, \d+% of it \(servo tensioner\)",
         lines[0],
     )
     assert m, lines[0]

@@ -54,3 +54,51 @@ def test_a_round_core_at_constant_speed_holds_the_set_tension() -> None:
     # a step of the take-up speed at the start, then steady: the tension settles back to the set
     assert abs(out.tension[-1] - 2.0) < 1e-6 and abs(out.coordinate[-1]) < 1e-6
     assert math.isclose(out.takeup[-1], 25.0 * 0.01, rel_tol=1e-12)
+
+
+def test_a_coil_as_wound_is_lsims_of_its_commanded_flyer() -> None:
+    """winder.tension.predict.predict_coil: a layer (one S-curve move of the
+    flyer), a dwell, a layer wound back; against scipy's lsim of the take-up
+    worked out here from the move's own samples, on a grid 8 times finer."""
+    from winder.motion.timing import plan_segment
+    from winder.tension.predict import CoilMove, predict_coil
+
+    values = {
+        "profile": "scurve", "v_max": 3000.0, "a_max": 3e4, "j_max": 1e6, "v_start": 0.0,
+        "tau": 0.0, "dwell": 0.0, "shaper": "none", "shaper_freq": 50.0, "shaper_zeta": 0.0,
+    }  # fmt: skip
+    move = plan_segment(values, 6 * 512)
+    rect = Contour(0.03, 0.012, 0.002)
+    rad = 2 * math.pi / 512
+    t1 = move.duration + 0.2  # the second layer after a 0.2 s dwell
+    coil = [
+        CoilMove(0.0, (0.0,), (move,), rad, 1.0, 0.0, rect, 1),
+        CoilMove(t1, (0.0,), (move,), -rad, 1.0, 6 * 2 * math.pi, Contour(0.031, 0.013, 0.0025), 2),
+    ]
+    tensioner = Tensioner("dancer", 2e4, 4.0)
+    from winder.motion.material import MATERIALS, Wire
+
+    wire = Wire(MATERIALS["copper"], 0.45e-3)
+    rate = 4000.0
+    got = predict_coil(coil, 0.08, tensioner, wire, rate)
+    # here: the flyer's angle and speed from the move, the take-up, lsim on a finer grid
+    fine = 8 * rate
+    t = np.arange(0, math.floor((t1 + move.duration) * fine) + 1) / fine
+    v = np.zeros(t.size)
+    layer = np.zeros(t.size, int)
+    for seg in coil:
+        local = t - seg.t0
+        on = (local >= 0) & (local <= move.duration)
+        p, w, _, _ = move.sample(local[on])
+        psi = seg.psi0 + p * seg.rad_per_step
+        assert seg.contour is not None
+        v[on] = np.abs(w * seg.rad_per_step) * seg.contour.lever(psi if seg.rad_per_step > 0 else -psi, 0.08)
+        layer[on] = seg.layer
+    a, b, c, d = tensioner.matrices()
+    _, y, _ = scipy.signal.lsim((a, b[:, None], c, d[:, None]), v, t)
+    tension = 4.0 + y[:, 0]
+    for n in (1, 2):
+        want_peak, want_min = tension[layer == n].max(), tension[layer == n].min()
+        swing = want_peak - want_min
+        assert abs(got[n].peak - want_peak) < 0.02 * swing, (n, got[n], want_peak)
+        assert abs(got[n].minimum - want_min) < 0.02 * swing, (n, got[n], want_min)

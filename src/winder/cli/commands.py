@@ -304,7 +304,8 @@ def cmd_check(args: argparse.Namespace) -> int:
     doc = {"job_id": job.job_id, **report(laid)}
     add_takeup(job, doc, given["profile_node"], str(given["interp_node"].get("schedule", "")))
     tensioner = values_from_args(args, TENSIONER_SPECS, given["consumer"])
-    tension_why = add_tension(job, doc, tensioner)
+    schedule = str(given["interp_node"].get("schedule", ""))
+    tension_why = add_tension(job, doc, tensioner, given["profile_node"], schedule)
     if tension_why and doc["fits"]:  # the coil fits its bobbin, but its wire would not hold
         doc["fits"], doc["overflow"] = False, tension_why
     limits_why = ""
@@ -441,7 +442,7 @@ def wire_refusal(job: Job, ramp: dict[str, Any], schedule: str, consumer: dict[s
 
     doc = report(job.winding)
     add_takeup(job, doc, ramp, schedule)
-    return add_tension(job, doc, consumer)
+    return add_tension(job, doc, consumer, ramp, schedule)
 
 
 def add_takeup(job: Job, doc: dict[str, Any], ramp_given: dict[str, Any], schedule: str) -> None:
@@ -467,14 +468,19 @@ def add_takeup(job: Job, doc: dict[str, Any], ramp_given: dict[str, Any], schedu
             layer.update(layer_takeup(contour, job.flyer_radius, omega or 0.0))
 
 
-def add_tension(job: Job, doc: dict[str, Any], sim_given: dict[str, Any]) -> str:
-    """The wire (``doc["wire"]``) and each layer's predicted tension at its
-    flyer's top speed (winder.tension.predict), with the job file's
-    tensioner (its sim_node section; defaults where it sets none); the first
-    layer that does not keep within the wire's maximum or the alarm band,
-    in one line naming it, the prediction, the limit and the highest flyer
-    speed that keeps it ("" if every layer does)."""
-    from winder.tension.predict import Bounds, LayerTension, fastest_within, predict_layer
+def add_tension(
+    job: Job, doc: dict[str, Any], sim_given: dict[str, Any], ramp_given: dict[str, Any], schedule: str
+) -> str:
+    """The wire (``doc["wire"]``) and each layer's predicted tension with the
+    job file's tensioner (its sim_node section; defaults where it sets none):
+    the periodic steady state at its flyer's top speed and the layer as
+    wound with the ramp, its transients included (winder.tension); the first
+    layer that does not keep within the wire's maximum or the alarm band, in
+    one line naming it, the prediction, the limit and what keeps it ("" if
+    every layer does)."""
+    from winder.contract.params import PROFILE_SPECS
+    from winder.tension.plan import wound_tension
+    from winder.tension.predict import Bounds, LayerTension, fastest_within, predict_layer, wider
     from winder.tension.tensioner import tensioner_of
 
     wire = job.wire
@@ -507,6 +513,11 @@ def add_tension(job: Job, doc: dict[str, Any], sim_given: dict[str, Any]) -> str
             for layer in coil_doc["layers"]:
                 layer.update(tension_peak_n=None, tension_min_n=None)
         return why
+    ramp = {n: s.default for n, s in PROFILE_SPECS.items()} | ramp_given
+    try:
+        wound = wound_tension(job, ramp, schedule, tensioner)
+    except BadInputError:  # a ramp that cannot plan the job: said where the job is run
+        wound = {}
     seen: dict[tuple[float, float], LayerTension] = {}  # coils laid alike: each layer worked out once
     for coil_doc in [{"coil": 1, "layers": doc["layers"]}, *doc["coils"]]:
         for layer in coil_doc["layers"]:
@@ -518,20 +529,26 @@ def add_tension(job: Job, doc: dict[str, Any], sim_given: dict[str, Any]) -> str
             key = (layer["radius_m"], omega)
             if key not in seen:
                 seen[key] = predict_layer(contour, job.flyer_radius, omega, tensioner, wire)
-            got = seen[key]
+            steady = seen[key]
+            as_wound = wound.get((coil_doc["coil"], layer["layer"]))
+            got = steady if as_wound is None else wider(steady, as_wound)
             layer.update(tension_peak_n=got.peak, tension_min_n=got.minimum)
             breach = got.breach(bounds, wire) or tensioner.limit_words(got.peak, got.coordinate)
             if breach and not why:
-                keep = fastest_within(contour, job.flyer_radius, omega, tensioner, wire, bounds)
                 which = (
                     f"coil {coil_doc['coil']} layer {layer['layer']}"
                     if job.poles > 1
                     else f"layer {layer['layer']}"
                 )
-                why = (
-                    f"{which} at {omega:.4g} rad/s: {breach}; the highest flyer speed that keeps it is "
-                    f"{keep:.4g} rad/s, {keep / omega:.0%} of it ({tensioner.kind} tensioner)"
-                )
+                if steady.breach(bounds, wire) or tensioner.limit_words(steady.peak, steady.coordinate):
+                    keep = fastest_within(contour, job.flyer_radius, omega, tensioner, wire, bounds)
+                    cure = (
+                        f"the highest flyer speed at which its steady swing keeps it is {keep:.4g} rad/s, "
+                        f"{keep / omega:.0%} of it"
+                    )
+                else:  # only as the flyer ramps up, down or reverses: the ramp, not the speed
+                    cure = "at full speed it keeps; the ramps and reversals do not: lower a_max or j_max"
+                why = f"{which} at {omega:.4g} rad/s: {breach}; {cure} ({tensioner.kind} tensioner)"
     return why
 
 

@@ -25,11 +25,21 @@ from dataclasses import dataclass
 import numpy as np
 
 from winder.motion.material import Wire
+from winder.motion.shaped import Motion
 from winder.motion.takeup import Contour
 from winder.tension.lti import Discrete, periodic_orbit
 from winder.tension.tensioner import Tensioner
 
-__all__ = ["SAMPLES", "Bounds", "LayerTension", "fastest_within", "predict_layer"]
+__all__ = [
+    "SAMPLES",
+    "Bounds",
+    "CoilMove",
+    "LayerTension",
+    "fastest_within",
+    "predict_coil",
+    "predict_layer",
+    "wider",
+]
 
 #: input samples over a turn
 SAMPLES = 1024
@@ -135,3 +145,83 @@ def fastest_within(
         mid = (lo + hi) / 2
         lo, hi = (mid, hi) if ok(mid) else (lo, mid)
     return lo
+
+
+@dataclass(frozen=True)
+class CoilMove:
+    """One segment of a coil as the flyer moves it, for :func:`predict_coil`:
+    its moves (each a profile of the segment's major axis from rest to rest,
+    started ``starts`` s after the segment's start, which is ``t0`` s into
+    the coil), how many fork radians one major step is (0: an index move,
+    the flyer stands), its fork angle at its start, and its layer's contour
+    (None: nothing wound)."""
+
+    t0: float
+    starts: tuple[float, ...]
+    moves: tuple[Motion, ...]
+    rad_per_step: float
+    speed: float  #: the feed override: the moves run this many times as fast
+    psi0: float
+    contour: Contour | None
+    layer: int  #: from 1 (0: an index move)
+
+
+def predict_coil(
+    coil: list[CoilMove], flyer_radius: float, tensioner: Tensioner, wire: Wire, rate: float
+) -> dict[int, LayerTension]:
+    """Each layer's tension over the coil wound as the run winds it: the
+    flyer's exact motion (its ramps from and to rest, the dwells between
+    segments with nothing drawn) sampled at ``rate`` Hz, the tensioner
+    carried from one segment to the next from rest at the set tension. The
+    extremes per layer include every transient a ramp or a reversal makes."""
+    system = Discrete(*tensioner.matrices(), 1.0 / rate)
+    x = tensioner.steady(0.0)
+    out: dict[int, LayerTension] = {}
+    last_v = 0.0
+    t_end = 0.0
+    for seg in coil:
+        k = seg.speed
+        end = seg.t0 + ((seg.starts[-1] + seg.moves[-1].duration) / k if seg.moves else 0.0)
+        t = np.arange(math.ceil(t_end * rate), math.floor(end * rate) + 1) / rate
+        v = np.zeros(t.size)
+        omega = np.zeros(t.size)
+        if seg.contour is not None and seg.rad_per_step:
+            before = 0.0  # the major steps of the segment's earlier moves
+            for start, move in zip(seg.starts, seg.moves, strict=True):
+                local = (t - seg.t0) * k - start
+                on = (local >= 0) & (local <= move.duration)
+                p, w, _, _ = move.sample(local[on])
+                psi = seg.psi0 + (before + p) * seg.rad_per_step
+                omega[on] = w * k * abs(seg.rad_per_step)
+                before += move.distance
+                mirrored = psi if seg.rad_per_step > 0 else -psi
+                v[on] = omega[on] * seg.contour.lever(mirrored, flyer_radius)
+        if t.size:
+            xs, ys = system.run(x, np.concatenate([[last_v], v]))
+            x, last_v = xs[-1], float(v[-1])
+            mine = t >= seg.t0  # the dwell before the segment is no layer's
+            if seg.layer and mine.any():
+                tension = tensioner.set_tension + ys[1:, 0][mine]
+                speed = float(v[mine].max())
+                got = LayerTension(
+                    float(omega[mine].max()),
+                    float(tension.max()),
+                    max(float(tension.min()), 0.0),
+                    wire.whirl_stress(speed) * wire.section,
+                    float(np.abs(ys[1:, 1][mine]).max()),
+                )
+                had = out.get(seg.layer)
+                out[seg.layer] = got if had is None else wider(had, got)
+        t_end = end + 1.0 / rate
+    return out
+
+
+def wider(a: LayerTension, b: LayerTension) -> LayerTension:
+    """The extremes of both predictions of a layer."""
+    return LayerTension(
+        max(a.flyer_speed, b.flyer_speed),
+        max(a.peak, b.peak),
+        min(a.minimum, b.minimum),
+        max(a.whirl, b.whirl),
+        max(a.coordinate, b.coordinate),
+    )
