@@ -268,7 +268,8 @@ _DOUBLE = re.compile(r"\s*[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?\s*")
 
 def plotjuggler_series(messages: Messages) -> set[str]:
     """The numeric series PlotJuggler's ROS parser makes of the bag's
-    JointState and DiagnosticArray topics: ``/topic/<joint>/<position|velocity>``
+    JointState, WrenchStamped and DiagnosticArray topics: ``/topic/<joint>/<position|velocity>``,
+    ``/topic/wrench/<force|torque>/<x|y|z>``
     when the field has one value per joint; ``/topic/<hardware id>/<status
     name>/<key>`` (without the hardware id when it is empty) when the value
     reads as a number."""
@@ -280,6 +281,8 @@ def plotjuggler_series(messages: Messages) -> set[str]:
                 for field in ("position", "velocity", "effort"):
                     if len(getattr(m, field)) == len(m.name):
                         series.update(f"{topic}/{joint}/{field}" for joint in m.name)
+            elif kind == "geometry_msgs/msg/WrenchStamped":
+                series.update(f"{topic}/wrench/{v}/{a}" for v in ("force", "torque") for a in "xyz")
             elif kind == "diagnostic_msgs/msg/DiagnosticArray":
                 for st in m.status:
                     prefix = f"{topic}/{st.hardware_id}/{st.name}" if st.hardware_id else f"{topic}/{st.name}"
@@ -294,7 +297,7 @@ def test_every_plotjuggler_series_exists_in_a_recorded_run(
     snippets = {s.get("name", ""): s for s in plotjuggler.iter("snippet")}
     assert set(snippets) == {f"{j}_tracking_error" for j in JOINTS}
     curves = [c.get("name", "") for c in plotjuggler.iter("curve")]
-    assert len(curves) == 16
+    assert len(curves) == 19
     assert [c for c in curves if c not in series and c not in snippets] == []
     sources = [
         e.text or "" for s in snippets.values() for e in s.iter() if e.tag == "linked_source" or e.tag == "v1"
@@ -308,7 +311,16 @@ def test_every_plotjuggler_series_exists_in_a_recorded_run(
     used = {
         t for name in curves + sources for t in messages if name.startswith(t + "/") and name not in snippets
     }
-    assert set(selected) == used == {"/winder/joint_commands", "/winder/joint_states", "/diagnostics"}
+    assert (
+        set(selected)
+        == used
+        == {
+            "/winder/joint_commands",
+            "/winder/joint_states",
+            "/winder/tension",
+            "/diagnostics",
+        }
+    )
     assert stamp.get("value") == "false"  # see test_foxglove_plots_use_log_time
 
 
