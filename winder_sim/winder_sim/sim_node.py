@@ -338,9 +338,7 @@ class SimEngine(Engine):
             wire = {
                 "tension_peak_n": f"{w.peak:.4g}",
                 "tension_min_n": f"{w.least:.4g}",
-                (
-                    "dancer_travel_max_m" if w.tensioner.kind == "dancer" else "servo_feed_max_m_s"
-                ): f"{w.travel:.4g}",
+                TRAVEL_KEY.get(w.tensioner.kind, "tensioner_coordinate_max"): f"{w.travel:.4g}",
                 "wire_taken_m": f"{w.taken:.6g}",
                 "tension_outside_warning_s": f"{self.outside['warning'] / self.rate:.3f}",
                 "tension_outside_alarm_s": f"{self.outside['alarm'] / self.rate:.3f}",
