@@ -26,12 +26,26 @@ from winder.tension.tensioner import Tensioner, tensioner_of
 COPPER = MATERIALS["copper"]
 
 
+#: entries of the random matrices: 0 or at least 1e-9 in size. scipy's expm works a triangular
+#: matrix's off-diagonal terms out as (e^a - e^b) / (a - b), and with a = 1.5e-166, b = 0 it gave 0
+#: where e^A holds 1 (a fresh-clone run found it; winder's expm had 1)
+ENTRIES = st.floats(-50, 50).map(lambda x: x if abs(x) >= 1e-9 else 0.0)
+
+
 @settings(max_examples=200, deadline=None)
-@given(st.integers(1, 6).flatmap(lambda n: arrays(np.float64, (n, n), elements=st.floats(-50, 50))))
+@given(st.integers(1, 6).flatmap(lambda n: arrays(np.float64, (n, n), elements=ENTRIES)))
 def test_expm_is_scipys(a: np.ndarray) -> None:
     want = scipy.linalg.expm(a)
     # norm-wise: both are exact to a few ulps of the result's norm times the squarings' growth
     assert np.linalg.norm(expm(a) - want) <= 1e-9 * max(1.0, float(np.linalg.norm(want)))
+
+
+def test_expm_of_a_triangular_matrix_is_its_closed_form() -> None:
+    """The case scipy got wrong: [[a, 1], [0, b]] has e^A = [[e^a, (e^a - e^b)/(a - b)], [0, e^b]],
+    1 in the corner as a -> b = 0 (worked with expm1 to keep its digits)."""
+    for a in (1.5e-166, 1e-12, 0.3, -2.0):
+        want = np.array([[math.exp(a), math.expm1(a) / a], [0.0, 1.0]])
+        assert np.allclose(expm(np.array([[a, 1.0], [0.0, 0.0]])), want, rtol=1e-14, atol=0)
 
 
 def servo(k: float = 3e4, fb: float = 30.0) -> Tensioner:
