@@ -87,6 +87,11 @@ def test_the_recorded_tension_is_the_recorded_flyers(tmp_path: Path, procs: Proc
     # winder analyze draws it
     run = read_run(only_bag(tmp_path))
     assert np.array_equal(run.tension.tension, tension)
+    from winder.analysis.metrics import analyze
+
+    wire = analyze(run).wire
+    assert (wire["tension_min_n"], wire["tension_peak_n"]) == (tension.min(), tension.max())
+    assert wire["outside_alarm_s"] == wire["outside_warning_s"] == 0.0
     assert np.allclose(run.tension.t, t - t[0], rtol=0, atol=1e-9)
     out = subprocess.run(
         [str(BIN / "winder"), "analyze", str(only_bag(tmp_path)), "--plots-dir", str(tmp_path / "plots")],

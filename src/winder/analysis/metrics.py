@@ -194,6 +194,9 @@ class Analysis:
     shaper: str = ""  #: the input shaper of the run's ramp ("ZVD shaper at 12.5 Hz"), "" if none
     stops: str = ""  #: the job's programmed stops in one line (winder.contract.run.stops_text), "" if none
     commands: str = ""  #: the operator's commands in one line (commands_text), "" if none
+    #: the wire as recorded (winder/tension), where the run simulated it: the tension's least
+    #: and peak, the set tension, the alarm band and how long the tension was outside it (s)
+    wire: dict[str, Any] = field(default_factory=dict)
 
 
 # -- eq. 7 -------------------------------------------------------------------------
@@ -529,7 +532,29 @@ def analyze(run: Run, stride_time: float = STRIDE_TIME, digested: Digest | None 
         shaper=shaper_text(run.profile_config),
         stops=stops_text(run.plan),
         commands=commands_text(run.events, run.plan),
+        wire=_wire(run),
     )
+
+
+def _wire(run: Run) -> dict[str, Any]:
+    """The recorded tension against the job's bands (empty where no wire was simulated)."""
+    t, tension = run.tension.t, run.tension.tension
+    if not t.size:
+        return {}
+    job = run.plan.job
+    set_n = job.set_tension
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+    out: dict[str, Any] = {
+        "tension_min_n": float(tension.min()),
+        "tension_peak_n": float(tension.max()),
+        "set_tension_n": set_n,
+        "max_tension_n": job.wire.max_tension * job.tension_derate,
+    }
+    for band, frac in (("warning", job.tension_warning), ("alarm", job.tension_alarm)):
+        low, high = set_n * (1 - frac), set_n * (1 + frac)
+        out[f"{band}_band_n"] = [low, high]
+        out[f"outside_{band}_s"] = int(np.count_nonzero((tension < low) | (tension > high))) * dt
+    return out
 
 
 # -- output ---------------------------------------------------------------------------
@@ -704,6 +729,15 @@ def _rows(a: Analysis) -> list[tuple[str, str]]:
         ("simulated / wall time", f"{_f(a.sim_time)} s / {_f(a.wall_time)} s"),
         ("real-time factor", f"{_f(a.real_time_factor, decimals=1)} x"),
         ("lost steps (sim node)", str(a.lost_steps) if a.lost_steps >= 0 else "-"),
+        (
+            "wire tension",
+            (
+                f"{a.wire['tension_min_n']:.4g}..{a.wire['tension_peak_n']:.4g} N (set "
+                f"{a.wire['set_tension_n']:.4g} N), {a.wire['outside_alarm_s']:.3f} s outside the alarm band"
+            )
+            if a.wire
+            else "-",
+        ),
         ("eq.7 mean, command", f"{_f(a.command.mean, 1e6)} um"),
         ("eq.7 max, command", f"{_f(a.command.max, 1e6)} um"),
         ("worst turn, command", f"{_f(a.command.turn_max_pct, decimals=4)} % of wire"),
