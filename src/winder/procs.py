@@ -53,16 +53,37 @@ def die_with_parent(sig: int = signal.SIGINT) -> Callable[[], None]:
     return _preexec
 
 
+#: the environment variable a child started here finds this process' pid in
+#: (:func:`parent_gone`)
+PARENT_ENV = "WINDER_PARENT_PID"
+
+
+def _with_parent(kwargs: dict[str, Any]) -> dict[str, Any]:
+    env = kwargs.get("env")
+    return {**kwargs, "env": {**(os.environ if env is None else env), PARENT_ENV: str(os.getpid())}}
+
+
+def parent_gone() -> bool:
+    """Whether the winder process that started this one is gone. Its death
+    signal can come while Python is still starting, where it may be lost: a
+    KeyboardInterrupt inside the import a ``.pth`` file runs is caught and
+    printed by ``site`` as "Error processing line 1", and the node then came
+    up and spun on, an orphan (a fresh-clone run). A process that finds its
+    starter gone once its handlers are in ends instead."""
+    parent = os.environ.get(PARENT_ENV, "")
+    return parent.isdigit() and os.getppid() != int(parent)
+
+
 def run(
     argv: Sequence[str], *, death_signal: int = signal.SIGINT, **kwargs: Any
 ) -> subprocess.CompletedProcess[Any]:
     """:func:`subprocess.run` for a child that dies with this process."""
-    return subprocess.run(argv, preexec_fn=die_with_parent(death_signal), **kwargs)
+    return subprocess.run(argv, preexec_fn=die_with_parent(death_signal), **_with_parent(kwargs))
 
 
 def popen(argv: Sequence[str], *, death_signal: int = signal.SIGINT, **kwargs: Any) -> subprocess.Popen[Any]:
     """:class:`subprocess.Popen` for a child that dies with this process."""
-    return subprocess.Popen(list(argv), preexec_fn=die_with_parent(death_signal), **kwargs)
+    return subprocess.Popen(list(argv), preexec_fn=die_with_parent(death_signal), **_with_parent(kwargs))
 
 
 def stop_all(

@@ -136,3 +136,21 @@ def test_a_child_whose_parent_is_gone_before_it_is_set_up_ends_at_once(tmp_path:
     )
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
     assert out.stdout.strip() == str(-signal.SIGINT), out.stdout + out.stderr
+
+
+def test_a_child_knows_whether_its_starter_is_gone() -> None:
+    """winder.procs.parent_gone in a child started by popen: False while the
+    starter lives; True when the pid it was given is not its parent (as after
+    the starter died and the child was handed to init: a death signal lost
+    while Python started must not leave a node spinning on)."""
+    import subprocess as sp
+    import sys as _sys
+
+    from winder.procs import PARENT_ENV, popen
+
+    code = "from winder.procs import parent_gone; print(parent_gone())"
+    p = popen([_sys.executable, "-c", code], stdout=sp.PIPE, text=True)
+    assert p.communicate(timeout=60)[0].strip() == "False"
+    env = {**__import__("os").environ, PARENT_ENV: "1"}  # a parent that is not this one
+    out = sp.run([_sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
+    assert out.stdout.strip() == "True"

@@ -109,7 +109,7 @@ def spin_all(factories: list[Callable[[], Node]], args: list[str] | None = None)
     from rclpy._rclpy_pybind11 import RCLError
     from rclpy.executors import ExternalShutdownException
 
-    from winder.procs import stacks_on_signal, take_stop_signals
+    from winder.procs import parent_gone, stacks_on_signal, take_stop_signals
     from winder.ros.dds import use_profile
     from winder.ros.sender import SenderExecutor
 
@@ -118,6 +118,8 @@ def spin_all(factories: list[Callable[[], Node]], args: list[str] | None = None)
     stacks_on_signal()  # kill -USR1: every thread's stack on stderr (where a node hangs)
     take_stop_signals()  # none blocked (a node's handlers below replace an ignored one)
     install_signal_handlers()
+    if parent_gone():  # its death signal may have been lost while Python started (winder.procs)
+        return
     rclpy.init(args=args)
     nodes: list[Node] = []
     executor: SenderExecutor | None = None
