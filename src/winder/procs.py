@@ -71,7 +71,17 @@ def parent_gone() -> bool:
     up and spun on, an orphan (a fresh-clone run). A process that finds its
     starter gone once its handlers are in ends instead."""
     parent = os.environ.get(PARENT_ENV, "")
-    return parent.isdigit() and os.getppid() != int(parent)
+    if not parent.isdigit() or os.getppid() == int(parent):
+        return False
+    # not its parent: a grandchild that inherited the variable (a shell's `node &`), whose
+    # starter lives on, or the child of a starter that is gone
+    try:
+        os.kill(int(parent), 0)
+    except ProcessLookupError:
+        return True
+    except OSError:  # there, but not ours to signal
+        return False
+    return False
 
 
 def run(

@@ -151,6 +151,13 @@ def test_a_child_knows_whether_its_starter_is_gone() -> None:
     code = "from winder.procs import parent_gone; print(parent_gone())"
     p = popen([_sys.executable, "-c", code], stdout=sp.PIPE, text=True)
     assert p.communicate(timeout=60)[0].strip() == "False"
-    env = {**__import__("os").environ, PARENT_ENV: "1"}  # a parent that is not this one
+    # a starter that is not its parent but lives (a grandchild through a shell): not gone
+    env = {**__import__("os").environ, PARENT_ENV: "1"}
+    out = sp.run([_sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
+    assert out.stdout.strip() == "False"
+    # a starter that is gone: a pid that was and is no more
+    dead = sp.Popen(["true"])
+    dead.wait()
+    env = {**__import__("os").environ, PARENT_ENV: str(dead.pid)}
     out = sp.run([_sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
     assert out.stdout.strip() == "True"
