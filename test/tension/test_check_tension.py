@@ -178,7 +178,7 @@ def test_bands_and_corners_that_make_no_sense_are_refused(args: list[str], words
     assert out.returncode == 2 and out.stderr == f"winder check: error: {words}\n", out.stderr
 
 
-def test_derating_lowers_the_default_set_tension() -> None:
-    doc = json.loads(check(RECT, "--json", "--tension.derate", "0.3").stdout)
+def test_a_smaller_max_share_lowers_the_default_set_tension() -> None:
+    doc = json.loads(check(RECT, "--json", "--tension.max-share", "0.3").stdout)
     wire = doc["wire"]
     assert math.isclose(wire["set_tension_n"], wire["max_tension_n"] * 0.3 / 2, rel_tol=1e-12)

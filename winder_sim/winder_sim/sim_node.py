@@ -203,7 +203,7 @@ class SimEngine(Engine):
             "clock_origin_ns": self.origin_ns,
             "real_time": bool(values["real_time"]),
             "real_time_factor": values["real_time_factor"],
-            "wire": self.wire_config(plan),
+            "wire": self.wire_config(),
         }
 
     def unrecorded(self) -> frozenset[str]:
@@ -236,7 +236,7 @@ class SimEngine(Engine):
         }
         return WireSim(tensioner, contours, job.flyer_radius, 1.0 / self.rate)
 
-    def wire_config(self, plan: JobPlan) -> dict[str, object] | None:
+    def wire_config(self) -> dict[str, object] | None:
         if self.wire is None or self.wire_bound is None:
             return None
         wire, t = self.wire_bound, self.wire.tensioner

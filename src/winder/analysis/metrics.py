@@ -548,7 +548,7 @@ def _wire(run: Run) -> dict[str, Any]:
         "tension_min_n": float(tension.min()),
         "tension_peak_n": float(tension.max()),
         "set_tension_n": set_n,
-        "max_tension_n": job.wire.max_tension * job.tension_derate,
+        "max_tension_n": job.tension_limit,
     }
     for band, frac in (("warning", job.tension_warning), ("alarm", job.tension_alarm)):
         low, high = set_n * (1 - frac), set_n * (1 + frac)

@@ -61,6 +61,7 @@ from winder.interrupts import Interrupts, deferred
 from winder.motion.axes import AXIS_TABLE, FEED, FORK
 from winder.motion.interp import dda, deviation_stats, min_deviation, point_by_point
 from winder.motion.job import FIELD_SPECS, Job
+from winder.motion.limits import TimedJob
 from winder.motion.timing import plan_timing
 from winder.spec import Spec
 from winder.tension.tensioner import TENSIONER_SPECS
@@ -302,10 +303,10 @@ def cmd_check(args: argparse.Namespace) -> int:
     job = Job.from_dict(values_from_args(args, FIELD_SPECS, given["interp_node"]), check_fit=False)
     laid = job.winding
     doc = {"job_id": job.job_id, **report(laid)}
-    add_takeup(job, doc, given["profile_node"], str(given["interp_node"].get("schedule", "")))
+    timed = time_for_check(job, given["profile_node"], str(given["interp_node"].get("schedule", "")))
+    add_takeup(job, doc, timed)
     tensioner = values_from_args(args, TENSIONER_SPECS, given["consumer"])
-    schedule = str(given["interp_node"].get("schedule", ""))
-    tension_why = add_tension(job, doc, tensioner, given["profile_node"], schedule)
+    tension_why = add_tension(job, doc, tensioner, timed)
     if tension_why and doc["fits"]:  # the coil fits its bobbin, but its wire would not hold
         doc["fits"], doc["overflow"] = False, tension_why
     limits_why = ""
@@ -441,24 +442,32 @@ def wire_refusal(job: Job, ramp: dict[str, Any], schedule: str, consumer: dict[s
     from winder.motion.coil import report
 
     doc = report(job.winding)
-    add_takeup(job, doc, ramp, schedule)
-    return add_tension(job, doc, consumer, ramp, schedule)
+    timed = time_for_check(job, ramp, schedule)
+    add_takeup(job, doc, timed)
+    return add_tension(job, doc, consumer, timed)
 
 
-def add_takeup(job: Job, doc: dict[str, Any], ramp_given: dict[str, Any], schedule: str) -> None:
-    """Each layer's take-up at the job's speeds (the job file's ramp, the
-    profile node's defaults where it sets none, at the highest feed override
-    it will run at): the flyer's top speed and the wire's least and greatest
-    speed and greatest acceleration over a turn (winder.motion.takeup)."""
+def time_for_check(job: Job, ramp_given: dict[str, Any], schedule: str) -> TimedJob | None:
+    """The job timed as it will run (the job file's ramp, the profile node's
+    defaults where it sets none, at the highest feed override it will run
+    at); None if the ramp cannot plan it (said where the job is run)."""
     from winder.contract.params import PROFILE_SPECS
-    from winder.motion.limits import flyer_speeds
-    from winder.motion.takeup import layer_takeup
+    from winder.motion.limits import time_job
 
     ramp = {n: s.default for n, s in PROFILE_SPECS.items()} | ramp_given
     try:
-        speeds = flyer_speeds(job, ramp, schedule)
-    except BadInputError:  # a ramp that cannot plan the job: said where the job is run
-        speeds = {}
+        return time_job(job, ramp, schedule)
+    except BadInputError:
+        return None
+
+
+def add_takeup(job: Job, doc: dict[str, Any], timed: TimedJob | None) -> None:
+    """Each layer's take-up at the job's speeds (``timed``): the flyer's top
+    speed and the wire's least and greatest speed and greatest acceleration
+    over a turn (winder.motion.takeup)."""
+    from winder.motion.takeup import layer_takeup
+
+    speeds = timed.flyer_speeds() if timed is not None else {}
     b = job.bobbin
     for coil_doc in [{"coil": 1, "layers": doc["layers"]}, *doc["coils"]]:
         for layer in coil_doc["layers"]:
@@ -468,9 +477,7 @@ def add_takeup(job: Job, doc: dict[str, Any], ramp_given: dict[str, Any], schedu
             layer.update(layer_takeup(contour, job.flyer_radius, omega or 0.0))
 
 
-def add_tension(
-    job: Job, doc: dict[str, Any], sim_given: dict[str, Any], ramp_given: dict[str, Any], schedule: str
-) -> str:
+def add_tension(job: Job, doc: dict[str, Any], sim_given: dict[str, Any], timed: TimedJob | None) -> str:
     """The wire (``doc["wire"]``) and each layer's predicted tension with the
     job file's tensioner (its sim_node section; defaults where it sets none):
     the periodic steady state at its flyer's top speed and the layer as
@@ -478,13 +485,12 @@ def add_tension(
     layer that does not keep within the wire's maximum or the alarm band, in
     one line naming it, the prediction, the limit and what keeps it ("" if
     every layer does)."""
-    from winder.contract.params import PROFILE_SPECS
     from winder.tension.plan import wound_tension
     from winder.tension.predict import Bounds, LayerTension, fastest_within, predict_layer, wider
     from winder.tension.tensioner import tensioner_of
 
     wire = job.wire
-    top = wire.max_tension * job.tension_derate
+    top = job.tension_limit
     tensioner = tensioner_of(sim_given, wire.stiffness_per_length, job.set_tension)
     bounds = Bounds(job.set_tension, job.tension_alarm, top)
     m = wire.material
@@ -502,22 +508,19 @@ def add_tension(
             job.set_tension * (1 + job.tension_warning),
         ],
         "alarm_band_n": [bounds.low, bounds.high],
+        "max_share": job.tension_max_share,
         "derate": job.tension_derate,
         "tensioner": tensioner.kind,
         "span_stiffness_n_m": tensioner.stiffness,
     }
     # a tensioner that oscillates, or cannot hold the set tension at all: no prediction holds
-    why = tensioner.unstable() or tensioner.limit_words(0.0, 0.0)
+    why = tensioner.unstable() or tensioner.cannot_hold()
     if why:
         for coil_doc in [{"layers": doc["layers"]}, *doc["coils"]]:
             for layer in coil_doc["layers"]:
                 layer.update(tension_peak_n=None, tension_min_n=None)
         return why
-    ramp = {n: s.default for n, s in PROFILE_SPECS.items()} | ramp_given
-    try:
-        wound = wound_tension(job, ramp, schedule, tensioner)
-    except BadInputError:  # a ramp that cannot plan the job: said where the job is run
-        wound = {}
+    wound = wound_tension(timed, tensioner) if timed is not None else {}
     seen: dict[tuple[float, float], LayerTension] = {}  # coils laid alike: each layer worked out once
     for coil_doc in [{"coil": 1, "layers": doc["layers"]}, *doc["coils"]]:
         for layer in coil_doc["layers"]:

@@ -80,6 +80,7 @@ LATER_FIELDS = frozenset(
         "tension.set",
         "tension.warning",
         "tension.alarm",
+        "tension.max_share",
         "tension.derate",
     }
 )

@@ -286,7 +286,16 @@ FIELD_SPECS: dict[str, Spec] = {
             0.4,
             open_low=False,
         ),
-        _f("tension.derate", 0.05, 1.0, "", "the share of the wire's maximum tension a job may reach", 1.0),
+        _f(
+            "tension.max_share", 0.05, 1.0, "", "the share of the wire's maximum tension a job may reach", 1.0
+        ),
+        Spec(
+            "tension.derate",
+            bool,
+            False,
+            "cap the flyer's speed per layer so the predicted peak tension stays within the limit "
+            "(false: such a job is refused)",
+        ),
         Spec(
             "coil_overrides",
             str,
@@ -524,7 +533,8 @@ class Job:
     tension_set: float = FIELD_SPECS["tension.set"].default
     tension_warning: float = FIELD_SPECS["tension.warning"].default
     tension_alarm: float = FIELD_SPECS["tension.alarm"].default
-    tension_derate: float = FIELD_SPECS["tension.derate"].default
+    tension_max_share: float = FIELD_SPECS["tension.max_share"].default
+    tension_derate: bool = FIELD_SPECS["tension.derate"].default
     check_fit: InitVar[bool] = True
 
     def __post_init__(self, check_fit: bool) -> None:
@@ -692,9 +702,9 @@ class Job:
                 f"{self.tension_alarm:g} (the warning band lies inside the alarm band)"
             )
         wire = self.wire
-        top = wire.max_tension * self.tension_derate
+        top = self.tension_limit
         if self.tension_set > top:
-            derate = f" x tension.derate {self.tension_derate:g}" if self.tension_derate < 1 else ""
+            derate = f" x tension.max_share {self.tension_max_share:g}" if self.tension_max_share < 1 else ""
             raise JobError(
                 f"tension.set={self.tension_set:g} N is invalid: must be at most the wire's maximum "
                 f"{wire.max_tension:.4g} N{derate} (yield {wire.material.yield_stress / 1e6:.4g} MPa x bare "
@@ -780,10 +790,15 @@ class Job:
         return Wire(mine, self.bare_diameter or self.wire_diameter)
 
     @property
+    def tension_limit(self) -> float:
+        """The highest tension the job may reach, N: the wire's maximum x ``tension.max_share``."""
+        return self.wire.max_tension * self.tension_max_share
+
+    @property
     def set_tension(self) -> float:
         """The set tension, N (``tension.set``, or half the wire's maximum
-        tension a job may reach: its maximum x ``tension.derate``)."""
-        return self.tension_set or self.wire.max_tension * self.tension_derate / 2
+        tension a job may reach: its maximum x ``tension.max_share``)."""
+        return self.tension_set or self.tension_limit / 2
 
     # -- the coil as laid (winder.motion.coil) ------------------------------
     @property

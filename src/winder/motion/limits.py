@@ -30,17 +30,17 @@ being whole (a position off the ideal line by at most 1.5 steps). A job that
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
 import numpy.typing as npt
 
 from winder.motion.axes import AXES, AXIS_TABLE, FORK
-from winder.motion.job import Job
+from winder.motion.job import Job, Segment
 from winder.motion.shaped import Motion, ShapedProfile
 from winder.motion.timeline import parse_schedule
-from winder.motion.timing import plan_timing
+from winder.motion.timing import SegmentTiming, plan_timing
 
 __all__ = [
     "NO_LIMIT",
@@ -49,13 +49,14 @@ __all__ = [
     "Breach",
     "LimitWatch",
     "Past",
+    "TimedJob",
     "breach",
-    "flyer_speeds",
     "highest_override",
     "job_extent",
     "job_limits",
     "job_peaks",
     "move_peaks",
+    "time_job",
     "travel_past",
 ]
 
@@ -331,30 +332,49 @@ def job_limits(
     return peaks, why
 
 
-def flyer_speeds(job: Job, ramp: dict[str, Any], schedule: str = "") -> dict[tuple[int, int], float]:
-    """The flyer's top speed (rad/s) in each layer laid, ``(coil, layer)``
-    from 0, with the ``ramp`` settings at the highest feed override the run
-    will have: the path's peak step rate over the layer's moves times the
-    fork's share of it (1 where the fork is the major axis, as in any layer
-    of more fork steps a turn than feed steps), at 2 pi /
-    ``fork_steps_per_rev`` rad a step. ValueError (one line) if the ramp
-    cannot plan the job."""
+@dataclass(frozen=True)
+class TimedJob:
+    """A job's segments timed once with a ramp at the highest feed override
+    the run will have (``override``): what the flyer's speeds per layer and
+    the tension predicted for them (winder.tension.plan) are read from."""
+
+    job: Job
+    segments: Sequence[Segment]
+    timings: Sequence[SegmentTiming]
+    override: float
+    _peaks: dict[int, float] = field(default_factory=dict, compare=False, repr=False)
+
+    def fork_peak(self, i: int) -> float:
+        """The flyer's top speed in segment ``i`` (rad/s): the path's peak step
+        rate over its moves times the fork's share of it (1 where the fork is
+        the major axis, as in any layer of more fork steps a turn than feed
+        steps), at 2 pi / ``fork_steps_per_rev`` rad a step."""
+        seg, timing = self.segments[i], self.timings[i]
+        v = max((self._peak(m) for m in timing.profiles), default=0.0)
+        share = max(abs(p[FORK.index]) / max(abs(x) for x in p) for p in seg.pieces if any(p))
+        return float(v * share * self.override * 2 * np.pi / self.job.fork_steps_per_rev)
+
+    def _peak(self, move: Motion) -> float:
+        if id(move) not in self._peaks:
+            self._peaks[id(move)] = move_peaks(move)[0]
+        return self._peaks[id(move)]
+
+    def flyer_speeds(self) -> dict[tuple[int, int], float]:
+        """The flyer's top speed (rad/s) in each layer laid, ``(coil, layer)`` from 0."""
+        out: dict[tuple[int, int], float] = {}
+        for i, seg in enumerate(self.segments):
+            if seg.kind.winds:
+                key = (seg.pole, seg.layer)
+                out[key] = max(out.get(key, 0.0), self.fork_peak(i))
+        return out
+
+
+def time_job(job: Job, ramp: dict[str, Any], schedule: str = "") -> TimedJob:
+    """The job timed with the ``ramp`` settings (the profile node's) at the
+    highest feed override the run will have. ValueError (one line) if the
+    ramp cannot plan the job."""
     segments = job.segments()
     timings, _ = plan_timing(
         ramp, [s.steps for s in segments], speeds=[job.segment_speed(s) for s in segments]
     )
-    k = highest_override(ramp, schedule) * 2 * np.pi / job.fork_steps_per_rev
-    out: dict[tuple[int, int], float] = {}
-    peaks: dict[int, float] = {}
-    for seg, timing in zip(segments, timings, strict=True):
-        if not seg.kind.winds:
-            continue
-        v = 0.0
-        for move in timing.profiles:
-            if id(move) not in peaks:
-                peaks[id(move)] = move_peaks(move)[0]
-            v = max(v, peaks[id(move)])
-        share = max(abs(p[FORK.index]) / max(abs(x) for x in p) for p in seg.pieces if any(p))
-        key = (seg.pole, seg.layer)
-        out[key] = max(out.get(key, 0.0), float(v * share * k))
-    return out
+    return TimedJob(job, segments, timings, highest_override(ramp, schedule))

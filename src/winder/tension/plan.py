@@ -1,7 +1,7 @@
 """A job's tension as it will be wound: every coil's layers in sequence with
 the flyer's exact motion (:func:`winder.tension.predict.predict_coil`), from
-the job's segments timed with the ramp (:func:`winder.motion.timing.plan_timing`)
-at the highest feed override the run will have. Coils laid alike are worked
+the job's segments timed once with the ramp at the highest feed override
+the run will have (:func:`winder.motion.limits.time_job`). Coils laid alike are worked
 out once (their flyer starts each at a whole turn: the same phase against
 the core's corners).
 """
@@ -12,9 +12,7 @@ import math
 from typing import Any
 
 from winder.motion.axes import FORK
-from winder.motion.job import Job
-from winder.motion.limits import highest_override, move_peaks
-from winder.motion.timing import plan_timing
+from winder.motion.limits import TimedJob
 from winder.tension.predict import CoilMove, LayerTension, predict_coil
 from winder.tension.tensioner import Tensioner
 
@@ -26,21 +24,18 @@ MAX_SAMPLES = 400_000
 RATE, PER_TURN = 2000.0, 40.0
 
 
-def wound_tension(
-    job: Job, ramp: dict[str, Any], schedule: str, tensioner: Tensioner
-) -> dict[tuple[int, int], LayerTension]:
-    """Each layer's tension as wound, ``(coil, layer)`` from 1 (see the module doc)."""
+def wound_tension(timed: TimedJob, tensioner: Tensioner) -> dict[tuple[int, int], LayerTension]:
+    """Each layer's tension as wound, ``(coil, layer)`` from 1, from the job
+    as ``timed`` (see the module doc)."""
+    job = timed.job
     if not job.bobbin.core_given:
         return {}
-    segments = job.segments()
-    speeds = [job.segment_speed(s) for s in segments]
-    timings, _ = plan_timing(ramp, [s.steps for s in segments], speeds=speeds)
-    k = highest_override(ramp, schedule)
+    k = timed.override
     turn = 2 * math.pi / job.fork_steps_per_rev
     coils: dict[int, list[CoilMove]] = {}
     starts: dict[int, int] = {}
     top = 0.0
-    for seg, timing in zip(segments, timings, strict=True):
+    for i, (seg, timing) in enumerate(zip(timed.segments, timed.timings, strict=True)):
         base = starts.setdefault(seg.pole, timing.t0_ns)
         winds = seg.kind.winds and seg.steps > 0
         contour = job.bobbin.contour(job.winding.coils[seg.pole].layers[seg.layer].radius) if winds else None
@@ -57,8 +52,7 @@ def wound_tension(
             )
         )
         if winds:
-            share = abs(seg.delta[FORK.index]) / seg.steps
-            top = max(top, max(move_peaks(m)[0] for m in timing.profiles) * share * turn * k)
+            top = max(top, timed.fork_peak(i))
     out: dict[tuple[int, int], LayerTension] = {}
     done: dict[tuple[Any, ...], dict[int, LayerTension]] = {}
     for pole, moves in coils.items():

@@ -11,7 +11,7 @@ flyer adds ``rho v**2 / 2`` of stress at the take-up speed ``v``
 (:meth:`winder.motion.material.Wire.whirl_stress`), counted against the
 wire's maximum as tension ``rho v**2 A / 2``.
 
-A layer whose peak passes the wire's maximum (times ``tension.derate``) or
+A layer whose peak passes the wire's maximum (times ``tension.max_share``) or
 the alarm band's top, or whose minimum falls below the band's bottom (a
 slack wire lays loose turns), does not fit; the highest flyer speed that
 keeps it is found by bisection (the swing grows with the speed).
@@ -52,7 +52,7 @@ class Bounds:
 
     set_tension: float
     alarm: float  #: the band's half-width, a fraction of the set tension
-    max_tension: float  #: the wire's maximum x tension.derate, N
+    max_tension: float  #: the wire's maximum x tension.max_share, N
 
     @property
     def low(self) -> float:

@@ -152,14 +152,21 @@ class Tensioner:
             "the supply gain"
         )
 
-    def limit_words(self, peak: float, travel: float) -> str:
-        """What the tensioner cannot do at a predicted peak tension and
-        travel, in words ("" if it can)."""
+    def cannot_hold(self) -> str:
+        """Why the tensioner cannot hold the set tension at all, in words ("" if it can)."""
         if self.kind == "servo" and self.set_tension > self.force_limit:
             return (
                 f"tensioner.force_limit {self.force_limit:g} N is below the set tension "
                 f"{self.set_tension:.4g} N: the servo cannot hold it"
             )
+        return ""
+
+    def limit_words(self, peak: float, travel: float) -> str:
+        """What the tensioner cannot do at a predicted peak tension and
+        travel, in words ("" if it can)."""
+        held = self.cannot_hold()
+        if held:
+            return held
         if self.kind == "servo" and peak > self.force_limit:
             return f"the servo tensioner holds at most {self.force_limit:g} N (tensioner.force_limit)"
         if self.kind == "dancer" and travel > self.stroke / 2:

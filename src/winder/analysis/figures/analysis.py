@@ -490,7 +490,7 @@ def motion_figure(run: Run, d: Digest) -> Figure:
 def wire_figure(run: Run) -> Figure:
     """wire.png's figure: the wire's tension over the run as recorded, in the
     job's bands (the set tension, the warning and alarm bands) and below the
-    wire's maximum (times ``tension.derate``), and two turns of the flyer
+    wire's maximum (times ``tension.max_share``), and two turns of the flyer
     around the peak in the same bands."""
     job = run.plan.job
     tension = run.tension
@@ -498,14 +498,14 @@ def wire_figure(run: Run) -> Figure:
     ax = fig.add_axes((0.07, 0.58, 0.72, 0.36))
     zoom = fig.add_axes((0.07, 0.08, 0.72, 0.38))
     set_n = job.set_tension
-    top = job.wire.max_tension * job.tension_derate
+    top = job.tension_limit
     for frac, alpha, label in (
         (job.tension_alarm, 0.10, f"alarm band (tension.alarm {job.tension_alarm:g})"),
         (job.tension_warning, 0.16, f"warning band (tension.warning {job.tension_warning:g})"),
     ):
         ax.axhspan(set_n * (1 - frac), set_n * (1 + frac), color="tab:green", alpha=alpha, lw=0, label=label)
     ax.axhline(set_n, color="tab:green", lw=0.8, label=f"set {set_n:.4g} N")
-    derated = f" x tension.derate {job.tension_derate:g}" if job.tension_derate < 1 else ""
+    derated = f" x tension.max_share {job.tension_max_share:g}" if job.tension_max_share < 1 else ""
     ax.axhline(top, color="tab:red", lw=1.0, ls="--", label=f"the wire's maximum{derated}: {top:.4g} N")
     _line(ax, tension.t, tension.tension, color=ACT, lw=0.6, label="simulated tension")
     peak, least = float(tension.tension.max()), float(tension.tension.min())
