@@ -49,7 +49,7 @@ def polygon(c: Contour, n: int) -> tuple[np.ndarray, np.ndarray]:
     total = sum(length for _, length in pieces)
     pts, arcs, at = [], [], 0.0
     for f, length in pieces:
-        m = max(2, round(n * length / total))
+        m = max(256, round(n * length / total))  # a tiny corner arc still well resolved
         u = np.linspace(0.0, 1.0, m, endpoint=False)
         pts.append(f(u))
         arcs.append(at + u * length)

@@ -73,7 +73,7 @@ from winder.contract.topics import (
 )
 from winder.motion.axes import AXES
 from winder.motion.timeline import Command, CommandError, Timeline, parse_schedule
-from winder.motion.timing import SegmentTiming, plan_timing, shaping_report
+from winder.motion.timing import SegmentTiming, plan_job_timing, shaping_report
 from winder.ros.chunks import STEPS_CDR, TIMED_CDR
 from winder.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from winder.ros.graph import Who, participant
@@ -246,14 +246,7 @@ class ProfileNode(ManagedNode):
                 return
             values, source = self.settings.values(), "profile_node"
         try:
-            segments = job.segments
-            timing, duration_ns = plan_timing(
-                values,
-                [s.steps for s in segments],
-                job.stops,
-                job.stop_pause,
-                [job.job.segment_speed(s) for s in segments],
-            )
+            timing, duration_ns = plan_job_timing(values, job.job, job.stops, job.stop_pause)
         except ValueError as exc:
             self.fail(f"job {job.job_id} cannot be ramped: {exc}")
             return

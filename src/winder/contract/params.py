@@ -21,7 +21,7 @@ from winder.motion.job import FIELD_SPECS, Job, Segment
 from winder.motion.limits import NO_LIMIT
 from winder.motion.profile import KINDS
 from winder.motion.timeline import OVERRIDE_RANGE
-from winder.motion.timing import MAX_JOB_SECONDS, plan_segment, plan_timing
+from winder.motion.timing import MAX_JOB_SECONDS, plan_job_timing, plan_segment
 from winder.spec import Spec, SpecError, shorten
 from winder.tension.tensioner import TENSIONER_SPECS
 
@@ -440,7 +440,7 @@ def check_job_duration(job: Job, values: dict[str, Any]) -> None:
     ramp = run_ramp(values)
     if ramp is not None:
         try:
-            plan_timing(ramp, steps, stops, pause, [job.segment_speed(s) for s in segments])
+            plan_job_timing(ramp, job, stops, pause)
         except ValueError as exc:
             raise SpecError(f"job {job.job_id} ({job.total_steps} steps) is too long: {exc}") from None
         return

@@ -72,6 +72,7 @@ def make_run_id(job_id: str, counter: int, now: float | None = None) -> str:
 LATER_FIELDS = frozenset(
     {
         "bobbin.core_corner_radius",
+        "layer_speed",
         "wire.material",
         "wire.yield_stress",
         "wire.modulus",

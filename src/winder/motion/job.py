@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import InitVar, dataclass, fields, replace
 from enum import StrEnum
 from typing import Any
@@ -231,6 +231,15 @@ FIELD_SPECS: dict[str, Spec] = {
         ),
         _f("first_layer_speed", 0.0, 1.0, "", "speed of layer 1, a fraction of v_max", 1.0),
         Spec(
+            "layer_speed",
+            str,
+            "",
+            "single layers at a fraction of v_max: COIL:LAYER=SHARE separated by ';' (COIL * = every "
+            "coil; times first_layer_speed on layer 1); tension.derate fills it in for a run",
+            pattern=r"[0-9*.:=;eE+\-\s]*",
+            pattern_text='e.g. "*:3=0.8;2:4=0.75", or empty',
+        ),
+        Spec(
             "wire.material",
             str,
             "copper",
@@ -331,6 +340,34 @@ class Coil:
     turns_per_layer: int
     layers: int
     direction: int
+
+
+def parse_layer_speeds(text: str, layers: Sequence[int]) -> dict[tuple[int, int], float]:
+    """The layers ``text`` slows down, ``(pole, layer)`` from 0 -> share of
+    ``v_max`` in (0, 1], for coils of ``layers`` layers each; JobError (one
+    line) naming the item and the allowed range. A layer given twice (``*``
+    and its coil) takes the last."""
+    out: dict[tuple[int, int], float] = {}
+    for item in (t.strip() for t in text.split(";") if t.strip()):
+        head, _, body = item.partition(":")
+        layer_text, _, share_text = body.partition("=")
+        try:
+            coils = range(len(layers)) if head.strip() == "*" else [int(head) - 1]
+            layer, share = int(layer_text), float(share_text)
+        except ValueError:
+            raise JobError(f"layer_speed: {item!r} must be COIL:LAYER=SHARE (COIL a number or *)") from None
+        if any(not 0 <= c < len(layers) for c in coils):
+            raise JobError(f"layer_speed: coil {head.strip()} is not in [1, {len(layers)}] (poles)")
+        if not 0.0 < share <= 1.0:
+            raise JobError(f"layer_speed: {item!r}: share {share:g} is invalid: must be in (0, 1]")
+        for pole in coils:
+            if not 1 <= layer <= layers[pole]:
+                raise JobError(
+                    f"layer_speed: {item!r}: layer {layer} is not in [1, {layers[pole]}] "
+                    f"(the layers of coil {pole + 1})"
+                )
+            out[(pole, layer - 1)] = share
+    return out
 
 
 def parse_coil_overrides(text: str, poles: int, base: Coil) -> dict[int, Coil]:
@@ -525,6 +562,7 @@ class Job:
     crossover_at: float = FIELD_SPECS["lay.crossover_at"].default
     reversal_dwell: float = FIELD_SPECS["reversal_dwell"].default
     first_layer_speed: float = FIELD_SPECS["first_layer_speed"].default
+    layer_speed: str = FIELD_SPECS["layer_speed"].default
     material: str = FIELD_SPECS["wire.material"].default
     yield_stress: float = FIELD_SPECS["wire.yield_stress"].default
     modulus: float = FIELD_SPECS["wire.modulus"].default
@@ -567,6 +605,7 @@ class Job:
             raise JobError(laid.overflow())
         self._check_flyer_clears(laid)
         self._check_size(laid)
+        _ = self.layer_speeds  # layer_speed parsed against the coils' layers (JobError, one line)
         checked = {(base.turns_per_layer, base.layers)}
         for p, c in enumerate(wound):
             if (
@@ -1037,9 +1076,26 @@ class Job:
         return start, max(1, math.floor(self.crossover / 360.0 * spr + 0.5))
 
     def segment_speed(self, segment: Segment) -> float:
-        """The fraction of ``v_max`` a segment runs at: ``first_layer_speed``
-        on the first layer of every coil, else 1."""
-        return self.first_layer_speed if segment.kind.winds and segment.layer == 0 else 1.0
+        """The fraction of ``v_max`` a segment runs at: its layer's (:meth:`layer_share`); 1 off a layer."""
+        return self.layer_share(segment.pole, segment.layer) if segment.kind.winds else 1.0
+
+    def segment_pace(self, segment: Segment) -> float:
+        """How much a segment is slowed down in time: its layer's
+        ``layer_speed`` share (its ramp's acceleration x share**2, jerk x
+        share**3: :func:`winder.motion.timing.plan_segment`); 1 elsewhere."""
+        return self.layer_speeds.get((segment.pole, segment.layer), 1.0) if segment.kind.winds else 1.0
+
+    def layer_share(self, pole: int, layer: int) -> float:
+        """The fraction of ``v_max`` layer ``layer`` of coil ``pole`` (from 0)
+        is wound at: ``first_layer_speed`` on the first layer of every coil,
+        times its ``layer_speed`` share where it has one."""
+        first = self.first_layer_speed if layer == 0 else 1.0
+        return first * self.layer_speeds.get((pole, layer), 1.0)
+
+    @functools.cached_property
+    def layer_speeds(self) -> dict[tuple[int, int], float]:
+        """``layer_speed`` parsed: ``(pole, layer)`` from 0 -> share of ``v_max``."""
+        return parse_layer_speeds(self.layer_speed, [len(c.layers) for c in self.winding.coils])
 
     @functools.cached_property
     def total_steps(self) -> int:

@@ -40,7 +40,7 @@ from winder.motion.axes import AXES, AXIS_TABLE, FORK
 from winder.motion.job import Job, Segment
 from winder.motion.shaped import Motion, ShapedProfile
 from winder.motion.timeline import parse_schedule
-from winder.motion.timing import SegmentTiming, plan_timing
+from winder.motion.timing import SegmentTiming, plan_job_timing
 
 __all__ = [
     "NO_LIMIT",
@@ -321,9 +321,7 @@ def job_limits(
     sets): each axis' peaks (AXES order) and the first limit passed, in
     words ("" if none). ValueError (one line) if the ramp cannot plan the job."""
     segments = job.segments()
-    timings, _ = plan_timing(
-        ramp, [s.steps for s in segments], stops, pause, [job.segment_speed(s) for s in segments]
-    )
+    timings, _ = plan_job_timing(ramp, job, stops, pause)
     override = highest_override(ramp, schedule)
     peaks = job_peaks(segments, timings, job.joint_step, override)
     why = breach(peaks, limits)
@@ -342,6 +340,7 @@ class TimedJob:
     segments: Sequence[Segment]
     timings: Sequence[SegmentTiming]
     override: float
+    duration_ns: int  #: the job's, at feed override 1 (without stops)
     _peaks: dict[int, float] = field(default_factory=dict, compare=False, repr=False)
 
     def fork_peak(self, i: int) -> float:
@@ -374,7 +373,5 @@ def time_job(job: Job, ramp: dict[str, Any], schedule: str = "") -> TimedJob:
     highest feed override the run will have. ValueError (one line) if the
     ramp cannot plan the job."""
     segments = job.segments()
-    timings, _ = plan_timing(
-        ramp, [s.steps for s in segments], speeds=[job.segment_speed(s) for s in segments]
-    )
-    return TimedJob(job, segments, timings, highest_override(ramp, schedule))
+    timings, duration_ns = plan_job_timing(ramp, job)
+    return TimedJob(job, segments, timings, highest_override(ramp, schedule), duration_ns)

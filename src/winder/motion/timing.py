@@ -11,7 +11,7 @@ import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -20,7 +20,19 @@ from winder.errors import BadInputError
 from winder.motion.profile import LIMITS, plan
 from winder.motion.shaped import Motion, ShapedProfile, shape
 
-__all__ = ["MAX_JOB_SECONDS", "SegmentTiming", "plan_job", "plan_segment", "plan_timing", "shaping_report"]
+if TYPE_CHECKING:
+    from winder.motion.job import Job
+
+__all__ = [
+    "MAX_JOB_SECONDS",
+    "PACE_POWER",
+    "SegmentTiming",
+    "plan_job",
+    "plan_job_timing",
+    "plan_segment",
+    "plan_timing",
+    "shaping_report",
+]
 
 
 #: The longest a job may last, in simulated time: a week. Step times travel as
@@ -29,20 +41,29 @@ __all__ = ["MAX_JOB_SECONDS", "SegmentTiming", "plan_job", "plan_segment", "plan
 MAX_JOB_SECONDS = 7 * 24 * 3600.0
 
 
-def plan_segment(values: dict[str, Any], steps: int, speed: float = 1.0) -> Motion:
+#: how each ramp limit scales when a move is slowed down in time by ``pace``
+#: (speed x pace): the power of ``pace`` it takes
+PACE_POWER = {"a_max": 2, "j_max": 3, "tau": -1}
+
+
+def plan_segment(values: dict[str, Any], steps: int, speed: float = 1.0, pace: float = 1.0) -> Motion:
     """The profile of one segment of ``steps`` steps with the profile settings,
-    at ``speed`` times ``v_max`` (a job's ``first_layer_speed``), shaped by
+    at ``speed`` times ``v_max`` (a layer's share: ``Job.layer_share``), shaped by
     ``shaper`` (absent: none); ValueError (one line) if the limits cannot plan
-    it or it would last longer than :data:`MAX_JOB_SECONDS`."""
+    it or it would last longer than :data:`MAX_JOB_SECONDS`. ``pace`` < 1
+    slows the move down in time (``Job.segment_pace``): the ramp's
+    acceleration x pace**2, its jerk x pace**3, an exponential's time
+    constant / pace (:data:`PACE_POWER`; the start/stop rate stays)."""
     kind = values["profile"]
     v_max = values["v_max"] * speed
     if values["v_start"] > v_max:
         raise BadInputError(
-            f"first_layer_speed={speed:g} is invalid with v_max={values['v_max']:g}: the first layer's "
-            f"speed {v_max:g} steps/s is below v_start={values['v_start']:g} steps/s"
+            f"a layer speed of {speed:g} x v_max (first_layer_speed, layer_speed) is invalid with "
+            f"v_max={values['v_max']:g}: the layer's speed {v_max:g} steps/s is below "
+            f"v_start={values['v_start']:g} steps/s"
         )
     kw: dict[str, Any] = {"v_max": v_max, "v_start": values["v_start"], "v_end": values["v_start"]}
-    kw.update({name: values[name] for name in LIMITS[kind]})
+    kw.update({name: values[name] * pace ** PACE_POWER[name] for name in LIMITS[kind]})
     limits = ", ".join(f"{k}={v:g}" for k, v in kw.items() if k != "v_end")
     profile: Motion
     try:
@@ -128,22 +149,25 @@ def plan_timing(
     stops: Sequence[tuple[int, int]] = (),
     pause: float = 0.0,
     speeds: Sequence[float] | None = None,
+    paces: Sequence[float] | None = None,
 ) -> tuple[list[SegmentTiming], int]:
     """The timing of every segment of a job with the ramp ``values``, its
     programmed ``stops`` ((segment, step index) pairs: the axes come to rest
     there, with the same ramp as a segment end, and rest ``pause`` seconds)
     and ``dwell`` between segments; and the job's duration (ns). ``speeds``:
     each segment's fraction of ``v_max`` (:meth:`Job.segment_speed`; absent:
-    all 1). Without stops and speeds the steps' times are :func:`plan_job`'s.
+    all 1); ``paces``: each segment's slowing down in time (:func:`plan_segment`;
+    absent: all 1). Without stops and speeds the steps' times are :func:`plan_job`'s.
     ValueError (one line) as there."""
     at: dict[int, list[int]] = {}
     for seg, k in stops:
         at.setdefault(seg, []).append(k)
     speed_of = list(speeds) if speeds is not None else [1.0] * len(segment_steps)
-    lengths: set[tuple[int, float]] = set()
+    pace_of = list(paces) if paces is not None else [1.0] * len(segment_steps)
+    lengths: set[tuple[int, float, float]] = set()
     for i, n in enumerate(segment_steps):
         cuts = [0, *sorted(k for k in at.get(i, ()) if 0 < k < n), n]
-        lengths.update((b - a, speed_of[i]) for a, b in itertools.pairwise(cuts) if b > a)
+        lengths.update((b - a, speed_of[i], pace_of[i]) for a, b in itertools.pairwise(cuts) if b > a)
     plans = {key: plan_segment(values, *key) for key in sorted(lengths)}
     dwell_ns, pause_ns = round(values["dwell"] * 1e9), round(pause * 1e9)
     timings = []
@@ -154,7 +178,7 @@ def plan_timing(
         ends, profiles, starts = [], [], []
         start = 0
         for a, b in itertools.pairwise(cuts):
-            move = plans[(b - a, speed_of[i])]
+            move = plans[(b - a, speed_of[i], pace_of[i])]
             ends.append(b)
             profiles.append(move)
             starts.append(start)
@@ -194,3 +218,19 @@ def shaping_report(timings: Sequence[SegmentTiming]) -> dict[str, Any]:
             "peak_unshaped": {k: max(q[k] for q in unshaped) for k in ("v", "a", "j")},
         }
     }
+
+
+def plan_job_timing(
+    values: dict[str, Any], job: Job, stops: Sequence[tuple[int, int]] = (), pause: float = 0.0
+) -> tuple[list[SegmentTiming], int]:
+    """:func:`plan_timing` of ``job``'s segments, each at its speed and pace
+    (``first_layer_speed``, ``layer_speed``)."""
+    segments = job.segments()
+    return plan_timing(
+        values,
+        [s.steps for s in segments],
+        stops,
+        pause,
+        [job.segment_speed(s) for s in segments],
+        [job.segment_pace(s) for s in segments],
+    )

@@ -9,19 +9,32 @@ the core's corners).
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 from winder.motion.axes import FORK
-from winder.motion.limits import TimedJob
-from winder.tension.predict import CoilMove, LayerTension, predict_coil
+from winder.motion.job import Job
+from winder.motion.limits import TimedJob, time_job
+from winder.tension.predict import (
+    Bounds,
+    CoilMove,
+    LayerTension,
+    predict_coil,
+    predict_layer,
+    wider,
+)
 from winder.tension.tensioner import Tensioner
 
-__all__ = ["MAX_SAMPLES", "wound_tension"]
+__all__ = ["MAX_SAMPLES", "Derating", "derate", "wound_tension"]
 
 #: samples a coil is worked out in, at most (the rate drops for a longer coil)
 MAX_SAMPLES = 400_000
 #: samples a second at least, and per turn of the flyer at its top speed at least
 RATE, PER_TURN = 2000.0, 40.0
+#: derating: a layer whose tension swings past its bounds by a factor ``r`` (of the allowed swing
+#: about the set tension) is slowed by MARGIN / sqrt(r) a round; one past the tensioner's reach
+#: alone by STEP_DOWN; at most ROUNDS rounds
+MARGIN, STEP_DOWN, ROUNDS = 0.97, 0.9, 6
 
 
 def wound_tension(timed: TimedJob, tensioner: Tensioner) -> dict[tuple[int, int], LayerTension]:
@@ -67,3 +80,89 @@ def wound_tension(timed: TimedJob, tensioner: Tensioner) -> dict[tuple[int, int]
         for layer, got in done[key].items():
             out[(pole + 1, layer)] = got
     return out
+
+
+@dataclass(frozen=True)
+class Derating:
+    """A job slowed layer by layer until its predicted tension keeps within
+    its bounds (``tension.derate``): ``job`` carries the layers' new speeds
+    in ``layer_speed``; ``slowed`` maps each slowed ``(coil, layer)`` (from
+    1) to the share of ``v_max`` it now runs at; the job's duration before
+    and after (s, at feed override 1); ``why``: what still does not keep
+    ("" if every layer does)."""
+
+    job: Job
+    slowed: dict[tuple[int, int], float]
+    before_s: float
+    after_s: float
+    why: str = ""
+
+    def to_doc(self) -> dict[str, Any]:
+        """``winder check --json``'s ``wire.derated``."""
+        return {
+            "layers": [
+                {"coil": c, "layer": k, "speed_share": v} for (c, k), v in sorted(self.slowed.items())
+            ],
+            "duration_before_s": self.before_s,
+            "duration_after_s": self.after_s,
+        }
+
+    def words(self) -> str:
+        """The summary's line ("" if nothing was slowed)."""
+        if not self.slowed:
+            return ""
+        shares = sorted(self.slowed.values())
+        span = f"{shares[0]:.0%}" if shares[0] == shares[-1] else f"{shares[0]:.0%}-{shares[-1]:.0%}"
+        longer = self.after_s - self.before_s
+        return (
+            f"tension.derate: {len(self.slowed)} layer{'s' if len(self.slowed) > 1 else ''} slowed to "
+            f"{span} of v_max to keep the wire's tension within its limit; the job takes "
+            f"{self.after_s:.1f} s instead of {self.before_s:.1f} s "
+            f"(+{longer:.1f} s, +{longer / max(self.before_s, 1e-9):.0%})"
+        )
+
+
+def derate(job: Job, ramp: dict[str, Any], schedule: str, tensioner: Tensioner) -> Derating:
+    """``job`` with each layer whose predicted tension passes its bounds
+    (the alarm band, the wire's maximum x ``tension.max_share``, the
+    tensioner's reach) slowed in time (``layer_speed`` s: its speed x s,
+    its ramp's acceleration x s**2) until it keeps, round by round
+    (:data:`MARGIN`), its prediction taken steady and as wound with the
+    ramps. ValueError (one line) if the ramp cannot plan it."""
+    bounds = Bounds(job.set_tension, job.tension_alarm, job.tension_limit)
+    wire = job.wire
+    first = timed = time_job(job, ramp, schedule)
+    given = dict(job.layer_speeds)
+    shares = dict(given)
+    why = ""
+    for round_ in range(ROUNDS + 1):
+        wound = wound_tension(timed, tensioner)
+        slower: dict[tuple[int, int], float] = {}
+        why = ""
+        for (pole, layer), omega in timed.flyer_speeds().items():
+            radius = job.winding.coils[pole].layers[layer].radius
+            contour = job.bobbin.contour(radius)
+            if contour is None or omega <= 0:
+                continue
+            steady = predict_layer(contour, job.flyer_radius, omega, tensioner, wire)
+            got = wider(steady, wound.get((pole + 1, layer + 1), steady))
+            breach = got.breach(bounds, wire) or tensioner.limit_words(got.peak, got.coordinate)
+            if not breach:
+                continue
+            over = got.overshoot(bounds)
+            if over == math.inf:
+                why = why or f"coil {pole + 1} layer {layer + 1}: {breach} at any flyer speed"
+                continue
+            # the swing about the set tension grows as the take-up's acceleration, the square of the
+            # pace (speed and time alike): slowed by the square root of how far it overshoots
+            slower[(pole, layer)] = MARGIN / math.sqrt(over) if over > 1 else STEP_DOWN
+            why = why or f"coil {pole + 1} layer {layer + 1} at {omega:.4g} rad/s: {breach}"
+        if not slower or round_ == ROUNDS:
+            break
+        for key, factor in slower.items():
+            shares[key] = math.floor(shares.get(key, 1.0) * factor * 1e4) / 1e4
+        text = ";".join(f"{p + 1}:{k + 1}={v:g}" for (p, k), v in sorted(shares.items()))
+        job = Job.from_dict({**job.to_dict(), "layer_speed": text})
+        timed = time_job(job, ramp, schedule)
+    slowed = {(p + 1, k + 1): job.layer_share(p, k) for (p, k), v in shares.items() if v != given.get((p, k))}
+    return Derating(job, slowed, first.duration_ns / 1e9, timed.duration_ns / 1e9, why)

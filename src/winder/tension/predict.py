@@ -73,6 +73,22 @@ class LayerTension:
     whirl: float  #: N: the whirl's stress as tension, at the take-up's top speed
     coordinate: float  #: the tensioner's own at its extreme: dancer travel (m), servo feed speed (m/s)
 
+    def overshoot(self, bounds: Bounds) -> float:
+        """How far the swing about the set tension passes the bounds: the
+        largest ratio of a swing (up to the peak, with the whirl against the
+        wire's maximum; down to the minimum) to the room the bounds leave
+        for it (<= 1: within; inf: no room at all)."""
+        s = bounds.set_tension
+
+        def ratio(swing: float, room: float) -> float:
+            return swing / room if room > 0 else (math.inf if swing > 0 else 0.0)
+
+        return max(
+            ratio(self.peak - s, bounds.high - s),
+            ratio(self.peak + self.whirl - s, bounds.max_tension - s),
+            ratio(s - self.minimum, s - bounds.low),
+        )
+
     def breach(self, bounds: Bounds, wire: Wire) -> str:
         """What passes the bounds, in words ("" if nothing)."""
         top = self.peak + self.whirl
