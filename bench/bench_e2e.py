@@ -2,7 +2,7 @@
 raw DDS throughput of the same bytes between two plain rclpy processes,
 measured in the same run, size by size.
 
-    .venv/bin/python bench/bench_e2e.py [--quick]
+    .venv/bin/python bench/bench_e2e.py [--quick | --wire]
 
 End-to-end: ``winder.ros.cell.run_cell`` (what ``winder run`` does) starts
 interp_node, profile_node and sim_node on a job of N steps (the sim node
@@ -41,6 +41,15 @@ simulated time (and the 200 Hz joint-state output, 3 messages per sample into
 DDS and the bag) stays small next to the step stream; the full run adds one
 job at a realistic 5e4 steps/s (2900 rpm flyer) to show what the samples cost,
 and one 10^7-step job in a single segment (memory of a long segment).
+
+The wire (``--wire`` alone, and at the end of the full run): a real job on
+a rectangular core (``jobs/ortho_rect.yaml`` on 4 poles, its own ramp), with
+its core given (the sim node then simulates the wire at every sample: the
+take-up, the tensioner, the tension published and recorded) against itself
+without a core (no wire), at 200 and 1000 Hz samples, the two run alternately
+as many times each. The throughput is steps / the sim node's job time; the
+ratio with over without is given best against best and as the median of the
+pairs (issue 43: the wire costs at most 25 %, a ratio of 0.75 or more).
 """
 
 from __future__ import annotations
@@ -76,6 +85,7 @@ class Case:
     job: dict[str, Any]
     profile: dict[str, Any]
     domain: int
+    rate: float = PUBLISH_RATE  #: the sim node's samples a second
 
     @property
     def steps(self) -> int:
@@ -121,7 +131,7 @@ def run_e2e(case: Case, timeout: float, keep: Path | None = None) -> dict[str, A
     params = {
         "interp": {**Job(**case.job).to_dict(), "chunk_steps": CHUNK_STEPS},
         "profile": dict(case.profile),
-        "sim": {"publish_rate": PUBLISH_RATE, "bag_dir": str(work / "bags"), "record": True},
+        "sim": {"publish_rate": case.rate, "bag_dir": str(work / "bags"), "record": True},
     }
     marks: list[float] = []
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
@@ -149,6 +159,7 @@ def run_e2e(case: Case, timeout: float, keep: Path | None = None) -> dict[str, A
             gaps=int(s["gaps"]),
             rejected=int(s["chunks_rejected"]),
             errors=int(s["errors"]),
+            tension=s.get("tension_peak_n"),  # the simulated wire's peak (None: no wire)
             bag_chunks=chunks,
             bag_mb=sum(f.stat().st_size for f in bag.iterdir()) / 1e6 if bag and bag.exists() else 0.0,
         )
@@ -373,9 +384,100 @@ def replay_split(bag: Path) -> None:
     print(table(["part", "calls", "s", "share", "us/call"], rows))
 
 
+#: the wire's job (``--wire``): jobs/ortho_rect.yaml (an orthocyclic coil on a 12 x 20 mm
+#: core, 0.5 mm copper, its ramp: a 24.5 rad/s flyer; ``winder check`` passes it) on 4 poles,
+#: 7.5e6 steps; without the wire: the same with its core not given
+WIRE_JOB = HERE.parent / "jobs" / "ortho_rect.yaml"
+WIRE_POLES = 4
+WIRE_RATES = (200.0, 1000.0)
+
+
+def wire_jobs() -> tuple[dict[str, Any], dict[str, Any], dict[str, Any]]:
+    """The wire's job with its core and without (Job's fields), and its ramp."""
+    from winder.contract.jobfile import load_job_file
+    from winder.motion.job import ATTRIBUTES
+
+    params = load_job_file(WIRE_JOB)
+    values = params["interp_node"] | {"poles": WIRE_POLES}
+    wired = {ATTRIBUTES[k]: v for k, v in values.items()} | {"job_id": "bench_wire"}
+    plain = {ATTRIBUTES[k]: v for k, v in values.items() if not k.startswith("bobbin.core")}
+    return wired, plain | {"job_id": "bench_nowire"}, params["profile_node"]
+
+
+def wire_cost(repeat: int, timeout: float) -> None:
+    """The same job with the wire simulated (its core given) and without,
+    alternated ``repeat`` times at each sample rate: the ratio of throughputs."""
+    wired, plain, ramp = wire_jobs()
+    rows, heads = [], []
+    for r, rate in enumerate(WIRE_RATES):
+        without = Case("no wire", plain, ramp, domain(10), rate)
+        within = Case("wire", wired, ramp, domain(10), rate)
+        runs: dict[str, list[dict[str, Any]]] = {"no wire": [], "wire": []}
+        pairs = []
+        for rep in range(repeat):
+            # alternated, the first of each pair swapped every time: the load drifts over seconds
+            order = (without, within) if (rep + r) % 2 == 0 else (within, without)
+            for case in order:
+                runs[case.label].append(run_e2e(case, timeout))
+            a, b = runs["no wire"][-1], runs["wire"][-1]
+            if "job_wall" in a and "job_wall" in b:
+                pairs.append(a["job_wall"] / b["job_wall"])
+        a, b = best(runs["no wire"], "job_wall"), best(runs["wire"], "job_wall")
+        n = without.steps
+        ok = all(x.get("lossless") for x in runs["no wire"] + runs["wire"])
+        wire_seen = all(x.get("tension") is not None for x in runs["wire"]) and not any(
+            x.get("tension") is not None for x in runs["no wire"]
+        )
+        nan = float("nan")
+        ja, jb = a.get("job_wall", nan), b.get("job_wall", nan)
+        cpu_a = sum((a.get(k) or {}).get("cpu_job") or 0.0 for k in NODES)
+        cpu_b = sum((b.get(k) or {}).get("cpu_job") or 0.0 for k in NODES)
+        pairs.sort()
+        rows.append(
+            [
+                f"{rate:g}",
+                n,
+                round(a.get("sim_s", 0) * rate),
+                f"{ja:6.2f}",
+                f"{jb:6.2f}",
+                f"{n / ja / 1e6:5.2f}",
+                f"{n / jb / 1e6:5.2f}",
+                f"{ja / jb:5.2f}",
+                f"{pairs[len(pairs) // 2]:5.2f} ({pairs[0]:.2f}-{pairs[-1]:.2f})" if pairs else "-",
+                f"{cpu_a:5.2f} / {cpu_b:5.2f}",
+                f"{(cpu_b - cpu_a) / max(a.get('sim_s', 0) * rate, 1) * 1e6:5.1f}",
+                str(b.get("tension", "-")),
+                "yes" if ok and wire_seen else "NO",
+            ]
+        )
+        heads.append(f"{rate:g} Hz: {ja / jb:.2f} best, {pairs[len(pairs) // 2]:.2f} paired" if pairs else "")
+    core = f"{wired['core_width'] * 1e3:g} x {wired['core_depth'] * 1e3:g} mm"
+    print(
+        f"\nThe wire: {WIRE_JOB.name} on {WIRE_POLES} poles ({wired['turns_per_layer']} turns x "
+        f"{wired['layers']} layers a coil, v_max {ramp['v_max']:g} steps/s), without a core (no wire) and "
+        f"on its {core} core (the wire simulated at every sample; default dancer), alternated, best of "
+        f"{repeat} each"
+    )
+    print(
+        table(
+            ["Hz", "steps", "samples", "no wire job s", "wire job s", "no wire Msteps/s", "wire Msteps/s",
+             "wire / no wire", "paired median (range)", "CPU s: no wire / wire", "wire CPU us/sample",
+             "tension peak N", "all steps, wire seen"],
+            rows,
+        )
+    )  # fmt: skip
+    print(
+        "  throughput with the wire over without (target >= 0.75, issue 43): "
+        + "; ".join(h for h in heads if h)
+    )
+
+
 def main() -> None:
     if "--replay" in sys.argv:
         replay_split(Path(sys.argv[sys.argv.index("--replay") + 1]))
+        return
+    if "--wire" in sys.argv:
+        wire_cost(4, 900.0)
         return
     quick = "--quick" in sys.argv
     sizes = SIZES[:3] if quick else SIZES
@@ -566,6 +668,9 @@ def main() -> None:
             f"  the {extra_samples} extra 200 Hz samples of the 5e4 job cost {per_sample * 1e6:.0f} us each "
             "(its job time over the 1e6 row above; per sample: /clock + 2 JointState published and recorded)"
         )
+
+    if not quick:
+        wire_cost(3, timeout)
 
     for name, what in (("fast", "1e6 at v_max 1e6"), ("real", "1e6 at v_max 5e4")):
         if (scratch / name).exists():

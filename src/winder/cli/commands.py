@@ -62,8 +62,9 @@ from winder.motion.axes import AXIS_TABLE, FEED, FORK
 from winder.motion.interp import dda, deviation_stats, min_deviation, point_by_point
 from winder.motion.job import FIELD_SPECS, Job
 from winder.motion.limits import TimedJob
-from winder.motion.timing import plan_timing
+from winder.motion.timing import plan_job_timing
 from winder.spec import Spec
+from winder.tension.plan import Derating
 from winder.tension.tensioner import TENSIONER_SPECS
 
 __all__ = ["main"]
@@ -162,6 +163,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     job = job_from_args(args, given["interp_node"])
     profile = values_from_args(args, PROFILE_SPECS, given["profile_node"])
     check_profile(profile)
+    sim = values_from_args(args, SIM_SPECS, given["consumer"])
+    derating = derated(job, profile, str(given["interp_node"].get("schedule", "")), sim)
+    if derating is not None:  # the layers slowed go to the interp node in layer_speed
+        job = derating.job
     operation = values_from_args(args, OPERATION_SPECS, given["profile_node"])
     segments = job.segments()
     # the interp node's other settings in the file (chunk_steps, max_in_flight, stops...) go with the job
@@ -175,13 +180,10 @@ def cmd_run(args: argparse.Namespace) -> int:
         extra["job_file_sha256"] = digest  # the run's bag names its recipe
     stops = stop_points(job, extra["stops"])
     pause = float(extra["stop_pause"])
-    _, duration_ns = plan_timing(  # the job as a whole
-        profile, [s.steps for s in segments], stops, pause, [job.segment_speed(s) for s in segments]
-    )
+    _, duration_ns = plan_job_timing(profile, job, stops, pause)  # the job as a whole
     # the interp node's own check of what it will be given (schedule, the ramp it carries, ...)
     check_interp({**{n: s.default for n, s in INTERP_SPECS.items()}, **job.to_dict(), **extra}, job=job)
     external = external_nodes(args)
-    sim = values_from_args(args, SIM_SPECS, given["consumer"])
     check_sim({**sim, "record": False} if "sim" in external else sim)  # a remote bag_dir is its host's
     why = wire_refusal(job, profile, str(extra.get("schedule", "")), sim)
     if why:  # the words of winder check
@@ -195,6 +197,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         foxglove_host(args)
     if args.check:
         steps = sum(s.steps for s in segments)
+        if derating is not None and derating.words():
+            print(f"winder run --check: {derating.words()}")
         print(
             f"winder run --check: job {job.job_id}: {steps} steps in {len(segments)} segments, "
             f"{duration_ns / 1e9:.3f} s with the {profile['profile']} profile; every setting is valid, "
@@ -225,6 +229,9 @@ def cmd_run(args: argparse.Namespace) -> int:
         )
         model = "the external step consumer" if "sim" in external else f"{sim['model']} motor model"
         print(f"winder: job {job.job_id}, {job.total_steps} steps, {ramp}, {model}")
+        slowed = derating.words() if derating is not None else ""
+        if slowed:
+            print(f"  {slowed}")
         if digest:
             print(f"  job file           {args.job_file}  (sha256 {digest})")
         if external:
@@ -283,7 +290,10 @@ def cmd_run(args: argparse.Namespace) -> int:
         bar.close()
         # this run's bag, if its consumer was killed (or its disk filled) before it was closed
         left = [b for b in unclosed_bags(bag_dir) if b not in left_before] if local_bags else []
-        return report_run(result, time.monotonic() - t0, stops=bool(stops), unclosed=left)
+        code = report_run(result, time.monotonic() - t0, stops=bool(stops), unclosed=left)
+        if slowed and result.summary:
+            print(f"  derated            {slowed.removeprefix('tension.derate: ')}")
+        return code
     finally:
         interrupts.restore()
 
@@ -301,12 +311,18 @@ def cmd_check(args: argparse.Namespace) -> int:
 
     given = job_file(args, check_fit=False)
     job = Job.from_dict(values_from_args(args, FIELD_SPECS, given["interp_node"]), check_fit=False)
+    schedule = str(given["interp_node"].get("schedule", ""))
+    tensioner = values_from_args(args, TENSIONER_SPECS, given["consumer"])
+    derating = derated(job, given["profile_node"], schedule, tensioner) if job.winding.fits else None
+    if derating is not None:
+        job = derating.job
     laid = job.winding
     doc = {"job_id": job.job_id, **report(laid)}
-    timed = time_for_check(job, given["profile_node"], str(given["interp_node"].get("schedule", "")))
+    timed = time_for_check(job, given["profile_node"], schedule)
     add_takeup(job, doc, timed)
-    tensioner = values_from_args(args, TENSIONER_SPECS, given["consumer"])
     tension_why = add_tension(job, doc, tensioner, timed)
+    if derating is not None:
+        doc["wire"]["derated"] = derating.to_doc()
     if tension_why and doc["fits"]:  # the coil fits its bobbin, but its wire would not hold
         doc["fits"], doc["overflow"] = False, tension_why
     limits_why = ""
@@ -445,6 +461,25 @@ def wire_refusal(job: Job, ramp: dict[str, Any], schedule: str, consumer: dict[s
     timed = time_for_check(job, ramp, schedule)
     add_takeup(job, doc, timed)
     return add_tension(job, doc, consumer, timed)
+
+
+def derated(job: Job, ramp_given: dict[str, Any], schedule: str, consumer: dict[str, Any]) -> Derating | None:
+    """With ``tension.derate``, the job with the layers whose predicted
+    tension would pass its bounds slowed until it keeps (winder.tension.plan);
+    None without it, without a core to predict on, or where no speed helps
+    (a tensioner that oscillates or cannot hold the set tension: refused as
+    such)."""
+    if not (job.tension_derate and job.bobbin.core_given):
+        return None
+    from winder.contract.params import PROFILE_SPECS
+    from winder.tension.plan import derate
+    from winder.tension.tensioner import tensioner_of
+
+    tensioner = tensioner_of(consumer, job.wire.stiffness_per_length, job.set_tension)
+    if tensioner.unstable() or tensioner.cannot_hold():
+        return None
+    ramp = {n: s.default for n, s in PROFILE_SPECS.items()} | ramp_given
+    return derate(job, ramp, schedule, tensioner)
 
 
 def time_for_check(job: Job, ramp_given: dict[str, Any], schedule: str) -> TimedJob | None:
@@ -647,6 +682,16 @@ def check_lines(job: Job, doc: dict[str, Any]) -> list[str]:
             f"{w['set_tension_n']:.4g} N, alarm band {band[0]:.4g}..{band[1]:.4g} N, "
             f"{w['tensioner']} tensioner"
         )
+        d = w.get("derated")
+        if d and d["layers"]:
+            shares = sorted(x["speed_share"] for x in d["layers"])
+            before, after = d["duration_before_s"], d["duration_after_s"]
+            lines.append(
+                f"  derated        {_count(len(shares), 'layer')} slowed to "
+                f"{shares[0]:.0%}..{shares[-1]:.0%} of v_max (tension.derate): {after:.1f} s instead "
+                f"of {before:.1f} s "
+                f"(+{(after - before) / max(before, 1e-9):.0%})"
+            )
     lines.append(f"  fits           {'yes' if doc['fits'] else 'NO: ' + doc['overflow']}")
     return lines
 
@@ -723,7 +768,7 @@ def cmd_discovery_server(args: argparse.Namespace) -> int:
     return EXIT_OK  # not reached
 
 
-FIGURES = ("interp", "profile", "motor")
+FIGURES = ("interp", "profile", "motor", "wire_theory")
 
 
 def cmd_figures(args: argparse.Namespace) -> int:
