@@ -173,3 +173,19 @@ def test_the_flat_step_is_the_flats_length_far_out() -> None:
 def test_a_nozzle_inside_the_coil_is_refused() -> None:
     with pytest.raises(BadInputError, match=r"flyer_radius 0\.1 m is invalid"):
         Contour(0.2, 0.1, 0.0).lever(np.zeros(1), 0.1)
+
+
+@settings(max_examples=200, deadline=None)
+@given(contours, st.floats(1.05, 6.0), st.floats(-50.0, 50.0))
+def test_the_wire_normals_closed_form_is_the_bisections_root(c: Contour, reach: float, psi0: float) -> None:
+    """The root of R cos(alpha) = h(psi - alpha) in [0, pi/2], found here by
+    bisection to the last bit (the function falls across the interval)."""
+    radius = c.h_max * reach
+    psi = psi0 + np.linspace(0.0, 2 * math.pi, 720)
+    lo, hi = np.zeros_like(psi), np.full_like(psi, math.pi / 2)
+    for _ in range(70):
+        mid = (lo + hi) / 2
+        ahead = radius * np.cos(mid) > c.h(psi - mid)
+        lo, hi = np.where(ahead, mid, lo), np.where(ahead, hi, mid)
+    got = c.wire_normal(psi, radius)
+    assert np.allclose(got, psi - (lo + hi) / 2, rtol=0, atol=1e-12 * (1 + abs(psi0)))

@@ -95,20 +95,37 @@ class Contour:
     def wire_normal(self, psi: Floats, radius: float) -> Floats:
         """The normal angle ``theta`` of the free wire's line with the nozzle
         at angle ``psi`` and ``radius`` (> :attr:`h_max`): ``psi - alpha``,
-        ``alpha`` the root in (0, pi/2) of ``R cos(alpha) = h(psi - alpha)``,
-        by bisection to the last bit."""
+        ``alpha`` the root in [0, pi/2] of ``R cos(alpha) = h(psi - alpha)``.
+        Closed form: with the signs ``s1, s2`` of ``cos theta, sin theta``
+        (the quadrant the wire's normal lies in) the equation is ``P cos
+        alpha + Q sin alpha = r``, ``P = R - (a/2 - r) s1 cos psi - (b/2 - r)
+        s2 sin psi``, ``Q = (b/2 - r) s2 cos psi - (a/2 - r) s1 sin psi``, so
+        ``alpha = atan2(Q, P) +- acos(r / hypot(P, Q))``; of the eight
+        candidates the one in [0, pi/2] that solves the equation itself is
+        the root (it is unique: the left side falls and the right rises)."""
         if not radius > self.h_max:
             raise BadInputError(
                 f"flyer_radius {radius:g} m is invalid: the coil's layer reaches {self.h_max:g} m from the "
                 "flyer's axis; the nozzle must circle outside it"
             )
         psi = np.asarray(psi, float)
-        lo, hi = np.zeros_like(psi), np.full_like(psi, math.pi / 2)
-        for _ in range(60):
-            mid = (lo + hi) / 2
-            ahead = radius * np.cos(mid) > self.h(psi - mid)  # f(alpha) > 0: the root lies beyond
-            lo, hi = np.where(ahead, mid, lo), np.where(ahead, hi, mid)
-        out: Floats = psi - (lo + hi) / 2
+        ca, cb = self.a / 2 - self.r, self.b / 2 - self.r
+        c, s = np.cos(psi), np.sin(psi)
+        best = np.zeros_like(psi)
+        miss = np.full_like(psi, np.inf)
+        for s1, s2 in ((1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)):
+            p = radius - ca * s1 * c - cb * s2 * s
+            q = cb * s2 * c - ca * s1 * s
+            phase = np.arctan2(q, p)
+            spread = np.arccos(np.clip(self.r / np.hypot(p, q), -1.0, 1.0))
+            for alpha in (phase - spread, phase + spread):
+                alpha = np.remainder(alpha + math.pi, 2 * math.pi) - math.pi
+                alpha = np.where((alpha < 0) & (alpha > -1e-12), 0.0, alpha)
+                err = np.abs(radius * np.cos(alpha) - self.h(psi - alpha))
+                err = np.where((alpha >= 0) & (alpha <= math.pi / 2), err, np.inf)
+                better = err < miss
+                best, miss = np.where(better, alpha, best), np.where(better, err, miss)
+        out: Floats = psi - best
         return out
 
     def lever(self, psi: Floats, radius: float) -> Floats:

@@ -61,6 +61,10 @@ def expm(a: Floats) -> Floats:
     return out
 
 
+#: samples :meth:`Discrete.run` steps at a time
+BLOCK = 64
+
+
 class Discrete:
     """A continuous LTI system ``(A, B, C, D)`` of one input, stepped exactly
     over sample period ``h`` with the input linear between samples."""
@@ -79,20 +83,48 @@ class Discrete:
         self.g1 = e[:n, n + 1]  # (1/h) int_0^h e^{A (h - s)} s ds B
         self.h = h
         self.n = n
+        self._powers: Floats | None = None
+        self._toeplitz: Floats | None = None
 
     def run(self, x0: Floats, u: Floats) -> tuple[Floats, Floats]:
         """The states at every sample of the input ``u`` (``u[0]`` at ``x0``)
-        and the outputs there: ``(len(u), n)`` and ``(len(u), outputs)``."""
+        and the outputs there: ``(len(u), n)`` and ``(len(u), outputs)``.
+        Stepped :data:`BLOCK` samples at a time: ``x[k] = phi**k x0 + sum
+        phi**(k-1-j) w[j]``, ``w[j]`` the input's share of step ``j``."""
         u = np.asarray(u, float)
         xs = np.empty((u.size, self.n))
         x = np.asarray(x0, float).copy()
         if u.size:
             xs[0] = x
-        for k in range(1, u.size):
-            x = self.phi @ x + self.g0 * u[k - 1] + self.g1 * (u[k] - u[k - 1])
-            xs[k] = x
+        w = u[:-1, None] * (self.g0 - self.g1)[None, :] + u[1:, None] * self.g1[None, :]
+        powers, toeplitz = self._blocks()
+        for lo in range(0, w.shape[0], BLOCK):
+            wb = w[lo : lo + BLOCK]
+            m = wb.shape[0]
+            size = m * self.n
+            forced = (toeplitz[:size, :size] @ wb.reshape(-1)).reshape(m, self.n)
+            xs[lo + 1 : lo + 1 + m] = powers[1 : m + 1] @ x + forced
+            x = xs[lo + m]
         ys = xs @ self.c.T + u[:, None] * self.d[None, :]
         return xs, ys
+
+    def _blocks(self) -> tuple[Floats, Floats]:
+        """``phi**k`` for k = 0..BLOCK, and the block's convolution as one
+        matrix: its ``n x n`` block ``[k, j]`` is ``phi**(k-j)`` for ``j <= k``,
+        else 0 (made once)."""
+        if self._powers is None:
+            powers = np.empty((BLOCK + 1, self.n, self.n))
+            powers[0] = np.eye(self.n)
+            for i in range(1, BLOCK + 1):
+                powers[i] = self.phi @ powers[i - 1]
+            rows, cols = np.meshgrid(np.arange(BLOCK), np.arange(BLOCK), indexing="ij")
+            lag = rows - cols
+            blocks = np.where((lag >= 0)[:, :, None, None], powers[np.maximum(lag, 0)], 0.0)
+            # as one matrix: row k*n + a, column j*n + b (the block's states and inputs, flattened)
+            toeplitz = blocks.transpose(0, 2, 1, 3).reshape(BLOCK * self.n, BLOCK * self.n)
+            self._powers, self._toeplitz = powers, toeplitz
+        assert self._toeplitz is not None
+        return self._powers, self._toeplitz
 
 
 def periodic_orbit(system: Discrete, u: Floats) -> Floats:

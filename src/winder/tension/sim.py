@@ -81,19 +81,14 @@ class WireSim:
         """The wire at the next samples (flyer angle, speed and segment at each)."""
         v = self.takeup(np.asarray(psi, float), np.asarray(omega, float), np.asarray(segments, np.int64))
         n = v.size
-        states = np.empty((n, self.system.n))
-        taken = np.empty(n)
-        phi, g0, g1, h = self.system.phi, self.system.g0, self.system.g1, self.period
-        x, last, total = self.x, self.v, self.taken
-        for k in range(n):
-            if self.started:
-                x = phi @ x + g0 * last + g1 * (v[k] - last)
-                total += h * (last + v[k]) / 2
+        # from the last sample on (its state and speed), or from rest at the first sample
+        inputs = np.concatenate([[self.v], v]) if self.started else v
+        states = self.system.run(self.x, inputs)[0][inputs.size - n :]
+        steps = np.cumsum(self.period * (inputs[1:] + inputs[:-1]) / 2)  # the wire taken, trapezoids
+        taken = self.taken + (steps if self.started or not n else np.concatenate([[0.0], steps]))
+        if n:
             self.started = True
-            last = v[k]
-            states[k] = x
-            taken[k] = total
-        self.x, self.v, self.taken = x, last, total
+            self.x, self.v, self.taken = states[-1].copy(), float(v[-1]), float(taken[-1])
         out = states @ self.system.c.T
         tension = np.maximum(self.tensioner.set_tension + out[:, 0], 0.0)
         held = self.tensioner.held(states)
