@@ -154,6 +154,52 @@ def test_a_wire_pulled_past_its_breaking_load_stops_the_run(tmp_path: Path, proc
     run = read_run(meta.parent)
     assert run.report["state"] == "incomplete", run.report
     assert any(
-        ": wire: the wire broke " in e and "its breaking load 34.99 N, 220 MPa" in e for e in run.errors
+        ": wire: wire break at coil 1 layer 1 turn " in e and "its breaking load 34.99 N, 220 MPa" in e
+        for e in run.errors
     ), run.errors
     assert float(run.report["tension_peak_n"]) > 34.99
+
+
+@pytest.mark.parametrize(
+    ("fault", "words", "turn"),
+    [
+        (["--fault.wire-break-turn", "8"], "wire break at coil 1 layer 2 turn 8 (", 8),
+        (["--fault.slip-turn", "3"], "wire slip at coil 1 layer 1 turn 3 (", 3),
+    ],
+)
+def test_an_injected_fault_is_caught_at_its_turn(
+    tmp_path: Path, procs: Procs, fault: list[str], words: str, turn: int
+) -> None:
+    """A break and a slip injected at a turn of the job: caught in that turn
+    (the recorded flyer's angle at the fault's time says which), the run
+    stopped there incomplete, `winder run` exits 1 naming it, and the bag
+    reads to its end."""
+    r = winder_run(tmp_path, procs.domain, *RECT, "--publish-rate", "2000", "--v-max", "1500", *fault)
+    assert r.returncode == 1, r.stdout + r.stderr
+    last = r.stderr.strip().splitlines()[-1]
+    assert last.startswith("winder run: job rect: incomplete, ") and words in last, r.stderr
+    bag = rosbags_read(only_bag(tmp_path))  # every message, to the end
+    statuses = [st for _, m in bag["/diagnostics"] for st in m.status if st.name.endswith(": wire")]
+    assert len(statuses) == 1 and statuses[0].message.startswith(words.rstrip(" ("))
+    values = {kv.key: kv.value for kv in statuses[0].values}
+    kind = "break" if "break" in words else "slip"
+    assert (values["fault"], values["coil"], values["layer"], values["turn"]) == (
+        kind,
+        "1",
+        str(1 + (turn > 6)),
+        str(turn),
+    )
+    states = bag["/winder/joint_states"]
+    t = np.array([m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for _, m in states])
+    t -= t[0]
+    fork = np.array([m.position[1] for _, m in states])
+    at = int(np.searchsorted(t, float(values["t_s"]) - 1e-9))
+    assert turn - 1 <= fork[at] / (2 * np.pi) < turn  # the job's turn (one coil: the coil's)
+    tension = np.array([m.wrench.force.x for _, m in bag["/winder/tension"]])
+    if kind == "break":  # the wire held up to there, and nothing from there on
+        assert tension[at - 1] > 1.0 and not tension[at:].any()
+    assert t[-1] - t[at] <= 0.02  # the axes stopped as the watch saw it (10 ms on, for a break)
+    run = read_run(only_bag(tmp_path))
+    assert run.report["state"] == "incomplete" and int(run.report["steps_done"]) < int(
+        run.report["steps_total"]
+    )

@@ -58,8 +58,6 @@ from winder.contract.topics import (
     TOPIC_TENSION,
 )
 from winder.motion.axes import AXES, FORK
-from winder.motion.material import Wire
-from winder.motion.takeup import Contour
 from winder.ros.consumer import StepConsumer
 from winder.ros.diagnostics import ERROR
 from winder.ros.engine import Engine, RunPort
@@ -67,8 +65,7 @@ from winder.ros.qos import QOS_CLOCK, QOS_STATE
 from winder.ros.spin import spin
 from winder.ros.timers import steady_timer
 from winder.ros.upstream import ProfileAbort
-from winder.tension.sim import WireSim
-from winder.tension.tensioner import tensioner_of
+from winder.tension.run import WireRun
 
 #: Samples simulated in one go, at most: the node's memory is bounded by this,
 #: never by the simulated time a batch of steps covers (at 1 step/s, a chunk of
@@ -82,8 +79,6 @@ SAMPLE_BATCH = 1 << 15
 FREE_RUN_LEAP = 0.02
 #: s of wall time after which a real-time run waiting for steps says its /clock again
 CLOCK_REPEAT = 0.1
-#: the job report's key of the tensioner's largest excursion
-TRAVEL_KEY = {"dancer": "dancer_travel_max_m", "servo": "servo_feed_max_m_s"}
 #: the simulator's own recorded topics
 SIM_TOPICS = {
     "clock": (TOPIC_CLOCK, "rosgraph_msgs/msg/Clock"),
@@ -163,14 +158,9 @@ class SimEngine(Engine):
         self.pace_factor = 0.0  # the real_time_factor since wall_pace0
         self.last_seg = -1  # the segment of the last step row simulated (-1: none yet)
         self.t_sim_ns = 0  # simulated time reached, since the run's start (ns)
-        self.wire: WireSim | None = None  # the wire, where the job gives its core
-        self.wire_bound: Wire | None = None
-        self.broken = ""  # the wire broke: where and how (the run stops)
-        self.broken_at: tuple[float, int] | None = None  # the supply paid out when it broke
-        self.broken_said = False
-        self.stretched = 0.0  # the highest stress past the wire's yield (Pa; 0: none)
-        self.outside = {"warning": 0, "alarm": 0}  # samples with the tension outside each band
-        self.bands: dict[str, tuple[float, float]] = {}
+        self.wire: WireRun | None = None  # the wire, where the job gives its core
+        self.wire_stopped = False  # its fault has stopped the run
+        self.wire_cut: float | None = None  # the sample time its fault stopped the axes at (s)
 
     # -- the consumer's hooks ---------------------------------------------------
     def begin(self, plan: JobPlan, values: dict[str, Any]) -> dict[str, object]:
@@ -178,7 +168,11 @@ class SimEngine(Engine):
         # the run starts on the cell's clock one sample after the last one published
         self.origin_ns = 0 if self.clock_ns < 0 else self.clock_ns + round(1e9 / self.rate)
         self.encoder = JointStateEncoder(AXES, plan.job_id)
-        self.wire = self.wire_of(plan, values)
+        self.wire, why = WireRun.of(plan.job, plan.segments, values, self.rate, plan.joint_step[FORK.index])
+        if why:  # winder run and winder check refuse such a job; a run started otherwise goes without
+            self.node.get_logger().error(
+                f"run {plan.run_id or plan.job_id}: the wire is not simulated: {why}"
+            )
         joints = list(AXES)
         if self.wire is not None:
             self.upstream.find()  # the run's profile node, before the wire can break
@@ -209,37 +203,10 @@ class SimEngine(Engine):
     def unrecorded(self) -> frozenset[str]:
         return frozenset() if self.wire is not None else frozenset({"tension"})
 
-    def wire_of(self, plan: JobPlan, values: dict[str, Any]) -> WireSim | None:
-        """The run's wire: the flyer winds each layer on its contour (None:
-        the job does not give its core, so nothing of the wire is known)."""
-        job = plan.job
-        if not job.bobbin.core_given:
-            return None
-        contours: dict[int, Contour | None] = {}
-        for seg in plan.segments:
-            if seg.kind.winds:
-                layer = job.winding.coils[seg.pole].layers[seg.layer]
-                contours[seg.index] = job.bobbin.contour(layer.radius)
-        wire = job.wire
-        tensioner = tensioner_of(values, wire.stiffness_per_length, job.set_tension)
-        why = tensioner.unstable()
-        if why:  # winder run and winder check refuse such a job; a run started otherwise goes without
-            self.node.get_logger().error(
-                f"run {plan.run_id or plan.job_id}: the wire is not simulated: {why}"
-            )
-            return None
-        self.wire_bound = wire
-        set_n = job.set_tension
-        self.bands = {
-            "warning": (set_n * (1 - job.tension_warning), set_n * (1 + job.tension_warning)),
-            "alarm": (set_n * (1 - job.tension_alarm), set_n * (1 + job.tension_alarm)),
-        }
-        return WireSim(tensioner, contours, job.flyer_radius, 1.0 / self.rate)
-
     def wire_config(self) -> dict[str, object] | None:
-        if self.wire is None or self.wire_bound is None:
+        if self.wire is None:
             return None
-        wire, t = self.wire_bound, self.wire.tensioner
+        wire, t = self.wire.wire, self.wire.tensioner
         return {
             "material": wire.material.name,
             "max_tension_n": wire.max_tension,
@@ -256,10 +223,13 @@ class SimEngine(Engine):
         return not self.paces()
 
     def accepts_more(self) -> bool:
+        if self.wire_cut is not None:
+            return False  # the wire's fault stopped the run (work_wire)
         return self.rest is None and not (self.paces() and self.out and self.ahead())
 
     def holding(self) -> bool:
-        return self.rest is not None
+        # a wire's fault stopped the axes: they neither go on nor settle (work_wire closes the run)
+        return self.rest is not None or self.wire_cut is not None
 
     def pending(self) -> bool:
         return self.rest is not None or bool(self.out) or self.free_running()
@@ -332,17 +302,7 @@ class SimEngine(Engine):
             self.dev_cmd.add(step_deviation(self.run.plan, seg, rows[:, 2:]))
 
     def details(self) -> dict[str, object]:
-        wire: dict[str, object] = {}
-        if self.wire is not None:
-            w = self.wire
-            wire = {
-                "tension_peak_n": f"{w.peak:.4g}",
-                "tension_min_n": f"{w.least:.4g}",
-                TRAVEL_KEY.get(w.tensioner.kind, "tensioner_coordinate_max"): f"{w.travel:.4g}",
-                "wire_taken_m": f"{w.taken:.6g}",
-                "tension_outside_warning_s": f"{self.outside['warning'] / self.rate:.3f}",
-                "tension_outside_alarm_s": f"{self.outside['alarm'] / self.rate:.3f}",
-            }
+        wire = self.wire.details() if self.wire is not None else {}
         return {
             **wire,
             "lost_steps": sum(a.lost_steps for a in self.axes),
@@ -356,37 +316,24 @@ class SimEngine(Engine):
     def faults(self) -> str:
         lost = sum(a.lost_steps for a in self.axes)
         said = [f"{lost} steps lost"] if lost else []
-        if self.broken:
-            said.append(self.broken)
-        elif self.wire is not None and self.wire_bound is not None:
-            if self.outside["alarm"]:
-                low, high = self.bands["alarm"]
-                w = self.wire
-                said.append(
-                    f"the wire's tension left the alarm band ({low:.4g}..{high:.4g} N) for "
-                    f"{self.outside['alarm'] / self.rate:.3f} s ({w.least:.4g}..{w.peak:.4g} N)"
-                )
-            if self.stretched:
-                m = self.wire_bound.material
-                rise = self.wire_bound.resistance_rise(self.stretched)
-                said.append(
-                    f"the wire was stretched past its yield ({self.stretched / 1e6:.4g} MPa against "
-                    f"{m.yield_stress / 1e6:.4g} MPa): its resistance rose by {rise:.3%} where it was"
-                )
+        if self.wire is not None:
+            said += self.wire.faults()
         return "; ".join(said)
 
     def work_wire(self) -> None:
-        """A broken wire stops the run: said, the profile node asked to abort, the run closed."""
-        if not self.broken or self.broken_said or self.run.plan is None:
+        """A fault of the wire (a break, a slip) stops the run: said, the
+        profile node asked to abort, the run closed."""
+        if self.wire is None or self.wire.fault is None or self.wire_stopped or self.run.plan is None:
             return
-        self.broken_said = True
-        self.flush()  # the samples up to the break and after it go out and into the bag first
+        self.wire_stopped = True
+        self.flush()  # the samples up to the fault and after it go out and into the bag first
         plan = self.run.plan
         if plan is None:
             return
-        self.node.get_logger().error(f"{self.broken}; the run stops")
-        ids: dict[str, object] = {"job_id": plan.job_id, "run_id": plan.run_id}
-        self.run.publish_status("wire", ERROR, f"{self.broken}; the run stops", ids)
+        text = f"{self.wire.fault_text()}; the run stops"
+        self.node.get_logger().error(text)
+        values: dict[str, object] = {"job_id": plan.job_id, "run_id": plan.run_id, **self.wire.fault.values()}
+        self.run.publish_status("wire", ERROR, text, values)
         self.upstream.ask(TOPIC_STEP_TIMES)
         self.run.finish(complete=False)
 
@@ -405,6 +352,9 @@ class SimEngine(Engine):
                 self.simulate(None, None, until=end)  # no step within the batch: samples only
             else:
                 self.simulate(rows[lo:hi], t_s[lo:hi], until=float(t_s[hi - 1]) if hi == n else end)
+            if self.wire_cut is not None:  # the wire's fault stopped the axes there: no row after it runs
+                self.run.executed(int(np.searchsorted(t_s[lo:hi], self.wire_cut, side="right")))
+                return
             self.run.executed(hi - lo)
             lo = hi
             if lo < n:
@@ -466,59 +416,14 @@ class SimEngine(Engine):
             self.deviation_of_axes(seg_of_sample, act_pos)
             block = {"k": ks, "cmd_pos": cmd_pos, "cmd_vel": cmd_vel, "act_pos": act_pos, "act_vel": act_vel}
             if self.wire is not None:
-                block.update(self.wire_samples(samples, act_pos, act_vel, seg_of_sample))
+                fork = FORK.index
+                block.update(self.wire.samples(samples, act_pos[:, fork], act_vel[:, fork], seg_of_sample))
+                fault = self.wire.fault
+                if fault is not None and self.wire_cut is None:  # the axes stop where the watch saw it
+                    self.wire_cut = fault.seen_s
+                    keep = int(np.searchsorted(samples, fault.seen_s, side="right"))
+                    block = {key: value[:keep] for key, value in block.items()}
             self.out.append(block)
-
-    def wire_samples(
-        self,
-        samples: npt.NDArray[np.float64],
-        act_pos: npt.NDArray[np.float64],
-        act_vel: npt.NDArray[np.float64],
-        segs: npt.NDArray[np.int64],
-    ) -> dict[str, npt.NDArray[np.float64]]:
-        """The wire at the samples (winder.tension.sim), from the flyer's
-        simulated angle and speed; a stress past the yield is noted, one at
-        the tensile strength breaks the wire (the run stops: work_wire)."""
-        assert self.wire is not None and self.wire_bound is not None and self.run.plan is not None
-        fork = FORK.index
-        w = self.wire.advance(act_pos[:, fork], act_vel[:, fork], segs)
-        dancer = self.wire.tensioner.kind == "dancer"
-        tension = w.tension.copy()
-        pos = np.column_stack([w.supply, w.coordinate] if dancer else [w.supply])
-        vel = np.column_stack([w.supply_speed, w.coordinate_rate] if dancer else [w.supply_speed])
-        wire, m = self.wire_bound, self.wire_bound.material
-        stress = w.tension / wire.section + m.density * w.takeup**2 / 2
-        start = 0
-        if self.broken_at is None and stress.size:
-            over = np.flatnonzero(stress >= m.tensile_strength)
-            if over.size:  # the first sample at the tensile strength: it breaks there
-                k = int(over[0])
-                self.broken_at = (float(pos[k, 0]), k)
-                seg = self.run.plan.segments[int(segs[k])] if segs[k] >= 0 else None
-                where = (
-                    f"coil {seg.pole + 1} layer {seg.layer + 1}, "
-                    if seg is not None and seg.kind.winds
-                    else ""
-                )
-                self.broken = (
-                    f"the wire broke {samples[k]:.3f} s into the run ({where}tension {w.tension[k]:.4g} N at "
-                    f"{w.takeup[k]:.3g} m/s: {stress[k] / 1e6:.4g} MPa, its breaking load "
-                    f"{wire.breaking_load:.4g} N, {m.tensile_strength / 1e6:.4g} MPa)"
-                )
-                start = k + 1
-            elif float(stress.max()) > m.yield_stress:
-                self.stretched = max(self.stretched, float(stress.max()))
-        for band, (low, high) in self.bands.items():
-            held = tension[: start or None]  # up to the break
-            self.outside[band] += int(np.count_nonzero((held < low) | (held > high)))
-        if self.broken_at is not None:
-            # from the break on the wire holds nothing: no tension, the supply stands, the arm at rest
-            paid, _ = self.broken_at
-            tension[start:] = 0.0
-            pos[start:] = 0.0
-            pos[start:, 0] = paid
-            vel[start:] = 0.0
-        return {"tension": tension, "wire_pos": pos, "wire_vel": vel}
 
     @staticmethod
     def command_velocity(

@@ -236,6 +236,37 @@ SIM_SPECS = {
     # the tensioner and the free span (winder.tension): `winder check` predicts each
     # layer's tension with them
     **TENSIONER_SPECS,
+    # faults of the wire, injected for tests and operator training (winder.tension.watch catches them)
+    **_table(
+        Spec(
+            "fault.wire_break_turn",
+            int,
+            0,
+            "the wire breaks as the flyer starts this turn of the job (counted from 1 over its coils; 0: never)",
+            "",
+            0,
+            10**9,
+        ),
+        Spec(
+            "fault.slip_turn",
+            int,
+            0,
+            "the supply's counter slips over this turn of the job (from 1; 0: never)",
+            "",
+            0,
+            10**9,
+        ),
+        Spec(
+            "fault.slip_length",
+            float,
+            0.02,
+            "how much wire the counter misses over the slipping turn",
+            "m",
+            0.0,
+            100.0,
+            True,
+        ),
+    ),
 }
 
 

@@ -83,6 +83,7 @@ LATER_FIELDS = frozenset(
         "tension.alarm",
         "tension.max_share",
         "tension.derate",
+        "tension.slip_tolerance",
     }
 )
 

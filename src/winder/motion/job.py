@@ -298,6 +298,14 @@ FIELD_SPECS: dict[str, Spec] = {
         _f(
             "tension.max_share", 0.05, 1.0, "", "the share of the wire's maximum tension a job may reach", 1.0
         ),
+        _f(
+            "tension.slip_tolerance",
+            0.0,
+            100.0,
+            "m",
+            "a slip or count mismatch: the wire paid out may differ from what the turns took by this much",
+            0.01,
+        ),
         Spec(
             "tension.derate",
             bool,
@@ -573,6 +581,7 @@ class Job:
     tension_alarm: float = FIELD_SPECS["tension.alarm"].default
     tension_max_share: float = FIELD_SPECS["tension.max_share"].default
     tension_derate: bool = FIELD_SPECS["tension.derate"].default
+    tension_slip_tolerance: float = FIELD_SPECS["tension.slip_tolerance"].default
     check_fit: InitVar[bool] = True
 
     def __post_init__(self, check_fit: bool) -> None:
