@@ -203,3 +203,57 @@ def test_an_injected_fault_is_caught_at_its_turn(
     assert run.report["state"] == "incomplete" and int(run.report["steps_done"]) < int(
         run.report["steps_total"]
     )
+
+
+CORES = {
+    "rect": ["--bobbin.core", "rect", "--bobbin.core-width", "0.012", "--bobbin.core-depth", "0.02"],
+    "square": ["--bobbin.core", "rect", "--bobbin.core-width", "0.016", "--bobbin.core-depth", "0.016"],
+    "round": ["--bobbin.core", "round", "--bobbin.core-diameter", "0.016"],
+}
+
+
+def turn_harmonics(tmp_path: Path, domain: int, core: str, v_max: int) -> np.ndarray:
+    """The recorded tension's harmonics of the flyer's turn (N; index m: m
+    times a turn) over the last 8 turns the flyer cruised, resampled evenly
+    in its recorded angle: numpy's FFT of the bag, nothing of winder's."""
+    out = tmp_path / f"{core}_{v_max}"
+    out.mkdir()
+    args = [
+        *["--job-id", "ripple", "--wire-diameter", "0.0005", "--wire.bare-diameter", "0.00045"],
+        *["--flyer-radius", "0.03", "--turns-per-layer", "16", "--layers", "1", "--poles", "1"],
+        *["--fork-steps-per-rev", "512", "--feed-step", "1e-5", "--publish-rate", "2000"],
+        *(["--bobbin.core-corner-radius", "0.001"] if core != "round" else []),
+    ]
+    r = winder_run(out, domain, *args, *CORES[core], "--v-max", str(v_max))
+    assert r.returncode == 0, r.stdout + r.stderr
+    bag = rosbags_read(only_bag(out))
+    psi = np.array([m.position[1] for _, m in bag["/winder/joint_states"]])
+    omega = np.array([m.velocity[1] for _, m in bag["/winder/joint_states"]])
+    tension = np.array([m.wrench.force.x for _, m in bag["/winder/tension"]])
+    cruise = np.flatnonzero(np.abs(omega - omega.max()) < 1e-3 * omega.max())
+    a, b = cruise[0], cruise[-1]
+    assert psi[b] - psi[a] > 10 * 2 * np.pi  # cruising over 10 turns and more
+    if core == "round":  # the wire paid out is what the 16 turns took, the dancer's loop aside
+        last = bag["/winder/joint_states"][-1][1]
+        took = 16 * 2 * np.pi * (0.016 / 2 + 0.0005 / 2)
+        assert abs(last.position[3] + 2 * last.position[4] - took) < 1e-3 * took
+    turns = 8
+    grid = np.linspace(psi[b] - turns * 2 * np.pi, psi[b], turns * 256, endpoint=False)
+    y = np.interp(grid, psi[a : b + 1], tension[a : b + 1])
+    spectrum = np.abs(np.fft.rfft(y - y.mean())) * 2 / y.size
+    return spectrum[: 9 * turns : turns]  # m = 0..8
+
+
+def test_the_ripple_follows_the_cores_corners(tmp_path: Path, procs: Procs) -> None:
+    """While the flyer cruises: a rectangle's tension ripples at twice the
+    turn rate (its even harmonics only), a square's at four times, a round
+    core's not at all; faster, the ripple is larger. On the round core the
+    supply paid out what the turns took (2 pi r a turn)."""
+    rect = turn_harmonics(tmp_path, procs.domain, "rect", 3000)
+    assert rect[2] > 100 * max(rect[1], rect[3], rect[5]) and rect[4] > 100 * rect[3]
+    square = turn_harmonics(tmp_path, procs.domain, "square", 3000)
+    assert square[4] > 100 * max(square[1], square[2], square[3], square[5], square[6])
+    round_ = turn_harmonics(tmp_path, procs.domain, "round", 3000)
+    assert round_[1:].max() < 0.01 * rect[2]
+    slower = turn_harmonics(tmp_path, procs.domain, "rect", 1500)
+    assert rect[2] > 1.5 * slower[2]
