@@ -29,7 +29,7 @@ ORTHO = {
     "layers": 2,
     "poles": 2,
     "lay": "orthocyclic",
-    "lay.crossover": 120.0,
+    "lay.crossover": 180.0,
     "feed_step": 1e-4,
 }
 

@@ -183,7 +183,10 @@ def job_of(g: dict[str, Any], check_fit: bool = False, **extra: Any) -> Job:
         "wire.bare_diameter": g["bare"],
         "feed_step": g["d"] / 8,
         "fork_steps_per_rev": 16,
-        "lay.crossover": 180.0,  # 8 fork steps: the feed's 8 steps of a crossover never outrun the flyer
+        # 8 fork steps: the feed's 8 steps of a linear crossover never outrun the flyer (the layout's
+        # the subject here, not the cam law: tests/motion/test_orthocyclic.py)
+        "lay.crossover": 180.0,
+        "lay.crossover_law": "linear",
         "flyer_radius": 1.0,
         "poles": 1,
         "lay": g["lay"],

@@ -73,14 +73,31 @@ def expected_layer(job: Job, pole: int, layer: int, origin: int, first: int) -> 
     zone = max(1, math.floor(job.crossover / 360 * spr + 0.5))
     end = n * spr + math.floor(job.reversal_dwell * spr + 0.5)
     points = [(places[0], 0)]
+
+    def crossing(a: int, b: int, k0: int) -> list[tuple[int, int]]:
+        """From feed a to b over the zone from fork k0: a straight line
+        (linear), or the cycloid u - sin(2 pi u)/(2 pi) through min(16, zone)
+        + 1 points rounded to whole steps."""
+        if job.crossover_law == "linear" or a == b:
+            return [(a, k0), (b, k0 + zone)]
+        n_pts = min(16, zone)
+        return [
+            (
+                a
+                + math.floor((b - a) * (i / n_pts - math.sin(2 * math.pi * i / n_pts) / (2 * math.pi)) + 0.5),
+                k0 + math.floor(zone * i / n_pts + 0.5),
+            )
+            for i in range(n_pts + 1)
+        ]
+
     for r in range(n - 1):
-        points += [(places[r], r * spr + at), (places[r + 1], r * spr + at + zone)]
+        points += crossing(places[r], places[r + 1], r * spr + at)
     if layer + 1 < len(geometry):
         m = geometry[layer + 1].turns
         nxt_k = 0 if (layer + 1) % 2 == 0 else m - 1
         nxt = origin + first * steps_of((nxt_k + (0.5 if (layer + 1) % 2 else 0.0)) * d, fs)
         r = (end - at - zone) // spr
-        points += [(places[-1], r * spr + at), (nxt, r * spr + at + zone)]
+        points += crossing(places[-1], nxt, r * spr + at)
     points.append((points[-1][0], end))
     return points
 
@@ -98,7 +115,9 @@ def ortho_jobs(draw: st.DrawFn) -> Job:
     per_d = draw(st.integers(2, 12))  # feed steps per wire diameter
     spr = draw(st.sampled_from([16, 24, 64, 100, 256]))
     d = draw(st.sampled_from([0.2e-3, 0.5e-3, 1.0e-3, 2.0e-3]))
-    need = math.ceil(per_d / spr * 3600) / 10 + 0.1
+    law = draw(st.sampled_from(["cycloidal", "linear"]))
+    # the cycloid's peak speed is twice its mean (and a whole step more, rounded)
+    need = math.ceil((per_d if law == "linear" else 2 * per_d + 2) / spr * 3600) / 10 + 0.1
     assume(need < 300)
     zone = draw(st.floats(need, 360.0))
     at = draw(st.floats(0.0, 360.0 - zone))
@@ -111,6 +130,7 @@ def ortho_jobs(draw: st.DrawFn) -> Job:
         "fork_steps_per_rev": spr,
         "lay.crossover": zone,
         "lay.crossover_at": at,
+        "lay.crossover_law": law,
         "layers": layers,
         "reversal_dwell": dwell,
         "poles": draw(st.integers(1, 2)),
@@ -163,14 +183,44 @@ def test_the_cam_is_the_rules_written_again(job: Job) -> None:
         position = rows[-1] if rows.size else position
 
 
-def test_a_crossover_zone_too_short_is_refused_naming_the_shortest_that_would_do() -> None:
-    base = {"lay": "orthocyclic", "turns_per_layer": 5, "poles": 1}  # 250 feed steps per d, 1024 per turn
+def shortest_cycloid_zone(across: int) -> int:
+    """The fewest fork steps a cycloidal crossover of ``across`` feed steps
+    takes with the flyer leading every piece: the cycloid through min(16, z)
+    + 1 points rounded to whole steps, brute force over z."""
+    for z in range(across, 10 * across):
+        n = min(16, z)
+        pts = [
+            (
+                math.floor(across * (i / n - math.sin(2 * math.pi * i / n) / (2 * math.pi)) + 0.5),
+                math.floor(z * i / n + 0.5),
+            )
+            for i in range(n + 1)
+        ]
+        if all(abs(f1 - f0) <= k1 - k0 for (f0, k0), (f1, k1) in itertools.pairwise(pts)):
+            return z
+    raise AssertionError("no zone")
+
+
+@pytest.mark.parametrize("law", ["linear", "cycloidal"])
+def test_a_crossover_zone_too_short_is_refused_naming_the_shortest_that_would_do(law: str) -> None:
+    base = {
+        "lay": "orthocyclic",
+        "turns_per_layer": 5,
+        "poles": 1,
+        "lay.crossover_law": law,
+    }  # 250 per d, 1024 a turn
     with pytest.raises(JobError) as err:
         Job.from_dict({**base, "lay.crossover": 60.0})
     text = str(err.value)
-    assert "\n" not in text and "lay.crossover=60 deg is too short" in text
+    assert (
+        "\n" not in text
+        and "lay.crossover=60 deg is too short" in text
+        and f"lay.crossover_law {law}" in text
+    )
     need = float(re.search(r"shortest crossover zone that would do is ([0-9.]+) deg", text).group(1))  # type: ignore[union-attr]
-    assert need == math.ceil(250 / 1024 * 3600) / 10  # 87.9: 250 fork steps at least
+    steps = 250 if law == "linear" else shortest_cycloid_zone(250)  # linear: 87.9 deg, 250 fork steps
+    assert need == math.ceil(steps / 1024 * 3600) / 10
+    assert law == "linear" or steps > 1.9 * 250  # the cycloid peaks at twice its mean speed (1.97 a piece)
     Job.from_dict({**base, "lay.crossover": need})  # the zone it names does
     with pytest.raises(JobError, match="crossover_at \\+ crossover <= 360"):
         Job.from_dict({**base, "lay.crossover": 100.0, "lay.crossover_at": 300.0})
@@ -223,7 +273,7 @@ def test_the_first_layer_runs_at_its_fraction_of_v_max_even_under_an_override() 
 
 def test_the_stream_check_follows_the_cam_and_refuses_the_straight_line() -> None:
     job = Job.from_dict(
-        {"lay": "orthocyclic", "lay.crossover": 90.0, "turns_per_layer": 4, "layers": 2, "poles": 1}
+        {"lay": "orthocyclic", "lay.crossover": 180.0, "turns_per_layer": 4, "layers": 2, "poles": 1}
     )
     plan = parse_job_description(describe_job(job))
     checker = StreamChecker(plan)
@@ -340,9 +390,10 @@ def test_a_dwell_and_a_slow_first_layer_run_as_asked(procs: Procs, tmp_path: Pat
 
 @pytest.mark.ros
 def test_a_feed_that_loses_steps_in_the_crossovers_shows_as_defects(procs: Procs, tmp_path: Path) -> None:
-    # a feed motor at 0.3 A (of 1) cannot follow the crossover's jump to the flyer's step rate
+    # a feed motor at 0.3 A (of 1) cannot follow the linear crossover's jump to the flyer's step rate
     r = winder_run(
         procs, tmp_path / "bags", "--job-id", "orthoslip", "--lay", "orthocyclic", "--lay.crossover", "90",
+        "--lay.crossover-law", "linear",
         "--turns-per-layer", "6", "--layers", "2", "--poles", "1", "--model", "nonlinear",
         "--feed.i-a", "0.3", "--publish-rate", "2000",
     )  # fmt: skip
@@ -374,3 +425,63 @@ def test_every_defect_kind_has_a_colour_and_a_word_in_wound_png() -> None:
     from winder.analysis.wound import DEFECT_KINDS
 
     assert set(DEFECT_KINDS) <= set(WOUND_COLOURS) and set(DEFECT_KINDS) <= set(WOUND_WORDS)
+
+
+def windowed_feed_acceleration(rows: np.ndarray, window_s: float) -> float:
+    """The feed's largest acceleration over ``window_s`` in recorded step rows
+    (t ns, segment, feed, fork, pole): at each row's time, the change of the
+    mean velocity over the window before it from the window before that."""
+    t = rows[:, 0] / 1e9
+    feed = rows[:, 2].astype(float)
+
+    def at(times: np.ndarray) -> np.ndarray:  # the feed's position at times: its last step's
+        k = np.searchsorted(t, times, side="right") - 1
+        return np.where(k >= 0, feed[np.maximum(k, 0)], feed[0])
+
+    now = t[t >= t[0] + 2 * window_s]
+    accel = (at(now) - 2 * at(now - window_s) + at(now - 2 * window_s)) / window_s**2
+    return float(np.abs(accel).max())
+
+
+@pytest.mark.ros
+def test_the_cycloidal_crossover_keeps_the_feed_within_a_limit_the_linear_one_passes(
+    procs: Procs, tmp_path: Path
+) -> None:
+    """The same job with either cam law: with a feed acceleration limit at
+    what the cycloidal law needs (`winder check --limits`), the cycloidal job
+    fits and its recorded steps keep within it over every 20 ms; the linear
+    one is refused, and its recorded steps do pass the limit."""
+    from winder.motion.limits import WINDOW_S, job_limits
+
+    fields = {
+        "job_id": "cam", "lay": "orthocyclic", "wire_diameter": 0.0005, "feed_step": 1e-6,
+        "fork_steps_per_rev": 2048, "lay.crossover": 180.0, "turns_per_layer": 4, "layers": 1, "poles": 1,
+        "flyer_radius": 0.03,
+    }  # fmt: skip
+    job_file = tmp_path / "cam.yaml"
+    job_file.write_text(
+        "interp_node:\n  ros__parameters:\n"
+        + "".join(f"    {k}: {v!r}\n" for k, v in fields.items()).replace("'", "")
+        + "profile_node:\n  ros__parameters:\n    v_max: 6000.0\n"
+    )
+    args = [str(job_file)]
+    values = {n: s.default for n, s in PROFILE_SPECS.items()} | {"v_max": 6000.0}
+    need = job_limits(Job.from_dict(fields), values, {})[0][0].windowed_acceleration
+    limits = tmp_path / "limits.yaml"
+    limits.write_text(f"bridge_node:\n  ros__parameters:\n    max_acceleration.feed: {need * 1.01!r}\n")
+    measured = {}
+    for law in ("cycloidal", "linear"):
+        check = subprocess.run(
+            [str(BIN / "winder"), "check", *args, "--lay.crossover-law", law, "--limits", str(limits)],
+            capture_output=True, text=True, timeout=120,
+        )  # fmt: skip
+        assert check.returncode == (0 if law == "cycloidal" else 2), check.stdout + check.stderr
+        r = winder_run(procs, tmp_path / law, *args, "--lay.crossover-law", law)
+        assert r.returncode == 0, r.stdout + r.stderr
+        [bag] = closed_bags(tmp_path / law)
+        measured[law] = windowed_feed_acceleration(read_run(bag).steps, WINDOW_S) * 1e-6  # m/s2
+    # whole steps: each of the three positions off the ideal by up to 1.5 steps
+    whole = 4 * 1.5 / WINDOW_S**2 * 1e-6
+    assert measured["cycloidal"] <= need + whole
+    assert measured["linear"] > need * 1.01
+    assert measured["linear"] > 1.2 * measured["cycloidal"]  # a jump at each end against none

@@ -213,7 +213,7 @@ def orthocyclic_auto() -> Job:
     return Job.from_dict(
         {
             "lay": "orthocyclic",
-            "lay.crossover": 120.0,
+            "lay.crossover": 180.0,
             "turns_per_layer": "auto",
             "bobbin.window_width": 0.0101,
             "layers": 3,
@@ -262,7 +262,7 @@ def test_segments_are_laid_out_once_per_job(monkeypatch: pytest.MonkeyPatch) -> 
 
 def test_the_plan_segment_type_is_the_segment() -> None:
     assert SegmentPlan is Segment
-    plan = parse_job_description(describe_job(Job(lay="orthocyclic", crossover=120.0, poles=2)))
+    plan = parse_job_description(describe_job(Job(lay="orthocyclic", crossover=180.0, poles=2)))
     assert all(type(s) is Segment for s in plan.segments)
     assert all(len(s.pieces) > 1 for s in plan.segments if s.kind.winds)  # the cams travel with it
 

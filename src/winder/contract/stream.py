@@ -68,6 +68,9 @@ def make_run_id(job_id: str, counter: int, now: float | None = None) -> str:
     return f"{job_id}_{time.strftime('%Y%m%d_%H%M%S', time.gmtime(t))}{ms:03d}_{counter}"
 
 
+#: the crossover's cam law: written for every orthocyclic job; one described without it (before
+#: the law could be chosen) crossed over linearly
+CROSSOVER_LAW, ORTHO = "lay.crossover_law", "orthocyclic"
 #: job fields added after the description's format was fixed (written only when set)
 LATER_FIELDS = frozenset(
     {
@@ -84,6 +87,7 @@ LATER_FIELDS = frozenset(
         "tension.max_share",
         "tension.derate",
         "tension.slip_tolerance",
+        "lay.crossover_law",
     }
 )
 
@@ -118,7 +122,11 @@ def describe_job(
         # without it reads as before, also by a node of an earlier winder (which refuses
         # a field it does not know)
         "job": {
-            k: v for k, v in job.to_dict().items() if k not in LATER_FIELDS or v != FIELD_SPECS[k].default
+            k: v
+            for k, v in job.to_dict().items()
+            if k not in LATER_FIELDS
+            or v != FIELD_SPECS[k].default
+            or (k == CROSSOVER_LAW and job.lay == ORTHO)
         },
         "axes": list(AXES),
         "joint_step": list(job.joint_step),
@@ -209,6 +217,8 @@ def parse_job_description(text: str) -> JobPlan:
             f"job description: ramp {json.dumps(ramp)[:60]} is not an object of ramp settings"
         )
     fields = _expect(doc, "job", dict, "an object of job fields")
+    if fields.get("lay") == ORTHO and CROSSOVER_LAW not in fields:
+        fields = {**fields, CROSSOVER_LAW: "linear"}  # written before the key: its crossovers were linear
     try:
         job = Job.from_dict(fields)
     except TypeError as exc:  # a field missing or of another shape

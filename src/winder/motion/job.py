@@ -28,6 +28,7 @@ start to (feed distance, flyer arc length) in the plane: the segment that
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import InitVar, dataclass, fields, replace
@@ -42,6 +43,8 @@ from winder.motion.material import MATERIALS, Material, Wire
 from winder.spec import Spec, SpecError
 
 __all__ = [
+    "CAM_PIECES",
+    "CROSSOVER_LAWS",
     "FIELD_SPECS",
     "MAX_PIECES",
     "Coil",
@@ -57,6 +60,36 @@ MAX_STEPS = 2**31 - 1
 #: Straight moves of a job, at most (its segments' pieces: an orthocyclic
 #: layer is two a turn): every node lays them out, about 0.1 kB and 1 us each
 MAX_PIECES = 2**20
+#: the orthocyclic crossover's cam laws (``lay.crossover_law``)
+CROSSOVER_LAWS = ("cycloidal", "linear")
+#: straight pieces a cycloidal crossover is laid in, at most (one fork step each at least)
+CAM_PIECES = 16
+
+
+def cycloid(u: float) -> float:
+    """The cycloidal cam law over ``u`` in [0, 1]: ``u - sin(2 pi u) / (2 pi)``,
+    from 0 to 1 with zero speed and zero acceleration at both ends; its speed
+    ``1 - cos(2 pi u)`` peaks at 2, its acceleration at 2 pi."""
+    return u - math.sin(2 * math.pi * u) / (2 * math.pi)
+
+
+def crossover_cam(across: int, zone: int, law: str) -> list[tuple[int, int]]:
+    """The straight pieces (feed steps, fork steps) of a crossover of
+    ``across`` feed steps (signed) over ``zone`` fork steps, by ``law``: one
+    piece (linear), or the cycloid through :data:`CAM_PIECES` points (at
+    most one a fork step), each point rounded to whole steps."""
+    if law == "linear" or across == 0:
+        return [(across, zone)]
+    n = min(CAM_PIECES, zone)
+    points = [
+        (math.floor(across * cycloid(i / n) + 0.5), math.floor(zone * i / n + 0.5)) for i in range(n + 1)
+    ]
+    return [(f1 - f0, k1 - k0) for (f0, k0), (f1, k1) in itertools.pairwise(points) if k1 > k0 or f1 != f0]
+
+
+def steepest(pieces: Sequence[tuple[int, int]]) -> float:
+    """The largest feed steps per fork step of a crossover's pieces (inf: a piece of no fork step)."""
+    return max(abs(f) / k if k else (math.inf if f else 0.0) for f, k in pieces)
 
 
 class JobError(SpecError):
@@ -211,6 +244,15 @@ FIELD_SPECS: dict[str, Spec] = {
             choices=LAYS,
         ),
         _f("lay.crossover", 0.0, 360.0, "deg", "orthocyclic: the crossover zone, in flyer angle", 60.0),
+        Spec(
+            "lay.crossover_law",
+            str,
+            "cycloidal",
+            "orthocyclic: the feed's cam law across the crossover zone: cycloidal (its acceleration "
+            "rises and falls smoothly, no jump in speed; peak speed twice the mean) or linear (a "
+            "constant speed, with a jump at both ends)",
+            choices=CROSSOVER_LAWS,
+        ),
         _f(
             "lay.crossover_at",
             0.0,
@@ -568,6 +610,7 @@ class Job:
     lay: str = FIELD_SPECS["lay"].default
     crossover: float = FIELD_SPECS["lay.crossover"].default
     crossover_at: float = FIELD_SPECS["lay.crossover_at"].default
+    crossover_law: str = FIELD_SPECS["lay.crossover_law"].default
     reversal_dwell: float = FIELD_SPECS["reversal_dwell"].default
     first_layer_speed: float = FIELD_SPECS["first_layer_speed"].default
     layer_speed: str = FIELD_SPECS["layer_speed"].default
@@ -628,6 +671,7 @@ class Job:
                         layers=c.layers,
                         poles=1,
                         coil_overrides="",
+                        layer_speed="",  # the job's layers' speeds are checked against the job's coils
                         check_fit=False,
                     )
                 except JobError as exc:
@@ -687,11 +731,13 @@ class Job:
         """The job's moves are few enough to lay out (JobError, one line),
         checked from the turn counts before any move is made: a layer is one
         straight piece (two with a reversal dwell); an orthocyclic layer is a
-        cam of two pieces a turn (a hold and a crossover) and one more, and
+        cam of a hold and a crossover a turn (the crossover one piece, or
+        :data:`CAM_PIECES` by the cycloidal law) and one more, and
         each piece is a Python object that every node of the cell holds
         (:data:`MAX_PIECES`)."""
+        per_turn = 1 + (1 if self.crossover_law == "linear" else CAM_PIECES)  # a hold, a crossover
         if self.lay == "orthocyclic":
-            pieces = sum(2 * c.total_turns + len(c.layers) for c in laid.coils)
+            pieces = sum(per_turn * c.total_turns + len(c.layers) for c in laid.coils)
         else:
             pieces = sum(len(c.layers) for c in laid.coils) * (2 if self.dwell_fork_steps else 1)
         pieces += self.poles - 1  # the index moves
@@ -701,7 +747,7 @@ class Job:
             raise JobError(
                 f"turns_per_layer={self.layer_turns} x layers={self.layers} x poles={self.poles} "
                 f"(lay={self.lay}) is invalid: {turns} turns make {pieces} straight moves, a job may have "
-                f"at most {MAX_PIECES} (an orthocyclic job about {MAX_PIECES // 2} turns); wind fewer "
+                f"at most {MAX_PIECES} (an orthocyclic job about {MAX_PIECES // per_turn} turns); wind fewer "
                 "turns per job"
             )
 
@@ -724,12 +770,16 @@ class Job:
                 places = np.floor((2 * k + shift) * q + 0.5)
                 across = max(across, int(np.max(np.diff(places))))
             zone = self.crossover_zone[1]
-            if across > zone:
-                need = math.ceil(across / spr * 3600.0) / 10.0
+            law = self.crossover_law
+            if steepest(crossover_cam(across, zone, law)) > 1:
+                fits = next(z for z in range(zone, 2**40) if steepest(crossover_cam(across, z, law)) <= 1)
+                need = math.ceil(fits / spr * 3600.0) / 10.0
+                peak = " at its peak" if law != "linear" else ""
                 raise JobError(
                     f"lay.crossover={self.crossover:g} deg is too short: the feed crosses {across} steps "
-                    f"({self.wire_diameter:g} m) in {zone} fork steps, faster than the flyer turns; the "
-                    f"shortest crossover zone that would do is {need:g} deg (or a coarser feed_step)"
+                    f"({self.wire_diameter:g} m) in {zone} fork steps (lay.crossover_law {law}), faster "
+                    f"than the flyer turns{peak}; the shortest crossover zone that would do is {need:g} deg "
+                    f"(or a coarser feed_step{', or lay.crossover_law linear' if law != 'linear' else ''})"
                 )
         elif self.dwell_fork_steps > 0:
             for p in range(self.poles):
@@ -1060,13 +1110,16 @@ class Job:
 
         if places[0] != at:  # never: a layer starts where the last one climbed to
             raise JobError(f"layer {layer + 1} of coil {pole + 1} starts off its first turn's place")
+
+        def cross(to_feed: int, zone_at: int) -> None:  # the crossover: the cam law over the zone
+            go(feed, zone_at)
+            for df, dk in crossover_cam(to_feed - feed, zc, self.crossover_law):
+                go(feed + df, fork + dk)
+
         for r in range(turns - 1):
-            go(feed, r * spr + za)
-            go(places[r + 1], r * spr + za + zc)
+            cross(places[r + 1], r * spr + za)
         if climb_to is not None:
-            r = (end - za - zc) // spr  # the last zone that ends within the layer
-            go(feed, r * spr + za)
-            go(climb_to, r * spr + za + zc)
+            cross(climb_to, (end - za - zc) // spr * spr + za)  # the last zone that ends within the layer
         go(feed, end)
         merged: list[tuple[int, int]] = []
         for df, dk in pieces:  # holds side by side are one hold

@@ -150,6 +150,32 @@ def move_peaks(motion: Motion) -> tuple[float, float]:
     return peaks["v"], peaks["a"]
 
 
+def window_change(
+    lengths: npt.NDArray[np.float64], ratios: npt.NDArray[np.float64], reach: float
+) -> npt.NDArray[np.float64]:
+    """The largest change of each axis' ratio (its steps per major step)
+    between two points of a cam ``reach`` major steps apart: a window of
+    that length from piece ``i`` (of ``lengths`` major steps) to piece ``j``
+    exists where ``a_j - b_i < reach < b_j - a_i`` (``a``, ``b``: the
+    pieces' starts and ends). A straight move's is 0; a cam's crossover at
+    once (reach beyond its pieces, or a linear one) its whole rise; a cam
+    law spread over many pieces less, the more pieces the window cannot span."""
+    n = lengths.size
+    out = np.zeros(ratios.shape[1] if ratios.ndim == 2 else 0)
+    if n < 2:
+        return out
+    b = np.cumsum(lengths)
+    a = b - lengths
+    lo = np.searchsorted(b, a + reach, side="right")  # the first piece a window from piece i can end in
+    hi = np.searchsorted(a, b + reach, side="left") - 1  # the last
+    for d in range(int(np.max(hi - lo, initial=-1)) + 1):
+        j = lo + d
+        ok = (j <= hi) & (j < n)
+        if ok.any():
+            out = np.maximum(out, np.abs(ratios[j[ok]] - ratios[ok]).max(axis=0))
+    return out
+
+
 def job_peaks(
     segments: Sequence[_Segment],
     timings: Sequence[_Timing],
@@ -182,7 +208,8 @@ def job_peaks(
         steepest = np.abs(ratios).max(axis=0)
         vel = np.maximum(vel, steepest * v_peak)
         acc = np.maximum(acc, steepest * a_peak)
-        corner = (ratios.max(axis=0) - ratios.min(axis=0)) * v_peak  # 0 for a straight move
+        lengths = np.array([max(abs(x) for x in piece) for piece in seg.pieces if any(piece)], float)
+        corner = window_change(lengths, ratios, v_peak * override * WINDOW_S) * v_peak  # 0: straight
         jump = np.maximum(jump, np.maximum(corner, steepest * v_rest))
     step = np.abs(np.asarray(joint_step, dtype=np.float64))
     k = float(override)

@@ -65,6 +65,8 @@ def plan_segment(values: dict[str, Any], steps: int, speed: float = 1.0, pace: f
     kw: dict[str, Any] = {"v_max": v_max, "v_start": values["v_start"], "v_end": values["v_start"]}
     kw.update({name: values[name] * pace ** PACE_POWER[name] for name in LIMITS[kind]})
     limits = ", ".join(f"{k}={v:g}" for k, v in kw.items() if k != "v_end")
+    if pace != 1.0:  # the limits said are a slowed layer's: say so
+        limits += f" (a layer slowed to {pace:g} by layer_speed)"
     profile: Motion
     try:
         profile = plan(kind, float(steps), **kw)
