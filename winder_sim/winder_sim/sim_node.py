@@ -406,23 +406,26 @@ class SimEngine(Engine):
                 v_steps = ax.last_dir / np.maximum(ax.last_dt, samples - ax.last_step_t)
             theta, omega = ax.tracker.advance(ev_t, ev_a, samples)
             actual_steps = theta / ax.step_angle
-            if samples.size:
-                ax.max_error_steps = max(ax.max_error_steps, float(np.max(np.abs(cmd_steps - actual_steps))))
             cmd_pos[:, i] = cmd_steps * ax.joint_step
             cmd_vel[:, i] = v_steps * ax.joint_step
             act_pos[:, i] = actual_steps * ax.joint_step
             act_vel[:, i] = omega / ax.step_angle * ax.joint_step
         if samples.size:
-            self.deviation_of_axes(seg_of_sample, act_pos)
             block = {"k": ks, "cmd_pos": cmd_pos, "cmd_vel": cmd_vel, "act_pos": act_pos, "act_vel": act_vel}
+            keep = samples.size
             if self.wire is not None:
                 fork = FORK.index
-                block.update(self.wire.samples(samples, act_pos[:, fork], act_vel[:, fork], seg_of_sample))
-                fault = self.wire.fault
-                if fault is not None and self.wire_cut is None:  # the axes stop where the watch saw it
-                    self.wire_cut = fault.seen_s
-                    keep = int(np.searchsorted(samples, fault.seen_s, side="right"))
+                wire, keep = self.wire.samples(samples, act_pos[:, fork], act_vel[:, fork], seg_of_sample)
+                block.update(wire)
+                if keep < samples.size or (self.wire.fault is not None and self.wire_cut is None):
+                    # the wire's fault stops the axes where the watch saw it: nothing after counts
+                    assert self.wire.fault is not None
+                    self.wire_cut = self.wire.fault.seen_s
                     block = {key: value[:keep] for key, value in block.items()}
+            for i, ax in enumerate(self.axes):
+                error = np.abs(cmd_pos[:keep, i] - act_pos[:keep, i]) / abs(ax.joint_step)
+                ax.max_error_steps = max(ax.max_error_steps, float(error.max(initial=0.0)))
+            self.deviation_of_axes(seg_of_sample[:keep], act_pos[:keep])
             self.out.append(block)
 
     @staticmethod

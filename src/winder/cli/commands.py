@@ -164,14 +164,16 @@ def cmd_run(args: argparse.Namespace) -> int:
     profile = values_from_args(args, PROFILE_SPECS, given["profile_node"])
     check_profile(profile)
     sim = values_from_args(args, SIM_SPECS, given["consumer"])
-    derating = derated(job, profile, str(given["interp_node"].get("schedule", "")), sim)
-    if derating is not None:  # the layers slowed go to the interp node in layer_speed
-        job = derating.job
     operation = values_from_args(args, OPERATION_SPECS, given["profile_node"])
-    segments = job.segments()
     # the interp node's other settings in the file (chunk_steps, max_in_flight, stops...) go with the job
     extra = {k: v for k, v in given["interp_node"].items() if k not in FIELD_SPECS and k != "autostart"}
     extra.update(values_from_args(args, STOP_SPECS, given["interp_node"]))
+    # the wire at the run's speeds: its ramp, its feed override and the overrides its schedule sets
+    running, schedule = {**profile, **operation}, str(extra.get("schedule", ""))
+    derating = derated(job, running, schedule, sim)
+    if derating is not None:  # the layers slowed go to the interp node in layer_speed
+        job = derating.job
+    segments = job.segments()
     if args.stop_at_turn is not None:
         extra["stops"] = f"1:{args.stop_at_turn}"
     if args.auto_resume is not None:
@@ -185,9 +187,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     check_interp({**{n: s.default for n, s in INTERP_SPECS.items()}, **job.to_dict(), **extra}, job=job)
     external = external_nodes(args)
     check_sim({**sim, "record": False} if "sim" in external else sim)  # a remote bag_dir is its host's
-    why = wire_refusal(job, profile, str(extra.get("schedule", "")), sim)
+    why = wire_refusal(job, running, schedule, sim)
     if why:  # the words of winder check
-        raise UserError(why)
+        raise UserError(why + (derating.still() if derating is not None else ""))
     cell = values_from_args(args, CELL_SPECS)
     args.namespace = check_namespace(args.namespace)
     from winder.cli.view import foxglove_host, foxglove_port, start_live_view
@@ -321,6 +323,8 @@ def cmd_check(args: argparse.Namespace) -> int:
     timed = time_for_check(job, given["profile_node"], schedule)
     add_takeup(job, doc, timed)
     tension_why = add_tension(job, doc, tensioner, timed)
+    if derating is not None and tension_why:
+        tension_why += derating.still()
     if derating is not None:
         doc["wire"]["derated"] = derating.to_doc()
     if tension_why and doc["fits"]:  # the coil fits its bobbin, but its wire would not hold

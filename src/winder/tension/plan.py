@@ -12,6 +12,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from winder.errors import BadInputError
 from winder.motion.axes import FORK
 from winder.motion.job import Job
 from winder.motion.limits import TimedJob, time_job
@@ -31,10 +32,11 @@ __all__ = ["MAX_SAMPLES", "Derating", "derate", "wound_tension"]
 MAX_SAMPLES = 400_000
 #: samples a second at least, and per turn of the flyer at its top speed at least
 RATE, PER_TURN = 2000.0, 40.0
-#: derating: a layer whose tension swings past its bounds by a factor ``r`` (of the allowed swing
-#: about the set tension) is slowed by MARGIN / sqrt(r) a round; one past the tensioner's reach
-#: alone by STEP_DOWN; at most ROUNDS rounds
-MARGIN, STEP_DOWN, ROUNDS = 0.97, 0.9, 6
+#: derating: a layer's predicted swing may fill this share of the room its bounds leave (the
+#: prediction follows the commanded flyer; the axes' own dynamics swing it a little further)
+TARGET = 0.9
+#: a layer is never slowed below this share of v_max; at most ROUNDS rounds
+MIN_SHARE, ROUNDS = 0.05, 8
 
 
 def wound_tension(timed: TimedJob, tensioner: Tensioner) -> dict[tuple[int, int], LayerTension]:
@@ -107,12 +109,21 @@ class Derating:
             "duration_after_s": self.after_s,
         }
 
+    def still(self) -> str:
+        """What a refusal of the derated job adds: that derating was tried."""
+        shares = sorted(self.slowed.values())
+        tried = (
+            f"slowed {len(shares)} layers to {shares[0]:.0%} of v_max and more" if shares else "slowed none"
+        )
+        return f" (tension.derate {tried}: the prediction still does not keep)"
+
     def words(self) -> str:
         """The summary's line ("" if nothing was slowed)."""
         if not self.slowed:
             return ""
         shares = sorted(self.slowed.values())
-        span = f"{shares[0]:.0%}" if shares[0] == shares[-1] else f"{shares[0]:.0%}-{shares[-1]:.0%}"
+        low, high = f"{shares[0]:.0%}", f"{shares[-1]:.0%}"
+        span = low if low == high else f"{low}..{high}"
         longer = self.after_s - self.before_s
         return (
             f"tension.derate: {len(self.slowed)} layer{'s' if len(self.slowed) > 1 else ''} slowed to "
@@ -123,15 +134,17 @@ class Derating:
 
 
 def derate(job: Job, ramp: dict[str, Any], schedule: str, tensioner: Tensioner) -> Derating:
-    """``job`` with each layer whose predicted tension passes its bounds
-    (the alarm band, the wire's maximum x ``tension.max_share``, the
-    tensioner's reach) slowed in time (``layer_speed`` s: its speed x s,
-    its ramp's acceleration x s**2) until it keeps, round by round
-    (:data:`MARGIN`), its prediction taken steady and as wound with the
-    ramps. ValueError (one line) if the ramp cannot plan it."""
+    """``job`` with each layer whose predicted tension passes :data:`TARGET`
+    of the room its bounds leave (the alarm band, the wire's maximum x
+    ``tension.max_share``, the tensioner's reach: :func:`overshoot`) slowed
+    in time (``layer_speed`` s: its speed x s, its ramp's acceleration x
+    s**2) until it keeps, round by round, its prediction taken steady and
+    as wound with the ramps; never below :data:`MIN_SHARE` of ``v_max``
+    (``why`` says what still does not keep). BadInputError (one line) if the
+    ramp cannot plan it."""
     bounds = Bounds(job.set_tension, job.tension_alarm, job.tension_limit)
     wire = job.wire
-    first = timed = time_job(job, ramp, schedule)
+    first = timed = _timed(job, ramp, schedule)
     given = dict(job.layer_speeds)
     shares = dict(given)
     why = ""
@@ -146,23 +159,55 @@ def derate(job: Job, ramp: dict[str, Any], schedule: str, tensioner: Tensioner) 
                 continue
             steady = predict_layer(contour, job.flyer_radius, omega, tensioner, wire)
             got = wider(steady, wound.get((pole + 1, layer + 1), steady))
+            over = overshoot(got, bounds, tensioner)
+            if over <= TARGET:
+                continue
+            where = f"coil {pole + 1} layer {layer + 1}"
             breach = got.breach(bounds, wire) or tensioner.limit_words(got.peak, got.coordinate)
-            if not breach:
+            share = job.layer_share(pole, layer)
+            if over == math.inf or share <= MIN_SHARE:
+                why = why or (
+                    f"{where}: {breach or 'too close to its bounds'} "
+                    + ("at any flyer speed" if over == math.inf else f"even at {share:.0%} of v_max")
+                )
                 continue
-            over = got.overshoot(bounds)
-            if over == math.inf:
-                why = why or f"coil {pole + 1} layer {layer + 1}: {breach} at any flyer speed"
-                continue
-            # the swing about the set tension grows as the take-up's acceleration, the square of the
-            # pace (speed and time alike): slowed by the square root of how far it overshoots
-            slower[(pole, layer)] = MARGIN / math.sqrt(over) if over > 1 else STEP_DOWN
-            why = why or f"coil {pole + 1} layer {layer + 1} at {omega:.4g} rad/s: {breach}"
+            # the swing about the set tension grows with the take-up's acceleration (the square of
+            # the pace for the dancer's inertia, about the pace for the servo): slowed by the
+            # square root of how far it passes the target, a round at a time
+            factor = 0.99 * math.sqrt(TARGET / over)
+            slower[(pole, layer)] = max(factor, MIN_SHARE / share)
+            why = why or f"{where} at {omega:.4g} rad/s: {breach or 'too close to its bounds'}"
         if not slower or round_ == ROUNDS:
             break
         for key, factor in slower.items():
             shares[key] = math.floor(shares.get(key, 1.0) * factor * 1e4) / 1e4
         text = ";".join(f"{p + 1}:{k + 1}={v:g}" for (p, k), v in sorted(shares.items()))
         job = Job.from_dict({**job.to_dict(), "layer_speed": text})
-        timed = time_job(job, ramp, schedule)
+        timed = _timed(job, ramp, schedule)
     slowed = {(p + 1, k + 1): job.layer_share(p, k) for (p, k), v in shares.items() if v != given.get((p, k))}
     return Derating(job, slowed, first.duration_ns / 1e9, timed.duration_ns / 1e9, why)
+
+
+def overshoot(got: LayerTension, bounds: Bounds, tensioner: Tensioner) -> float:
+    """How far a layer's predicted swing passes the room it has (1: just
+    within): the tension's bounds (:meth:`LayerTension.overshoot`), the
+    dancer's stroke (its travel against half its stroke) and the servo's
+    force limit (its peak's rise against the limit's)."""
+    over = got.overshoot(bounds)
+    if tensioner.kind == "dancer":
+        return max(over, got.coordinate / (tensioner.stroke / 2))
+    room = tensioner.force_limit - bounds.set_tension
+    rise = got.peak - bounds.set_tension
+    return max(over, rise / room if room > 0 else (math.inf if rise > 0 else 0.0))
+
+
+def _timed(job: Job, ramp: dict[str, Any], schedule: str) -> TimedJob:
+    """:func:`time_job`, its refusal said as tension.derate's where the layers it slowed made it."""
+    try:
+        return time_job(job, ramp, schedule)
+    except BadInputError as exc:
+        if not job.layer_speed:
+            raise
+        raise BadInputError(
+            f"tension.derate: the layers slowed ({job.layer_speed}) cannot be run: {exc}"
+        ) from None

@@ -69,7 +69,12 @@ class WireRun:
         self.break_turn = int(values.get("fault.wire_break_turn", 0))
         self.slip_turn = int(values.get("fault.slip_turn", 0))
         self.slip_length = float(values.get("fault.slip_length", 0.0))
-        self.parted: float | None = None  # the wire paid out when it parted (None: whole)
+        self.parted: float | None = None  # the supply's count when the wire parted (None: whole)
+        self.last_count = 0.0  # the supply's count at the last sample
+        self.slipped = 0.0  # the share of the injected slip the counter has missed
+        self.peak = self.least = job.set_tension  # the tension's range over the run's samples (N)
+        self.travel = 0.0  # the tensioner's largest excursion
+        self.taken = 0.0  # the wire the turns took (m)
         self.cause = ""  # why it parted, where the simulation knows (pulled to its breaking load)
         self.watch = WireWatch(set_n, job.tension_slip_tolerance)
         self.fault: WireFault | None = None
@@ -93,47 +98,56 @@ class WireRun:
         return (None, why) if why else (wire, "")
 
     # -- where the flyer is -------------------------------------------------------
-    def places(self, fork: Floats, segs: Ints) -> tuple[Ints, Ints, Ints, Floats]:
-        """Per sample the coil, the layer and the coil's turn (from 1; 0 off a
-        layer), and the job's turn as a fraction (turns done + the part of
-        the present one), from the flyer's position (rad) and the segment."""
+    def places(self, fork: Floats, segs: Ints) -> tuple[Ints, Ints, Ints, Ints, Floats]:
+        """Per sample the coil, the layer and the coil's turn in progress
+        (from 1; 0 off a layer), the job's turn in progress (from 1, counted
+        over its coils; 0 off a layer) and how far into it the flyer is (0
+        to 1), from the flyer's position (rad) and the segment. A layer's
+        reversal dwell belongs to its last turn (:meth:`Segment.turn_end`)."""
         coil = np.zeros(segs.size, np.int64)
         layer = np.zeros(segs.size, np.int64)
         turn = np.zeros(segs.size, np.int64)
-        job_turn = np.zeros(segs.size)
+        job_turn = np.zeros(segs.size, np.int64)
+        into = np.zeros(segs.size)
         for i in np.unique(segs):
             if not 0 <= i < len(self.segments) or not self.segments[int(i)].kind.winds:
                 continue
             seg = self.segments[int(i)]
             at = segs == i
-            done = np.abs(fork[at] / self.fork_step - seg.start[FORK.index]) / seg.turn_steps
-            done = np.clip(done, 0.0, float(seg.turns))
+            done = np.maximum(np.abs(fork[at] / self.fork_step - seg.start[FORK.index]) / seg.turn_steps, 0.0)
+            k = np.minimum(np.floor(done).astype(np.int64), seg.turns - 1)  # the turn in progress, from 0
             coil[at], layer[at] = seg.pole + 1, seg.layer + 1
-            turn[at] = seg.first_turn + np.minimum(np.floor(done).astype(np.int64) + 1, seg.turns)
-            job_turn[at] = self.turns_before[seg.pole] + seg.first_turn + done
-        return coil, layer, turn, job_turn
+            turn[at] = seg.first_turn + k + 1
+            job_turn[at] = self.turns_before[seg.pole] + seg.first_turn + k + 1
+            into[at] = np.clip(done - k, 0.0, 1.0)
+        return coil, layer, turn, job_turn, into
 
     # -- a block of samples -------------------------------------------------------
-    def samples(self, t: Floats, fork: Floats, omega: Floats, segs: Ints) -> dict[str, Floats]:
+    def samples(self, t: Floats, fork: Floats, omega: Floats, segs: Ints) -> tuple[dict[str, Floats], int]:
         """The wire at the samples (times s, the flyer's simulated angle and
         speed, rad and rad/s, the segment): ``tension``, ``wire_pos`` and
-        ``wire_vel`` (the supply's count, and the dancer's travel if a dancer)."""
+        ``wire_vel`` (the supply's count, and the dancer's travel if a
+        dancer), and how many of them the run keeps: all, or up to the
+        sample at which the watch saw a fault (the axes stop there; the
+        run's figures count no sample after it)."""
         w = self.sim.advance(fork, omega, segs)
-        coil, layer, turn, job_turn = self.places(fork, segs)
+        coil, layer, turn, job_turn, into = self.places(fork, segs)
         tension = w.tension.copy()
         counted = w.supply.copy()
-        if self.slip_turn:  # the counter misses slip_length over the turn, evenly
-            counted -= self.slip_length * np.clip(job_turn - (self.slip_turn - 1), 0.0, 1.0)
+        if self.slip_turn:  # the counter misses slip_length over the turn, evenly, and for good
+            share = np.where(job_turn == self.slip_turn, into, (job_turn > self.slip_turn).astype(float))
+            missed = np.maximum.accumulate(np.maximum(share, self.slipped))
+            counted -= self.slip_length * missed
+            self.slipped = float(missed[-1]) if missed.size else self.slipped
         dancer = self.tensioner.kind == "dancer"
         vel = np.column_stack([w.supply_speed, w.coordinate_rate] if dancer else [w.supply_speed])
-        start = self._parts(t, w.tension, w.takeup, counted, job_turn, coil)
-        for band, (low, high) in self.bands.items():
-            held = tension[:start]  # up to the break
-            self.outside[band] += int(np.count_nonzero((held < low) | (held > high)))
+        start = self._parts(t, w.tension, w.takeup, counted, job_turn)
         if self.parted is not None:  # from the break on the wire holds nothing; the supply stands
             tension[start:] = 0.0
             counted[start:] = self.parted
             vel[start:] = 0.0
+        if counted.size:
+            self.last_count = float(counted[-1])
         pos = np.column_stack([counted, w.coordinate] if dancer else [counted])
         if self.parted is not None:
             pos[start:, 1:] = 0.0  # the arm at rest
@@ -143,34 +157,42 @@ class WireRun:
             return int(coil[k]), int(layer[k]), int(turn[k])
 
         fault = self.watch.feed(t, tension, omega, place, counted, expected)
+        keep = t.size
         if fault is not None and self.fault is None:
             self.fault = fault
-        return {"tension": tension, "wire_pos": pos, "wire_vel": vel}
+            keep = int(np.searchsorted(t, fault.seen_s, side="right"))
+        self._tally(tension[:keep], np.abs(w.coordinate[:keep]), w.taken[:keep])
+        return {"tension": tension, "wire_pos": pos, "wire_vel": vel}, keep
 
-    def _parts(
-        self,
-        t: Floats,
-        tension: Floats,
-        takeup: Floats,
-        counted: Floats,
-        job_turn: Floats,
-        coil: Ints,
-    ) -> int:
+    def _tally(self, tension: Floats, travel: Floats, taken: Floats) -> None:
+        """The run's figures over the samples it keeps: the tension's range,
+        the time outside each band, the tensioner's travel, the wire taken."""
+        if not tension.size:
+            return
+        self.peak = max(self.peak, float(tension.max()))
+        self.least = min(self.least, float(tension.min()))
+        self.travel = max(self.travel, float(travel.max()))
+        self.taken = float(taken[-1])
+        for band, (low, high) in self.bands.items():
+            self.outside[band] += int(np.count_nonzero((tension < low) | (tension > high)))
+
+    def _parts(self, t: Floats, tension: Floats, takeup: Floats, counted: Floats, job_turn: Ints) -> int:
         """Where in the block the wire parts (its first sample without it;
         the block's size if it holds): pulled to its tensile strength, or the
-        injected break's turn reached. Notes a stretch past the yield."""
+        flyer starting the injected break's turn. Notes a stretch past the yield."""
         if self.parted is not None:
             return 0
         wire, m = self.wire, self.wire.material
         stress = tension / wire.section + m.density * takeup**2 / 2
         over = np.flatnonzero(stress >= m.tensile_strength)
-        injected = np.flatnonzero(job_turn >= self.break_turn - 1) if self.break_turn else over[:0]
-        injected = injected[coil[injected] > 0]
+        injected = np.flatnonzero(job_turn >= self.break_turn) if self.break_turn else over[:0]
         if not over.size and not injected.size:
             if stress.size and float(stress.max()) > m.yield_stress:
                 self.stretched = max(self.stretched, float(stress.max()))
             return t.size
         k = int(min(over[0] if over.size else t.size, injected[0] if injected.size else t.size))
+        if k and float(stress[:k].max()) > m.yield_stress:
+            self.stretched = max(self.stretched, float(stress[:k].max()))
         if over.size and k == over[0]:
             self.cause = (
                 f"pulled to its breaking load: {tension[k]:.4g} N at {takeup[k]:.3g} m/s, "
@@ -179,7 +201,7 @@ class WireRun:
             )
         else:
             self.cause = f"injected: fault.wire_break_turn {self.break_turn}"
-        self.parted = float(counted[k - 1] if k else counted[0])
+        self.parted = float(counted[k - 1]) if k else self.last_count
         return k
 
     # -- what the run reports ----------------------------------------------------------
@@ -187,17 +209,20 @@ class WireRun:
         """The fault that stops the run, in words, with its cause where known ("" if none)."""
         if self.fault is None:
             return ""
-        cause = f" ({self.cause})" if self.cause and self.fault.kind == "break" else ""
-        return self.fault.text + cause
+        if self.fault.kind == "break":
+            # the watch sees the tension only: the simulation knows whether the wire parted
+            cause = self.cause or "the wire is whole: it went slack"
+        else:
+            cause = f"injected: fault.slip_turn {self.slip_turn}" if self.slip_turn else ""
+        return self.fault.text + (f" ({cause})" if cause else "")
 
     def details(self) -> dict[str, object]:
         """The job report's keys of the wire."""
-        w = self.sim
         return {
-            "tension_peak_n": f"{w.peak:.4g}",
-            "tension_min_n": f"{w.least:.4g}",
-            TRAVEL_KEY.get(w.tensioner.kind, "tensioner_coordinate_max"): f"{w.travel:.4g}",
-            "wire_taken_m": f"{w.taken:.6g}",
+            "tension_peak_n": f"{self.peak:.4g}",
+            "tension_min_n": f"{self.least:.4g}",
+            TRAVEL_KEY.get(self.tensioner.kind, "tensioner_coordinate_max"): f"{self.travel:.4g}",
+            "wire_taken_m": f"{self.taken:.6g}",
             "tension_outside_warning_s": f"{self.outside['warning'] / self.rate:.3f}",
             "tension_outside_alarm_s": f"{self.outside['alarm'] / self.rate:.3f}",
         }
@@ -213,7 +238,7 @@ class WireRun:
             low, high = self.bands["alarm"]
             said.append(
                 f"the wire's tension left the alarm band ({low:.4g}..{high:.4g} N) for "
-                f"{self.outside['alarm'] / self.rate:.3f} s ({self.sim.least:.4g}..{self.sim.peak:.4g} N)"
+                f"{self.outside['alarm'] / self.rate:.3f} s ({self.least:.4g}..{self.peak:.4g} N)"
             )
         if self.stretched:
             m = self.wire.material

@@ -40,6 +40,7 @@ class WireSample:
     takeup: Floats  #: take-up speed, m/s
     supply_speed: Floats  #: the supply's pay-out speed, m/s
     coordinate_rate: Floats  #: the coordinate's rate (dancer, m/s; servo, m/s2)
+    taken: Floats  #: wire taken up since the run's start, m
 
 
 class WireSim:
@@ -104,4 +105,5 @@ class WireSim:
             v,
             v - self.tensioner.held(rates),
             (rates @ self.system.c.T)[:, 1],
+            taken,
         )
