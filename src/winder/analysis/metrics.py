@@ -74,6 +74,7 @@ import numpy as np
 import numpy.typing as npt
 
 from winder.analysis.digest import STRIDE_TIME, Digest, SegmentKinematics, digest, turn_index
+from winder.analysis.wire import FAULTS, fault, layer_tensions, paid_out
 from winder.contract.eq7 import layer_of_samples, sample_deviation
 from winder.contract.run import commands_text, shaper_text, stops_text
 from winder.contract.states import EventKind, JobState
@@ -93,6 +94,7 @@ __all__ = [
     "digest_run",
     "format_table",
     "paired_error",
+    "sample_layers",
     "setup",
     "setup_differences",
     "step_kinematics",
@@ -195,7 +197,8 @@ class Analysis:
     stops: str = ""  #: the job's programmed stops in one line (winder.contract.run.stops_text), "" if none
     commands: str = ""  #: the operator's commands in one line (commands_text), "" if none
     #: the wire as recorded (winder/tension), where the run simulated it: the tension's least
-    #: and peak, the set tension, the alarm band and how long the tension was outside it (s)
+    #: and peak, the set tension, the bands and how long the tension was outside each (s), the
+    #: wire paid out, the tension and stretch per layer wound, its break and slip (winder.analysis.wire)
     wire: dict[str, Any] = field(default_factory=dict)
 
 
@@ -258,20 +261,29 @@ def _summarise(
     )
 
 
+def sample_layers(run: Run, digested: Digest) -> npt.NDArray[np.int64]:
+    """The layer segment each joint sample is measured against
+    (:mod:`winder.contract.eq7`), -1 where none; empty if the digest has no
+    command segment for the samples."""
+    if digested.sample_segment.size != len(run.states):
+        return np.zeros(0, np.int64)
+    y = run.states.pos[:, FORK.index] / run.plan.joint_step[FORK.index]
+    return layer_of_samples(run.plan, digested.sample_segment, y)
+
+
 def winding_samples(run: Run, digested: Digest) -> tuple[npt.NDArray[np.int64], FloatArray, FloatArray]:
     """The joint samples taken while a layer is wound, each with the layer
-    it is measured against (:mod:`winder.contract.eq7`): (layer segment, x,
-    y), x and y in steps of the feed and the fork."""
-    plan = run.plan
-    js = plan.joint_step
-    if digested.sample_segment.size != len(run.states):
+    it is measured against (:func:`sample_layers`): (layer segment, x, y), x
+    and y in steps of the feed and the fork."""
+    js = run.plan.joint_step
+    layer = sample_layers(run, digested)
+    if not layer.size:
         z = np.zeros(0)
         return np.zeros(0, np.int64), z, z
-    x = run.states.pos[:, FEED.index] / js[FEED.index]  # steps, float
-    y = run.states.pos[:, FORK.index] / js[FORK.index]
-    layer = layer_of_samples(plan, digested.sample_segment, y)
     keep = layer >= 0
-    return layer[keep], x[keep], y[keep]
+    x = run.states.pos[keep, FEED.index] / js[FEED.index]  # steps, float
+    y = run.states.pos[keep, FORK.index] / js[FORK.index]
+    return layer[keep], x, y
 
 
 def axis_deviation(run: Run, digested: Digest | None = None) -> Deviation | None:
@@ -532,12 +544,14 @@ def analyze(run: Run, stride_time: float = STRIDE_TIME, digested: Digest | None 
         shaper=shaper_text(run.profile_config),
         stops=stops_text(run.plan),
         commands=commands_text(run.events, run.plan),
-        wire=_wire(run),
+        wire=_wire(run, d),
     )
 
 
-def _wire(run: Run) -> dict[str, Any]:
-    """The recorded tension against the job's bands (empty where no wire was simulated)."""
+def _wire(run: Run, d: Digest) -> dict[str, Any]:
+    """The recorded tension against the job's bands, per layer wound, the wire
+    paid out and its faults (:mod:`winder.analysis.wire`); empty where no wire
+    was simulated."""
     t, tension = run.tension.t, run.tension.tension
     if not t.size:
         return {}
@@ -554,6 +568,13 @@ def _wire(run: Run) -> dict[str, Any]:
         low, high = set_n * (1 - frac), set_n * (1 + frac)
         out[f"{band}_band_n"] = [low, high]
         out[f"outside_{band}_s"] = int(np.count_nonzero((tension < low) | (tension > high))) * dt
+    out.update(
+        paid_out_m=paid_out(run),
+        tension_set_n=set_n,
+        tension_max_n=float(tension.max()),
+        layers=[lay.to_json() for lay in layer_tensions(run, sample_layers(run, d))],
+        **{kind: fault(run, kind) for kind in FAULTS},
+    )
     return out
 
 
@@ -729,15 +750,7 @@ def _rows(a: Analysis) -> list[tuple[str, str]]:
         ("simulated / wall time", f"{_f(a.sim_time)} s / {_f(a.wall_time)} s"),
         ("real-time factor", f"{_f(a.real_time_factor, decimals=1)} x"),
         ("lost steps (sim node)", str(a.lost_steps) if a.lost_steps >= 0 else "-"),
-        (
-            "wire tension",
-            (
-                f"{a.wire['tension_min_n']:.4g}..{a.wire['tension_peak_n']:.4g} N (set "
-                f"{a.wire['set_tension_n']:.4g} N), {a.wire['outside_alarm_s']:.3f} s outside the alarm band"
-            )
-            if a.wire
-            else "-",
-        ),
+        *_wire_rows(a.wire),
         ("eq.7 mean, command", f"{_f(a.command.mean, 1e6)} um"),
         ("eq.7 max, command", f"{_f(a.command.max, 1e6)} um"),
         ("worst turn, command", f"{_f(a.command.turn_max_pct, decimals=4)} % of wire"),
@@ -762,6 +775,40 @@ def _rows(a: Analysis) -> list[tuple[str, str]]:
     return rows
 
 
+def _wire_rows(w: dict[str, Any]) -> list[tuple[str, str]]:
+    """The wire: its tension in one row; what the supply paid out, how far it
+    was stretched and its faults where there are any."""
+    if not w:
+        return [("wire tension", "-")]
+    rows = [
+        (
+            "wire tension",
+            f"{w['tension_min_n']:.4g}..{w['tension_max_n']:.4g} N (set {w['tension_set_n']:.4g} N), "
+            f"{w['outside_alarm_s']:.3f} s outside the alarm band",
+        )
+    ]
+    paid = w.get("paid_out_m")
+    rows.append(("wire paid out", f"{paid:.4g} m" if paid is not None else "-"))
+    stretched = [lay for lay in w.get("layers", []) if lay["stretch"] > 0]
+    worst = max(stretched, key=lambda lay: lay["stretch"], default=None)
+    said = "none"
+    if worst:
+        said = (
+            f"in {len(stretched)} of {len(w['layers'])} layers, most {100 * worst['stretch']:.3g} % in coil "
+            f"{worst['coil']} layer {worst['layer']} (resistance +{100 * worst['resistance_rise']:.3g} %)"
+        )
+    rows.append(("wire stretched", said))
+    rows += [(f"wire {kind}", _fault_text(w[kind]) if w.get(kind) else "none") for kind in ("break", "slip")]
+    return rows
+
+
+def _fault_text(f: dict[str, Any]) -> str:
+    """Where and when a wire fault happened, as far as its status says."""
+    where = [f"{k} {f[k]}" for k in ("coil", "layer", "turn") if f.get(k) is not None]
+    when = [f"at {f['t_s']:.3f} s"] if f.get("t_s") is not None else []
+    return " ".join(where + when) or "where not recorded (see its ERROR below)"
+
+
 def _wound_rows(w: dict[str, Any]) -> list[tuple[str, str]]:
     """The coil as wound, in three rows (winder.analysis.wound)."""
     if not w:
@@ -775,7 +822,9 @@ def _wound_rows(w: dict[str, Any]) -> list[tuple[str, str]]:
     worst = max(errors) if errors else math.nan
     defects = w["defects"]
     if defects:
-        kinds = {k: sum(1 for x in defects if x["kind"] == k) for k in ("gap", "overlap", "offset", "flange")}
+        from winder.analysis.wound import DEFECT_KINDS
+
+        kinds = {k: sum(1 for x in defects if x["kind"] == k) for k in DEFECT_KINDS}
         first = defects[0]
         said = ", ".join(f"{n} {k}" for k, n in kinds.items() if n)
         found = (
@@ -809,6 +858,10 @@ SETUP_ROWS: dict[str, tuple[str, ...]] = {
 }
 
 
+#: rows left out of the table where every run says "none"
+TOLD_IF_ANY = ("programmed stops", "operator commands", "wire stretched", "wire break", "wire slip")
+
+
 def _shows(row: str, key: str) -> bool:
     return any(key == k or (k.endswith(".") and key.startswith(k)) for k in SETUP_ROWS.get(row, ()))
 
@@ -817,12 +870,9 @@ def format_table(analyses: list[Analysis]) -> str:
     """One readable table, one column per run; with several runs, the set-up
     rows (job, ramp, motors, rates) in which they differ are marked ``*``."""
     cols = [_rows(a) for a in analyses]
-    # the stops and the commands are told when a run had any
-    told = {n for c in cols for n, v in c if n in ("programmed stops", "operator commands") and v != "none"}
-    cols = [
-        [(n, v) for n, v in c if n in told or n not in ("programmed stops", "operator commands")]
-        for c in cols
-    ]
+    # the stops, the commands and the wire's faults are told when a run had any
+    told = {n for c in cols for n, v in c if n in TOLD_IF_ANY and v != "none"}
+    cols = [[(n, v) for n, v in c if n in told or n not in TOLD_IF_ANY] for c in cols]
     # runs side by side may not have the same rows (one without joint samples has one "as
     # wound" row, not three): every row any run has, in the order they come, "-" where a run has none
     names = list(dict.fromkeys(n for c in cols for n, _ in c))

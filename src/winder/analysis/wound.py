@@ -24,7 +24,12 @@ defects (``tolerance``: 10 % of the wire diameter unless given):
 * ``flange``: a turn whose centre lies nearer a flange than half a wire
   diameter less the tolerance (it climbs onto the flange), or beyond it;
 * ``crossover`` (orthocyclic): the feed moved by more than the tolerance
-  while the turn held, outside its crossover zone.
+  while the turn held, outside its crossover zone;
+* ``stretched`` / ``slack`` (a run that simulated the wire): the wire's
+  stress (:func:`winder.analysis.wire.stresses`) passed its yield while the
+  turn was wound (its size: the stretch it kept, strain x the turn's
+  length), or its tension fell below the alarm band (size 0). A turn is
+  wound from the moment the measured flyer begins it to the one it ends it.
 
 The window is ``bobbin.window_width`` when the job sets one, else the room the
 job's turns take (``turns_per_layer`` x d, plus d/2 on a shifted layer);
@@ -41,6 +46,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from winder.analysis.wire import stresses, tension_joints
 from winder.motion.axes import FEED, FORK
 from winder.motion.coil import radial_pitch
 from winder.motion.job import Segment
@@ -50,7 +56,7 @@ __all__ = ["DEFECT_KINDS", "AsWound", "Defect", "LayerLaid", "TurnLaid", "as_wou
 
 FloatArray = npt.NDArray[np.float64]
 
-DEFECT_KINDS = ("gap", "overlap", "offset", "flange", "crossover")
+DEFECT_KINDS = ("gap", "overlap", "offset", "flange", "crossover", "stretched", "slack")
 #: the default tolerance, as a fraction of the wire diameter
 TOLERANCE = 0.10
 
@@ -76,7 +82,9 @@ class Defect:
     coil: int
     layer: int
     turn: int  #: the turn it concerns (a gap or overlap: the later of the two)
-    size_m: float  #: by how much (gap/overlap: spacing - d; offset: error; flange: how far past d/2)
+    #: by how much (gap/overlap: spacing - d; offset: error; flange: how far past d/2;
+    #: stretched: the stretch the turn's wire kept; slack: 0)
+    size_m: float
     t_s: float
 
     def to_json(self) -> dict[str, Any]:
@@ -200,6 +208,7 @@ def as_wound(
     ortho = getattr(job, "lay", "helical") == "orthocyclic"
     pitch = radial_pitch(d, "orthocyclic" if ortho else "helical")
     coil_start: dict[int, tuple[float, int]] = {}  # coil -> (start flange feed position m, direction)
+    joint = tension_joints(run)
     result = AsWound(wire_m=d, window_m=0.0, tolerance_m=tol)
     for seg in layer_segments:
         n = seg.turns
@@ -236,6 +245,10 @@ def as_wound(
                 for tt, (_, _, _, moved) in zip(turns, laid, strict=True)
                 if abs(moved) > tol
             ]
+        spans = _turn_spans(
+            seg, len(turns), t, fork, windows.get(seg.index), fork_rad, job.fork_steps_per_rev
+        )
+        defects += _wire_defects(run, seg, turns, spans, joint)
         result.turns += turns
         result.defects += defects
         errors = [abs(tt.error_m) for tt in turns]
@@ -271,6 +284,83 @@ def _marks(seg: Segment, n: int, job: Any, ortho: bool) -> FloatArray:
     return np.stack([lo, (lo + hi) / 2, hi], axis=1)
 
 
+def _progress(
+    seg: Segment, t: FloatArray, fork: FloatArray, window: tuple[float, float] | None, fork_rad: float
+) -> tuple[int, int, FloatArray, float] | None:
+    """The samples ``lo:hi`` of layer ``seg`` (its time ``window``, with a
+    sample's margin either side), the measured flyer's progress along the
+    layer at each (rad, non-decreasing) and the layer's start on that scale;
+    None if fewer than two."""
+    if window is None:
+        return None
+    t0, t1 = window
+    lo = max(int(np.searchsorted(t, t0, side="right")) - 1, 0)
+    hi = min(int(np.searchsorted(t, t1, side="left")) + 2, t.size)
+    if hi - lo < 2:
+        return None
+    direction = 1 if seg.delta[FORK.index] >= 0 else -1
+    angle = np.maximum.accumulate(direction * fork[lo:hi])
+    return lo, hi, angle, direction * seg.start[FORK.index] * fork_rad
+
+
+def _turn_spans(
+    seg: Segment,
+    n: int,
+    t: FloatArray,
+    fork: FloatArray,
+    window: tuple[float, float] | None,
+    fork_rad: float,
+    spr: int,
+) -> FloatArray:
+    """(n, 2): when the measured flyer began and ended each of the first ``n``
+    turns of ``seg`` (s)."""
+    got = _progress(seg, t, fork, window, fork_rad)
+    if got is None or n <= 0:
+        return np.zeros((0, 2))
+    lo, hi, angle, base = got
+    when = np.interp(base + np.arange(n + 1) * spr * fork_rad, angle, t[lo:hi])
+    return np.stack([when[:-1], when[1:]], axis=1)
+
+
+def _wire_defects(
+    run: Run, seg: Segment, turns: list[TurnLaid], spans: FloatArray, joint: npt.NDArray[np.int64]
+) -> list[Defect]:
+    """The turns of ``seg`` wound stretched or slack (module doc), from the
+    tension samples within each turn's ``spans``; ``joint``: the joint sample
+    of each tension sample (:func:`winder.analysis.wire.tension_joints`)."""
+    tt = run.tension.t
+    if not tt.size or spans.shape[0] != len(turns) or not turns:
+        return []
+    first = np.searchsorted(tt, spans[:, 0], side="left")
+    last = np.searchsorted(tt, spans[:, 1], side="left")
+    lo, hi = int(first[0]), int(last[-1])
+    if hi <= lo:
+        return []
+    job = run.plan.job
+    j = np.maximum(joint[lo:hi], 0)
+    known = joint[lo:hi] >= 0  # a tension sample without its joint sample: its tension's stress alone
+    psi = np.where(known, run.states.pos[j, FORK.index], 0.0)
+    omega = np.where(known, run.states.vel[j, FORK.index], 0.0)
+    tension = run.tension.tension[lo:hi]
+    stress = stresses(job, seg, tension, psi, omega)
+    wire, slack = job.wire, job.set_tension * (1 - job.tension_alarm)
+    length = job.bobbin.turn_length(job.winding.coils[seg.pole].layers[seg.layer].radius) or 0.0
+    out = []
+    for tt_, a, b in zip(turns, (first - lo).tolist(), (last - lo).tolist(), strict=True):
+        if b <= a:
+            continue
+        peak = float(stress[a:b].max())
+        if peak > wire.material.yield_stress:
+            out.append(
+                Defect(
+                    "stretched", tt_.coil, tt_.layer, tt_.turn, wire.plastic_strain(peak) * length, tt_.t_s
+                )
+            )
+        if float(tension[a:b].min()) < slack:
+            out.append(Defect("slack", tt_.coil, tt_.layer, tt_.turn, 0.0, tt_.t_s))
+    return out
+
+
 def _lay(
     seg: Segment,
     marks: FloatArray,
@@ -285,17 +375,10 @@ def _lay(
     hold m) of each turn of ``seg`` whose measuring point (``marks``' middle,
     fork steps from the layer's start) the measured flyer reached."""
     n = marks.shape[0]
-    if window is None or n <= 0:
+    got = _progress(seg, t, fork, window, fork_rad)
+    if got is None or n <= 0:
         return []
-    t0, t1 = window
-    # the samples of this layer, with a sample's margin either side
-    lo = max(int(np.searchsorted(t, t0, side="right")) - 1, 0)
-    hi = min(int(np.searchsorted(t, t1, side="left")) + 2, t.size)
-    if hi - lo < 2:
-        return []
-    direction = 1 if seg.delta[FORK.index] >= 0 else -1
-    angle = np.maximum.accumulate(direction * fork[lo:hi])  # progress along the layer, non-decreasing
-    base = direction * seg.start[FORK.index] * fork_rad
+    lo, hi, angle, base = got
     at = base + marks * fork_rad
     reached = at[:, 2] <= angle[-1]
     if not reached.any():

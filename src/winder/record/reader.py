@@ -161,11 +161,14 @@ class SimConfig:
 @dataclass(frozen=True)
 class Samples:
     """Joint samples: times ``t`` (s, simulated), ``pos`` and ``vel`` (n, 3) in
-    joint units (feed m, fork rad, pole rad; per s), axes in AXES order."""
+    joint units (feed m, fork rad, pole rad; per s), axes in AXES order;
+    ``extra``: the positions of the other joints recorded with them (the
+    wire's ``supply``, m paid out, and ``dancer``, m), by name."""
 
     t: FloatArray
     pos: FloatArray
     vel: FloatArray
+    extra: dict[str, FloatArray] = field(default_factory=dict)
 
     @classmethod
     def empty(cls) -> Samples:
@@ -301,6 +304,9 @@ class Run:
     #: recorded ("at <t> s: <node>: <task>: <message>", each different one
     #: once, t the simulated time it was recorded at)
     errors: tuple[str, ...] = ()
+    #: the same ERROR statuses as recorded: each different one's first, its
+    #: ``name``, ``message`` and values (key -> text)
+    error_statuses: tuple[dict[str, str], ...] = ()
     #: the profile node's ramp settings (winder/profile_config: profile, v_max, a_max,
     #: j_max, tau, v_start, dwell in steps of the major axis, s), empty in older bags
     profile_config: dict[str, Any] = field(default_factory=dict)
@@ -410,13 +416,15 @@ def _joint_samples(datas: list[bytes], topic: str) -> Samples:
             k = len(names)
             sec = block[:, 4:8].copy().view("<i4")[:, 0].astype(np.float64)
             nsec = block[:, 8:12].copy().view("<u4")[:, 0].astype(np.float64)
-            pos = block[:, p_off : p_off + 8 * k].copy().view("<f8")[:, order]
+            every = block[:, p_off : p_off + 8 * k].copy().view("<f8")
+            pos = every[:, order]
             vel = block[:, v_off : v_off + 8 * k].copy().view("<f8")[:, order]
             first = _typestore().deserialize_cdr(datas[0], "sensor_msgs/msg/JointState")
             if np.array_equal(np.asarray(first.position)[order], pos[0]) and np.array_equal(
                 np.asarray(first.velocity)[order], vel[0]
             ):
-                return Samples(sec + nsec * 1e-9, pos, vel)
+                extra = {name: every[:, j].copy() for j, name in enumerate(names) if name not in AXES}
+                return Samples(sec + nsec * 1e-9, pos, vel, extra)
     return _joint_samples_slow(datas, topic)
 
 
@@ -428,6 +436,7 @@ def _joint_samples_slow(datas: list[bytes], topic: str) -> Samples:
     vel = np.zeros((n, len(AXES)))
     order: list[int] | None = None
     names0: list[str] | None = None
+    extra: dict[str, FloatArray] = {}
     for i, data in enumerate(datas):
         m = store.deserialize_cdr(data, "sensor_msgs/msg/JointState")
         names = list(m.name)
@@ -446,7 +455,10 @@ def _joint_samples_slow(datas: list[bytes], topic: str) -> Samples:
         pos[i] = p[order]
         if v.size == len(names):
             vel[i] = v[order]
-    return Samples(t, pos, vel)
+        for j, name in enumerate(names):
+            if name not in AXES:
+                extra.setdefault(name, np.full(n, np.nan))[i] = p[j]
+    return Samples(t, pos, vel, extra)
 
 
 #: the topics whose messages the first walk keeps (they describe the run and
@@ -608,10 +620,12 @@ def _concat(parts: list[Samples]) -> Samples:
         return Samples.empty()
     if len(parts) == 1:
         return parts[0]
+    names = [name for name in parts[0].extra if all(name in p.extra for p in parts)]
     return Samples(
         np.concatenate([p.t for p in parts]),
         np.vstack([p.pos for p in parts]),
         np.vstack([p.vel for p in parts]),
+        {name: np.concatenate([p.extra[name] for p in parts]) for name in names},
     )
 
 
@@ -630,7 +644,7 @@ def _assemble(
     profile_config = _decode_profile_config(decoded[topic[PROFILE_CONFIG]], topic[PROFILE_CONFIG], notes)
     wall0, origin_ns = _time_base(decoded[topic[SIM_CONFIG]])
     consumer = {status_node(m.name) for m in decoded[topic[STATE]]}  # who announced the cell's state
-    report, profile, errors = _decode_diagnostics(
+    report, profile, errors, error_statuses = _decode_diagnostics(
         decoded[DIAGNOSTICS], ns, decoded[_DIAGNOSTIC_TIMES], wall0, consumer
     )
     origin = origin_ns / 1e9
@@ -650,6 +664,7 @@ def _assemble(
         notes=tuple(notes),
         damaged=tuple(raw.damaged),
         errors=errors,
+        error_statuses=error_statuses,
         profile_config=profile_config,
         events=_decode_events(decoded.get(topic[CONTROL], []), plan.run_id),
         compression=", ".join(sorted(raw.compressions)),
@@ -675,7 +690,7 @@ def _shifted(samples: Samples, origin: float) -> Samples:
     """Samples stamped on the cell's clock, timed from their job's start."""
     if not origin:
         return samples
-    return Samples(samples.t - origin, samples.pos, samples.vel)
+    return Samples(samples.t - origin, samples.pos, samples.vel, samples.extra)
 
 
 def _decode_plan(bag: Path, msgs: list[Any], topic: str) -> JobPlan:
@@ -732,12 +747,12 @@ def _decode_profile_config(msgs: list[Any], topic: str, notes: list[str]) -> dic
 
 def _decode_diagnostics(
     msgs: list[Any], ns: str, times: list[int], wall0: int, consumer: set[str] | None = None
-) -> tuple[dict[str, str], str, tuple[str, ...]]:
+) -> tuple[dict[str, str], str, tuple[str, ...], tuple[dict[str, str], ...]]:
     """The consumer's last job status (the final report), the profile kind
     the profile node's status names (older bags say it only there) and the
     ERROR statuses of the cell in ``ns`` (each different one once, in order,
     with the simulated time it was first recorded at: the log time less the
-    job's wall start).
+    job's wall start), in words and as recorded (name, message, values).
 
     Nodes are found by their role (:func:`winder.contract.topics.has_role`),
     not their names: the consumer's status says ``role: consumer``; one
@@ -748,6 +763,7 @@ def _decode_diagnostics(
     report: dict[str, str] = {}
     profile = ""
     errors: dict[str, str] = {}
+    statuses: dict[str, dict[str, str]] = {}
     for arr, t in zip(msgs, times, strict=True):
         for st in arr.status:
             values = {kv.key: kv.value for kv in st.values}
@@ -760,4 +776,5 @@ def _decode_diagnostics(
             if level == ERROR_LEVEL and in_namespace(st.name, ns) and text not in errors:
                 at = f"at {(t - wall0) / 1e9:.3f} s: " if wall0 and t >= wall0 else ""
                 errors[text] = at + text
-    return report, profile, tuple(errors.values())
+                statuses[text] = {**values, "name": st.name, "message": st.message}
+    return report, profile, tuple(errors.values()), tuple(statuses.values())

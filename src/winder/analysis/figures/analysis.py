@@ -57,7 +57,8 @@ from matplotlib.transforms import Bbox
 
 from winder.analysis.digest import ZOOM_STEPS, Digest, turn_index
 from winder.analysis.identify import Identification
-from winder.analysis.metrics import Analysis, digest_run, paired_error
+from winder.analysis.metrics import Analysis, digest_run, paired_error, sample_layers
+from winder.analysis.wire import FAULTS, LayerTension, fault, layer_tensions, tension_joints
 from winder.contract.eq7 import layer_of_samples, sample_deviation, signed_path_distance
 from winder.contract.files import OutputError, atomic_file, output_dir
 from winder.contract.run import shaper_text, where_text
@@ -487,50 +488,178 @@ def motion_figure(run: Run, d: Digest) -> Figure:
 # -- operations.png -------------------------------------------------------------------------
 
 
-def wire_figure(run: Run) -> Figure:
-    """wire.png's figure: the wire's tension over the run as recorded, in the
-    job's bands (the set tension, the warning and alarm bands) and below the
-    wire's maximum (times ``tension.max_share``), and two turns of the flyer
-    around the peak in the same bands."""
+#: wire.png: a panel for each layer wound, WIRE_COLUMNS to a row; of more than WIRE_LAYERS
+#: layers, the WIRE_LAYERS with the highest peaks
+WIRE_LAYERS, WIRE_COLUMNS = 8, 4
+#: the colours of the layers in wire.png, none the bands' green, the maximum's red or
+#: the grey of the tension between layers (they repeat after eight layers)
+LAYER_COLOURS = (
+    "tab:blue",
+    "tab:orange",
+    "tab:purple",
+    "tab:brown",
+    "tab:pink",
+    "tab:cyan",
+    "tab:olive",
+    "navy",
+)
+
+
+def wire_figure(run: Run, d: Digest | None = None) -> Figure:
+    """wire.png's figure: the wire's tension over the run as recorded,
+    coloured by the layer it was wound in, in the job's bands (the set
+    tension, the warning and alarm bands) and below the wire's maximum (times
+    ``tension.max_share``); below it a panel per layer (of more than
+    WIRE_LAYERS, those with the highest peaks) against the turns into the
+    layer, in its colour, and two turns of the flyer around the peak, in the
+    same bands. ``d``: the run's digest, if made already."""
+    d = d if d is not None else digest_run(run)
+    layers = layer_tensions(run, sample_layers(run, d))
+    shown = sorted(sorted(range(len(layers)), key=lambda k: -layers[k].max_n)[:WIRE_LAYERS])
+    rows = math.ceil(len(shown) / WIRE_COLUMNS)
+    height = 0.9 + 3.3 + 2.35 * rows + 3.0  # inches: title, the run, the layers, the zoom
+    fig, _ = _figure((13, height))
+
+    def box(
+        top: float, tall: float, left: float = 0.07, width: float = 0.72
+    ) -> tuple[float, float, float, float]:
+        return (left, 1 - (top + tall) / height, width, tall / height)  # from the top, in inches
+
+    ax = fig.add_axes(box(0.6, 2.6))
+    zoom = fig.add_axes(box(height - 2.75, 2.2))
+    _wire_run(run, ax, layers, {kind: fault(run, kind) for kind in FAULTS})
+    joint = tension_joints(run)
+    for k, i in enumerate(shown):
+        col, row = k % WIRE_COLUMNS, k // WIRE_COLUMNS
+        width = (0.975 - 0.07 - 0.05 * (WIRE_COLUMNS - 1)) / WIRE_COLUMNS
+        panel = fig.add_axes(box(4.25 + 2.35 * row, 1.6, 0.07 + col * (width + 0.05), width))
+        _wire_layer(run, panel, layers[i], joint, LAYER_COLOURS[i % len(LAYER_COLOURS)], ax.get_ylim())
+        if col == 0:
+            panel.set_ylabel("tension (N)")
+    _wire_zoom(run, zoom)
+    return fig
+
+
+def _wire_bands(run: Run, ax: Axes, label: bool) -> None:
+    """The set tension, the warning and alarm bands and the wire's maximum."""
     job = run.plan.job
-    tension = run.tension
-    fig, _ = _figure((13, 8.0))
-    ax = fig.add_axes((0.07, 0.58, 0.72, 0.36))
-    zoom = fig.add_axes((0.07, 0.08, 0.72, 0.38))
     set_n = job.set_tension
-    top = job.tension_limit
-    for frac, alpha, label in (
+    for frac, alpha, name in (
         (job.tension_alarm, 0.10, f"alarm band (tension.alarm {job.tension_alarm:g})"),
         (job.tension_warning, 0.16, f"warning band (tension.warning {job.tension_warning:g})"),
     ):
-        ax.axhspan(set_n * (1 - frac), set_n * (1 + frac), color="tab:green", alpha=alpha, lw=0, label=label)
-    ax.axhline(set_n, color="tab:green", lw=0.8, label=f"set {set_n:.4g} N")
+        span = (set_n * (1 - frac), set_n * (1 + frac))
+        ax.axhspan(*span, color="tab:green", alpha=alpha, lw=0, label=name if label else None, gid=BACKGROUND)
+    ax.axhline(
+        set_n, color="tab:green", lw=0.8, label=f"set {set_n:.4g} N" if label else None, gid=BACKGROUND
+    )
     derated = f" x tension.max_share {job.tension_max_share:g}" if job.tension_max_share < 1 else ""
-    ax.axhline(top, color="tab:red", lw=1.0, ls="--", label=f"the wire's maximum{derated}: {top:.4g} N")
-    _line(ax, tension.t, tension.tension, color=ACT, lw=0.6, label="simulated tension")
+    top = job.tension_limit
+    said = f"the wire's maximum{derated}: {top:.4g} N" if label else None
+    ax.axhline(top, color="tab:red", lw=1.0, ls="--", label=said, gid=BACKGROUND)
+
+
+#: what the wire did at each of its faults, in wire.png
+FAULT_VERBS = {"break": "broke", "slip": "slipped"}
+
+
+def _wire_run(
+    run: Run, ax: Axes, layers: list[LayerTension], faults: dict[str, dict[str, Any] | None]
+) -> None:
+    """The tension over the whole run, each layer's samples in its colour,
+    and when the wire broke or slipped (where its status says)."""
+    job = run.plan.job
+    tension = run.tension
+    _wire_bands(run, ax, label=True)
+    _line(ax, tension.t, tension.tension, color="0.55", lw=0.6, label="tension (between layers)")
+    n = len(LAYER_COLOURS)
+    for k, colour in enumerate(LAYER_COLOURS[: len(layers)]):  # one line a colour, however many layers
+        mine = layers[k::n]
+        t, y = _broken_at_gaps(
+            np.sort(np.concatenate([lay.samples for lay in mine])), tension.t, tension.tension
+        )
+        label = f"coil {mine[0].coil} layer {mine[0].layer}" + (
+            f", every {n}th layer after" if len(mine) > 1 else ""
+        )
+        _line(ax, t, y, color=colour, lw=0.7, label=label)
+    said = ""
+    for kind, f in faults.items():
+        if f is None:
+            continue
+        verb = FAULT_VERBS.get(kind, kind)
+        said += f", the wire {verb}" + (" (when: not recorded)" if f["t_s"] is None else "")
+        if f["t_s"] is not None:
+            ls = ":" if kind == "break" else "-."
+            ax.axvline(f["t_s"], color="k", lw=1.2, ls=ls, label=f"the wire {verb} at {f['t_s']:.3f} s")
     peak, least = float(tension.tension.max()), float(tension.tension.min())
     ax.set_xlim(float(tension.t[0]), float(tension.t[-1]) if len(tension) > 1 else float(tension.t[0]) + 1)
-    ax.set_ylim(0.0, max(top, peak) * 1.08)
+    ax.set_ylim(0.0, max(job.tension_limit, peak) * 1.08)
     ax.set_xlabel("time (s)")
     ax.set_ylabel("wire tension (N)")
+    below = (
+        f"; below, the {WIRE_LAYERS} of {len(layers)} layers with the highest peaks"
+        if len(layers) > WIRE_LAYERS
+        else ""
+    )
     ax.set_title(
         f"{run.label}: the wire ({job.wire.material.name}, {job.wire.bare_diameter * 1e3:g} mm): "
-        f"tension {least:.4g}..{peak:.4g} N",
+        f"tension {least:.4g}..{peak:.4g} N{said}{below}",
         loc="left",
     )
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
-    # two turns around the peak: the swing the corners make, four times a turn on a rectangle
+
+
+def _broken_at_gaps(idx: IntArray, x: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """``x[idx]``, ``y[idx]`` with a point of NaN height between samples that
+    are not neighbours (a line through them does not bridge what lies between)."""
+    gaps = np.flatnonzero(np.diff(idx) > 1) + 1
+    xs = x[idx]
+    return np.insert(xs, gaps, xs[gaps - 1]), np.insert(y[idx], gaps, np.nan)
+
+
+def _wire_layer(
+    run: Run, ax: Axes, lay: LayerTension, joint: IntArray, colour: str, ylim: tuple[float, float]
+) -> None:
+    """One layer's tension against the turns into it, in the bands."""
+    seg = run.plan.segments[lay.segment]
+    spr = run.plan.job.fork_steps_per_rev
+    j = joint[lay.samples]
+    steps = run.states.pos[j, FORK.index] / run.plan.joint_step[FORK.index]
+    turns = np.abs(steps - seg.start[FORK.index]) / spr
+    _wire_bands(run, ax, label=False)
+    # against the flyer's progress (the turns it reached: it may go back a little at a stop)
+    progress = np.maximum.accumulate(turns)
+    tension = run.tension.tension[lay.samples]
+    _line(ax, progress, tension, color=colour, lw=0.7)
+    k = int(np.argmax(tension))  # the peak, a dot: seen where the line is one pixel wide
+    ax.plot(progress[k : k + 1], tension[k : k + 1], "o", color=colour, ms=4)
+    ax.set_xlim(0.0, max(float(seg.turns), float(turns.max()) if turns.size else 0.0) or 1.0)
+    ax.set_ylim(*ylim)
+    ax.set_xlabel("turns into the layer")
+    stretched = f", stretched {100 * lay.stretch:.3g} %" if lay.stretch > 0 else ""
+    ax.set_title(
+        f"coil {lay.coil} layer {lay.layer}: {lay.min_n:.4g}..{lay.max_n:.4g} N{stretched}",
+        loc="left",
+        fontsize=8.5,
+        color="tab:red" if lay.stretch > 0 else "k",
+    )
+
+
+def _wire_zoom(run: Run, zoom: Axes) -> None:
+    """Two turns of the flyer around the tension's peak: the swing the
+    corners make, four times a turn on a rectangle."""
+    job = run.plan.job
+    tension = run.tension
+    set_n = job.set_tension
     k = int(np.argmax(tension.tension))
+    peak = float(tension.tension[k])
     st = run.states
     fork = AXES.index("fork")
     w = abs(float(np.interp(tension.t[k], st.t, st.vel[:, fork]))) if len(st) else 0.0
     half = 2 * math.pi / w if w > 1e-9 else 0.5
     m = (tension.t >= tension.t[k] - half) & (tension.t <= tension.t[k] + half)
     near = tension.tension[m]
-    for frac, alpha in ((job.tension_alarm, 0.10), (job.tension_warning, 0.16)):
-        zoom.axhspan(set_n * (1 - frac), set_n * (1 + frac), color="tab:green", alpha=alpha, lw=0)
-    zoom.axhline(set_n, color="tab:green", lw=0.8)
-    zoom.axhline(top, color="tab:red", lw=1.0, ls="--")
+    _wire_bands(run, zoom, label=False)
     zoom.plot(tension.t[m], near, color=ACT, lw=0.9, marker=".", ms=2)
     lo, hi = float(min(near.min(), set_n)), float(max(near.max(), set_n))
     pad = 0.1 * (hi - lo) or 0.05 * max(abs(hi), 1e-9)
@@ -543,7 +672,6 @@ def wire_figure(run: Run) -> Figure:
         else f"around the peak, {peak:.4g} N at {tension.t[k]:.3f} s",
         loc="left",
     )
-    return fig
 
 
 def _operations(run: Run, d: Digest, out: Path) -> Path:
@@ -948,6 +1076,8 @@ WOUND_COLOURS = {
     "offset": "tab:red",
     "flange": "k",
     "crossover": "tab:green",
+    "stretched": "m",
+    "slack": "gold",
 }
 #: what the legend calls each colour
 WOUND_WORDS = {
@@ -957,6 +1087,20 @@ WOUND_WORDS = {
     "offset": "off its place",
     "flange": "on the flange",
     "crossover": "crossed over outside its zone",
+    "stretched": "stretched past the yield",
+    "slack": "slack (below the alarm band)",
+}
+#: the wire's state in a turn (winder.analysis.wound), marked in its colour over
+#: the turn's: a ring around a stretched turn, a dot in a slack one (scale: of
+#: the wire's diameter)
+WIRE_MARKS: dict[str, dict[str, Any]] = {
+    "stretched": {
+        "scale": 1.0,
+        "facecolors": "none",
+        "edgecolors": WOUND_COLOURS["stretched"],
+        "linewidths": 1.6,
+    },
+    "slack": {"scale": 0.4, "facecolors": WOUND_COLOURS["slack"], "edgecolors": "k", "linewidths": 0.3},
 }
 
 
@@ -966,7 +1110,6 @@ def _wound(run: Run, d: Digest, out: Path) -> Path:
     measured, the layer's height), the defects coloured by kind; one row per
     coil (the first WOUND_COILS)."""
     from matplotlib.collections import EllipseCollection
-    from matplotlib.lines import Line2D
     from matplotlib.patches import Rectangle
 
     from winder.analysis.wound import as_wound
@@ -979,8 +1122,9 @@ def _wound(run: Run, d: Digest, out: Path) -> Path:
     # a gap or overlap (where a loss happened), then an offset (which lasts)
     rank = {"flange": 0, "overlap": 1, "gap": 2, "crossover": 3, "offset": 4}
     kind: dict[tuple[int, int, int], str] = {}
-    for fault in sorted(wound.defects, key=lambda f: -rank[f.kind]):
-        kind[fault.coil, fault.layer, fault.turn] = fault.kind
+    for defect in sorted((f for f in wound.defects if f.kind in rank), key=lambda f: -rank[f.kind]):
+        kind[defect.coil, defect.layer, defect.turn] = defect.kind
+    marked = {m: {(f.coil, f.layer, f.turn) for f in wound.defects if f.kind == m} for m in WIRE_MARKS}
     coils = sorted({t.coil for t in wound.turns})[:WOUND_COILS] or [1]
     top = max((t.radial_m * 1e3 for t in wound.turns), default=wire / 2) + wire
     aspect = top / max(width, wire)
@@ -1014,25 +1158,27 @@ def _wound(run: Run, d: Digest, out: Path) -> Path:
                 )
             )
             shown.add(name)
+        for name, style in WIRE_MARKS.items():
+            mine = [t for t in turns if (t.coil, t.layer, t.turn) in marked[name]]
+            if mine:
+                _circles(ax, mine, wire, style)
+                shown.add(name)
         ax.set_xlim(-wire, width + wire)
         ax.set_ylim(-wire * 0.8, top + wire * 0.2)
         ax.set_aspect("equal", adjustable="box")
         ax.set_ylabel(f"coil {coil}\nheight (mm)")
         laid = sum(lay.turns_laid for lay in wound.layers if lay.coil == coil)
         planned = sum(lay.turns_planned for lay in wound.layers if lay.coil == coil)
-        faults = sum(1 for f in wound.defects if f.coil == coil)
+        faults = sum(1 for f in wound.defects if f.coil == coil and f.kind not in WIRE_MARKS)
+        wired = {m: sum(1 for c, _, _ in marked[m] if c == coil) for m in WIRE_MARKS}
         ax.set_title(
             f"coil {coil}: {laid} of {planned} turns laid, {faults} defects"
-            + (f" (tolerance {wound.tolerance_m * 1e3:g} mm)" if faults else ""),
+            + (f" (tolerance {wound.tolerance_m * 1e3:g} mm)" if faults else "")
+            + "".join(f", {n} turns {m}" for m, n in wired.items() if n),
             fontsize=9,
         )
     axes[-1].set_xlabel("axial place in the window, from the start flange (mm)")
-    # EllipseCollection has no legend handle: a marker of each colour stands for it
-    handles = [
-        Line2D([], [], ls="", marker="o", ms=8, color=WOUND_COLOURS[name], label=WOUND_WORDS[name])
-        for name in WOUND_COLOURS
-        if name in shown
-    ]
+    handles = [_wound_handle(name) for name in WOUND_COLOURS if name in shown]
     height = 1.2 + row * len(coils)
     fig.legend(  # in inches from the top, below the two-line title: a tall window's axes must not lift it
         handles=handles,
@@ -1059,6 +1205,34 @@ def _wound(run: Run, d: Digest, out: Path) -> Path:
     return _save(fig, out / "wound.png")
 
 
+def _circles(ax: Axes, turns: list[Any], wire: float, style: dict[str, Any]) -> None:
+    """A mark of WIRE_MARKS' ``style`` (its ``scale`` of the ``wire``'s
+    diameter, mm, across) at each of ``turns`` (as laid)."""
+    from matplotlib.collections import EllipseCollection
+
+    look = dict(style)
+    xy = np.array([[t.axial_m * 1e3, t.radial_m * 1e3] for t in turns])
+    sizes = np.full(len(turns), wire * look.pop("scale"))
+    ax.add_collection(
+        EllipseCollection(
+            sizes, sizes, np.zeros(len(turns)), units="x", offsets=xy, offset_transform=ax.transData, **look
+        )
+    )
+
+
+def _wound_handle(name: str) -> Line2D:
+    """The legend's marker of a kind of turn in wound.png (EllipseCollection
+    has no legend handle): a dot of its colour, or its mark."""
+    if name not in WIRE_MARKS:
+        return Line2D([], [], ls="", marker="o", ms=8, color=WOUND_COLOURS[name], label=WOUND_WORDS[name])
+    mark = WIRE_MARKS[name]
+    ring = mark["facecolors"] == "none"
+    return Line2D(
+        [], [], ls="", marker="o", ms=8 if ring else max(8 * mark["scale"], 5), mfc=mark["facecolors"],
+        mec=mark["edgecolors"], mew=mark["linewidths"], label=WOUND_WORDS[name],
+    )  # fmt: skip
+
+
 def _draw(name: str) -> Path:
     assert _JOB is not None
     run, analysis, d, out = _JOB
@@ -1072,7 +1246,7 @@ def _draw(name: str) -> Path:
         if name == "wound":
             return _wound(run, d, out)
         if name == "wire":
-            return _save(wire_figure(run), out / "wire.png")
+            return _save(wire_figure(run, d), out / "wire.png")
         return _operations(run, d, out)
 
 
