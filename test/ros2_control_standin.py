@@ -36,7 +36,19 @@ named and namespaced as ros2_control makes them, behaving as documented:
   ``homing_controller`` node whose ``~/home`` (std_srvs/Trigger) homes every
   joint: the mock's positions go to 0, the home switches' place (a real
   machine's drives run to their switches; the bridge's ``homing_service``);
-  ``--homing-silent`` adds one that never answers (a drive that hangs).
+  ``--homing-silent`` adds one that never answers (a drive that hangs);
+* with ``--load-cell NAME``, a force_torque_sensor_broadcaster named NAME
+  (force_torque_sensor_broadcaster/ForceTorqueSensorBroadcaster, as its
+  documentation and source have it: publishes geometry_msgs/WrenchStamped on
+  ``~/wrench``, i.e. ``/<ns>/NAME/wrench``, SystemDefaultsQoS, at each
+  update, stamped with the update's time, ``header.frame_id`` its
+  ``frame_id``) over a one-axis load cell, force.x = the wire's tension:
+  ``--tension`` N, steady; beyond the mock, it drops to 0 (the wire broke)
+  from the first update where a joint's state reaches a position
+  (``--tension-drop JOINT=POSITION``: a turn of the flyer) or ``--tension-drop-after S`` s
+  after the first command; ``--impostor NODE`` adds another node, NODE,
+  publishing 0 N on the same topic at the same rate (a neighbour no bridge
+  may trust).
 
 Like the controller manager, which "independent of the kernel installed"
 configures SCHED_FIFO with priority 50 for its main thread (its user
@@ -60,6 +72,7 @@ import time
 from typing import Any
 
 import rclpy
+from geometry_msgs.msg import WrenchStamped
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -110,6 +123,11 @@ def main() -> None:
     ap.add_argument("--corrupt-value", type=float, default=math.inf)
     ap.add_argument("--homing", action="store_true")
     ap.add_argument("--homing-silent", action="store_true")
+    ap.add_argument("--load-cell", default="")
+    ap.add_argument("--tension", type=float, default=10.0)
+    ap.add_argument("--tension-drop", default="", metavar="JOINT=POSITION")
+    ap.add_argument("--tension-drop-after", type=float, default=math.inf)
+    ap.add_argument("--impostor", default="")
     args = ap.parse_args(argv)
     joints = args.joints.split(",")
     if args.controller is None:
@@ -200,6 +218,25 @@ def main() -> None:
     else:
         ctrl.create_subscription(Float64MultiArray, "~/commands", on_commands, reliable)
     pub = jsb.create_publisher(JointState, "joint_states", reliable)
+    # the load cell's broadcaster (and a neighbour on its topic): the wire's tension
+    fts = rclpy.create_node(args.load_cell) if args.load_cell else None
+    impostor = rclpy.create_node(args.impostor) if args.impostor and fts is not None else None
+    pub_wrench = fts.create_publisher(WrenchStamped, "~/wrench", reliable) if fts is not None else None
+    pub_impostor = (
+        impostor.create_publisher(WrenchStamped, f"{args.load_cell}/wrench", reliable)
+        if impostor is not None
+        else None
+    )
+    drop_joint, _, drop_at = args.tension_drop.partition("=")
+    broke = [False]
+
+    def wrench(force: float, stamp: Any) -> WrenchStamped:
+        msg = WrenchStamped()
+        msg.header.stamp = stamp
+        msg.header.frame_id = "load_cell"
+        msg.wrench.force.x = force
+        return msg
+
     dt = 1.0 / args.rate
     last = [time.monotonic()]
 
@@ -226,6 +263,15 @@ def main() -> None:
             )
             msg.header.stamp = cm.get_clock().now().to_msg()
             pub.publish(msg)
+        if pub_wrench is not None:
+            stamp = cm.get_clock().now().to_msg()
+            if drop_joint and state[joints.index(drop_joint)] >= float(drop_at):
+                broke[0] = True
+            if now - first_command[0] >= args.tension_drop_after:
+                broke[0] = True
+            pub_wrench.publish(wrench(0.0 if broke[0] else args.tension, stamp))
+            if pub_impostor is not None:
+                pub_impostor.publish(wrench(0.0, stamp))
         if args.interface == "trajectory":
             sample_trajectory()
         elif last_msg[0] is not None:
@@ -233,7 +279,7 @@ def main() -> None:
 
     cm.create_timer(dt, update, clock=Clock(clock_type=ClockType.STEADY_TIME))
     ex = SingleThreadedExecutor()
-    nodes = [n for n in (cm, ctrl, jsb, homing) if n is not None]
+    nodes = [n for n in (cm, ctrl, jsb, homing, fts, impostor) if n is not None]
     for n in nodes:
         ex.add_node(n)
     cm.get_logger().info(f"stand-in up: joints {joints}, {args.controller}, {args.rate:g} Hz, {policy}")

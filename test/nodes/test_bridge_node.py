@@ -255,6 +255,43 @@ def test_the_plain_python_read_is_the_numpy_read_where_every_joint_is_measured(
             assert fast[1] == measured == got[1].tolist()
 
 
+def test_the_load_cell_and_velocity_reads_are_rclpy_s_messages() -> None:
+    """The bridge's readers of a WrenchStamped (stamp, force.x) and of one
+    joint's velocity in a JointState, against messages rclpy serializes:
+    frame ids of every padding, a layout read again after a change, a
+    message without velocities or without the joint (None), not a message
+    (None)."""
+    from geometry_msgs.msg import WrenchStamped
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import JointState
+    from winder_bridge.bridge_node import VelocityPick, wrench_force_x
+
+    for frame in ["", "a", "ab", "abc", "load_cell", "load_cell_frame"]:
+        msg = WrenchStamped()
+        msg.header.stamp.sec, msg.header.stamp.nanosec = 1_795_000_000, 123_456_789
+        msg.header.frame_id = frame
+        msg.wrench.force.x, msg.wrench.force.y, msg.wrench.torque.x = 169.125, -2.0, 7.0
+        assert wrench_force_x(serialize_message(msg)) == (1_795_000_000_123_456_789, 169.125)
+    assert wrench_force_x(b"\x00\x01\x00\x00" + bytes(8)) is None
+
+    pick = VelocityPick("flyer")
+    cases = [
+        (JOINTS, [1.0, 2.0, 3.0], [0.5, -49.0, 0.25], "", -49.0),
+        (JOINTS, [1.5, 2.5, 3.5], [0.5, 12.0, 0.25], "", 12.0),  # the layout kept: the values read
+        (["flyer", "x"], [1.0, 2.0], [3.5, 4.0], "frame", 3.5),  # another layout
+        (JOINTS, [1.0, 2.0, 3.0], [], "", None),  # no velocities
+        (["feed_screw", "x"], [1.0, 2.0], [3.0, 4.0], "", None),  # not the joint
+        (JOINTS, [1.0, 2.0, 3.0], [0.5, math.nan, 0.25], "", None),  # NaN: not measured
+        (JOINTS, [1.0, 2.0, 3.0], [0.5, -49.0, 0.25], "", -49.0),
+    ]
+    for names, pos, vel, frame, want in cases:
+        js = JointState(name=names, position=pos, velocity=vel)
+        js.header.frame_id = frame
+        for _ in range(2):  # parsed, then reused
+            assert pick.read(serialize_message(js)) == want, (names, vel)
+    assert pick.read(b"\x00\x01\x00\x00") is None
+
+
 def test_trajectory_payloads_read_back_in_rclpy_and_rosbags() -> None:
     """The bridge's JointTrajectory bytes: rclpy and rosbags read the same
     message back (rclpy's own serializer leaves bytes past the end, which a
@@ -994,3 +1031,136 @@ def test_steps_past_a_velocity_limit_stop_the_run_before_they_are_due(
     step = 2 * math.pi / JOB["fork_steps_per_rev"]
     assert int(report["steps_done"]) >= 2 * 512  # it ran to the stop at turn 2, within the limit
     assert windowed_speed(rows[: k.max(), 0], fork, 20_000_000) <= 55.0 + 3 * step / 0.02
+
+
+# -- the wire's load cell -----------------------------------------------------------
+#: the load cell's force_torque_sensor_broadcaster (the stand-in's, from its documented behaviour)
+LOAD_CELL = "load_cell"
+WRENCHES = f"/{LOAD_CELL}/wrench"
+
+
+def wire_statuses(raw: dict[str, list[tuple[int, Any]]]) -> list[Any]:
+    return [
+        st
+        for _, arr in raw["/diagnostics"]
+        for st in arr.status
+        if st.name == "bridge_node: wire" and st.level == 2
+    ]
+
+
+def test_a_wire_break_stops_the_run_where_the_flyer_was(tmp_path: Path, procs: Procs, ros: Any) -> None:
+    """The stand-in's load cell (a force_torque_sensor_broadcaster, as
+    documented: WrenchStamped on ~/wrench, force.x the tension) reads the
+    job's set tension, then 0 from the moment the flyer reaches 2.2 turns
+    into coil 2 (the wire breaks while it turns). The bridge stops the run
+    as at a servo fault: one ``wire`` ERROR status naming coil 2, layer 1,
+    turn 3 (worked out here from the job: 4 turns a coil, fork_steps_per_rev
+    512 steps a turn of 2 pi rad), which is also where the commands recorded
+    had taken the fork at the fault's time; commands held from there (every
+    one exact, none after the fault), the profile node told to abort, the
+    run closed incomplete, the final report naming the break; the load
+    cell's readings in the bag under its topic."""
+    job = Job(**JOB)
+    set_n = job.set_tension
+    per_coil = JOB["turns_per_layer"] * JOB["layers"]
+    into_coil = 2.2  # turns into coil 2 when the wire breaks
+    drop = (per_coil + into_coil) * 2 * math.pi  # the flyer's joint (rad): a turn is 2 pi
+    want = int((per_coil + into_coil) // per_coil) + 1, 1, int(into_coil) + 1  # (coil, layer, turn)
+    assert want == (2, 1, 3)
+    bags = tmp_path / "bags"
+    standin = start_standin(
+        procs, "--load-cell", LOAD_CELL, "--tension", repr(set_n), "--tension-drop", f"flyer={drop!r}"
+    )
+    bridge = start_cell(procs, bags, *LOOSE, "-p", f"load_cell:={LOAD_CELL}")
+    [bag] = wait_for_bags(bags, 1)
+    raw = rosbags_read(bag)
+    report = final_report(raw)
+    assert report["state"] == "incomplete", report
+    assert 0 < int(report["steps_done"]) < int(report["steps_total"]), report
+    fault = report["wire_fault"]
+    coil, layer, turn = want
+    assert fault.startswith(f"wire break at coil {coil} layer {layer} turn {turn} ("), report
+    assert report["servo_fault"] == "" and "\n" not in fault
+    [status] = wire_statuses(raw)
+    values = {kv.key: kv.value for kv in status.values}
+    assert status.message == fault
+    assert (values["fault"], values["coil"], values["layer"], values["turn"]) == ("break", "2", "1", "3")
+    assert values["load_cell"] == f"/{LOAD_CELL}" and values["job_id"] == "br", values
+    [job_status] = [
+        st for _, arr in raw["/diagnostics"] for st in arr.status if st.name == "bridge_node: job"
+    ][-1:]
+    assert job_status.level == 2 and fault in job_status.message, job_status.message
+    assert [m.values[0].value for _, m in raw["/winder/state"]] == ["running", "failed"]
+
+    # where the commands had taken the fork at the fault's time (run time = log time - wall_start_ns)
+    check_commands(raw, report)  # every command exact, from the job's start
+    t_log, pos = commands(raw)
+    t_run = t_log - sim_config(raw)["wall_start_ns"]
+    t_fault = float(values["t_s"])
+    fork = pos[np.searchsorted(t_run, t_fault * 1e9, side="right") - 1, AXES_OF.index("fork")]
+    turns = fork / (2 * math.pi) - per_coil  # into coil 2
+    assert into_coil - 0.01 <= turns < turn, (turns, t_fault)
+    # commands hold from the fault: the job's last 1.8 turns (0.23 s at 7.8 turns/s) and its
+    # settle_time (0.2 s) were never commanded; 0.3 s leaves the watch's sight of the break
+    # (BREAK_TIME, the stand-in's 4 ms updates, transport) room on a loaded machine
+    assert t_run[-1] / 1e9 < t_fault + 0.3, (t_run[-1] / 1e9, t_fault)
+
+    wrenches = [m.wrench.force.x for _, m in raw[WRENCHES]]
+    assert len(wrenches) > 10 and wrenches[0] == set_n and wrenches[-1] == 0.0
+    assert report["tension_peak_n"] == f"{set_n:.4g}" and report["tension_min_n"] == "0", report
+    assert int(report["tension_samples"]) > 10 and report["foreign_wrenches"] == "0", report
+    log = wait.log_has(lambda: procs.log(bridge), "profile_node/abort: run", 30, "the bridge's abort call")
+    assert "Traceback" not in log
+    assert standin.poll() is None
+
+
+def test_a_neighbour_on_the_load_cell_s_topic_changes_nothing(tmp_path: Path, procs: Procs, ros: Any) -> None:
+    """Another node (the stand-in's ``impostor``) publishes 0 N on the load
+    cell's topic at the broadcaster's rate throughout, while the load cell
+    reads the set tension: were it trusted, the run would stop at the
+    flyer's first turn. The run is done; the impostor's wrenches are counted
+    in the report and named in one warning; the bag holds only the load
+    cell's; the tension stayed in its bands."""
+    set_n = Job(**JOB).set_tension
+    bags = tmp_path / "bags"
+    start_standin(procs, "--load-cell", LOAD_CELL, "--tension", repr(set_n), "--impostor", "impostor")
+    bridge = start_cell(procs, bags, *LOOSE, "-p", f"load_cell:={LOAD_CELL}")
+    [bag] = wait_for_bags(bags, 1)
+    raw = rosbags_read(bag)
+    report = final_report(raw)
+    assert report["state"] == "done", report["wire_fault"] or report["servo_fault"] or report
+    assert report["wire_fault"] == "" and not wire_statuses(raw), report
+    assert int(report["foreign_wrenches"]) > 10, report
+    assert report["foreign_wrench_publishers"] == "/impostor", report
+    assert int(report["tension_samples"]) > 10, report
+    assert report["tension_peak_n"] == report["tension_min_n"] == f"{set_n:.4g}", report
+    assert report["tension_outside_warning_s"] == report["tension_outside_alarm_s"] == "0.000", report
+    assert all(m.wrench.force.x == set_n for _, m in raw[WRENCHES])
+    warned = [ln for ln in procs.log(bridge).splitlines() if "a wrench from /impostor" in ln]
+    assert len(warned) == 1 and "WARN" in warned[0] and f"the load cell /{LOAD_CELL}" in warned[0], warned
+    assert "Traceback" not in procs.log(bridge)
+
+
+def test_a_bad_load_cell_is_refused_in_one_line(tmp_path: Path, procs: Procs, ros: Any) -> None:
+    """load_cell is a controller name or empty: a bad one at start is
+    refused in one line naming the parameter, the value and the form (the
+    node runs on, blocked); at run time too, a name whose topic would be
+    longer than ROS allows included."""
+    from support.ros_probe import set_params
+
+    p = procs.start("bridge_node", "-p", f"bag_dir:={tmp_path / 'bags'}", "-p", "load_cell:=9cell")
+    log = wait.log_has(lambda: procs.log(p), "load_cell=", 30, "the line for load_cell", running=p)
+    [line] = [x for x in log.splitlines() if "load_cell=" in x]
+    assert (
+        "load_cell='9cell' is invalid: must be empty (no load cell), or a controller name (letters, "
+        "digits and _, starting with a letter)" in line
+    ), line
+    for value in ("a/b", "-x", "x" * 300):
+        [res] = set_params(ros, "bridge_node", {"load_cell": value})
+        assert not res.successful, value
+        assert res.reason.startswith("load_cell=") and "invalid" in res.reason, res.reason
+        assert "\n" not in res.reason
+    for value in ("fts_broadcaster", "x" * 200, ""):
+        [res] = set_params(ros, "bridge_node", {"load_cell": value})
+        assert res.successful, res.reason
+    assert p.poll() is None and "Traceback" not in procs.log(p)

@@ -44,6 +44,19 @@ naming the joint, the error and the limit, the profile node's ``~/abort``
 called (so the interp node stops sending and is ready for a new start), and
 the run closed incomplete with its bag.
 
+Wire watch: with ``load_cell`` (a force_torque_sensor_broadcaster's
+controller name) the bridge takes geometry_msgs/WrenchStamped on
+``<load_cell>/wrench`` (relative, as the commands), trusted only from the
+node ``load_cell`` names (as joint_states from ``broadcaster``), force.x
+the wire's tension (N). While a run's time runs, each reading goes to
+:class:`winder.tension.watch.WireWatch` with the flyer's measured speed
+(the fork joint's velocity from joint_states, else its position's change
+between messages) and where the run is (the segment executed at the
+reading's time and the fork commanded then: coil, layer, turn); a break
+(the tension below a tenth of the job's set tension while the flyer
+turns) stops the run as a servo fault does, with a ``wire`` ERROR status.
+The readings are counted against the job's tension bands and recorded.
+
 Soft limits and homing: ``min_position.<axis>``/``max_position.<axis>``
 bound what a run may command. Every command is one of the job's positions
 from the run's origin, so the job's extent (its segments' corners) is
@@ -74,14 +87,17 @@ per wake-up with a consumer's dozens of entities, a 1 kHz timer or a 100 Hz
 subscription in it alone would be over the budget (bench/bench_bridge.py).
 The thread shares the pacer, the command history and the record queue with
 the executor under one lock, and hands a fault to the executor through a
-guard condition; everything else (the base's bookkeeping, the bag, the
-fault's report) runs in the executor, woken by the step stream and every
+guard condition; the load cell's readings are taken and watched in the
+thread too, with the joint states; everything else (the base's bookkeeping,
+the bag, the fault's report) runs in the executor, woken by the step stream and every
 0.25 s after the last pump while rows wait (``pump_period``).
 """
 
 from __future__ import annotations
 
+import bisect
 import json
+import struct
 import threading
 import time
 from collections import deque
@@ -90,6 +106,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 import rclpy
+from geometry_msgs.msg import WrenchStamped
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.client import Client
 from rclpy.node import Node
@@ -101,12 +118,25 @@ from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
-from winder.contract.cdr import CommandPayload, JointStateReader, clock_payload, trajectory_payload
+from winder.contract.cdr import (
+    CommandPayload,
+    JointStateReader,
+    clock_payload,
+    joint_state_names,
+    trajectory_payload,
+)
 from winder.contract.pacing import CommandHistory, Pacer, following_error
 from winder.contract.params import BRIDGE_SPECS, PROFILE_SPECS, check_bridge
 from winder.contract.stream import JobPlan
-from winder.contract.topics import TOPIC_CLOCK, TOPIC_PROFILE_CONFIG, TOPIC_STEP_TIMES, check_node_name
-from winder.motion.axes import AXES, axis
+from winder.contract.topics import (
+    TOPIC_CLOCK,
+    TOPIC_PROFILE_CONFIG,
+    TOPIC_STEP_TIMES,
+    check_node_name,
+    check_relative_name,
+)
+from winder.motion.axes import AXES, FORK, axis
+from winder.motion.job import Segment
 from winder.motion.limits import NO_LIMIT, LimitWatch, job_extent, job_limits, travel_past
 from winder.ros.consumer import StepConsumer
 from winder.ros.diagnostics import ERROR
@@ -117,6 +147,8 @@ from winder.ros.sender import attributed
 from winder.ros.sender import waiting as taken_with_sender
 from winder.ros.spin import spin
 from winder.ros.upstream import ProfileAbort
+from winder.spec import SpecError
+from winder.tension.watch import WireWatch
 
 #: the measured joint states (joint_state_broadcaster's default topic, relative)
 TOPIC_MEASURED = "joint_states"
@@ -144,14 +176,140 @@ MAX_HELD = 1 << 16
 AHEAD_BATCHES = 4
 #: the message type of the commands with interface trajectory
 TRAJECTORY_TYPE = "trajectory_msgs/msg/JointTrajectory"
+#: a force_torque_sensor_broadcaster's topic (``~/wrench``: relative to its node) and message type
+WRENCH = "wrench"
+WRENCH_TYPE = "geometry_msgs/msg/WrenchStamped"
+#: load cell readings taken at most per look (its subscription keeps the last 100)
+WRENCHES_PER_LOOK = 100
+#: a run whose time ran this long without a reading of the load cell says so (once)
+LOAD_CELL_SILENT_NS = 1_000_000_000
+#: a gap between two readings longer than this counts no time outside a band (the cell was silent)
+BAND_HOLD_MAX_S = 0.1
 #: The bridge's own recorded topics (the commands topic follows ``controller`` and ``interface``).
 BRIDGE_TOPICS = {
     "commands": ("forward_position_controller/commands", "std_msgs/msg/Float64MultiArray"),
     "joint_states": (TOPIC_MEASURED, "sensor_msgs/msg/JointState"),
     "clock": (TOPIC_CLOCK, "rosgraph_msgs/msg/Clock"),
+    # the load cell's readings: <load_cell>/wrench (recorded only with a load_cell)
+    "tension": (f"load_cell/{WRENCH}", WRENCH_TYPE),
 }
 # Commands and measured states: reliable, volatile, keep-last 100 (QOS_STATE),
 # which matches ros2_control's SystemDefaultsQoS (reliable) on both topics.
+# The load cell's wrench: the same (force_torque_sensor_broadcaster publishes
+# ``~/wrench`` with SystemDefaultsQoS too).
+
+
+def check_load_cell(values: dict[str, Any], namespace: str) -> None:
+    """``load_cell`` as ROS takes it in the bridge's ``namespace``: its topic
+    ``<load_cell>/wrench`` and its node's names within the length ROS allows
+    (the table's pattern checks its form). SpecError, one line, otherwise."""
+    name = values.get("load_cell", "")
+    if not name:
+        return
+    try:
+        check_relative_name("load_cell", name, namespace, (f"/{WRENCH}",))
+        check_node_name(name, namespace, "load_cell")
+    except ValueError as exc:
+        raise SpecError(str(exc)) from None
+
+
+def wrench_force_x(raw: bytes) -> tuple[int, float] | None:
+    """(stamp ns, force.x) of a little-endian CDR geometry_msgs/WrenchStamped
+    payload, or None if it is not one."""
+    if len(raw) < 16 or raw[1] != 1:
+        return None
+    sec, nsec, flen = struct.unpack_from("<iII", raw, 4)
+    off = 12 + flen  # the body's offset past the frame id
+    off += -off % 8  # force.x, a float64
+    if 4 + off + 48 > len(raw):
+        return None
+    (fx,) = struct.unpack_from("<d", raw, 4 + off)
+    return sec * 1_000_000_000 + nsec, float(fx)
+
+
+class VelocityPick:
+    """The measured velocity of one joint in sensor_msgs/JointState payloads
+    (None: the message gives no velocity for it). The layout (names, counts)
+    is parsed once and reused while the bytes before the positions and the
+    velocity count stay the same, as they do from a joint_state_broadcaster."""
+
+    def __init__(self, joint: str) -> None:
+        self.joint = joint
+        self.prefix = b""  # bytes 12 (after the stamp) .. the position data of the known layout
+        self.count_at = 0  # payload offset of the velocity count
+        self.count = b""  # the velocity count's bytes
+        self.at = -1  # payload offset of the joint's velocity (-1: none)
+
+    def read(self, raw: bytes) -> float | None:
+        known = (
+            self.prefix
+            and raw.startswith(self.prefix, 12)
+            and raw.startswith(self.count, self.count_at)
+            and (self.at < 0 or len(raw) >= self.at + 8)
+        )
+        if not known and not self.parse(raw):
+            return None
+        if self.at < 0:
+            return None
+        (v,) = struct.unpack_from("<d", raw, self.at)
+        return float(v) if abs(v) < FAR_POSITION else None  # NaN or a sentinel: no velocity
+
+    def parse(self, raw: bytes) -> bool:
+        self.prefix, self.at = b"", -1
+        if len(raw) < 12 or raw[1] != 1:
+            return False
+        body = memoryview(raw)[4:]
+        try:
+            names, off = joint_state_names(body)
+            (npos,) = struct.unpack_from("<I", body, off)
+            off += 4
+            if npos:
+                off += -off % 8
+            pos_at = off
+            off += 8 * npos
+            (nvel,) = struct.unpack_from("<I", body, off)
+        except struct.error:
+            return False
+        vel_at = off + 4 + (-(off + 4) % 8 if nvel else 0)
+        if npos != len(names) or 4 + vel_at + 8 * nvel > len(raw):
+            return False
+        self.prefix = bytes(raw[12 : 4 + pos_at])
+        self.count_at, self.count = 4 + off, bytes(raw[4 + off : 8 + off])
+        if nvel == len(names) and self.joint in names:
+            self.at = 4 + vel_at + 8 * names.index(self.joint)
+        return True
+
+
+class Senders:
+    """The nodes that publish on one topic, by their publishers' GIDs as the
+    graph names them, and the messages ignored per node (under the engine's
+    lock)."""
+
+    def __init__(self) -> None:
+        self.names: dict[bytes, str] = {}  # publisher GID -> its node's full name
+        self.ignored: dict[str, int] = {}  # messages ignored, by the publishing node
+        self.look_ns = 0  # when the graph was last asked
+
+    def who(self, io: Node, topic: str, gid: bytes, now: int) -> str | None:
+        """The node that published with ``gid``; a publisher the graph does
+        not name yet is asked for again (at most every GRAPH_LOOK_NS): None
+        meanwhile."""
+        who = self.names.get(gid)
+        if who is None and now - self.look_ns >= GRAPH_LOOK_NS:
+            self.look_ns = now
+            for g, w in publishers_by_gid(io, topic).items():
+                self.names[g] = fully_qualified(w.name, w.namespace)
+            who = self.names.get(gid)
+        return who
+
+    def ignore(self, who: str) -> bool:
+        """A message of ``who`` ignored: counted; True for its first."""
+        self.ignored[who] = self.ignored.get(who, 0) + 1
+        return self.ignored[who] == 1
+
+    def summary(self) -> tuple[int, str]:
+        """Messages ignored, and their nodes."""
+        return sum(self.ignored.values()), ", ".join(sorted(n for n, c in self.ignored.items() if c))
 
 
 class BridgeEngine(Engine):
@@ -190,9 +348,11 @@ class BridgeEngine(Engine):
         self.sub_states = attributed(
             self.io, JointState, self.run.bag_topic("joint_states"), lambda _m, _g: None, QOS_STATE
         )
-        self.state_publishers: dict[bytes, str] = {}  # joint_states publisher GID -> its node's full name
-        self.foreign_states: dict[str, int] = {}  # joint_states ignored, by the publishing node
-        self.graph_look_ns = 0  # when the graph was last asked for joint_states' publishers
+        self.state_senders = Senders()  # joint_states' publishers, and the messages ignored
+        # the load cell's wrench (load_cell): its subscription, taken by the command thread too
+        self.load_cell = ""
+        self.sub_wrench: Any = None
+        self.wrench_senders = Senders()
         self.hardware_bad = ""  # the broadcaster's last message between runs is no position
         self.idle_pos = np.full(len(values["joints"]), np.nan)  # the joints as last measured between runs
         self.homed = False  # ~/home ran, and the broadcaster was not lost since
@@ -215,11 +375,12 @@ class BridgeEngine(Engine):
         self.outbox: deque[tuple[str, int, bytes, bool]] = deque()  # (bag key, run time, payload, exact)
         self.heard_ns = 0  # monotonic time of the last joint_states message
         self.clock_ns = -1  # the last clock published in this node's life
-        self.alarm: tuple[str, dict[str, object]] | None = None  # a fault for the executor
+        self.alarm: tuple[str, dict[str, object], str] | None = None  # a fault for the executor
         self.go = threading.Event()  # set while a run is on
         self.quit = False
         self.missing_said = ""
         self.new_run(values)
+        self.wrench_subscription(values["load_cell"])
         self.thread = threading.Thread(target=self.command_loop, name="bridge-commands", daemon=True)
         self.thread.start()
 
@@ -239,6 +400,23 @@ class BridgeEngine(Engine):
         topic = self.node.resolve_topic_name(f"{controller}/commands")
         self.run.set_bag_topic("commands", topic, BRIDGE_TOPICS["commands"][1])
         return self.io.create_publisher(Float64MultiArray, topic, QOS_STATE)
+
+    def wrench_subscription(self, load_cell: str) -> None:
+        """The subscription of ``<load_cell>/wrench`` (none without a load
+        cell): a new one if the load cell changed; swapped under the lock
+        (the command thread takes it)."""
+        if load_cell == self.load_cell:
+            return
+        sub = None
+        if load_cell:
+            topic = self.node.resolve_topic_name(f"{load_cell}/{WRENCH}")
+            self.run.set_bag_topic("tension", topic, WRENCH_TYPE)
+            sub = attributed(self.io, WrenchStamped, topic, lambda _m, _g: None, QOS_STATE)
+        with self.lock:
+            old, self.sub_wrench, self.load_cell = self.sub_wrench, sub, load_cell
+            self.wrench_senders = Senders()
+        if old is not None:
+            self.io.destroy_subscription(old)
 
     def new_run(self, values: dict[str, Any]) -> None:
         """A run's settings and state before it starts (also: the node's, before any run)."""
@@ -300,11 +478,32 @@ class BridgeEngine(Engine):
         self.why_not_armed = "no joint_states yet"
         self.late_rows = 0
         self.max_late_ns = 0
+        self.fault_task = ""  # the fault's status task: servo, or wire
+        # the load cell (load_cell): its node, the run's watch and what its readings showed
+        self.fork_j = self.axes.index(FORK.name) if FORK.name in self.axes else -1
+        self.velocity = VelocityPick(self.joints[self.fork_j]) if self.fork_j >= 0 else None
+        cell = str(values.get("load_cell", ""))
+        self.load_cell_fq = check_node_name(cell, self.node.get_namespace(), "load_cell") if cell else ""
+        self.watch: WireWatch | None = None  # set when a run with a load cell begins
+        self.segments: tuple[Segment, ...] = ()
+        self.seg_t: list[int] = []  # run time of the first row of each segment executed, in order
+        self.seg_id: list[int] = []  # and that segment
+        self.fork_speed = float("nan")  # the flyer's measured speed (rad/s): NaN until measured
+        self.fork_last: tuple[int, float] | None = None  # the fork's last measured (stamp, position)
+        self.bands = [(0.0, 0.0), (0.0, 0.0)]  # the warning and alarm bands (N)
+        self.outside = [0.0, 0.0]  # s of the run with the tension outside each band
+        self.tension_last: tuple[float, float] | None = None  # the last reading watched: (t s, N)
+        self.tension_peak = -float("inf")
+        self.tension_min = float("inf")
+        self.wrenches_in_run = 0  # readings of the load cell taken during the run
+        self.bad_wrenches = 0
+        self.silence_said = False
 
     # -- the consumer's hooks ---------------------------------------------------
     def begin(self, plan: JobPlan, values: dict[str, Any]) -> dict[str, object]:
         self.stop_pacing()
         self.pub_cmd = self.commands_publisher(values["controller"], values["interface"])
+        self.wrench_subscription(values["load_cell"])
         which = [AXES.index(a) for a in values["axes"]]
         start = np.array([plan.segments[0].start[i] if plan.segments else 0 for i in which], np.int64)
         step_len = np.array([plan.joint_step[i] for i in which])
@@ -321,6 +520,8 @@ class BridgeEngine(Engine):
             self.faulted = False
             # the run starts on the cell's clock a clock period after the last one published
             self.origin_ns = 0 if self.clock_ns < 0 else self.clock_ns + CLOCK_PERIOD_NS
+            if self.sub_wrench is not None:
+                self.watch_wire(plan)
             self.running = True
         self.go.set()
         self.upstream.find()  # the run's profile node
@@ -337,6 +538,7 @@ class BridgeEngine(Engine):
             ),
             "controller_topic": self.run.bag_topic("commands"),
             "joint_states_topic": self.run.bag_topic("joint_states"),
+            **({"load_cell_topic": self.run.bag_topic("tension")} if self.load_cell else {}),
             "joints": dict(zip(self.joints, self.axes, strict=True)),  # joint -> the cell axis it drives
             "job_origin": "start_position" if self.origin_here else "zero",
             "max_following_error": dict(zip(self.joints, self.limits.tolist(), strict=True)),
@@ -344,6 +546,20 @@ class BridgeEngine(Engine):
             "joint_state_timeout": self.timeout_ns / 1e9,
             "settle_time": self.settle_ns / 1e9,
         }
+
+    def watch_wire(self, plan: JobPlan) -> None:
+        """(Under the lock, as a run with a load cell begins.) The run's wire
+        watch, from its job's set tension and bands; readings that came
+        between runs are dropped (they are no part of it)."""
+        job = plan.job
+        set_n = job.set_tension
+        self.watch = WireWatch(set_n, job.tension_slip_tolerance)
+        self.segments = plan.segments
+        self.bands = [
+            (set_n * (1 - share), set_n * (1 + share)) for share in (job.tension_warning, job.tension_alarm)
+        ]
+        for _ in taken_with_sender(self.sub_wrench, 1 << 12):
+            pass
 
     def profile_config_heard(self) -> None:
         self.check_ramp()
@@ -392,6 +608,12 @@ class BridgeEngine(Engine):
     def execute(self, rows: npt.NDArray[np.int64]) -> None:
         with self.lock:
             assert self.pacer is not None
+            if self.watch is not None:  # where each segment starts: the wire watch's places
+                segs = rows[:, 1]
+                for i in [0, *(np.flatnonzero(segs[1:] != segs[:-1]) + 1).tolist()]:
+                    if not self.seg_id or int(segs[i]) != self.seg_id[-1]:
+                        self.seg_t.append(int(rows[i, 0]))
+                        self.seg_id.append(int(segs[i]))
             # came after their time (trajectory: after the points for their time went out): now
             sent = self.frontier if self.trajectory else self.t_tick
             if self.armed and rows[0, 0] < sent:
@@ -479,7 +701,13 @@ class BridgeEngine(Engine):
     def faults(self) -> str:
         return self.fault_text
 
+    def unrecorded(self) -> frozenset[str]:
+        return frozenset() if self.load_cell else frozenset({"tension"})
+
     def details(self) -> dict[str, object]:
+        with self.lock:  # the command thread adds to them
+            foreign, foreign_nodes = self.state_senders.summary()
+            wire = self.wire_details()
         errors = {
             f"max_following_error.{j}": f"{e:.6g}" for j, e in zip(self.joints, self.max_error, strict=True)
         }
@@ -489,13 +717,33 @@ class BridgeEngine(Engine):
             "max_command_gap_ms": f"{self.max_gap_ns / 1e6:.3f}",
             "joint_states_received": self.states_in_run,
             "late_steps": self.late_rows,
-            "foreign_joint_states": sum(self.foreign_states.values()),
-            "foreign_joint_state_publishers": ", ".join(
-                sorted(n for n, c in self.foreign_states.items() if c)
-            ),
+            "foreign_joint_states": foreign,
+            "foreign_joint_state_publishers": foreign_nodes,
             "max_step_lateness_ms": f"{self.max_late_ns / 1e6:.3f}",
             **errors,
-            "servo_fault": self.fault_text,
+            "servo_fault": self.fault_text if self.fault_task != "wire" else "",
+            **wire,
+        }
+
+    def wire_details(self) -> dict[str, object]:
+        """(Under the lock.) The load cell's status keys (none without one): its node, the
+        readings, the tension's peak and least (N) and the time outside
+        each band (s) while the run's time ran, foreign wrenches, the wire's
+        fault."""
+        if not self.load_cell_fq:
+            return {}
+        foreign, foreign_nodes = self.wrench_senders.summary()
+        seen = self.tension_min <= self.tension_peak
+        return {
+            "load_cell": self.load_cell_fq,
+            "tension_samples": self.wrenches_in_run,
+            "tension_peak_n": f"{self.tension_peak:.4g}" if seen else "",
+            "tension_min_n": f"{self.tension_min:.4g}" if seen else "",
+            "tension_outside_warning_s": f"{self.outside[0]:.3f}",
+            "tension_outside_alarm_s": f"{self.outside[1]:.3f}",
+            "foreign_wrenches": foreign,
+            "foreign_wrench_publishers": foreign_nodes,
+            "wire_fault": self.fault_text if self.fault_task == "wire" else "",
         }
 
     def account(self) -> None:
@@ -689,6 +937,8 @@ class BridgeEngine(Engine):
                 if self.from_broadcaster(gid, now):
                     self.heard_ns = now
                     self.measurement(raw, now)
+            if self.sub_wrench is not None and not self.faulted:
+                self.take_wrenches(now)
             if self.faulted:
                 return
         if not self.armed:
@@ -780,23 +1030,123 @@ class BridgeEngine(Engine):
         A publisher the graph does not name yet is asked for again (at most
         every GRAPH_LOOK_NS) and its message ignored meanwhile; another
         node's is ignored, counted and warned about once per node."""
-        who = self.state_publishers.get(gid)
-        if who is None and now - self.graph_look_ns >= GRAPH_LOOK_NS:
-            self.graph_look_ns = now
-            for g, w in publishers_by_gid(self.io, self.run.bag_topic("joint_states")).items():
-                self.state_publishers[g] = fully_qualified(w.name, w.namespace)
-            who = self.state_publishers.get(gid)
+        who = self.state_senders.who(self.io, self.run.bag_topic("joint_states"), gid, now)
         if who is None:
             return False  # not named yet: neither trusted nor blamed
         if who == self.broadcaster:
             return True
-        self.foreign_states[who] = self.foreign_states.get(who, 0) + 1
-        if self.foreign_states[who] == 1:
+        if self.state_senders.ignore(who):
             self.node.get_logger().warning(
                 f"{self.run.bag_topic('joint_states')}: joint states from {who}, not from the broadcaster "
                 f"{self.broadcaster}: ignored (counted in the status' foreign_joint_states)"
             )
         return False
+
+    # -- the load cell ------------------------------------------------------------
+    def from_load_cell(self, gid: bytes, now: int) -> bool:
+        """(Under the lock.) Whether a wrench with publisher ``gid`` is the
+        load cell's (its node, as the graph names it): as
+        :meth:`from_broadcaster`."""
+        topic = self.run.bag_topic("tension")
+        who = self.wrench_senders.who(self.io, topic, gid, now)
+        if who is None:
+            return False
+        if who == self.load_cell_fq:
+            return True
+        if self.wrench_senders.ignore(who):
+            self.node.get_logger().warning(
+                f"{topic}: a wrench from {who}, not from the load cell {self.load_cell_fq}: ignored "
+                "(counted in the status' foreign_wrenches)"
+            )
+        return False
+
+    def take_wrenches(self, now: int) -> None:
+        """(Under the lock, each look during a run.) The load cell's readings
+        that came: recorded; while the run's time runs, counted against the
+        bands and watched (a break is a fault)."""
+        times: list[int] = []
+        forces: list[float] = []
+        wall = time.time_ns()
+        for raw, gid in taken_with_sender(self.sub_wrench, WRENCHES_PER_LOOK):
+            if not self.from_load_cell(gid, now):
+                continue
+            self.outbox.append(("tension", self.t_tick, raw, False))
+            got = wrench_force_x(raw)
+            if got is None:
+                self.bad_wrenches += 1
+                if self.bad_wrenches == 1:
+                    self.node.get_logger().warning(
+                        f"{self.run.bag_topic('tension')}: a message that is not a WrenchStamped: ignored"
+                    )
+                continue
+            self.wrenches_in_run += 1
+            stamp, force = got
+            if self.armed:  # the run's time: the reading's stamp on it (or its arrival)
+                times.append((stamp if abs(stamp - wall) < STAMP_TRUST_NS else wall) - self.wall_t0)
+                forces.append(force)
+        if times:
+            self.watch_tension(times, forces)
+        elif self.armed and not self.silence_said and now - self.t0_ns > LOAD_CELL_SILENT_NS:
+            if self.wrenches_in_run == 0:  # said once a run
+                self.node.get_logger().warning(
+                    f"no reading of the load cell {self.load_cell_fq} on {self.run.bag_topic('tension')} "
+                    f"{LOAD_CELL_SILENT_NS / 1e9:g} s into the run: the wire is not watched (is the "
+                    "force_torque_sensor_broadcaster active?)"
+                )
+            self.silence_said = True
+
+    def watch_tension(self, times: list[int], forces: list[float]) -> None:
+        """(Under the lock.) Readings of the run (run time ns, N): the bands'
+        time (each reading holds until the next), the peak and the least, and
+        the wire watch with the flyer's speed; a break stops the run."""
+        for t_ns, force in zip(times, forces, strict=True):
+            t = t_ns / 1e9
+            last = self.tension_last
+            if last is not None and 0.0 < t - last[0] <= BAND_HOLD_MAX_S:
+                for b, (low, high) in enumerate(self.bands):
+                    if not low <= last[1] <= high:
+                        self.outside[b] += t - last[0]
+            self.tension_last = (t, force)
+            self.tension_peak = max(self.tension_peak, force)
+            self.tension_min = min(self.tension_min, force)
+        if self.watch is None:
+            return
+        fault = self.watch.feed(
+            np.array(times) / 1e9,
+            np.array(forces),
+            np.full(len(times), self.fork_speed),
+            lambda k: self.place_at(times[k]),
+        )
+        if fault is not None:
+            self.raise_fault(fault.text, {**fault.values(), "load_cell": self.load_cell_fq}, task="wire")
+
+    def place_at(self, t_ns: int) -> tuple[int, int, int]:
+        """(Under the lock.) Where the run was at run time ``t_ns``: (coil,
+        layer, turn of the coil, from 1) of the segment executed then and
+        the fork commanded then; (0, 0, 0) off a layer."""
+        i = bisect.bisect_right(self.seg_t, t_ns) - 1
+        if not self.seg_id or self.pacer is None or self.fork_j < 0:
+            return (0, 0, 0)
+        seg = self.segments[self.seg_id[max(i, 0)]]
+        if not seg.kind.winds or seg.turn_steps <= 0:
+            return (0, 0, 0)
+        at = self.wall_t0 + t_ns
+        commanded = float(self.history.span(at, at)[0][self.fork_j])
+        j = self.fork_j
+        steps = round((commanded - float(self.pacer.offset[j])) / float(self.pacer.step_len[j]))
+        done = min(abs(steps - seg.start[FORK.index]) // seg.turn_steps, seg.turns - 1)
+        return seg.pole + 1, seg.layer + 1, seg.first_turn + int(done) + 1
+
+    def measured_fork_speed(self, raw: bytes, stamp: int, position: float) -> None:
+        """(Under the lock.) The flyer's speed from a broadcaster's message:
+        the fork joint's velocity if it gives one, else its position's change
+        since the last message."""
+        v = self.velocity.read(raw) if self.velocity is not None else None
+        last, self.fork_last = self.fork_last, (stamp, position)
+        if v is None and last is not None and stamp > last[0] and position == position:
+            v = (position - last[1]) / ((stamp - last[0]) / 1e9)
+        if v is not None and v == v:
+            self.fork_speed = v
 
     def idle_measurement(self, raw: bytes, now: int) -> None:
         """(Under the lock.) The broadcaster's message between runs: the
@@ -855,6 +1205,8 @@ class BridgeEngine(Engine):
             self.measured[seen] = pos[seen]
         self.outbox.append(("joint_states", self.t_tick, raw, False))
         self.states_in_run += 1
+        if self.watch is not None and self.fork_j >= 0:
+            self.measured_fork_speed(raw, stamp, float(pos[self.fork_j]))
         bad = self.no_position(pos)
         if bad:  # a broken measurement: never an origin, never a position to follow
             self.raise_fault(f"servo fault: {bad}", {"reason": bad})
@@ -1010,14 +1362,15 @@ class BridgeEngine(Engine):
         )
         return True
 
-    def raise_fault(self, text: str, values: dict[str, object]) -> None:
+    def raise_fault(self, text: str, values: dict[str, object], task: str = "servo") -> None:
         """(Under the lock, in the thread.) No further command at once; the
-        executor reports the fault and closes the run (on_alarm)."""
+        executor reports the fault (a status of ``task``: servo, or wire for
+        the load cell's) and closes the run (on_alarm)."""
         if self.faulted:
             return
         self.faulted = True
         self.armed = False
-        self.alarm = (text, values)
+        self.alarm = (text, values, task)
         self.guard.trigger()
 
     def stop_pacing(self) -> None:
@@ -1029,22 +1382,23 @@ class BridgeEngine(Engine):
 
     # -- faults ------------------------------------------------------------------
     def on_alarm(self) -> None:
-        """The command thread raised a servo fault."""
+        """The command thread raised a fault (a servo fault, or the wire's)."""
         with self.lock:
             alarm, self.alarm = self.alarm, None
         if alarm is not None:
             self.servo_fault(*alarm)
 
-    def servo_fault(self, text: str, values: dict[str, object]) -> None:
-        """Stop the run: commands hold, the fault reported, the profile node
-        told to abort (the rest of the cell stops sending), the run closed."""
+    def servo_fault(self, text: str, values: dict[str, object], task: str = "servo") -> None:
+        """Stop the run: commands hold, the fault reported (an ERROR status of
+        ``task``), the profile node told to abort (the rest of the cell stops
+        sending), the run closed."""
         if self.run.plan is None or self.fault_text:
             return
         self.stop_pacing()
-        self.fault_text = text
+        self.fault_text, self.fault_task = text, task
         self.node.get_logger().error(text)
         self.run.publish_status(
-            "servo", ERROR, text, {"job_id": self.run.plan.job_id, "run_id": self.run.plan.run_id, **values}
+            task, ERROR, text, {"job_id": self.run.plan.job_id, "run_id": self.run.plan.run_id, **values}
         )
         self.upstream.ask(TOPIC_STEP_TIMES)
         self.run.finish(complete=False)
@@ -1067,12 +1421,16 @@ class BridgeNode(StepConsumer):
         super().__init__(
             "bridge_node",
             BRIDGE_SPECS,
-            # the topics `controller` names must be names ROS takes in this node's namespace
-            lambda values: check_bridge(values, namespace=self.get_namespace()),
+            # the topics `controller` and `load_cell` name must be names ROS takes in this node's namespace
+            self.check,
             BridgeEngine(),
             hardware_id="winder_bridge",
             topics=BRIDGE_TOPICS,
         )
+
+    def check(self, values: dict[str, Any]) -> None:
+        check_bridge(values, namespace=self.get_namespace())
+        check_load_cell(values, self.get_namespace())
 
 
 def main(args: list[str] | None = None) -> None:

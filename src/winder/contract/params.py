@@ -242,7 +242,8 @@ SIM_SPECS = {
             "fault.wire_break_turn",
             int,
             0,
-            "the wire breaks as the flyer starts this turn of the job (counted from 1 over its coils; 0: never)",
+            "the wire breaks as the flyer starts this turn of the job (counted from 1 over its coils; "
+            "0: never)",
             "",
             0,
             10**9,
@@ -636,6 +637,17 @@ BRIDGE_SPECS = {
             "publisher are ignored, counted and warned about once",
             pattern=r"/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*",
             pattern_text="a node name, or its full name /ns/name (letters, digits and _)",
+        ),
+        Spec(
+            "load_cell",
+            str,
+            "",
+            "the force_torque_sensor_broadcaster of the wire's load cell (force.x = the tension, N): its "
+            "controller name; the bridge watches <load_cell>/wrench, relative to this node's namespace, "
+            "trusting only that node's messages, and a wire break stops the run. Empty: no load cell",
+            pattern=r"([A-Za-z][A-Za-z0-9_]*)?",
+            pattern_text="empty (no load cell), or a controller name (letters, digits and _, starting with a "
+            "letter)",
         ),
         Spec(
             "interface",
