@@ -1139,12 +1139,14 @@ class BridgeEngine(Engine):
 
     def measured_fork_speed(self, raw: bytes, stamp: int, position: float) -> None:
         """(Under the lock.) The flyer's speed from a broadcaster's message:
-        the fork joint's velocity if it gives one, else its position's change
-        since the last message."""
+        the larger of the fork joint's velocity, if it gives one, and its
+        position's change since the last message (a mock_components system
+        without calculate_dynamics reports a velocity of 0 on a moving joint)."""
         v = self.velocity.read(raw) if self.velocity is not None else None
         last, self.fork_last = self.fork_last, (stamp, position)
-        if v is None and last is not None and stamp > last[0] and position == position:
-            v = (position - last[1]) / ((stamp - last[0]) / 1e9)
+        if last is not None and stamp > last[0] and position == position:
+            moved = (position - last[1]) / ((stamp - last[0]) / 1e9)
+            v = moved if v is None or abs(moved) > abs(v) else v
         if v is not None and v == v:
             self.fork_speed = v
 

@@ -169,6 +169,8 @@ class SimEngine(Engine):
         self.origin_ns = 0 if self.clock_ns < 0 else self.clock_ns + round(1e9 / self.rate)
         self.encoder = JointStateEncoder(AXES, plan.job_id)
         self.wire, why = WireRun.of(plan.job, plan.segments, values, self.rate, plan.joint_step[FORK.index])
+        for idle in self.wire.idle_faults() if self.wire is not None else []:
+            self.node.get_logger().warning(f"run {plan.run_id or plan.job_id}: {idle}")
         if why:  # winder run and winder check refuse such a job; a run started otherwise goes without
             self.node.get_logger().error(
                 f"run {plan.run_id or plan.job_id}: the wire is not simulated: {why}"

@@ -97,6 +97,20 @@ class WireRun:
         why = wire.tensioner.unstable()
         return (None, why) if why else (wire, "")
 
+    def idle_faults(self) -> list[str]:
+        """The injected faults that cannot fire in this job (a turn beyond its turns), in words."""
+        total = self.turns_before.get(self.job.poles - 1, 0) + max(
+            (s.last_turn for s in self.segments if s.kind.winds and s.pole == self.job.poles - 1), default=0
+        )
+        return [
+            f"{name} {turn} is beyond the job's {total} turns: it never fires"
+            for name, turn in (
+                ("fault.wire_break_turn", self.break_turn),
+                ("fault.slip_turn", self.slip_turn),
+            )
+            if turn > total
+        ]
+
     # -- where the flyer is -------------------------------------------------------
     def places(self, fork: Floats, segs: Ints) -> tuple[Ints, Ints, Ints, Ints, Floats]:
         """Per sample the coil, the layer and the coil's turn in progress
