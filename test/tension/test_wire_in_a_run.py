@@ -130,14 +130,15 @@ sim_node:
 
 def test_a_wire_pulled_past_its_breaking_load_stops_the_run(tmp_path: Path, procs: Procs) -> None:
     """A job `winder run` refuses (its predicted tension), started on the nodes
-    themselves (they do not predict it yet): the sim node's wire breaks, the run
+    themselves with the sim node's wire check off: its wire breaks, the run
     stops incomplete, a `wire` ERROR names where."""
     job = tmp_path / "breaks.yaml"
     job.write_text(BREAKS)
     refused = winder_run(tmp_path, procs.domain, str(job))
     assert refused.returncode == 2 and "passes the wire's maximum" in refused.stderr, refused.stderr
     bags = tmp_path / "nodes"
-    procs.start("sim_node", "--params-file", str(job), "-p", f"bag_dir:={bags}")
+    # wire_check off: the sim node winds it anyway, and its wire shows what happens
+    procs.start("sim_node", "--params-file", str(job), "-p", f"bag_dir:={bags}", "-p", "wire_check:=false")
     procs.start("profile_node", "--params-file", str(job))
     procs.start("interp_node", "--params-file", str(job))
     done = ("incomplete", "done", "aborted")
@@ -260,3 +261,33 @@ def test_the_ripple_follows_the_cores_corners(tmp_path: Path, procs: Procs) -> N
     assert round_[1:].max() < 0.01 * rect[2]
     slower = turn_harmonics(tmp_path, procs.domain, "rect", 1500)
     assert rect[2] > 1.5 * slower[2]
+
+
+def test_the_sim_node_refuses_a_job_whose_wire_would_not_hold(tmp_path: Path, procs: Procs) -> None:
+    """The same job started on the nodes themselves, the sim node's wire
+    check on (its default): the run stops as it starts, before a step runs,
+    in `winder check`'s words."""
+    job = tmp_path / "breaks.yaml"
+    job.write_text(BREAKS)
+    check = subprocess.run(
+        [str(BIN / "winder"), "check", str(job)], capture_output=True, text=True, timeout=60
+    )
+    assert check.returncode == 2, check.stdout + check.stderr
+    words = check.stderr.strip().removeprefix("winder check: error: ")
+    bags = tmp_path / "nodes"
+    procs.start("sim_node", "--params-file", str(job), "-p", f"bag_dir:={bags}")
+    procs.start("profile_node", "--params-file", str(job))
+    procs.start("interp_node", "--params-file", str(job))
+    wait.until(
+        lambda: (
+            (metas := list(bags.glob("*/metadata.yaml")))
+            and read_run(metas[0].parent).report.get("state") in ("incomplete", "done", "aborted")
+        ),
+        60,
+        f"a bag in {bags} with its run's final report",
+        poll=0.2,
+    )
+    [meta] = list(bags.glob("*/metadata.yaml"))
+    run = read_run(meta.parent)
+    assert run.report["state"] == "incomplete" and int(run.report["steps_done"]) == 0, run.report
+    assert any(e.endswith(f": wire: job breaks refused: {words}") for e in run.errors), (words, run.errors)

@@ -32,6 +32,7 @@ that still comes behind the clock is executed at the clock and counted late
 
 from __future__ import annotations
 
+import json
 import math
 import time
 from collections import deque
@@ -41,14 +42,16 @@ import numpy as np
 import numpy.typing as npt
 from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
+from std_msgs.msg import String
 
 from winder.axis import StepperAxis
 from winder.contract.cdr import JointStateEncoder, WrenchEncoder, encode_clocks
 from winder.contract.eq7 import layer_of_samples, sample_deviation, step_deviation
 from winder.contract.pacing import ns_not_before
-from winder.contract.params import MOTOR_FIELDS, SIM_SPECS, check_sim
+from winder.contract.params import MOTOR_FIELDS, PROFILE_SPECS, SIM_SPECS, check_sim
 from winder.contract.stream import JobPlan
 from winder.contract.topics import (
     TOPIC_CLOCK,
@@ -57,14 +60,17 @@ from winder.contract.topics import (
     TOPIC_STEP_TIMES,
     TOPIC_TENSION,
 )
+from winder.errors import BadInputError
 from winder.motion.axes import AXES, FORK
 from winder.ros.consumer import StepConsumer
 from winder.ros.diagnostics import ERROR
 from winder.ros.engine import Engine, RunPort
 from winder.ros.qos import QOS_CLOCK, QOS_STATE
+from winder.ros.run_bag import one_line
 from winder.ros.spin import spin
 from winder.ros.timers import steady_timer
 from winder.ros.upstream import ProfileAbort
+from winder.tension.check import wire_refusal
 from winder.tension.run import WireRun
 
 #: Samples simulated in one go, at most: the node's memory is bounded by this,
@@ -161,6 +167,8 @@ class SimEngine(Engine):
         self.wire: WireRun | None = None  # the wire, where the job gives its core
         self.wire_stopped = False  # its fault has stopped the run
         self.wire_cut: float | None = None  # the sample time its fault stopped the axes at (s)
+        self.refused = ""  # why the run's wire would not hold (winder check's words): the run stops
+        self.wire_checked = False
 
     # -- the consumer's hooks ---------------------------------------------------
     def begin(self, plan: JobPlan, values: dict[str, Any]) -> dict[str, object]:
@@ -191,6 +199,7 @@ class SimEngine(Engine):
             )
             sim.position = plan.segments[0].start[i] if plan.segments else 0
             self.axes.append(sim)
+        self.check_wire()  # a ramp the run brings is here already
         return {
             "model": values["model"],
             "axes": {axis: {k: values[f"{axis}.{k}"] for k in MOTOR_FIELDS} for axis in AXES},
@@ -201,6 +210,39 @@ class SimEngine(Engine):
             "real_time_factor": values["real_time_factor"],
             "wire": self.wire_config(),
         }
+
+    def profile_config_heard(self) -> None:
+        self.check_wire()
+
+    def check_wire(self) -> None:
+        """The run's job against its wire before a step runs, as ``winder
+        check`` predicts it (each layer's steady swing at its top speed and
+        the coil as wound with its ramps, with the ramp the run is timed
+        with: the one it brings, or its profile node's winder/profile_config):
+        a job whose wire would not hold stops with ``winder check``'s words
+        (winder.tension.check). 0.3 s for jobs/ortho_rect.yaml, 0.7 s on 4
+        poles, once a run (``wire_check`` false: none)."""
+        plan = self.run.plan
+        if plan is None or self.wire is None or self.wire_checked or not self.run.values()["wire_check"]:
+            return
+        ramp = plan.ramp
+        if ramp is None:
+            raw = self.run.profile_config()
+            if raw is None:
+                return
+            try:
+                doc = json.loads(deserialize_message(raw, String).data)
+            except (ValueError, TypeError):
+                return
+            if (doc.get("job_id"), doc.get("run_id", "")) != (plan.job_id, plan.run_id):
+                return  # an earlier run's: this run's is on its way
+            ramp = {k: doc[k] for k in (*PROFILE_SPECS, "feed_override") if k in doc}
+        self.wire_checked = True
+        values = {n: s.default for n, s in PROFILE_SPECS.items()} | ramp
+        try:
+            self.refused = wire_refusal(plan.job, values, plan.schedule, self.run.values())
+        except BadInputError as exc:
+            self.node.get_logger().warning(f"the run's wire cannot be predicted: {one_line(exc)}")
 
     def unrecorded(self) -> frozenset[str]:
         return frozenset() if self.wire is not None else frozenset({"tension"})
@@ -225,8 +267,8 @@ class SimEngine(Engine):
         return not self.paces()
 
     def accepts_more(self) -> bool:
-        if self.wire_cut is not None:
-            return False  # the wire's fault stopped the run (work_wire)
+        if self.wire_cut is not None or self.refused:
+            return False  # the wire's fault stopped the run, or its job is refused (work_wire)
         return self.rest is None and not (self.paces() and self.out and self.ahead())
 
     def holding(self) -> bool:
@@ -318,23 +360,33 @@ class SimEngine(Engine):
     def faults(self) -> str:
         lost = sum(a.lost_steps for a in self.axes)
         said = [f"{lost} steps lost"] if lost else []
-        if self.wire is not None:
+        if self.refused:
+            said.append(f"refused: {self.refused}")
+        elif self.wire is not None:
             said += self.wire.faults()
         return "; ".join(said)
 
     def work_wire(self) -> None:
         """A fault of the wire (a break, a slip) stops the run: said, the
         profile node asked to abort, the run closed."""
-        if self.wire is None or self.wire.fault is None or self.wire_stopped or self.run.plan is None:
+        if self.wire is None or self.wire_stopped or self.run.plan is None:
+            return
+        fault = self.wire.fault
+        if fault is None and not self.refused:
             return
         self.wire_stopped = True
         self.flush()  # the samples up to the fault and after it go out and into the bag first
         plan = self.run.plan
         if plan is None:
             return
-        text = f"{self.wire.fault_text()}; the run stops"
+        values: dict[str, object] = {"job_id": plan.job_id, "run_id": plan.run_id}
+        if fault is not None:
+            text = f"{self.wire.fault_text()}; the run stops"
+            values.update(fault.values())
+        else:
+            text = f"job {plan.job_id} refused: {self.refused}"
+            values["fault"] = "refused"
         self.node.get_logger().error(text)
-        values: dict[str, object] = {"job_id": plan.job_id, "run_id": plan.run_id, **self.wire.fault.values()}
         self.run.publish_status("wire", ERROR, text, values)
         self.upstream.ask(TOPIC_STEP_TIMES)
         self.run.finish(complete=False)

@@ -239,6 +239,13 @@ SIM_SPECS = {
     # faults of the wire, injected for tests and operator training (winder.tension.watch catches them)
     **_table(
         Spec(
+            "wire_check",
+            bool,
+            True,
+            "refuse, as a run starts, a job whose wire would not hold (winder check's words); false: "
+            "wind it and let the simulated wire show what happens (training, tests)",
+        ),
+        Spec(
             "fault.wire_break_turn",
             int,
             0,
