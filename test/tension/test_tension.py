@@ -57,24 +57,31 @@ def dancer(k: float = 3e4) -> Tensioner:
 
 
 @settings(max_examples=30, deadline=None)
-@given(st.sampled_from(["servo", "dancer"]), st.floats(1e2, 1e5), st.floats(1e-4, 2e-3), st.data())
+@given(
+    st.sampled_from([("servo", "driven"), ("dancer", "driven"), ("dancer", "braked")]),
+    st.floats(1e2, 1e5),
+    st.floats(1e-4, 2e-3),
+    st.data(),
+)
 def test_stepping_is_scipys_lsim_with_a_linear_input(
-    kind: str, k: float, h: float, data: st.DataObject
+    kinds: tuple[str, str], k: float, h: float, data: st.DataObject
 ) -> None:
-    t = Tensioner(kind, k, 5.0)
+    t = Tensioner(kinds[0], k, 5.0, supply=kinds[1])
     a, b, c, d = t.matrices()
     u = np.array(data.draw(st.lists(st.floats(-2.0, 2.0), min_size=3, max_size=60)))
     x0 = np.array(data.draw(st.lists(st.floats(-1e-3, 1e-3), min_size=a.shape[0], max_size=a.shape[0])))
     times = h * np.arange(u.size)
     _, y_ref, x_ref = scipy.signal.lsim((a, b[:, None], c, d[:, None]), u, times, X0=x0)
     xs, ys = Discrete(a, b, c, d, h).run(x0, u)
+    # two exact discretisations in floating point: a stiff span (a dancer's 500 Hz and more at
+    # 1 ms steps) leaves them 1e-9 of the largest value apart
     scale = max(1.0, float(np.abs(x_ref).max()))
-    assert np.allclose(xs, x_ref, rtol=1e-7, atol=1e-9 * scale)
-    assert np.allclose(ys, y_ref, rtol=1e-7, atol=1e-9 * max(1.0, float(np.abs(y_ref).max())))
+    assert np.allclose(xs, x_ref, rtol=1e-7, atol=1e-8 * scale)
+    assert np.allclose(ys, y_ref, rtol=1e-7, atol=1e-8 * max(1.0, float(np.abs(y_ref).max())))
 
 
 def test_a_steady_wind_holds_the_set_tension_and_the_arm_centred() -> None:
-    for t in (servo(), dancer()):
+    for t in (servo(), dancer(), Tensioner("dancer", 3e4, 5.0, supply="braked")):
         sys_ = Discrete(*t.matrices(), 1e-3)
         x0 = t.steady(0.7)
         xs, ys = sys_.run(x0, np.full(500, 0.7))

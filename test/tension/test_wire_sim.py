@@ -16,9 +16,11 @@ from winder.tension.sim import WireSim
 from winder.tension.tensioner import Tensioner
 
 
-@pytest.mark.parametrize("kind", ["servo", "dancer"])
-def test_the_wire_of_a_run_is_lsims_and_conserved(kind: str) -> None:
-    tensioner = Tensioner(kind, 2e4, 4.0)
+@pytest.mark.parametrize(
+    ("kind", "spool"), [("servo", "driven"), ("dancer", "driven"), ("dancer", "braked")]
+)
+def test_the_wire_of_a_run_is_lsims_and_conserved(kind: str, spool: str) -> None:
+    tensioner = Tensioner(kind, 2e4, 4.0, supply=spool)
     rect = Contour(0.03, 0.012, 0.002)
     contours: dict[int, Contour | None] = {0: rect, 1: None, 2: rect}
     rate = 2000.0
@@ -41,6 +43,9 @@ def test_the_wire_of_a_run_is_lsims_and_conserved(kind: str) -> None:
     taken = np.concatenate([[0.0], np.cumsum((want_v[1:] + want_v[:-1]) / 2 / rate)])
     held = x[:, 0] / 2e4 if kind == "servo" else x[:, 0] + 2 * x[:, 1]
     assert np.allclose(supply, taken - held, rtol=1e-7, atol=1e-9)
+    if spool == "braked":  # what the spool paid out is what it turned: its speed's integral
+        turned = np.concatenate([[0.0], np.cumsum((x[1:, 3] + x[:-1, 3]) / 2 / rate)])
+        assert np.allclose(supply, turned, rtol=1e-6, atol=1e-6 * taken[-1])
     assert math.isclose(sim.peak, float(tension.max())) and math.isclose(sim.least, float(tension.min()))
 
 

@@ -16,12 +16,24 @@ through. Two tensioners, each a linear system of the take-up speed
   tension at any steady speed. Its force limit bounds the tension it can
   hold back: a prediction beyond it is said.
 * **dancer** - an arm of mass ``m`` on a spring ``k_d`` with damping ``c``
-  carrying a pulley, so its travel ``y`` stores ``2 y`` of wire; its
-  position drives the supply spool's pay-out (``k_p y + k_i int y``: the
-  brake released as the arm rises) and the spring's preload holds ``2 T_set``
-  at the centre. States ``[q, y, y', int y]``: ``q' = v - 2 y' - k_p y - k_i
-  int y``, ``m y'' = 2 K q - k_d y - c y'``. Holds the arm centred, and the
-  set tension, at any steady speed; its stroke bounds the travel.
+  carrying a pulley, so its travel ``y`` stores ``2 y`` of wire, and the
+  spring's preload holds ``2 T_set`` at the centre; its stroke bounds the
+  travel. Its supply spool (``tensioner.supply``):
+
+  - **driven** (a motor pays out as the arm asks): ``k_p y + k_i int y``.
+    States ``[q, y, y', int y]``: ``q' = v - 2 y' - k_p y - k_i int y``,
+    ``m y'' = 2 K q - k_d y - c y'``. Holds the arm centred, and the set
+    tension, at any steady speed.
+  - **braked** (the wire pulls the spool round against a friction brake the
+    arm releases as it is pulled): the spool, of inertia ``J`` and radius
+    ``r``, is a mass ``M = J / r**2`` at the wire, pulled by the tension
+    and held by the brake, whose force is the set tension with the arm
+    centred, less ``k_b y`` (a friction brake: its force does not depend on
+    the speed). States ``[q, y, y', u]`` (``u`` the spool's pay-out speed):
+    ``q' = v - 2 y' - u``, ``m y'' = 2 K q - k_d y - c y'``, ``M u' = K q +
+    k_b y``. Holds the set tension at any steady speed too, the arm centred;
+    the spool's inertia against the span makes a slow mode the arm's
+    damping alone damps (the arm that swings on every start and reversal).
 
 Both outputs: the tension (N) and the tensioner's own coordinate (the
 servo's feed speed, m/s; the dancer's travel, m).
@@ -44,6 +56,8 @@ __all__ = ["KINDS", "TENSIONER_SPECS", "Tensioner", "tensioner_of"]
 Floats = npt.NDArray[np.float64]
 
 KINDS = ("servo", "dancer")
+#: how a dancer's supply spool pays out (``tensioner.supply``)
+SUPPLIES = ("driven", "braked")
 
 
 def _f(name: str, low: float, high: float, unit: str, help_: str, default: float) -> Spec:
@@ -69,6 +83,30 @@ TENSIONER_SPECS: dict[str, Spec] = {
         _f("tensioner.dancer_damping", 1e-4, 1e4, "N s/m", "dancer: the arm's damping", 1.0),
         _f("tensioner.dancer_stroke", 1e-3, 2.0, "m", "dancer: the arm's travel, end stop to end stop", 0.08),
         _f("tensioner.supply_gain", 0.01, 1e4, "1/s", "dancer: supply pay-out per metre of arm travel", 20.0),
+        Spec(
+            "tensioner.supply",
+            str,
+            "driven",
+            "dancer: the supply spool: driven (a motor pays out as the arm asks) or braked (the wire "
+            "pulls the spool round against a brake the arm releases as it is pulled)",
+            choices=SUPPLIES,
+        ),
+        _f(
+            "tensioner.spool_mass",
+            1e-4,
+            1e3,
+            "kg",
+            "braked supply: the spool's inertia with its wire, over its radius squared (J / r^2)",
+            0.25,
+        ),
+        _f(
+            "tensioner.brake_gain",
+            0.01,
+            1e6,
+            "N/m",
+            "braked supply: the brake force the arm releases per metre it is pulled",
+            100.0,
+        ),
     )
 }
 
@@ -87,7 +125,10 @@ class Tensioner:
     spring: float = 50.0  #: dancer: N/m
     damping: float = 1.0  #: dancer: N s/m
     stroke: float = 0.08  #: dancer: m
-    supply_gain: float = 20.0  #: dancer: 1/s
+    supply_gain: float = 20.0  #: dancer: 1/s (a driven supply)
+    supply: str = "driven"  #: dancer: driven or braked
+    spool_mass: float = 0.25  #: braked supply: J / r^2, kg
+    brake_gain: float = 100.0  #: braked supply: N/m
 
     def matrices(self) -> tuple[Floats, Floats, Floats, Floats]:
         """``(A, B, C, D)`` of the deviation from the set tension; a steady
@@ -103,6 +144,19 @@ class Tensioner:
             c = np.array([[1.0, 0.0], [g, g * wi]])  # tension error; feed speed
             return a, b, c, np.array([0.0, 0.0])
         m, kd, cd, kp = self.mass, self.spring, self.damping, self.supply_gain
+        if self.supply == "braked":
+            ms, kb = self.spool_mass, self.brake_gain
+            a = np.array(
+                [
+                    [0.0, 0.0, -2.0, -1.0],
+                    [0.0, 0.0, 1.0, 0.0],
+                    [2 * k / m, -kd / m, -cd / m, 0.0],
+                    [k / ms, kb / ms, 0.0, 0.0],
+                ]
+            )
+            b = np.array([1.0, 0.0, 0.0, 0.0])
+            c = np.array([[k, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]])  # tension error; arm travel
+            return a, b, c, np.array([0.0, 0.0])
         ki = kp**2 / 4  # the supply loop critically damped on its own
         a = np.array(
             [
@@ -130,6 +184,8 @@ class Tensioner:
         if self.kind == "servo":
             wb = 2 * math.pi * self.bandwidth
             return np.array([0.0, speed / (wb / self.stiffness * wb / 4)])
+        if self.supply == "braked":  # the spool turns at the wire's speed, the brake holding the set tension
+            return np.array([0.0, 0.0, 0.0, speed])
         ki = self.supply_gain**2 / 4
         return np.array([0.0, 0.0, 0.0, speed / ki])
 
@@ -145,6 +201,13 @@ class Tensioner:
         hz = abs(worst.imag) / (2 * math.pi)
         if self.kind == "servo":  # (a PI loop on a spring: stable for any positive gain)
             return f"the servo tensioner's tension loop is unstable ({hz:.3g} Hz): raise tensioner.bandwidth"
+        if self.supply == "braked":
+            return (
+                f"the dancer and its braked spool would oscillate ({hz:.3g} Hz, growing at "
+                f"{worst.real:.3g} 1/s) with tensioner.dancer_damping {self.damping:g} N s/m, "
+                f"tensioner.spool_mass {self.spool_mass:g} kg and tensioner.brake_gain {self.brake_gain:g} "
+                f"N/m on a span of {self.stiffness:.4g} N/m: raise the damping"
+            )
         return (
             f"the dancer would oscillate ({hz:.3g} Hz, growing at {worst.real:.3g} 1/s) with "
             f"tensioner.dancer_damping {self.damping:g} N s/m and tensioner.supply_gain "
@@ -194,4 +257,7 @@ def tensioner_of(values: dict[str, Any], ea: float, set_tension: float) -> Tensi
         damping=float(v["tensioner.dancer_damping"]),
         stroke=float(v["tensioner.dancer_stroke"]),
         supply_gain=float(v["tensioner.supply_gain"]),
+        supply=str(v["tensioner.supply"]),
+        spool_mass=float(v["tensioner.spool_mass"]),
+        brake_gain=float(v["tensioner.brake_gain"]),
     )
