@@ -100,9 +100,11 @@ class Contour:
         (the quadrant the wire's normal lies in) the equation is ``P cos
         alpha + Q sin alpha = r``, ``P = R - (a/2 - r) s1 cos psi - (b/2 - r)
         s2 sin psi``, ``Q = (b/2 - r) s2 cos psi - (a/2 - r) s1 sin psi``, so
-        ``alpha = atan2(Q, P) +- acos(r / hypot(P, Q))``; of the eight
-        candidates the one in [0, pi/2] that solves the equation itself is
-        the root (it is unique: the left side falls and the right rises)."""
+        ``alpha = atan2(Q, P) +- acos(r / hypot(P, Q))``. As ``alpha`` lies
+        in [0, pi/2], ``theta`` lies in the quadrant of ``psi`` or the one
+        before it: of those four candidates the one in [0, pi/2] that solves
+        the equation itself is the root (it is unique: the left side falls
+        and the right rises)."""
         if not radius > self.h_max:
             raise BadInputError(
                 f"flyer_radius {radius:g} m is invalid: the coil's layer reaches {self.h_max:g} m from the "
@@ -113,7 +115,11 @@ class Contour:
         c, s = np.cos(psi), np.sin(psi)
         best = np.zeros_like(psi)
         miss = np.full_like(psi, np.inf)
-        for s1, s2 in ((1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)):
+        quadrant = np.floor(psi / (math.pi / 2)).astype(np.int64) % 4  # of psi: theta's, or the one before
+        for back in (0, 1):
+            quad = (quadrant - back) % 4
+            s1 = np.where((quad == 0) | (quad == 3), 1.0, -1.0)  # the signs of cos and sin in it
+            s2 = np.where(quad <= 1, 1.0, -1.0)
             p = radius - ca * s1 * c - cb * s2 * s
             q = cb * s2 * c - ca * s1 * s
             phase = np.arctan2(q, p)
