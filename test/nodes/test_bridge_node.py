@@ -1141,6 +1141,70 @@ def test_a_neighbour_on_the_load_cell_s_topic_changes_nothing(tmp_path: Path, pr
     assert "Traceback" not in procs.log(bridge)
 
 
+def test_the_load_cell_s_tension_is_read_back_in_the_run_s_time(
+    tmp_path: Path, procs: Procs, ros: Any
+) -> None:
+    """The stand-in's load cell reads a steady tension (not the job's set
+    tension: nothing may take one for the other) and drops to 0 N
+    ``drop_after`` s after the first command it gets (a known step; the
+    bridge stops the run at the break). ``read_run`` gives the readings the
+    bag holds under the load cell's topic, in the order recorded, each at
+    its log time less the run's wall-clock start: in time order, none
+    before the run's start, the steady ones before the step and the first
+    0 N not before the drop (the first command's run time plus
+    ``drop_after``, as the stand-in measures it). ``winder analyze --json``
+    gives their least and peak as the wire's; its table the wire row."""
+    import json
+
+    from support.cli import run_cli
+
+    from winder.record.reader import read_run
+
+    set_n = Job(**JOB).set_tension
+    steady = 0.9 * set_n  # within the job's bands: only the step is a fault
+    drop_after = 0.8  # s: mid-job (the job's steps take about 1.6 s)
+    bags = tmp_path / "bags"
+    start_standin(
+        procs, "--load-cell", LOAD_CELL, "--tension", repr(steady), "--tension-drop-after", repr(drop_after)
+    )
+    start_cell(procs, bags, *LOOSE, "-p", f"load_cell:={LOAD_CELL}")
+    [bag] = wait_for_bags(bags, 1)
+    raw = rosbags_read(bag)
+    report = final_report(raw)
+    assert report["wire_fault"].startswith("wire break at "), report
+    # what the stand-in published, as recorded: steady, then 0 N from the drop on
+    published = np.array([m.wrench.force.x for _, m in raw[WRENCHES]])
+    step = int(np.argmax(published == 0.0))
+    assert step > 10 and published.size > step + 1, published
+    assert (published[:step] == steady).all() and (published[step:] == 0.0).all(), published
+
+    run = read_run(bag)
+    t, tension = run.tension.t, run.tension.tension
+    np.testing.assert_array_equal(tension, published)
+    assert t.size == published.size and (np.diff(t) >= 0).all()
+    wall0 = sim_config(raw)["wall_start_ns"]
+    t_end = (max(logged for msgs in raw.values() for logged, _ in msgs) - wall0) / 1e9
+    assert t[0] >= 0.0 and t[-1] <= t_end, (t[0], t[-1], t_end)
+    t_first_command = (commands(raw)[0][0] - wall0) / 1e9
+    # the drop is read at the bridge's next look (5 ms) after it came; a command's time is its tick's (1 ms)
+    assert t_first_command + drop_after - 0.01 <= t[step] < t_first_command + drop_after + 0.3, (
+        t[step],
+        t_first_command,
+    )
+    assert t[step - 1] <= t[step] and t[step - 1] < t_first_command + drop_after + 0.3
+
+    r = run_cli("analyze", "--json", "--no-plots", str(bag))
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stdout + r.stderr
+    [doc] = json.loads(r.stdout)
+    wire = doc["wire"]
+    assert (wire["tension_min_n"], wire["tension_peak_n"]) == (published.min(), published.max()), wire
+    assert wire["set_tension_n"] == set_n, wire
+    r = run_cli("analyze", "--no-plots", str(bag))
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stdout + r.stderr
+    [row] = [ln for ln in r.stdout.splitlines() if ln.startswith("wire tension")]
+    assert f"{published.min():.4g}..{published.max():.4g} N (set {set_n:.4g} N)" in row, row
+
+
 def test_a_bad_load_cell_is_refused_in_one_line(tmp_path: Path, procs: Procs, ros: Any) -> None:
     """load_cell is a controller name or empty: a bad one at start is
     refused in one line naming the parameter, the value and the form (the

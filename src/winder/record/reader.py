@@ -180,9 +180,13 @@ class Samples:
 
 @dataclass(frozen=True)
 class TensionSamples:
-    """The wire's tension as recorded (winder/tension): times ``t`` (s,
-    simulated, from the run's start) and ``tension`` (N); empty where the run
-    did not simulate the wire."""
+    """The wire's tension as recorded: times ``t`` (s from the run's start)
+    and ``tension`` (N); empty where the run recorded none. A simulated wire's
+    is winder/tension, timed by its stamps (simulated time); a hardware run's
+    is its load cell's (the topic its winder/sim_config names as
+    ``load_cell_topic``, a ros2_control bridge's), timed by when each reading
+    was recorded: its log time less the run's wall-clock start, as the bag's
+    other messages are (the load cell stamps its readings on its own clock)."""
 
     t: FloatArray
     tension: FloatArray
@@ -317,7 +321,7 @@ class Run:
     #: how the bag's MCAP chunks are compressed ("lz4", "zstd", "none"; several
     #: comma-separated if they differ; "" if it holds no chunks, e.g. sqlite3)
     compression: str = ""
-    #: the wire's tension (winder/tension), where the run simulated the wire
+    #: the wire's tension (winder/tension, or the load cell's of a hardware run), where recorded
     tension: TensionSamples = field(default_factory=TensionSamples.empty)
 
     @property
@@ -498,8 +502,19 @@ def read_run(path: str | Path, namespace: str | None = None) -> Run:
         )
     }
     decoded = _decode(raw, topic)
-    streamed = _stream_pass(raw, topic)
+    streamed = _stream_pass(raw, topic, _load_cell_topic(decoded[topic[SIM_CONFIG]]))
     return _assemble(raw, ns, counts, topic, decoded, streamed)
+
+
+def _load_cell_topic(msgs: list[Any]) -> str:
+    """The topic of the run's load cell, as its consumer's first configuration
+    names it (``load_cell_topic``: a bridge's with a load cell); "" if none."""
+    try:
+        doc = json.loads(msgs[0].data) if msgs else {}
+        name = doc.get("load_cell_topic", "") if isinstance(doc, dict) else ""
+    except (ValueError, TypeError, AttributeError, RecursionError):
+        return ""
+    return name if isinstance(name, str) and name.startswith("/") else ""
 
 
 def _pick_namespace(bag: Path, counts: dict[str, int], namespace: str | None) -> str:
@@ -557,14 +572,27 @@ class _Streamed:
     states: Samples
     steps: StepSource
     tension: TensionSamples
+    #: the log time (ns) of each tension sample: set where they are a load cell's (timed by it)
+    tension_logged: IntArray | None = None
+    notes: tuple[str, ...] = ()
 
 
-def _stream_pass(raw: RawBag, topic: dict[str, str]) -> _Streamed:
-    """The second walk: the joint samples decoded (a batch at a time), the step
-    chunks checked and counted but not kept."""
+_WRENCH_TYPE = "geometry_msgs/msg/WrenchStamped"
+
+
+def _stream_pass(raw: RawBag, topic: dict[str, str], load_cell: str = "") -> _Streamed:
+    """The second walk: the joint samples and the tension decoded (a batch at
+    a time), the step chunks checked and counted but not kept. ``load_cell``:
+    the topic of the run's load cell (its readings are the tension, with their
+    log times), "" if none."""
     joints = (topic[JOINT_COMMANDS], topic[JOINT_STATES])
     steps_type = "std_msgs/msg/Int64MultiArray"
+    wrench_topic = load_cell or topic[TENSION]
+    notes = []
     for conn in raw.connections.values():
+        if load_cell and conn.topic == load_cell and conn.msgtype != _WRENCH_TYPE:
+            notes.append(f"{load_cell} (the load cell's topic) has type {conn.msgtype}: tension unknown")
+            wrench_topic = ""
         if conn.topic in joints and conn.msgtype != "sensor_msgs/msg/JointState":
             raise BagError(
                 f"{raw.path}: {conn.topic} has type {conn.msgtype}, not sensor_msgs/msg/JointState"
@@ -576,11 +604,13 @@ def _stream_pass(raw: RawBag, topic: dict[str, str]) -> _Streamed:
     parts: dict[str, list[Samples]] = {t: [] for t in joints}
     wrenches: list[bytes] = []
     wrench_parts: list[TensionSamples] = []
+    logged: list[int] = []
     rows = 0
-    for batch in raw.stream({*joints, topic[STEP_TIMES], topic[TENSION]}):
-        for name, _, data in batch:
-            if name == topic[TENSION]:
+    for batch in raw.stream({*joints, topic[STEP_TIMES], wrench_topic} - {""}):
+        for name, t, data in batch:
+            if name == wrench_topic:
                 wrenches.append(data)
+                logged.append(t)
                 if len(wrenches) >= _JOINT_BATCH:
                     wrench_parts.append(_wrench_samples(wrenches, name))
                     wrenches = []
@@ -599,7 +629,7 @@ def _stream_pass(raw: RawBag, topic: dict[str, str]) -> _Streamed:
             parts[name].append(_joint_samples(pending[name], name))
         samples[name] = _concat(parts[name])
     if wrenches:
-        wrench_parts.append(_wrench_samples(wrenches, topic[TENSION]))
+        wrench_parts.append(_wrench_samples(wrenches, wrench_topic))
     tension = (
         TensionSamples(
             np.concatenate([p.t for p in wrench_parts]), np.concatenate([p.tension for p in wrench_parts])
@@ -612,6 +642,8 @@ def _stream_pass(raw: RawBag, topic: dict[str, str]) -> _Streamed:
         samples[topic[JOINT_STATES]],
         StepRows(raw, topic[STEP_TIMES], steps_type, rows),
         tension,
+        np.array(logged, dtype=np.int64) if load_cell else None,
+        tuple(notes),
     )
 
 
@@ -639,7 +671,7 @@ def _assemble(
 ) -> Run:
     """The :class:`Run` of the cell in namespace ``ns`` from its decoded messages."""
     plan = _decode_plan(raw.path, decoded[topic[JOB]], topic[JOB])
-    notes = list(raw.notes)
+    notes = [*raw.notes, *streamed.notes]
     sim_config = _decode_sim_config(raw.path, decoded[topic[SIM_CONFIG]], topic[SIM_CONFIG], notes)
     profile_config = _decode_profile_config(decoded[topic[PROFILE_CONFIG]], topic[PROFILE_CONFIG], notes)
     wall0, origin_ns = _time_base(decoded[topic[SIM_CONFIG]])
@@ -668,8 +700,23 @@ def _assemble(
         profile_config=profile_config,
         events=_decode_events(decoded.get(topic[CONTROL], []), plan.run_id),
         compression=", ".join(sorted(raw.compressions)),
-        tension=TensionSamples(streamed.tension.t - origin, streamed.tension.tension),
+        tension=_tension(streamed, origin, wall0),
     )
+
+
+def _tension(streamed: _Streamed, origin: float, wall0: int) -> TensionSamples:
+    """The tension timed from the run's start: a simulated wire's by its stamps
+    on the cell's clock (less the run's origin on it); a load cell's by when
+    each reading was recorded (its log time less the run's wall-clock start,
+    where the run's other messages, its joint states and commands, are
+    timed from; the first reading's if the start is not recorded)."""
+    logged = streamed.tension_logged
+    if logged is None:
+        return TensionSamples(streamed.tension.t - origin, streamed.tension.tension)
+    if not logged.size:
+        return TensionSamples.empty()
+    base = wall0 if wall0 else int(logged[0])
+    return TensionSamples((logged - base) / 1e9, streamed.tension.tension)
 
 
 def _decode_events(msgs: list[Any], run_id: str) -> tuple[dict[str, Any], ...]:
