@@ -96,7 +96,6 @@ the bag, the fault's report) runs in the executor, woken by the step stream and 
 from __future__ import annotations
 
 import bisect
-import json
 import struct
 import threading
 import time
@@ -110,11 +109,10 @@ from geometry_msgs.msg import WrenchStamped
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.client import Client
 from rclpy.node import Node
-from rclpy.serialization import deserialize_message
 from rclpy.task import Future
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray, String
+from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
@@ -126,7 +124,7 @@ from winder.contract.cdr import (
     trajectory_payload,
 )
 from winder.contract.pacing import CommandHistory, Pacer, following_error
-from winder.contract.params import BRIDGE_SPECS, PROFILE_SPECS, check_bridge
+from winder.contract.params import BRIDGE_SPECS, check_bridge
 from winder.contract.stream import JobPlan
 from winder.contract.topics import (
     TOPIC_CLOCK,
@@ -570,14 +568,12 @@ class BridgeEngine(Engine):
         that passes one is refused when the run is armed, before any command
         (after that, at once). Without the ramp the steps are still watched
         as they come (execute)."""
-        raw = self.run.profile_config()
-        if self.run.plan is None or self.ramp_checked or raw is None or not self.watching_limits():
+        if self.run.plan is None or self.ramp_checked or not self.watching_limits():
             return
         try:
-            doc = json.loads(deserialize_message(raw, String).data)
-            if (doc.get("job_id"), doc.get("run_id", "")) != (self.run.plan.job_id, self.run.plan.run_id):
-                return  # an earlier run's ramp; this run's is on its way
-            ramp = {k: doc[k] for k in (*PROFILE_SPECS, "feed_override") if k in doc}
+            ramp = self.run.run_ramp()
+            if ramp is None:
+                return  # none yet, or an earlier run's: this run's is on its way
             _, why = job_limits(
                 self.run.plan.job,
                 ramp,

@@ -32,7 +32,6 @@ that still comes behind the clock is executed at the clock and counted late
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from collections import deque
@@ -42,10 +41,8 @@ import numpy as np
 import numpy.typing as npt
 from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
-from rclpy.serialization import deserialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import String
 
 from winder.axis import StepperAxis
 from winder.contract.cdr import JointStateEncoder, WrenchEncoder, encode_clocks
@@ -225,18 +222,12 @@ class SimEngine(Engine):
         plan = self.run.plan
         if plan is None or self.wire is None or self.wire_checked or not self.run.values()["wire_check"]:
             return
-        ramp = plan.ramp
+        try:
+            ramp = plan.ramp if plan.ramp is not None else self.run.run_ramp()
+        except (ValueError, TypeError):  # a profile_config that does not parse: nothing to predict with
+            return
         if ramp is None:
-            raw = self.run.profile_config()
-            if raw is None:
-                return
-            try:
-                doc = json.loads(deserialize_message(raw, String).data)
-            except (ValueError, TypeError):
-                return
-            if (doc.get("job_id"), doc.get("run_id", "")) != (plan.job_id, plan.run_id):
-                return  # an earlier run's: this run's is on its way
-            ramp = {k: doc[k] for k in (*PROFILE_SPECS, "feed_override") if k in doc}
+            return  # this run's ramp is on its way
         self.wire_checked = True
         values = {n: s.default for n, s in PROFILE_SPECS.items()} | ramp
         try:

@@ -60,6 +60,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import Int64MultiArray, String
 from trajectory_msgs.msg import JointTrajectory
 
+from winder.contract.params import PROFILE_SPECS
 from winder.contract.run import ControlEvent, EventError, JobReport, RunLedger, Transition
 from winder.contract.states import CellState, EventKind, JobState, ReadyState
 from winder.contract.stream import JobPlan, StreamChecker, parse_job_description
@@ -488,8 +489,14 @@ class StepConsumer(ManagedNode):
     def chunks_waiting(self) -> bool:
         return bool(self.inbox)
 
-    def profile_config(self) -> bytes | None:
-        return self.recording.profile_raw
+    def run_ramp(self) -> dict[str, Any] | None:
+        raw, plan = self.recording.profile_raw, self.plan
+        if raw is None or plan is None:
+            return None
+        doc = json.loads(deserialize_message(raw, String).data)
+        if (doc.get("job_id"), doc.get("run_id", "")) != (plan.job_id, plan.run_id):
+            return None  # an earlier run's: this run's is on its way
+        return {k: doc[k] for k in (*PROFILE_SPECS, "feed_override") if k in doc}
 
     def bag_topic(self, key: str) -> str:
         return self.recording.topics[key][0]

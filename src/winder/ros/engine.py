@@ -75,8 +75,10 @@ class RunPort(Protocol):
         """Chunks were received and are not handed over yet."""
         ...
 
-    def profile_config(self) -> bytes | None:
-        """The last winder/profile_config heard (CDR), of any run."""
+    def run_ramp(self) -> dict[str, Any] | None:
+        """The ramp this run is timed with, as its profile node published it
+        on winder/profile_config (its settings and ``feed_override``); None
+        until this run's has come. ValueError if what came does not parse."""
         ...
 
     def executed(self, n: int) -> None:
