@@ -79,11 +79,9 @@ class WireRun:
         self.watch = WireWatch(set_n, job.tension_slip_tolerance)
         self.fault: WireFault | None = None
         # the job's turns before each coil: a job's turn is these plus the coil's
-        before: dict[int, int] = {}
-        for seg in segments:
-            if seg.kind.winds:
-                before[seg.pole] = max(before.get(seg.pole, 0), seg.last_turn)
-        self.turns_before = {p: sum(before.get(q, 0) for q in range(p)) for p in range(job.poles)}
+        turns = [coil.total_turns for coil in job.winding.coils]
+        self.turns_before = {p: sum(turns[:p]) for p in range(job.poles)}
+        self.total_turns = sum(turns)
 
     @classmethod
     def of(
@@ -99,16 +97,13 @@ class WireRun:
 
     def idle_faults(self) -> list[str]:
         """The injected faults that cannot fire in this job (a turn beyond its turns), in words."""
-        total = self.turns_before.get(self.job.poles - 1, 0) + max(
-            (s.last_turn for s in self.segments if s.kind.winds and s.pole == self.job.poles - 1), default=0
-        )
         return [
-            f"{name} {turn} is beyond the job's {total} turns: it never fires"
+            f"{name} {turn} is beyond the job's {self.total_turns} turns: it never fires"
             for name, turn in (
                 ("fault.wire_break_turn", self.break_turn),
                 ("fault.slip_turn", self.slip_turn),
             )
-            if turn > total
+            if turn > self.total_turns
         ]
 
     # -- where the flyer is -------------------------------------------------------
