@@ -186,7 +186,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     check_interp({**{n: s.default for n, s in INTERP_SPECS.items()}, **job.to_dict(), **extra}, job=job)
     external = external_nodes(args)
     check_sim({**sim, "record": False} if "sim" in external else sim)  # a remote bag_dir is its host's
-    why = wire_refusal(job, running, schedule, sim)
+    why = wire_refusal(job, running, schedule, sim, derating=derating)
     if why:  # the words of winder check
         raise UserError(why + (derating.still() if derating is not None else ""))
     cell = values_from_args(args, CELL_SPECS)
@@ -320,9 +320,10 @@ def cmd_check(args: argparse.Namespace) -> int:
         job = derating.job
     laid = job.winding
     doc = {"job_id": job.job_id, **report(laid)}
-    timed = time_for_check(job, ramp, schedule)
+    # the derated job was timed and predicted as it was derated
+    timed = derating.timed if derating is not None else time_for_check(job, ramp, schedule)
     add_takeup(job, doc, timed)
-    tension_why = add_tension(job, doc, tensioner, timed)
+    tension_why = add_tension(job, doc, tensioner, timed, wound=derating.wound if derating else None)
     if derating is not None and tension_why:
         tension_why += derating.still()
     if derating is not None:

@@ -27,18 +27,26 @@ __all__ = ["add_takeup", "add_tension", "derated", "time_for_check", "wire_refus
 
 
 def wire_refusal(
-    job: Job, ramp: dict[str, Any], schedule: str, consumer: dict[str, Any], *, as_wound: bool = True
+    job: Job,
+    ramp: dict[str, Any],
+    schedule: str,
+    consumer: dict[str, Any],
+    *,
+    as_wound: bool = True,
+    derating: Derating | None = None,
 ) -> str:
     """Why the job's wire would not hold at the run's speeds, in ``winder
     check``'s words ("" if it holds, or the job does not give its core).
     ``as_wound=False``: each layer's steady swing at its top speed alone (a
-    few ms a layer; the coil as wound with its ramps takes a second or more)."""
+    few ms a layer; the coil as wound with its ramps takes a second or
+    more). ``derating``: the job's, whose timing and prediction it reads."""
     if not job.bobbin.core_given:
         return ""
     doc = report(job.winding)
-    timed = time_for_check(job, ramp, schedule)
+    timed = derating.timed if derating is not None and derating.timed else time_for_check(job, ramp, schedule)
     add_takeup(job, doc, timed)
-    return add_tension(job, doc, consumer, timed, as_wound=as_wound)
+    wound = derating.wound if derating is not None else None
+    return add_tension(job, doc, consumer, timed, as_wound=as_wound, wound=wound)
 
 
 def derated(job: Job, ramp: dict[str, Any], schedule: str, consumer: dict[str, Any]) -> Derating | None:
@@ -79,7 +87,13 @@ def add_takeup(job: Job, doc: dict[str, Any], timed: TimedJob | None) -> None:
 
 
 def add_tension(
-    job: Job, doc: dict[str, Any], consumer: dict[str, Any], timed: TimedJob | None, *, as_wound: bool = True
+    job: Job,
+    doc: dict[str, Any],
+    consumer: dict[str, Any],
+    timed: TimedJob | None,
+    *,
+    as_wound: bool = True,
+    wound: dict[tuple[int, int], LayerTension] | None = None,
 ) -> str:
     """The wire (``doc["wire"]``) and each layer's predicted tension with the
     consumer's tensioner:
@@ -119,7 +133,8 @@ def add_tension(
             for layer in coil_doc["layers"]:
                 layer.update(tension_peak_n=None, tension_min_n=None)
         return why
-    wound = wound_tension(timed, tensioner) if timed is not None and as_wound else {}
+    if wound is None:  # as wound, unless known already (derating worked it out for this job)
+        wound = wound_tension(timed, tensioner) if timed is not None and as_wound else {}
     seen: dict[tuple[float, float], LayerTension] = {}  # coils laid alike: each layer worked out once
     for coil_doc in [{"coil": 1, "layers": doc["layers"]}, *doc["coils"]]:
         for layer in coil_doc["layers"]:

@@ -98,6 +98,10 @@ class Derating:
     before_s: float
     after_s: float
     why: str = ""
+    #: the derated job as timed, and its layers' tension as wound (``(coil, layer)`` from 1):
+    #: what its check reads again
+    timed: TimedJob | None = None
+    wound: dict[tuple[int, int], LayerTension] | None = None
 
     def to_doc(self) -> dict[str, Any]:
         """``winder check --json``'s ``wire.derated``."""
@@ -185,7 +189,7 @@ def derate(job: Job, ramp: dict[str, Any], schedule: str, tensioner: Tensioner) 
         job = Job.from_dict({**job.to_dict(), "layer_speed": text})
         timed = _timed(job, ramp, schedule)
     slowed = {(p + 1, k + 1): job.layer_share(p, k) for (p, k), v in shares.items() if v != given.get((p, k))}
-    return Derating(job, slowed, first.duration_ns / 1e9, timed.duration_ns / 1e9, why)
+    return Derating(job, slowed, first.duration_ns / 1e9, timed.duration_ns / 1e9, why, timed, wound)
 
 
 def overshoot(got: LayerTension, bounds: Bounds, tensioner: Tensioner) -> float:
