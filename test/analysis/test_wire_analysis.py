@@ -32,6 +32,7 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.typesys import Stores, get_typestore
 from support import wait
 from support.bags import step_rows, write_bag
+from support.cell import servo_rect_job
 
 from winder.analysis.metrics import analyze, format_table
 from winder.analysis.wire import stresses
@@ -39,30 +40,6 @@ from winder.analysis.wound import as_wound
 from winder.motion.job import Job
 from winder.record.reader import read_run
 
-JOB = """\
-interp_node:
-  ros__parameters:
-    job_id: {name}
-    wire_diameter: 0.0005
-    wire.bare_diameter: 0.00045
-    bobbin.core: rect
-    bobbin.core_width: 0.012
-    bobbin.core_depth: 0.02
-    bobbin.core_corner_radius: 0.001
-    flyer_radius: 0.03
-    turns_per_layer: 6
-    layers: 3
-    poles: 1
-    fork_steps_per_rev: 512
-    tension.set: 9.0
-profile_node:
-  ros__parameters:
-    v_max: 15000.0
-sim_node:
-  ros__parameters:
-    tensioner.kind: servo
-    tensioner.bandwidth: {bandwidth}
-"""
 #: a servo too slow for the corners: past the yield and below the alarm band in
 #: turns, never broken; and a slower one: the tension drops to nothing, the wire
 #: breaks (the sim node's watch) in the second layer
@@ -80,7 +57,15 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Path]]:
     try:
         for name, values in RUNS.items():
             params = root / f"{name}.yaml"
-            params.write_text(JOB.format(name=name, **values))
+            params.write_text(
+                servo_rect_job(
+                    name,
+                    layers=3,
+                    v_max=15000.0,
+                    bandwidth=values["bandwidth"],
+                    extra="    tension.set: 9.0\n",
+                )
+            )
             (root / name).mkdir()
             cells[name] = procs = Procs(next_domain(), root / name)
             procs.start(

@@ -35,17 +35,18 @@ def names(ros: Any) -> set[str]:
     return {n for n, _ in ros.get_node_names_and_namespaces()} - {ros.get_name()}
 
 
+def gone(ros: Any, who: set[str] | None, what: str) -> None:
+    """``who`` (None: every node but the probe) leaves the graph within
+    GONE_WITHIN s; the failure names who was still there."""
+    left = (lambda: names(ros) & who) if who is not None else (lambda: names(ros))
+    spin_until(ros, lambda: not left(), GONE_WITHIN, what, heard=lambda: sorted(names(ros)))
+
+
 def gone_after_exit(procs: Procs, ros: Any, p: subprocess.Popen[bytes], expected: set[str]) -> None:
     """``p``'s nodes are on the graph; SIGINT ends it with status 0 and they leave within GONE_WITHIN s."""
     spin_until(ros, lambda: expected <= names(ros), 60, f"{sorted(expected)} on the graph")
     assert procs.stop(p) == 0, procs.log(p)
-    spin_until(
-        ros,
-        lambda: not expected & names(ros),
-        GONE_WITHIN,
-        f"{sorted(expected)} gone from the graph",
-        heard=lambda: sorted(names(ros)),
-    )
+    gone(ros, expected, f"{sorted(expected)} gone from the graph")
     assert "Traceback" not in procs.log(p)
 
 
@@ -101,7 +102,7 @@ def test_winder_run_leaves_nothing_on_the_graph(
     assert run.returncode == 0, out
     assert "state              done" in out, out
     assert {"winder_cell", "interp_node", "profile_node", "sim_node"} <= seen, seen
-    spin_until(ros, lambda: not names(ros), GONE_WITHIN, "the graph empty", heard=lambda: sorted(names(ros)))
+    gone(ros, None, "the graph empty")
 
 
 @pytest.mark.usefixtures("hangup_taken")
@@ -133,13 +134,7 @@ def test_sighup_ends_winder_run_as_sigint_does(procs: Procs, ros: Any, tmp_path:
             run.wait()
     assert run.returncode == 130, out + err
     assert err.strip().splitlines()[-1] == "winder run: interrupted" and "Traceback" not in err, err
-    spin_until(
-        ros,
-        lambda: not cell & names(ros),
-        GONE_WITHIN,
-        f"{sorted(cell)} gone from the graph",
-        heard=lambda: sorted(names(ros)),
-    )
+    gone(ros, cell, f"{sorted(cell)} gone from the graph")
     [bag] = list(bags.iterdir())
     assert bag_closed(bag)
     assert final_report(rosbags_read(bag))["state"] == "incomplete"

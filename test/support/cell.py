@@ -20,6 +20,35 @@ from winder.procs import run
 SMALL_JOB = {"turns_per_layer": 3, "layers": 3, "poles": 2, "fork_steps_per_rev": 256, "job_id": "small"}
 
 
+def servo_rect_job(job_id: str, *, layers: int, v_max: float, bandwidth: float, extra: str = "") -> str:
+    """A job file of 6 turns a layer of 0.5 mm wire (0.45 mm copper) on a
+    12 x 20 mm core, 512 fork steps a turn, wound with a servo tensioner of
+    ``bandwidth`` Hz at ``v_max``; ``extra``: more interp_node lines."""
+    return f"""\
+interp_node:
+  ros__parameters:
+    job_id: {job_id}
+    wire_diameter: 0.0005
+    wire.bare_diameter: 0.00045
+    bobbin.core: rect
+    bobbin.core_width: 0.012
+    bobbin.core_depth: 0.02
+    bobbin.core_corner_radius: 0.001
+    flyer_radius: 0.03
+    turns_per_layer: 6
+    layers: {layers}
+    poles: 1
+    fork_steps_per_rev: 512
+{extra}profile_node:
+  ros__parameters:
+    v_max: {v_max}
+sim_node:
+  ros__parameters:
+    tensioner.kind: servo
+    tensioner.bandwidth: {bandwidth}
+"""
+
+
 def timed_rows(bag: dict[str, list[tuple[int, Any]]], topic: str = "/winder/step_times") -> np.ndarray:
     chunks = []
     for _, msg in bag[topic]:

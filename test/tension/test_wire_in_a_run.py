@@ -16,7 +16,7 @@ import pytest
 import scipy.signal
 from conftest import Procs, rosbags_read
 from support import wait
-from support.cell import only_bag, winder_run
+from support.cell import only_bag, servo_rect_job, winder_run
 from support.paths import BIN
 
 from winder.motion.job import Job
@@ -103,29 +103,7 @@ def test_the_recorded_tension_is_the_recorded_flyers(tmp_path: Path, procs: Proc
     assert (tmp_path / "plots" / "wire.png").stat().st_size > 10_000
 
 
-BREAKS = """\
-interp_node:
-  ros__parameters:
-    job_id: breaks
-    wire_diameter: 0.0005
-    wire.bare_diameter: 0.00045
-    bobbin.core: rect
-    bobbin.core_width: 0.012
-    bobbin.core_depth: 0.02
-    bobbin.core_corner_radius: 0.001
-    flyer_radius: 0.03
-    turns_per_layer: 6
-    layers: 1
-    poles: 1
-    fork_steps_per_rev: 512
-profile_node:
-  ros__parameters:
-    v_max: 60000.0
-sim_node:
-  ros__parameters:
-    tensioner.kind: servo
-    tensioner.bandwidth: 2.0
-"""
+BREAKS = servo_rect_job("breaks", layers=1, v_max=60000.0, bandwidth=2.0)
 
 
 def test_a_wire_pulled_past_its_breaking_load_stops_the_run(tmp_path: Path, procs: Procs) -> None:

@@ -16,9 +16,7 @@ from winder.tension.sim import WireSim
 from winder.tension.tensioner import Tensioner
 
 
-@pytest.mark.parametrize(
-    ("kind", "spool"), [("servo", "driven"), ("dancer", "driven"), ("dancer", "braked")]
-)
+@pytest.mark.parametrize(("kind", "spool"), [("servo", "driven"), ("dancer", "driven"), ("dancer", "braked")])
 def test_the_wire_of_a_run_is_lsims_and_conserved(kind: str, spool: str) -> None:
     tensioner = Tensioner(kind, 2e4, 4.0, supply=spool)
     rect = Contour(0.03, 0.012, 0.002)
