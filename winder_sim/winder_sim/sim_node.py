@@ -462,9 +462,8 @@ class SimEngine(Engine):
                 fork = FORK.index
                 wire, keep = self.wire.samples(samples, act_pos[:, fork], act_vel[:, fork], seg_of_sample)
                 block.update(wire)
-                if keep < samples.size or (self.wire.fault is not None and self.wire_cut is None):
-                    # the wire's fault stops the axes where the watch saw it: nothing after counts
-                    assert self.wire.fault is not None
+                if self.wire.fault is not None and self.wire_cut is None:
+                    # the wire's fault (seen in this block) stops the axes there: nothing after counts
                     self.wire_cut = self.wire.fault.seen_s
                     block = {key: value[:keep] for key, value in block.items()}
             for i, ax in enumerate(self.axes):
