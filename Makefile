@@ -16,7 +16,7 @@ TEST_WORKERS ?= 4
 PYTEST := $(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile
 FLAKE_ROUNDS ?= 3
 
-.PHONY: demo test flakes bench figures venv bytecode clean
+.PHONY: demo test flakes bench figures venv bytecode interfaces clean
 
 venv: $(STAMP)
 
@@ -24,8 +24,14 @@ venv: $(STAMP)
 # install has no bytecode for them, and where PYTHONDONTWRITEBYTECODE is set
 # Python compiles them again in every process (0.15 s a process here); write
 # it as pip does for an installed package (up to date: 0.1 s, nothing done).
-bytecode: $(STAMP)
+bytecode: interfaces
 	@$(BIN)/python -m compileall -q $(PACKAGES) > /dev/null
+
+# winder_interfaces (the Wind action, the typed cell state and report): an ament_cmake
+# package, generated with the wheels' rosidl and installed into the venv; built again
+# only when its definitions change (its stamp; 0.1 s when they did not)
+interfaces: $(STAMP)
+	@$(BIN)/python winder_interfaces/build_into_venv.py winder_interfaces $(VENV)
 
 $(STAMP): $(SETUPS)
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -39,7 +45,7 @@ demo: bytecode
 	$(BIN)/winder run
 
 test: bytecode
-	$(BIN)/ruff check $(PACKAGES) test bench
+	$(BIN)/ruff check $(PACKAGES) winder_interfaces test bench
 	$(BIN)/mypy
 	$(PYTEST)
 

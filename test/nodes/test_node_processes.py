@@ -7,6 +7,7 @@ and expected positions are worked out from the job fields in the test.
 from __future__ import annotations
 
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -22,6 +23,9 @@ from support.paths import ROOT
 from support.ros_probe import heard_diagnostics, set_params, under_way
 
 from winder.procs import popen
+
+#: the venv the suite runs in (its ROS wheels: what colcon builds winder_interfaces against)
+VENV = BIN.parent
 
 pytestmark = pytest.mark.ros
 
@@ -243,22 +247,31 @@ def test_colcon_build_installs_runnable_executables(tmp_path: Path, procs: Procs
             str(ws / "build"),
             "--install-base",
             str(ws / "install"),
+            # winder_interfaces (ament_cmake) against the venv's ROS wheels, as a ROS install
+            # sourced would give it: the wheels' prefix, their python, no tests of its own
+            "--cmake-args",
+            f"-DCMAKE_PREFIX_PATH={VENV}",
+            f"-DPython3_EXECUTABLE={BIN / 'python'}",
+            "-DBUILD_TESTING=OFF",
         ],
         capture_output=True,
         text=True,
         timeout=600,
         cwd=ws.parent,
         stdin=subprocess.DEVNULL,
+        env={**os.environ, "AMENT_PREFIX_PATH": str(VENV)},
     )
     assert r.returncode == 0, r.stdout + r.stderr
-    assert "5 packages finished" in r.stdout
+    assert "6 packages finished" in r.stdout
+    # the interfaces as colcon installed them: generated, with the action among them
+    share = ws / "install" / "winder_interfaces" / "share" / "winder_interfaces"
+    assert (share / "action" / "Wind.action").is_file() and (share / "msg" / "CellState.msg").is_file()
     # the cell's data beside its launch file: what params_file:= and the viewers take
     share = ws / "install" / "winder_sim" / "share" / "winder_sim"
     for d, pattern in (("jobs", "*.yaml"), ("layouts", "winder_*")):
         want = sorted(f.name for f in (repo / d).glob(pattern))
         assert want and sorted(f.name for f in (share / d).iterdir()) == want, d
     assert (share / "launch" / "winder.launch.py").is_file()
-    import os
 
     from ament_index_python.packages import get_package_prefix
 

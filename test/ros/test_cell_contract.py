@@ -152,11 +152,11 @@ def test_the_same_job_twice_gives_two_runs_on_one_clock(tmp_path: Path, procs: P
 
 
 def test_the_readme_controller_runs_a_cell(tmp_path: Path, procs: Procs) -> None:
-    """docs/cell_controller.py, the docs' example of a line controller,
-    against the three node executables started one by one, the consumer under
-    another node name: it starts the job, follows its run id to the
-    consumer's final report (found by its role) and exits 0 with the run done
-    and its bag named. With no cell on the graph it gives up after its
+    """docs/cell_controller.py, the docs' example of a line controller (an
+    ActionClient of the cell's Wind action), against the three node
+    executables started one by one, the consumer under another node name: its
+    goal winds the job set in the cell, and it exits 0 with the run done and
+    its bag named. With no cell on the graph it gives up after its
     timeout, in one line, exit 2."""
     import subprocess
     import sys
@@ -167,7 +167,7 @@ def test_the_readme_controller_runs_a_cell(tmp_path: Path, procs: Procs) -> None
         [sys.executable, str(script), "", "2"], env=procs.env, capture_output=True, text=True, timeout=60
     )
     assert alone.returncode == 2 and time.monotonic() - t0 < 30, alone.stdout + alone.stderr
-    assert alone.stdout.strip() == "cell_controller: no interp_node/start service within 2 s", alone.stdout
+    assert alone.stdout.strip() == "cell_controller: no winder/wind action server within 2 s", alone.stdout
     bags = tmp_path / "bags"
     procs.start("sim_node", "-r", "__node:=axes", "-p", f"bag_dir:={bags}")
     procs.start("profile_node")

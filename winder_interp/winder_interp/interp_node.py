@@ -47,6 +47,7 @@ from winder.ros.settings import Settings
 from winder.ros.spin import spin
 from winder.ros.timers import steady_timer
 from winder.spec import SpecError
+from winder_interp.wind import WindServer, job_params
 
 #: this node's part in the cell (winder.contract.topics.ROLES), in every job status
 ROLE = "interp"
@@ -72,6 +73,9 @@ class InterpNode(ManagedNode):
         self.peers = Peers(self)
         self.solo = Solo(self, "interp", self.peers, self.leave)  # one interp node per cell
         self.solo.on_settled = self.on_ready  # an autostart that waited for it goes now
+        # the Wind action: a goal is a run (it hears the consumer's statuses through solo)
+        self.wind = WindServer(self, self, self.peers)
+        self.solo.also = self.wind.on_statuses
         self.diag.foreign = self.peers.intruders.summary  # its statuses name what it refused
         self.peers.on_new = lambda: self.report()  # at once, not at the next second
         self.peers.subscribe(KeyValue, TOPIC_PROGRESS, self.on_progress, QOS_STATE)
@@ -104,6 +108,13 @@ class InterpNode(ManagedNode):
                 "job", ERROR, str(self.settings.blocked()), status_values(JobState.BLOCKED, role=ROLE)
             )
         self.start_lifecycle()
+
+    def destroy_node(self) -> None:
+        """The action server first: it holds the node's handle, and with it the
+        process' DDS participant, which stayed on the graph after the process
+        ended (rclpy's destroy_node leaves waitables alone)."""
+        self.wind.destroy()
+        super().destroy_node()
 
     # -- lifecycle (winder.ros.managed) ----------------------------------------
     def in_run(self) -> bool:
@@ -143,13 +154,7 @@ class InterpNode(ManagedNode):
             given, digest = load_job_file_hashed(path)
         except (SpecError, ValueError):
             return params
-        extra = [Parameter(k, value=v) for k, v in given["interp_node"].items() if k not in named]
-        if "job_file_sha256" not in named:
-            extra.append(Parameter("job_file_sha256", value=digest))
-        if given["profile_node"]:
-            ramp = {"ramp.source": "job", **{f"ramp.{k}": v for k, v in given["profile_node"].items()}}
-            extra += [Parameter(k, value=v) for k, v in ramp.items() if k not in named]
-        return params + extra
+        return params + job_params(given, digest, named)
 
     # -- in --------------------------------------------------------------
     def on_start(self, _req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:
@@ -167,25 +172,36 @@ class InterpNode(ManagedNode):
         would not ramp the run). Nothing is set when the cell cannot start a
         run now (a run going on, a node not ready); the reason is in
         ``result.reason``, the start reply in it when the run starts."""
-        why = self.cannot_start()
-        if why:
-            resp.result = SetParametersResult(successful=False, reason=why)
-            return resp
         try:
             params = [Parameter.from_parameter_msg(p) for p in req.parameters]
-            params, refused = with_run_ramp(params)
-            if refused:
-                resp.result = SetParametersResult(successful=False, reason=refused)
-                return resp
-            result = self.set_parameters_atomically(params)
-        except Exception as exc:  # an undeclared name, a type rclpy cannot take
-            result = SetParametersResult(successful=False, reason=f"run not set up: {exc}".splitlines()[0])
-        if not result.successful:
-            resp.result = SetParametersResult(successful=False, reason=result.reason or "run not set up")
-            return resp
-        ok, message = self.start_job()
+        except Exception as exc:  # a type rclpy cannot take
+            params, why = [], f"run not set up: {exc}".splitlines()[0]
+        else:
+            why = ""
+        ok, message = self.start_with(params) if not why else (False, why)
         resp.result = SetParametersResult(successful=ok, reason=message)
         return resp
+
+    def start_with(self, params: list[Parameter]) -> tuple[bool, str]:
+        """Set ``params`` all together or not at all, and start a run with
+        them (none: with the settings as they are): whether it started, and
+        the start reply or the reason (a ``ramp.*`` value makes the run bring
+        its ramp: see :func:`with_run_ramp`)."""
+        why = self.cannot_start()
+        if why:
+            return False, why
+        if params:
+            params, refused = with_run_ramp(params)
+            if refused:
+                return False, refused
+            try:
+                result = self.set_parameters_atomically(params)
+            except Exception as exc:  # an undeclared name, a type rclpy cannot take
+                why = f"run not set up: {exc}".splitlines()[0]
+                result = SetParametersResult(successful=False, reason=why)
+            if not result.successful:
+                return False, result.reason or "run not set up"
+        return self.start_job()
 
     def cannot_start(self) -> str:
         """Why a run cannot start now ("" if it can)."""

@@ -19,7 +19,6 @@ import time
 from pathlib import Path
 from typing import Any
 
-from winder.cli.common import UserError
 from winder.cli.exits import EXIT_ABORTED, EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK
 from winder.contract.states import EventKind, JobState
 from winder.errors import BadInputError
@@ -116,7 +115,7 @@ def run_values(args: argparse.Namespace) -> dict[str, Any]:
     checked here as the node will check it) and each ``--set key=value``,
     checked against the interp node's setting table."""
     from winder.contract.jobfile import load_job_file
-    from winder.contract.params import INTERP_SPECS
+    from winder.contract.params import interp_setting
 
     values: dict[str, Any] = {}
     if args.job_file:
@@ -124,17 +123,7 @@ def run_values(args: argparse.Namespace) -> dict[str, Any]:
         load_job_file(path)  # JobFileError (a BadInputError): one line naming the file tried
         values["job_file"] = str(path)
     for item in args.set or ():
-        key, eq, text = item.partition("=")
-        key = key.strip()
-        if not eq or not key:
-            raise UserError(f"--set {item!r} is invalid: must be key=value (--set turns_per_layer=40)")
-        spec = INTERP_SPECS.get(key)
-        if spec is None or key == "job_file_sha256":
-            raise UserError(
-                f"--set {key}: the interp node has no setting {key!r} (winder run --help and "
-                "winder ctl param list interp_node name them; the ramp is ramp.profile, ramp.v_max, ...)"
-            )
-        value = spec.parse(text)  # SpecError: "turns_per_layer='0' is invalid: must be ... in [1, ...]"
+        key, value = interp_setting(item, "--set")
         if key == "job_file" and value:
             path = Path(value).expanduser().absolute()
             load_job_file(path)

@@ -62,6 +62,7 @@ __all__ = [
     "check_interp_settings",
     "load_job_file",
     "load_job_file_hashed",
+    "load_job_text",
     "load_node_params",
     "ros_scalar",
     "ros_text",
@@ -104,7 +105,6 @@ def _flatten(prefix: str, value: Any, out: dict[str, Any]) -> None:
 def _read(path: Path, what: str = "job file") -> tuple[Any, str]:
     """The YAML document of the file ``path`` (a ``what``) and its sha256;
     JobFileError (one line) if it cannot be read or is no such file."""
-    from ruamel.yaml.error import YAMLError
 
     try:
         size = path.stat().st_size
@@ -118,8 +118,18 @@ def _read(path: Path, what: str = "job file") -> tuple[Any, str]:
         raise JobFileError(f"{path}: {size} bytes, more than a {what} holds here ({MAX_BYTES})")
     try:
         data = path.read_bytes()
+    except OSError as exc:
+        raise JobFileError(f"{path}: cannot be read: {str(exc).splitlines()[0]}") from None
+    return _document(path, data)
+
+
+def _document(path: Path, data: bytes) -> tuple[Any, str]:
+    """The YAML document of the bytes ``data`` (named ``path`` in errors) and their sha256."""
+    from ruamel.yaml.error import YAMLError
+
+    try:
         text = data.decode("utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
+    except UnicodeDecodeError as exc:
         raise JobFileError(f"{path}: cannot be read: {str(exc).splitlines()[0]}") from None
     try:
         doc = _parse(path, text)
@@ -416,6 +426,25 @@ def load_job_file_hashed(
     from: the recipe a run is traced to (``job_file_sha256`` in its bag)."""
     p = Path(path).expanduser()
     doc, digest = _read(p)
+    return _settings(p, doc, check_fit), digest
+
+
+def load_job_text(
+    text: str, *, name: str = "job", check_fit: bool = True
+) -> tuple[dict[str, dict[str, Any]], str]:
+    """:func:`load_job_file_hashed` of a job file's text (a Wind goal's
+    ``job``), named ``name`` in its errors: the settings it gives each node,
+    checked, and the sha256 of its UTF-8 bytes (what the file's would be)."""
+    data = text.encode("utf-8")
+    if len(data) > MAX_BYTES:
+        raise JobFileError(f"{name}: {len(data)} bytes, more than a job file holds here ({MAX_BYTES})")
+    p = Path(name)
+    doc, digest = _document(p, data)
+    return _settings(p, doc, check_fit), digest
+
+
+def _settings(p: Path, doc: Any, check_fit: bool) -> dict[str, dict[str, Any]]:
+    """The settings of a job file's document, each checked by its node's table."""
     sections = _sections(p, doc)
     out: dict[str, dict[str, Any]] = {node: {} for node in NODE_SPECS}
     names = {node: node for node in NODE_SPECS}  # each node's section as the file names it
@@ -436,7 +465,7 @@ def load_job_file_hashed(
             for node in takers:
                 out[node][name] = _check(p, where, NODE_SPECS[node][name], value)
     _check_together(p, out, names, check_fit)
-    return out, digest
+    return out
 
 
 def _check_together(

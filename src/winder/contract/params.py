@@ -431,6 +431,23 @@ def stop_points(job: Job, text: str) -> list[tuple[int, int]]:
     return sorted(out)
 
 
+def interp_setting(item: str, where: str) -> tuple[str, Any]:
+    """One ``KEY=VALUE`` setting of the interp node for a run (``winder ctl
+    start --set``, a Wind goal's ``overrides``): its name and its value,
+    parsed and checked by its spec; SpecError naming ``where`` otherwise."""
+    key, eq, text = item.partition("=")
+    key = key.strip()
+    if not eq or not key:
+        raise SpecError(f"{where} {item!r} is invalid: must be key=value ({where} turns_per_layer=40)")
+    spec = INTERP_SPECS.get(key)
+    if spec is None or key == "job_file_sha256":
+        raise SpecError(
+            f"{where} {key}: the interp node has no setting {key!r} (winder run --help and "
+            "winder ctl param list interp_node name them; the ramp is ramp.profile, ramp.v_max, ...)"
+        )
+    return key, spec.parse(text)  # SpecError: "turns_per_layer='0' is invalid: must be ... in [1, ...]"
+
+
 def stop_place(job: Job, segment: Segment, k: int) -> tuple[int, int, int]:
     """(coil, layer, turn), from 1, of a programmed stop after step ``k`` of
     the layer ``segment``: the inverse of :func:`stop_points` (the turn is

@@ -108,6 +108,7 @@ class Session:
         self.started = time.monotonic()
         self.deadline = self.started + timeout
         self.clients: dict[str, Any] = {}
+        self.actions: dict[str, Any] = {}
 
     def __enter__(self) -> Session:
         return self
@@ -119,6 +120,8 @@ class Session:
         import rclpy
 
         self.executor.shutdown(timeout_sec=1.0)
+        for client in self.actions.values():  # an action client holds the node's handle: it goes first
+            client.destroy()
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)
 
@@ -146,6 +149,14 @@ class Session:
             if left <= 0:
                 raise UnansweredError(f"no {what} within {self.timeout:g} s{hint}")
             self.spin(min(left, GRAPH_POLL))
+
+    def action_client(self, action_type: Any, action: str) -> Any:
+        """The session's client of the action ``action`` (made once, as :meth:`client`)."""
+        if action not in self.actions:
+            from rclpy.action.client import ActionClient
+
+            self.actions[action] = ActionClient(self.node, action_type, action)
+        return self.actions[action]
 
     def client(self, srv_type: Any, service: str) -> Any:
         """The session's client of ``service`` (made once: make it early, and
@@ -481,46 +492,82 @@ def find_role(session: Session, namespace: str, role: str, what: str) -> str:
 #: s after a "not ready" reply before a start is asked again, when no
 #: ``winder/ready`` message came meanwhile (one that comes asks again at once)
 NOT_READY_RETRY = 0.5
+#: s a canceled goal's end is waited for, past the deadline: its reason
+CANCEL_WAIT = 3.0
+
+
+#: the cell's Wind action, relative to its namespace (winder_interp.wind.ACTION)
+WIND = "winder/wind"
+
+
+def wind_action(interp: str) -> str:
+    """The Wind action of the cell whose interp node is ``interp`` (fully qualified)."""
+    namespace = interp.rsplit("/", 1)[0]
+    return f"{namespace}/{WIND}"
 
 
 def start_clients(session: Session, interp: str) -> None:
-    """Make the session's clients of ``interp``'s start services now (see
+    """Make the session's client of ``interp``'s cell's Wind action now (see
     :func:`parameter_clients`); the stock name's before the graph has said
     which node is the interp node."""
-    from rcl_interfaces.srv import SetParametersAtomically
-    from std_srvs.srv import Trigger
+    from winder_interfaces.action import Wind
 
-    session.client(SetParametersAtomically, f"{interp}/start_run")
-    session.client(Trigger, f"{interp}/start")
+    session.action_client(Wind, wind_action(interp))
+
+
+def goal_text(value: Any) -> str:
+    """A setting as a Wind goal's ``KEY=VALUE`` override says it (the node parses it by its type)."""
+    return ("true" if value else "false") if isinstance(value, bool) else str(value)
+
+
+def _one_goal(session: Session, client: Any, action: str, goal: Any) -> tuple[str, str]:
+    """Send one Wind goal: (the start reply, "") once its run started, or
+    ("", the cell's reason) if it ended first. At the deadline the goal, still
+    waiting for the cell, is canceled and its reason raised (RefusedError)."""
+    started: list[Any] = []
+    sent = client.send_goal_async(goal, feedback_callback=lambda m: started.append(m.feedback))
+    session.until(sent.done, f"reply from {action} to the goal")
+    handle = sent.result()
+    if not handle.accepted:
+        raise RefusedError(f"{action}: goal rejected")
+    result = handle.get_result_async()
+    try:
+        session.until(lambda: result.done() or any(f.run_id for f in started), "start of the goal's run")
+    except UnansweredError:
+        handle.cancel_goal_async()  # still waiting for the cell: it stops waiting
+        with contextlib.suppress(UnansweredError):
+            session.renew(CANCEL_WAIT)
+            session.until(result.done, "end of the canceled goal")
+        reason = one_line(result.result().result.message) if result.done() else ""
+        if reason:
+            raise RefusedError(f"{reason} (still, after {session.timeout:g} s)") from None
+        raise
+    first = next((f for f in started if f.run_id), None)
+    if first is not None:
+        return f"run {first.run_id} started: {first.steps_total} steps", ""
+    return "", one_line(result.result().result.message)
 
 
 def start_run(session: Session, interp: str, values: dict[str, Any], view: CellView | None = None) -> str:
-    """Call ``interp``'s ``~/start_run`` with ``values`` (typed already; none:
-    its ``~/start``, the run with the settings as they are), again while the
-    cell says it is not ready (at the next ``winder/ready`` message ``view``
-    hears, or after :data:`NOT_READY_RETRY` s), until the deadline; the
-    start reply (``run <id> started: ...``). :class:`RefusedError` with the
-    reply otherwise."""
-    from rcl_interfaces.srv import SetParametersAtomically
-    from std_srvs.srv import Trigger
+    """Send ``interp``'s cell a Wind goal with ``values`` as its overrides
+    (typed already; none: the run with the settings as they are), again
+    while the cell says it is not ready (at the next ``winder/ready``
+    message ``view`` hears, or after :data:`NOT_READY_RETRY` s), until the
+    deadline; the start reply (``run <id> started: ...``) once the goal's
+    run started (its first feedback). The goal goes on when the session
+    ends: the run is the cell's. :class:`RefusedError` with the cell's
+    reason otherwise; a goal still waiting for the cell at the deadline is
+    canceled."""
+    from winder_interfaces.action import Wind
 
-    request = SetParametersAtomically.Request(parameters=[to_message(n, v) for n, v in values.items()])
-    refused = ""  # the cell's last "not ready"
+    action = wind_action(interp)
+    client = session.action_client(Wind, action)
+    session.until(client.server_is_ready, f"action server {action}", f" ({graph_words()})")
+    goal = Wind.Goal(overrides=[f"{k}={goal_text(v)}" for k, v in values.items()])
     while True:
-        try:
-            if values:
-                reply = session.call(SetParametersAtomically, f"{interp}/start_run", request)
-                ok, reason = bool(reply.result.successful), one_line(reply.result.reason)
-            else:  # start_run refuses an empty change (rclpy: "parameter list cannot be empty")
-                answer = session.call(Trigger, f"{interp}/start", Trigger.Request())
-                ok, reason = bool(answer.success), one_line(answer.message)
-        except UnansweredError:
-            if refused:  # the deadline came while asking again: the cell's own word, not "no reply"
-                raise RefusedError(f"{refused} (still, after {session.timeout:g} s)") from None
-            raise
-        refused = reason
-        if ok:
-            return reason
+        reply, reason = _one_goal(session, client, action, goal)
+        if reply:
+            return reply
         lasting = any(word in reason for word in LASTING)
         if not reason.startswith(NOT_READY) or lasting:
             raise RefusedError(reason or "start refused (no reason given)")

@@ -150,11 +150,17 @@ class Peers:
         return "; ".join(missing)
 
     def subscribe(
-        self, msg_type: Any, topic: str, callback: Callable[[Any], None], qos: QoSProfile, **kwargs: Any
+        self,
+        msg_type: Any,
+        topic: str,
+        callback: Callable[[Any], None],
+        qos: QoSProfile,
+        role: str | None = None,
+        **kwargs: Any,
     ) -> Subscription:
         """A subscription of this node whose ``callback`` gets only the
-        messages of the cell's node that owns ``topic`` (:data:`OWNERS`),
-        deserialized; what does not deserialize is dropped."""
+        messages of the cell's node that owns ``topic`` (:data:`OWNERS`; or
+        plays ``role``), deserialized; what does not deserialize is dropped."""
 
         def act(raw: bytes) -> None:
             try:
@@ -164,7 +170,7 @@ class Peers:
             callback(msg)
 
         def take(raw: bytes, gid: bytes) -> None:
-            self.deliver(topic, gid, raw, act)
+            self.deliver(topic, gid, raw, act, role)
 
         return attributed(self.node, msg_type, topic, take, qos, **kwargs)
 

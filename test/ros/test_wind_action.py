@@ -1,0 +1,217 @@
+"""The cell's Wind action (winder_interfaces/action/Wind on winder/wind),
+driven by an rclpy ActionClient against the real interp, profile and sim
+nodes, as an integrator's controller drives it: a goal winds a part (its
+feedback and a result naming the run's complete bag), a cancel is an abort,
+a goal while a run goes on is refused with the reason, a job that is not
+valid is refused in `winder check`'s words, and the server goes on serving
+after each.
+
+Oracles: the job's step count from winder.motion.job.Job (the interpolation's
+own segments, computed here), the bag the run wrote (read by rosbags and by
+mcap), and the consumer's final report in it.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import pytest
+from conftest import Procs, bag_closed, final_report, rosbags_read
+from support import wait
+from support.ros_probe import ready_states
+
+from winder.contract.params import INTERP_SPECS
+from winder.motion.job import Job
+
+pytestmark = pytest.mark.ros
+
+#: a small job: 2 coils of one 8-turn layer, 512 fork steps a turn (a second or two of motion)
+JOB = {"turns_per_layer": 8, "layers": 1, "poles": 2, "fork_steps_per_rev": 512}
+#: a long one, for a run to cancel or to be busy with (paced in real time: many seconds)
+LONG = {"turns_per_layer": 60, "layers": 4, "poles": 4, "fork_steps_per_rev": 512}
+
+
+def job_text(fields: dict[str, Any], job_id: str) -> str:
+    """A job file's text, as `winder run` reads one."""
+    lines = ["interp_node:", "  ros__parameters:", f"    job_id: {job_id}"]
+    lines += [f"    {k}: {v}" for k, v in fields.items()]
+    return "\n".join(lines) + "\n"
+
+
+def cell(procs: Procs, tmp: Path, ros: Any, client: Any, *, real_time: bool) -> Path:
+    """The cell's three nodes, the consumer and the profile node ready, the
+    action server matched by ``client``; its bag directory."""
+    bags = tmp / "bags"
+    states = ready_states(ros)
+    procs.start("interp_node", "-p", "autostart:=false")
+    procs.start("profile_node")
+    procs.start("sim_node", "-p", f"bag_dir:={bags}", "-p", f"real_time:={str(real_time).lower()}")
+    wait.spin_until(
+        ros,
+        lambda: states.get("consumer") == "ready" and states.get("profile") == "ready",
+        60,
+        "consumer and profile node ready on winder/ready",
+        heard=lambda: states,
+    )
+    wait.spin_until(ros, client.server_is_ready, 60, "the interp node's winder/wind action server")
+    return bags
+
+
+class Goal:
+    """One goal sent by an ActionClient: its feedback as it comes, its result."""
+
+    def __init__(self, ros: Any, client: Any, job: str = "", overrides: tuple[str, ...] = ()) -> None:
+        from winder_interfaces.action import Wind
+
+        self.ros = ros
+        self.feedback: list[Any] = []
+        sent = client.send_goal_async(
+            Wind.Goal(job=job, overrides=list(overrides)),
+            feedback_callback=lambda m: self.feedback.append(m.feedback),
+        )
+        self.handle = wait.spin_until(ros, lambda: sent.done() and sent.result(), 30, "the goal's acceptance")
+        assert self.handle.accepted
+        self.result_future = self.handle.get_result_async()
+
+    def result(self, timeout: float = 120) -> tuple[int, Any]:
+        """(status, result) once the goal ended."""
+        wait.spin_until(
+            self.ros,
+            self.result_future.done,
+            timeout,
+            "the goal's result",
+            heard=lambda: self.feedback[-1:] or "no feedback",
+        )
+        answer = self.result_future.result()
+        return answer.status, answer.result
+
+
+@pytest.fixture
+def client(ros: Any) -> Any:
+    from rclpy.action import ActionClient
+
+    from winder_interfaces.action import Wind
+
+    c = ActionClient(ros, Wind, "/winder/wind")
+    yield c
+    c.destroy()
+
+
+def test_a_goal_winds_a_part(procs: Procs, tmp_path: Path, ros: Any, client: Any) -> None:
+    from action_msgs.msg import GoalStatus
+
+    bags = cell(procs, tmp_path, ros, client, real_time=False)
+    goal = Goal(ros, client, job_text(JOB, "part_a"))
+    status, result = goal.result()
+    total = Job(**JOB, job_id="part_a").total_steps  # the oracle: the job's own segments
+    assert status == GoalStatus.STATUS_SUCCEEDED, result.message
+    assert result.success and result.run_id.startswith("part_a_")
+    assert result.message == f"job part_a: complete, {total}/{total} steps"
+    # the result names the run's bag, closed, holding the same final report
+    bag = Path(result.bag_path)
+    assert bag.parent == bags and bag.name == result.run_id and bag_closed(bag)
+    report = result.report
+    assert (report.state, report.run_id, report.steps_done, report.steps_total) == (
+        "done",
+        result.run_id,
+        total,
+        total,
+    )
+    recorded = final_report(rosbags_read(bag))
+    assert recorded["state"] == "done" and int(recorded["steps_done"]) == total
+    extra = {kv.key: kv.value for kv in report.extra}
+    assert extra and all(recorded[k] == v for k, v in extra.items())
+    # feedback: the run's id, steps that only grow, up to the total, where they reached
+    assert goal.feedback, "no feedback"
+    assert {f.run_id for f in goal.feedback} == {result.run_id}
+    done = [f.steps_done for f in goal.feedback]
+    assert done == sorted(done) and done[-1] <= total
+    assert all(f.steps_total == total for f in goal.feedback)
+    assert all(1 <= f.coil <= JOB["poles"] and f.layer <= JOB["layers"] for f in goal.feedback)
+    assert all(f.turn <= JOB["turns_per_layer"] * JOB["layers"] for f in goal.feedback)
+    assert all(math.isnan(f.tension_n) for f in goal.feedback)  # no core: no wire simulated
+
+
+def test_a_cancel_aborts_the_run_and_the_cell_takes_the_next(
+    procs: Procs, tmp_path: Path, ros: Any, client: Any
+) -> None:
+    from action_msgs.msg import GoalStatus
+
+    cell(procs, tmp_path, ros, client, real_time=True)
+    goal = Goal(ros, client, job_text(LONG, "long"))
+    wait.spin_until(
+        ros,
+        lambda: any(f.steps_done > 0 for f in goal.feedback),
+        60,
+        "feedback of steps executed",
+        heard=lambda: goal.feedback[-1:],
+    )
+    canceling = goal.handle.cancel_goal_async()
+    wait.spin_until(ros, canceling.done, 30, "the cancel's reply")
+    assert canceling.result().goals_canceling, "cancel refused"
+    status, result = goal.result()
+    total = Job(**LONG, job_id="long").total_steps
+    assert status == GoalStatus.STATUS_CANCELED, result.message
+    assert not result.success and result.report.state == "aborted"
+    assert 0 < result.report.steps_done < total
+    assert result.message.startswith("job long: aborted, the axes at rest")
+    assert bag_closed(Path(result.bag_path))
+    assert final_report(rosbags_read(Path(result.bag_path)))["state"] == "aborted"
+    assert any(f.state == "aborting" for f in goal.feedback) or goal.feedback[-1].state == "aborted"
+    # the cell is ready again: the next goal winds its part
+    status, result = Goal(ros, client, job_text(JOB, "after")).result()
+    assert status == GoalStatus.STATUS_SUCCEEDED, result.message
+
+
+def test_a_goal_while_a_run_goes_on_is_refused_and_the_run_goes_on(
+    procs: Procs, tmp_path: Path, ros: Any, client: Any
+) -> None:
+    from action_msgs.msg import GoalStatus
+
+    cell(procs, tmp_path, ros, client, real_time=True)
+    busy = {**JOB, "turns_per_layer": 30}  # a few seconds in real time
+    first = Goal(ros, client, job_text(busy, "first"))
+    wait.spin_until(ros, lambda: first.feedback, 60, "the first goal's feedback")
+    status, result = Goal(ros, client, job_text(JOB, "second")).result(30)
+    assert status == GoalStatus.STATUS_ABORTED
+    assert not result.success and not result.run_id and not result.bag_path
+    run_id = first.feedback[0].run_id
+    assert f"run {run_id} is running" in result.message
+    assert result.message.endswith("start refused, the running job goes on")
+    status, result = first.result()
+    assert status == GoalStatus.STATUS_SUCCEEDED and result.run_id == run_id, result.message
+
+
+def test_a_job_that_is_not_valid_is_refused_with_its_reason(
+    procs: Procs, tmp_path: Path, ros: Any, client: Any
+) -> None:
+    from action_msgs.msg import GoalStatus
+
+    cell(procs, tmp_path, ros, client, real_time=False)
+    turns = INTERP_SPECS["turns_per_layer"]
+    refused = {
+        "interp_node: [": "job rejected: goal job: not YAML at line 1",
+        "interp_node:\n  ros__parameters:\n    turns: 3\n": (
+            "job rejected: goal job: interp_node.ros__parameters.turns: interp_node has no setting 'turns'"
+        ),
+        job_text({**JOB, "layers": 0}, "zero"): "job rejected: goal job: interp_node.ros__parameters.layers",
+    }
+    for text, why in refused.items():
+        status, result = Goal(ros, client, text).result(30)
+        assert status == GoalStatus.STATUS_ABORTED and not result.success
+        assert result.message.startswith(why), result.message
+    for overrides, why in {
+        # the setting's own range, as `winder ctl start --set` says it
+        ("turns_per_layer=0",): f"turns_per_layer=0 is invalid: must be in {turns.range_text()}",
+        ("v_max=2",): "overrides v_max: the interp node has no setting 'v_max'",
+        ("turns_per_layer",): "overrides 'turns_per_layer' is invalid: must be key=value",
+    }.items():
+        status, result = Goal(ros, client, job_text(JOB, "o"), overrides).result(30)
+        assert status == GoalStatus.STATUS_ABORTED and why in result.message, result.message
+    # still serving: a valid goal, with an override that wins over its job
+    status, result = Goal(ros, client, job_text(JOB, "fine"), ("turns_per_layer=4",)).result()
+    assert status == GoalStatus.STATUS_SUCCEEDED, result.message
+    total = Job(**{**JOB, "turns_per_layer": 4}, job_id="fine").total_steps
+    assert result.report.steps_done == total

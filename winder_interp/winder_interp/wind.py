@@ -1,0 +1,378 @@
+"""The cell's ``Wind`` action (``winder_interfaces/action/Wind`` on
+``winder/wind``), served by the interp node: a goal is a run.
+
+* goal: ``job`` (a job file's text, the files ``winder run`` reads; "" = the
+  node's settings as they are) and ``overrides`` (``KEY=VALUE`` settings of
+  the interp node for this run, as ``winder ctl start --set``). The job is set as
+  ``winder ctl start JOB_FILE`` sets a file (what it gives the interp node,
+  its ramp; every other node's section is theirs), then the overrides
+  (``winder ctl start --set``), all in one change; then the run starts.
+* a goal the cell cannot take now (a run going on, a node not ready, a job
+  or setting that is not valid) is accepted and ends at once ABORTED, its
+  result's ``message`` the reason, in the words ``winder check`` and
+  ``winder ctl start`` use: a rejected goal could not say why;
+* feedback: ``run_id``, the state, the steps executed of the total, the
+  coil, layer and turn they reached, and the wire's tension where the
+  consumer measures one (NaN otherwise), twice a second and at each state;
+* result: ``success`` (the run ended complete), ``run_id``, ``bag_path``,
+  ``message`` (the consumer's final word) and the typed final report, once
+  the consumer has closed the run's bag and said how it ended;
+* a cancel is an abort (the profile node's ``~/abort``: the axes braked to
+  rest, the bag closed): the goal ends CANCELED with the aborted run's report.
+
+Every message it acts on comes from the cell's own consumer
+(:class:`winder.ros.peers.Peers`), as the interp node's receipts do.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+import time
+import traceback
+from dataclasses import dataclass, field, fields
+from typing import Any, Protocol
+
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from geometry_msgs.msg import WrenchStamped
+from rclpy.action.server import ActionServer, CancelResponse, GoalResponse, ServerGoalHandle
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.task import Future
+from std_srvs.srv import Trigger
+
+from winder.contract.jobfile import load_job_text
+from winder.contract.params import interp_setting
+from winder.contract.run import JobReport
+from winder.contract.states import JobState
+from winder.contract.topics import TOPIC_DIAGNOSTICS, TOPIC_STATE, TOPIC_TENSION
+from winder.errors import BadInputError
+from winder.motion.job import Job
+from winder.ros.graph import fully_qualified
+from winder.ros.peers import Peers
+from winder.ros.qos import QOS_LATCHED_READER, QOS_STATE
+from winder.ros.run_bag import one_line
+from winder.ros.timers import steady_timer
+from winder_interfaces.action import Wind
+from winder_interfaces.msg import JobReport as JobReportMsg
+
+__all__ = ["ACTION", "WindCell", "WindServer", "goal_params", "job_params"]
+
+#: the action's name, relative: ``/<ns>/winder/wind``
+ACTION = "winder/wind"
+#: s between feedbacks while a run goes on
+FEEDBACK_PERIOD = 0.5
+#: s a goal waits for a cell that is not ready yet (its nodes still discovering each other)
+START_WAIT = 10.0
+#: the start's refusal while the cell is not ready yet, and the states asking again does not change
+NOT_READY = "job not started: not ready"
+LASTING = (" inactive", " blocked")
+#: the consumer's job states that end a run
+FINAL = frozenset({JobState.DONE, JobState.ABORTED, JobState.INCOMPLETE})
+
+
+class WindCell(Protocol):
+    """What the server needs of the interp node."""
+
+    run_id: str
+    job: Job | None
+    consumed: int
+    aborted: str
+    operator_abort: bool
+
+    def cannot_start(self) -> str: ...
+
+    def start_with(self, params: list[Parameter]) -> tuple[bool, str]: ...
+
+
+def job_params(given: dict[str, dict[str, Any]], digest: str, named: set[str]) -> list[Parameter]:
+    """The interp node's parameters a job file sets (:func:`winder.contract.jobfile.load_job_file_hashed`'s
+    ``given``): its interp_node section, its ramp as the run's (``ramp.*``,
+    ``ramp.source: job``) and the file's sha256; none of the names ``named``
+    (set in the same change: they win)."""
+    out = [Parameter(k, value=v) for k, v in given["interp_node"].items() if k not in named]
+    if "job_file_sha256" not in named:
+        out.append(Parameter("job_file_sha256", value=digest))
+    if given["profile_node"]:
+        ramp = {"ramp.source": "job", **{f"ramp.{k}": v for k, v in given["profile_node"].items()}}
+        out += [Parameter(k, value=v) for k, v in ramp.items() if k not in named]
+    return out
+
+
+def goal_params(job: str, overrides: list[str]) -> list[Parameter]:
+    """The change a goal asks for: its job text's settings, then its
+    ``KEY=VALUE`` overrides (which win). BadInputError (one line) if the job
+    or an override cannot be used."""
+    values = dict(interp_setting(text, "overrides") for text in overrides)
+    params = [Parameter(k, value=v) for k, v in values.items()]
+    if job.strip() and values.get("job_file"):
+        raise BadInputError("overrides: job_file given beside the goal's job: give the job one way")
+    if job.strip():
+        given, digest = load_job_text(job, name="goal job")
+        # the job is the goal's, not a file's: job_file is cleared, its hash is the text's
+        params += [Parameter("job_file", value=""), *job_params(given, digest, set(values) | {"job_file"})]
+    return params
+
+
+@dataclass
+class Running:
+    """The goal whose run goes on."""
+
+    handle: ServerGoalHandle
+    run_id: str
+    total: int
+    job: Job
+    #: the steps before each segment, for the coil, layer and turn a step count reached
+    offsets: list[int]
+    done: Future = field(default_factory=Future)
+    state: str = JobState.RUNNING
+    tension: float = math.nan
+    report: JobReport | None = None
+    message: str = ""
+    abort_asked: bool = False
+
+
+class WindServer:
+    """The ``Wind`` action server of the interp node ``node`` (see the module doc)."""
+
+    def __init__(self, node: Node, cell: WindCell, peers: Peers) -> None:
+        self.node, self.cell, self.peers = node, cell, peers
+        self.log = node.get_logger()
+        self.goal: Running | None = None
+        self.waiting: set[bytes] = set()  # the ids of goals waiting for the cell to be ready
+        self.server = ActionServer(
+            node,
+            Wind,
+            ACTION,
+            execute_callback=self.execute,
+            goal_callback=lambda _goal: GoalResponse.ACCEPT,
+            cancel_callback=self.on_cancel,
+        )
+        peers.subscribe(DiagnosticStatus, TOPIC_STATE, self.on_state, QOS_LATCHED_READER)
+        peers.subscribe(WrenchStamped, TOPIC_TENSION, self.on_tension, QOS_STATE, role="consumer")
+        self.timer = steady_timer(node, FEEDBACK_PERIOD, self.feedback)
+        self.abort_client: Any = None
+
+    def destroy(self) -> None:
+        """The action server goes (before its node: it holds the node's handle)."""
+        self.server.destroy()
+
+    # -- a goal ------------------------------------------------------------------
+    async def execute(self, handle: ServerGoalHandle) -> Wind.Result:
+        """A goal, from its request to its result; an error of the server's
+        own ends it ABORTED saying so (its traceback in the node's log)."""
+        try:
+            return await self.wind(handle)
+        except Exception as exc:
+            self.log.error(f"goal {goal_id(handle)}: internal error\n{traceback.format_exc()}")
+            if handle.is_active:
+                handle.abort()
+            return Wind.Result(
+                message=f"internal error of the Wind server: {one_line(exc)} (in the interp node's log)"
+            )
+
+    async def wind(self, handle: ServerGoalHandle) -> Wind.Result:
+        request = handle.request
+        result = Wind.Result()
+        if self.goal is not None:
+            result.message = self.cell.cannot_start() or f"goal refused: run {self.goal.run_id} is running"
+            handle.abort()
+            return result
+        try:
+            params = goal_params(request.job, list(request.overrides))
+        except BadInputError as exc:
+            result.message = f"job rejected: {one_line(exc)}"
+            handle.abort()
+            return result
+        self.waiting.add(goal_key(handle))
+        try:
+            waited = await self.until_ready(handle)
+        finally:
+            self.waiting.discard(goal_key(handle))
+        ok, message = self.cell.start_with(params) if not waited else (False, waited)
+        job = self.cell.job
+        if not ok or job is None:
+            result.message = message
+            if handle.is_cancel_requested:  # given up while the cell was not ready
+                handle.canceled()
+            else:
+                handle.abort()
+            return result
+        offsets = [0]
+        for seg in job.segments():
+            offsets.append(offsets[-1] + seg.steps)
+        goal = self.goal = Running(handle, self.cell.run_id, job.total_steps, job, offsets)
+        self.log.info(f"goal {goal_id(handle)}: {message}")
+        self.feedback()
+        try:
+            await goal.done
+        finally:
+            self.goal = None
+        return self.finish(goal)
+
+    async def until_ready(self, handle: ServerGoalHandle) -> str:
+        """Wait while the cell is only not ready yet (its nodes still finding
+        each other), as ``winder ctl start`` asks again, for at most
+        :data:`START_WAIT` s or until the goal is canceled: "" once it can
+        start, else why it cannot."""
+        end = time.monotonic() + START_WAIT
+        while True:
+            why = self.cell.cannot_start()
+            lasting = any(word in why for word in LASTING)
+            if handle.is_cancel_requested:
+                return why or "goal canceled before its run started"
+            if not why.startswith(NOT_READY) or lasting or time.monotonic() > end:
+                return (
+                    why
+                    if not why.startswith(NOT_READY) or lasting
+                    else f"{why} (still, after {START_WAIT:g} s)"
+                )
+            await self.pause(0.1)
+
+    async def pause(self, seconds: float) -> None:
+        """Let ``seconds`` pass on the steady clock, the executor serving everything else."""
+        tick: Future = Future()
+        timer = steady_timer(self.node, seconds, lambda: tick.done() or tick.set_result(True))
+        try:
+            await tick
+        finally:
+            timer.cancel()
+            self.node.destroy_timer(timer)
+
+    def finish(self, goal: Running) -> Wind.Result:
+        """The goal's result, its state set: SUCCEEDED, CANCELED or ABORTED."""
+        result = Wind.Result(run_id=goal.run_id, message=goal.message)
+        report = goal.report
+        if report is not None:
+            result.success = report.state == JobState.DONE
+            result.bag_path = report.bag
+            result.report = report_msg(report)
+        if result.success:
+            goal.handle.succeed()
+        elif goal.handle.is_cancel_requested:
+            goal.handle.canceled()
+        else:
+            goal.handle.abort()
+        return result
+
+    def on_cancel(self, handle: ServerGoalHandle) -> CancelResponse:
+        """A cancel is an abort of the goal's run (the profile node brakes the
+        axes to rest); the goal ends CANCELED once the consumer closed the run."""
+        if goal_key(handle) in self.waiting:
+            return CancelResponse.ACCEPT  # it stops waiting for the cell to be ready
+        goal = self.goal
+        if goal is None or goal.handle is not handle:
+            return CancelResponse.REJECT
+        if not goal.abort_asked:
+            goal.abort_asked = True
+            self.ask_abort(goal)
+        return CancelResponse.ACCEPT
+
+    def ask_abort(self, goal: Running) -> None:
+        profile = self.peers.owner("profile")
+        if profile is None:
+            self.log.error(f"goal of run {goal.run_id} canceled: no profile node to abort it")
+            return
+        service = fully_qualified("abort", fully_qualified(profile.name, profile.namespace))
+        if self.abort_client is None or self.abort_client.srv_name != service:
+            self.abort_client = self.node.create_client(Trigger, service)
+        future = self.abort_client.call_async(Trigger.Request())
+
+        def answered(f: Future) -> None:
+            reply = f.result()
+            if reply is not None and not reply.success:
+                self.log.warning(f"goal of run {goal.run_id} canceled: {service}: {reply.message}")
+
+        future.add_done_callback(answered)
+        self.log.info(f"goal of run {goal.run_id} canceled: aborting the run ({service})")
+
+    # -- what the consumer says ---------------------------------------------------
+    def on_statuses(self, raw: bytes, gid: bytes, statuses: list[Any]) -> None:
+        """/diagnostics (the interp node's Solo hands every array over): the
+        consumer's job status of the goal's run, and its final report."""
+        goal = self.goal
+        if goal is None:
+            return
+        mine = []  # the statuses that speak of the goal's run as its consumer: only those are judged
+        for st in statuses:
+            values = {kv.key: kv.value for kv in st.values}
+            if values.get("role") == "consumer" and values.get("run_id") == goal.run_id:
+                mine.append((st, values))
+        if not mine:
+            return
+
+        def act(_raw: bytes) -> None:
+            for st, values in mine:
+                goal.state = values.get("state", goal.state)
+                if goal.state in FINAL and not goal.done.done():
+                    goal.report = JobReport.from_values(values)
+                    goal.message = st.message
+                    goal.done.set_result(True)
+
+        self.peers.deliver(TOPIC_DIAGNOSTICS, gid, raw, act, role="consumer")
+
+    def on_state(self, msg: DiagnosticStatus) -> None:
+        goal = self.goal
+        values = {kv.key: kv.value for kv in msg.values}
+        if goal is not None and values.get("run_id") == goal.run_id and values.get("state"):
+            goal.state = values["state"]
+            self.feedback()
+
+    def on_tension(self, msg: WrenchStamped) -> None:
+        if self.goal is not None:
+            self.goal.tension = float(msg.wrench.force.x)
+
+    # -- feedback -------------------------------------------------------------------
+    def feedback(self) -> None:
+        """The goal's progress; a run the interp node gave up ends the goal."""
+        goal = self.goal
+        if goal is None:
+            return
+        cell = self.cell
+        if cell.run_id == goal.run_id and cell.aborted and not cell.operator_abort and not goal.done.done():
+            goal.message = cell.aborted  # given up: the consumer may never close it
+            goal.done.set_result(True)
+            return
+        if not goal.handle.is_active:
+            return
+        done = min(cell.consumed, goal.total) if cell.run_id == goal.run_id else 0
+        coil, layer, turn = place(goal, done)
+        goal.handle.publish_feedback(
+            Wind.Feedback(
+                run_id=goal.run_id,
+                state=str(goal.state),
+                steps_done=done,
+                steps_total=goal.total,
+                coil=coil,
+                layer=layer,
+                turn=turn,
+                tension_n=goal.tension,
+            )
+        )
+
+
+def place(goal: Running, steps: int) -> tuple[int, int, int]:
+    """(coil, layer, turn), from 1, that ``steps`` executed steps reached."""
+    segments = goal.job.segments()
+    if not segments:
+        return 0, 0, 0
+    i = min(max(bisect.bisect_right(goal.offsets, steps) - 1, 0), len(segments) - 1)
+    seg = segments[i]
+    k = steps - goal.offsets[i]
+    return seg.pole + 1, max(seg.layer + 1, 0), seg.turn_at(k)
+
+
+def report_msg(report: JobReport) -> JobReportMsg:
+    """The typed report of the consumer's key/values (its own keys in ``extra``)."""
+    values = {f.name: getattr(report, f.name) for f in fields(report) if f.name != "extra"}
+    extra = [KeyValue(key=k, value=v) for k, v in report.extra.items()]
+    return JobReportMsg(**{**values, "state": str(report.state)}, extra=extra)
+
+
+def goal_key(handle: ServerGoalHandle) -> bytes:
+    """A goal's id (its handle is not hashable)."""
+    return bytes(handle.goal_id.uuid)
+
+
+def goal_id(handle: ServerGoalHandle) -> str:
+    return goal_key(handle).hex()[:8]
