@@ -265,7 +265,7 @@ def test_colcon_build_installs_runnable_executables(tmp_path: Path, procs: Procs
     assert "6 packages finished" in r.stdout
     # the interfaces as colcon installed them: generated, with the action among them
     share = ws / "install" / "winder_interfaces" / "share" / "winder_interfaces"
-    assert (share / "action" / "Wind.action").is_file() and (share / "msg" / "CellState.msg").is_file()
+    assert (share / "action" / "Wind.action").is_file() and (share / "msg" / "JobReport.msg").is_file()
     # the cell's data beside its launch file: what params_file:= and the viewers take
     share = ws / "install" / "winder_sim" / "share" / "winder_sim"
     for d, pattern in (("jobs", "*.yaml"), ("layouts", "winder_*")):

@@ -193,6 +193,11 @@ def _ros2(args: list[str]) -> list[str] | None:
         ]
     if verb == "service" and len(args) >= 4 and args[1] == "call":
         return _service(args[2], args[3])
+    if verb == "action" and len(args) >= 4 and args[1] == "send_goal":
+        rest = [a for a in args[2:] if not a.startswith("--")]
+        return _action(*rest[:3]) if len(rest) >= 2 else None
+    if verb == "interface" and len(args) >= 3 and args[1] == "show":
+        return _interface(args[2])
     if verb == "param" and len(args) >= 4 and args[1] in ("get", "set", "describe"):
         node = args[2].strip("/").split("/")[-1]
         if node not in NODE_SPECS:
@@ -237,6 +242,39 @@ def _service(name: str, kind: str) -> list[str] | None:
     except (ImportError, AttributeError):
         return [f"ros2 service call {name} {kind}: that type is not installed"]
     return []
+
+
+def _interface(kind: str) -> list[str] | None:
+    """``ros2 interface show pkg/kind/Type``: one of winder_interfaces', installed."""
+    package, _, rest = kind.partition("/")
+    if package != "winder_interfaces":
+        return None
+    group, _, type_name = rest.partition("/")
+    try:
+        getattr(importlib.import_module(f"{package}.{group}"), type_name)
+    except (ImportError, AttributeError):
+        return [f"ros2 interface show {kind}: winder_interfaces has no such type"]
+    return []
+
+
+def _action(name: str, kind: str, goal: str = "") -> list[str] | None:
+    """``ros2 action send_goal`` to the cell's Wind action: its name and type,
+    and the goal's overrides, each a setting of the interp node in range."""
+    from winder.contract.params import interp_setting
+
+    if not name.rstrip("/").endswith("winder/wind"):
+        return None
+    found = _interface(kind) or []
+    if kind != "winder_interfaces/action/Wind":
+        found.append(f"ros2 action send_goal {name}: the action's type is winder_interfaces/action/Wind")
+    for item in re.findall(r"'([^']*)'", goal.partition("overrides:")[2]):
+        if "$" in item:
+            continue  # the reader's own path
+        try:
+            interp_setting(item, "overrides")
+        except SpecError as exc:
+            found.append(f"ros2 action send_goal {name}: {exc}")
+    return found
 
 
 def _make(args: list[str]) -> list[str]:

@@ -1,0 +1,41 @@
+"""winder_interfaces' build into the venv (winder_interfaces/build_into_venv.py,
+run by make): a machine without cmake or a compiler gets one line naming what
+to install, and the build is skipped while the definitions are unchanged
+and the generated package imports."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+from support.paths import ROOT
+
+SCRIPT = ROOT / "winder_interfaces" / "build_into_venv.py"
+VENV = Path(sys.executable).parent.parent
+
+
+def test_without_cmake_or_a_compiler_one_line_says_what_to_install(tmp_path: Path) -> None:
+    out = subprocess.run(
+        [sys.executable, str(SCRIPT), str(ROOT / "winder_interfaces"), str(tmp_path / "venv")],
+        env={"PATH": str(tmp_path)},  # nothing on it: no cmake, make, cc or c++
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert out.returncode == 2, out.stdout + out.stderr
+    lines = (out.stdout + out.stderr).strip().splitlines()
+    assert len(lines) == 1, lines
+    assert "cannot build the ROS interfaces: missing cmake, make, gcc, g++" in lines[0], lines[0]
+    assert not (tmp_path / "venv").exists()  # nothing half-made
+
+
+def test_unchanged_definitions_are_not_built_again() -> None:
+    out = subprocess.run(
+        [sys.executable, str(SCRIPT), str(ROOT / "winder_interfaces"), str(VENV)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert out.stdout.strip() == f"winder_interfaces: up to date in {VENV}", out.stdout
