@@ -39,7 +39,8 @@ an operator could act on it: it takes the tests that need no run going on
 (the handshake, a whole job, the report), the others take ``PACED``.
 
 The checks, each a test: the handshake; a whole job; pause and resume;
-abort, then ready and a second job; a start refused while busy; a stall
+abort, then ready and a second job; a Wind goal canceled, then one wound
+(the action a line controller drives the cell with); a start refused while busy; a stall
 reported and the run closed; a killed and restarted consumer; the status
 keys, the final report and the names. The last two tests are of the interp
 node: a consumer written from the topic contract alone that ignores aborts
@@ -543,6 +544,57 @@ def test_abort_then_ready_and_a_second_job(cell: Cell, paced: ConsumerSpec) -> N
     )
     second, total2 = cell.start(timeout=10)
     check_done(cell, second, total2, cell.ends(second))
+
+
+def test_a_wind_goal_canceled_then_one_wound(cell: Cell, paced: ConsumerSpec) -> None:
+    """The cell's Wind action (winder/wind) in front of this consumer: a
+    goal's run canceled mid-job ends CANCELED, its result the consumer's
+    aborted report; the next goal winds its part, SUCCEEDED, its result the
+    consumer's final report and its bag."""
+    from action_msgs.msg import GoalStatus
+    from rclpy.action import ActionClient
+
+    from winder_interfaces.action import Wind
+
+    cell.start_consumer(paced, name="axes")
+    cell.start_upstream()
+    cell.handshake()
+    client = ActionClient(cell.ros, Wind, "/winder/wind")
+    cell.wait(client.server_is_ready, 30, "the interp node's Wind action server")
+
+    def goal(job: dict[str, Any]) -> tuple[Any, Any, list[Any]]:
+        feedback: list[Any] = []
+        overrides = [f"{k}={v}" for k, v in job.items()]
+        sent = client.send_goal_async(Wind.Goal(overrides=overrides), lambda m: feedback.append(m.feedback))
+        cell.wait(sent.done, 30, "the goal's acceptance")
+        assert sent.result().accepted
+        return sent.result(), sent.result().get_result_async(), feedback
+
+    handle, ending, feedback = goal(LONG_JOB)
+    cell.wait(lambda: any(f.steps_done >= 200 for f in feedback), 30, "feedback of 200 steps executed")
+    run_id = feedback[-1].run_id
+    handle.cancel_goal_async()
+    cell.wait(ending.done, 30, f"the end of the canceled goal of run {run_id}")
+    answer = ending.result()
+    report = cell.final(run_id)
+    assert answer.status == GoalStatus.STATUS_CANCELED, answer.result.message
+    assert report is not None and report.values["state"] == "aborted" == answer.result.report.state
+    assert (
+        answer.result.report.steps_done == int(report.values["steps_done"]) < answer.result.report.steps_total
+    )
+    assert "aborting" in cell.cell_states(run_id), cell.cell_states(run_id)
+    handle, ending, feedback = goal(JOB)
+    cell.wait(ending.done, 30, "the end of the second goal")
+    answer = ending.result()
+    assert answer.status == GoalStatus.STATUS_SUCCEEDED, answer.result.message
+    result = answer.result
+    report = cell.final(result.run_id)
+    assert report is not None
+    check_done(cell, result.run_id, result.report.steps_total, report)
+    assert (result.report.steps_done, result.bag_path) == (
+        int(report.values["steps_done"]),
+        report.values["bag"],
+    )
 
 
 def test_a_start_while_busy_is_refused(cell: Cell, paced: ConsumerSpec) -> None:
