@@ -192,7 +192,8 @@ def checkout(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Path, d
     assert (venv / ".winder-installed").exists(), f"{venv} was not made by `make venv`"
     work = tmp_path_factory.mktemp("docs_commands")
     (work / ".venv").symlink_to(venv)
-    for d in ("jobs", "layouts"):
+    # winder_interfaces: the definitions make builds (up to date in the venv: nothing to build)
+    for d in ("jobs", "layouts", "winder_interfaces"):
         shutil.copytree(ROOT / d, work / d)
     shutil.copy(ROOT / "Makefile", work / "Makefile")
     # the Makefile's venv stamp depends on the setup files: stand-ins older than

@@ -45,7 +45,7 @@ from winder.contract.jobfile import load_job_text
 from winder.contract.params import interp_setting
 from winder.contract.run import JobReport
 from winder.contract.states import JobState
-from winder.contract.topics import TOPIC_DIAGNOSTICS, TOPIC_STATE, TOPIC_TENSION
+from winder.contract.topics import ACTION_WIND, TOPIC_DIAGNOSTICS, TOPIC_STATE, TOPIC_TENSION
 from winder.errors import BadInputError
 from winder.motion.job import Job
 from winder.ros.graph import fully_qualified
@@ -59,7 +59,7 @@ from winder_interfaces.msg import JobReport as JobReportMsg
 __all__ = ["ACTION", "WindCell", "WindServer", "goal_params", "job_params"]
 
 #: the action's name, relative: ``/<ns>/winder/wind``
-ACTION = "winder/wind"
+ACTION = ACTION_WIND
 #: s between feedbacks while a run goes on
 FEEDBACK_PERIOD = 0.5
 #: s a goal waits for a cell that is not ready yet (its nodes still discovering each other)

@@ -25,6 +25,8 @@ TOPIC_STEPS = "winder/steps"
 TOPIC_STEP_TIMES = "winder/step_times"
 TOPIC_JOINT_STATES = "winder/joint_states"
 #: the wire's tension (geometry_msgs/WrenchStamped, force.x in N), as a load cell reads it
+#: the cell's Wind action (winder_interfaces/action/Wind), served by the interp node
+ACTION_WIND = "winder/wind"
 TOPIC_TENSION = "winder/tension"
 TOPIC_JOINT_COMMANDS = "winder/joint_commands"
 TOPIC_SIM_CONFIG = "winder/sim_config"

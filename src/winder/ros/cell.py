@@ -30,6 +30,7 @@ from typing import Any
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.srv import SetParametersAtomically
+from rclpy.action.client import ActionClient
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -40,7 +41,15 @@ from std_srvs.srv import Trigger
 from winder.contract.jobfile import ros_text
 from winder.contract.run import JobReport
 from winder.contract.states import FINAL_JOB_STATES, JobState
-from winder.contract.topics import ROLE_KEY, ROLES, TASK_JOB, TOPIC_DIAGNOSTICS, has_role, in_namespace
+from winder.contract.topics import (
+    ACTION_WIND,
+    ROLE_KEY,
+    ROLES,
+    TASK_JOB,
+    TOPIC_DIAGNOSTICS,
+    has_role,
+    in_namespace,
+)
 from winder.contract.trust import without_senders
 from winder.errors import BadInputError
 from winder.interrupts import Interrupts
@@ -53,6 +62,7 @@ from winder.ros.managed import LEFT_CELL
 from winder.ros.peers import Peers
 from winder.ros.sender import SenderExecutor, attributed
 from winder.ros.terminal import KeyReader
+from winder_interfaces.action import Wind
 
 #: the executable ``winder run`` starts for each part of the cell
 NODES = {"interp": "interp_node", "profile": "profile_node", "sim": "sim_node"}
@@ -322,16 +332,23 @@ class CellWatch:
             self._on_raw,
             QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE),
         )
-        self.start = node.create_client(Trigger, f"{namespace.rstrip('/')}/interp_node/start")
-        self._request: Future | None = None
+        # the run starts as a goal of the cell's Wind action (the job as the nodes have it)
+        self.wind = ActionClient(node, Wind, f"{namespace.rstrip('/')}/{ACTION_WIND}")
+        self._request: Future | None = None  # the goal sent, its acceptance
+        self._result: Future | None = None  # its result, once accepted
+        self._goal_run = ""  # the run its feedback names
         self._asked = 0.0
         self.accepted = False
         self.not_ready = ""  #: the last 'not ready' reply to a start request
 
+    def close(self) -> None:
+        """The action client goes before the node: it holds the node's handle."""
+        self.wind.destroy()
+
     def waiting_for(self) -> str:
         """What the start of the job still waits for, in words (when it never came)."""
-        if not self.start.service_is_ready():
-            return "the interp node's ~/start service"
+        if not self.wind.server_is_ready():
+            return f"the interp node's {ACTION_WIND} action server"
         if not self.heard_consumer:
             return (
                 "the step consumer (sim_node or a hardware driver), which is not on this graph: is it "
@@ -341,7 +358,7 @@ class CellWatch:
         if pending is not None:
             return pending.waiting
         blocked = f": {self.consumer_blocked}" if self.consumer_blocked else ""
-        return f"the cell to be ready ({self.not_ready or 'no reply to ~/start yet'}){blocked}"
+        return f"the cell to be ready ({self.not_ready or 'no answer to the goal yet'}){blocked}"
 
     def _look(self, force: bool = False) -> None:
         """The consumer's node name(s) from the graph (at most every GRAPH_POLL s)."""
@@ -454,20 +471,21 @@ class CellWatch:
         )
 
     def ask_to_start(self) -> str | None:
-        """One step of starting the job: set the remote nodes' settings, call
-        ``~/start`` once the cell is listening, ask again if the reply is
-        lost, and return the reason if the job was refused (None while
-        starting or once started)."""
+        """One step of starting the job: set the remote nodes' settings, send
+        the Wind goal once the cell is listening, send it again if its
+        acceptance is lost, and return the reason if the job was refused
+        (None while starting or once started)."""
         self.accepted = self.accepted or self.job_seen
         if self.accepted:
             return None
-        if not self.heard_consumer and self.start.service_is_ready():
+        ready = self.wind.server_is_ready()
+        if not self.heard_consumer and ready:
             self.heard_consumer = self._consumer_reports_here()
         for remote in self.remote:
             refused = remote.step()
             if refused:
                 return refused
-        if not (self.start.service_is_ready() and self.heard_consumer):
+        if not (ready and self.heard_consumer):
             return None
         if self.own is not None and time.monotonic() - self.since < OCCUPIED_WAIT and not self._alone():
             return None  # every node of the namespace has said who it is (1 Hz) before we start
@@ -477,25 +495,39 @@ class CellWatch:
             return None
         req = self._request
         if req is None and time.monotonic() - self._asked < NOT_READY_RETRY:
-            return None  # the last reply said "not ready" a moment ago
+            return None  # the last answer said "not ready" a moment ago
         if req is None or (not req.done() and time.monotonic() - self._asked > START_RETRY):
-            # a DDS service reply can be lost while its topic is still matching:
-            # ask again (a job already started is no error)
-            if req is not None:
-                self.start.remove_pending_request(req)
-            self._request, self._asked = self.start.call_async(Trigger.Request()), time.monotonic()
-        elif req.done():
-            reply = req.result()
-            if reply is not None and (reply.success or "is running" in reply.message):
-                self.accepted = True
-                said = re.search(r"\brun (\S+) (?:started|is running)", reply.message)
-                self.run_id = self.run_id or (said.group(1) if said else "")
-            elif reply is not None and "not ready" in reply.message:
-                self.not_ready = reply.message
+            # a goal's acceptance can be lost while the action's services are still matching:
+            # send it again (a run already started by the first refuses it "is running": ours)
+            self._request, self._result = self.wind.send_goal_async(Wind.Goal(), self._on_feedback), None
+            self._asked = time.monotonic()
+            return None
+        if not req.done():
+            return None
+        handle = req.result()
+        if handle is None or not handle.accepted:
+            return "job refused: the interp node rejected the goal"
+        if self._result is None:
+            self._result = handle.get_result_async()
+        if self._goal_run:
+            self.accepted = True
+            self.run_id = self.run_id or self._goal_run
+        elif self._result.done():
+            answer = self._result.result()
+            message = answer.result.message if answer is not None else ""
+            if answer is not None and (answer.result.run_id or "is running" in message):
+                self.accepted = True  # ended already (or a second goal refused: the first's run is ours)
+                said = re.search(r"\brun (\S+) is running", message)
+                self.run_id = self.run_id or answer.result.run_id or (said.group(1) if said else "")
+            elif "not ready" in message:
+                self.not_ready = message
                 self._request = None  # the consumer or the profile node is still coming up: ask again
             else:
-                return f"job refused: {reply.message if reply else 'no reply'}"
+                return f"job refused: {message or 'no reason given'}"
         return None
+
+    def _on_feedback(self, msg: Any) -> None:
+        self._goal_run = self._goal_run or msg.feedback.run_id
 
 
 #: keys of `winder run` on a terminal: the profile node's service each calls
@@ -754,6 +786,7 @@ def run_cell(
             adopted = True
             node: Node | None = None
             keys: Keys | None = None
+            watch: CellWatch | None = None
             try:
                 with interrupts.held():  # no signal between init and the nodes, the view's thread spinning
                     rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
@@ -775,6 +808,8 @@ def run_cell(
                 interrupts.ending()  # the view's thread stops before its node goes, the nodes before rclpy
                 if keys is not None:
                     keys.close()
+                if watch is not None:
+                    watch.close()
                 clean = procs.stop()
                 if view is not None:
                     view.close()

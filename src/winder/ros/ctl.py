@@ -32,6 +32,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
+from winder.contract.topics import ACTION_WIND
 from winder.errors import BadInputError, RefusedError, UnavailableError
 from winder.ros.dds import ANNOUNCEMENT
 
@@ -496,8 +497,8 @@ NOT_READY_RETRY = 0.5
 CANCEL_WAIT = 3.0
 
 
-#: the cell's Wind action, relative to its namespace (winder_interp.wind.ACTION)
-WIND = "winder/wind"
+#: the cell's Wind action, relative to its namespace
+WIND = ACTION_WIND
 
 
 def wind_action(interp: str) -> str:
