@@ -20,6 +20,7 @@ from typing import Any
 import pytest
 from conftest import Procs, bag_closed, final_report, rosbags_read
 from support import wait
+from support.paths import ROOT
 from support.ros_probe import ready_states
 
 from winder.contract.params import INTERP_SPECS
@@ -127,7 +128,9 @@ def test_a_goal_winds_a_part(procs: Procs, tmp_path: Path, ros: Any, client: Any
     assert goal.feedback, "no feedback"
     assert {f.run_id for f in goal.feedback} == {result.run_id}
     done = [f.steps_done for f in goal.feedback]
-    assert done == sorted(done) and done[-1] <= total
+    assert done == sorted(done) and done[-1] == total  # the last: where the run ended
+    last = goal.feedback[-1]
+    assert (last.state, last.coil, last.layer, last.turn) == ("done", 2, 1, 8), last  # the job's last turn
     assert all(f.steps_total == total for f in goal.feedback)
     assert all(1 <= f.coil <= JOB["poles"] and f.layer <= JOB["layers"] for f in goal.feedback)
     assert all(f.turn <= JOB["turns_per_layer"] * JOB["layers"] for f in goal.feedback)
@@ -215,3 +218,21 @@ def test_a_job_that_is_not_valid_is_refused_with_its_reason(
     assert status == GoalStatus.STATUS_SUCCEEDED, result.message
     total = Job(**{**JOB, "turns_per_layer": 4}, job_id="fine").total_steps
     assert result.report.steps_done == total
+
+
+def test_the_feedback_carries_the_wires_tension(procs: Procs, tmp_path: Path, ros: Any, client: Any) -> None:
+    """A job on a core (its wire simulated): the feedback's tension is the
+    consumer's, within the least and peak tension its final report gives."""
+    from action_msgs.msg import GoalStatus
+
+    cell(procs, tmp_path, ros, client, real_time=False)
+    job = (ROOT / "jobs" / "ortho_round.yaml").read_text()
+    goal = Goal(ros, client, job, ("layers=2",))
+    status, result = goal.result()
+    assert status == GoalStatus.STATUS_SUCCEEDED, result.message
+    extra = {kv.key: kv.value for kv in result.report.extra}
+    low, high = float(extra["tension_min_n"]), float(extra["tension_peak_n"])
+    seen = [f.tension_n for f in goal.feedback if not math.isnan(f.tension_n)]
+    assert seen, [f.tension_n for f in goal.feedback]
+    # the report rounds to 3 decimals
+    assert all(low - 1e-3 <= t <= high + 1e-3 for t in seen), (low, high, seen)

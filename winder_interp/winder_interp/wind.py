@@ -38,6 +38,7 @@ from geometry_msgs.msg import WrenchStamped
 from rclpy.action.server import ActionServer, CancelResponse, GoalResponse, ServerGoalHandle
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 from std_srvs.srv import Trigger
 
@@ -50,7 +51,7 @@ from winder.errors import BadInputError
 from winder.motion.job import Job
 from winder.ros.graph import fully_qualified
 from winder.ros.peers import Peers
-from winder.ros.qos import QOS_LATCHED_READER, QOS_STATE
+from winder.ros.qos import QOS_LATCHED_READER
 from winder.ros.run_bag import one_line
 from winder.ros.timers import steady_timer
 from winder_interfaces.action import Wind
@@ -149,7 +150,12 @@ class WindServer:
             cancel_callback=self.on_cancel,
         )
         peers.subscribe(DiagnosticStatus, TOPIC_STATE, self.on_state, QOS_LATCHED_READER)
-        peers.subscribe(WrenchStamped, TOPIC_TENSION, self.on_tension, QOS_STATE, role="consumer")
+        # the tension comes at every simulated sample (thousands a second as fast as possible): the
+        # feedback wants the last one, so the reader keeps one and takes it when it can
+        latest = QoSProfile(
+            depth=1, reliability=ReliabilityPolicy.BEST_EFFORT, history=HistoryPolicy.KEEP_LAST
+        )
+        peers.subscribe(WrenchStamped, TOPIC_TENSION, self.on_tension, latest, role="consumer")
         self.timer = steady_timer(node, FEEDBACK_PERIOD, self.feedback)
         self.abort_client: Any = None
 
@@ -240,10 +246,13 @@ class WindServer:
             self.node.destroy_timer(timer)
 
     def finish(self, goal: Running) -> Wind.Result:
-        """The goal's result, its state set: SUCCEEDED, CANCELED or ABORTED."""
+        """The goal's last feedback and its result, its state set: SUCCEEDED,
+        CANCELED or ABORTED."""
         result = Wind.Result(run_id=goal.run_id, message=goal.message)
         report = goal.report
-        if report is not None:
+        if report is not None:  # the last feedback: where the run ended, as its report says
+            goal.state = report.state
+            self.publish(goal, min(report.steps_done, goal.total))
             result.success = report.state == JobState.DONE
             result.bag_path = report.bag
             result.report = report_msg(report)
@@ -333,9 +342,12 @@ class WindServer:
             goal.message = cell.aborted  # given up: the consumer may never close it
             goal.done.set_result(True)
             return
+        self.publish(goal, min(cell.consumed, goal.total) if cell.run_id == goal.run_id else 0)
+
+    def publish(self, goal: Running, done: int) -> None:
+        """One feedback of ``goal``, ``done`` steps executed."""
         if not goal.handle.is_active:
             return
-        done = min(cell.consumed, goal.total) if cell.run_id == goal.run_id else 0
         coil, layer, turn = place(goal, done)
         goal.handle.publish_feedback(
             Wind.Feedback(
