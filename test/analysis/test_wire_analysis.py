@@ -29,7 +29,6 @@ from conftest import BIN, Procs, next_domain, release_domain, rosbags_read
 from hypothesis import given
 from hypothesis import strategies as st
 from rosbags.rosbag2 import StoragePlugin
-from rosbags.typesys import Stores, get_typestore
 from support import wait
 from support.bags import step_rows, write_bag
 from support.cell import servo_rect_job
@@ -38,6 +37,7 @@ from winder.analysis.metrics import analyze, format_table
 from winder.analysis.wire import stresses
 from winder.analysis.wound import as_wound
 from winder.motion.job import Job
+from winder.record.msgtypes import jazzy_store
 from winder.record.reader import read_run
 
 #: a servo too slow for the corners: past the yield and below the alarm band in
@@ -318,7 +318,7 @@ def rewritten(src: Path, out: Path, slip: dict[str, str]) -> Path:
     """``src`` written again (rosbags) with its wire status's values cut to
     the run's ids (as a status said it before it named the place), and a
     wire status of a slip with ``slip`` beside it."""
-    store = get_typestore(Stores.ROS2_JAZZY)
+    store = jazzy_store()  # Jazzy's types and winder's own (winder/state's CellState)
     kv = store.types["diagnostic_msgs/msg/KeyValue"]
     from rosbags.highlevel import AnyReader
 

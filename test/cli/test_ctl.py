@@ -487,18 +487,14 @@ def _obeyed(
     bag is closed aborted, far short of the job's end. With ``hold`` (a node's
     process): that process is stopped (SIGSTOP) for a second while the pause is asked."""
     states: list[str] = []
-    from diagnostic_msgs.msg import DiagnosticStatus
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    from winder_interfaces.msg import CellState
 
     latched = QoSProfile(
         depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
     )
-    ros.create_subscription(
-        DiagnosticStatus,
-        "/winder/state",
-        lambda m: states.append({kv.key: kv.value for kv in m.values}["state"]),
-        latched,
-    )
+    ros.create_subscription(CellState, "/winder/state", lambda m: states.append(m.state), latched)
     if hold is None:
         code, out, err = ctl(procs, "pause")
     else:

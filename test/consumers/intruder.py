@@ -45,6 +45,7 @@ from winder.contract.topics import (
 )
 from winder.ros.chunks import pack_timed
 from winder.ros.qos import QOS_DIAGNOSTICS, QOS_EVENTS, QOS_LATCHED, QOS_STATE, QOS_STREAM
+from winder_interfaces.msg import CellState
 
 KINDS = ("control", "steps", "job", "ready", "progress", "diagnostics", "state", "sim_config", "joints")
 
@@ -65,7 +66,7 @@ class Intruder(Node):
             "ready": self.create_publisher(KeyValue, TOPIC_READY, QOS_LATCHED),
             "progress": self.create_publisher(KeyValue, TOPIC_PROGRESS, QOS_STATE),
             "diagnostics": self.create_publisher(DiagnosticArray, TOPIC_DIAGNOSTICS, QOS_DIAGNOSTICS),
-            "state": self.create_publisher(DiagnosticStatus, TOPIC_STATE, QOS_LATCHED),
+            "state": self.create_publisher(CellState, TOPIC_STATE, QOS_LATCHED),
             "sim_config": self.create_publisher(String, TOPIC_SIM_CONFIG, QOS_LATCHED),
             "joints": self.create_publisher(JointState, TOPIC_JOINT_STATES, QOS_STATE),
         }
@@ -144,12 +145,8 @@ class Intruder(Node):
         )
 
     def forge_state(self) -> None:
-        values = [KeyValue(key="state", value="failed"), KeyValue(key="run_id", value=self.run_id)]
-        self.pub["state"].publish(
-            DiagnosticStatus(
-                level=b"\x02", name=f"{self.prefix}sim_node: state", message="forged", values=values
-            )
-        )
+        node = f"{self.prefix}sim_node"
+        self.pub["state"].publish(CellState(node=node, state="failed", run_id=self.run_id, message="forged"))
 
     def forge_sim_config(self) -> None:
         doc = {"run_id": self.run_id, "real_time": True, "lookahead_s": 0.001, "clock_origin_ns": 0}

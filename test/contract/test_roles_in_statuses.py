@@ -15,14 +15,14 @@ from typing import Any
 
 import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
-from rosbags.typesys import Stores, get_typestore
 
 from winder.contract.stream import describe_job
 from winder.contract.topics import ROLE_KEY, ROLES, STATUS_KEYS, has_role, status_values
 from winder.motion.job import Job
+from winder.record.msgtypes import jazzy_store
 from winder.record.reader import read_run
 
-STORE = get_typestore(Stores.ROS2_JAZZY)
+STORE = jazzy_store()  # Jazzy's types and winder's own (winder_interfaces/msg/CellState)
 RUN = "tiny_20260101_000000000_1"
 
 
@@ -74,7 +74,8 @@ def write_bag(path: Path, ns: str, diagnostics: list[Any], states: tuple[Any, ..
     String = STORE.types["std_msgs/msg/String"]
     text = String(data=describe_job(job, RUN))
     msgs: list[tuple[str, str, Any]] = [(f"{ns}/winder/job", "std_msgs/msg/String", text)]
-    msgs += [(f"{ns}/winder/state", "diagnostic_msgs/msg/DiagnosticStatus", s) for s in states]
+    kinds = {True: "winder_interfaces/msg/CellState", False: "diagnostic_msgs/msg/DiagnosticStatus"}
+    msgs += [(f"{ns}/winder/state", kinds[hasattr(s, "node")], s) for s in states]
     msgs += [("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", a) for a in diagnostics]
     with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as w:
         conns: dict[str, Any] = {}
@@ -139,7 +140,23 @@ def test_the_reader_takes_a_renamed_consumer_that_names_no_role_by_the_cell_stat
         _array(_status("axes: job", final("done", bag="renamed"))),
     ]
     bag = write_bag(tmp_path / "renamed", "", diagnostics, (_status("axes: state", {"state": "done"}),))
-    assert read_run(bag).report["bag"] == "renamed"
+    assert read_run(bag).report["bag"] == "renamed"  # a bag of before 2026-11-28: a DiagnosticStatus
+    CellState = STORE.types["winder_interfaces/msg/CellState"]
+    Time = STORE.types["builtin_interfaces/msg/Time"]
+    typed = CellState(
+        stamp=Time(sec=0, nanosec=0),
+        node="axes",
+        state="done",
+        job_id="tiny",
+        run_id=RUN,
+        coil=1,
+        layer=1,
+        turn=1,
+        sim_time_s=1.0,
+        message="done",
+    )
+    bag = write_bag(tmp_path / "typed", "", diagnostics, (typed,))
+    assert read_run(bag).report["bag"] == "renamed"  # a CellState names its node
     # without winder/state nothing says axes is the consumer: no report, and analyze says so
     bare = write_bag(tmp_path / "bare", "", diagnostics)
     assert read_run(bare).report == {}

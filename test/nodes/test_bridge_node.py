@@ -550,7 +550,7 @@ def test_servo_fault_stops_the_cell(
     ]
     assert len(servo) == 1 and servo[0].message == fault_text
     assert "\n" not in fault_text
-    assert [m.values[0].value for _, m in raw["/winder/state"]] == ["running", "failed"]
+    assert [m.state for _, m in raw["/winder/state"]] == ["running", "failed"]
     # no jump up to the fault (the job starts at 0, where the stand-in's joints are): every
     # command is the steps of a row due at its time; then they hold
     check_commands(raw, report)
@@ -1090,7 +1090,7 @@ def test_a_wire_break_stops_the_run_where_the_flyer_was(tmp_path: Path, procs: P
         st for _, arr in raw["/diagnostics"] for st in arr.status if st.name == "bridge_node: job"
     ][-1:]
     assert job_status.level == 2 and fault in job_status.message, job_status.message
-    assert [m.values[0].value for _, m in raw["/winder/state"]] == ["running", "failed"]
+    assert [m.state for _, m in raw["/winder/state"]] == ["running", "failed"]
 
     # where the commands had taken the fork at the fault's time (run time = log time - wall_start_ns)
     check_commands(raw, report)  # every command exact, from the job's start

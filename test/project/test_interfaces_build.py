@@ -39,3 +39,15 @@ def test_unchanged_definitions_are_not_built_again() -> None:
     )
     assert out.returncode == 0, out.stdout + out.stderr
     assert out.stdout.strip() == f"winder_interfaces: up to date in {VENV}", out.stdout
+
+
+def test_the_contract_shows_each_interface_as_its_file_says() -> None:
+    """docs/CONTRACT.md shows `ros2 interface show` of each winder_interfaces
+    type: the definition file's text, as it is."""
+    contract = (ROOT / "docs" / "CONTRACT.md").read_text()
+    package = ROOT / "winder_interfaces"
+    files = sorted([*package.glob("msg/*.msg"), *package.glob("action/*.action")])
+    assert files
+    for f in files:
+        shown = f"$ ros2 interface show winder_interfaces/{f.parent.name}/{f.stem}\n{f.read_text()}"
+        assert shown in contract, f"docs/CONTRACT.md does not show {f.relative_to(ROOT)} as it is"

@@ -48,6 +48,7 @@ TYPES = {
     "geometry_msgs/msg/WrenchStamped": ("geometry_msgs.msg", "WrenchStamped"),
     "diagnostic_msgs/msg/DiagnosticArray": ("diagnostic_msgs.msg", "DiagnosticArray"),
     "diagnostic_msgs/msg/DiagnosticStatus": ("diagnostic_msgs.msg", "DiagnosticStatus"),
+    "winder_interfaces/msg/CellState": ("winder_interfaces.msg", "CellState"),
 }
 
 

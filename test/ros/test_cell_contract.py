@@ -28,7 +28,7 @@ from support.ros_probe import get_params, ros_spin, start_run
 
 from winder.analysis.metrics import analyze
 from winder.contract.stream import RUN_ID
-from winder.contract.topics import STATUS_KEYS
+from winder.contract.topics import STATUS_KEYS, cell_state_values
 from winder.procs import popen
 from winder.record.reader import read_run
 
@@ -131,14 +131,13 @@ def test_the_same_job_twice_gives_two_runs_on_one_clock(tmp_path: Path, procs: P
     assert c.size > 100 and np.all(np.diff(c) > 0), np.nonzero(np.diff(c) <= 0)
     assert c[-1] > origin2
     # the cell's state, latched: a late subscriber hears how the last run ended
-    from diagnostic_msgs.msg import DiagnosticStatus
-
     from winder.ros.qos import QOS_LATCHED
+    from winder_interfaces.msg import CellState
 
     late: list[Any] = []
-    ros.create_subscription(DiagnosticStatus, "/winder/state", late.append, QOS_LATCHED)
+    ros.create_subscription(CellState, "/winder/state", late.append, QOS_LATCHED)
     spin_until(ros, lambda: bool(late), 10, "the latched cell state")
-    last = {kv.key: kv.value for kv in late[-1].values}
+    last = cell_state_values(late[-1])
     assert last["state"] == "done" and last["run_id"] == second, last
     # one status schema on every node, in every state seen
     states: dict[str, set[str]] = {}

@@ -281,15 +281,16 @@ def test_a_held_message_outlasts_a_stretch_in_which_its_node_did_not_run(procs: 
     part, not refused at the first look after the node woke up."""
     import time
 
-    from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+    from diagnostic_msgs.msg import KeyValue
     from std_msgs.msg import Int64MultiArray
 
     from winder.ros.peers import HOLD, Peers
     from winder.ros.qos import QOS_LATCHED, QOS_STATE, QOS_STREAM
+    from winder_interfaces.msg import CellState
 
     peers = Peers(ros, "/", patient=True)
     sim = rclpy_node(ros, "sim_node")
-    sim.create_publisher(DiagnosticStatus, "/winder/state", QOS_LATCHED)
+    sim.create_publisher(CellState, "/winder/state", QOS_LATCHED)
     [gid] = wait.until(
         lambda: [bytes(i.endpoint_gid) for i in ros.get_publishers_info_by_topic("/winder/state")],
         10,

@@ -25,6 +25,7 @@ from support.oracles import ruckig_stop
 
 from winder.analysis.metrics import analyze
 from winder.contract.params import PROFILE_SPECS
+from winder.contract.topics import cell_state_values
 from winder.motion.interp import interpolate
 from winder.motion.job import Job
 from winder.motion.retime import motion_state
@@ -65,7 +66,7 @@ def events(raw: dict[str, list[tuple[int, Any]]]) -> list[dict[str, Any]]:
 
 
 def cell_states(raw: dict[str, list[tuple[int, Any]]]) -> list[dict[str, str]]:
-    return [{kv.key: kv.value for kv in m.values} for _, m in raw["/winder/state"]]
+    return [cell_state_values(m) for _, m in raw["/winder/state"]]
 
 
 def check_stop(event: dict[str, Any], t_s: float) -> None:
@@ -150,19 +151,16 @@ def test_live_pause_override_resume_abort_in_real_time(tmp_path: Path, procs: Pr
     request; the clock runs on while paused and nothing is reported stalled;
     the abort closes the bag aborted with the uninterrupted job's first steps."""
     from conftest import spin_until
-    from diagnostic_msgs.msg import DiagnosticStatus
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    from winder_interfaces.msg import CellState
 
     states: list[str] = []
     latched = QoSProfile(
         depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
     )
-    ros.create_subscription(  # a late joiner hears the state the cell is in
-        DiagnosticStatus,
-        "/winder/state",
-        lambda m: states.append({kv.key: kv.value for kv in m.values}["state"]),
-        latched,
-    )
+    # a late joiner hears the state the cell is in
+    ros.create_subscription(CellState, "/winder/state", lambda m: states.append(m.state), latched)
     bags = tmp_path / "bags"
     procs.start("sim_node", "-p", f"bag_dir:={bags}", "-p", "real_time:=true", "-p", "stall_timeout:=1.0")
     procs.start("profile_node", "-p", "lookahead:=0.05")

@@ -23,6 +23,7 @@ from hypothesis import strategies as st
 
 from winder.analysis.metrics import analyze
 from winder.contract.params import PROFILE_SPECS, stop_place, stop_points
+from winder.contract.topics import cell_state_values
 from winder.motion.job import Job
 from winder.motion.timing import plan_job, plan_segment, plan_timing
 from winder.record.reader import read_run
@@ -141,7 +142,7 @@ def test_a_run_stopped_at_turn_2_has_the_uninterrupted_steps(tmp_path: Path, pro
     marks = [(v["state"], v.get("stop")) for v in states if v.get("stop")]
     assert marks == [("paused", "1:2"), ("running", "1:2")], marks
     # and the cell's state topic, one message per transition, with where the axes are
-    cell = [{kv.key: kv.value for kv in m.values} for _, m in raw["/winder/state"]]
+    cell = [cell_state_values(m) for _, m in raw["/winder/state"]]
     assert [c["state"] for c in cell] == ["running", "paused", "running", "done"], cell
     assert (cell[1]["coil"], cell[1]["layer"], cell[1]["turn"]) == ("1", "1", "2")
     assert all(c["run_id"] == stopped.run_id for c in cell)

@@ -54,9 +54,10 @@ class Cell:
     """What the probe hears of a cell: its states, its clock, its statuses."""
 
     def __init__(self, ros: Any) -> None:
-        from diagnostic_msgs.msg import DiagnosticStatus
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
         from rosgraph_msgs.msg import Clock
+
+        from winder_interfaces.msg import CellState
 
         self.ros = ros
         self.states: list[str] = []
@@ -64,12 +65,7 @@ class Cell:
         latched = QoSProfile(
             depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
         )
-        ros.create_subscription(
-            DiagnosticStatus,
-            "/winder/state",
-            lambda m: self.states.append({kv.key: kv.value for kv in m.values}["state"]),
-            latched,
-        )
+        ros.create_subscription(CellState, "/winder/state", lambda m: self.states.append(m.state), latched)
         ros.create_subscription(Clock, "/clock", self._clock, qos_profile_sensor_data)
         self.seen = heard_diagnostics(ros)
 

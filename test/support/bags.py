@@ -16,13 +16,13 @@ from typing import Any
 import numpy as np
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
-from rosbags.typesys import Stores, get_typestore
 
 from support import wait
 from support.domains import long_lived_domain
 from support.paths import BIN
 from winder.procs import Children
 from winder.record.bag import BagRecorder
+from winder.record.msgtypes import jazzy_store
 from winder.record.raw import RawBag
 
 SMALL = ["--turns-per-layer", "3", "--poles", "2"]
@@ -226,7 +226,7 @@ def step_rows(msgs: list[tuple[int, Any]]) -> np.ndarray:
 
 
 def write_bag(path: Path, messages: list[tuple[str, str, int, Any]], storage: StoragePlugin) -> None:
-    store = get_typestore(Stores.ROS2_JAZZY)
+    store = jazzy_store()  # Jazzy's types and winder's own (winder/state's CellState)
     with Writer(path, version=9, storage_plugin=storage) as w:
         conns: dict[str, Any] = {}
         for topic, msgtype, _, _ in messages:

@@ -36,7 +36,7 @@ from support import wait
 from support.paths import ROOT, TEST
 from support.ros_probe import spin_until
 
-from winder.contract.topics import in_namespace
+from winder.contract.topics import cell_state_values, in_namespace
 
 pytestmark = pytest.mark.ros
 
@@ -50,7 +50,7 @@ LIVE_TOPICS = {
     "/winder/joint_states": "sensor_msgs/msg/JointState",
     "/winder/joint_commands": "sensor_msgs/msg/JointState",
     "/winder/tension": "geometry_msgs/msg/WrenchStamped",
-    "/winder/state": "diagnostic_msgs/msg/DiagnosticStatus",
+    "/winder/state": "winder_interfaces/msg/CellState",
     "/winder/progress": "diagnostic_msgs/msg/KeyValue",
     "/winder/path": "trajectory_msgs/msg/JointTrajectory",
     "/winder/control": "std_msgs/msg/String",
@@ -230,9 +230,9 @@ def check_joint_states(data: list[Data], job_id: str) -> None:
 def check_state(data: list[Data]) -> dict[str, str]:
     assert data, "no winder/state"
     m = data[-1].msg
-    values = {kv.key: kv.value for kv in m.values}
+    values = cell_state_values(m)
     assert {"state", "job_id", "run_id", "coil", "layer", "turn", "sim_time_s"} <= set(values), values
-    assert m.name.endswith("sim_node: state")
+    assert m.node.endswith("sim_node")
     assert values["state"] in ("running", "idle"), values
     return values
 

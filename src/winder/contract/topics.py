@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Collection, Mapping, Sequence
+from typing import Any
 
 from winder.contract.states import CellState, JobState, ReadyState
 from winder.errors import BadInputError
@@ -33,8 +34,8 @@ TOPIC_SIM_CONFIG = "winder/sim_config"
 TOPIC_PROGRESS = "winder/progress"
 TOPIC_PROFILE_CONFIG = "winder/profile_config"
 TOPIC_CLOCK = "clock"
-#: The cell's state (diagnostic_msgs/DiagnosticStatus, latched): one message
-#: per transition, values :data:`CELL_STATE_KEYS`
+#: The cell's state (winder_interfaces/CellState, latched; a DiagnosticStatus with
+#: the values :data:`CELL_STATE_KEYS` in bags of before 2026-11-28): one message per transition
 TOPIC_STATE = "winder/state"
 #: idle, running, pausing (braking for a pause), paused (at rest: a pause or a
 #: programmed stop), aborting (braking for an abort), done, aborted (ended at
@@ -271,6 +272,16 @@ def status_values(
         values[ROLE_KEY] = role
     values.update(extra)
     return values
+
+
+def cell_state_values(msg: Any) -> dict[str, str]:
+    """The :data:`CELL_STATE_KEYS` of a ``winder/state`` message as text: a
+    winder_interfaces/CellState (by its fields), or the DiagnosticStatus of
+    bags of before 2026-11-28 (its key/values)."""
+    if hasattr(msg, "values"):
+        return {kv.key: kv.value for kv in msg.values}
+    values = {k: str(getattr(msg, k)) for k in CELL_STATE_KEYS if k != "sim_time_s"}
+    return {**values, "sim_time_s": f"{msg.sim_time_s:.6f}"}
 
 
 def status_node(name: str) -> str:

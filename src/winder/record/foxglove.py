@@ -116,9 +116,9 @@ def start_server(
 
 @functools.cache
 def _typestore() -> Any:
-    from rosbags.typesys import Stores, get_typestore
+    from winder.record.msgtypes import jazzy_store
 
-    return get_typestore(Stores.ROS2_JAZZY)
+    return jazzy_store()
 
 
 def ros2msg_schema(msgtype: str, text: str = "") -> Any:

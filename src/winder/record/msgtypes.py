@@ -5,7 +5,8 @@ through the module chain of every earlier distribution: 0.1 s of every node
 process that records a bag. The types winder's recorders write are few;
 :func:`typestore_for` makes them alone, from their ``.msg`` definitions
 (comments left out), and falls back to the whole store for any other type.
-The test suite checks each definition against rosbags' Jazzy store.
+The test suite checks each definition against rosbags' Jazzy store, and
+winder's own against its ``.msg`` file.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from collections.abc import Iterable
 from functools import cache
 from typing import Any
 
-__all__ = ["DEFINITIONS", "typestore_for"]
+__all__ = ["DEFINITIONS", "jazzy_store", "typestore_for"]
 
 #: ``package/msg/Name`` -> its ``.msg`` definition in ROS 2 Jazzy, for the
 #: types winder's bags hold and the types they are made of
@@ -41,6 +42,14 @@ DEFINITIONS = {
         "byte level\nstring name\nstring message\nstring hardware_id\nKeyValue[] values"
     ),
     "diagnostic_msgs/msg/DiagnosticArray": "std_msgs/Header header\nDiagnosticStatus[] status",
+    # winder's own (winder_interfaces/msg/CellState.msg): winder/state since 2026-11-28, a
+    # DiagnosticStatus before
+    "winder_interfaces/msg/CellState": (
+        "string IDLE=idle\nstring RUNNING=running\nstring PAUSING=pausing\nstring PAUSED=paused\n"
+        "string ABORTING=aborting\nstring DONE=done\nstring ABORTED=aborted\nstring FAILED=failed\n"
+        "builtin_interfaces/Time stamp\nstring node\nstring state\nstring job_id\nstring run_id\n"
+        "uint32 coil\nuint32 layer\nuint32 turn\nfloat64 sim_time_s\nstring message"
+    ),
     "trajectory_msgs/msg/JointTrajectoryPoint": (
         "float64[] positions\nfloat64[] velocities\nfloat64[] accelerations\nfloat64[] effort\n"
         "builtin_interfaces/Duration time_from_start"
@@ -63,11 +72,20 @@ def _small() -> Any:
     return store
 
 
-@cache
-def _jazzy() -> Any:
-    from rosbags.typesys import Stores, get_typestore
+def jazzy_store() -> Any:
+    """A new store for any type a bag holds: rosbags' Jazzy store, with
+    winder's own types (winder_interfaces) registered in it (a caller may
+    register more)."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-    return get_typestore(Stores.ROS2_JAZZY)
+    store = get_typestore(Stores.ROS2_JAZZY)
+    for name, text in DEFINITIONS.items():
+        if name.startswith("winder_interfaces/"):
+            store.register(get_types_from_msg(text, name))
+    return store
+
+
+_jazzy = cache(jazzy_store)
 
 
 def typestore_for(msgtypes: Iterable[str]) -> Any:

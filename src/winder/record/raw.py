@@ -572,9 +572,9 @@ def read_raw(path: str | Path, keep: Callable[[str], bool] | None = None) -> Raw
 
 
 def _typestore() -> Any:
-    from rosbags.typesys import Stores, get_typestore
+    from winder.record.msgtypes import jazzy_store
 
-    return get_typestore(Stores.ROS2_JAZZY)
+    return jazzy_store()
 
 
 # -- repair -------------------------------------------------------------------------

@@ -675,7 +675,9 @@ def _assemble(
     sim_config = _decode_sim_config(raw.path, decoded[topic[SIM_CONFIG]], topic[SIM_CONFIG], notes)
     profile_config = _decode_profile_config(decoded[topic[PROFILE_CONFIG]], topic[PROFILE_CONFIG], notes)
     wall0, origin_ns = _time_base(decoded[topic[SIM_CONFIG]])
-    consumer = {status_node(m.name) for m in decoded[topic[STATE]]}  # who announced the cell's state
+    # who announced the cell's state: a CellState names its node; a bag of before 2026-11-28
+    # holds a DiagnosticStatus, named "<node>: state"
+    consumer = {status_node(m.node if hasattr(m, "node") else m.name) for m in decoded[topic[STATE]]}
     report, profile, errors, error_statuses = _decode_diagnostics(
         decoded[DIAGNOSTICS], ns, decoded[_DIAGNOSTIC_TIMES], wall0, consumer
     )

@@ -92,7 +92,7 @@ CONSUMER_TOPICS = {
     "sim_config": (TOPIC_SIM_CONFIG, "std_msgs/msg/String"),
     "profile_config": (TOPIC_PROFILE_CONFIG, "std_msgs/msg/String"),
     "diagnostics": (TOPIC_DIAGNOSTICS, "diagnostic_msgs/msg/DiagnosticArray"),
-    "state": (TOPIC_STATE, "diagnostic_msgs/msg/DiagnosticStatus"),
+    "state": (TOPIC_STATE, "winder_interfaces/msg/CellState"),
     "control": (TOPIC_CONTROL, "std_msgs/msg/String"),
 }
 

@@ -33,7 +33,8 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any
 
-from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import KeyValue
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import String
@@ -52,6 +53,7 @@ from winder.ros.peers import Peers
 from winder.ros.qos import QOS_LATCHED, QOS_STATE
 from winder.ros.run_bag import RunBag
 from winder.ros.settings import Settings
+from winder_interfaces.msg import CellState as CellStateMsg
 
 __all__ = ["ConsumerRun"]
 
@@ -80,7 +82,7 @@ class ConsumerRun:
         self.log = node.get_logger()
         self.diag = Diagnostics(node, hardware_id)
         self.pub_progress = node.create_publisher(KeyValue, TOPIC_PROGRESS, QOS_STATE)
-        self.pub_cell_state = node.create_publisher(DiagnosticStatus, TOPIC_STATE, QOS_LATCHED)
+        self.pub_cell_state = node.create_publisher(CellStateMsg, TOPIC_STATE, QOS_LATCHED)
         self.last_report: JobReport | None = None
         self.last_level, self.last_text = OK, ""
         self.clear()
@@ -238,21 +240,18 @@ class ConsumerRun:
         plan = self.plan
         t = self.t_ns if t_ns is None else t_ns
         coil, layer, turn = where
-        values = {
-            "state": state,
-            "job_id": plan.job_id if plan else "",
-            "run_id": plan.run_id if plan else "",
-            "coil": coil,
-            "layer": layer,
-            "turn": turn,
-            "sim_time_s": f"{t / 1e9:.6f}",
-        }
-        msg = DiagnosticStatus(
-            level=bytes([ERROR if state == CellState.FAILED else OK]),
-            name=f"{self.node.get_fully_qualified_name().lstrip('/')}: state",
+        wall = time.time_ns()
+        msg = CellStateMsg(
+            stamp=Time(sec=wall // 1_000_000_000, nanosec=wall % 1_000_000_000),
+            node=self.node.get_fully_qualified_name().lstrip("/"),
+            state=str(state),
+            job_id=plan.job_id if plan else "",
+            run_id=plan.run_id if plan else "",
+            coil=coil,
+            layer=layer,
+            turn=turn,
+            sim_time_s=t / 1e9,
             message=text,
-            hardware_id=self.hardware_id,
-            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()],
         )
         if plan is not None:
             self.record("state", t, serialize_message(msg))

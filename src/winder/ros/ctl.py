@@ -769,23 +769,31 @@ def watch_cell(session: Session, namespace: str, *, statuses: bool = True) -> Ce
     once), and volatile, for a node that keeps none (a third-party consumer).
     Without ``statuses``, only winder/state and winder/ready (a start that
     follows nothing)."""
-    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+    from diagnostic_msgs.msg import DiagnosticArray, KeyValue
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
-    from winder.contract.topics import TASK_JOB, TOPIC_DIAGNOSTICS, TOPIC_READY, TOPIC_STATE, in_namespace
+    from winder.contract.topics import (
+        TASK_JOB,
+        TOPIC_DIAGNOSTICS,
+        TOPIC_READY,
+        TOPIC_STATE,
+        cell_state_values,
+        in_namespace,
+    )
     from winder.ros.diagnostics import QOS_DIAGNOSTICS_KEPT
     from winder.ros.graph import fully_qualified
     from winder.ros.qos import QOS_DIAGNOSTICS
+    from winder_interfaces.msg import CellState
 
     view = CellView(namespace)
     latched = QoSProfile(
         depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
     )
 
-    def on_state(msg: DiagnosticStatus, info: Any) -> None:
-        view.state = {kv.key: kv.value for kv in msg.values}
+    def on_state(msg: CellState, info: Any) -> None:
+        view.state = cell_state_values(msg)
         view.state_ns = sent_ns(info)
-        view.state_by = node_of(msg.name) if msg.name else ""
+        view.state_by = node_of(msg.node) if msg.node else ""
         view.changed += 1
 
     def on_ready(msg: KeyValue, info: Any) -> None:
@@ -807,7 +815,7 @@ def watch_cell(session: Session, namespace: str, *, statuses: bool = True) -> Ce
     # rclpy hands a callback of two arguments the message's info too (its
     # source timestamp: when it was sent); its type hints know only one
     subscribe: Any = session.node.create_subscription
-    subscribe(DiagnosticStatus, fully_qualified(TOPIC_STATE, namespace), on_state, latched)
+    subscribe(CellState, fully_qualified(TOPIC_STATE, namespace), on_state, latched)
     subscribe(KeyValue, fully_qualified(TOPIC_READY, namespace), on_ready, latched)
     if statuses:
         subscribe(DiagnosticArray, TOPIC_DIAGNOSTICS, on_diagnostics, QOS_DIAGNOSTICS_KEPT)

@@ -100,7 +100,7 @@ VIEW_TOPICS = (
     ViewTopic(TOPIC_JOINT_STATES, "sensor_msgs/msg/JointState", _lossy(table.STATE)),
     ViewTopic(TOPIC_JOINT_COMMANDS, "sensor_msgs/msg/JointState", _lossy(table.STATE)),
     ViewTopic(TOPIC_TENSION, "geometry_msgs/msg/WrenchStamped", _lossy(table.STATE)),
-    ViewTopic(TOPIC_STATE, "diagnostic_msgs/msg/DiagnosticStatus", table.LATCHED),
+    ViewTopic(TOPIC_STATE, "winder_interfaces/msg/CellState", table.LATCHED),
     ViewTopic(TOPIC_PROGRESS, "diagnostic_msgs/msg/KeyValue", _lossy(table.STATE)),
     ViewTopic(TOPIC_PATH, "trajectory_msgs/msg/JointTrajectory", table.LATCHED),
     ViewTopic(TOPIC_CONTROL, "std_msgs/msg/String", table.EVENTS),
