@@ -41,14 +41,18 @@ def job_text(fields: dict[str, Any], job_id: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def cell(procs: Procs, tmp: Path, ros: Any, client: Any, *, real_time: bool) -> Path:
+def cell(procs: Procs, tmp: Path, ros: Any, client: Any, *, real_time: bool, **interp: object) -> Path:
     """The cell's three nodes, the consumer and the profile node ready, the
     action server matched by ``client``; its bag directory."""
     bags = tmp / "bags"
     states = ready_states(ros)
-    procs.start("interp_node", "-p", "autostart:=false")
+    procs.start(
+        "interp_node", "-p", "autostart:=false", *(a for k, v in interp.items() for a in ("-p", f"{k}:={v}"))
+    )
     procs.start("profile_node")
-    procs.start("sim_node", "-p", f"bag_dir:={bags}", "-p", f"real_time:={str(real_time).lower()}")
+    procs.sim = procs.start(  # type: ignore[attr-defined]
+        "sim_node", "-p", f"bag_dir:={bags}", "-p", f"real_time:={str(real_time).lower()}"
+    )
     wait.spin_until(
         ros,
         lambda: states.get("consumer") == "ready" and states.get("profile") == "ready",
@@ -222,7 +226,9 @@ def test_a_job_that_is_not_valid_is_refused_with_its_reason(
 
 def test_the_feedback_carries_the_wires_tension(procs: Procs, tmp_path: Path, ros: Any, client: Any) -> None:
     """A job on a core (its wire simulated): the feedback's tension is the
-    consumer's, within the least and peak tension its final report gives."""
+    consumer's, within the least and peak tension its final report gives.
+    The next goal's job text is wound as it says (a whole job: nothing of
+    the core job's settings left)."""
     from action_msgs.msg import GoalStatus
 
     cell(procs, tmp_path, ros, client, real_time=False)
@@ -236,3 +242,31 @@ def test_the_feedback_carries_the_wires_tension(procs: Procs, tmp_path: Path, ro
     assert seen, [f.tension_n for f in goal.feedback]
     # the report rounds to 3 decimals
     assert all(low - 1e-3 <= t <= high + 1e-3 for t in seen), (low, high, seen)
+    # a job text is a whole job: the next goal's is wound as it says, nothing of the last one's left
+    status, result = Goal(ros, client, job_text(JOB, "after_core")).result()
+    assert status == GoalStatus.STATUS_SUCCEEDED, result.message
+    assert result.report.steps_total == Job(**JOB, job_id="after_core").total_steps
+    assert not {kv.key for kv in result.report.extra} & {"tension_peak_n", "tension_min_n"}  # no core now
+
+
+def test_a_goal_whose_consumer_dies_ends(procs: Procs, tmp_path: Path, ros: Any, client: Any) -> None:
+    """The sim node killed (SIGKILL) mid-run: no final report will come. The
+    goal ends ABORTED once the interp node's stall_abort has passed without
+    word of the run, saying it gave the run up, and the server takes the
+    next goal."""
+    import signal
+
+    from action_msgs.msg import GoalStatus
+
+    cell(procs, tmp_path, ros, client, real_time=True, stall_abort=3.0)
+    goal = Goal(ros, client, job_text(LONG, "orphan"))
+    wait.spin_until(
+        ros, lambda: any(f.steps_done > 0 for f in goal.feedback), 60, "feedback of steps executed"
+    )
+    procs.sim.send_signal(signal.SIGKILL)  # type: ignore[attr-defined]
+    status, result = goal.result(60)
+    assert status == GoalStatus.STATUS_ABORTED and not result.success, result.message
+    assert "given up" in result.message, result.message
+    # the server serves on: a goal now gets its answer
+    status, result = Goal(ros, client, "interp_node: [").result(60)
+    assert status == GoalStatus.STATUS_ABORTED and result.message.startswith("job rejected: goal job"), result

@@ -444,10 +444,16 @@ class InterpNode(ManagedNode):
         quiet = time.monotonic() - self.last_receipt_wall
         if self.job is None or quiet <= self.settings.values()["stall_abort"]:
             return
-        why = (
+        self.give_up(
             f"job {self.job.job_id} given up, incomplete: no receipt from the consumer for {quiet:.1f} s "
             f"(stall_abort) at {self.consumed}/{self.sent} steps taken of {self.sent} sent"
         )
+
+    def give_up(self, why: str) -> None:
+        """The running run is over for this node, incomplete: nothing more is
+        sent, and the next start is not held by it (its consumer went)."""
+        if self.job is None or self.aborted:
+            return
         self.get_logger().error(why)
         self.pending = None
         self.aborted = why

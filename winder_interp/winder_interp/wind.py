@@ -33,7 +33,7 @@ import traceback
 from dataclasses import dataclass, field, fields
 from typing import Any, Protocol
 
-from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import KeyValue
 from geometry_msgs.msg import WrenchStamped
 from rclpy.action.server import ActionServer, CancelResponse, GoalResponse, ServerGoalHandle
 from rclpy.node import Node
@@ -43,18 +43,20 @@ from rclpy.task import Future
 from std_srvs.srv import Trigger
 
 from winder.contract.jobfile import load_job_text
-from winder.contract.params import interp_setting
+from winder.contract.params import INTERP_SPECS, interp_setting
 from winder.contract.run import JobReport
 from winder.contract.states import JobState
 from winder.contract.topics import ACTION_WIND, TOPIC_DIAGNOSTICS, TOPIC_STATE, TOPIC_TENSION
 from winder.errors import BadInputError
-from winder.motion.job import Job
+from winder.motion.job import FIELD_SPECS, Job
 from winder.ros.graph import fully_qualified
 from winder.ros.peers import Peers
 from winder.ros.qos import QOS_LATCHED_READER
 from winder.ros.run_bag import one_line
+from winder.ros.settings import Settings
 from winder.ros.timers import steady_timer
 from winder_interfaces.action import Wind
+from winder_interfaces.msg import CellState
 from winder_interfaces.msg import JobReport as JobReportMsg
 
 __all__ = ["ACTION", "WindCell", "WindServer", "goal_params", "job_params"]
@@ -80,10 +82,13 @@ class WindCell(Protocol):
     consumed: int
     aborted: str
     operator_abort: bool
+    settings: Settings
 
     def cannot_start(self) -> str: ...
 
     def start_with(self, params: list[Parameter]) -> tuple[bool, str]: ...
+
+    def give_up(self, why: str) -> None: ...
 
 
 def job_params(given: dict[str, dict[str, Any]], digest: str, named: set[str]) -> list[Parameter]:
@@ -100,18 +105,32 @@ def job_params(given: dict[str, dict[str, Any]], digest: str, named: set[str]) -
     return out
 
 
+#: what a job text is whole in: the job's fields, its stops and schedule (a field the text does
+#: not give takes its default, not what an earlier goal left); the node's own settings
+#: (autostart, chunk_steps, max_in_flight, stall_abort) are not the job's
+JOB_SETTINGS = (*FIELD_SPECS, "stops", "stop_pause", "stop_resume", "schedule")
+
+
 def goal_params(job: str, overrides: list[str]) -> list[Parameter]:
     """The change a goal asks for: its job text's settings, then its
-    ``KEY=VALUE`` overrides (which win). BadInputError (one line) if the job
-    or an override cannot be used."""
+    ``KEY=VALUE`` overrides (which win). A job text is a whole job: the
+    settings of :data:`JOB_SETTINGS` it does not give take their defaults,
+    and without a profile_node section the run is ramped by the profile
+    node's settings. BadInputError (one line) if the job or an override
+    cannot be used."""
     values = dict(interp_setting(text, "overrides") for text in overrides)
     params = [Parameter(k, value=v) for k, v in values.items()]
     if job.strip() and values.get("job_file"):
         raise BadInputError("overrides: job_file given beside the goal's job: give the job one way")
     if job.strip():
         given, digest = load_job_text(job, name="goal job")
+        named = set(values) | {"job_file"}
         # the job is the goal's, not a file's: job_file is cleared, its hash is the text's
-        params += [Parameter("job_file", value=""), *job_params(given, digest, set(values) | {"job_file"})]
+        params += [Parameter("job_file", value=""), *job_params(given, digest, named)]
+        named |= {p.name for p in params}
+        params += [Parameter(k, value=INTERP_SPECS[k].default) for k in JOB_SETTINGS if k not in named]
+        if "ramp.source" not in named:
+            params.append(Parameter("ramp.source", value="profile_node"))
     return params
 
 
@@ -131,6 +150,8 @@ class Running:
     report: JobReport | None = None
     message: str = ""
     abort_asked: bool = False
+    #: when the consumer last spoke of the run (its job status, every second; a state)
+    heard: float = field(default_factory=time.monotonic)
 
 
 class WindServer:
@@ -149,7 +170,7 @@ class WindServer:
             goal_callback=lambda _goal: GoalResponse.ACCEPT,
             cancel_callback=self.on_cancel,
         )
-        peers.subscribe(DiagnosticStatus, TOPIC_STATE, self.on_state, QOS_LATCHED_READER)
+        peers.subscribe(CellState, TOPIC_STATE, self.on_state, QOS_LATCHED_READER)
         # the tension comes at every simulated sample (thousands a second as fast as possible): the
         # feedback wants the last one, so the reader keeps one and takes it when it can
         latest = QoSProfile(
@@ -158,6 +179,10 @@ class WindServer:
         peers.subscribe(WrenchStamped, TOPIC_TENSION, self.on_tension, latest, role="consumer")
         self.timer = steady_timer(node, FEEDBACK_PERIOD, self.feedback)
         self.abort_client: Any = None
+
+    def node_stall_abort(self) -> float:
+        """The interp node's stall_abort (s): how long a run may go without word from its consumer."""
+        return float(self.cell.settings.values()["stall_abort"])
 
     def destroy(self) -> None:
         """The action server goes (before its node: it holds the node's handle)."""
@@ -181,7 +206,10 @@ class WindServer:
         request = handle.request
         result = Wind.Result()
         if self.goal is not None:
-            result.message = self.cell.cannot_start() or f"goal refused: run {self.goal.run_id} is running"
+            result.message = self.cell.cannot_start() or (
+                f"job {self.goal.job.job_id} run {self.goal.run_id} is running (a Wind goal's): "
+                "start refused, the running job goes on"
+            )
             handle.abort()
             return result
         try:
@@ -272,9 +300,13 @@ class WindServer:
         goal = self.goal
         if goal is None or goal.handle is not handle:
             return CancelResponse.REJECT
-        if not goal.abort_asked:
-            goal.abort_asked = True
-            self.ask_abort(goal)
+        if goal.abort_asked:
+            return CancelResponse.ACCEPT  # asked already: the run is being aborted
+        if self.peers.owner("profile") is None:
+            self.log.error(f"goal of run {goal.run_id}: cancel refused: no profile node to abort the run")
+            return CancelResponse.REJECT
+        goal.abort_asked = True
+        self.ask_abort(goal)
         return CancelResponse.ACCEPT
 
     def ask_abort(self, goal: Running) -> None:
@@ -290,7 +322,10 @@ class WindServer:
         def answered(f: Future) -> None:
             reply = f.result()
             if reply is not None and not reply.success:
-                self.log.warning(f"goal of run {goal.run_id} canceled: {service}: {reply.message}")
+                # refused (every step of an as-fast-as-possible run timed already): the run ends
+                # as it ends, and a later cancel asks again
+                goal.abort_asked = False
+                self.log.warning(f"goal of run {goal.run_id}: cancel: {service}: {reply.message}")
 
         future.add_done_callback(answered)
         self.log.info(f"goal of run {goal.run_id} canceled: aborting the run ({service})")
@@ -311,20 +346,26 @@ class WindServer:
             return
 
         def act(_raw: bytes) -> None:
+            goal.heard = time.monotonic()
             for st, values in mine:
-                goal.state = values.get("state", goal.state)
-                if goal.state in FINAL and not goal.done.done():
+                state = values.get("state", "")
+                # the states come from winder/state, in order; the status adds what it alone says
+                stalled = state == JobState.STALLED or goal.state == JobState.STALLED
+                if stalled and state != goal.state and state not in FINAL:
+                    goal.state = state
+                    self.feedback()
+                if state in FINAL and not goal.done.done():
+                    goal.state = state
                     goal.report = JobReport.from_values(values)
                     goal.message = st.message
                     goal.done.set_result(True)
 
         self.peers.deliver(TOPIC_DIAGNOSTICS, gid, raw, act, role="consumer")
 
-    def on_state(self, msg: DiagnosticStatus) -> None:
+    def on_state(self, msg: CellState) -> None:
         goal = self.goal
-        values = {kv.key: kv.value for kv in msg.values}
-        if goal is not None and values.get("run_id") == goal.run_id and values.get("state"):
-            goal.state = values["state"]
+        if goal is not None and msg.run_id == goal.run_id and msg.state:
+            goal.state, goal.heard = msg.state, time.monotonic()
             self.feedback()
 
     def on_tension(self, msg: WrenchStamped) -> None:
@@ -338,8 +379,23 @@ class WindServer:
         if goal is None:
             return
         cell = self.cell
-        if cell.run_id == goal.run_id and cell.aborted and not cell.operator_abort and not goal.done.done():
+        if goal.done.done():
+            return
+        if cell.run_id == goal.run_id and cell.aborted and not cell.operator_abort:
             goal.message = cell.aborted  # given up: the consumer may never close it
+            goal.done.set_result(True)
+            return
+        silent = time.monotonic() - goal.heard
+        if silent > self.node_stall_abort():
+            # the consumer went (killed, its host down): no final report will come
+            goal.message = (
+                f"run {goal.run_id}: no word from the consumer for {silent:.0f} s (stall_abort): given up, "
+                "how the run ended is not known (a bag cut short: winder bag recover)"
+            )
+            if cell.run_id == goal.run_id:
+                cell.give_up(goal.message)  # the node's run is over too: the next start is not held by it
+            else:
+                self.log.error(goal.message)
             goal.done.set_result(True)
             return
         self.publish(goal, min(cell.consumed, goal.total) if cell.run_id == goal.run_id else 0)

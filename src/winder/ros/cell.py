@@ -347,13 +347,13 @@ class CellWatch:
 
     def waiting_for(self) -> str:
         """What the start of the job still waits for, in words (when it never came)."""
-        if not self.wind.server_is_ready():
-            return f"the interp node's {ACTION_WIND} action server"
-        if not self.heard_consumer:
+        if not self.heard_consumer:  # the likelier of the two to be missing, and the one to name
             return (
                 "the step consumer (sim_node or a hardware driver), which is not on this graph: is it "
                 "running, on the same ROS_DOMAIN_ID, discovery range (and static peers) as this host?"
             )
+        if not self.wind.server_is_ready():
+            return f"the interp node's {ACTION_WIND} action server"
         pending = next((r for r in self.remote if not r.done), None)
         if pending is not None:
             return pending.waiting
