@@ -93,6 +93,30 @@ class Goal:
         return answer.status, answer.result
 
 
+def mcap_cell_states(bag: Path) -> list[str]:
+    """The states on winder/state, read with the mcap library: its schema is
+    winder_interfaces/msg/CellState in ros2msg, each message decoded by a
+    rosbags store made from that schema alone."""
+    from mcap.reader import make_reader
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    [path] = bag.glob("*.mcap")
+    out = []
+    with path.open("rb") as f:
+        for schema, _channel, message in make_reader(f).iter_messages(topics=["/winder/state"]):
+            assert (schema.name, schema.encoding) == ("winder_interfaces/msg/CellState", "ros2msg")
+            store = get_typestore(Stores.EMPTY)
+            text = schema.data.decode()
+            main, _, deps = text.partition("\n" + "=" * 80 + "\n")
+            types = get_types_from_msg(main, schema.name)
+            for dep in deps.split("=" * 80 + "\n") if deps else []:
+                head, _, body = dep.partition("\n")
+                types.update(get_types_from_msg(body, head.removeprefix("MSG: ").strip()))
+            store.register(types)
+            out.append(store.deserialize_cdr(message.data, schema.name).state)
+    return out
+
+
 @pytest.fixture
 def client(ros: Any) -> Any:
     from rclpy.action import ActionClient
@@ -124,8 +148,17 @@ def test_a_goal_winds_a_part(procs: Procs, tmp_path: Path, ros: Any, client: Any
         total,
         total,
     )
-    recorded = final_report(rosbags_read(bag))
+    read = rosbags_read(bag)
+    recorded = final_report(read)
     assert recorded["state"] == "done" and int(recorded["steps_done"]) == total
+    # the typed cell state, read back by rosbags (from the bag's own schema) and by mcap
+    states = [m for _, m in read["/winder/state"]]
+    assert [(m.state, m.run_id, m.node) for m in states] == [
+        ("running", result.run_id, "sim_node"),
+        ("done", result.run_id, "sim_node"),
+    ]
+    assert (states[-1].coil, states[-1].layer, states[-1].turn) == (2, 1, 8)
+    assert mcap_cell_states(bag) == ["running", "done"]
     extra = {kv.key: kv.value for kv in report.extra}
     assert extra and all(recorded[k] == v for k, v in extra.items())
     # feedback: the run's id, steps that only grow, up to the total, where they reached
