@@ -546,7 +546,10 @@ def _one_goal(session: Session, client: Any, action: str, goal: Any) -> tuple[st
     first = next((f for f in started if f.run_id), None)
     if first is not None:
         return f"run {first.run_id} started: {first.steps_total} steps", ""
-    return "", one_line(result.result().result.message)
+    ended = result.result().result
+    if ended.run_id:  # the run started and ended before its first feedback came (as fast as possible)
+        return f"run {ended.run_id} started: {ended.report.steps_total} steps", ""
+    return "", one_line(ended.message)
 
 
 def start_run(session: Session, interp: str, values: dict[str, Any], view: CellView | None = None) -> str:
