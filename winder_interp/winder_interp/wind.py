@@ -3,10 +3,10 @@
 
 * goal: ``job`` (a job file's text, the files ``winder run`` reads; "" = the
   node's settings as they are) and ``overrides`` (``KEY=VALUE`` settings of
-  the interp node for this run, as ``winder ctl start --set``). The job is set as
-  ``winder ctl start JOB_FILE`` sets a file (what it gives the interp node,
-  its ramp; every other node's section is theirs), then the overrides
-  (``winder ctl start --set``), all in one change; then the run starts.
+  the interp node for this run, as ``winder ctl start --set``). A job text is
+  a whole job (:func:`goal_params`: what it gives the interp node and its
+  ramp, the rest of the job at its defaults; every other node's section is
+  theirs); the overrides win; all is set in one change, then the run starts.
 * a goal the cell cannot take now (a run going on, a node not ready, a job
   or setting that is not valid) is accepted and ends at once ABORTED, its
   result's ``message`` the reason, in the words ``winder check`` and
@@ -16,7 +16,8 @@
   consumer measures one (NaN otherwise), twice a second and at each state;
 * result: ``success`` (the run ended complete), ``run_id``, ``bag_path``,
   ``message`` (the consumer's final word) and the typed final report, once
-  the consumer has closed the run's bag and said how it ended;
+  the consumer has closed the run's bag and said how it ended; a consumer
+  silent for the node's ``stall_abort`` ends the goal, the run given up;
 * a cancel is an abort (the profile node's ``~/abort``: the axes braked to
   rest, the bag closed): the goal ends CANCELED with the aborted run's report.
 
@@ -45,11 +46,11 @@ from std_srvs.srv import Trigger
 from winder.contract.jobfile import load_job_text
 from winder.contract.params import INTERP_SPECS, interp_setting
 from winder.contract.run import JobReport
-from winder.contract.states import JobState
+from winder.contract.states import FINAL_JOB_STATES, JobState, asks_again
 from winder.contract.topics import ACTION_WIND, TOPIC_DIAGNOSTICS, TOPIC_STATE, TOPIC_TENSION
 from winder.errors import BadInputError
 from winder.motion.job import FIELD_SPECS, Job
-from winder.ros.graph import fully_qualified
+from winder.ros.graph import Who, fully_qualified
 from winder.ros.peers import Peers
 from winder.ros.qos import QOS_LATCHED_READER
 from winder.ros.run_bag import one_line
@@ -59,19 +60,12 @@ from winder_interfaces.action import Wind
 from winder_interfaces.msg import CellState
 from winder_interfaces.msg import JobReport as JobReportMsg
 
-__all__ = ["ACTION", "WindCell", "WindServer", "goal_params", "job_params"]
+__all__ = ["JOB_SETTINGS", "WindCell", "WindServer", "goal_params", "job_params"]
 
-#: the action's name, relative: ``/<ns>/winder/wind``
-ACTION = ACTION_WIND
 #: s between feedbacks while a run goes on
 FEEDBACK_PERIOD = 0.5
 #: s a goal waits for a cell that is not ready yet (its nodes still discovering each other)
 START_WAIT = 10.0
-#: the start's refusal while the cell is not ready yet, and the states asking again does not change
-NOT_READY = "job not started: not ready"
-LASTING = (" inactive", " blocked")
-#: the consumer's job states that end a run
-FINAL = frozenset({JobState.DONE, JobState.ABORTED, JobState.INCOMPLETE})
 
 
 class WindCell(Protocol):
@@ -165,7 +159,7 @@ class WindServer:
         self.server = ActionServer(
             node,
             Wind,
-            ACTION,
+            ACTION_WIND,  # relative: /<ns>/winder/wind
             execute_callback=self.execute,
             goal_callback=lambda _goal: GoalResponse.ACCEPT,
             cancel_callback=self.on_cancel,
@@ -252,15 +246,12 @@ class WindServer:
         end = time.monotonic() + START_WAIT
         while True:
             why = self.cell.cannot_start()
-            lasting = any(word in why for word in LASTING)
             if handle.is_cancel_requested:
                 return why or "goal canceled before its run started"
-            if not why.startswith(NOT_READY) or lasting or time.monotonic() > end:
-                return (
-                    why
-                    if not why.startswith(NOT_READY) or lasting
-                    else f"{why} (still, after {START_WAIT:g} s)"
-                )
+            if not asks_again(why):
+                return why
+            if time.monotonic() > end:
+                return f"{why} (still, after {START_WAIT:g} s)"
             await self.pause(0.1)
 
     async def pause(self, seconds: float) -> None:
@@ -302,18 +293,16 @@ class WindServer:
             return CancelResponse.REJECT
         if goal.abort_asked:
             return CancelResponse.ACCEPT  # asked already: the run is being aborted
-        if self.peers.owner("profile") is None:
+        profile = self.peers.owner("profile")
+        if profile is None:
             self.log.error(f"goal of run {goal.run_id}: cancel refused: no profile node to abort the run")
             return CancelResponse.REJECT
         goal.abort_asked = True
-        self.ask_abort(goal)
+        self.ask_abort(goal, profile)
         return CancelResponse.ACCEPT
 
-    def ask_abort(self, goal: Running) -> None:
-        profile = self.peers.owner("profile")
-        if profile is None:
-            self.log.error(f"goal of run {goal.run_id} canceled: no profile node to abort it")
-            return
+    def ask_abort(self, goal: Running, profile: Who) -> None:
+        """The profile node ``profile``'s ``~/abort`` for the goal's run."""
         service = fully_qualified("abort", fully_qualified(profile.name, profile.namespace))
         if self.abort_client is None or self.abort_client.srv_name != service:
             self.abort_client = self.node.create_client(Trigger, service)
@@ -351,10 +340,10 @@ class WindServer:
                 state = values.get("state", "")
                 # the states come from winder/state, in order; the status adds what it alone says
                 stalled = state == JobState.STALLED or goal.state == JobState.STALLED
-                if stalled and state != goal.state and state not in FINAL:
+                if stalled and state != goal.state and state not in FINAL_JOB_STATES:
                     goal.state = state
                     self.feedback()
-                if state in FINAL and not goal.done.done():
+                if state in FINAL_JOB_STATES and not goal.done.done():
                     goal.state = state
                     goal.report = JobReport.from_values(values)
                     goal.message = st.message

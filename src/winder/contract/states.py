@@ -12,7 +12,17 @@ from __future__ import annotations
 
 from enum import StrEnum
 
-__all__ = ["FINAL_JOB_STATES", "CellState", "EventKind", "EventSource", "JobState", "ReadyState"]
+__all__ = [
+    "FINAL_JOB_STATES",
+    "LASTING",
+    "NOT_READY",
+    "CellState",
+    "EventKind",
+    "EventSource",
+    "JobState",
+    "ReadyState",
+    "asks_again",
+]
 
 
 class CellState(StrEnum):
@@ -77,3 +87,14 @@ class EventSource(StrEnum):
 
 #: the job states a consumer's final report ends a run with (CONTRACT.md §3.7)
 FINAL_JOB_STATES = (JobState.DONE, JobState.ABORTED, JobState.INCOMPLETE)
+
+#: the start replies that mean "ask again": a node of the cell is still connecting
+NOT_READY = "job not started: not ready"
+#: states on winder/ready that asking again does not change (an orchestrator's, or a setting's)
+LASTING = (" inactive", " blocked")
+
+
+def asks_again(reason: str) -> bool:
+    """Whether a refused start is worth asking again: the cell is only not
+    ready yet (its nodes still finding each other), not inactive or blocked."""
+    return reason.startswith(NOT_READY) and not any(word in reason for word in LASTING)

@@ -32,6 +32,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
+from winder.contract.states import asks_again
 from winder.contract.topics import ACTION_WIND
 from winder.errors import BadInputError, RefusedError, UnavailableError
 from winder.ros.dds import ANNOUNCEMENT
@@ -461,11 +462,6 @@ def lifecycle_transition(session: Session, node: str, action: str) -> tuple[str,
 
 # -- starting a run --------------------------------------------------------------------
 
-#: the start replies that mean "ask again": a node of the cell is still connecting
-NOT_READY = "job not started: not ready"
-#: states on winder/ready that asking again does not change (an orchestrator's, or a setting's)
-LASTING = (" inactive", " blocked")
-
 
 def find_role(session: Session, namespace: str, role: str, what: str) -> str:
     """The fully qualified name of the one node in ``namespace`` that plays
@@ -497,14 +493,10 @@ NOT_READY_RETRY = 0.5
 CANCEL_WAIT = 3.0
 
 
-#: the cell's Wind action, relative to its namespace
-WIND = ACTION_WIND
-
-
 def wind_action(interp: str) -> str:
     """The Wind action of the cell whose interp node is ``interp`` (fully qualified)."""
     namespace = interp.rsplit("/", 1)[0]
-    return f"{namespace}/{WIND}"
+    return f"{namespace}/{ACTION_WIND}"
 
 
 def start_clients(session: Session, interp: str) -> None:
@@ -572,8 +564,7 @@ def start_run(session: Session, interp: str, values: dict[str, Any], view: CellV
         reply, reason = _one_goal(session, client, action, goal)
         if reply:
             return reply
-        lasting = any(word in reason for word in LASTING)
-        if not reason.startswith(NOT_READY) or lasting:
+        if not asks_again(reason):
             raise RefusedError(reason or "start refused (no reason given)")
         if time.monotonic() + 0.1 > session.deadline:
             raise RefusedError(f"{reason} (still, after {session.timeout:g} s)")
