@@ -236,23 +236,26 @@ def _service(name: str, kind: str) -> list[str] | None:
         return [f"ros2 service call {name}: {parts[-2]} offers no service {parts[-1]!r}"]
     if kind != offered:
         return [f"ros2 service call {name} {kind}: the service's type is {offered}"]
-    package, _, type_name = kind.split("/")
-    try:
-        getattr(importlib.import_module(f"{package}.srv"), type_name)
-    except (ImportError, AttributeError):
+    if not _installed(kind):
         return [f"ros2 service call {name} {kind}: that type is not installed"]
     return []
 
 
-def _interface(kind: str) -> list[str] | None:
-    """``ros2 interface show pkg/kind/Type``: one of winder_interfaces', installed."""
-    package, _, rest = kind.partition("/")
-    if package != "winder_interfaces":
-        return None
-    group, _, type_name = rest.partition("/")
+def _installed(kind: str) -> bool:
+    """Whether the ROS type ``pkg/srv|msg|action/Type`` is installed here."""
+    package, group, type_name = kind.split("/")
     try:
         getattr(importlib.import_module(f"{package}.{group}"), type_name)
     except (ImportError, AttributeError):
+        return False
+    return True
+
+
+def _interface(kind: str) -> list[str] | None:
+    """``ros2 interface show pkg/kind/Type``: one of winder_interfaces', installed."""
+    if not kind.startswith("winder_interfaces/"):
+        return None
+    if kind.count("/") != 2 or not _installed(kind):
         return [f"ros2 interface show {kind}: winder_interfaces has no such type"]
     return []
 
