@@ -5,6 +5,8 @@ decodes with). The oracle is rosbags' own Jazzy typestore."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 from rosbags.typesys import Stores, get_typestore
@@ -56,7 +58,9 @@ def test_another_type_gets_the_whole_store() -> None:
 def test_each_own_type_is_its_msg_files(name: str) -> None:
     """winder's own types: as rosbags reads their .msg file in winder_interfaces
     (comments and all), with the type hash rosidl generated into the venv, and
-    the bytes rclpy's generated class serializes read back field for field."""
+    the bytes rclpy's generated class serializes (every field set to a value
+    of its own) read back field for field."""
+    import importlib
     import json
     import sys
     from pathlib import Path
@@ -66,26 +70,81 @@ def test_each_own_type_is_its_msg_files(name: str) -> None:
     from support.paths import ROOT
 
     package, _, type_name = name.split("/")
-    text = (ROOT / package / "msg" / f"{type_name}.msg").read_text()
     oracle = get_typestore(Stores.EMPTY)
-    oracle.register(get_types_from_msg(text, name))
-    oracle.register({k: v for k, v in JAZZY.fielddefs.items() if k.startswith("builtin_interfaces/")})
+    for own in OWN:  # its nested own types read from their files too
+        text = (ROOT / package / "msg" / f"{own.rsplit('/', 1)[1]}.msg").read_text()
+        oracle.register(get_types_from_msg(text, own))
+    oracle.register(
+        {
+            k: v
+            for k, v in JAZZY.fielddefs.items()
+            if k.startswith(("builtin_interfaces/", "diagnostic_msgs/"))
+        }
+    )
     small = typestore_for([name])
     assert small.fielddefs[name] == oracle.fielddefs[name]
     generated = json.loads((Path(sys.prefix) / "share" / package / "msg" / f"{type_name}.json").read_text())
     [hashed] = [h["hash_string"] for h in generated["type_hashes"] if h["type_name"] == name]
     assert small.hash_rihs01(name) == hashed
-    from winder_interfaces.msg import CellState
 
-    msg = CellState(node="cell1/axes", state=CellState.PAUSED, run_id="r_1", coil=2, layer=3, turn=41)
-    msg.sim_time_s, msg.stamp.sec = 12.5, 7
+    module = importlib.import_module(f"{package}.msg")
+    msg = _filled(getattr(module, type_name)(), module, seed=3)
     back = small.deserialize_cdr(serialize_message(msg), name)
-    assert (back.node, back.state, back.run_id, back.coil, back.layer, back.turn) == (
-        "cell1/axes",
-        "paused",
-        "r_1",
-        2,
-        3,
-        41,
-    )
-    assert (back.sim_time_s, back.stamp.sec) == (12.5, 7)
+    assert _plain(back) == _plain(msg)
+
+
+def _filled(msg: Any, module: Any, seed: int) -> Any:
+    """``msg`` with each field set to a value of its own (not a default):
+    numbers from ``seed`` on, texts naming their field, two items in each
+    sequence (messages filled alike)."""
+    import diagnostic_msgs.msg
+
+    for i, (field, kind) in enumerate(msg.get_fields_and_field_types().items()):
+        n = seed + i
+        base = kind.split("<")[0].removeprefix("sequence")
+        if kind.startswith("sequence<"):
+            inner = kind[len("sequence<") : -1]
+            if inner in ("string",):
+                value: Any = [f"{field}-a", f"{field}-b"]
+            elif inner.startswith(("int", "uint")):
+                value = [n, n + 1]
+            elif inner == "double":
+                value = [n + 0.25, n + 0.5]
+            else:
+                pkg, _, cls = inner.partition("/")
+                where = module if pkg == "winder_interfaces" else diagnostic_msgs.msg
+                value = [
+                    _filled(getattr(where, cls)(), module, n),
+                    _filled(getattr(where, cls)(), module, n + 7),
+                ]
+        elif kind == "string":
+            value = f"{field}-{n}"
+        elif kind == "boolean":
+            value = True
+        elif kind == "double":
+            value = n + 0.125
+        elif kind.startswith(("int", "uint")):
+            value = n
+        elif kind == "builtin_interfaces/Time":
+            value = type(getattr(msg, field))(sec=n, nanosec=n + 1)
+        else:
+            raise AssertionError(f"{field}: {kind} (base {base}) is not filled by this test")
+        setattr(msg, field, value)
+    return msg
+
+
+def _plain(msg: Any) -> Any:
+    """A message (rclpy's or rosbags') as nested dicts and lists."""
+    if hasattr(msg, "get_fields_and_field_types"):
+        return {f: _plain(getattr(msg, f)) for f in msg.get_fields_and_field_types()}
+    if hasattr(msg, "__dataclass_fields__"):
+        return {
+            f: _plain(getattr(msg, f))
+            for f in msg.__dataclass_fields__
+            if not f.startswith("_") and not f.isupper()
+        }
+    if isinstance(msg, (list, tuple)) or type(msg).__name__ in ("ndarray", "array"):
+        return [_plain(x) for x in msg]
+    if hasattr(msg, "item"):
+        return msg.item()
+    return msg

@@ -31,10 +31,9 @@ import bisect
 import math
 import time
 import traceback
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-from diagnostic_msgs.msg import KeyValue
 from geometry_msgs.msg import WrenchStamped
 from rclpy.action.server import ActionServer, CancelResponse, GoalResponse, ServerGoalHandle
 from rclpy.node import Node
@@ -51,6 +50,7 @@ from winder.contract.topics import ACTION_WIND, TOPIC_DIAGNOSTICS, TOPIC_STATE, 
 from winder.errors import BadInputError
 from winder.motion.job import FIELD_SPECS, Job
 from winder.ros.graph import Who, fully_qualified
+from winder.ros.interfaces import job_report_msg
 from winder.ros.peers import Peers
 from winder.ros.qos import QOS_LATCHED_READER
 from winder.ros.run_bag import one_line
@@ -58,7 +58,6 @@ from winder.ros.settings import Settings
 from winder.ros.timers import steady_timer
 from winder_interfaces.action import Wind
 from winder_interfaces.msg import CellState
-from winder_interfaces.msg import JobReport as JobReportMsg
 
 __all__ = ["JOB_SETTINGS", "WindCell", "WindServer", "goal_params", "job_params"]
 
@@ -142,6 +141,7 @@ class Running:
     state: str = JobState.RUNNING
     tension: float = math.nan
     report: JobReport | None = None
+    consumer: str = ""  #: the consumer that sent the report (its name in the graph)
     message: str = ""
     abort_asked: bool = False
     #: when the consumer last spoke of the run (its job status, every second; a state)
@@ -274,7 +274,7 @@ class WindServer:
             self.publish(goal, min(report.steps_done, goal.total))
             result.success = report.state == JobState.DONE
             result.bag_path = report.bag
-            result.report = report_msg(report)
+            result.report = job_report_msg(report, goal.consumer)
         if result.success:
             goal.handle.succeed()
         elif goal.handle.is_cancel_requested:
@@ -346,6 +346,7 @@ class WindServer:
                 if state in FINAL_JOB_STATES and not goal.done.done():
                     goal.state = state
                     goal.report = JobReport.from_values(values)
+                    goal.consumer = st.name.split(":", 1)[0]
                     goal.message = st.message
                     goal.done.set_result(True)
 
@@ -417,13 +418,6 @@ def place(goal: Running, steps: int) -> tuple[int, int, int]:
     seg = segments[i]
     k = steps - goal.offsets[i]
     return seg.pole + 1, max(seg.layer + 1, 0), seg.turn_at(k)
-
-
-def report_msg(report: JobReport) -> JobReportMsg:
-    """The typed report of the consumer's key/values (its own keys in ``extra``)."""
-    values = {f.name: getattr(report, f.name) for f in fields(report) if f.name != "extra"}
-    extra = [KeyValue(key=k, value=v) for k, v in report.extra.items()]
-    return JobReportMsg(**{**values, "state": str(report.state)}, extra=extra)
 
 
 def goal_key(handle: ServerGoalHandle) -> bytes:

@@ -1,10 +1,14 @@
 """Operator events on ``winder/control`` as a typed record (ROS-free).
 
 :class:`ControlEvent` is the one place an event is built from or read into
-JSON: the profile node publishes ``event.to_wire()``, consumers and the interp
-node read ``ControlEvent.from_wire(text)``, which refuses anything that is
-not a well-formed event (:class:`EventError`, one line naming the key). Its
-keys and their meaning: docs/CONTRACT.md §3.3.
+a message: the profile node publishes a winder_interfaces/ControlEvent of
+``event.to_fields()``, consumers and the interp node read
+``ControlEvent.from_message(msg)``, which refuses anything that is not a
+well-formed event (:class:`EventError`, one line naming the field). Bags of
+before 2026-11-28 carry the event as JSON in a std_msgs/String
+(:meth:`ControlEvent.to_wire`, :meth:`ControlEvent.from_wire`);
+``from_message`` reads those too. The fields and their meaning:
+docs/CONTRACT.md §3.3.
 """
 
 from __future__ import annotations
@@ -13,6 +17,7 @@ import json
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from numbers import Integral
 from typing import Any
 
 from winder.contract.states import EventKind, EventSource
@@ -101,6 +106,51 @@ class ControlEvent:
         doc.update((k, v) for k, v in optional.items() if v is not None)
         return json.dumps(doc)
 
+    def to_fields(self) -> dict[str, object]:
+        """The fields of the event's winder_interfaces/ControlEvent: what is
+        not said is -1 (an integer), NaN (a number) or "" (a text)."""
+        return {
+            "event": str(self.kind),
+            "source": str(self.source or ""),
+            "run_id": self.run_id,
+            "job_id": self.job_id or "",
+            "t_ns": self.t_ns,
+            "t_rest_ns": _said_int(self.t_rest_ns),
+            "steps": _said_int(self.steps),
+            "segment": self.segment,
+            "step": self.step,
+            "factor": _said_float(self.factor),
+            "t_request_ns": _said_int(self.t_request_ns),
+            "latency_ns": _said_int(self.latency_ns),
+            "v": _said_float(self.v),
+            "a": _said_float(self.a),
+            "stop_distance": _said_float(self.stop_distance),
+            "v_max": _said_float(self.v_max),
+            "note": self.note or "",
+        }
+
+    @classmethod
+    def from_message(cls, msg: Any) -> ControlEvent:
+        """The event of a ``winder/control`` message: a
+        winder_interfaces/ControlEvent (an rclpy message, or one rosbags
+        decoded: -1, NaN and "" read as not said), or the JSON text of a
+        std_msgs/String (bags of before 2026-11-28); checked as
+        :meth:`from_wire` does (EventError, one line)."""
+        if hasattr(msg, "data"):
+            return cls.from_wire(str(msg.data))
+        doc: dict[str, Any] = {}
+        for key in _FIELDS:
+            value = getattr(msg, key)
+            if isinstance(value, float) and math.isnan(value):
+                continue
+            if key in _INT_NOT_SAID and value == -1:
+                continue
+            if key in _TEXT_NOT_SAID and value == "":
+                continue
+            # rosbags may hand a numpy scalar
+            doc[key] = int(value) if isinstance(value, Integral) and not isinstance(value, bool) else value
+        return cls.from_doc(doc)
+
     @classmethod
     def from_wire(cls, text: str) -> ControlEvent:
         """The event in a ``winder/control`` message's JSON text; EventError
@@ -180,6 +230,22 @@ class ControlEvent:
 
 #: the sources of an event (``source``)
 EVENT_SOURCES = tuple(EventSource)
+#: the fields of a winder_interfaces/ControlEvent (the JSON keys of before: ``event`` too)
+_FIELDS = (
+    "event", "source", "run_id", "job_id", "t_ns", "t_rest_ns", "steps", "segment", "step", "factor",
+    "t_request_ns", "latency_ns", "v", "a", "stop_distance", "v_max", "note",
+)  # fmt: skip
+#: the integer fields where -1 means "not said" (``segment``'s -1 is its own "not known")
+_INT_NOT_SAID = frozenset({"t_rest_ns", "steps", "t_request_ns", "latency_ns"})
+_TEXT_NOT_SAID = frozenset({"source", "job_id", "note"})
+
+
+def _said_int(value: int | None) -> int:
+    return -1 if value is None else value
+
+
+def _said_float(value: float | None) -> float:
+    return math.nan if value is None else value
 
 
 def _int(doc: Mapping[str, Any], key: str, default: int | None = None) -> int | None:

@@ -384,6 +384,15 @@ class JobReport:
             kwargs[key] = _num(str(text), kind) if kind is not str else str(text)
         return cls(state=str(kwargs.pop("state", "")), extra=extra, **kwargs)
 
+    @classmethod
+    def from_message(cls, msg: Any) -> JobReport:
+        """A report from a winder_interfaces/JobReport (``winder/report``, a
+        Wind result: an rclpy message, or one rosbags decoded)."""
+        kwargs = {f.name: getattr(msg, f.name) for f in fields(cls) if f.name not in ("state", "extra")}
+        kinds = {"int": int, "float": float}
+        typed = {k: kinds.get(str(f.type), str)(kwargs[k]) for f in fields(cls) if (k := f.name) in kwargs}
+        return cls(state=str(msg.state), extra={kv.key: kv.value for kv in msg.extra}, **typed)
+
 
 # -- a run told in words: one line each for the summaries of winder run and winder analyze ---------
 

@@ -1,8 +1,13 @@
 """The step stream between the nodes, ROS-free: job description, chunk layout
 and integrity checking.
 
-A job travels as a JSON description (:func:`describe_job`) and then as chunks
-of rows. Step rows are ``[segment, feed, fork, pole]`` (int32, absolute step
+A job travels as a description and then as chunks of rows. The description's
+canonical form here is a JSON text (:func:`describe_job`, :func:`parse_job_description`);
+on ``winder/job`` it is a winder_interfaces/JobDescription
+(:func:`description_fields` gives its fields, :func:`description_text` reads one, or
+the std_msgs/String of the bags of before 2026-11-28, back into the text).
+
+Step rows are ``[segment, feed, fork, pole]`` (int32, absolute step
 positions after the step); timed rows are ``[t_ns, segment, feed, fork, pole]``
 (int64, nanoseconds since the job start). A chunk never spans two segments.
 
@@ -18,7 +23,7 @@ import json
 import math
 import re
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -29,7 +34,7 @@ from winder.errors import BadInputError
 from winder.motion.axes import AXES
 from winder.motion.interp import interpolate_pieces, pieces_mismatch
 from winder.motion.job import FIELD_SPECS, Job, Segment
-from winder.spec import interval
+from winder.spec import Spec, interval, shorten
 
 __all__ = [
     "STEP_COLUMNS",
@@ -39,6 +44,8 @@ __all__ = [
     "JobPlan",
     "StreamChecker",
     "describe_job",
+    "description_fields",
+    "description_text",
     "parse_job_description",
     "with_source",
 ]
@@ -285,6 +292,124 @@ def parse_job_description(text: str) -> JobPlan:
         source_run_id=source_run_id,
         job_file_sha256=digest,
     )
+
+
+def _setting_text(value: Any) -> str:
+    """A job's or a ramp's setting as a KeyValue carries it: a text as it is,
+    anything else as JSON (``0.0025``, ``20``, ``true``)."""
+    return value if isinstance(value, str) else json.dumps(value)
+
+
+def _setting_value(key: str, text: str, specs: Mapping[str, Spec]) -> Any:
+    """The inverse of :func:`_setting_text`: ``text`` as the type its
+    setting in ``specs`` has (a key no setting has: JSON if it is, else the
+    text, which the job's own check then refuses)."""
+    spec = specs.get(key)
+    if spec is not None and spec.kind is str:
+        return text
+    try:
+        return json.loads(text)
+    except (ValueError, RecursionError):
+        return text
+
+
+def description_fields(text: str) -> dict[str, Any]:
+    """The fields of a winder_interfaces/JobDescription for a description's
+    JSON text (:func:`describe_job`'s, :func:`with_source`'s, or one
+    recorded before the typed message): plain values; the job's and the
+    ramp's settings as (key, value text) pairs; the stops and segments as
+    dicts of their messages' fields. The ROS side makes the message of them
+    (winder.ros.interfaces); :func:`description_text` reads it back into
+    the same text. BadInputError (one line) for a text that is no JSON object."""
+    try:
+        doc = json.loads(text)
+    except (ValueError, RecursionError) as exc:
+        raise BadInputError(f"job description is not JSON: {str(exc).splitlines()[0]}") from None
+    if not isinstance(doc, dict):
+        raise BadInputError(f"job description is a JSON {type(doc).__name__}, expected an object")
+    ramp = doc.get("ramp")
+    job = dict(doc.get("job") or {})
+    given = doc.get("source")
+    source: dict[str, Any] = given if isinstance(given, dict) else {}
+    return {
+        "format": str(doc.get("format", "")),
+        "run_id": str(doc.get("run_id", "")),
+        "job_id": str(job.get("job_id", "")),
+        "job": [(k, _setting_text(v)) for k, v in job.items()],
+        "has_ramp": ramp is not None,
+        "ramp": [(k, _setting_text(v)) for k, v in dict(ramp or {}).items()],
+        "stops": [{"segment": int(seg), "step": int(step)} for seg, step in doc.get("stops", [])],
+        "stop_pause": float(doc.get("stop_pause", 0.0)),
+        "stop_resume": str(doc.get("stop_resume", "auto")),
+        "schedule": str(doc.get("schedule", "")),
+        "job_file_sha256": str(doc.get("job_file_sha256", "")),
+        "source_bag": str(source.get("bag", "")),
+        "source_run_id": str(source.get("run_id", "")),
+        "axes": [str(a) for a in doc.get("axes", [])],
+        "joint_step": [float(x) for x in doc.get("joint_step", [])],
+        "step_lengths": [float(x) for x in doc.get("step_lengths", [])],
+        "total_steps": int(doc.get("total_steps", 0)),
+        "segments": [
+            {
+                "kind": str(s.get("kind", "")),
+                "start": [int(x) for x in s.get("start", [])],
+                "delta": [int(x) for x in s.get("delta", [])],
+                "steps": int(s.get("steps", 0)),
+                "pole": int(s.get("pole", 0)),
+                "layer": int(s.get("layer", 0)),
+            }
+            for s in doc.get("segments", [])
+        ],
+    }
+
+
+def description_text(msg: Any) -> str:
+    """The JSON text of a ``winder/job`` message, for
+    :func:`parse_job_description` (which checks it): a
+    winder_interfaces/JobDescription (by its fields: an rclpy message, or
+    one rosbags decoded) made back into :func:`describe_job`'s text, or the
+    text of a std_msgs/String (bags of before 2026-11-28)."""
+    if hasattr(msg, "data"):
+        return str(msg.data)
+    job = {kv.key: _setting_value(kv.key, kv.value, FIELD_SPECS) for kv in msg.job}
+    if msg.job_id != job.get("job_id", msg.job_id):
+        raise BadInputError(
+            f"job description: job_id {shorten(msg.job_id)} is not its job's ({shorten(str(job['job_id']))})"
+        )
+    doc: dict[str, Any] = {
+        "format": msg.format,
+        "run_id": msg.run_id,
+        "ramp": (
+            # the ramp's texts are words (profile, shaper: never JSON), its numbers JSON
+            {kv.key: _setting_value(kv.key, kv.value, {}) for kv in msg.ramp}
+            if msg.has_ramp
+            else None
+        ),
+        "stops": [[int(s.segment), int(s.step)] for s in msg.stops],
+        "stop_pause": float(msg.stop_pause),
+        "stop_resume": msg.stop_resume,
+        "schedule": msg.schedule,
+        "job_file_sha256": msg.job_file_sha256,
+        "job": job,
+        "axes": list(msg.axes),
+        "joint_step": [float(x) for x in msg.joint_step],
+        "step_lengths": [float(x) for x in msg.step_lengths],
+        "total_steps": int(msg.total_steps),
+        "segments": [
+            {
+                "kind": s.kind,
+                "start": [int(x) for x in s.start],
+                "delta": [int(x) for x in s.delta],
+                "steps": int(s.steps),
+                "pole": int(s.pole),
+                "layer": int(s.layer),
+            }
+            for s in msg.segments
+        ],
+    }
+    if msg.source_bag or msg.source_run_id:
+        doc["source"] = {"bag": msg.source_bag, "run_id": msg.source_run_id}
+    return json.dumps(doc, separators=(",", ":"))
 
 
 def _source(doc: dict[str, Any]) -> tuple[str, str]:

@@ -42,14 +42,39 @@ DEFINITIONS = {
         "byte level\nstring name\nstring message\nstring hardware_id\nKeyValue[] values"
     ),
     "diagnostic_msgs/msg/DiagnosticArray": "std_msgs/Header header\nDiagnosticStatus[] status",
-    # winder's own (winder_interfaces/msg/CellState.msg): winder/state since 2026-11-28, a
-    # DiagnosticStatus before
+    # winder's own (winder_interfaces/msg/*.msg): winder/state, winder/control and winder/job
+    # since 2026-11-28 (a DiagnosticStatus, and JSON in a String, before), winder/report
     "winder_interfaces/msg/CellState": (
         "string IDLE=idle\nstring RUNNING=running\nstring PAUSING=pausing\nstring PAUSED=paused\n"
         "string ABORTING=aborting\nstring DONE=done\nstring ABORTED=aborted\nstring FAILED=failed\n"
         "builtin_interfaces/Time stamp\nstring node\nstring state\nstring job_id\nstring run_id\n"
         "uint32 coil\nuint32 layer\nuint32 turn\nfloat64 sim_time_s\nstring message"
     ),
+    "winder_interfaces/msg/ControlEvent": (
+        "string PAUSE=pause\nstring RESUME=resume\nstring ABORT=abort\nstring OVERRIDE=override\n"
+        "string event\nstring source\nstring run_id\nstring job_id\nint64 t_ns\nint64 t_rest_ns\n"
+        "int64 steps\nint64 segment\nint64 step\nfloat64 factor\nint64 t_request_ns\n"
+        "int64 latency_ns\nfloat64 v\nfloat64 a\nfloat64 stop_distance\nfloat64 v_max\nstring note"
+    ),
+    "winder_interfaces/msg/JobDescription": (
+        "string FORMAT=winder.job/1\nstring format\nstring run_id\nstring job_id\n"
+        "diagnostic_msgs/KeyValue[] job\n"
+        "bool has_ramp\ndiagnostic_msgs/KeyValue[] ramp\nJobStop[] stops\nfloat64 stop_pause\n"
+        "string stop_resume\nstring schedule\nstring job_file_sha256\nstring source_bag\n"
+        "string source_run_id\nstring[] axes\nfloat64[] joint_step\nfloat64[] step_lengths\n"
+        "uint64 total_steps\nJobSegment[] segments"
+    ),
+    "winder_interfaces/msg/JobReport": (
+        "builtin_interfaces/Time stamp\nstring node\nstring state\nstring job_id\nstring run_id\n"
+        "uint64 steps_done\nuint64 steps_total\nuint64 steps_missing\nuint32 gaps\n"
+        "uint32 chunks_rejected\nfloat64 sim_time_s\nfloat64 wall_time_s\nstring bag\nuint32 errors\n"
+        "uint32 stalls\ndiagnostic_msgs/KeyValue[] extra"
+    ),
+    "winder_interfaces/msg/JobSegment": (
+        "string LAYER=layer\nstring INDEX=index\nstring kind\nint64[] start\nint64[] delta\n"
+        "uint64 steps\nuint32 pole\nint32 layer"
+    ),
+    "winder_interfaces/msg/JobStop": ("uint32 segment\nuint64 step"),
     "trajectory_msgs/msg/JointTrajectoryPoint": (
         "float64[] positions\nfloat64[] velocities\nfloat64[] accelerations\nfloat64[] effort\n"
         "builtin_interfaces/Duration time_from_start"

@@ -1,0 +1,62 @@
+"""winder's own ROS types (winder_interfaces) made from the core's records.
+
+The core stays ROS-free: it gives the fields (:meth:`ControlEvent.to_fields`,
+:func:`winder.contract.stream.description_fields`, :class:`JobReport`) and
+reads messages back by their fields (``ControlEvent.from_message``,
+``description_text``, ``JobReport.from_message``), which also takes what
+rosbags decodes from a bag. Here the messages are made, for the nodes that
+publish them.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import fields
+
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import KeyValue
+
+from winder.contract.events import ControlEvent
+from winder.contract.run import JobReport
+from winder.contract.stream import description_fields
+from winder_interfaces.msg import ControlEvent as ControlEventMsg
+from winder_interfaces.msg import JobDescription, JobSegment, JobStop
+from winder_interfaces.msg import JobReport as JobReportMsg
+
+__all__ = ["control_event_msg", "job_description_msg", "job_report_msg", "wall_stamp"]
+
+
+def wall_stamp(wall_ns: int | None = None) -> Time:
+    """A builtin_interfaces/Time of the wall clock (now, or ``wall_ns``)."""
+    wall = time.time_ns() if wall_ns is None else wall_ns
+    return Time(sec=wall // 1_000_000_000, nanosec=wall % 1_000_000_000)
+
+
+def control_event_msg(event: ControlEvent) -> ControlEventMsg:
+    """The winder/control message of an operator event."""
+    return ControlEventMsg(**event.to_fields())
+
+
+def job_description_msg(text: str) -> JobDescription:
+    """The winder/job message of a job description's JSON text
+    (:func:`winder.contract.stream.describe_job`)."""
+    f = description_fields(text)
+    return JobDescription(
+        **{
+            **f,
+            "job": [KeyValue(key=k, value=v) for k, v in f["job"]],
+            "ramp": [KeyValue(key=k, value=v) for k, v in f["ramp"]],
+            "stops": [JobStop(**s) for s in f["stops"]],
+            "segments": [JobSegment(**s) for s in f["segments"]],
+        }
+    )
+
+
+def job_report_msg(report: JobReport, node: str = "", stamp: Time | None = None) -> JobReportMsg:
+    """The typed final report (winder/report, a Wind result) of a consumer's
+    report: its own keys in ``extra``; ``node`` the consumer that sent it."""
+    values = {f.name: getattr(report, f.name) for f in fields(report) if f.name != "extra"}
+    extra = [KeyValue(key=k, value=str(v)) for k, v in report.extra.items()]
+    return JobReportMsg(
+        **{**values, "state": str(report.state)}, stamp=stamp or wall_stamp(), node=node, extra=extra
+    )
