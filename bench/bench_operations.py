@@ -15,7 +15,6 @@ interval at v_max (plus one sample period of clock lag, not in the figure).
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import random
 import signal
@@ -42,8 +41,9 @@ def main() -> None:
     n = 12 if ap.parse_args().quick else 60
     import rclpy
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-    from std_msgs.msg import String
     from std_srvs.srv import Trigger
+
+    from winder_interfaces.msg import ControlEvent
 
     work = Path(tempfile.mkdtemp(prefix="winder-bench-ops-"))
     domain = common_domain()
@@ -61,7 +61,12 @@ def main() -> None:
     qos = QoSProfile(
         depth=100, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
     )
-    node.create_subscription(String, "/winder/control", lambda m: events.append(json.loads(m.data)), qos)
+    node.create_subscription(
+        ControlEvent,
+        "/winder/control",
+        lambda m: events.append({"event": m.event, "latency_ns": m.latency_ns, "v": m.v}),
+        qos,
+    )
     clients = {k: node.create_client(Trigger, f"/profile_node/{k}") for k in ("pause", "resume", "abort")}
     rng = random.Random(7)
 

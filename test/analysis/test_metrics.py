@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from conftest import final_report, is_consumer, rosbags_read
 from mcap.reader import make_reader
-from support.bags import joint_arrays, step_rows
+from support.bags import control_docs, job_doc, joint_arrays, step_rows
 from support.cli import assert_one_line_error, run_cli
 
 from winder.analysis.metrics import analyze, step_kinematics
@@ -40,7 +40,7 @@ def eq7_by_hand(path: Path) -> tuple[float, float, list[float]]:
     (eq. 5 and 7 of the 2016 paper), and the mean per turn, from the raw bag."""
     ref = rosbags_read(path)
     ns = next(k for k in ref if k.endswith("/winder/job"))[: -len("/winder/job")]
-    job = json.loads(ref[f"{ns}/winder/job"][0][1].data)
+    job = job_doc(ref[f"{ns}/winder/job"][0][1])
     rows = step_rows(ref[f"{ns}/winder/step_times"])
     lx, ly = job["step_lengths"][0], job["step_lengths"][1]
     spr = job["job"]["fork_steps_per_rev"]
@@ -86,7 +86,7 @@ def test_eq7_of_the_simulated_axes(bag: Any) -> None:
     path = bag("lin2k")
     res = analyze(read_run(path))
     ref = rosbags_read(path)
-    job = json.loads(ref["/winder/job"][0][1].data)
+    job = job_doc(ref["/winder/job"][0][1])
     rows = step_rows(ref["/winder/step_times"])
     t, pos, _ = joint_arrays(ref["/winder/joint_states"])
     lx, ly = job["step_lengths"][0], job["step_lengths"][1]
@@ -176,7 +176,7 @@ def test_tracking_error_from_the_joint_topics(bag: Any) -> None:
     path = bag("lin2k")
     res = analyze(read_run(path))
     ref = rosbags_read(path)
-    js = json.loads(ref["/winder/job"][0][1].data)["joint_step"]
+    js = job_doc(ref["/winder/job"][0][1])["joint_step"]
     tc, cmd, _ = joint_arrays(ref["/winder/joint_commands"])
     ts, act, _ = joint_arrays(ref["/winder/joint_states"])
     np.testing.assert_array_equal(tc, ts)
@@ -196,7 +196,7 @@ def test_lost_steps(bag: Any) -> None:
     ref = rosbags_read(path)
     report = final_report(ref)
     cfg = json.loads(ref["/winder/sim_config"][0][1].data)
-    js = json.loads(ref["/winder/job"][0][1].data)["joint_step"]
+    js = job_doc(ref["/winder/job"][0][1])["joint_step"]
     _, cmd, _ = joint_arrays(ref["/winder/joint_commands"])
     _, act, _ = joint_arrays(ref["/winder/joint_states"])
     assert int(report["lost_steps"]) > 0
@@ -286,7 +286,7 @@ def _recorded_setup(path: Path) -> dict[str, Any]:
     """What a bag says it ran with, as rosbags decodes it: job, ramp, motors, rate, compression."""
     ref = rosbags_read(path)
     ns = next(k for k in ref if k.endswith("/winder/job"))[: -len("/winder/job")]
-    job = json.loads(ref[f"{ns}/winder/job"][0][1].data)
+    job = job_doc(ref[f"{ns}/winder/job"][0][1])
     cfg = json.loads(ref[f"{ns}/winder/sim_config"][0][1].data)
     ramp = json.loads(ref[f"{ns}/winder/profile_config"][-1][1].data)
     with next(path.glob("*.mcap")).open("rb") as f:  # the chunk compression, by the mcap library
@@ -370,10 +370,10 @@ def test_an_aborted_run_counts_the_steps_it_simulated(bag: Any) -> None:
     path = bag("abort")
     ref = rosbags_read(path)
     report = final_report(ref)
-    job = json.loads(ref["/winder/job"][0][1].data)
+    job = job_doc(ref["/winder/job"][0][1])
     total = sum(s["steps"] for s in job["segments"])
     rows = step_rows(ref["/winder/step_times"])
-    (abort,) = [e for e in (json.loads(m.data) for _, m in ref["/winder/control"]) if e["event"] == "abort"]
+    (abort,) = [e for e in control_docs(ref["/winder/control"]) if e["event"] == "abort"]
     simulated = int(report["steps_done"])
     assert report["state"] == "aborted" and 0 < simulated < total
     assert simulated == int(np.sum(rows[:, 0] <= abort["t_rest_ns"])) == abort["steps"]
@@ -455,7 +455,7 @@ def test_export_csv_holds_every_message_and_step(bag: Any, tmp_path: Path, name:
     steps = np.loadtxt(out / "step_times.csv", delimiter=",", skiprows=1, ndmin=2)
     np.testing.assert_array_equal(steps[:, [0, 2, 3, 4, 5]].astype(np.int64), rows)
     np.testing.assert_allclose(steps[:, 1], rows[:, 0] / 1e9, rtol=0, atol=1e-12)
-    events = [json.loads(m.data) for _, m in ref.get(f"{ns}/winder/control", [])]
+    events = control_docs(ref.get(f"{ns}/winder/control", []))
     with open(out / "events.csv", newline="") as f:
         listed = list(csv.DictReader(f))
     assert [(e["event"], float(e["t_s"])) for e in listed] == [

@@ -30,7 +30,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 from rosbags.rosbag2 import StoragePlugin
 from support import wait
-from support.bags import step_rows, write_bag
+from support.bags import job_doc, step_rows, write_bag
 from support.cell import servo_rect_job
 
 from winder.analysis.metrics import analyze, format_table
@@ -106,7 +106,7 @@ class Recorded:
 
     def __init__(self, path: Path) -> None:
         ref = rosbags_read(path)
-        doc = json.loads(ref["/winder/job"][0][1].data)
+        doc = job_doc(ref["/winder/job"][0][1])
         self.job = Job.from_dict(doc["job"])
         self.segments = doc["segments"]
         self.joint_step = doc["joint_step"]

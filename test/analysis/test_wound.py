@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import pytest
 from conftest import BIN, rosbags_read
-from support.bags import joint_arrays
+from support.bags import job_doc, joint_arrays
 
 from winder.analysis.wound import as_wound
 from winder.record.reader import read_run
@@ -26,7 +26,7 @@ def test_a_clean_run_lays_every_turn_in_its_place(bag: Any) -> None:
     path = bag("lin2k")
     wound = as_wound(read_run(path))
     assert wound is not None
-    job = json.loads(rosbags_read(path)["/winder/job"][0][1].data)["job"]
+    job = job_doc(rosbags_read(path)["/winder/job"][0][1])["job"]
     d, n, layers, poles = job["wire_diameter"], job["turns_per_layer"], job["layers"], job["poles"]
     assert wound.turns_per_layer() == [[n] * layers] * poles
     assert wound.defects == []
@@ -72,7 +72,7 @@ def test_a_feed_that_loses_steps_is_found_where_it_happened(bag: Any) -> None:
         raise AssertionError(f"the feed never left its command by {bound} m for good: the run is no test")
 
     early, late = lasting(wound.tolerance_m / 2), lasting(2 * wound.tolerance_m)
-    job = json.loads(ref["/winder/job"][0][1].data)["job"]
+    job = job_doc(ref["/winder/job"][0][1])["job"]
     spr = job["fork_steps_per_rev"]
     first = wound.defects[0]
     # the flyer angle at the middle of the first faulty turn (one coil, the fork turning forward)

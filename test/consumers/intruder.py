@@ -20,8 +20,8 @@ domain can) and, every ``--period`` s, forges what ``--forge`` names:
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
+import math
 import sys
 
 import numpy as np
@@ -45,7 +45,7 @@ from winder.contract.topics import (
 )
 from winder.ros.chunks import pack_timed
 from winder.ros.qos import QOS_DIAGNOSTICS, QOS_EVENTS, QOS_LATCHED, QOS_STATE, QOS_STREAM
-from winder_interfaces.msg import CellState
+from winder_interfaces.msg import CellState, ControlEvent, JobDescription
 
 KINDS = ("control", "steps", "job", "ready", "progress", "diagnostics", "state", "sim_config", "joints")
 
@@ -55,14 +55,14 @@ class Intruder(Node):
         super().__init__("intruder")
         self.forge = forge
         self.run_id = ""
-        self.job_text = ""
+        self.job: JobDescription | None = None
         self.sent = 0
         ns = self.get_namespace().strip("/")
         self.prefix = f"{ns}/" if ns else ""
         self.pub = {
-            "control": self.create_publisher(String, TOPIC_CONTROL, QOS_EVENTS),
+            "control": self.create_publisher(ControlEvent, TOPIC_CONTROL, QOS_EVENTS),
             "steps": self.create_publisher(Int64MultiArray, TOPIC_STEP_TIMES, QOS_STREAM),
-            "job": self.create_publisher(String, TOPIC_JOB, QOS_LATCHED),
+            "job": self.create_publisher(JobDescription, TOPIC_JOB, QOS_LATCHED),
             "ready": self.create_publisher(KeyValue, TOPIC_READY, QOS_LATCHED),
             "progress": self.create_publisher(KeyValue, TOPIC_PROGRESS, QOS_STATE),
             "diagnostics": self.create_publisher(DiagnosticArray, TOPIC_DIAGNOSTICS, QOS_DIAGNOSTICS),
@@ -71,7 +71,7 @@ class Intruder(Node):
             "joints": self.create_publisher(JointState, TOPIC_JOINT_STATES, QOS_STATE),
         }
         self.create_subscription(DiagnosticArray, TOPIC_DIAGNOSTICS, self.on_diagnostics, QOS_DIAGNOSTICS)
-        self.create_subscription(String, TOPIC_JOB, self.on_job, QOS_LATCHED)
+        self.create_subscription(JobDescription, TOPIC_JOB, self.on_job, QOS_LATCHED)
         self.create_timer(period, self.tick)
 
     def on_diagnostics(self, msg: DiagnosticArray) -> None:
@@ -80,12 +80,11 @@ class Intruder(Node):
             if values.get("run_id") and values.get("state") == "running":
                 self.run_id = values["run_id"]
 
-    def on_job(self, msg: String) -> None:
-        if "intruder" not in msg.data:
-            self.job_text = msg.data
+    def on_job(self, msg: JobDescription) -> None:
+        if not msg.run_id.endswith("_99"):  # not its own forgery
+            self.job = msg
             # the run's id as the run starts (its statuses say it up to 1 s later)
-            with contextlib.suppress(ValueError, KeyError, TypeError):
-                self.run_id = str(json.loads(msg.data)["run_id"]) or self.run_id
+            self.run_id = msg.run_id or self.run_id
 
     def tick(self) -> None:
         if not self.run_id:
@@ -98,12 +97,13 @@ class Intruder(Node):
 
     def forge_control(self) -> None:
         run = self.run_id
+        nan = math.nan
         for event in (
-            {"event": "abort", "run_id": run, "t_ns": 1, "t_rest_ns": 2, "steps": 10},
-            {"event": "pause", "run_id": run, "t_ns": 1, "t_rest_ns": 2, "steps": 10},
-            {"event": "override", "run_id": run, "t_ns": 1, "factor": 0.1},
+            ControlEvent(event="abort", run_id=run, t_ns=1, t_rest_ns=2, steps=10, factor=nan),
+            ControlEvent(event="pause", run_id=run, t_ns=1, t_rest_ns=2, steps=10, factor=nan),
+            ControlEvent(event="override", run_id=run, t_ns=1, t_rest_ns=-1, steps=-1, factor=0.1),
         ):
-            self.pub["control"].publish(String(data=json.dumps(event)))
+            self.pub["control"].publish(event)
 
     def forge_steps(self) -> None:
         rows = np.zeros((100, 5), np.int64)
@@ -113,11 +113,9 @@ class Intruder(Node):
         self.pub["steps"].publish(pack_timed(rows))
 
     def forge_job(self) -> None:
-        if self.job_text:
-            doc = json.loads(self.job_text)
-            doc["run_id"] = doc["run_id"].rsplit("_", 1)[0] + "_99"
-            doc["intruder"] = True
-            self.pub["job"].publish(String(data=json.dumps(doc)))
+        if self.job is not None:
+            self.job.run_id = self.job.run_id.rsplit("_", 1)[0] + "_99"
+            self.pub["job"].publish(self.job)
 
     def forge_ready(self) -> None:
         self.pub["ready"].publish(KeyValue(key="consumer", value="ready"))

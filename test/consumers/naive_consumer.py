@@ -1,5 +1,5 @@
-"""A step consumer written from the topic contract (docs/INTEGRATING.md) alone: rclpy and
-standard messages, no winder import, no StepConsumer.
+"""A step consumer written from the topic contract (docs/INTEGRATING.md) alone: rclpy,
+standard messages and winder_interfaces' types, no winder import, no StepConsumer.
 
 It announces itself on winder/ready, takes a run from winder/job, executes
 the timed steps of winder/step_times at their times (as a drive would, in
@@ -13,7 +13,6 @@ consumer test_conformance.py's ignored-abort test starts the cell with.
 
 from __future__ import annotations
 
-import json
 import sys
 import time
 from collections import deque
@@ -23,7 +22,9 @@ from _spin import spin_until_stopped
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from std_msgs.msg import Int64MultiArray, String
+from std_msgs.msg import Int64MultiArray
+
+from winder_interfaces.msg import JobDescription
 
 RELIABLE = ReliabilityPolicy.RELIABLE
 LATCHED = QoSProfile(depth=1, reliability=RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -38,7 +39,7 @@ class NaiveConsumer(Node):
         self.pub_ready = self.create_publisher(KeyValue, "winder/ready", LATCHED)
         self.pub_progress = self.create_publisher(KeyValue, "winder/progress", PROGRESS)
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS)
-        self.create_subscription(String, "winder/job", self.on_job, LATCHED)
+        self.create_subscription(JobDescription, "winder/job", self.on_job, LATCHED)
         self.sub_times = self.create_subscription(Int64MultiArray, "winder/step_times", self.on_steps, STREAM)
         self.state, self.job_id, self.run_id = "idle", "", ""
         self.total = self.done = 0
@@ -47,10 +48,9 @@ class NaiveConsumer(Node):
         self.create_timer(0.02, self.execute)
         self.create_timer(1.0, self.report)
 
-    def on_job(self, msg: String) -> None:
-        job = json.loads(msg.data)
-        self.job_id, self.run_id = job["job"].get("job_id", ""), job.get("run_id", "")
-        self.total, self.done, self.t0 = int(job["total_steps"]), 0, 0.0
+    def on_job(self, msg: JobDescription) -> None:
+        self.job_id, self.run_id = msg.job_id, msg.run_id
+        self.total, self.done, self.t0 = msg.total_steps, 0, 0.0
         self.due.clear()
         self.state = "running"
         self.report()

@@ -50,7 +50,6 @@ whose braking steps the interp node had not sent yet still ends aborted.
 
 from __future__ import annotations
 
-import json
 import os
 import re
 import shlex
@@ -213,10 +212,9 @@ class Cell:
     def __init__(self, procs: Procs, ros: Any, tmp_path: Path) -> None:
         from diagnostic_msgs.msg import DiagnosticArray, KeyValue
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-        from std_msgs.msg import String
         from std_srvs.srv import Trigger
 
-        from winder_interfaces.msg import CellState
+        from winder_interfaces.msg import CellState, ControlEvent
 
         self.procs, self.ros = procs, ros
         self.bags = tmp_path / "bags"
@@ -246,14 +244,14 @@ class Cell:
             if msg.value.isdigit():
                 self.receipts.append((time.monotonic(), msg.key, int(msg.value)))
 
-        def on_control(msg: Any) -> None:
-            self.events.append(json.loads(msg.data))
+        def on_control(msg: Any) -> None:  # a winder_interfaces/ControlEvent, as its fields
+            self.events.append({f: getattr(msg, f) for f in msg.get_fields_and_field_types()})
 
         ros.create_subscription(DiagnosticArray, "/diagnostics", on_diag, plain)
         ros.create_subscription(CellState, "/winder/state", on_state, latched)
         ros.create_subscription(KeyValue, "/winder/ready", on_ready, latched)
         ros.create_subscription(KeyValue, "/winder/progress", on_progress, plain)
-        ros.create_subscription(String, "/winder/control", on_control, latched)
+        ros.create_subscription(ControlEvent, "/winder/control", on_control, latched)
         self.Trigger = Trigger
         self.clients = {
             name: ros.create_client(Trigger, f"/{node}/{name}")

@@ -335,7 +335,7 @@ def test_an_orthocyclic_coil_runs_exact_and_is_laid_in_the_grooves(
     job = run.plan.job
     assert job.lay == "orthocyclic" and run.complete
     if extra:  # the operator's pause, resume and override were taken (the stops are the profile's own)
-        events = [json.loads(m.data)["event"] for _, m in rosbags_read(bag)["/winder/control"]]
+        events = [m.event for _, m in rosbags_read(bag)["/winder/control"]]
         assert events == ["pause", "resume", "override"]
     rows = run.steps
     # every step the job's, exactly: the interp node's cam, row for row

@@ -880,12 +880,9 @@ def start_unstepped_run(procs: Procs, ros: Any, bags: Path, *bridge_params: str)
     """The stand-in, the bridge and a fake planner (test/support/cell.py) that
     sends a job description and never a step: (the bridge process, the fake)
     once the bridge's run is on."""
-    import json
 
     from support.cell import FakeProfile
     from support.ros_probe import ready_states
-
-    from winder.contract.stream import describe_job
 
     start_standin(procs)
     bridge = procs.start(
@@ -904,7 +901,7 @@ def start_unstepped_run(procs: Procs, ros: Any, bags: Path, *bridge_params: str)
     ready = ready_states(ros)
     spin_until(ros, lambda: ready.get("consumer") == "ready", 60, "the bridge ready (winder/ready)")
     spin_until(ros, lambda: fake.pub_job.get_subscription_count() > 0, 30, "the bridge's job reader")
-    fake.pub_job.publish(fake.String(data=json.dumps(json.loads(describe_job(fake.job)))))
+    fake.publish_job()
     wait.log_has(lambda: procs.log(bridge), "run -: job br", 30, "the bridge's run", running=bridge)
     return bridge, fake
 
@@ -929,16 +926,19 @@ def test_an_abort_before_the_run_is_armed_closes_it_at_once(tmp_path: Path, proc
     """The run waits for its steps, and an abort comes (its rest at step 0):
     the run closes at once, aborted, nothing commanded; not after the stall
     (stall_abort 60 s here). (Before: 'aborting' for as long as one waited.)"""
-    import json
 
     bags = tmp_path / "bags"
     bridge, fake = start_unstepped_run(procs, ros, bags, "-p", "stall_abort:=60.0")
+    from winder.contract.events import ControlEvent
+    from winder.ros.interfaces import control_event_msg
     from winder.ros.qos import QOS_EVENTS
+    from winder_interfaces.msg import ControlEvent as ControlEventMsg
 
-    abort = {"event": "abort", "run_id": "", "job_id": "br", "t_ns": 0, "t_rest_ns": 0, "steps": 0}
-    control = fake.node.create_publisher(fake.String, "/winder/control", QOS_EVENTS)  # as the profile node's
+    abort = ControlEvent("abort", "", 0, 0, 0, job_id="br")
+    # as the profile node's
+    control = fake.node.create_publisher(ControlEventMsg, "/winder/control", QOS_EVENTS)
     spin_until(ros, lambda: control.get_subscription_count() > 0, 30, "the bridge's control reader")
-    control.publish(fake.String(data=json.dumps(abort)))
+    control.publish(control_event_msg(abort))
     [bag] = wait_for_bags(bags, 1, timeout=20)
     raw = rosbags_read(bag)
     report = final_report(raw)

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 from conftest import BIN, Procs, bag_closed, final_report, is_consumer, rosbags_read, spin_until
 from support import wait
+from support.bags import job_doc
 from support.cell import SMALL_JOB, expected_end, job_args, only_bag, timed_rows, winder_run
 from support.paths import ROOT
 from support.ros_probe import heard_diagnostics, set_params, under_way
@@ -59,7 +60,7 @@ def test_cell_records_every_step_once_in_order(tmp_path: Path, procs: Procs, pro
     assert t[0] > 0
 
     # the job, path and motor set-up travel with the recording
-    job = json.loads(bag["/winder/job"][0][1].data)
+    job = job_doc(bag["/winder/job"][0][1])
     assert job["job"]["job_id"] == "small"
     assert job["run_id"].startswith("small_")  # the run's identity travels with its job
     path = bag["/winder/path"][0][1]

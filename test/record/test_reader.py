@@ -13,6 +13,7 @@ that reads them.
 from __future__ import annotations
 
 import json
+import math
 import shutil
 import signal
 import struct
@@ -48,7 +49,13 @@ def test_run_matches_rosbags(bag: Any) -> None:
     ref = rosbags_read(path)
     assert run.complete and run.closed and not run.recovered
     assert run.job_id == "lin2k" and run.namespace == ""
-    assert run.plan.text == ref["/winder/job"][0][1].data
+    job = ref["/winder/job"][0][1]  # a winder_interfaces/JobDescription, as rosbags reads it
+    assert (job.run_id, job.job_id, job.total_steps) == (run.plan.run_id, "lin2k", run.plan.total_steps)
+    assert {kv.key: kv.value for kv in job.job}["turns_per_layer"] == str(run.plan.job.turns_per_layer)
+    assert [(s.kind, list(s.start), list(s.delta), s.steps) for s in job.segments] == [
+        (s.kind, list(s.start), list(s.delta), s.steps) for s in run.plan.segments
+    ]
+    assert list(job.joint_step) == list(run.plan.joint_step)
     cfg = json.loads(ref["/winder/sim_config"][0][1].data)
     assert run.sim_config is not None
     assert run.sim_config.model == cfg["model"] == "linear"
@@ -110,6 +117,78 @@ def test_two_cells_in_one_bag_need_a_namespace(bag: Any, tmp_path: Path) -> None
     r = run_cli("analyze", str(path), "--namespace", "/b", "--no-plots")
     assert r.returncode == 0, r.stderr
     assert "no steps recorded" in r.stdout
+
+
+def test_a_bag_of_before_the_typed_messages_reads_as_a_typed_one(tmp_path: Path) -> None:
+    """Before 2026-11-28 a bag held the job description and the operator
+    events as JSON in std_msgs/String; since, as winder_interfaces messages.
+    The same run written both ways, each by hand here (the JSON as the
+    contract gave its keys, the messages field by field), reads as the same
+    plan and the same events."""
+    from winder.contract.stream import describe_job
+    from winder.motion.job import Job
+    from winder.record.msgtypes import jazzy_store
+
+    run_id = "old_20261127_101010123_1"
+    text = describe_job(
+        Job.from_dict({"job_id": "old", "turns_per_layer": 3, "poles": 2}), run_id, stops=[(0, 2)]
+    )
+    doc = json.loads(text)
+    events = [
+        {"event": "pause", "source": "call", "run_id": run_id, "job_id": "old", "t_ns": 100,
+         "t_request_ns": 90, "latency_ns": 10, "t_rest_ns": 150, "steps": 7, "segment": 0, "step": 7,
+         "v": 10.0, "a": -2.0, "stop_distance": 1.5},
+        {"event": "resume", "source": "call", "run_id": run_id, "t_ns": 400, "steps": 7},
+        {"event": "override", "source": "schedule", "run_id": run_id, "t_ns": 500, "factor": 0.5,
+         "v_max": 1024.0, "note": "applied"},
+        {"event": "abort", "run_id": "another_20261127_101010123_2", "t_ns": 1, "t_rest_ns": 1, "steps": 0},
+    ]  # fmt: skip
+    store = jazzy_store()
+    types = store.types
+    String, KeyValue = types["std_msgs/msg/String"], types["diagnostic_msgs/msg/KeyValue"]
+    Description, Segment = (
+        types["winder_interfaces/msg/JobDescription"],
+        types["winder_interfaces/msg/JobSegment"],
+    )
+    Stop, Event = types["winder_interfaces/msg/JobStop"], types["winder_interfaces/msg/ControlEvent"]
+
+    def pairs(values: dict[str, Any]) -> list[Any]:
+        return [KeyValue(key=k, value=v if isinstance(v, str) else json.dumps(v)) for k, v in values.items()]
+
+    typed_job = Description(
+        format="winder.job/1", run_id=run_id, job_id="old", job=pairs(doc["job"]), has_ramp=False, ramp=[],
+        stops=[Stop(segment=0, step=2)], stop_pause=0.0, stop_resume="auto", schedule="", job_file_sha256="",
+        source_bag="", source_run_id="", axes=["feed", "fork", "pole"],
+        joint_step=np.array(doc["joint_step"]), step_lengths=np.array(doc["step_lengths"]),
+        total_steps=doc["total_steps"],
+        segments=[
+            Segment(kind=s["kind"], start=np.array(s["start"], np.int64),
+                    delta=np.array(s["delta"], np.int64), steps=s["steps"], pole=s["pole"], layer=s["layer"])
+            for s in doc["segments"]
+        ],
+    )  # fmt: skip
+    said = {"t_rest_ns": -1, "steps": -1, "t_request_ns": -1, "latency_ns": -1, "segment": -1, "step": 0}
+    unsaid = {k: math.nan for k in ("factor", "v", "a", "stop_distance", "v_max")}
+    typed_events = [Event(**{"source": "", "job_id": "", "note": "", **said, **unsaid, **e}) for e in events]
+    old, new = tmp_path / "old", tmp_path / "new"
+    write_bag(
+        old,
+        [("/winder/job", "std_msgs/msg/String", 0, String(data=text)),
+         *(("/winder/control", "std_msgs/msg/String", i + 1, String(data=json.dumps(e)))
+           for i, e in enumerate(events))],
+        StoragePlugin.MCAP,
+    )  # fmt: skip
+    write_bag(
+        new,
+        [("/winder/job", "winder_interfaces/msg/JobDescription", 0, typed_job),
+         *(("/winder/control", "winder_interfaces/msg/ControlEvent", i + 1, e)
+           for i, e in enumerate(typed_events))],
+        StoragePlugin.MCAP,
+    )  # fmt: skip
+    before, since = read_run(old), read_run(new)
+    assert since.plan == before.plan and since.plan.text == text
+    assert since.plan.stops == ((0, 2),) and since.plan.run_id == run_id
+    assert list(since.events) == list(before.events) == events[:3]  # the other run's abort left out
 
 
 # -- cut-short files ------------------------------------------------------------------------

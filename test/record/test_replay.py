@@ -49,6 +49,9 @@ TYPES = {
     "diagnostic_msgs/msg/DiagnosticArray": ("diagnostic_msgs.msg", "DiagnosticArray"),
     "diagnostic_msgs/msg/DiagnosticStatus": ("diagnostic_msgs.msg", "DiagnosticStatus"),
     "winder_interfaces/msg/CellState": ("winder_interfaces.msg", "CellState"),
+    "winder_interfaces/msg/ControlEvent": ("winder_interfaces.msg", "ControlEvent"),
+    "winder_interfaces/msg/JobDescription": ("winder_interfaces.msg", "JobDescription"),
+    "winder_interfaces/msg/JobReport": ("winder_interfaces.msg", "JobReport"),
 }
 
 
@@ -432,20 +435,28 @@ def test_resim_with_another_inertia(ops_bag: Path, procs: Procs, tmp_path: Path)
 
     # the operator events, but for the run id
     def events(msgs: dict[str, list[tuple[int, Any]]]) -> list[dict[str, Any]]:
+        # winder_interfaces/ControlEvent, as rosbags reads it: its fields (NaN, not said, as None)
+        fields = [f for _, m in msgs["/winder/control"][:1] for f in m.__dataclass_fields__ if f.islower()]
         return [
-            {k: v for k, v in json.loads(m.data).items() if k != "run_id"} for _, m in msgs["/winder/control"]
+            {f: None if getattr(m, f) != getattr(m, f) else getattr(m, f) for f in fields if f != "run_id"}
+            for _, m in msgs["/winder/control"]
         ]
 
     assert events(new_msgs) == events(old_msgs) and events(old_msgs)
     config = json.loads(new_msgs["/winder/sim_config"][0][1].data)
-    old_run = json.loads(old_msgs["/winder/job"][0][1].data)["run_id"]
+    old_run = old_msgs["/winder/job"][0][1].run_id
     assert config["source_bag"] == str(ops_bag.resolve()) and config["source_run_id"] == old_run
     assert (
         config["axes"]["fork"]["J"] == new_j
         and config["axes"]["feed"] == json.loads(old_msgs["/winder/sim_config"][0][1].data)["axes"]["feed"]
     )
-    new_run = json.loads(new_msgs["/winder/job"][0][1].data)["run_id"]
+    new_job, old_job = new_msgs["/winder/job"][0][1], old_msgs["/winder/job"][0][1]
+    new_run = new_job.run_id
     assert new_run != old_run and new.name == new_run
+    # the same job, named a re-simulation of the recorded run
+    assert (new_job.source_bag, new_job.source_run_id) == (str(ops_bag.resolve()), old_run)
+    assert [(kv.key, kv.value) for kv in new_job.job] == [(kv.key, kv.value) for kv in old_job.job]
+    assert [list(s.delta) for s in new_job.segments] == [list(s.delta) for s in old_job.segments]
     # the path and the ramp are recorded too, for the new run
     assert new_msgs["/winder/path"][0][1].header.frame_id == new_run
     ramp = json.loads(new_msgs["/winder/profile_config"][0][1].data)

@@ -124,12 +124,13 @@ def fake_cell(rclpy: Any, namespace: str) -> tuple[list[Any], Any]:
     there), and a node ``sim_node`` publishing /diagnostics; (the two nodes,
     sim_node's /diagnostics publisher)."""
     from diagnostic_msgs.msg import DiagnosticArray
-    from std_msgs.msg import Int32MultiArray, String
+    from std_msgs.msg import Int32MultiArray
 
     from winder.ros.qos import QOS_DIAGNOSTICS, QOS_LATCHED, QOS_STREAM
+    from winder_interfaces.msg import JobDescription
 
     interp = rclpy.create_node("interp_node", namespace=namespace)
-    interp.create_publisher(String, "winder/job", QOS_LATCHED)
+    interp.create_publisher(JobDescription, "winder/job", QOS_LATCHED)
     interp.create_publisher(Int32MultiArray, "winder/steps", QOS_STREAM)
     sim = rclpy.create_node("sim_node", namespace=namespace)
     return [interp, sim], sim.create_publisher(DiagnosticArray, "/diagnostics", QOS_DIAGNOSTICS)
@@ -389,7 +390,7 @@ def test_a_nodes_message_heard_before_the_graph_shows_its_part_is_held_not_blame
     in the interp node's statuses and so in ``winder run``'s summary as
     "ignored, foreign", and its word was lost till it was said again)."""
     from diagnostic_msgs.msg import KeyValue
-    from std_msgs.msg import Int64MultiArray, String
+    from std_msgs.msg import Int64MultiArray
     from trajectory_msgs.msg import JointTrajectory
 
     from winder.contract.topics import TOPIC_READY
@@ -397,6 +398,7 @@ def test_a_nodes_message_heard_before_the_graph_shows_its_part_is_held_not_blame
     from winder.ros.qos import QOS_EVENTS, QOS_LATCHED, QOS_STREAM
     from winder.ros.ready import Readiness
     from winder.ros.sender import SenderExecutor
+    from winder_interfaces.msg import ControlEvent
 
     node = rclpy_default.create_node("interp_node", namespace="/c5")
     executor = SenderExecutor()
@@ -406,7 +408,7 @@ def test_a_nodes_message_heard_before_the_graph_shows_its_part_is_held_not_blame
     graph = PartHidden(node, "/c5/winder/path")
     profile = rclpy_default.create_node("profile_node", namespace="/c5")
     profile.create_publisher(Int64MultiArray, "winder/step_times", QOS_STREAM)
-    profile.create_publisher(String, "winder/control", QOS_EVENTS)
+    profile.create_publisher(ControlEvent, "winder/control", QOS_EVENTS)
     profile.create_publisher(JointTrajectory, "winder/path", QOS_LATCHED)
     ready = profile.create_publisher(KeyValue, "winder/ready", QOS_LATCHED)
     try:
@@ -493,21 +495,20 @@ def test_a_sender_in_a_part_no_node_plays_is_refused_in_its_name_after_the_hold(
     in a namespace where no node plays the profile node's part (a forger)
     is held, and refused in its name once the hold ends (:data:`HOLD` s of
     the node's own time), never acted on."""
-    from std_msgs.msg import String
-
     from winder.contract.topics import TOPIC_CONTROL
     from winder.ros.peers import HOLD, Peers
     from winder.ros.qos import QOS_EVENTS
     from winder.ros.sender import SenderExecutor
+    from winder_interfaces.msg import ControlEvent
 
     node = rclpy_default.create_node("interp_node", namespace="/c6")
     executor = SenderExecutor()
     executor.add_node(node)
     peers = Peers(node)
     acted: list[Any] = []
-    peers.subscribe(String, TOPIC_CONTROL, acted.append, QOS_EVENTS)
+    peers.subscribe(ControlEvent, TOPIC_CONTROL, acted.append, QOS_EVENTS)
     forger = rclpy_default.create_node("forger", namespace="/c6")
-    pub = forger.create_publisher(String, "winder/control", QOS_EVENTS)
+    pub = forger.create_publisher(ControlEvent, "winder/control", QOS_EVENTS)
     try:
         matched_both(pub, node, "/c6/winder/control")
         wait.until(
@@ -517,7 +518,7 @@ def test_a_sender_in_a_part_no_node_plays_is_refused_in_its_name_after_the_hold(
             10,
             "the forger named on the graph",
         )
-        pub.publish(String(data='{"event": "abort"}'))
+        pub.publish(ControlEvent(event="abort", run_id="r", t_ns=1, t_rest_ns=2, steps=10))
         spin_executor(executor, lambda: peers.held.get(TOPIC_CONTROL), 10, "the forger's message held")
         spin_executor(
             executor,

@@ -305,10 +305,11 @@ def test_nodes_survive_junk_jobs_chunks_and_receipts(tmp_path: Path, procs: Proc
     part reaches the checks behind: test_sim_node_reports_a_malformed_chunk...)"""
     from conftest import spin_until
     from diagnostic_msgs.msg import DiagnosticArray, KeyValue
-    from std_msgs.msg import Int32MultiArray, Int64MultiArray, String
+    from std_msgs.msg import Int32MultiArray, Int64MultiArray
 
     from winder.ros.chunks import pack_steps, pack_timed
     from winder.ros.qos import QOS_LATCHED, QOS_STATE, QOS_STREAM
+    from winder_interfaces.msg import JobDescription
 
     seen: list[str] = []
     ros.create_subscription(
@@ -324,7 +325,7 @@ def test_nodes_survive_junk_jobs_chunks_and_receipts(tmp_path: Path, procs: Proc
 
     topics = ("job", "steps", "times", "progress")
     junk = {t: rclpy.create_node(f"junk_{t}", context=ros.context) for t in topics}
-    pub_job = junk["job"].create_publisher(String, "/winder/job", QOS_LATCHED)
+    pub_job = junk["job"].create_publisher(JobDescription, "/winder/job", QOS_LATCHED)
     pub_steps = junk["steps"].create_publisher(Int32MultiArray, "/winder/steps", QOS_STREAM)
     pub_times = junk["times"].create_publisher(Int64MultiArray, "/winder/step_times", QOS_STREAM)
     pub_progress = junk["progress"].create_publisher(KeyValue, "/winder/progress", QOS_STATE)
@@ -342,14 +343,14 @@ def test_nodes_survive_junk_jobs_chunks_and_receipts(tmp_path: Path, procs: Proc
         "the nodes' subscriptions on each junk topic",
         heard=lambda: {t: pub.get_subscription_count() for t, (pub, _) in pubs.items()},
     )
-    for text in [
-        "[1,2]",
-        '{"format": "winder.job/1"}',
-        '{"format": "winder.job/1", "job": null}',
-        "{",
-        '"x"',
+    for description in [
+        JobDescription(),  # no format
+        JobDescription(format=JobDescription.FORMAT),  # no segments
+        JobDescription(format=JobDescription.FORMAT, job=[KeyValue(key="layers", value="x")]),
+        JobDescription(format=JobDescription.FORMAT, job=[KeyValue(key="no_such_field", value="1")]),
+        JobDescription(format=JobDescription.FORMAT, job_id="a", job=[KeyValue(key="job_id", value="b")]),
     ]:
-        pub_job.publish(String(data=text))
+        pub_job.publish(description)
         # paced, not a wait: a latched writer keeps one message, so each junk job goes out alone
         time.sleep(0.2)
     pub_steps.publish(pack_steps(np.zeros((0, 4), np.int32)))

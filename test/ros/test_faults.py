@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 import pytest
 from conftest import Procs, bag_closed, is_consumer, rosbags_read, spin_until
+from support.bags import job_doc
 from support.cell import SMALL_JOB, FakeProfile, expected_end, job_args, only_bag, timed_rows, winder_run
 from support.ros_probe import heard_diagnostics, under_way
 
@@ -194,7 +195,7 @@ def test_two_cells_in_two_namespaces_do_not_interfere(tmp_path: Path, procs: Pro
         out, err = p.communicate(timeout=300)
         assert p.returncode == 0, out + err
         bag = rosbags_read(only_bag(tmp_path / ns))
-        job = json.loads(bag[f"/{ns}/winder/job"][0][1].data)
+        job = job_doc(bag[f"/{ns}/winder/job"][0][1])
         assert job["job"]["job_id"] == jobs[ns]["job_id"]
         rows = timed_rows(bag, f"/{ns}/winder/step_times")
         assert rows.shape[0] == job["total_steps"]  # nothing from the other cell

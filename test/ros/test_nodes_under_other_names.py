@@ -262,16 +262,17 @@ def test_the_graph_and_the_watch_find_the_consumer_by_its_part(ros: Any) -> None
             n.destroy_node()
 
 
-#: A third-party step consumer in a few lines of rclpy, no winder import: it
+#: A third-party step consumer in a few lines of rclpy and winder_interfaces, no winder import: it
 #: takes each chunk as it comes, acknowledges it and reports its job status
 #: under its own node name WITHOUT a role (a driver written before roles). It
 #: declares no parameters, records no bag, and its report has none of the
 #: simulator's keys.
 DRIVER = """
-import json, sys, rclpy
+import sys, rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from std_msgs.msg import Int64MultiArray, String
+from std_msgs.msg import Int64MultiArray
+from winder_interfaces.msg import JobDescription
 R = ReliabilityPolicy.RELIABLE
 LATCHED = QoSProfile(depth=1, reliability=R, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 rclpy.init(args=sys.argv)
@@ -290,9 +291,7 @@ def report():
     kvs = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
     diag.publish(DiagnosticArray(status=[DiagnosticStatus(name=name, message=run["state"], values=kvs)]))
 def on_job(msg):
-    doc = json.loads(msg.data)
-    run.update(state="running", job_id=doc["job"]["job_id"], run_id=doc["run_id"], done=0)
-    run["total"] = doc["total_steps"]
+    run.update(state="running", job_id=msg.job_id, run_id=msg.run_id, done=0, total=msg.total_steps)
     report()
 def on_steps(msg):
     if run["state"] != "running":
@@ -302,7 +301,7 @@ def on_steps(msg):
     if run["done"] >= run["total"]:
         run["state"] = "done"
         report()
-node.create_subscription(String, "winder/job", on_job, LATCHED)
+node.create_subscription(JobDescription, "winder/job", on_job, LATCHED)
 times = node.create_subscription(Int64MultiArray, "winder/step_times", on_steps,
                                  QoSProfile(depth=1000, reliability=R, history=HistoryPolicy.KEEP_ALL))
 node.create_timer(1.0, report)

@@ -11,7 +11,6 @@ nothing of it in the bag.
 
 from __future__ import annotations
 
-import json
 import re
 import subprocess
 import sys
@@ -22,6 +21,7 @@ import numpy as np
 import pytest
 from conftest import BIN, Procs, final_report, rosbags_read
 from support import wait
+from support.bags import control_docs
 from support.paths import TEST
 
 from winder.procs import popen
@@ -100,11 +100,9 @@ def recorded(bag: Path) -> tuple[np.ndarray, list[dict[str, Any]], dict[str, lis
     chunks = [np.asarray(m.data, np.int64).reshape(-1, 5) for _, m in msgs["/c1/winder/step_times"]]
     rows = np.concatenate(chunks)
 
-    events = []
-    for _, m in msgs.get("/c1/winder/control", []):
-        doc = json.loads(m.data)
+    events = control_docs(msgs.get("/c1/winder/control", []))
+    for doc in events:
         doc.pop("run_id")
-        events.append(doc)
     return rows, events, msgs
 
 

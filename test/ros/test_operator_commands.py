@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 import pytest
 from conftest import Procs, closed_bags, rosbags_read
+from support.bags import control_docs
 from support.oracles import ruckig_stop
 
 from winder.analysis.metrics import analyze
@@ -62,7 +63,7 @@ def positions() -> np.ndarray:
 
 
 def events(raw: dict[str, list[tuple[int, Any]]]) -> list[dict[str, Any]]:
-    return [json.loads(m.data) for _, m in raw.get("/winder/control", [])]
+    return control_docs(raw.get("/winder/control", []))
 
 
 def cell_states(raw: dict[str, list[tuple[int, Any]]]) -> list[dict[str, str]]:

@@ -174,12 +174,10 @@ def test_no_steps_yet_in_real_time_is_a_warning(tmp_path: Path, procs: Procs, ro
     the axes waiting at rest with the run's time not started; when the steps
     come the run completes with no ERROR. (Before: an ERROR, and an aborted
     run exited 1, "failed", instead of 3.)"""
-    import json
 
     from diagnostic_msgs.msg import DiagnosticStatus
     from support.cell import FakeProfile
 
-    from winder.contract.stream import describe_job
     from winder.motion.job import Job
     from winder.ros.chunks import pack_timed
 
@@ -190,7 +188,7 @@ def test_no_steps_yet_in_real_time_is_a_warning(tmp_path: Path, procs: Procs, ro
     fake = FakeProfile(ros, Job(job_id="late", turns_per_layer=2, layers=1, poles=1, fork_steps_per_rev=256))
     wait.spin_until(ros, lambda: fake.pub.get_subscription_count() > 0, 30, "the sim node's step reader")
     wait.spin_until(ros, lambda: any(is_consumer(n, v) for n, _, v in seen), 30, "the sim node's status")
-    fake.pub_job.publish(fake.String(data=json.dumps(json.loads(describe_job(fake.job)))))
+    fake.publish_job()
     wait.spin_until(ros, lambda: stalls(seen), 30, "a stall report", heard=lambda: seen[-5:])
     for chunk in fake.chunks(128):
         fake.pub.publish(pack_timed(chunk))

@@ -16,7 +16,6 @@ comes behind the clock is executed at it, counted and reported.
 
 from __future__ import annotations
 
-import json
 import os
 import signal
 import sys
@@ -27,6 +26,7 @@ import numpy as np
 import pytest
 from conftest import Procs, closed_bags, is_consumer, rosbags_read, spin_until
 from support import wait
+from support.bags import control_docs
 from support.paths import TEST
 from support.ros_probe import heard_diagnostics, set_params
 
@@ -116,7 +116,7 @@ def check_complete(bag: Path) -> tuple[Any, dict[str, list[tuple[int, Any]]]]:
 
 
 def control_events(raw: dict[str, list[tuple[int, Any]]]) -> list[dict[str, Any]]:
-    return [json.loads(m.data) for _, m in raw.get("/winder/control", [])]
+    return control_docs(raw.get("/winder/control", []))
 
 
 def test_sim_node_held_up_around_the_resume(tmp_path: Path, procs: Procs, ros: Any) -> None:

@@ -93,18 +93,18 @@ class Goal:
         return answer.status, answer.result
 
 
-def mcap_cell_states(bag: Path) -> list[str]:
-    """The states on winder/state, read with the mcap library: its schema is
-    winder_interfaces/msg/CellState in ros2msg, each message decoded by a
-    rosbags store made from that schema alone."""
+def mcap_messages(bag: Path, topic: str, msgtype: str) -> list[Any]:
+    """The messages on ``topic``, read with the mcap library: its schema must
+    be ``msgtype`` in ros2msg (with the types it is made of after it), each
+    message decoded by a rosbags store made from that schema alone."""
     from mcap.reader import make_reader
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     [path] = bag.glob("*.mcap")
     out = []
     with path.open("rb") as f:
-        for schema, _channel, message in make_reader(f).iter_messages(topics=["/winder/state"]):
-            assert (schema.name, schema.encoding) == ("winder_interfaces/msg/CellState", "ros2msg")
+        for schema, _channel, message in make_reader(f).iter_messages(topics=[topic]):
+            assert (schema.name, schema.encoding) == (msgtype, "ros2msg")
             store = get_typestore(Stores.EMPTY)
             text = schema.data.decode()
             main, _, deps = text.partition("\n" + "=" * 80 + "\n")
@@ -113,8 +113,27 @@ def mcap_cell_states(bag: Path) -> list[str]:
                 head, _, body = dep.partition("\n")
                 types.update(get_types_from_msg(body, head.removeprefix("MSG: ").strip()))
             store.register(types)
-            out.append(store.deserialize_cdr(message.data, schema.name).state)
+            out.append(store.deserialize_cdr(message.data, schema.name))
     return out
+
+
+def latched_report(ros: Any) -> Any:
+    """The last final report on /winder/report, as a subscriber that comes
+    after it gets it (latched)."""
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    from winder_interfaces.msg import JobReport
+
+    got: list[Any] = []
+    qos = QoSProfile(
+        depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+    )
+    sub = ros.create_subscription(JobReport, "/winder/report", got.append, qos)
+    try:
+        wait.spin_until(ros, lambda: got, 30, "the latched final report on /winder/report")
+    finally:
+        ros.destroy_subscription(sub)
+    return got[-1]
 
 
 @pytest.fixture
@@ -158,7 +177,29 @@ def test_a_goal_winds_a_part(procs: Procs, tmp_path: Path, ros: Any, client: Any
         ("done", result.run_id, "sim_node"),
     ]
     assert (states[-1].coil, states[-1].layer, states[-1].turn) == (2, 1, 8)
-    assert mcap_cell_states(bag) == ["running", "done"]
+    assert [m.state for m in mcap_messages(bag, "/winder/state", "winder_interfaces/msg/CellState")] == [
+        "running",
+        "done",
+    ]
+    # the job description, typed: the same by mcap's schema as by rosbags'
+    [job] = mcap_messages(bag, "/winder/job", "winder_interfaces/msg/JobDescription")
+    [(_, recorded_job)] = read["/winder/job"]
+    assert (job.run_id, job.job_id, job.total_steps) == (result.run_id, "part_a", total)
+    assert [(s.kind, list(s.delta), s.steps) for s in job.segments] == [
+        (s.kind, list(s.delta), s.steps) for s in recorded_job.segments
+    ]
+    assert [(s.kind, list(s.delta), s.steps) for s in job.segments] == [
+        (str(s.kind), list(s.delta), s.steps) for s in Job(**JOB, job_id="part_a").segments()
+    ]
+    # the final report, typed on winder/report: in the bag, and latched for a late reader
+    [(_, typed)] = read["/winder/report"]
+    [typed_by_mcap] = mcap_messages(bag, "/winder/report", "winder_interfaces/msg/JobReport")
+    assert typed.node == typed_by_mcap.node == report.node == "sim_node"
+    for name in ("state", "run_id", "steps_done", "steps_total", "steps_missing", "bag"):
+        assert getattr(typed, name) == getattr(typed_by_mcap, name) == getattr(report, name), name
+    assert {kv.key: kv.value for kv in typed.extra} == {kv.key: kv.value for kv in report.extra}
+    late = latched_report(ros)
+    assert (late.run_id, late.state, late.node, late.steps_done) == (result.run_id, "done", "sim_node", total)
     extra = {kv.key: kv.value for kv in report.extra}
     assert extra and all(recorded[k] == v for k, v in extra.items())
     # feedback: the run's id, steps that only grow, up to the total, where they reached

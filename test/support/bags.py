@@ -244,3 +244,26 @@ def rewrite(raw: RawBag, out: Path, compression: str) -> Path:
         rec.write(raw.connections[cid].topic, t, data, exact=True)
     rec.close()
     return out
+
+
+def job_doc(msg: Any) -> dict[str, Any]:
+    """A recorded ``winder/job`` message (a winder_interfaces/JobDescription, or
+    the std_msgs/String of bags of before 2026-11-28) as its description's
+    JSON keys, for a test about something else (the typed form is checked
+    against the text in test/contract/test_typed_messages.py)."""
+    import json
+
+    from winder.contract.stream import description_text
+
+    doc: dict[str, Any] = json.loads(description_text(msg))
+    return doc
+
+
+def control_docs(msgs: list[tuple[int, Any]]) -> list[dict[str, Any]]:
+    """Recorded ``winder/control`` messages as their events' JSON keys (a key
+    not said left out), typed or the String of older bags."""
+    import json
+
+    from winder.contract.events import ControlEvent
+
+    return [json.loads(ControlEvent.from_message(m).to_wire()) for _, m in msgs]

@@ -108,31 +108,37 @@ class FakeProfile:
 
     def __init__(self, node: Any, job: Job) -> None:
         from diagnostic_msgs.msg import DiagnosticArray
-        from std_msgs.msg import Int32MultiArray, Int64MultiArray, String
+        from std_msgs.msg import Int32MultiArray, Int64MultiArray
         from trajectory_msgs.msg import JointTrajectory
 
         from winder.ros.qos import QOS_LATCHED, QOS_STREAM
+        from winder_interfaces.msg import ControlEvent, JobDescription
 
         self.node = node
         self.job = job
-        self.pub_job = node.create_publisher(String, "/winder/job", QOS_LATCHED)
+        self.pub_job = node.create_publisher(JobDescription, "/winder/job", QOS_LATCHED)
         self.pub = node.create_publisher(Int64MultiArray, "/winder/step_times", QOS_STREAM)
         # it stands in for the cell's interp and profile node, and the sim node acts only on
         # theirs (docs/SECURITY.md): it has their parts' endpoints (winder.contract.trust.SIGNS)
         self.parts = [
             node.create_publisher(Int32MultiArray, "/winder/steps", QOS_STREAM),
-            node.create_publisher(String, "/winder/control", QOS_STREAM),
+            node.create_publisher(ControlEvent, "/winder/control", QOS_STREAM),
             node.create_publisher(JointTrajectory, "/winder/path", QOS_LATCHED),
         ]
         self.statuses: list[tuple[int, str, dict[str, str]]] = []
         node.create_subscription(DiagnosticArray, "/diagnostics", self._diag, 100)
-        self.String = String
 
     def _diag(self, msg: Any) -> None:
         for s in msg.status:
             self.statuses.append(
                 (s.level[0], s.name + " | " + s.message, {kv.key: kv.value for kv in s.values})
             )
+
+    def publish_job(self) -> None:
+        """The job's description on winder/job, as the interp node sends it."""
+        from winder.ros.interfaces import job_description_msg
+
+        self.pub_job.publish(job_description_msg(describe_job(self.job)))
 
     def chunks(self, size: int) -> list[np.ndarray]:
         out = []
@@ -163,7 +169,7 @@ class FakeProfile:
             30,
             "the sim node's status",
         )
-        self.pub_job.publish(self.String(data=describe_job(self.job)))
+        self.publish_job()
         # the job description taken first, as the real profile node sends it: the sim node's run is on
         spin_until(
             self.node,

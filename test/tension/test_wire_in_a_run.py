@@ -16,6 +16,7 @@ import pytest
 import scipy.signal
 from conftest import Procs, rosbags_read
 from support import wait
+from support.bags import job_doc
 from support.cell import only_bag, servo_rect_job, winder_run
 from support.paths import BIN
 
@@ -50,7 +51,7 @@ def test_the_recorded_tension_is_the_recorded_flyers(tmp_path: Path, procs: Proc
     assert config["tensioner"] == "dancer"
 
     # the take-up, worked out here from the recorded flyer: the layer is the one the feed is on
-    job = Job.from_dict(json.loads(bag["/winder/job"][0][1].data)["job"])
+    job = Job.from_dict(job_doc(bag["/winder/job"][0][1])["job"])
     plan_layers = [seg for seg in job.segments() if seg.kind.winds]
     fork_per_layer = [(seg.start[1], seg.start[1] + seg.delta[1]) for seg in plan_layers]
     assert len(plan_layers) == 2

@@ -53,8 +53,9 @@ LIVE_TOPICS = {
     "/winder/state": "winder_interfaces/msg/CellState",
     "/winder/progress": "diagnostic_msgs/msg/KeyValue",
     "/winder/path": "trajectory_msgs/msg/JointTrajectory",
-    "/winder/control": "std_msgs/msg/String",
-    "/winder/job": "std_msgs/msg/String",
+    "/winder/control": "winder_interfaces/msg/ControlEvent",
+    "/winder/job": "winder_interfaces/msg/JobDescription",
+    "/winder/report": "winder_interfaces/msg/JobReport",
     "/winder/sim_config": "std_msgs/msg/String",
     "/winder/profile_config": "std_msgs/msg/String",
     "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
@@ -280,8 +281,8 @@ async def watch_live(port: int, job_id: str, ns: str = "") -> Client:
     await client.drain(0.5)
     check_joint_states(client.of(states), job_id)
     values = check_state(client.of(state))
-    description = json.loads(client.of(job)[-1].msg.data)
-    assert description["job"]["job_id"] == job_id and description["run_id"] == values["run_id"]
+    description = client.of(job)[-1].msg  # a winder_interfaces/JobDescription
+    assert description.job_id == job_id and description.run_id == values["run_id"]
     names = {s.name for d in client.of("/diagnostics") for s in d.msg.status}
     assert all(in_namespace(n, ns) for n in names), f"statuses of another namespace served: {names}"
     await client.ws.close()
@@ -379,7 +380,7 @@ def forged(d: Data) -> bool:
     if d.topic.endswith("/winder/state"):
         return m.message == "forged"
     if d.topic.endswith("/winder/job"):
-        return "intruder" in json.loads(m.data)
+        return bool(m.run_id.endswith("_99"))  # the intruder's forgery of the run's description
     if d.topic == "/diagnostics":
         return any(
             st.message == "forged ERROR" or any(kv.value == "/FAKE" for kv in st.values) for st in m.status
@@ -449,7 +450,7 @@ def test_view_serves_a_replay_where_no_cell_runs(
 
     client = asyncio.run(watch())
     assert all(list(d.msg.name) == JOINTS for d in client.of(states))
-    assert json.loads(client.of(job)[-1].msg.data)["job"]["job_id"] == "pole1"
+    assert client.of(job)[-1].msg.job_id == "pole1"
     assert procs.stop(view) == 0
     out = procs.log(view)
     assert "ignored, foreign" not in out and "Traceback" not in out, out
@@ -533,7 +534,7 @@ def test_play_foxglove_plays_pauses_and_seeks(procs: Procs, tmp_path: Path) -> N
         assert seek["did_seek"] and seek["time"] == middle and seek["status"] == 0
         assert all(d.log_time >= middle for d in client.of("/winder/joint_states"))
         (job,) = client.of("/winder/job")  # latched: its last message before the seek, sent first
-        assert job.log_time < middle and json.loads(job.msg.data)["job"]["job_id"] == "rw400"
+        assert job.log_time < middle and job.msg.job_id == "rw400"
 
         await client.control("play", 100.0, None, "fast")
         await client.until(lambda: any(s["status"] == 3 for s in client.states), 60, "the end (Ended)")

@@ -126,15 +126,18 @@ def script_fields(source: str) -> set[str]:
 
 
 def json_reads(source: str) -> dict[str, set[str]]:
-    """The keys a script reads from a topic's JSON text, by topic: after
-    ``event.topic === "T"``, ``JSON.parse(event.message.data).KEY`` or
-    ``NAME.KEY`` of a ``const NAME = JSON.parse(event.message.data)``."""
+    """The keys a script reads from a topic's JSON text (or typed message),
+    by topic: after ``event.topic === "T"``, ``PARSE.KEY`` or ``NAME.KEY``
+    of a ``const NAME = PARSE``, where PARSE is
+    ``JSON.parse(event.message.data)`` or ``jobOf(event.message)`` (the
+    job's fields, typed or JSON)."""
     reads: dict[str, set[str]] = {}
     topic, parsed = "", ""
+    parse = r"(?:JSON\.parse\(event\.message\.data\)|jobOf\(event\.message\))"
     token = re.compile(
         r'event\.topic === "(?P<topic>[^"]+)"'
-        r"|const (?P<name>\w+) = JSON\.parse\(event\.message\.data\);"
-        r"|JSON\.parse\(event\.message\.data\)\.(?P<key>\w+)"
+        rf"|const (?P<name>\w+) = {parse};"
+        rf"|{parse}\.(?P<key>\w+)"
         r"|\b(?P<obj>\w+)\.(?P<attr>\w+)"
     )
     for m in token.finditer(source):
@@ -218,11 +221,11 @@ def test_foxglove_scripts_read_what_the_bag_holds(foxglove: dict[str, Any], mess
         "/winder/job": {"axes", "joint_step", "total_steps"},
         "/winder/sim_config": {"clock_origin_ns"},
     }
-    for topic, keys in reads.items():
-        text = json.loads(messages[topic][0][1].data)
-        assert keys <= set(text), (topic, keys - set(text))
-    job = json.loads(messages["/winder/job"][0][1].data)
-    assert job["axes"] == list(JOINTS) and len(job["joint_step"]) == 3
+    config = json.loads(messages["/winder/sim_config"][0][1].data)
+    assert reads["/winder/sim_config"] <= set(config)
+    job = messages["/winder/job"][0][1]  # a winder_interfaces/JobDescription: the keys are its fields
+    assert all(hasattr(job, key) for key in reads["/winder/job"])
+    assert list(job.axes) == list(JOINTS) and len(job.joint_step) == 3 and job.total_steps > 0
 
 
 def test_the_foxglove_scripts_premises_hold_in_the_bag(messages: Messages) -> None:
@@ -242,11 +245,11 @@ def test_the_foxglove_scripts_premises_hold_in_the_bag(messages: Messages) -> No
     assert all(m.layout.dim[1].label.startswith("t_ns,") for m in step_times)
     t_ns = np.concatenate([np.asarray(m.data).reshape(-1, m.layout.dim[1].size)[:, 0] for m in step_times])
     assert np.all(np.diff(t_ns) > 0)
-    job = json.loads(messages["/winder/job"][0][1].data)
+    total = int(messages["/winder/job"][0][1].total_steps)  # a winder_interfaces/JobDescription
     origin = json.loads(messages["/winder/sim_config"][0][1].data)["clock_origin_ns"]
     first, last = states[0], states[-1]
     done = np.searchsorted(t_ns, [s * 10**9 + ns - origin for s, ns, _ in (first, last)], side="right")
-    assert done.tolist() == [0, job["total_steps"]] and len(t_ns) == job["total_steps"]
+    assert done.tolist() == [0, total] and len(t_ns) == total
 
 
 def test_the_foxglove_resolver_reports_wrong_paths(messages: Messages) -> None:

@@ -6,7 +6,7 @@ In:  parameters (the fields of winder.motion.job.Job, the ramp a run may bring
      (rcl_interfaces/SetParametersAtomically: set the run's settings and start
      it, in one call, all or nothing; a ramp.* value in it makes the run bring
      that ramp, ramp.source job), winder/ready, winder/progress.
-Out: winder/job (std_msgs/String, JSON job description with the run id, latched),
+Out: winder/job (winder_interfaces/JobDescription, the job with the run id, latched),
      winder/steps (std_msgs/Int32MultiArray chunks), /diagnostics.
 
 Every start is a run with its own id (:func:`winder.contract.stream.make_run_id`):
@@ -26,7 +26,7 @@ from diagnostic_msgs.msg import KeyValue
 from rcl_interfaces.msg import SetParametersResult
 from rcl_interfaces.srv import SetParametersAtomically
 from rclpy.parameter import Parameter
-from std_msgs.msg import Int32MultiArray, String
+from std_msgs.msg import Int32MultiArray
 from std_srvs.srv import Trigger
 
 from winder.contract.jobfile import check_interp_settings, load_job_file_hashed
@@ -39,6 +39,7 @@ from winder.motion.interp import interpolate_pieces
 from winder.motion.job import FIELD_SPECS, Job
 from winder.ros.chunks import STEPS_CDR
 from winder.ros.diagnostics import ERROR, OK, Diagnostics
+from winder.ros.interfaces import job_description_msg
 from winder.ros.managed import ManagedNode
 from winder.ros.peers import Peers, Solo
 from winder.ros.qos import QOS_EVENTS, QOS_LATCHED, QOS_STATE, QOS_STREAM
@@ -47,6 +48,8 @@ from winder.ros.settings import Settings
 from winder.ros.spin import spin
 from winder.ros.timers import steady_timer
 from winder.spec import SpecError
+from winder_interfaces.msg import ControlEvent as ControlEventMsg
+from winder_interfaces.msg import JobDescription
 from winder_interp.wind import WindServer, job_params
 
 #: this node's part in the cell (winder.contract.topics.ROLES), in every job status
@@ -64,7 +67,7 @@ class InterpNode(ManagedNode):
             if not result.successful:
                 self.settings.rejected.append(result.reason)
 
-        self.pub_job = self.create_publisher(String, TOPIC_JOB, QOS_LATCHED)
+        self.pub_job = self.create_publisher(JobDescription, TOPIC_JOB, QOS_LATCHED)
         self.pub_steps = self.create_publisher(Int32MultiArray, TOPIC_STEPS, QOS_STREAM)
         self.diag = Diagnostics(self, "winder_interp")
         self.create_service(Trigger, "~/start", self.on_start)
@@ -79,7 +82,7 @@ class InterpNode(ManagedNode):
         self.diag.foreign = self.peers.intruders.summary  # its statuses name what it refused
         self.peers.on_new = lambda: self.report()  # at once, not at the next second
         self.peers.subscribe(KeyValue, TOPIC_PROGRESS, self.on_progress, QOS_STATE)
-        self.peers.subscribe(String, TOPIC_CONTROL, self.on_control, QOS_EVENTS)
+        self.peers.subscribe(ControlEventMsg, TOPIC_CONTROL, self.on_control, QOS_EVENTS)
         # the start handshake: consumer and profile node ready (an autostart waits for it)
         self.readiness = Readiness(self, on_change=self.on_ready, peers=self.peers)
         # tick() sends a running job's chunks every 20 ms; idle, only the 1 Hz report runs
@@ -329,7 +332,7 @@ class InterpNode(ManagedNode):
             values["schedule"],
             values["job_file_sha256"],
         )
-        self.pub_job.publish(String(data=text))
+        self.pub_job.publish(job_description_msg(text))
         self.pending = self.chunks(job, values["chunk_steps"])
         if self.tick_timer.is_canceled():
             self.tick_timer.reset()
@@ -377,13 +380,13 @@ class InterpNode(ManagedNode):
         if self.pending is not None:
             self.send_some()  # the window has room again: fill it now, not at the next tick
 
-    def on_control(self, msg: String) -> None:
+    def on_control(self, msg: ControlEventMsg) -> None:
         """An abort of the running run (winder/control): send it up to the
         abort's ``steps`` (the profile node brakes on them), nothing beyond.
         The profile node brings the axes to rest and the sim node closes the
-        run aborted; events of other runs, or not JSON, change nothing."""
+        run aborted; events of other runs, or ill-formed, change nothing."""
         try:
-            event = ControlEvent.from_wire(msg.data)
+            event = ControlEvent.from_message(msg)
         except EventError:
             return
         if event.kind is not EventKind.ABORT or self.job is None:

@@ -1,11 +1,12 @@
 """profile_node: step commands -> timed step commands.
 
-In:  winder/job (std_msgs/String, latched), winder/steps (Int32MultiArray),
+In:  winder/job (winder_interfaces/JobDescription, latched), winder/steps (Int32MultiArray),
      parameters (profile kind and limits, in steps of the segment's major axis).
 Out: winder/step_times (std_msgs/Int64MultiArray: [t_ns, segment, feed, fork,
      pole]), winder/path (trajectory_msgs/JointTrajectory, latched: the corner
      points of the job with the time each is reached), winder/profile_config
-     (String, latched: the ramp in force), /diagnostics.
+     (String, latched: the ramp in force), winder/control
+     (winder_interfaces/ControlEvent: operator commands as they take effect), /diagnostics.
 
 Each segment is one move of its major axis' step count, ramped with the chosen
 profile from and to the start/stop rate ``v_start``; step k of N happens when
@@ -59,7 +60,14 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from winder.contract.events import ControlEvent
 from winder.contract.params import OPERATION_SPECS, PROFILE_SPECS, UNSHAPED, check_profile
 from winder.contract.states import EventKind, EventSource, JobState, ReadyState
-from winder.contract.stream import STEP_COLUMNS, TIMED_COLUMNS, JobPlan, StreamChecker, parse_job_description
+from winder.contract.stream import (
+    STEP_COLUMNS,
+    TIMED_COLUMNS,
+    JobPlan,
+    StreamChecker,
+    description_text,
+    parse_job_description,
+)
 from winder.contract.topics import (
     TOPIC_CLOCK,
     TOPIC_CONTROL,
@@ -77,6 +85,7 @@ from winder.motion.timing import SegmentTiming, plan_job_timing, shaping_report
 from winder.ros.chunks import STEPS_CDR, TIMED_CDR
 from winder.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from winder.ros.graph import Who, participant
+from winder.ros.interfaces import control_event_msg
 from winder.ros.managed import ManagedNode
 from winder.ros.peers import Peers, Solo
 from winder.ros.qos import QOS_CLOCK, QOS_EVENTS, QOS_LATCHED, QOS_LATCHED_READER, QOS_STREAM
@@ -86,6 +95,8 @@ from winder.ros.settings import Settings
 from winder.ros.spin import spin
 from winder.ros.timers import steady_timer
 from winder.spec import SpecError, check_all
+from winder_interfaces.msg import ControlEvent as ControlEventMsg
+from winder_interfaces.msg import JobDescription
 
 #: this node's part in the cell (winder.contract.topics.ROLES), in every job status
 ROLE = "profile"
@@ -131,7 +142,7 @@ class ProfileNode(ManagedNode):
         self.job_waiting: bytes | None = None  # a job description that came before the node settled
         self.diag.foreign = self.peers.intruders.summary  # its statuses name what it refused
         self.peers.on_new = lambda: self.report()  # at once, not at the next second
-        attributed(self, String, TOPIC_JOB, self.on_job, QOS_LATCHED_READER)
+        attributed(self, JobDescription, TOPIC_JOB, self.on_job, QOS_LATCHED_READER)
         self.sub_steps: Subscription | None = None  # created once the timed stream has a reader
         # connect() and announce() follow the streams' matching as it happens;
         # the 1 Hz report repeats both (and is the only timer)
@@ -139,7 +150,7 @@ class ProfileNode(ManagedNode):
         self.create_service(Trigger, "~/resume", self.on_resume)
         self.create_service(Trigger, "~/pause", lambda _q, r: self.reply(r, *self.command(EventKind.PAUSE)))
         self.create_service(Trigger, "~/abort", lambda _q, r: self.reply(r, *self.command(EventKind.ABORT)))
-        self.pub_control = self.create_publisher(String, TOPIC_CONTROL, QOS_EVENTS)
+        self.pub_control = self.create_publisher(ControlEventMsg, TOPIC_CONTROL, QOS_EVENTS)
         attributed(self, String, TOPIC_SIM_CONFIG, self.on_sim_config_raw, QOS_LATCHED_READER)
         self.sim_config_topic = self.resolve_topic_name(TOPIC_SIM_CONFIG)
         self.sub_clock: Subscription | None = None  # only while a real-time run is timed
@@ -218,8 +229,8 @@ class ProfileNode(ManagedNode):
             self.job_waiting = raw
             return
         try:
-            job = parse_job_description(deserialize_message(raw, String).data)
-        except Exception as exc:  # ValueError, or not even a String
+            job = parse_job_description(description_text(deserialize_message(raw, JobDescription)))
+        except Exception as exc:  # ValueError, or not even a JobDescription
             self.fail(f"job description rejected: {(str(exc).splitlines() or [type(exc).__name__])[0]}")
             return
         if self.plan is not None and job.run_id and job.run_id == self.plan.run_id:
@@ -665,7 +676,7 @@ class ProfileNode(ManagedNode):
             effect, run_id=self.plan.run_id, job_id=self.plan.job_id, t_request_ns=t_request
         )
         event = replace(event, latency_ns=event.t_ns - t_request)
-        self.pub_control.publish(String(data=event.to_wire()))
+        self.pub_control.publish(control_event_msg(event))
         return event
 
     def on_settings_set(self, params: list[Parameter]) -> None:

@@ -174,7 +174,6 @@ def cmd_resim(args: argparse.Namespace) -> int:
     from winder.cli.summary import report_run
     from winder.contract.params import SIM_SPECS, bag_directory, check_sim
     from winder.contract.topics import (
-        TOPIC_CONTROL,
         TOPIC_JOB,
         TOPIC_PATH,
         TOPIC_PROFILE_CONFIG,
@@ -190,10 +189,7 @@ def cmd_resim(args: argparse.Namespace) -> int:
         run = read_run(args.bag, args.namespace)
         # the cell's nodes start in the recorded namespace: one ROS takes (a bag may come from anywhere)
         ns = check_namespace(run.namespace, "the recorded namespace")
-        wanted = [
-            f"{ns}/{t}"
-            for t in (TOPIC_JOB, TOPIC_PATH, TOPIC_PROFILE_CONFIG, TOPIC_CONTROL, TOPIC_STEP_TIMES)
-        ]
+        wanted = [f"{ns}/{t}" for t in (TOPIC_JOB, TOPIC_PATH, TOPIC_PROFILE_CONFIG, TOPIC_STEP_TIMES)]
         plan = plan_play(args.bag, topics=[t for t in wanted if run.counts.get(t)])
     except OSError as exc:
         raise UserError(f"{exc.filename}: {exc.strerror or exc}") from None
@@ -203,20 +199,16 @@ def cmd_resim(args: argparse.Namespace) -> int:
     changed = [k for k in SIM_SPECS if k in recorded and sim[k] != recorded[k]]
     sim["bag_dir"] = str(bag_directory(sim["bag_dir"]))
     first: dict[str, bytes] = {}
-    events: list[bytes] = []
     for topic, _t, data in plan.messages():
-        if topic.recorded.endswith(TOPIC_CONTROL):
-            events.append(data)
-        elif not topic.recorded.endswith(TOPIC_STEP_TIMES):
+        if not topic.recorded.endswith(TOPIC_STEP_TIMES):
             first.setdefault(topic.recorded, data)
     with ros_imports():
         from winder.ros.cell import cell_network
         from winder.ros.resim import Recorded, resimulate
     rec = Recorded(
-        job=first[f"{ns}/{TOPIC_JOB}"],
         path=first.get(f"{ns}/{TOPIC_PATH}"),
         profile_config=first.get(f"{ns}/{TOPIC_PROFILE_CONFIG}"),
-        events=events,
+        events=run.events,
         plan=plan,
         step_topic=f"{ns}/{TOPIC_STEP_TIMES}",
     )

@@ -20,6 +20,8 @@ from winder.contract.states import CellState, JobState, ReadyState
 from winder.errors import BadInputError
 from winder.spec import shorten
 
+#: a run's description (winder_interfaces/JobDescription, latched; a std_msgs/String of
+#: JSON in bags of before 2026-11-28), sent by the interp node as the run starts
 TOPIC_JOB = "winder/job"
 TOPIC_PATH = "winder/path"
 TOPIC_STEPS = "winder/steps"
@@ -43,12 +45,16 @@ TOPIC_STATE = "winder/state"
 CELL_STATES = tuple(CellState)
 CELL_STATE_KEYS = ("state", "job_id", "run_id", "coil", "layer", "turn", "sim_time_s")
 TOPIC_DIAGNOSTICS = "/diagnostics"
-#: Operator commands as they take effect (std_msgs/String, JSON, reliable,
+#: Operator commands as they take effect (winder_interfaces/ControlEvent; a
+#: std_msgs/String of JSON in bags of before 2026-11-28; reliable,
 #: transient-local, depth 100): the profile node publishes one event per
 #: pause, resume, abort or override of a run - when it takes effect in
 #: simulated time, where the axes come to rest - and the sim node records and
 #: announces them; the interp node stops sending an aborted run.
 TOPIC_CONTROL = "winder/control"
+#: The consumer's final report of each run (winder_interfaces/JobReport, latched),
+#: as its run ends: the same account as its last ``"<node>: job"`` status, typed
+TOPIC_REPORT = "winder/report"
 
 #: The diagnostic task every node reports its job under (``"<node>: job"``).
 TASK_JOB = "job"
@@ -99,7 +105,7 @@ LONGEST_NAME = max(
     (
         TOPIC_JOB, TOPIC_PATH, TOPIC_STEPS, TOPIC_STEP_TIMES, TOPIC_JOINT_STATES, TOPIC_JOINT_COMMANDS,
         TOPIC_SIM_CONFIG, TOPIC_PROGRESS, TOPIC_PROFILE_CONFIG, TOPIC_CLOCK, TOPIC_STATE, TOPIC_CONTROL,
-        *(f"{node}/{service}" for node in NODE_NAMES for service in NODE_SERVICES),
+        TOPIC_REPORT, *(f"{node}/{service}" for node in NODE_NAMES for service in NODE_SERVICES),
         "bridge_node_io/get_type_description",
     ),
     key=len,

@@ -17,6 +17,7 @@ from winder.contract.topics import (
     TOPIC_PATH,
     TOPIC_PROFILE_CONFIG,
     TOPIC_PROGRESS,
+    TOPIC_REPORT,
     TOPIC_SIM_CONFIG,
     TOPIC_STATE,
     TOPIC_STEP_TIMES,
@@ -43,10 +44,12 @@ OWNERS = {
 
 #: The role whose node alone may publish each topic a live view shows
 #: (``winder view``, ``winder run --foxglove``): those of :data:`OWNERS`, and
-#: the consumer's joint states, joint commands, wire tension and clock, which
-#: no node of the cell acts on. (A ``/diagnostics`` status: the node it names.)
+#: the consumer's joint states, joint commands, wire tension, final reports
+#: and clock, which no node of the cell acts on. (A ``/diagnostics`` status:
+#: the node it names.)
 SHOWN = {
     **OWNERS,
+    TOPIC_REPORT: "consumer",
     TOPIC_JOINT_STATES: "consumer",
     TOPIC_JOINT_COMMANDS: "consumer",
     TOPIC_TENSION: "consumer",

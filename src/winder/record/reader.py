@@ -40,8 +40,9 @@ import numpy as np
 import numpy.typing as npt
 
 from winder.contract.cdr import joint_state_names
+from winder.contract.events import ControlEvent, EventError
 from winder.contract.states import JobState
-from winder.contract.stream import TIMED_COLUMNS, JobPlan, parse_job_description
+from winder.contract.stream import TIMED_COLUMNS, JobPlan, description_text, parse_job_description
 from winder.contract.topics import (
     TOPIC_CONTROL,
     TOPIC_DIAGNOSTICS,
@@ -726,10 +727,16 @@ def _decode_events(msgs: list[Any], run_id: str) -> tuple[dict[str, Any], ...]:
     messages that are not events of this run are left out."""
     out = []
     for m in msgs:
-        try:
-            event = json.loads(m.data)
-        except (json.JSONDecodeError, RecursionError, AttributeError):
-            continue
+        if not hasattr(m, "data"):  # a winder_interfaces/ControlEvent: its JSON keys as before
+            try:
+                event = json.loads(ControlEvent.from_message(m).to_wire())
+            except EventError:
+                continue
+        else:  # JSON in a std_msgs/String: bags of before 2026-11-28
+            try:
+                event = json.loads(m.data)
+            except (json.JSONDecodeError, RecursionError, TypeError):
+                continue
         if isinstance(event, dict) and event.get("run_id") == run_id and isinstance(event.get("t_ns"), int):
             out.append(event)
     return tuple(out)
@@ -745,7 +752,7 @@ def _shifted(samples: Samples, origin: float) -> Samples:
 def _decode_plan(bag: Path, msgs: list[Any], topic: str) -> JobPlan:
     """The job plan from the first job message."""
     try:
-        return parse_job_description(msgs[0].data)
+        return parse_job_description(description_text(msgs[0]))
     except (ValueError, KeyError, TypeError) as exc:
         raise BagError(f"{bag}: {topic}: {exc}") from None
 

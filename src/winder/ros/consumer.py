@@ -48,13 +48,14 @@ from trajectory_msgs.msg import JointTrajectory
 
 from winder.contract.run import ControlEvent, EventError, JobReport
 from winder.contract.states import CellState, EventKind, JobState, ReadyState
-from winder.contract.stream import JobPlan, parse_job_description
+from winder.contract.stream import JobPlan, description_text, parse_job_description
 from winder.contract.topics import (
     TOPIC_CONTROL,
     TOPIC_DIAGNOSTICS,
     TOPIC_JOB,
     TOPIC_PATH,
     TOPIC_PROFILE_CONFIG,
+    TOPIC_REPORT,
     TOPIC_SIM_CONFIG,
     TOPIC_STATE,
     TOPIC_STEP_TIMES,
@@ -73,6 +74,8 @@ from winder.ros.sender import attributed, waiting
 from winder.ros.settings import Settings
 from winder.ros.timers import steady_timer
 from winder.spec import Spec
+from winder_interfaces.msg import ControlEvent as ControlEventMsg
+from winder_interfaces.msg import JobDescription
 
 __all__ = ["CONSUMER_TOPICS", "StepConsumer"]
 
@@ -86,14 +89,15 @@ BATCH_CHUNKS = 8
 BATCH_WAIT = 0.01
 #: the contract's topics every consumer's bag holds: key -> (name, type)
 CONSUMER_TOPICS = {
-    "job": (TOPIC_JOB, "std_msgs/msg/String"),
+    "job": (TOPIC_JOB, "winder_interfaces/msg/JobDescription"),
     "path": (TOPIC_PATH, "trajectory_msgs/msg/JointTrajectory"),
     "step_times": (TOPIC_STEP_TIMES, "std_msgs/msg/Int64MultiArray"),
     "sim_config": (TOPIC_SIM_CONFIG, "std_msgs/msg/String"),
     "profile_config": (TOPIC_PROFILE_CONFIG, "std_msgs/msg/String"),
     "diagnostics": (TOPIC_DIAGNOSTICS, "diagnostic_msgs/msg/DiagnosticArray"),
     "state": (TOPIC_STATE, "winder_interfaces/msg/CellState"),
-    "control": (TOPIC_CONTROL, "std_msgs/msg/String"),
+    "control": (TOPIC_CONTROL, "winder_interfaces/msg/ControlEvent"),
+    "report": (TOPIC_REPORT, "winder_interfaces/msg/JobReport"),
 }
 
 
@@ -131,7 +135,7 @@ class StepConsumer(ManagedNode):
         self.job_waiting: bytes | None = None  # a job description that came before the node settled
         self.sub_job = attributed(
             self,
-            String,
+            JobDescription,
             TOPIC_JOB,
             self.on_job,
             # volatile: a description latched before this node came is not a run of its own;
@@ -145,7 +149,7 @@ class StepConsumer(ManagedNode):
         )
         attributed(self, JointTrajectory, TOPIC_PATH, self.on_path, QOS_LATCHED_READER)
         attributed(self, String, TOPIC_PROFILE_CONFIG, self.on_profile_config, QOS_LATCHED_READER)
-        self.sub_control = attributed(self, String, TOPIC_CONTROL, self.on_control, QOS_EVENTS)
+        self.sub_control = attributed(self, ControlEventMsg, TOPIC_CONTROL, self.on_control, QOS_EVENTS)
         self.sub_times = attributed(
             self,
             Int64MultiArray,
@@ -229,8 +233,8 @@ class StepConsumer(ManagedNode):
             self.job_waiting = raw
             return
         try:
-            plan = parse_job_description(deserialize_message(raw, String).data)
-        except Exception as exc:  # ValueError, or not even a String
+            plan = parse_job_description(description_text(deserialize_message(raw, JobDescription)))
+        except Exception as exc:  # ValueError, or not even a JobDescription
             self.run.error(f"job description rejected: {one_line(exc)}")
             return
         if self.plan is not None and plan.run_id and plan.run_id == self.plan.run_id:
@@ -317,8 +321,8 @@ class StepConsumer(ManagedNode):
         parse, or contradicts the run, changes nothing (reported once)."""
         run = self.run
         try:
-            event = ControlEvent.from_wire(deserialize_message(raw, String).data)
-        except Exception:  # EventError, or not even a String: no event to act on
+            event = ControlEvent.from_message(deserialize_message(raw, ControlEventMsg))
+        except Exception:  # EventError, or not even a ControlEvent: no event to act on
             return
         if self.plan is None or run.ledger is None or event.run_id != self.plan.run_id:
             # the profile node may speak of a run before its description is

@@ -18,7 +18,8 @@ It keeps what a run owes the cell once its steps are accepted:
 * the stall watch: no steps for ``stall_timeout`` s is reported, for
   ``stall_abort`` s closes the run incomplete (a consumer never wedges the cell);
 * the ``<node>: job`` status every second (:class:`winder.contract.run.JobReport`),
-  and the final report once the bag is closed.
+  and the final report once the bag is closed: that status, and typed on
+  ``winder/report`` (winder_interfaces/JobReport).
 
 It is the :class:`winder.ros.engine.RunPort` the node's engine sees: an
 engine tells it what it executed and how far the run's time went, and asks
@@ -33,7 +34,6 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any
 
-from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import KeyValue
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message, serialize_message
@@ -43,17 +43,19 @@ from winder.contract.params import PROFILE_SPECS
 from winder.contract.run import JobReport, RunLedger, Transition
 from winder.contract.states import CellState, JobState
 from winder.contract.stream import JobPlan, StreamChecker
-from winder.contract.topics import TOPIC_PROGRESS, TOPIC_STATE, TOPIC_STEP_TIMES, status_values
+from winder.contract.topics import TOPIC_PROGRESS, TOPIC_REPORT, TOPIC_STATE, TOPIC_STEP_TIMES, status_values
 from winder.contract.trust import Intruders
 from winder.record.bag import signals_held
 from winder.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from winder.ros.engine import Engine
 from winder.ros.intake import RowGate
+from winder.ros.interfaces import job_report_msg, wall_stamp
 from winder.ros.peers import Peers
 from winder.ros.qos import QOS_LATCHED, QOS_STATE
 from winder.ros.run_bag import RunBag
 from winder.ros.settings import Settings
 from winder_interfaces.msg import CellState as CellStateMsg
+from winder_interfaces.msg import JobReport as JobReportMsg
 
 __all__ = ["ConsumerRun"]
 
@@ -83,6 +85,9 @@ class ConsumerRun:
         self.diag = Diagnostics(node, hardware_id)
         self.pub_progress = node.create_publisher(KeyValue, TOPIC_PROGRESS, QOS_STATE)
         self.pub_cell_state = node.create_publisher(CellStateMsg, TOPIC_STATE, QOS_LATCHED)
+        self.pub_report = node.create_publisher(JobReportMsg, TOPIC_REPORT, QOS_LATCHED)
+        #: the consumer's name in the graph, namespace first (who sent a state or a report)
+        self.node_name = node.get_fully_qualified_name().lstrip("/")
         self.last_report: JobReport | None = None
         self.last_level, self.last_text = OK, ""
         self.clear()
@@ -242,8 +247,8 @@ class ConsumerRun:
         coil, layer, turn = where
         wall = time.time_ns()
         msg = CellStateMsg(
-            stamp=Time(sec=wall // 1_000_000_000, nanosec=wall % 1_000_000_000),
-            node=self.node.get_fully_qualified_name().lstrip("/"),
+            stamp=wall_stamp(wall),
+            node=self.node_name,
             state=str(state),
             job_id=plan.job_id if plan else "",
             run_id=plan.run_id if plan else "",
@@ -420,15 +425,18 @@ class ConsumerRun:
         )
         self.cell_state(ended, text, where=last)
         final = self.diag.status("job", level, text, report.to_values())
+        typed = job_report_msg(report, self.node_name)
         bag = self.recording.path
         if bag is not None:
             # the final report goes into the bag too, and the bag is closed
             # before anyone hears "done": whoever stops us then finds it complete
             self.record("diagnostics", self.t_ns, serialize_message(final))
+            self.record("report", self.t_ns, serialize_message(typed))
             self.recording.close()
             if self.recording.failure:  # left unclosed: winder bag recover reads it
                 report, level, text = self.final_report(complete)  # no longer complete
                 final = self.diag.status("job", level, text, report.to_values())
+                typed = job_report_msg(report, self.node_name)
         if self.node.context.ok():
             self.log.info(text + (f"; bag {bag}" if bag else ""))
         self.last_report, self.last_level, self.last_text = report, level, text
@@ -439,3 +447,4 @@ class ConsumerRun:
         if self.node.context.ok():  # at Ctrl-C the context is already shut down
             self.announce()  # ready first: whoever hears "done" can start the next run at once
             self.diag.pub.publish(final)
+            self.pub_report.publish(typed)

@@ -29,6 +29,7 @@ from rclpy.executors import ExternalShutdownException
 from std_msgs.msg import Int32MultiArray, Int64MultiArray, String
 from trajectory_msgs.msg import JointTrajectory
 
+from winder.contract.events import ControlEvent
 from winder.contract.qos import EVENTS, LATCHED, STATE, STREAM
 from winder.contract.states import ReadyState
 from winder.contract.stream import RESIM_TAG, make_run_id, with_source
@@ -46,9 +47,12 @@ from winder.contract.topics import (
 from winder.record.replay import PlayPlan
 from winder.ros.cell import CellResult, CellWatch, NodeProcesses, _result, cell_environment, ros_args
 from winder.ros.chunks import TIMED_CDR
+from winder.ros.interfaces import control_event_msg, job_description_msg
 from winder.ros.player import refuse_live_cell
 from winder.ros.qos import profile
 from winder.ros.sender import SenderExecutor
+from winder_interfaces.msg import ControlEvent as ControlEventMsg
+from winder_interfaces.msg import JobDescription
 
 __all__ = ["IN_FLIGHT", "Recorded", "resimulate"]
 
@@ -60,10 +64,10 @@ IN_FLIGHT = 1 << 17
 class Recorded:
     """What a re-simulation takes from the recording (raw CDR payloads)."""
 
-    job: bytes
     path: bytes | None
     profile_config: bytes | None
-    events: list[bytes]
+    #: the run's operator events as the bag reader gives them (winder.record.reader.Run.events)
+    events: tuple[dict[str, Any], ...]
     plan: PlayPlan  #: streams the step chunks
     step_topic: str
 
@@ -128,10 +132,10 @@ def resimulate(
 
             node.create_subscription(KeyValue, TOPIC_PROGRESS, on_progress, profile(STATE))
             node.create_subscription(KeyValue, TOPIC_READY, on_ready, profile(LATCHED))
-            pub_job = node.create_publisher(String, TOPIC_JOB, profile(LATCHED))
+            pub_job = node.create_publisher(JobDescription, TOPIC_JOB, profile(LATCHED))
             pub_path = node.create_publisher(JointTrajectory, TOPIC_PATH, profile(LATCHED))
             pub_profile = node.create_publisher(String, TOPIC_PROFILE_CONFIG, profile(LATCHED))
-            pub_control = node.create_publisher(String, TOPIC_CONTROL, profile(EVENTS))
+            pub_control = node.create_publisher(ControlEventMsg, TOPIC_CONTROL, profile(EVENTS))
             pub_steps = node.create_publisher(Int64MultiArray, TOPIC_STEP_TIMES, profile(STREAM))
             # this node plays the interp and the profile node for the sim node, which
             # acts only on those parts' messages: it declares their endpoints
@@ -153,13 +157,13 @@ def resimulate(
                 node, procs, connected, 60.0, "sim node ready with its job and step readers matched"
             )
             if not failure:
-                pub_job.publish(_string(description))
+                pub_job.publish(job_description_msg(description))
                 if rec.path is not None:
                     pub_path.publish(_path_of(rec.path, run_id))
                 if rec.profile_config is not None:
                     pub_profile.publish(_string(_relabelled(rec.profile_config, run_id)))
-                for raw in rec.events:
-                    pub_control.publish(_string(_relabelled(raw, run_id)))
+                for doc in rec.events:
+                    pub_control.publish(control_event_msg(ControlEvent.from_doc(doc, run_id=run_id)))
                 failure = _stream(node, procs, rec, pub_steps, done, timeout)
             if not failure:
                 t_end = time.monotonic() + timeout
@@ -187,8 +191,8 @@ def _path_of(raw: bytes, run_id: str) -> JointTrajectory:
 
 
 def _relabelled(raw: bytes, run_id: str) -> str:
-    """A recorded JSON message of the run (String CDR: an operator event, the
-    ramp configuration) for the new run: the same, with the new run id."""
+    """The recorded ramp configuration of the run (JSON in a String's CDR)
+    for the new run: the same, with the new run id."""
     from rclpy.serialization import deserialize_message
 
     event = json.loads(deserialize_message(raw, String).data)
