@@ -51,3 +51,35 @@ def test_the_contract_shows_each_interface_as_its_file_says() -> None:
     for f in files:
         shown = f"$ ros2 interface show winder_interfaces/{f.parent.name}/{f.stem}\n{f.read_text()}"
         assert shown in contract, f"docs/CONTRACT.md does not show {f.relative_to(ROOT)} as it is"
+
+
+def test_integrating_names_each_interface_and_where_the_contract_shows_it() -> None:
+    """docs/INTEGRATING.md lists every winder_interfaces type with a link to
+    the CONTRACT.md section that shows its text, and each link's anchor is a
+    heading of CONTRACT.md that holds that text."""
+    import re
+
+    integrating = (ROOT / "docs" / "INTEGRATING.md").read_text()
+    contract = (ROOT / "docs" / "CONTRACT.md").read_text()
+    sections: dict[str, str] = {}  # GitHub's anchor of each heading -> the section's text
+    for part in re.split(r"^(?=#{2,4} )", contract, flags=re.M):
+        heading = part.splitlines()[0].lstrip("#").strip() if part.startswith("#") else ""
+        anchor = re.sub(r"[^\w\- ]", "", heading.lower()).replace(" ", "-")
+        sections[anchor] = part
+    package = ROOT / "winder_interfaces"
+    for f in sorted([*package.glob("msg/*.msg"), *package.glob("action/*.action")]):
+        row = next(
+            (
+                r
+                for r in integrating.splitlines()
+                if r.startswith("| `winder_interfaces/")
+                and (f"winder_interfaces/{f.parent.name}/{f.stem}`" in r or f"`{f.stem}`" in r)
+            ),
+            None,
+        )
+        assert row, f"docs/INTEGRATING.md does not list {f.stem}"
+        [anchor] = re.findall(r"\(CONTRACT\.md#([^)]+)\)", row)
+        assert anchor in sections, f"{f.stem}: no heading of CONTRACT.md has the anchor {anchor}"
+        assert f"$ ros2 interface show winder_interfaces/{f.parent.name}/{f.stem}\n" in sections[anchor], (
+            f.stem
+        )
