@@ -295,9 +295,19 @@ def replay_split(bag: Path) -> None:
 
     with AnyReader([bag]) as reader:
         raw: dict[str, list[bytes]] = {}
+        kinds: dict[str, str] = {}
         for conn, _, data in reader.messages():
             raw.setdefault(conn.topic, []).append(bytes(data))
-    job_raw = next(v[0] for k, v in raw.items() if k.endswith("winder/job"))
+            kinds[conn.topic] = conn.msgtype
+    job_topic = next(k for k in raw if k.endswith("winder/job"))
+    job_raw = raw[job_topic][0]
+    if kinds[job_topic] == "std_msgs/msg/String":  # an older bag: its JSON as the typed message of today
+        from rclpy.serialization import deserialize_message, serialize_message
+        from std_msgs.msg import String
+
+        from winder.ros.interfaces import job_description_msg
+
+        job_raw = serialize_message(job_description_msg(deserialize_message(job_raw, String).data))
     chunks = next(v for k, v in raw.items() if k.endswith("winder/step_times"))
     path_raw = next((v[0] for k, v in raw.items() if k.endswith("winder/path")), None)
     ramp_raw = next((v[0] for k, v in raw.items() if k.endswith("winder/profile_config")), None)

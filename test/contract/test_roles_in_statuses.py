@@ -140,7 +140,7 @@ def test_the_reader_takes_a_renamed_consumer_that_names_no_role_by_the_cell_stat
         _array(_status("axes: job", final("done", bag="renamed"))),
     ]
     bag = write_bag(tmp_path / "renamed", "", diagnostics, (_status("axes: state", {"state": "done"}),))
-    assert read_run(bag).report["bag"] == "renamed"  # a bag of before 2026-11-28: a DiagnosticStatus
+    assert read_run(bag).report["bag"] == "renamed"  # an older bag: a DiagnosticStatus
     CellState = STORE.types["winder_interfaces/msg/CellState"]
     Time = STORE.types["builtin_interfaces/msg/Time"]
     typed = CellState(

@@ -216,6 +216,29 @@ def test_a_description_that_lies_about_its_job_is_refused_in_one_line() -> None:
 
     assert "segment" in lie(more_turns)
 
+    def no_job_id(m: Any) -> None:  # the job's id left out: the job is the default's, not the message's
+        m.job = [kv for kv in m.job if kv.key != "job_id"]
+
+    assert "job_id 'part' is not its job's ('rw400')" in lie(no_job_id)
+
+
+def test_a_value_as_a_job_file_writes_it_is_taken_as_its_setting_takes_it() -> None:
+    """A typed description's values may be written as a job file or --set
+    writes them (``.5``, ``+2``, ``yes``), not only as JSON: each is read as
+    its setting reads it, and the description is that job's."""
+    from diagnostic_msgs.msg import KeyValue
+
+    from winder.ros.interfaces import job_description_msg
+
+    job = Job.from_dict({"job_id": "part", "flyer_radius": 0.5, "poles": 2, "tension.derate": True})
+    msg = job_description_msg(describe_job(job, RUN))
+    written = {"flyer_radius": ".5", "poles": "+2", "tension.derate": "yes"}
+    msg.job = [KeyValue(key=kv.key, value=written.get(kv.key, kv.value)) for kv in msg.job]
+    assert {kv.key: kv.value for kv in msg.job}["poles"] == "+2"
+    plan = parse_job_description(description_text(msg))
+    assert (plan.job.flyer_radius, plan.job.poles, plan.job.tension_derate) == (0.5, 2, True)
+    assert plan.job == job
+
 
 # -- final reports --------------------------------------------------------------------
 

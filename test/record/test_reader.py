@@ -142,6 +142,7 @@ def test_a_bag_of_before_the_typed_messages_reads_as_a_typed_one(tmp_path: Path)
         {"event": "override", "source": "schedule", "run_id": run_id, "t_ns": 500, "factor": 0.5,
          "v_max": 1024.0, "note": "applied"},
         {"event": "abort", "run_id": "another_20261127_101010123_2", "t_ns": 1, "t_rest_ns": 1, "steps": 0},
+        {"event": "pause", "run_id": run_id, "t_ns": 600},  # names no steps: no event the consumer took
     ]  # fmt: skip
     store = jazzy_store()
     types = store.types
@@ -188,7 +189,23 @@ def test_a_bag_of_before_the_typed_messages_reads_as_a_typed_one(tmp_path: Path)
     before, since = read_run(old), read_run(new)
     assert since.plan == before.plan and since.plan.text == text
     assert since.plan.stops == ((0, 2),) and since.plan.run_id == run_id
-    assert list(since.events) == list(before.events) == events[:3]  # the other run's abort left out
+    # the other run's abort, and the pause that is no event, left out of both
+    assert list(since.events) == list(before.events) == events[:3]
+
+    # another type on the cell's topics: no events; no job description, said in one line
+    other = tmp_path / "other"
+    write_bag(
+        other,
+        [("/winder/job", "winder_interfaces/msg/JobDescription", 0, typed_job),
+         ("/winder/control", "diagnostic_msgs/msg/KeyValue", 1, KeyValue(key="event", value="abort"))],
+        StoragePlugin.MCAP,
+    )  # fmt: skip
+    assert read_run(other).events == ()
+    wrong = tmp_path / "wrong"
+    write_bag(wrong, [("/winder/job", "diagnostic_msgs/msg/KeyValue", 0, KeyValue(key="a", value="b"))],
+              StoragePlugin.MCAP)  # fmt: skip
+    with pytest.raises(BagError, match=r"^[^\n]*/winder/job: [^\n]*$"):
+        read_run(wrong)
 
 
 # -- cut-short files ------------------------------------------------------------------------

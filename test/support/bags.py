@@ -248,7 +248,7 @@ def rewrite(raw: RawBag, out: Path, compression: str) -> Path:
 
 def job_doc(msg: Any) -> dict[str, Any]:
     """A recorded ``winder/job`` message (a winder_interfaces/JobDescription, or
-    the std_msgs/String of bags of before 2026-11-28) as its description's
+    the std_msgs/String of older bags) as its description's
     JSON keys, for a test about something else (the typed form is checked
     against the text in test/contract/test_typed_messages.py)."""
     import json

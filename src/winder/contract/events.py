@@ -4,8 +4,8 @@
 a message: the profile node publishes a winder_interfaces/ControlEvent of
 ``event.to_fields()``, consumers and the interp node read
 ``ControlEvent.from_message(msg)``, which refuses anything that is not a
-well-formed event (:class:`EventError`, one line naming the field). Bags of
-before 2026-11-28 carry the event as JSON in a std_msgs/String
+well-formed event (:class:`EventError`, one line naming the field). Older
+bags carry the event as JSON in a std_msgs/String
 (:meth:`ControlEvent.to_wire`, :meth:`ControlEvent.from_wire`);
 ``from_message`` reads those too. The fields and their meaning:
 docs/CONTRACT.md §3.3.
@@ -134,7 +134,7 @@ class ControlEvent:
         """The event of a ``winder/control`` message: a
         winder_interfaces/ControlEvent (an rclpy message, or one rosbags
         decoded: -1, NaN and "" read as not said), or the JSON text of a
-        std_msgs/String (bags of before 2026-11-28); checked as
+        std_msgs/String (older bags); checked as
         :meth:`from_wire` does (EventError, one line)."""
         if hasattr(msg, "data"):
             return cls.from_wire(str(msg.data))

@@ -5,7 +5,7 @@ A job travels as a description and then as chunks of rows. The description's
 canonical form here is a JSON text (:func:`describe_job`, :func:`parse_job_description`);
 on ``winder/job`` it is a winder_interfaces/JobDescription
 (:func:`description_fields` gives its fields, :func:`description_text` reads one, or
-the std_msgs/String of the bags of before 2026-11-28, back into the text).
+the std_msgs/String of older bags, back into the text).
 
 Step rows are ``[segment, feed, fork, pole]`` (int32, absolute step
 positions after the step); timed rows are ``[t_ns, segment, feed, fork, pole]``
@@ -34,7 +34,7 @@ from winder.errors import BadInputError
 from winder.motion.axes import AXES
 from winder.motion.interp import interpolate_pieces, pieces_mismatch
 from winder.motion.job import FIELD_SPECS, Job, Segment
-from winder.spec import Spec, interval, shorten
+from winder.spec import Spec, SpecError, interval, shorten
 
 __all__ = [
     "STEP_COLUMNS",
@@ -302,15 +302,23 @@ def _setting_text(value: Any) -> str:
 
 def _setting_value(key: str, text: str, specs: Mapping[str, Spec]) -> Any:
     """The inverse of :func:`_setting_text`: ``text`` as the type its
-    setting in ``specs`` has (a key no setting has: JSON if it is, else the
-    text, which the job's own check then refuses)."""
+    setting in ``specs`` has: a text as it is; a number or a truth value as
+    JSON, or else as a job file or ``--set`` writes it (``.5``, ``+4``,
+    ``yes``); what is neither stays the text (``auto``), which the job's own
+    check takes or refuses. A key no setting has: JSON if it is, else the text."""
     spec = specs.get(key)
     if spec is not None and spec.kind is str:
         return text
     try:
         return json.loads(text)
     except (ValueError, RecursionError):
-        return text
+        pass
+    if spec is not None:
+        try:
+            return spec.parse(text)
+        except SpecError:
+            pass
+    return text
 
 
 def description_fields(text: str) -> dict[str, Any]:
@@ -368,22 +376,21 @@ def description_text(msg: Any) -> str:
     :func:`parse_job_description` (which checks it): a
     winder_interfaces/JobDescription (by its fields: an rclpy message, or
     one rosbags decoded) made back into :func:`describe_job`'s text, or the
-    text of a std_msgs/String (bags of before 2026-11-28)."""
+    text of a std_msgs/String (older bags)."""
     if hasattr(msg, "data"):
         return str(msg.data)
     job = {kv.key: _setting_value(kv.key, kv.value, FIELD_SPECS) for kv in msg.job}
-    if msg.job_id != job.get("job_id", msg.job_id):
+    own = job.get("job_id", FIELD_SPECS["job_id"].default)  # the job's, as Job.from_dict takes it
+    if msg.job_id != own:
         raise BadInputError(
-            f"job description: job_id {shorten(msg.job_id)} is not its job's ({shorten(str(job['job_id']))})"
+            f"job description: job_id {shorten(msg.job_id)} is not its job's ({shorten(str(own))})"
         )
     doc: dict[str, Any] = {
         "format": msg.format,
         "run_id": msg.run_id,
         "ramp": (
             # the ramp's texts are words (profile, shaper: never JSON), its numbers JSON
-            {kv.key: _setting_value(kv.key, kv.value, {}) for kv in msg.ramp}
-            if msg.has_ramp
-            else None
+            {kv.key: _setting_value(kv.key, kv.value, {}) for kv in msg.ramp} if msg.has_ramp else None
         ),
         "stops": [[int(s.segment), int(s.step)] for s in msg.stops],
         "stop_pause": float(msg.stop_pause),

@@ -21,7 +21,7 @@ from winder.errors import BadInputError
 from winder.spec import shorten
 
 #: a run's description (winder_interfaces/JobDescription, latched; a std_msgs/String of
-#: JSON in bags of before 2026-11-28), sent by the interp node as the run starts
+#: JSON in older bags), sent by the interp node as the run starts
 TOPIC_JOB = "winder/job"
 TOPIC_PATH = "winder/path"
 TOPIC_STEPS = "winder/steps"
@@ -37,7 +37,7 @@ TOPIC_PROGRESS = "winder/progress"
 TOPIC_PROFILE_CONFIG = "winder/profile_config"
 TOPIC_CLOCK = "clock"
 #: The cell's state (winder_interfaces/CellState, latched; a DiagnosticStatus with
-#: the values :data:`CELL_STATE_KEYS` in bags of before 2026-11-28): one message per transition
+#: the values :data:`CELL_STATE_KEYS` in older bags): one message per transition
 TOPIC_STATE = "winder/state"
 #: idle, running, pausing (braking for a pause), paused (at rest: a pause or a
 #: programmed stop), aborting (braking for an abort), done, aborted (ended at
@@ -46,7 +46,7 @@ CELL_STATES = tuple(CellState)
 CELL_STATE_KEYS = ("state", "job_id", "run_id", "coil", "layer", "turn", "sim_time_s")
 TOPIC_DIAGNOSTICS = "/diagnostics"
 #: Operator commands as they take effect (winder_interfaces/ControlEvent; a
-#: std_msgs/String of JSON in bags of before 2026-11-28; reliable,
+#: std_msgs/String of JSON in older bags; reliable,
 #: transient-local, depth 100): the profile node publishes one event per
 #: pause, resume, abort or override of a run - when it takes effect in
 #: simulated time, where the axes come to rest - and the sim node records and
@@ -283,7 +283,7 @@ def status_values(
 def cell_state_values(msg: Any) -> dict[str, str]:
     """The :data:`CELL_STATE_KEYS` of a ``winder/state`` message as text: a
     winder_interfaces/CellState (by its fields), or the DiagnosticStatus of
-    bags of before 2026-11-28 (its key/values)."""
+    older bags (its key/values)."""
     if hasattr(msg, "values"):
         return {kv.key: kv.value for kv in msg.values}
     values = {k: str(getattr(msg, k)) for k in CELL_STATE_KEYS if k != "sim_time_s"}

@@ -676,7 +676,7 @@ def _assemble(
     sim_config = _decode_sim_config(raw.path, decoded[topic[SIM_CONFIG]], topic[SIM_CONFIG], notes)
     profile_config = _decode_profile_config(decoded[topic[PROFILE_CONFIG]], topic[PROFILE_CONFIG], notes)
     wall0, origin_ns = _time_base(decoded[topic[SIM_CONFIG]])
-    # who announced the cell's state: a CellState names its node; a bag of before 2026-11-28
+    # who announced the cell's state: a CellState names its node; an older bag
     # holds a DiagnosticStatus, named "<node>: state"
     consumer = {status_node(m.node if hasattr(m, "node") else m.name) for m in decoded[topic[STATE]]}
     report, profile, errors, error_statuses = _decode_diagnostics(
@@ -727,16 +727,14 @@ def _decode_events(msgs: list[Any], run_id: str) -> tuple[dict[str, Any], ...]:
     messages that are not events of this run are left out."""
     out = []
     for m in msgs:
-        if not hasattr(m, "data"):  # a winder_interfaces/ControlEvent: its JSON keys as before
-            try:
-                event = json.loads(ControlEvent.from_message(m).to_wire())
-            except EventError:
-                continue
-        else:  # JSON in a std_msgs/String: bags of before 2026-11-28
-            try:
-                event = json.loads(m.data)
-            except (json.JSONDecodeError, RecursionError, TypeError):
-                continue
+        # a winder_interfaces/ControlEvent (its JSON keys as before), or JSON in a std_msgs/String
+        # (older bags: kept as recorded); either checked as the consumer checked it. What is
+        # neither (another type on the topic) is no event.
+        try:
+            checked = ControlEvent.from_message(m)
+            event = json.loads(m.data) if hasattr(m, "data") else json.loads(checked.to_wire())
+        except (EventError, AttributeError, TypeError):
+            continue
         if isinstance(event, dict) and event.get("run_id") == run_id and isinstance(event.get("t_ns"), int):
             out.append(event)
     return tuple(out)
@@ -753,7 +751,7 @@ def _decode_plan(bag: Path, msgs: list[Any], topic: str) -> JobPlan:
     """The job plan from the first job message."""
     try:
         return parse_job_description(description_text(msgs[0]))
-    except (ValueError, KeyError, TypeError) as exc:
+    except (ValueError, KeyError, TypeError, AttributeError) as exc:  # AttributeError: another type
         raise BagError(f"{bag}: {topic}: {exc}") from None
 
 
