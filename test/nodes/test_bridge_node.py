@@ -155,13 +155,18 @@ def commands(raw: dict[str, list[tuple[int, Any]]]) -> tuple[np.ndarray, np.ndar
     return t, pos
 
 
-def check_commands(raw: dict[str, list[tuple[int, Any]]], report: dict[str, str]) -> np.ndarray:
+def check_commands(
+    raw: dict[str, list[tuple[int, Any]]], report: dict[str, str], *, stopped: bool = False
+) -> np.ndarray:
     """Every command is the step counts of one row (or the start) times the
     step lengths, exactly; the rows they come from never go back, and never
     lie ahead of the command's time (t_ns <= its run time: log time less
     wall_start_ns). If no step came after its time (the bridge counts them),
-    each command is exactly the last row due at its time. The row index
-    (0 = the start) of each command."""
+    each command is exactly the last row due at its time. ``stopped``: a
+    run a servo fault stopped, where the commands end holding the last row
+    the bridge took (rows the fault came before are never taken, so never
+    counted late, however long they waited): exact up to the first command
+    of that row, then that row. The row index (0 = the start) of each command."""
     rows, wall0 = step_rows(raw), sim_config(raw)["wall_start_ns"]
     t_log, pos = commands(raw)
     assert np.all(np.diff(t_log) > 0)
@@ -175,7 +180,9 @@ def check_commands(raw: dict[str, list[tuple[int, Any]]], report: dict[str, str]
     due = np.searchsorted(rows[:, 0], t_log - wall0, side="right")  # the last row due at each command
     assert np.all(np.diff(k) >= 0) and np.all(k <= due)  # never back, never ahead of time
     if report["late_steps"] == "0":
-        np.testing.assert_array_equal(k, due)
+        held = int(np.argmax(k == k[-1])) if stopped else len(k)  # the first command of the last row
+        np.testing.assert_array_equal(k[: held + 1], due[: held + 1])
+        assert np.all(k[held:] == k[-1])
     return k
 
 
@@ -553,7 +560,7 @@ def test_servo_fault_stops_the_cell(
     assert [m.state for _, m in raw["/winder/state"]] == ["running", "failed"]
     # no jump up to the fault (the job starts at 0, where the stand-in's joints are): every
     # command is the steps of a row due at its time; then they hold
-    check_commands(raw, report)
+    check_commands(raw, report, stopped=True)
 
     log = wait.log_has(lambda: procs.log(bridge), "profile_node/abort: run", 30, "the bridge's abort call")
     assert "/profile_node/abort: run" in log and "aborting" in log, log
@@ -1026,7 +1033,7 @@ def test_steps_past_a_velocity_limit_stop_the_run_before_they_are_due(
     # the steps commanded (to the last one sent), on their own times: never faster than the limit.
     # (The commands' send times are not held to it: a command thread that falls behind, as this
     # Python one does on a loaded machine, catches up in one command; max_command_gap_ms says so.)
-    rows, k = step_rows(raw), check_commands(raw, report)
+    rows, k = step_rows(raw), check_commands(raw, report, stopped=True)
     fork = rows[: k.max(), 2 + AXES.index("fork")] * (2 * math.pi / JOB["fork_steps_per_rev"])
     step = 2 * math.pi / JOB["fork_steps_per_rev"]
     assert int(report["steps_done"]) >= 2 * 512  # it ran to the stop at turn 2, within the limit
