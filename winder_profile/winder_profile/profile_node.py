@@ -65,8 +65,6 @@ from winder.contract.stream import (
     TIMED_COLUMNS,
     JobPlan,
     StreamChecker,
-    description_text,
-    parse_job_description,
 )
 from winder.contract.topics import (
     TOPIC_CLOCK,
@@ -85,7 +83,7 @@ from winder.motion.timing import SegmentTiming, plan_job_timing, shaping_report
 from winder.ros.chunks import STEPS_CDR, TIMED_CDR
 from winder.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from winder.ros.graph import Who, participant
-from winder.ros.interfaces import control_event_msg
+from winder.ros.interfaces import control_event_msg, job_plan
 from winder.ros.managed import ManagedNode
 from winder.ros.peers import Peers, Solo
 from winder.ros.qos import QOS_CLOCK, QOS_EVENTS, QOS_LATCHED, QOS_LATCHED_READER, QOS_STREAM
@@ -229,7 +227,7 @@ class ProfileNode(ManagedNode):
             self.job_waiting = raw
             return
         try:
-            job = parse_job_description(description_text(deserialize_message(raw, JobDescription)))
+            job = job_plan(raw)
         except Exception as exc:  # ValueError, or not even a JobDescription
             self.fail(f"job description rejected: {(str(exc).splitlines() or [type(exc).__name__])[0]}")
             return

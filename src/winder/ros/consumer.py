@@ -48,7 +48,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from winder.contract.run import ControlEvent, EventError, JobReport
 from winder.contract.states import CellState, EventKind, JobState, ReadyState
-from winder.contract.stream import JobPlan, description_text, parse_job_description
+from winder.contract.stream import JobPlan
 from winder.contract.topics import (
     TOPIC_CONTROL,
     TOPIC_DIAGNOSTICS,
@@ -65,6 +65,7 @@ from winder.ros.consumer_run import ConsumerRun
 from winder.ros.diagnostics import ERROR
 from winder.ros.engine import Engine
 from winder.ros.intake import EarlyChunks
+from winder.ros.interfaces import job_plan
 from winder.ros.managed import ManagedNode
 from winder.ros.peers import Peers, Solo
 from winder.ros.qos import QOS_EVENTS, QOS_LATCHED, QOS_LATCHED_READER, QOS_STREAM
@@ -233,7 +234,7 @@ class StepConsumer(ManagedNode):
             self.job_waiting = raw
             return
         try:
-            plan = parse_job_description(description_text(deserialize_message(raw, JobDescription)))
+            plan = job_plan(raw)
         except Exception as exc:  # ValueError, or not even a JobDescription
             self.run.error(f"job description rejected: {one_line(exc)}")
             return

@@ -245,9 +245,8 @@ class ConsumerRun:
         plan = self.plan
         t = self.t_ns if t_ns is None else t_ns
         coil, layer, turn = where
-        wall = time.time_ns()
         msg = CellStateMsg(
-            stamp=wall_stamp(wall),
+            stamp=wall_stamp(),
             node=self.node_name,
             state=str(state),
             job_id=plan.job_id if plan else "",

@@ -15,21 +15,30 @@ from dataclasses import fields
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import KeyValue
+from rclpy.serialization import deserialize_message
 
 from winder.contract.events import ControlEvent
 from winder.contract.run import JobReport
-from winder.contract.stream import description_fields
+from winder.contract.stream import JobPlan, description_fields, description_text, parse_job_description
 from winder_interfaces.msg import ControlEvent as ControlEventMsg
 from winder_interfaces.msg import JobDescription, JobSegment, JobStop
 from winder_interfaces.msg import JobReport as JobReportMsg
 
-__all__ = ["control_event_msg", "job_description_msg", "job_report_msg", "wall_stamp"]
+__all__ = ["control_event_msg", "job_description_msg", "job_plan", "job_report_msg", "wall_stamp"]
 
 
-def wall_stamp(wall_ns: int | None = None) -> Time:
-    """A builtin_interfaces/Time of the wall clock (now, or ``wall_ns``)."""
-    wall = time.time_ns() if wall_ns is None else wall_ns
-    return Time(sec=wall // 1_000_000_000, nanosec=wall % 1_000_000_000)
+def wall_stamp() -> Time:
+    """A builtin_interfaces/Time of the wall clock now."""
+    sec, nanosec = divmod(time.time_ns(), 1_000_000_000)
+    return Time(sec=sec, nanosec=nanosec)
+
+
+def job_plan(raw: bytes) -> JobPlan:
+    """The checked plan of a ``winder/job`` message's bytes (a
+    JobDescription): what the profile node and every consumer take a run
+    from. ValueError (one line) for a description that is not its job's;
+    anything else for bytes that are no JobDescription."""
+    return parse_job_description(description_text(deserialize_message(raw, JobDescription)))
 
 
 def control_event_msg(event: ControlEvent) -> ControlEventMsg:
