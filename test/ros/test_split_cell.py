@@ -220,7 +220,7 @@ def test_a_misspelt_profile_is_reported(procs: Procs, tmp_path: Path) -> None:
 
 @pytest.mark.parametrize(
     ("profile", "said"),
-    [(None, "winder's default (shared memory and UDP, 64 kB datagrams); on a network that loses packets"),
+    [(None, "winder's default (UDP only, on one host its loopback; 64 kB datagrams); on a network that loses packets"),
      (LAN_PROFILE, "winder's LAN profile (UDP only, datagrams within one MTU)")],
     ids=["default", "lan"],
 )  # fmt: skip
@@ -314,7 +314,7 @@ def test_a_split_cell_found_by_a_discovery_server(hosts: Hosts, procs: Procs, tm
 def test_discovery_server_settings_are_checked() -> None:
     from support.cli import assert_one_line_error, run_cli
 
-    assert_one_line_error(run_cli("discovery-server", "--port", "0"), "port=0 is invalid", "[1, 65535]")
+    assert_one_line_error(run_cli("discovery-server", "--port", "0"), "port=0 is invalid", "[1025, 65535]")
     assert_one_line_error(run_cli("discovery-server", "--id", "256"), "id=256 is invalid", "[0, 255]")
     assert_one_line_error(run_cli("discovery-server", "--address", "host"), "address='host' is invalid")
 

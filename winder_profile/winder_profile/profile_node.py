@@ -59,7 +59,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from winder.contract.events import ControlEvent
 from winder.contract.params import OPERATION_SPECS, PROFILE_SPECS, UNSHAPED, check_profile
-from winder.contract.states import EventKind, EventSource, JobState, ReadyState
+from winder.contract.states import CellState, EventKind, EventSource, JobState, ReadyState
 from winder.contract.stream import (
     STEP_COLUMNS,
     TIMED_COLUMNS,
@@ -73,6 +73,7 @@ from winder.contract.topics import (
     TOPIC_PATH,
     TOPIC_PROFILE_CONFIG,
     TOPIC_SIM_CONFIG,
+    TOPIC_STATE,
     TOPIC_STEP_TIMES,
     TOPIC_STEPS,
     status_values,
@@ -93,6 +94,7 @@ from winder.ros.settings import Settings
 from winder.ros.spin import spin
 from winder.ros.timers import steady_timer
 from winder.spec import SpecError, check_all
+from winder_interfaces.msg import CellState as CellStateMsg
 from winder_interfaces.msg import ControlEvent as ControlEventMsg
 from winder_interfaces.msg import JobDescription
 
@@ -150,6 +152,10 @@ class ProfileNode(ManagedNode):
         self.create_service(Trigger, "~/abort", lambda _q, r: self.reply(r, *self.command(EventKind.ABORT)))
         self.pub_control = self.create_publisher(ControlEventMsg, TOPIC_CONTROL, QOS_EVENTS)
         attributed(self, String, TOPIC_SIM_CONFIG, self.on_sim_config_raw, QOS_LATCHED_READER)
+        # the consumer's word that it closed a run (winder/state): its steps are timed no more
+        self.sub_state = self.peers.subscribe(
+            CellStateMsg, TOPIC_STATE, self.on_cell_state, QOS_LATCHED_READER
+        )
         self.sim_config_topic = self.resolve_topic_name(TOPIC_SIM_CONFIG)
         self.sub_clock: Subscription | None = None  # only while a real-time run is timed
         self.last_sim_config: String | None = None
@@ -159,6 +165,7 @@ class ProfileNode(ManagedNode):
         self.timeline: Timeline | None = None
         self.early: list[bytes] = []
         self.timed = 0
+        self.closed = ""  # the consumer closed the run being timed: its final state
         self.error = ""
         self.ramp_kind = ""  # the ramp kind of the run being timed
         #: accepted step rows not sent yet, with their step indices in the segment
@@ -260,7 +267,7 @@ class ProfileNode(ManagedNode):
             self.fail(f"job {job.job_id} cannot be ramped: {exc}")
             return
         self.end_clock()
-        self.plan, self.timeline = job, Timeline(values, timing)
+        self.plan, self.timeline, self.closed = job, Timeline(values, timing), ""
         self.holds = list(job.stops) if job.stop_resume == "call" else []
         self.waiting_at = None
         self.queue.clear()
@@ -321,6 +328,10 @@ class ProfileNode(ManagedNode):
         except ValueError as exc:
             self.fail(f"bad steps chunk: {exc}")
             return
+        if self.closed and self.checker.continues(rows, STEP_COLUMNS):
+            # the consumer closed the run: its steps still coming are dropped (counted when it closed)
+            self.checker.check_rows(rows, STEP_COLUMNS)
+            return
         if self.run_over() and not self.checker.continues(rows, STEP_COLUMNS):
             # every step of the run is sent (or dropped past its abort): a chunk that does not go
             # on from it is the next run's, whose description can come after its first steps (two
@@ -355,6 +366,13 @@ class ProfileNode(ManagedNode):
         for ~/resume, or the end of an aborted run (those are dropped)."""
         tl = self.timeline
         if tl is None or self.plan is None or not self.mode_ready():
+            return
+        # the consumer's states waiting in the reader first: a node that wakes from a hold finds
+        # the run's steps, its sim_config and the consumer's close of it all queued, and the
+        # executor hands them out in its own order, not theirs
+        for raw, gid in waiting(self.sub_state):
+            self.peers.deliver(TOPIC_STATE, gid, raw, self.take_cell_state)
+        if self.closed:
             return
         sent_before = self.timed + self.dropped
         while self.queue and self.waiting_at is None:
@@ -548,6 +566,43 @@ class ProfileNode(ManagedNode):
                 )
         self.mode_known = True
         self.release()
+
+    def take_cell_state(self, raw: bytes) -> None:
+        try:
+            msg = deserialize_message(raw, CellStateMsg)
+        except Exception:  # not a CellState: nothing to act on
+            return
+        self.on_cell_state(msg)
+
+    def on_cell_state(self, msg: CellStateMsg) -> None:
+        """The consumer's ``winder/state``: a run it closed (done, aborted,
+        failed) is over here too. Its steps not timed yet are dropped, never
+        sent: the consumer will execute none of them, and sent after the
+        close they reached the next run (issue 53: a consumer that closed a
+        run for its stall while this node still waited for its
+        winder/sim_config; this node then paced the closed run on its wall
+        clock, and the next run took those steps and refused its own pause)."""
+        plan = self.plan
+        if plan is None or not plan.run_id or msg.run_id != plan.run_id or self.closed:
+            return
+        if msg.state not in (CellState.DONE, CellState.ABORTED, CellState.FAILED) or self.run_over():
+            return
+        untimed = plan.total_steps - self.timed - self.dropped
+        self.closed = msg.state
+        self.queue.clear()
+        self.holds, self.waiting_at = [], None
+        self.dropped += untimed
+        self.mode_known = True
+        self.end_clock()
+        why = (
+            f"run {plan.run_id}: closed by the consumer ({msg.state}) with {untimed} of its steps not "
+            f"timed yet: they are dropped, never sent"
+        )
+        if msg.state == CellState.FAILED:
+            self.fail(why)
+        else:
+            self.get_logger().warning(why)
+        self.report()
 
     def on_clock(self, raw: bytes) -> None:
         """The cell's clock (builtin_interfaces/Time after the CDR header)."""

@@ -123,6 +123,8 @@ class StepConsumer(ManagedNode):
         self.pub_config = (
             self.create_publisher(String, TOPIC_SIM_CONFIG, QOS_LATCHED) if self.engine.configures else None
         )
+        #: the last run's winder/sim_config (its run id, the message), said again until its steps come
+        self.config_msg: tuple[str, String] | None = None
         self.ready = Announcer(self, "consumer", recheck=self.announce)
         # a job description starts a run now: volatile, so a consumer that
         # (re)starts never takes the last run's latched description for a new
@@ -272,6 +274,7 @@ class StepConsumer(ManagedNode):
                 doc.update(source_bag=plan.source_bag, source_run_id=plan.source_run_id)
             msg_config = String(data=json.dumps(doc))
             self.pub_config.publish(msg_config)
+            self.config_msg = (plan.run_id, msg_config)
             config_raw = serialize_message(msg_config)
         if values["record"]:
             why = self.recording.open(values, raw, config_raw, self.engine.unrecorded())
@@ -461,7 +464,15 @@ class StepConsumer(ManagedNode):
         self.ready.announce(state)
 
     def report(self) -> None:
-        """The 1 Hz report: readiness again, and the job status."""
+        """The 1 Hz report: readiness again, the run's configuration again
+        while none of its steps has come (the profile node waits for it: one
+        lost under load, or refused while the graph did not name this node
+        yet, held the run's steps back until this node gave the run up), and
+        the job status."""
+        config, plan = self.config_msg, self.plan
+        waits = plan is not None and config is not None and config[0] == plan.run_id
+        if waits and config is not None and self.pub_config is not None and self.run.last_step_ns < 0:
+            self.pub_config.publish(config[1])
         self.announce()
         self.ready.repeat()
         self.run.report()

@@ -58,7 +58,7 @@ def describe_profile(environ: Mapping[str, str] | None = None) -> str:
     path = Path(chosen)
     if path == PROFILE:
         return (
-            "winder's default (shared memory and UDP, 64 kB datagrams); on a network that "
+            "winder's default (UDP only, on one host its loopback; 64 kB datagrams); on a network that "
             "loses packets select the LAN profile on every host (docs/DEPLOYING.md)"
         )
     if path == LAN_PROFILE:

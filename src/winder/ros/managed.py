@@ -38,6 +38,8 @@ from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.publisher import Publisher
 
+from winder.ros.wake import WakeWatch
+
 __all__ = ["LEFT_CELL", "ManagedNode"]
 
 #: the exit status of a node that refused to join its cell: 2, "bad input"
@@ -61,6 +63,9 @@ class ManagedNode(LifecycleNode):
         self.active = False
         self.auto = False  # configuring itself at start (not managed)
         self.guard_transitions()
+        # a hold (SIGSTOP, a starved host) longer than the DDS lease must not cost the node its
+        # place on the others' graphs: it announces itself again when it wakes (winder.ros.wake)
+        self.wake_watch = WakeWatch(self)
         self.declare_parameter(
             "managed",
             False,
