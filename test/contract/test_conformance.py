@@ -613,10 +613,13 @@ def test_a_stall_is_reported_and_the_run_closed(cell: Cell, paced: ConsumerSpec)
     """The profile node stopped (SIGSTOP) mid-run: an ERROR mentioning the
     stall within stall_timeout, the run closed incomplete after stall_abort
     (winder/state failed); once the profile node goes on (SIGCONT), the
-    consumer is ready and the cell runs the next job."""
+    consumer is ready and the cell takes the next start at once (CONTRACT.md
+    5.3): the consumer's final report ends the run for the interp node too,
+    which gave it up only after its own stall_abort (30 s here, its default)
+    without receipts before ("job ... is running (11/3072 steps taken)")."""
     stall = {"stall_timeout": 0.5, "stall_abort": 2.0}
     cell.start_consumer(paced, stall=stall)
-    cell.start_upstream()
+    cell.start_upstream(stall_abort=30.0)
     cell.handshake()
     run_id, _ = cell.start()
     cell.running(run_id, 500)
@@ -667,8 +670,21 @@ def test_a_stall_is_reported_and_the_run_closed(cell: Cell, paced: ConsumerSpec)
         10,
         "the consumer's ready after the stalled run",
     )
-    cell.given_up(run_id)  # the interp node's side of the run, after its stall_abort
+    # taken, not refused "is running" (start() asks again only while the cell says "not ready":
+    # the profile node's word, stale after its stop, comes again within a second)
     second, total2 = cell.start(timeout=10)
+
+    def given_up() -> list[str]:  # the interp node's side: the run ended by the consumer's report
+        return [
+            s.message
+            for s in cell.statuses
+            if s.name == "interp_node: job"
+            and s.values.get("run_id") == run_id
+            and s.values["state"] == "incomplete"
+        ]
+
+    cell.wait(given_up, 5, f"the interp node's status of run {run_id} given up")
+    assert "its consumer closed the run" in given_up()[0], given_up()
     check_done(cell, second, total2, cell.ends(second))
 
 

@@ -883,6 +883,60 @@ def test_a_homing_service_that_never_answers_fails_homing_and_wedges_nothing(
     assert "Traceback" not in procs.log(bridge)
 
 
+def test_require_homing_switched_on_at_run_time_holds_the_next_start(
+    tmp_path: Path, procs: Procs, ros: Any
+) -> None:
+    """require_homing set while the bridge runs (a parameter change, not a
+    start-up value): no run moves the axes unhomed. A start taken before the
+    bridge said it waits is refused by the bridge before its first command,
+    naming ~/home; the bridge then says it waits ("not homed") and no start is
+    taken until ~/home has run; after it a run is done. (Before: the bridge
+    read require_homing from the last run's settings, and the next run went
+    unhomed to its end.)"""
+    from std_srvs.srv import Trigger
+    from support.ros_probe import ready_states, set_params
+
+    bags = tmp_path / "bags"
+    start_standin(procs)
+    bridge = start_cell(procs, bags, *LOOSE, interp={"autostart": "false"})
+    ready = ready_states(ros)
+    spin_until(
+        ros,
+        lambda: ready.get("consumer") == "ready" and ready.get("profile") == "ready",
+        60,
+        "the bridge and the profile node ready (winder/ready)",
+    )
+    [result] = set_params(ros, "bridge_node", {"require_homing": True})
+    assert result.successful, result.reason
+    want = "the axes are not homed (require_homing): call /bridge_node/home"
+    ok, reply = call_start(ros)  # at once: the bridge may not have said "waiting" yet
+    runs = 0
+    if ok:  # the run is taken: the bridge refuses it before any command
+        runs += 1
+        refused_before_any_command(
+            procs, bridge, bags, f"the run cannot start: {want}; nothing was commanded"
+        )
+    else:
+        assert "not ready" in reply, reply
+    wait.log_has(lambda: procs.log(bridge), f"waiting for the hardware: {want}", 30, running=bridge)
+    spin_until(ros, lambda: ready.get("consumer") == "waiting", 10, "the bridge waiting (winder/ready)")
+    ok, reply = call_start(ros)
+    assert not ok and "not ready" in reply, reply
+    client = ros.create_client(Trigger, "/bridge_node/home")
+    spin_until(ros, client.service_is_ready, 30, "/bridge_node/home")
+    future = client.call_async(Trigger.Request())
+    spin_until(ros, future.done, 30, "the reply of ~/home")
+    assert future.result().success, future.result().message
+    assert future.result().message.startswith("homed where they stand: "), future.result().message
+    start_again(ros)
+    bag = wait_for_bags(bags, runs + 1)[-1]
+    raw = rosbags_read(bag)
+    report = final_report(raw)
+    assert report["state"] == "done", report["servo_fault"] or report
+    check_commands(raw, report)
+    assert "Traceback" not in procs.log(bridge)
+
+
 def start_unstepped_run(procs: Procs, ros: Any, bags: Path, *bridge_params: str) -> tuple[Any, Any]:
     """The stand-in, the bridge and a fake planner (test/support/cell.py) that
     sends a job description and never a step: (the bridge process, the fake)

@@ -1,7 +1,10 @@
 """winder.ros.driver.DriverNode with a backend that fails: an exception in a
-driver's method is a bug of the driver, not of the cell. The run closes
-incomplete, named (``driver error: backend.write() raised ...``, once, with
-its traceback in the driver's log), ``winder run`` exits 1 "failed", and the
+driver's method (a SystemExit or a KeyboardInterrupt too), a return value
+that is not what the method promises (a read() of None or of text), a
+begin() that does not return within begin_timeout, is a bug of the driver,
+not of the cell. The run closes incomplete, named (``driver error:
+backend.write() raised ...``, once, with its traceback in the driver's log;
+a drive's fault text in one line), ``winder run`` exits 1 "failed", and the
 node stays up and takes the next run to done."""
 
 from __future__ import annotations
@@ -30,8 +33,18 @@ FAILURES = {
     "begin": "driver error: backend.begin() raised OSError: /dev/ttyDRIVE: no such device",
     "json": "driver error: backend.begin() returned a configuration JSON cannot hold",
     "nan": "driver error: backend.read() returned array([nan, nan, nan]): want 3 finite step positions",
+    "none": "driver error: backend.read() returned None: want 3 finite step positions",
+    "text": "driver error: backend.read() returned ['0', '0', '0']: want 3 finite step positions",
+    "exit": "driver error: backend.write() raised SystemExit: 3",
+    "interrupt": "driver error: backend.write() raised KeyboardInterrupt",
+    "hang": "driver error: backend.begin() did not return within 1 s (begin_timeout)",
+    "lines": "fork drive: following error; the run stops",
     "stuck": "axes not in position 0.05 s after the last step: fork",
 }
+#: the failures that are something raised: a traceback in the driver's log, once
+RAISED = ("write", "begin", "exit", "interrupt")
+#: the driver's settings for a failure (begin_timeout below faulty_drive.HANG_S)
+SETTINGS = {"hang": ["-p", "begin_timeout:=1.0"]}
 
 
 @pytest.mark.parametrize("fail", list(FAILURES))
@@ -47,6 +60,7 @@ def test_a_driver_that_fails_closes_its_run_and_takes_the_next(
             "--fail-run",
             "1",
             *bags(tmp_path),
+            *SETTINGS.get(fail, []),
         ],
         "faulty_drive",
     )
@@ -62,11 +76,15 @@ def test_a_driver_that_fails_closes_its_run_and_takes_the_next(
     log = procs.log(drive)
     errors = [line for line in log.splitlines() if line.startswith("[ERROR]")]
     assert len(errors) == 1 and FAILURES[fail] in errors[0], log  # said once
-    if fail in ("write", "begin"):  # an exception: its traceback in the driver's log, once
+    if fail in RAISED:  # an exception: its traceback in the driver's log, once
         assert log.count("Traceback") == 1 and 'faulty_drive.py", line' in log, log
+    if fail == "lines":  # a fault text of many lines: its first, nowhere the others
+        assert "3000 counts" not in said and "3000 counts" not in log, said + log
     second = subprocess.run(run, stdin=subprocess.DEVNULL, **options)  # type: ignore[call-overload]
     assert second.returncode == 0, second.stdout + second.stderr
     assert "  state              done" in second.stdout, second.stdout
+    if fail == "hang":  # no run was taken until the late begin() returned, and end() was called then
+        assert "backend.begin() returned, late: backend.end() called" in procs.log(drive)
 
 
 def test_winder_run_ends_when_its_external_consumer_dies_mid_run(procs: Procs, tmp_path: Path) -> None:

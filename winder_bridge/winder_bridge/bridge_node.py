@@ -62,8 +62,10 @@ bound what a run may command. Every command is one of the job's positions
 from the run's origin, so the job's extent (its segments' corners) is
 checked against them when the run is armed, before the first command: a job
 that would leave them is refused (a servo fault naming the joint, the
-position and the limit), nothing moves. With ``require_homing`` a run is not
-taken (the consumer says ``waiting``: "not homed") until ``~/home`` has run:
+position and the limit), nothing moves. With ``require_homing`` (as it is
+set when each run starts: switched on between runs, it holds the next one) a
+run is not taken (the consumer says ``waiting``: "not homed"; one taken
+before it said so is refused before any command) until ``~/home`` has run:
 it calls ``homing_service`` (the drive's or a homing controller's
 std_srvs/Trigger) or, without one, references the axes where they stand; the
 reference is lost with the broadcaster (no joint_states for a second). The
@@ -447,8 +449,6 @@ class BridgeEngine(Engine):
         self.ramp_checked = False
         self.ramp_said = False
         self.early_breach = ""  # steps past a limit came before the run was armed
-        self.require_homing = bool(values["require_homing"])
-        self.homing_service = str(values["homing_service"])
         #: the job's extent in each joint's step counts (its corners' least and greatest)
         self.extent = (np.zeros(len(self.axes), np.int64), np.zeros(len(self.axes), np.int64))
         self.units = [BRIDGE_SPECS[f"max_following_error.{a}"].unit for a in self.axes]
@@ -521,6 +521,9 @@ class BridgeEngine(Engine):
             if self.sub_wrench is not None:
                 self.watch_wire(plan)
             self.running = True
+            unhomed = self.unhomed(values)
+            if unhomed:  # the run's own settings: require_homing set since the last run counts
+                self.raise_fault(f"servo fault: the run cannot start: {unhomed}; nothing was commanded", {})
         self.go.set()
         self.upstream.find()  # the run's profile node
         self.check_ramp()
@@ -776,13 +779,25 @@ class BridgeEngine(Engine):
         if why and self.homed:
             self.homed = False
             self.node.get_logger().warning(f"the axes' reference is lost ({why}): home them again (~/home)")
-        if not why and self.require_homing and not self.homed:
-            why = f"the axes are not homed (require_homing): call {self.node.get_fully_qualified_name()}/home"
+        if not why:
+            why = self.unhomed(self.run.values())
         if why != self.missing_said:
             self.missing_said = why
             if why:
                 self.node.get_logger().info(f"waiting for the hardware: {why}")
         return why
+
+    def unhomed(self, values: dict[str, Any]) -> str:
+        """Why a run may not start for want of homing ("" if it may), from the
+        settings ``values`` as they are now: ``require_homing`` switched on
+        between runs holds the next start as one given at the node's start
+        does (it was read from the last run's settings, and the next run ran
+        unhomed to its end)."""
+        if values["require_homing"] and not self.homed:
+            return (
+                f"the axes are not homed (require_homing): call {self.node.get_fully_qualified_name()}/home"
+            )
+        return ""
 
     def hardware_missing(self) -> str:
         if not self.running:  # the controller the next run will command (its settings may have changed)

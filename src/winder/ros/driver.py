@@ -39,6 +39,8 @@ a driver starts from it.
 from __future__ import annotations
 
 import json
+import signal
+import threading
 import time
 import traceback
 from collections.abc import Callable
@@ -57,10 +59,10 @@ from winder.contract.stream import JobPlan
 from winder.contract.topics import TOPIC_CLOCK, TOPIC_JOINT_COMMANDS, TOPIC_JOINT_STATES, TOPIC_STEP_TIMES
 from winder.motion.axes import AXIS_TABLE, Axis
 from winder.ros.consumer import StepConsumer
+from winder.ros.ctl import one_line as one_line_text
 from winder.ros.diagnostics import ERROR
 from winder.ros.engine import Engine, RunPort
 from winder.ros.qos import QOS_CLOCK, QOS_STATE
-from winder.ros.run_bag import one_line
 from winder.ros.timers import steady_timer
 from winder.ros.upstream import ProfileAbort
 from winder.spec import Spec
@@ -84,7 +86,56 @@ DRIVER_SPECS: dict[str, Spec] = {
         0.0,
         1e9,
     ),
+    # at most the profile node's wait for the run's winder/sim_config (10 s), which goes out
+    # once begin() has returned: a longer begin would have the run's steps paced without it
+    "begin_timeout": Spec(
+        "begin_timeout",
+        float,
+        5.0,
+        "how long the backend's begin() may take; past it the run fails (the drive does not answer)",
+        "s",
+        0.0,
+        10.0,
+        low_open=True,
+    ),
 }
+
+#: what a backend method gave back when it raised (or could not be called): the error is said
+FAILED: Any = type("Failed", (), {"__repr__": lambda _self: "FAILED"})()
+
+
+def interrupted(exc: BaseException) -> bool:
+    """Whether ``exc``, raised in a backend method, may be a real Ctrl-C of
+    this process, to be passed on: a KeyboardInterrupt in the main thread
+    while Python's own SIGINT handler is in force (a driver run outside
+    winder's node main), which raises one wherever the main thread is and
+    cannot be told from a backend's own. Under :func:`winder.ros.spin.spin` a
+    signal never raises (it shuts the context down and the node ends after
+    the callback), so there every exception of a backend method, a
+    KeyboardInterrupt or a SystemExit too, is the backend's: a fault."""
+    return (
+        isinstance(exc, KeyboardInterrupt)
+        and threading.current_thread() is threading.main_thread()
+        and signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    )
+
+
+def shown(value: object) -> str:
+    """A value a backend returned, as a fault text names it: one line, short."""
+    try:
+        text = " ".join(repr(value).split())
+    except Exception:  # a repr that raises: its type says enough
+        return f"a {type(value).__name__}"
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def raised(exc: BaseException) -> str:
+    """``raised <type>: <its first line>``, whatever its str() does."""
+    try:
+        text = one_line_text(str(exc))
+    except Exception:
+        text = ""
+    return f"raised {type(exc).__name__}" + (f": {text}" if text else "")
 
 
 @dataclass(frozen=True)
@@ -111,7 +162,16 @@ class Backend(Protocol):
     """A drive (or a simulation of one) behind the cell: what a hardware
     driver writes. Only :meth:`begin`, :meth:`write` and :meth:`read` are
     needed; the others have defaults (inherit from ``Backend`` to get them).
-    Every method is called from the node's executor thread, one at a time."""
+    Every method is called one at a time: from the node's executor thread,
+    except :meth:`begin`, which runs in a thread of its own for at most
+    ``begin_timeout`` s (the executor waits for it; one that overruns fails
+    its run, and no other method is called until it has returned).
+
+    Every return value is checked against what is documented here, and
+    anything raised (``KeyboardInterrupt`` and ``SystemExit`` too, see
+    :func:`interrupted`) is a driver error: the run closes incomplete naming
+    it, the node takes the next run. Texts (a fault, a reason) are said in
+    one line: the first."""
 
     #: the backend's own parameters (name -> Spec), declared on the node beside the consumer's
     specs: ClassVar[dict[str, Spec]] = {}
@@ -166,6 +226,10 @@ class DriveEngine(Engine):
         self.backend = backend
         self.broken = ""  # a driver error of this run (an exception in the backend), if any
         self.said: set[str] = set()  # the backend's methods whose error between runs was said
+        #: a begin() that overran begin_timeout and still runs (its thread), and since when:
+        #: no other method is called meanwhile, and the node takes no run
+        self.busy: threading.Thread | None = None
+        self.busy_since = 0.0
         self.clock_ns = -1  # the last /clock published in this node's life
         self.begin_run(False)
 
@@ -199,7 +263,15 @@ class DriveEngine(Engine):
     def begin(self, plan: JobPlan, values: dict[str, Any]) -> dict[str, object]:
         self.broken = ""
         self.upstream.find()  # the run's profile node, before any fault
-        self.begin_run(bool(self.call("paces", True, self.backend.paces, values)))
+        stuck = self.still_beginning()
+        if stuck:  # a run's description came all the same (this node said "waiting")
+            self.broken = f"driver error: {stuck}: the run is not set up"
+            self.node.get_logger().error(f"{self.broken}; the run stops")
+        paces = self.call("paces", self.backend.paces, values)
+        if paces is not FAILED and not isinstance(paces, bool | np.bool_):
+            self.bug("paces", f"returned {shown(paces)}: want True or False")
+        # a paces() that failed: at their time (the run closes at the next pump anyway)
+        self.begin_run(True if self.broken else bool(paces))
         self.origin_ns = 0 if self.clock_ns < 0 else self.clock_ns + CLOCK_PERIOD_NS
         start = np.array(plan.segments[0].start if plan.segments else [0] * len(AXIS_TABLE), np.int64)
         self.commanded = start.copy()
@@ -208,19 +280,61 @@ class DriveEngine(Engine):
         run = RunStart(
             plan.job_id, plan.run_id, AXIS_TABLE, plan.joint_step, start.copy(), plan.total_steps, values
         )
-        config = self.call("begin", {}, self.backend.begin, run)
-        try:
-            json.dumps(config)
-        except (TypeError, ValueError) as exc:
-            self.bug("begin", f"returned a configuration JSON cannot hold ({exc})")
-            config = {}
+        config = {}
+        if not self.broken:  # a drive whose run already failed is not set up
+            got = self.begin_within(run, float(values["begin_timeout"]))
+            if got is FAILED:
+                pass
+            elif not isinstance(got, dict):
+                self.bug("begin", f"returned {shown(got)}: want a dict (the run's configuration)")
+            else:
+                try:
+                    json.dumps(got)
+                    config = got
+                except Exception as exc:  # TypeError, ValueError, RecursionError...
+                    why = one_line_text(str(exc))
+                    self.bug("begin", f"returned a configuration JSON cannot hold ({why})")
         # the backend's own keys under "drive": none of them can stand for a key of the contract's
         return {"drive": config, "real_time": self.paced, "clock_origin_ns": self.origin_ns}
+
+    def begin_within(self, run: RunStart, limit: float) -> Any:
+        """``backend.begin(run)`` in a thread of its own, waited for at most
+        ``limit`` s (``begin_timeout``): a drive that does not answer (a port
+        that hangs) fails the run instead of holding the node. Until a begin
+        that overran returns, no other method of the backend is called (one at
+        a time, as every backend is promised) and the node takes no run
+        (:meth:`missing`). FAILED if it raised or overran (said)."""
+        box: list[tuple[bool, Any, str]] = []
+
+        def run_begin() -> None:
+            try:
+                box.append((True, self.backend.begin(run), ""))
+            except BaseException as exc:  # no signal lands in this thread: each one is the backend's
+                box.append((False, exc, traceback.format_exc()))
+
+        thread = threading.Thread(target=run_begin, name="backend-begin", daemon=True)
+        since = time.monotonic()
+        thread.start()
+        end = since + limit
+        # in slices: a signal that shuts the node down is not held up by a drive that hangs
+        while thread.is_alive() and self.node.context.ok() and time.monotonic() < end:
+            thread.join(min(0.1, max(end - time.monotonic(), 0.0)))
+        if thread.is_alive():
+            self.busy, self.busy_since = thread, since
+            self.bug("begin", f"did not return within {limit:g} s (begin_timeout)")
+            return FAILED
+        ok, got, trace = box[0]
+        if not ok:
+            self.bug("begin", raised(got), trace=trace)
+            return FAILED
+        return got
 
     def paces(self) -> bool:
         return self.paced
 
     def execute(self, rows: npt.NDArray[np.int64]) -> None:
+        if self.broken:
+            return  # nothing more goes to a drive whose run failed: it closes at this pump
         if not self.paced:
             self.hand_over(int(rows[-1, 0]), rows)
             return
@@ -284,7 +398,7 @@ class DriveEngine(Engine):
         not, said as the run's fault."""
         measured = self.measured(self.run.t_ns)
         if measured is None:
-            return True  # a read that cannot be used: a driver error, said (self.broken)
+            return False  # a read that cannot be used: a driver error, said (self.broken)
         error = np.abs(measured - self.commanded)
         tolerance = self.run.values()["position_tolerance"]
         worst = int(np.argmax(error))
@@ -307,33 +421,83 @@ class DriveEngine(Engine):
             self.publish_states(self.now_ns())
 
     def faults(self) -> str:
-        return self.broken or str(self.call("fault", "", self.backend.fault))
+        if self.broken:
+            return self.broken
+        got = self.call("fault", self.backend.fault)
+        if got is not FAILED and not isinstance(got, str):
+            self.bug("fault", f'returned {shown(got)}: want a str ("" if nothing is wrong)')
+        if self.broken or got is FAILED:
+            return self.broken or "driver error: backend.fault() failed"
+        return one_line_text(got)  # a text of many lines: its first
 
     def details(self) -> dict[str, object]:
-        status = self.call("status", {}, self.backend.status)
-        return {
-            "max_following_error_steps": f"{self.following:.4f}",
-            **(status if isinstance(status, dict) else {}),
-        }
+        own: dict[str, object] = {}
+        got = self.call("status", self.backend.status)
+        if got is not FAILED and not (isinstance(got, dict) and all(isinstance(k, str) for k in got)):
+            self.bug("status", f"returned {shown(got)}: want a dict with str keys")
+        elif got is not FAILED:
+            try:
+                own = {k: one_line_text(str(v)) for k, v in got.items()}
+            except Exception as exc:  # a value whose str() raises
+                self.bug("status", f"returned a value that cannot be said ({raised(exc)})")
+        return {"max_following_error_steps": f"{self.following:.4f}", **own}
+
+    def still_beginning(self) -> str:
+        """Why no method of the backend may be called now: a begin() that
+        overran begin_timeout has not returned ("" if none; one that has
+        returned since is released here, its end() called as at a run's end)."""
+        busy = self.busy
+        if busy is not None and busy.is_alive():
+            return (
+                f"backend.begin() has not returned for {time.monotonic() - self.busy_since:.0f} s "
+                "(it overran begin_timeout)"
+            )
+        if busy is not None:
+            self.busy = None
+            self.node.get_logger().info("backend.begin() returned, late: backend.end() called")
+            self.end_backend()
+        return ""
 
     def missing(self) -> str:
-        return str(self.call("missing", "", self.backend.missing))
+        stuck = self.still_beginning()
+        if stuck:
+            return f"{stuck}: no run until it does"
+        got = self.call("missing", self.backend.missing)
+        if got is FAILED:
+            return "driver error: backend.missing() failed (in the node's log)"
+        if not isinstance(got, str):
+            self.bug("missing", f'returned {shown(got)}: want a str ("" if the drive is there)')
+            return f"driver error: backend.missing() returned {shown(got)}, not a str"
+        return one_line_text(got)
 
     def end(self) -> None:
         self.clock_timer.cancel()
         self.queue = []
-        self.call("end", None, self.backend.end)
+        self.end_backend()
+
+    def end_backend(self) -> None:
+        got = self.call("end", self.backend.end)
+        if got is not FAILED and got is not None:
+            self.bug("end", f"returned {shown(got)}: want None")
 
     # -- a backend that fails --------------------------------------------------------------
-    def call(self, what: str, default: Any, fn: Callable[..., Any], *args: Any) -> Any:
-        """``fn(*args)``, a method of the backend; an exception in it is a bug of
-        the driver: said once with its traceback, the run closed incomplete at
-        the next pump (a fault), the node goes on and takes the next run."""
+    def call(self, what: str, fn: Callable[..., Any], *args: Any) -> Any:
+        """``fn(*args)``, a method of the backend, or FAILED. Anything raised
+        in it (a KeyboardInterrupt or a SystemExit too: a driver's
+        ``sys.exit()`` must not end the node) is a bug of the driver: said
+        once with its traceback, the run closed incomplete at the next pump (a
+        fault), the node goes on and takes the next run. Only what may be a
+        real Ctrl-C is passed on (:func:`interrupted`). Not called at all
+        while a begin() that overran still runs (FAILED)."""
+        if self.busy is not None:
+            return FAILED
         try:
             return fn(*args)
-        except Exception as exc:
-            self.bug(what, f"raised {type(exc).__name__}: {one_line(exc)}", trace=traceback.format_exc())
-            return default
+        except BaseException as exc:
+            if interrupted(exc):
+                raise
+            self.bug(what, raised(exc), trace=traceback.format_exc())
+            return FAILED
 
     def bug(self, what: str, text: str, trace: str = "") -> None:
         why = f"backend.{what}() {text}"
@@ -396,8 +560,13 @@ class DriveEngine(Engine):
         return out[0] if len(out) == 1 else np.concatenate(out)
 
     def hand_over(self, t_ns: int, rows: npt.NDArray[np.int64]) -> None:
-        """Rows to the backend, then booked: executed, receipts, the run's time."""
-        self.call("write", None, self.backend.write, t_ns, rows)
+        """Rows to the backend, then booked: executed, receipts, the run's time.
+        Rows a write failed on are not executed (the run closes at this pump)."""
+        got = self.call("write", self.backend.write, t_ns, rows)
+        if got is not FAILED and got is not None:
+            self.bug("write", f"returned {shown(got)}: want None (a write that fails raises)")
+        if self.broken:
+            return
         self.commanded = rows[-1, 2:].copy()
         self.run.executed(rows.shape[0])
         self.run.receipt()
@@ -407,16 +576,19 @@ class DriveEngine(Engine):
 
     def measured(self, t_ns: int) -> npt.NDArray[np.float64] | None:
         """The backend's ``read(t_ns)`` as one finite step position per axis;
-        None (a driver error, said) if it raised or returned anything else."""
-        got = self.call("read", None, self.backend.read, t_ns)
+        None (a driver error, said) if it raised or returned anything else:
+        None, text, booleans, NaN, the wrong number of values."""
+        got = self.call("read", self.backend.read, t_ns)
+        if got is FAILED:
+            return None
         try:
-            measured = np.asarray(got, float).reshape(len(AXIS_TABLE))
-        except (TypeError, ValueError):
+            values = np.asarray(got)
+            numbers = values.dtype.kind in "iuf"  # not text, objects or booleans
+            measured = values.astype(float).reshape(len(AXIS_TABLE)) if numbers else None
+        except Exception:  # a ragged list, an object numpy cannot take
             measured = None
         if measured is None or not np.all(np.isfinite(measured)):
-            if got is not None:  # (None: it raised, said already)
-                want = f"want {len(AXIS_TABLE)} finite step positions"
-                self.bug("read", f"returned {repr(got)[:60]}: {want}")
+            self.bug("read", f"returned {shown(got)}: want {len(AXIS_TABLE)} finite step positions")
             return None
         return measured
 

@@ -5,10 +5,10 @@ driver from. Run it as the cell's consumer::
 
     .venv/bin/python -m winder.ros.mock_backend [--ros-args -p lag:=0.01 -p real_time:=false]
 
-Its parameters, besides the consumer's (``bag_dir``, ``record``, the stall
-watch) and ``settle_time``: ``real_time`` (execute each step at its time, as a
-drive does; false: every step at once) and ``lag`` (s: the axes follow the
-commanded position with this time constant; 0: at once).
+Its parameters, besides the consumer's and the driver node's (``settle_time``,
+``begin_timeout``...: ``driver.DRIVER_SPECS``): ``real_time`` (execute each
+step at its time, as a drive does; false: every step at once) and ``lag``
+(s: the axes follow the commanded position with this time constant; 0: at once).
 """
 
 from __future__ import annotations
