@@ -3,7 +3,7 @@ docs/RELIABILITY.md is the code's (winder.cli.exits), and each class really ends
 code, made to happen with the real cell: a bad option, a run aborted by its
 schedule, a run whose consumer is killed, Ctrl-C, a refused ``winder ctl``,
 an output that cannot be written (an internal error, a bug, is made to happen
-in test_errors.py)."""
+in test_errors.py; a run whose axes lose steps, exit 6, in test_lost_steps.py)."""
 
 from __future__ import annotations
 
@@ -24,6 +24,7 @@ from winder.cli.exits import (
     EXIT_ABORTED,
     EXIT_BAD_INPUT,
     EXIT_FAILED,
+    EXIT_FAULTED,
     EXIT_INTERNAL,
     EXIT_INTERRUPTED,
     EXIT_NODE_DIED,
@@ -63,7 +64,7 @@ def test_the_documented_table_is_the_codes_table() -> None:
     rows = re.findall(r"^\| (\d+) \| ([^|]+) \| (.+) \|$", section, re.MULTILINE)
     table = {int(code): (name.strip(), when.strip()) for code, name, when in rows}
     assert table == EXIT_TABLE
-    codes = [EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_ABORTED, EXIT_NODE_DIED, EXIT_OUTPUT]
+    codes = [EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_ABORTED, EXIT_NODE_DIED, EXIT_OUTPUT, EXIT_FAULTED]
     assert sorted(EXIT_TABLE) == [*codes, EXIT_INTERNAL, EXIT_INTERRUPTED] and len(set(codes)) == len(codes)
 
 

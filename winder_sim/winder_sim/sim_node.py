@@ -82,6 +82,13 @@ SAMPLE_BATCH = 1 << 15
 FREE_RUN_LEAP = 0.02
 #: s of wall time after which a real-time run waiting for steps says its /clock again
 CLOCK_REPEAT = 0.1
+#: How far the simulated axes may leave the wire's path (their eq. 7 distance from it, at any
+#: sample of a layer), in wire diameters: a turn laid half a diameter off lies on its
+#: neighbour's crest, so beyond it the coil has a defect. A lag along the path is no distance
+#: from it. The shipped jobs stay within 0.14 of a diameter (ortho_rect, the most: 70 um on
+#: 0.5 mm wire); a flyer that stalls leaves the path by millimetres. `winder analyze` judges
+#: each turn's place more finely afterwards (winder.analysis.wound: 10 % of a diameter).
+PATH_TOLERANCE = 0.5
 #: the simulator's own recorded topics
 SIM_TOPICS = {
     "clock": (TOPIC_CLOCK, "rosgraph_msgs/msg/Clock"),
@@ -111,7 +118,15 @@ class AxisSim:
 
     @property
     def lost_steps(self) -> int:
+        """Full steps of the motor lost (the nonlinear model's slips, a tooth pitch each: 2*m
+        full steps); the linear model loses none."""
         return int(getattr(self.tracker, "lost_steps", 0))
+
+    @property
+    def lost_commanded(self) -> int:
+        """The same angle in this axis' commanded steps (of ``motor_step_angle``: a microstep
+        of its drive), the unit of every other step count of the run."""
+        return round(self.lost_steps * self.motor.full_step / abs(self.step_angle))
 
 
 class Tally:
@@ -338,19 +353,43 @@ class SimEngine(Engine):
 
     def details(self) -> dict[str, object]:
         wire = self.wire.details() if self.wire is not None else {}
+        worst = max(range(len(self.axes)), key=lambda i: self.axes[i].max_error_steps, default=None)
         return {
             **wire,
             "lost_steps": sum(a.lost_steps for a in self.axes),
+            "lost_commanded_steps": sum(a.lost_commanded for a in self.axes),
             "max_tracking_error_steps": f"{max((a.max_error_steps for a in self.axes), default=0.0):.4f}",
+            "max_tracking_error_axis": AXES[worst] if worst is not None else "",
             "mean_deviation_command_m": f"{self.dev_cmd.mean:.6e}",
             "max_deviation_command_m": f"{self.dev_cmd.peak:.6e}",
             "mean_deviation_actual_m": f"{self.dev_act.mean:.6e}",
             "max_deviation_actual_m": f"{self.dev_act.peak:.6e}",
+            "path_tolerance_m": f"{self.path_tolerance():.6e}",
         }
 
+    def path_tolerance(self) -> float:
+        """How far the axes may leave the wire's path (m): PATH_TOLERANCE of the job's wire."""
+        plan = self.run.plan
+        return PATH_TOLERANCE * plan.job.wire_diameter if plan is not None else math.nan
+
     def faults(self) -> str:
-        lost = sum(a.lost_steps for a in self.axes)
-        said = [f"{lost} steps lost"] if lost else []
+        """What the simulated axes did that they were not commanded to, in words with their
+        units (the final report's ``faults``): steps lost, the wire's path left by more than
+        :data:`PATH_TOLERANCE` of its diameter; then the wire's own faults."""
+        said: list[str] = []
+        lost = [(name, a) for name, a in zip(AXES, self.axes, strict=True) if a.lost_steps]
+        if lost:
+            each = ", ".join(f"{name} {a.lost_steps}" for name, a in lost)
+            commanded = sum(a.lost_commanded for _, a in lost)
+            said.append(
+                f"{sum(a.lost_steps for _, a in lost)} full steps lost ({each}; {commanded} commanded steps)"
+            )
+        bound = self.path_tolerance()
+        if self.dev_act.count and self.dev_act.peak > bound:
+            said.append(
+                f"the axes left the wire's path: up to {self.dev_act.peak * 1e6:.1f} um from it, over the "
+                f"{bound * 1e6:.1f} um allowed ({PATH_TOLERANCE:g} x the wire's diameter)"
+            )
         if self.refused:
             said.append(f"refused: {self.refused}")
         elif self.wire is not None:

@@ -464,7 +464,7 @@ def analyze(run: Run, stride_time: float = STRIDE_TIME, digested: Digest | None 
                 "; it is still being recorded"
                 if being_written(run.path)
                 else f"; it was left unclosed (its writer killed, or its disk full): `winder bag recover "
-                f"{run.path}` writes it out closed, for ros2 bag and Foxglove"
+                f"{run.path}` writes a closed copy with its index (every reader opens it as it is)"
             )
         notes.append(f"incomplete recording ({why}): figures cover what was recorded{mend}")
     simulated = int(_num(run.report, "steps_done", -1))
@@ -749,7 +749,7 @@ def _rows(a: Analysis) -> list[tuple[str, str]]:
         ("job time (last step)", f"{_f(a.job_time)} s"),
         ("simulated / wall time", f"{_f(a.sim_time)} s / {_f(a.wall_time)} s"),
         ("real-time factor", f"{_f(a.real_time_factor, decimals=1)} x"),
-        ("lost steps (sim node)", str(a.lost_steps) if a.lost_steps >= 0 else "-"),
+        ("lost steps (sim node)", f"{a.lost_steps} full steps" if a.lost_steps >= 0 else "-"),
         *_wire_rows(a.wire),
         ("eq.7 mean, command", f"{_f(a.command.mean, 1e6)} um"),
         ("eq.7 max, command", f"{_f(a.command.max, 1e6)} um"),

@@ -10,6 +10,7 @@ __all__ = [
     "EXIT_ABORTED",
     "EXIT_BAD_INPUT",
     "EXIT_FAILED",
+    "EXIT_FAULTED",
     "EXIT_INTERNAL",
     "EXIT_INTERRUPTED",
     "EXIT_NODE_DIED",
@@ -24,13 +25,14 @@ EXIT_BAD_INPUT = 2
 EXIT_ABORTED = 3
 EXIT_NODE_DIED = 4
 EXIT_OUTPUT = 5
+EXIT_FAULTED = 6
 #: sysexits.h's EX_SOFTWARE: an internal software error
 EXIT_INTERNAL = 70
 EXIT_INTERRUPTED = 130
 
 #: code -> (name, when), in the words of docs/RELIABILITY.md
 EXIT_TABLE: dict[int, tuple[str, str]] = {
-    EXIT_OK: ("ok", "the command did what it was asked; a run ended done"),
+    EXIT_OK: ("ok", "the command did what it was asked; a run ended done, its axes as commanded"),
     EXIT_FAILED: (
         "run failed",
         "a run ended incomplete or with errors, or did not start or finish in time; `winder ctl`: "
@@ -44,7 +46,7 @@ EXIT_TABLE: dict[int, tuple[str, str]] = {
     EXIT_ABORTED: (
         "run aborted",
         "an operator abort (`winder ctl abort`, the job's schedule) ended the run, the axes at rest, "
-        "no error",
+        "no error, no fault",
     ),
     EXIT_NODE_DIED: (
         "node died",
@@ -54,6 +56,13 @@ EXIT_TABLE: dict[int, tuple[str, str]] = {
         "output not written",
         "a file or directory the command writes cannot be written (no permission, a file where a "
         "directory should be, no space left); nothing half-written is left",
+    ),
+    EXIT_FAULTED: (
+        "run faulted",
+        "a run executed its steps (done, or aborted at rest) but its axes did not do what was "
+        "commanded: the simulated axes lost steps or left the wire's path by more than half its "
+        "diameter, or the wire's tension left its alarm band; the final report's `faults` says what, "
+        "its `state` stays done or aborted",
     ),
     EXIT_INTERNAL: (
         "internal error",

@@ -9,7 +9,14 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from winder.cli.exits import EXIT_ABORTED, EXIT_BAD_INPUT, EXIT_FAILED, EXIT_NODE_DIED, EXIT_OK
+from winder.cli.exits import (
+    EXIT_ABORTED,
+    EXIT_BAD_INPUT,
+    EXIT_FAILED,
+    EXIT_FAULTED,
+    EXIT_NODE_DIED,
+    EXIT_OK,
+)
 from winder.contract.run import JobReport, commands_text, stops_text
 from winder.contract.states import JobState
 
@@ -44,7 +51,11 @@ def report_run(
 ) -> int:
     """The summary of a finished run (``winder run``, ``winder resim``) and
     the exit status (:mod:`winder.cli.exits`): done, aborted cleanly, a node
-    died before the run ended, or failed (with errors, or no final report).
+    died before the run ended, failed (with errors, or no final report), or
+    faulted (every step executed, but the axes did not do what was commanded:
+    the report's ``faults``). Every figure names its unit: a step count is in
+    commanded steps (a microstep of the drive, ``motor_step_angle``), lost
+    steps in the motor's full steps as well.
     ``stops``: the job has programmed stops (else the bag is read for the
     summary's stops and commands only when the consumer booked commands).
     ``unclosed``: the run's bag, if its consumer left it unclosed (killed, a
@@ -80,9 +91,11 @@ def report_run(
             f"axes {_number(x, 'mean_deviation_actual_m', '.3f', 1e6)} um  (eq. 7)"
         )
     if "max_tracking_error_steps" in x:
-        print(f"  max tracking error {_number(x, 'max_tracking_error_steps', '.3f')} steps")
-    if "lost_steps" in x:
-        print(f"  lost steps         {x['lost_steps']}")
+        axis = f" ({x['max_tracking_error_axis']})" if x.get("max_tracking_error_axis") else ""
+        print(f"  max tracking error {_number(x, 'max_tracking_error_steps', '.3f')} commanded steps{axis}")
+    if "lost_steps" in x:  # the nonlinear model's slips, in the motor's full steps (CONTRACT 3.7)
+        commanded = f" ({x['lost_commanded_steps']} commanded steps)" if "lost_commanded_steps" in x else ""
+        print(f"  lost steps         {x['lost_steps']} full steps{commanded}")
     if "tension_peak_n" in x:  # the simulated wire
         outside = float(x.get("tension_outside_alarm_s") or 0)
         span = f"{x.get('tension_min_n', '-')}..{x['tension_peak_n']} N"
@@ -90,6 +103,8 @@ def report_run(
             print(f"  WARNING wire       tension {span}, {outside:g} s outside the alarm band")
         else:
             print(f"  wire tension       {span}")
+    if r.faults:  # every step executed, but not as commanded: the part is not the job's
+        print(f"  WARNING faults     {r.faults}")
     if "late_steps" in x:  # steps that came behind the consumer's clock, executed at it
         behind = _number(x, "late_steps_behind_max_ms", ".3f")
         print(f"  late steps         {x['late_steps']}  (up to {behind} ms behind the clock, executed at it)")
@@ -119,11 +134,14 @@ def report_run(
     foreign = result.intruders if hasattr(result, "intruders") else x.get("intruders", "")
     if foreign:
         print(f"  ignored, foreign   {foreign}")
-    if r.state == JobState.ABORTED and not r.errors and not result.errors:
-        print(f"winder {command}: {result.message}", file=sys.stderr)
-        return EXIT_ABORTED
-    if not result.ok or r.errors or result.errors:
+    if r.errors or result.errors or (not result.ok and r.state != JobState.ABORTED):
         logs = f" (node logs in {result.log_dir})" if result.log_dir else ""
         print(f"winder {command}: {result.message}{logs}", file=sys.stderr)
         return EXIT_FAILED
+    if r.faults:  # done (or aborted at rest) with every step executed, but the axes did not follow
+        print(f"winder {command}: {result.message}", file=sys.stderr)
+        return EXIT_FAULTED
+    if r.state == JobState.ABORTED:
+        print(f"winder {command}: {result.message}", file=sys.stderr)
+        return EXIT_ABORTED
     return EXIT_OK

@@ -36,6 +36,7 @@ from winder.contract.topics import PROCESS_KEYS, status_values
 
 __all__ = [
     "EVENT_KINDS",
+    "FAULTS_KEY",
     "AbortPoint",
     "ControlEvent",
     "EventError",
@@ -302,6 +303,13 @@ class RunLedger:
         return self.abort is not None and self.accounted >= self.abort.steps
 
 
+#: The final report's key of what the consumer's axes did that they were not commanded to, in
+#: words with their units (the simulator: steps lost, the wire's path left, the wire's tension
+#: outside its alarm band; :meth:`winder.ros.engine.Engine.faults`); absent when nothing. A run
+#: that executed every step is still ``done``, and that is no success (CONTRACT.md 3.7).
+FAULTS_KEY = "faults"
+
+
 def _num(text: str, kind: type) -> Any:
     """``text`` as an int or a float; what is not one reads as 0 (an int) or
     NaN (a float): a report from elsewhere never raises here."""
@@ -344,6 +352,12 @@ class JobReport:
     @property
     def real_time_factor(self) -> float:
         return self.sim_time_s / self.wall_time_s if self.wall_time_s > 0 else math.inf
+
+    @property
+    def faults(self) -> str:
+        """What the axes did that they were not commanded to (:data:`FAULTS_KEY`), "" if nothing:
+        a ``done`` run with faults executed every step, but its part is not what was asked."""
+        return self.extra.get(FAULTS_KEY, "")
 
     def to_values(self) -> dict[str, object]:
         """The status' key/values, in the contract's order."""

@@ -40,7 +40,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import String
 
 from winder.contract.params import PROFILE_SPECS
-from winder.contract.run import JobReport, RunLedger, Transition
+from winder.contract.run import FAULTS_KEY, JobReport, RunLedger, Transition
 from winder.contract.states import CellState, JobState
 from winder.contract.stream import JobPlan, StreamChecker
 from winder.contract.topics import TOPIC_PROGRESS, TOPIC_REPORT, TOPIC_STATE, TOPIC_STEP_TIMES, status_values
@@ -307,6 +307,8 @@ class ConsumerRun:
             JobState.DONE if complete else (JobState.ABORTED if aborted else JobState.INCOMPLETE)
         )
         faults = self.engine.faults()
+        if faults:  # said as a key of its own too: a done run with faults is no success (CONTRACT 3.7)
+            report.extra[FAULTS_KEY] = faults
         ok = (complete or aborted) and not self.errors and not faults
         level = OK if ok else (WARN if complete or aborted else ERROR)
         state = "complete" if complete else ("aborted, the axes at rest" if aborted else "incomplete")
