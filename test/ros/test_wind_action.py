@@ -21,7 +21,7 @@ import pytest
 from conftest import Procs, bag_closed, final_report, rosbags_read
 from support import wait
 from support.paths import ROOT
-from support.ros_probe import ready_states
+from support.ros_probe import get_params, ready_states
 
 from winder.contract.params import INTERP_SPECS
 from winder.motion.job import Job
@@ -67,18 +67,38 @@ def cell(procs: Procs, tmp: Path, ros: Any, client: Any, *, real_time: bool, **i
 class Goal:
     """One goal sent by an ActionClient: its feedback as it comes, its result."""
 
-    def __init__(self, ros: Any, client: Any, job: str = "", overrides: tuple[str, ...] = ()) -> None:
+    def __init__(
+        self, ros: Any, client: Any, job: str = "", overrides: tuple[str, ...] = (), job_sha256: str = ""
+    ) -> None:
         from winder_interfaces.action import Wind
 
         self.ros = ros
         self.feedback: list[Any] = []
         sent = client.send_goal_async(
-            Wind.Goal(job=job, overrides=list(overrides)),
+            Wind.Goal(job=job, overrides=list(overrides), job_sha256=job_sha256),
             feedback_callback=lambda m: self.feedback.append(m.feedback),
         )
         self.handle = wait.spin_until(ros, lambda: sent.done() and sent.result(), 30, "the goal's acceptance")
         assert self.handle.accepted
         self.result_future = self.handle.get_result_async()
+
+    def result_after(self, act: Any, timeout: float = 120) -> tuple[int, Any]:
+        """(status, result), calling ``act()`` (which must not spin) every
+        second while the goal goes on (a resume for a stop that waits for one)."""
+        import time
+
+        asked = [0.0]
+
+        def ended() -> bool:
+            if self.result_future.done():
+                return True
+            if time.monotonic() - asked[0] > 1.0:
+                asked[0] = time.monotonic()
+                act()
+            return False
+
+        wait.spin_until(self.ros, ended, timeout, "the goal's result", heard=lambda: self.feedback[-1:])
+        return self.result(timeout)
 
     def result(self, timeout: float = 120) -> tuple[int, Any]:
         """(status, result) once the goal ended."""
@@ -344,3 +364,81 @@ def test_a_goal_whose_consumer_dies_ends(procs: Procs, tmp_path: Path, ros: Any,
     # the server serves on: a goal now gets its answer
     status, result = Goal(ros, client, "interp_node: [").result(60)
     assert status == GoalStatus.STATUS_ABORTED and result.message.startswith("job rejected: goal job"), result
+
+
+def test_a_job_cut_on_its_way_is_refused(procs: Procs, tmp_path: Path, ros: Any, client: Any) -> None:
+    """A job text with a NUL byte: the sender's rcl cuts the string there, and
+    what arrives (only its job_id) is a valid job of defaults, the 164,608
+    steps of rw400 (issue 53: motion nobody asked for). With the hash of what
+    was meant (``job_sha256``) the cut text is refused and nothing moves; the
+    whole text with its right hash winds as it says."""
+    import hashlib
+
+    from action_msgs.msg import GoalStatus
+
+    bags = cell(procs, tmp_path, ros, client, real_time=False)
+    meant = job_text(JOB, "wj")
+    cut = meant.replace("    turns_per_layer", "\x00    turns_per_layer", 1)
+    digest = hashlib.sha256(cut.encode()).hexdigest()
+    status, result = Goal(ros, client, cut, job_sha256=digest).result(30)
+    assert status == GoalStatus.STATUS_ABORTED and not result.success, result.message
+    assert result.message.startswith("job rejected: job_sha256: the job text came as"), result.message
+    assert not list(bags.glob("*")), "a refused goal started a run"
+    # a hash that is no hash, in one line
+    status, result = Goal(ros, client, meant, job_sha256="xyz").result(30)
+    assert status == GoalStatus.STATUS_ABORTED and "is not a SHA-256 in hex" in result.message, result.message
+    status, result = Goal(ros, client, meant, job_sha256=hashlib.sha256(meant.encode()).hexdigest()).result()
+    assert status == GoalStatus.STATUS_SUCCEEDED, result.message
+    assert result.report.steps_total == Job(**JOB, job_id="wj").total_steps
+
+
+def test_a_goals_settings_end_with_its_run(procs: Procs, tmp_path: Path, ros: Any, client: Any) -> None:
+    """What a goal sets is its run's, not the node's (issue 53): goal A's
+    schedule aborts A, and the empty goal B after it (the settings as they
+    are) winds the node's own job whole; goal C's stops that wait for a call
+    (released here by ~/resume) leave goal D to run through. The node's
+    parameters are what they were before the goals."""
+    from action_msgs.msg import GoalStatus
+
+    cell(procs, tmp_path, ros, client, real_time=False, **{k: v for k, v in JOB.items()}, job_id="own")
+    own = Job(**JOB, job_id="own").total_steps
+    status, result = Goal(ros, client, job_text(LONG, "a"), ("schedule=abort@0.5",)).result()
+    assert status == GoalStatus.STATUS_ABORTED and result.report.state == "aborted", result.message
+    status, result = Goal(ros, client).result()
+    assert status == GoalStatus.STATUS_SUCCEEDED, result.message
+    assert (result.report.job_id, result.report.steps_done, result.report.steps_total) == ("own", own, own)
+    # stops that wait for ~/resume: released once here; the next goal must not meet them
+    resume = Resume(ros)
+    status, result = Goal(ros, client, job_text(JOB, "c"), ("stops=1:4", "stop_resume=call")).result_after(
+        resume
+    )
+    assert status == GoalStatus.STATUS_SUCCEEDED, result.message
+    status, result = Goal(ros, client, job_text(JOB, "d")).result(60)
+    assert status == GoalStatus.STATUS_SUCCEEDED, result.message
+    assert get_params(ros, "interp_node", ["schedule", "stops", "stop_resume", "job_id"]) == [
+        "",
+        "",
+        "auto",
+        "own",
+    ]
+
+
+class Resume:
+    """~/resume on the profile node, asked (without spinning) each time it is
+    called until one answer says it resumed (a programmed stop waited for it)."""
+
+    def __init__(self, ros: Any) -> None:
+        from std_srvs.srv import Trigger
+
+        self.client = ros.create_client(Trigger, "/profile_node/resume")
+        self.asked: Any = None
+        self.done = False
+
+    def __call__(self) -> None:
+        from std_srvs.srv import Trigger
+
+        if self.asked is not None and self.asked.done():
+            self.done = self.done or bool(self.asked.result().success)
+            self.asked = None
+        if not self.done and self.asked is None and self.client.service_is_ready():
+            self.asked = self.client.call_async(Trigger.Request())

@@ -19,6 +19,7 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Iterator
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -34,7 +35,14 @@ from winder.contract.params import INTERP_SPECS, run_ramp, stop_points
 from winder.contract.run import ControlEvent, EventError
 from winder.contract.states import EventKind, JobState, ReadyState
 from winder.contract.stream import describe_job, make_run_id
-from winder.contract.topics import TOPIC_CONTROL, TOPIC_JOB, TOPIC_PROGRESS, TOPIC_STEPS, status_values
+from winder.contract.topics import (
+    TOPIC_CONTROL,
+    TOPIC_DIAGNOSTICS,
+    TOPIC_JOB,
+    TOPIC_PROGRESS,
+    TOPIC_STEPS,
+    status_values,
+)
 from winder.motion.interp import interpolate_pieces
 from winder.motion.job import FIELD_SPECS, Job
 from winder.ros.chunks import STEPS_CDR
@@ -78,7 +86,7 @@ class InterpNode(ManagedNode):
         self.solo.on_settled = self.on_ready  # an autostart that waited for it goes now
         # the Wind action: a goal is a run (it hears the consumer's statuses through solo)
         self.wind = WindServer(self, self, self.peers)
-        self.solo.also = self.wind.on_statuses
+        self.solo.also = self.on_statuses  # the goal's, and the consumer's close of a run
         self.diag.foreign = self.peers.intruders.summary  # its statuses name what it refused
         self.peers.on_new = lambda: self.report()  # at once, not at the next second
         self.peers.subscribe(KeyValue, TOPIC_PROGRESS, self.on_progress, QOS_STATE)
@@ -90,6 +98,7 @@ class InterpNode(ManagedNode):
         steady_timer(self, 1.0, self.report)
 
         self.job: Job | None = None
+        self.run_settings: dict[str, Any] = {}  # the settings the last run started with
         self.run_id = ""
         self.runs = 0  # runs started in this node's life
         self.pending: Iterator[npt.NDArray[np.int32]] | None = None  # generator of chunks of the running job
@@ -189,22 +198,57 @@ class InterpNode(ManagedNode):
         """Set ``params`` all together or not at all, and start a run with
         them (none: with the settings as they are): whether it started, and
         the start reply or the reason (a ``ramp.*`` value makes the run bring
-        its ramp: see :func:`with_run_ramp`)."""
+        its ramp: see :func:`with_run_ramp`). The values are the run's, not
+        the node's: once the run has started with them (its job description
+        carries them) or was refused, the node's settings are again what they
+        were before the call, so that nothing of one goal or ``~/start_run``
+        (a schedule's abort, stops that wait for a call, another job) reaches
+        a later start (issue 53)."""
         why = self.cannot_start()
         if why:
             return False, why
-        if params:
-            params, refused = with_run_ramp(params)
-            if refused:
-                return False, refused
-            try:
-                result = self.set_parameters_atomically(params)
-            except Exception as exc:  # an undeclared name, a type rclpy cannot take
-                why = f"run not set up: {exc}".splitlines()[0]
-                result = SetParametersResult(successful=False, reason=why)
-            if not result.successful:
-                return False, result.reason or "run not set up"
-        return self.start_job()
+        if not params:
+            return self.start_job()
+        params, refused = with_run_ramp(params)
+        if refused:
+            return False, refused
+        before = {name: self.get_parameter(name).value for name in INTERP_SPECS}
+        try:
+            result = self.set_parameters_atomically(params)
+        except Exception as exc:  # an undeclared name, a type rclpy cannot take
+            why = f"run not set up: {exc}".splitlines()[0]
+            result = SetParametersResult(successful=False, reason=why)
+        if not result.successful:
+            return False, result.reason or "run not set up"
+        try:
+            return self.start_job()
+        finally:
+            self.restore(before)
+
+    def run_setting(self, name: str) -> Any:
+        """A setting of the last run, as it started (the node's before any run)."""
+        return (self.run_settings or self.settings.values())[name]
+
+    def restore(self, before: dict[str, object]) -> None:
+        """The node's settings back to ``before`` (those a run's start changed)."""
+        changed = [
+            Parameter(name, value=value)
+            for name, value in before.items()
+            if self.get_parameter(name).value != value
+        ]
+        if not changed:
+            return
+        if any(p.name == "job_file" for p in changed):
+            # setting job_file loads the file's values for every name the change does not give:
+            # give them all, so each is what it was (a value set by hand after the file included)
+            changed = [Parameter(name, value=value) for name, value in before.items()]
+        if all(p.name != "job_file_sha256" for p in changed):  # named, or the change clears it
+            changed.append(Parameter("job_file_sha256", value=before["job_file_sha256"]))
+        result = self.set_parameters_atomically(changed)
+        if not result.successful:  # the earlier settings no longer hold (a job file changed on disk)
+            self.get_logger().warning(
+                f"settings not restored after the run's start ({result.reason}): the run's stay in force"
+            )
 
     def cannot_start(self) -> str:
         """Why a run cannot start now ("" if it can)."""
@@ -250,7 +294,7 @@ class InterpNode(ManagedNode):
         ):
             return False  # not busy, or not heard from lately: nothing to excuse
         stuck = now - max(self.ended_wall, self.busy_wall, self.progress_wall)
-        if stuck <= self.settings.values()["stall_abort"]:
+        if stuck <= self.run_setting("stall_abort"):
             return False
         self.abort_ignored = (
             f"the consumer ignores the abort of run {self.run_id}: still busy {now - self.ended_wall:.1f} s "
@@ -313,6 +357,7 @@ class InterpNode(ManagedNode):
             return False, f"job rejected: {exc}"
         self.runs += 1
         self.job = job
+        self.run_settings = values  # the run's, whatever the node's settings become
         self.run_id = make_run_id(job.job_id, self.runs)
         self.sent = 0
         self.consumed = 0
@@ -380,6 +425,33 @@ class InterpNode(ManagedNode):
         if self.pending is not None:
             self.send_some()  # the window has room again: fill it now, not at the next tick
 
+    def on_statuses(self, raw: bytes, gid: bytes, statuses: list[Any]) -> None:
+        """/diagnostics (Solo hands every array over): the Wind goal's, and
+        the consumer's final report of the running run closed incomplete (its
+        stall watch, a fault, a failed recording), which ends the run here at
+        once: no receipt comes after it, and waiting for them refused every
+        start for stall_abort though the consumer said ready before its report
+        (docs/CONTRACT.md 5.3). Only the cell's consumer counts (Peers)."""
+        self.wind.on_statuses(raw, gid, statuses)
+        run_id = self.run_id
+        closed = [
+            st.message
+            for st in statuses
+            if (values := {kv.key: kv.value for kv in st.values}).get("role") == "consumer"
+            and values.get("run_id") == run_id
+            and values.get("state") == JobState.INCOMPLETE
+        ]
+        if self.job is None or self.aborted or not closed:
+            return
+
+        def act(_raw: bytes) -> None:
+            if self.job is not None and self.run_id == run_id and self.running():
+                self.give_up(
+                    f"job {self.job.job_id} given up, incomplete: its consumer closed the run: {closed[-1]}"
+                )
+
+        self.peers.deliver(TOPIC_DIAGNOSTICS, gid, raw, act, role="consumer")
+
     def on_control(self, msg: ControlEventMsg) -> None:
         """An abort of the running run (winder/control): send it up to the
         abort's ``steps`` (the profile node brakes on them), nothing beyond.
@@ -424,7 +496,7 @@ class InterpNode(ManagedNode):
             return  # nothing to send, or nobody to send it to yet
         # flow control: with a sim node reporting progress, keep at most
         # max_in_flight steps between us and it; without one, send freely
-        window = self.settings.values()["max_in_flight"]
+        window = self.run_setting("max_in_flight")
         paced = self.paced()
         deadline = time.monotonic() + 0.015  # stay responsive to services and parameters
         while time.monotonic() < deadline:
@@ -445,7 +517,7 @@ class InterpNode(ManagedNode):
         restarted and will never take the steps in flight. The sim node closes
         its side after the same time; the next start runs a new job."""
         quiet = time.monotonic() - self.last_receipt_wall
-        if self.job is None or quiet <= self.settings.values()["stall_abort"]:
+        if self.job is None or quiet <= self.run_setting("stall_abort"):
             return
         self.give_up(
             f"job {self.job.job_id} given up, incomplete: no receipt from the consumer for {quiet:.1f} s "

@@ -2,7 +2,8 @@
 ``winder/wind``), served by the interp node: a goal is a run.
 
 * goal: ``job`` (a job file's text, the files ``winder run`` reads; "" = the
-  node's settings as they are) and ``overrides`` (``KEY=VALUE`` settings of
+  node's settings as they are), ``job_sha256`` (its hash as sent: a text cut
+  at a NUL on its way is refused) and ``overrides`` (``KEY=VALUE`` settings of
   the interp node for this run, as ``winder ctl start --set``). A job text is
   a whole job (:func:`goal_params`: what it gives the interp node and its
   ramp, the rest of the job at its defaults; every other node's section is
@@ -14,7 +15,8 @@
 * feedback: ``run_id``, the state, the steps executed of the total, the
   coil, layer and turn they reached, and the wire's tension where the
   consumer measures one (NaN otherwise), twice a second and at each state;
-* result: ``success`` (the run ended complete), ``run_id``, ``bag_path``,
+* result: ``success`` (the run ended complete, its report naming no ``faults``: a run
+  whose axes lost steps is done, not a success), ``run_id``, ``bag_path``,
   ``message`` (the consumer's final word) and the typed final report, once
   the consumer has closed the run's bag and said how it ended; a consumer
   silent for the node's ``stall_abort`` ends the goal, the run given up;
@@ -28,6 +30,7 @@ Every message it acts on comes from the cell's own consumer
 from __future__ import annotations
 
 import bisect
+import hashlib
 import math
 import time
 import traceback
@@ -83,6 +86,8 @@ class WindCell(Protocol):
 
     def give_up(self, why: str) -> None: ...
 
+    def run_setting(self, name: str) -> Any: ...
+
 
 def job_params(given: dict[str, dict[str, Any]], digest: str, named: set[str]) -> list[Parameter]:
     """The interp node's parameters a job file sets (:func:`winder.contract.jobfile.load_job_file_hashed`'s
@@ -104,13 +109,27 @@ def job_params(given: dict[str, dict[str, Any]], digest: str, named: set[str]) -
 JOB_SETTINGS = (*FIELD_SPECS, "stops", "stop_pause", "stop_resume", "schedule")
 
 
-def goal_params(job: str, overrides: list[str]) -> list[Parameter]:
+def goal_params(job: str, overrides: list[str], job_sha256: str = "") -> list[Parameter]:
     """The change a goal asks for: its job text's settings, then its
     ``KEY=VALUE`` overrides (which win). A job text is a whole job: the
     settings of :data:`JOB_SETTINGS` it does not give take their defaults,
     and without a profile_node section the run is ramped by the profile
-    node's settings. BadInputError (one line) if the job or an override
-    cannot be used."""
+    node's settings. ``job_sha256`` (hex, "" for none) is what the sender
+    hashed: a text that came otherwise is refused, for a string field ends
+    at its first NUL on its way (rcl's C strings), and a job cut there is
+    a valid job of defaults nobody asked for. BadInputError (one line) if
+    the job or an override cannot be used."""
+    if job_sha256:
+        wanted = job_sha256.strip().lower()
+        if len(wanted) != 64 or any(c not in "0123456789abcdef" for c in wanted):
+            raise BadInputError(f"job_sha256: {job_sha256[:80]!r} is not a SHA-256 in hex (64 of 0-9a-f)")
+        got = hashlib.sha256(job.encode("utf-8")).hexdigest()
+        if got != wanted:
+            size = len(job.encode("utf-8"))
+            raise BadInputError(
+                f"job_sha256: the job text came as {size} bytes hashing to {got[:12]}..., not the "
+                f"{wanted[:12]}... sent (cut at a NUL byte, or changed on its way): nothing set"
+            )
     values = dict(interp_setting(text, "overrides") for text in overrides)
     params = [Parameter(k, value=v) for k, v in values.items()]
     if job.strip() and values.get("job_file"):
@@ -176,7 +195,7 @@ class WindServer:
 
     def node_stall_abort(self) -> float:
         """The interp node's stall_abort (s): how long a run may go without word from its consumer."""
-        return float(self.cell.settings.values()["stall_abort"])
+        return float(self.cell.run_setting("stall_abort"))
 
     def destroy(self) -> None:
         """The action server goes (before its node: it holds the node's handle)."""
@@ -207,7 +226,7 @@ class WindServer:
             handle.abort()
             return result
         try:
-            params = goal_params(request.job, list(request.overrides))
+            params = goal_params(request.job, list(request.overrides), request.job_sha256)
         except BadInputError as exc:
             result.message = f"job rejected: {one_line(exc)}"
             handle.abort()
@@ -272,7 +291,7 @@ class WindServer:
         if report is not None:  # the last feedback: where the run ended, as its report says
             goal.state = report.state
             self.publish(goal, min(report.steps_done, goal.total))
-            result.success = report.state == JobState.DONE
+            result.success = report.state == JobState.DONE and not report.faults  # done, as commanded
             result.bag_path = report.bag
             result.report = job_report_msg(report, goal.consumer)
         if result.success:
