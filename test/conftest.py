@@ -12,7 +12,7 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Generator, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +21,7 @@ from hypothesis import settings
 from rosbags.highlevel import AnyReader
 from support import domains
 from support.bags import SessionBags
-from support.domains import lock_domain, long_lived_domain, next_domain, release_domain
+from support.domains import lock_domain, next_domain, release_domain
 from support.paths import BIN
 from support.ros_probe import spin_until
 
@@ -42,7 +42,6 @@ __all__ = [  # what test modules import from here besides the fixtures
     "final_report",
     "is_consumer",
     "lock_domain",
-    "long_lived_domain",
     "next_domain",
     "release_domain",
     "rosbags_read",
@@ -58,6 +57,29 @@ def pytest_runtest_setup(item: pytest.Item) -> None:
     and takes a ROS domain anyway (so would start nodes or use DDS) fails,
     naming itself; ``pytest -m "not ros"`` never starts a node."""
     domains.current.update(test=item.nodeid, ros=item.get_closest_marker("ros") is not None)
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_fixture_setup(fixturedef: pytest.FixtureDef[Any]) -> Generator[None, object, object]:
+    """The scope of the fixture being set up, for the domains it takes: one a
+    function-scoped fixture took must be handed back by its test's end."""
+    before = domains.current["scope"]
+    domains.current["scope"] = fixturedef.scope
+    try:
+        return (yield)
+    finally:
+        domains.current["scope"] = before
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_teardown(item: pytest.Item) -> Generator[None, object, object]:
+    """A test hands back every ROS domain it took, and at most one stays held
+    from one test to the next (:func:`support.domains.check_handed_back`): a
+    holder to the session's end wedged ``make test`` on 10 domains."""
+    try:
+        return (yield)
+    finally:
+        domains.check_handed_back(item.nodeid)
 
 
 @pytest.hookimpl(hookwrapper=True)

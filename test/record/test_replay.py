@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import BIN, Procs, final_report, long_lived_domain, rosbags_read, spin_until
+from conftest import BIN, Procs, final_report, next_domain, release_domain, rosbags_read, spin_until
 from ruamel.yaml import YAML
 from support import wait
 from support.bags import joint_arrays, rewrite, rosbags_raw, step_rows
@@ -57,20 +57,22 @@ TYPES = {
 
 @pytest.fixture(scope="module")
 def ops_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The ops run's bag, made once for the module. Its domain is handed back
+    as the run ends: the tests play the bag on domains of their own."""
     root = tmp_path_factory.mktemp("ops")
-    env = {
-        **os.environ,
-        "ROS_DOMAIN_ID": str(long_lived_domain()),
-        "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
-    }
-    r = subprocess.run(
-        [str(BIN / "winder"), "run", *OPS, "--schedule", SCHEDULE, "--bag-dir", str(root)],
-        capture_output=True,
-        text=True,
-        timeout=240,
-        env=env,
-        stdin=subprocess.DEVNULL,
-    )
+    domain = next_domain()
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    try:
+        r = subprocess.run(
+            [str(BIN / "winder"), "run", *OPS, "--schedule", SCHEDULE, "--bag-dir", str(root)],
+            capture_output=True,
+            text=True,
+            timeout=240,
+            env=env,
+            stdin=subprocess.DEVNULL,
+        )
+    finally:
+        release_domain(domain)
     assert r.returncode == 0, r.stdout + r.stderr
     (bag,) = sorted(root.iterdir())
     return bag

@@ -16,6 +16,7 @@ started one by one as a cell starts them, on an isolated domain.
 from __future__ import annotations
 
 import re
+import signal
 import time
 from pathlib import Path
 from typing import Any
@@ -29,7 +30,7 @@ from support.ros_probe import get_params, ros_spin, start_run
 from winder.analysis.metrics import analyze
 from winder.contract.stream import RUN_ID
 from winder.contract.topics import STATUS_KEYS, cell_state_values
-from winder.procs import popen
+from winder.procs import die_with_parent, popen
 from winder.record.reader import read_run
 
 pytestmark = pytest.mark.ros
@@ -178,6 +179,67 @@ def test_the_readme_controller_runs_a_cell(tmp_path: Path, procs: Procs) -> None
     run_id = re.search(r"started run (\S+)", out.stdout).group(1)  # type: ignore[union-attr]
     assert f"run {run_id}: done" in out.stdout and str(bags / run_id) in out.stdout, out.stdout
     assert read_run(bags / run_id).complete
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
+def test_the_readme_controller_cancels_its_goal_when_told_to_stop(
+    tmp_path: Path, procs: Procs, ros: Any, sig: signal.Signals
+) -> None:
+    """docs/cell_controller.py started as a shell starts ``cmd &`` (SIGINT
+    ignored: a supervisor's script may start it so) and told to stop mid-run
+    by SIGTERM or SIGINT: its goal ends CANCELED (the action's own status topic says
+    so), the run is aborted (the bag's final report) and the controller exits
+    128 + the signal's number. Before, SIGTERM ended it with the run going on
+    and SIGINT did nothing."""
+    import subprocess
+    import sys
+
+    from action_msgs.msg import GoalStatus, GoalStatusArray
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from support.bags import finished_run
+
+    statuses: list[int] = []  # every status the server published, in order (one goal here)
+    qos = QoSProfile(
+        depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+    )  # as the action server offers its status
+    on_status = lambda m: statuses.extend(s.status for s in m.status_list)  # noqa: E731
+    ros.create_subscription(GoalStatusArray, "/winder/wind/_action/status", on_status, qos)
+    bags = tmp_path / "bags"
+    # the job set in the cell, paced in real time: the signal comes well within the run
+    procs.start("sim_node", "-p", f"bag_dir:={bags}", "-p", "real_time:=true")
+    procs.start("profile_node")
+    procs.start("interp_node", "-p", "autostart:=false")
+    die = die_with_parent(signal.SIGTERM)
+
+    def in_background() -> None:  # as a shell starts `cmd &` (POSIX: SIGINT ignored)
+        die()
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+    log = tmp_path / "cell_controller.log"
+    with log.open("wb") as out:
+        p = subprocess.Popen(
+            [sys.executable, str(ROOT / "docs" / "cell_controller.py")],
+            env=procs.env,
+            stdin=subprocess.DEVNULL,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            preexec_fn=in_background,
+        )
+    procs.children.started.append((p, "cell_controller", log))  # stopped at teardown if the test fails
+    text = lambda: log.read_text(errors="replace")  # noqa: E731
+    under_way = lambda: "  coil 1: running" in text() or p.poll() is not None  # noqa: E731
+    spin_until(ros, under_way, 90, "the run under way", text)
+    assert p.poll() is None, text()
+    run_id = re.search(r"started run (\S+)", text()).group(1)  # type: ignore[union-attr]
+    p.send_signal(sig)
+    spin_until(ros, lambda: p.poll() is not None, 60, f"exit of the controller after {sig.name}", heard=text)
+    assert p.returncode == 128 + sig, (p.returncode, text())
+    canceled = lambda: GoalStatus.STATUS_CANCELED in statuses  # noqa: E731
+    spin_until(ros, canceled, 10, "the goal CANCELED", heard=lambda: statuses)
+    assert GoalStatus.STATUS_SUCCEEDED not in statuses and GoalStatus.STATUS_ABORTED not in statuses, statuses
+    run = finished_run(bags, run_id)
+    assert run.report["state"] == "aborted", run.report
+    assert f"{sig.name}: canceling the goal\nrun {run_id}: aborted" in text(), text()
 
 
 def test_a_dead_consumer_is_not_ready(tmp_path: Path, procs: Procs, ros: Any) -> None:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import shutil
 import signal
 import subprocess
 import time
@@ -18,9 +19,9 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 
 from support import wait
-from support.domains import long_lived_domain
+from support.domains import next_domain, release_domain, take_domain
 from support.paths import BIN
-from winder.procs import Children
+from winder.procs import Children, stop_all
 from winder.record.bag import BagRecorder
 from winder.record.msgtypes import jazzy_store
 from winder.record.raw import RawBag
@@ -108,34 +109,40 @@ CONFIGS: dict[str, list[str]] = {
 }
 
 
-#: winder run's exit status where it is not 0 (done): 3, aborted cleanly
-STATUS = {"abort": 3}
+#: winder run's exit status where it is not 0 (done): 3, aborted cleanly; 6, done with lost steps
+STATUS = {"abort": 3, "slip": 6, "feedslip": 6}
 PARALLEL = 3
 TIMEOUT = 240.0
 
 
 class SessionBags:
     """Runs ``winder run`` for each configuration, at most PARALLEL at a time,
-    each on a domain of its own held for the session, as children that die
-    with the test process (:class:`winder.procs.Children`)."""
+    as children that die with the test process (:class:`winder.procs.Children`),
+    each on a ROS domain of its own held only while it runs: a bag is a file,
+    and the tests that read it need no domain. :meth:`get` returns once every
+    run it started has ended, so neither a run nor its domain outlives the
+    test that asked (a worker that kept each run's domain to the session's
+    end held all 10 of a 10-domain pool, and every later node test failed)."""
 
     def __init__(self, root: Path) -> None:
         self.root = root
         self.pending = list(CONFIGS)
         self.children = Children(root)
-        self.running: dict[str, tuple[subprocess.Popen[bytes], float]] = {}
+        #: name -> the run's process, its start (monotonic) and its domain
+        self.running: dict[str, tuple[subprocess.Popen[bytes], float, int]] = {}
         self.done: dict[str, Path | str] = {}
 
-    def _start(self, name: str) -> None:
+    def _start(self, name: str, domain: int) -> None:
         env = {
             **os.environ,
-            "ROS_DOMAIN_ID": str(long_lived_domain()),
+            "ROS_DOMAIN_ID": str(domain),
             "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
         }
+        shutil.rmtree(self.root / name, ignore_errors=True)  # a bag of a run stopped before
         p = self.children.start(
             [str(BIN / "winder"), "run", "--bag-dir", str(self.root / name), *CONFIGS[name]], name, env=env
         )
-        self.running[name] = (p, time.monotonic())
+        self.running[name] = (p, time.monotonic(), domain)
 
     def _finish(self, name: str, p: subprocess.Popen[bytes]) -> None:
         log = self.children.log(p)
@@ -145,37 +152,63 @@ class SessionBags:
         else:
             self.done[name] = bags[0]
 
+    def _reap(self) -> None:
+        """Each run that ended (or ran past TIMEOUT: killed) done, its domain handed back."""
+        for name, (p, t0, domain) in list(self.running.items()):
+            if p.poll() is None and time.monotonic() - t0 > TIMEOUT:
+                p.kill()
+                p.wait()
+                self.done[name] = f"winder run {name} did not finish within {TIMEOUT} s"
+            elif p.poll() is not None:
+                self._finish(name, p)
+            else:
+                continue
+            del self.running[name]
+            release_domain(domain)
+
     def get(self, name: str) -> Path:
         """The bag directory of configuration ``name``, once its run ended."""
+        if name not in CONFIGS:
+            raise KeyError(f"no session bag {name!r}: one of {sorted(CONFIGS)}")
         if name in self.pending:
             self.pending.remove(name)
             self.pending.insert(0, name)
 
-        def ready() -> bool:  # runs the queue on: starts what may start, reaps what ended
-            while self.pending and len(self.running) < PARALLEL:
-                self._start(self.pending.pop(0))
-            for n, (p, t0) in list(self.running.items()):
-                if p.poll() is not None:
-                    del self.running[n]
-                    self._finish(n, p)
-                elif time.monotonic() - t0 > TIMEOUT:
-                    p.kill()
-                    p.wait()
-                    del self.running[n]
-                    self.done[n] = f"winder run {n} did not finish within {TIMEOUT} s"
-            return name in self.done
+        def ready() -> bool:  # runs the queue on; true once `name` is done and no run goes on
+            self._reap()
+            while name not in self.done and self.pending and len(self.running) < PARALLEL:
+                # beside a run only a domain free now; with none running, one waited for (within a bound)
+                domain = take_domain() if self.running else next_domain()
+                if domain is None:
+                    break
+                self._start(self.pending.pop(0), domain)
+            return name in self.done and not self.running
 
         # each run ends within TIMEOUT (killed after it), a few at a time: the bound only guards this loop
         bound = TIMEOUT * (len(CONFIGS) // PARALLEL + 2)
-        wait.until(ready, bound, f"the session's run {name}", heard=lambda: sorted(self.running), poll=0.05)
+        try:
+            wait.until(
+                ready, bound, f"the session's run {name}", heard=lambda: sorted(self.running), poll=0.05
+            )
+        finally:
+            self._stop_running()  # none but after a failure
         got = self.done[name]
         if isinstance(got, str):
             raise AssertionError(got)
         return got
 
-    def close(self) -> None:
-        self.children.stop_all(signal.SIGINT, 20.0)
+    def _stop_running(self) -> None:
+        """Stop the runs still going (SIGINT, then kill), hand their domains
+        back, and queue them again (the next :meth:`get` starts them anew)."""
+        stop_all([p for p, _, _ in self.running.values()], signal.SIGINT, 20.0)
+        for name, (_, _, domain) in self.running.items():
+            release_domain(domain)
+            self.pending.insert(0, name)
         self.running.clear()
+
+    def close(self) -> None:
+        self._stop_running()
+        self.children.stop_all(signal.SIGINT, 20.0)
 
 
 def finished_run(bags: Path, run_id: str, timeout: float = 60) -> Any:

@@ -1,6 +1,15 @@
 """The ROS domains a test session may use (``WINDER_TEST_DOMAINS=A-B``),
 each locked by a file in the temp directory while a test uses it, so two
-pytest runs on one machine never share one."""
+pytest runs on one machine never share one.
+
+A domain is held only while processes run on it: a test hands back every
+domain it took (conftest checks it after each test, :func:`check_handed_back`),
+and a fixture that outlives a test keeps what its processes made (a bag is a
+file), not their domain; only :data:`BETWEEN_TESTS` domain may stay held from
+one test to the next. So the pytest workers of ``make test`` (4) never hold
+the whole pool between them, and the documented minimum of 10 domains is
+enough (one worker once held all 10 for its session bags, and every later
+node test failed "no free ROS domain")."""
 
 from __future__ import annotations
 
@@ -32,8 +41,15 @@ def _pool() -> range:
 
 
 _held: dict[int, Any] = {}
-#: the test being set up or run, and whether it is marked ``ros`` (set by conftest)
-current: dict[str, Any] = {"test": "", "ros": True}
+#: who took each domain held: the test, and the scope of the fixture that took it ("function": the test)
+_takers: dict[int, tuple[str, str]] = {}
+#: the test being set up or run, whether it is marked ``ros``, and the scope
+#: of the fixture being set up ("function" outside one) (set by conftest)
+current: dict[str, Any] = {"test": "", "ros": True, "scope": "function"}
+#: domains a process may hold from one test to the next: a module fixture's
+#: whose processes serve every test of the module (test_docs_commands'
+#: checkout); four workers then hold four at most between tests
+BETWEEN_TESTS = 1
 _cursor = itertools.count(os.getpid() * 7)
 
 
@@ -67,45 +83,72 @@ def lock_domain(domain: int, kind: str) -> Any:
     return lock
 
 
-def next_domain(timeout: float = 120.0) -> int:
-    """A ROS domain no other test process on this machine holds (a lock file
-    per domain in the temp directory), held until :func:`release_domain` or
-    the end of this process. Two pytest runs side by side never share one, so
-    their nodes never hear each other."""
+def take_domain() -> int | None:
+    """A ROS domain no other test process on this machine holds, taken (as
+    :func:`next_domain`), or None at once if each is held or resting: one
+    look at every domain of the pool, each look opening its lock file."""
     if not current["ros"]:
         raise RuntimeError(
             f"{current['test']} takes a ROS domain but is not marked ros: "
             "mark it (@pytest.mark.ros), so that pytest -m 'not ros' starts no node"
         )
     pool = _pool()
+    for _ in range(len(pool)):
+        domain = pool[next(_cursor) % len(pool)]
+        if domain in _held:
+            continue
+        lock = lock_domain(domain, "test")
+        if lock is None:
+            continue
+        _held[domain] = lock
+        _takers[domain] = (current["test"], current["scope"])
+        return domain
+    return None
 
-    def free() -> list[int]:  # one look at every domain of the pool: the first free one, taken ([] if none)
-        for _ in range(len(pool)):
-            domain = pool[next(_cursor) % len(pool)]
-            if domain in _held:
-                continue
-            lock = lock_domain(domain, "test")
-            if lock is None:
-                continue
-            _held[domain] = lock
-            return [domain]
-        return []
+
+def next_domain(timeout: float = 120.0) -> int:
+    """A ROS domain no other test process on this machine holds (a lock file
+    per domain in the temp directory), held until :func:`release_domain`
+    (by the end of the test that took it, or of the fixture). Two pytest runs
+    side by side never share one, so their nodes never hear each other."""
+
+    def free() -> list[int]:  # the domain taken, in a list (domain 0 is false)
+        domain = take_domain()
+        return [] if domain is None else [domain]
 
     # a domain another test process releases; asked again every 0.5 s (each look opens lock files)
-    what = f"free ROS domain in {pool} (all held by other test processes)"
-    [domain] = wait.until(free, timeout, what, poll=0.5)
+    what = f"free ROS domain in {_pool()} (all held by other test processes)"
+    [domain] = wait.until(free, timeout, what, poll=0.5, heard=lambda: f"this process holds {held()}")
     return int(domain)
 
 
 def release_domain(domain: int) -> None:
     """Hand a domain of :func:`next_domain` back (its processes are stopped)."""
     lock = _held.pop(domain, None)
+    _takers.pop(domain, None)
     if lock is not None:
         os.utime(lock.fileno())  # handed back now: it rests QUIET_S (see lock_domain)
         lock.close()
 
 
-def long_lived_domain() -> int:
-    """A domain for processes that outlive one test (the session's bag runs):
-    held until the end of the session."""
-    return next_domain()
+def held() -> dict[int, tuple[str, str]]:
+    """The domains this process holds: who took each (the test, the scope)."""
+    return dict(_takers)
+
+
+def check_handed_back(test: str) -> None:
+    """After ``test`` and its teardown: every domain it or a function-scoped
+    fixture of it took is handed back, and no more than
+    :data:`BETWEEN_TESTS` stay held by wider fixtures. A domain the test left
+    held is handed back here, and AssertionError names the test and what it
+    held: a domain held past its test is one fewer for every worker to the
+    end of the session."""
+    left = sorted(d for d, who in held().items() if who == (test, "function"))
+    for domain in left:
+        release_domain(domain)
+    wider = held()
+    problems = [f"{left} that it took, not handed back (released now)"] if left else []
+    if len(wider) > BETWEEN_TESTS:
+        problems.append(f"{wider} (domain: test, scope) taken by fixtures, more than {BETWEEN_TESTS}")
+    if problems:
+        raise AssertionError(f"{test} left ROS domains held: " + "; ".join(problems))
