@@ -67,9 +67,8 @@ def main() -> int:
         return 2
     if stop:  # nothing sent yet: nothing to cancel
         return 128 + stop[0]
-    # the text's hash: a job cut on its way (a NUL byte ends a ROS string) is refused, not wound
-    digest = hashlib.sha256(job.encode()).hexdigest() if job else ""
-    goal = Wind.Goal(job=job, job_sha256=digest)
+    # the goal's hash: a job cut on its way (a NUL byte ends a ROS string) is refused, not wound
+    goal = Wind.Goal(job=job, goal_sha256=hashlib.sha256(job.encode()).hexdigest())
     sent = wind.send_goal_async(goal, feedback_callback=on_feedback)
     # a goal sent is waited for even once stopped: a goal known can be canceled
     if not spin_until(sent.done, 30.0, "reply to the goal", stoppable=False):

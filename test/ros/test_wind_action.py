@@ -68,14 +68,14 @@ class Goal:
     """One goal sent by an ActionClient: its feedback as it comes, its result."""
 
     def __init__(
-        self, ros: Any, client: Any, job: str = "", overrides: tuple[str, ...] = (), job_sha256: str = ""
+        self, ros: Any, client: Any, job: str = "", overrides: tuple[str, ...] = (), goal_sha256: str = ""
     ) -> None:
         from winder_interfaces.action import Wind
 
         self.ros = ros
         self.feedback: list[Any] = []
         sent = client.send_goal_async(
-            Wind.Goal(job=job, overrides=list(overrides), job_sha256=job_sha256),
+            Wind.Goal(job=job, overrides=list(overrides), goal_sha256=goal_sha256),
             feedback_callback=lambda m: self.feedback.append(m.feedback),
         )
         self.handle = wait.spin_until(ros, lambda: sent.done() and sent.result(), 30, "the goal's acceptance")
@@ -370,24 +370,30 @@ def test_a_job_cut_on_its_way_is_refused(procs: Procs, tmp_path: Path, ros: Any,
     """A job text with a NUL byte: the sender's rcl cuts the string there, and
     what arrives (only its job_id) is a valid job of defaults, the 164,608
     steps of rw400 (issue 53: motion nobody asked for). With the hash of what
-    was meant (``job_sha256``) the cut text is refused and nothing moves; the
-    whole text with its right hash winds as it says."""
-    import hashlib
-
+    was meant (``goal_sha256``) the cut text is refused and nothing moves, and
+    so is a cut override; the whole goal with its right hash winds as it says."""
     from action_msgs.msg import GoalStatus
+
+    from winder.contract.jobfile import goal_sha256
 
     bags = cell(procs, tmp_path, ros, client, real_time=False)
     meant = job_text(JOB, "wj")
     cut = meant.replace("    turns_per_layer", "\x00    turns_per_layer", 1)
-    digest = hashlib.sha256(cut.encode()).hexdigest()
-    status, result = Goal(ros, client, cut, job_sha256=digest).result(30)
+    digest = goal_sha256(cut)
+    status, result = Goal(ros, client, cut, goal_sha256=digest).result(30)
     assert status == GoalStatus.STATUS_ABORTED and not result.success, result.message
-    assert result.message.startswith("job rejected: job_sha256: the job text came as"), result.message
+    assert result.message.startswith("job rejected: goal_sha256: the goal came as"), result.message
+    # an override cut at its NUL: schedule=abort@0.5 would wind on, unaborted, as "schedule="
+    override = "schedule=\x00abort@0.5"
+    status, result = Goal(ros, client, meant, (override,), goal_sha256=goal_sha256(meant, [override])).result(
+        30
+    )
+    assert status == GoalStatus.STATUS_ABORTED and "goal_sha256: the goal came as" in result.message, result
     assert not list(bags.glob("*")), "a refused goal started a run"
     # a hash that is no hash, in one line
-    status, result = Goal(ros, client, meant, job_sha256="xyz").result(30)
+    status, result = Goal(ros, client, meant, goal_sha256="xyz").result(30)
     assert status == GoalStatus.STATUS_ABORTED and "is not a SHA-256 in hex" in result.message, result.message
-    status, result = Goal(ros, client, meant, job_sha256=hashlib.sha256(meant.encode()).hexdigest()).result()
+    status, result = Goal(ros, client, meant, goal_sha256=goal_sha256(meant)).result()
     assert status == GoalStatus.STATUS_SUCCEEDED, result.message
     assert result.report.steps_total == Job(**JOB, job_id="wj").total_steps
 

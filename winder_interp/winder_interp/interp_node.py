@@ -213,6 +213,7 @@ class InterpNode(ManagedNode):
         if refused:
             return False, refused
         before = {name: self.get_parameter(name).value for name in INTERP_SPECS}
+        rejected = list(self.settings.rejected)  # start-up values refused: the node stays blocked by them
         try:
             result = self.set_parameters_atomically(params)
         except Exception as exc:  # an undeclared name, a type rclpy cannot take
@@ -224,6 +225,7 @@ class InterpNode(ManagedNode):
             return self.start_job()
         finally:
             self.restore(before)
+            self.settings.rejected = rejected
 
     def run_setting(self, name: str) -> Any:
         """A setting of the last run, as it started (the node's before any run)."""

@@ -2,8 +2,8 @@
 ``winder/wind``), served by the interp node: a goal is a run.
 
 * goal: ``job`` (a job file's text, the files ``winder run`` reads; "" = the
-  node's settings as they are), ``job_sha256`` (its hash as sent: a text cut
-  at a NUL on its way is refused) and ``overrides`` (``KEY=VALUE`` settings of
+  node's settings as they are), ``goal_sha256`` (the goal's hash as sent: a
+  goal cut at a NUL on its way is refused) and ``overrides`` (``KEY=VALUE`` settings of
   the interp node for this run, as ``winder ctl start --set``). A job text is
   a whole job (:func:`goal_params`: what it gives the interp node and its
   ramp, the rest of the job at its defaults; every other node's section is
@@ -30,7 +30,6 @@ Every message it acts on comes from the cell's own consumer
 from __future__ import annotations
 
 import bisect
-import hashlib
 import math
 import time
 import traceback
@@ -45,7 +44,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 from std_srvs.srv import Trigger
 
-from winder.contract.jobfile import load_job_text
+from winder.contract.jobfile import goal_sha256, load_job_text
 from winder.contract.params import INTERP_SPECS, interp_setting
 from winder.contract.run import JobReport
 from winder.contract.states import FINAL_JOB_STATES, JobState, asks_again
@@ -109,26 +108,28 @@ def job_params(given: dict[str, dict[str, Any]], digest: str, named: set[str]) -
 JOB_SETTINGS = (*FIELD_SPECS, "stops", "stop_pause", "stop_resume", "schedule")
 
 
-def goal_params(job: str, overrides: list[str], job_sha256: str = "") -> list[Parameter]:
+def goal_params(job: str, overrides: list[str], sha256: str = "") -> list[Parameter]:
     """The change a goal asks for: its job text's settings, then its
     ``KEY=VALUE`` overrides (which win). A job text is a whole job: the
     settings of :data:`JOB_SETTINGS` it does not give take their defaults,
     and without a profile_node section the run is ramped by the profile
-    node's settings. ``job_sha256`` (hex, "" for none) is what the sender
-    hashed: a text that came otherwise is refused, for a string field ends
-    at its first NUL on its way (rcl's C strings), and a job cut there is
-    a valid job of defaults nobody asked for. BadInputError (one line) if
-    the job or an override cannot be used."""
-    if job_sha256:
-        wanted = job_sha256.strip().lower()
+    node's settings. ``sha256`` (hex, "" for none) is what the sender hashed
+    (:func:`winder.contract.jobfile.goal_sha256`): a goal that came otherwise
+    is refused, for a string ends at its first NUL on its way (rcl's C
+    strings), and a job or an override cut there is a valid goal nobody
+    asked for. BadInputError (one line) if the job or an override cannot be
+    used."""
+    if sha256:
+        wanted = sha256.strip().lower()
         if len(wanted) != 64 or any(c not in "0123456789abcdef" for c in wanted):
-            raise BadInputError(f"job_sha256: {job_sha256[:80]!r} is not a SHA-256 in hex (64 of 0-9a-f)")
-        got = hashlib.sha256(job.encode("utf-8")).hexdigest()
+            raise BadInputError(f"goal_sha256: {sha256[:80]!r} is not a SHA-256 in hex (64 of 0-9a-f)")
+        got = goal_sha256(job, overrides)
         if got != wanted:
             size = len(job.encode("utf-8"))
             raise BadInputError(
-                f"job_sha256: the job text came as {size} bytes hashing to {got[:12]}..., not the "
-                f"{wanted[:12]}... sent (cut at a NUL byte, or changed on its way): nothing set"
+                f"goal_sha256: the goal came as a {size}-byte job and {len(overrides)} overrides hashing "
+                f"to {got[:12]}..., not the {wanted[:12]}... sent (cut at a NUL byte, or changed on its "
+                "way): nothing set"
             )
     values = dict(interp_setting(text, "overrides") for text in overrides)
     params = [Parameter(k, value=v) for k, v in values.items()]
@@ -226,7 +227,7 @@ class WindServer:
             handle.abort()
             return result
         try:
-            params = goal_params(request.job, list(request.overrides), request.job_sha256)
+            params = goal_params(request.job, list(request.overrides), request.goal_sha256)
         except BadInputError as exc:
             result.message = f"job rejected: {one_line(exc)}"
             handle.abort()

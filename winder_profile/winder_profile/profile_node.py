@@ -115,6 +115,8 @@ MODE_SAY = 1.0
 #: s the graph must show the cell's consumer without a winder/sim_config writer before
 #: it is taken as one that publishes none (a node's endpoints are discovered one by one)
 MODE_ABSENT = 1.0
+#: closes of runs not taken yet kept (winder/state heard before the run's description)
+CLOSES_KEPT = 16
 #: Steps timed per pass in a real-time run (the rest wait for the clock).
 RELEASE_BLOCK = 4096
 
@@ -166,6 +168,8 @@ class ProfileNode(ManagedNode):
         self.early: list[bytes] = []
         self.timed = 0
         self.closed = ""  # the consumer closed the run being timed: its final state
+        #: runs the consumer closed before this node took them (their final states, the last few)
+        self.closes: dict[str, CellState] = {}
         self.error = ""
         self.ramp_kind = ""  # the ramp kind of the run being timed
         #: accepted step rows not sent yet, with their step indices in the segment
@@ -268,6 +272,7 @@ class ProfileNode(ManagedNode):
             return
         self.end_clock()
         self.plan, self.timeline, self.closed = job, Timeline(values, timing), ""
+        closed_before = self.closes.pop(job.run_id, None) if job.run_id else None
         self.holds = list(job.stops) if job.stop_resume == "call" else []
         self.waiting_at = None
         self.queue.clear()
@@ -309,6 +314,8 @@ class ProfileNode(ManagedNode):
             except CommandError as exc:
                 self.get_logger().warning(f"{source}: {cmd.kind} at {cmd.t_ns / 1e9:g} s not applied: {exc}")
         self.report()  # the run is on: its status at once
+        if closed_before is not None:  # the consumer closed it before this node took it
+            self.on_cell_state(CellStateMsg(run_id=job.run_id, state=closed_before))
         early, self.early = self.early, []
         for raw in early:  # in order, before any taken from the queue
             self.time_chunk(raw)
@@ -582,10 +589,16 @@ class ProfileNode(ManagedNode):
         run for its stall while this node still waited for its
         winder/sim_config; this node then paced the closed run on its wall
         clock, and the next run took those steps and refused its own pause)."""
-        plan = self.plan
-        if plan is None or not plan.run_id or msg.run_id != plan.run_id or self.closed:
+        if msg.state not in (CellState.DONE, CellState.ABORTED, CellState.FAILED) or not msg.run_id:
             return
-        if msg.state not in (CellState.DONE, CellState.ABORTED, CellState.FAILED) or self.run_over():
+        plan = self.plan
+        if plan is None or msg.run_id != plan.run_id:
+            # a run this node has not taken yet (its description held, or on its way): kept for it
+            self.closes[msg.run_id] = CellState(msg.state)
+            while len(self.closes) > CLOSES_KEPT:
+                self.closes.pop(next(iter(self.closes)))
+            return
+        if self.closed or self.run_over():
             return
         untimed = plan.total_steps - self.timed - self.dropped
         self.closed = msg.state
@@ -600,6 +613,8 @@ class ProfileNode(ManagedNode):
         )
         if msg.state == CellState.FAILED:
             self.fail(why)
+        elif self.timeline is not None and self.timeline.aborted:  # this node's own abort: as it braked
+            self.get_logger().info(why)
         else:
             self.get_logger().warning(why)
         self.report()
@@ -839,7 +854,9 @@ class ProfileNode(ManagedNode):
             else (JobState.DONE if self.timed >= total else JobState.RUNNING)
         )
         tl = self.timeline
-        if not self.error and tl is not None and tl.aborted:
+        if self.closed and not self.error:  # the consumer closed it: as it said
+            state = JobState.DONE if self.closed == CellState.DONE else JobState.ABORTED
+        elif not self.error and tl is not None and tl.aborted:
             state = JobState.ABORTED if self.run_over() else JobState.ABORTING
         elif (self.waiting_at is not None or (tl is not None and tl.paused)) and not self.error:
             state = JobState.PAUSED

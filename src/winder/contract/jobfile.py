@@ -429,6 +429,15 @@ def load_job_file_hashed(
     return _settings(p, doc, check_fit), digest
 
 
+def goal_sha256(job: str, overrides: list[str] | tuple[str, ...] = ()) -> str:
+    """The hash a ``Wind`` goal carries (``goal_sha256``): the SHA-256, hex,
+    of its job text and each override after it on a line of its own, as
+    UTF-8. A ROS string ends at its first NUL byte on its way (rcl's C
+    strings): a goal cut there arrives as another, valid one, and only its
+    hash tells."""
+    return hashlib.sha256("\n".join([job, *overrides]).encode("utf-8")).hexdigest()
+
+
 def load_job_text(
     text: str, *, name: str = "job", check_fit: bool = True
 ) -> tuple[dict[str, dict[str, Any]], str]:

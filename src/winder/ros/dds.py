@@ -1,7 +1,7 @@
 """The DDS settings every winder process starts with: winder's Fast DDS
-profile (``fastdds_profile.xml`` beside this file: discovery timing and the
-reliable writers' heartbeat period), unless the user names a profile of their
-own or another rmw."""
+profile (``fastdds_profile.xml`` beside this file: discovery timing, the
+reliable writers' heartbeat period, UDP as the only transport), unless the
+user names a profile of their own or another rmw."""
 
 from __future__ import annotations
 

@@ -47,6 +47,10 @@ HELD = 5.0
 TOPIC = "~/_wake"
 #: every node's log topic: a publisher of it in every process of a cell
 ROSOUT = "/rosout"
+#: s a participant that left is remembered (a hold that long is said by the held node itself)
+FORGET = 600.0
+#: participants that left remembered at most
+LEFT_KEPT = 256
 
 
 class WakeWatch:
@@ -60,7 +64,9 @@ class WakeWatch:
         self.last = time.monotonic()
         self.holds = 0
         self.present: set[bytes] = set()  # the participants on the graph at the last look
-        self.left: set[bytes] = set()  # those seen to leave it since
+        #: those seen to leave it since, and when (steady s): forgotten after FORGET s, for every
+        #: `winder ctl` call is a participant that comes and goes for good
+        self.left: dict[bytes, float] = {}
         self.timer = steady_timer(node, TICK, self._tick)
 
     def _tick(self) -> None:
@@ -73,8 +79,14 @@ class WakeWatch:
     def look(self) -> None:
         """A participant back on the graph after it left: it may lack this one's node names."""
         present = {bytes(i.endpoint_gid)[:12] for i in self.node.get_publishers_info_by_topic(ROSOUT)}
-        back = present & self.left
-        self.left = (self.left | (self.present - present)) - present
+        now = time.monotonic()
+        back = {p for p in present if self.left.pop(p, None) is not None}
+        for gone in self.present - present:
+            self.left[gone] = now
+        if len(self.left) > LEFT_KEPT or (self.left and now - next(iter(self.left.values())) > FORGET):
+            self.left = {p: t for p, t in self.left.items() if now - t <= FORGET}
+            while len(self.left) > LEFT_KEPT:
+                self.left.pop(next(iter(self.left)))
         self.present = present
         if back:
             self.node.get_logger().info(
@@ -86,7 +98,8 @@ class WakeWatch:
         """The node was held up for ``gap`` s: rejoin the graph."""
         self.holds += 1
         self.node.get_logger().warning(
-            f"held up for {gap:.1f} s (stopped or starved): announcing this node to the graph again"
+            f"no timer for {gap:.1f} s (held up, starved or a long callback): announcing this node to the "
+            "graph again"
         )
         self.republish()
         for hook in self.on_wake:
