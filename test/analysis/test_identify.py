@@ -156,7 +156,7 @@ def test_an_axis_that_does_not_move_is_not_identified(bag: Any) -> None:
 def test_cli_rejects_bad_settings(bag: Any) -> None:
     path = str(bag("pole1"))
     assert_one_line_error(
-        run_cli("identify", path, "--gain", "0"), "gain='0' is invalid: must be a number > 0"
+        run_cli("identify", path, "--gain", "0"), "gain=0.0 is invalid: must be in [1e-06, 1e+06]"
     )
     assert_one_line_error(run_cli("identify", path, "--window", "abc"), "window='abc' is invalid")
 
@@ -276,3 +276,52 @@ def test_cli_identifies_several_bags_one_after_another(bag: Any) -> None:
     assert [Path(x["path"]).name for x in json.loads(j.stdout)] == [Path(a).name, Path(b).name]
     h = run_cli("identify", "--help")
     assert "0.1 % accuracy" in h.stdout.replace("\n", " ") and "%%" not in h.stdout
+
+
+# -- the window and the gain bounded (issue 53) --------------------------------------------------------
+
+
+def test_a_window_longer_than_the_recording_holds_no_equation() -> None:
+    """``winder identify --window 1e308`` was an internal error: the window's
+    samples (1e308 / the sample interval) were a dimension numpy refused."""
+    from winder.analysis.identify import equations
+
+    rec = _record("linear", 2.3e-4, 0.011, 0.0, 2000.0)
+    for window in (1e308, 10.0, float(rec.t[-1] - rec.t[0]) * 2):
+        eq = equations(rec, window)
+        assert eq.q.size == eq.dw.size == eq.t.size == 0, window
+    a = identify_axis(rec, window=10.0)
+    assert not a.identifiable and a.reason.startswith("not identifiable: too little excitation")
+
+
+@pytest.mark.parametrize(("gain", "window"), [(1e308, 0.005), (1e-308, 0.005), (0.0, 0.005), (3.0, 1.5)])
+def test_identify_refuses_a_gain_or_window_out_of_its_range(gain: float, window: float) -> None:
+    from winder.analysis.identify import GAIN_RANGE, WINDOW_MAX, Equations, mras
+    from winder.errors import BadInputError
+
+    assert GAIN_RANGE == (1e-6, 1e6) and WINDOW_MAX == 1.0
+    empty = np.zeros(0)
+    with pytest.raises(BadInputError) as err:
+        if window > WINDOW_MAX:
+            identify(None, gain=gain, window=window)  # type: ignore[arg-type]
+        else:
+            mras(Equations(empty, empty, empty, empty, 0.005, np.zeros(0, dtype=bool), 0), gain)
+    text = str(err.value)
+    assert "\n" not in text and ("must be in [1e-06, 1e+06]" in text or "must be in (0, 1] s" in text), text
+
+
+@pytest.mark.parametrize("gain", [1e-6, 1e6])
+def test_the_mras_law_at_either_end_of_its_gains_overflows_nothing(gain: float) -> None:
+    """Landau's law formed beta x phi x e before dividing: at beta 1e308 it
+    overflowed (numpy's warnings, and an exit status of 0). Formed as
+    phi e / (1/beta + phi.phi) no product leaves the floats; at the highest
+    gain it is the normalised projection law, and still finds J."""
+    import warnings
+
+    J, D = 2.3e-4, 0.011
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        a = identify_axis(_record("linear", J, D, 0.0, 5000.0), gain=gain)
+    assert a.identifiable, a.reason
+    if gain > 1:
+        assert a.mras_J_last == pytest.approx(J, rel=0.05)

@@ -307,8 +307,8 @@ def test_what_overflows_and_by_how_much(values: dict[str, Any], words: str) -> N
         ({"lay.crossover": 0.0}, "lay.crossover=0.0 is invalid: must be in (0, 360] deg"),
         ({"lay.crossover_at": 360.0}, "lay.crossover_at=360 is invalid: must be in [0, 360) deg"),
         ({"reversal_dwell": -1.0}, "reversal_dwell=-1.0 is invalid: must be in [0, 1000] turns"),
-        ({"first_layer_speed": 0.0}, "first_layer_speed=0.0 is invalid: must be in (0, 1]"),
-        ({"first_layer_speed": 1.5}, "first_layer_speed=1.5 is invalid: must be in (0, 1]"),
+        ({"first_layer_speed": 0.0}, "first_layer_speed=0.0 is invalid: must be in [0.001, 1]"),
+        ({"first_layer_speed": 1.5}, "first_layer_speed=1.5 is invalid: must be in [0.001, 1]"),
         ({"coil_length": 0.05, "bobbin.window_width": 0.06}, "coil_length is the deprecated name"),
     ],
 )

@@ -40,7 +40,8 @@ EXTREMES = [
     (["--v-max", "1e-6"], "v_max=1e-06"),
     (["--j-max", "1e-300"], "j_max=1e-300"),
     (["--profile", "trapezoid", "--a-max", "1e-12"], "a_max=1e-12"),
-    (["--turns-per-layer", "100000", "--layers", "1000", "--poles", "360"], "the job takes"),
+    # 3.7e13 steps: refused from its turns, before it is timed (issue 53)
+    (["--turns-per-layer", "100000", "--layers", "1000", "--poles", "360"], "a job may have at most"),
 ]
 
 
@@ -990,7 +991,9 @@ def test_the_interp_node_refuses_a_job_too_long_as_check_does(procs: Procs, ros:
 
     from winder.contract.params import PROFILE_SPECS
 
-    huge = {**LONG_JOB, "poles": 360, "feed_step": 1e-3}  # past a week even at v_max 1e7
+    # past a week even at v_max 1e7: every layer a first layer, at a thousandth of v_max (3.7e10
+    # steps, within a job's steps: a job of more is refused from its turns before it is timed)
+    huge = {**LONG_JOB, "layers": 1, "poles": 360, "first_layer_speed": 0.001}
     flags = [f"--{k.replace('_', '-')}={v}" for k, v in huge.items()]
     check = subprocess.run([str(BIN / "winder"), "run", "--check", *flags], capture_output=True, text=True)
     assert check.returncode == 2 and "more than a job may last" in check.stderr, check.stderr
@@ -1014,10 +1017,10 @@ def test_the_interp_node_refuses_a_job_too_long_as_check_does(procs: Procs, ros:
         [str(BIN / "winder"), "run", "--check", *flags, "--v-max", "1e5"], capture_output=True, text=True
     )
     assert check.returncode == 2 and "more than a job may last" in check.stderr, check.stderr
-    refused = start_run(ros, {**LONG_JOB, **ramp, "ramp.source": "job"})
+    refused = start_run(ros, {**LONG_JOB, "first_layer_speed": 1.0, **ramp, "ramp.source": "job"})
     assert not refused.successful and "is too long" in refused.reason, refused.reason
     assert "v_max=100000: more than a job may last" in refused.reason, refused.reason
     assert get_params(ros, "interp_node", ["poles", "ramp.source"]) == [360, "profile_node"]  # nothing set
-    started = start_run(ros, {"turns_per_layer": 2, "layers": 1, "poles": 1})
+    started = start_run(ros, {"turns_per_layer": 2, "layers": 1, "poles": 1, "first_layer_speed": 1.0})
     assert started.successful, started.reason
     assert node.poll() is None and "Traceback" not in procs.log(node)

@@ -220,7 +220,8 @@ def test_a_misspelt_profile_is_reported(procs: Procs, tmp_path: Path) -> None:
 
 @pytest.mark.parametrize(
     ("profile", "said"),
-    [(None, "winder's default (UDP only, on one host its loopback; 64 kB datagrams); on a network that loses packets"),
+    [(None, "winder's default (UDP only, on one host its loopback; 64 kB datagrams); on a network that "
+            "loses packets"),
      (LAN_PROFILE, "winder's LAN profile (UDP only, datagrams within one MTU)")],
     ids=["default", "lan"],
 )  # fmt: skip

@@ -68,7 +68,7 @@ def test_layer_speed_slows_the_layers_it_names() -> None:
     [
         ("9:1=0.5", "layer_speed: coil 9 is not in [1, 4] (poles)"),
         ("1:3=0.5", "layer_speed: '1:3=0.5': layer 3 is not in [1, 2] (the layers of coil 1)"),
-        ("1:1=1.5", "layer_speed: '1:1=1.5': share 1.5 is invalid: must be in (0, 1]"),
+        ("1:1=1.5", "layer_speed: '1:1=1.5': share 1.5 is invalid: must be in [0.001, 1]"),
         ("1-1=0.5", "layer_speed: '1-1=0.5' must be COIL:LAYER=SHARE (COIL a number or *)"),
     ],
 )

@@ -86,11 +86,15 @@ import numpy.typing as npt
 from winder.errors import BadBagError, BadInputError
 from winder.motion.axes import AXES
 from winder.record.reader import AxisConfig, Run
+from winder.spec import Spec, interval
 
 __all__ = [
     "GAIN",
+    "GAIN_RANGE",
+    "IDENTIFY_SPECS",
     "MIN_STEPS",
     "WINDOW",
+    "WINDOW_MAX",
     "AxisIdentification",
     "AxisRecord",
     "Equations",
@@ -110,10 +114,31 @@ FloatArray = npt.NDArray[np.float64]
 
 #: default window of the integrated equations (s); at least one sample interval
 WINDOW = 0.005
+#: the longest window (s): its equations are counted in samples (MIN_WINDOWS of
+#: them must fit the motion), and a recording holds its samples in memory
+WINDOW_MAX = 1.0
 #: step events integrated together when a record holds them in memory
 EVENT_BATCH = 1 << 16
 #: default MRAS gain beta (dimensionless: the regressors are normalised)
 GAIN = 3.0
+#: the gains beta may be, least and most: far below, the estimate of 1/J
+#: hardly leaves 0 (and J, its inverse, overflows); far above, the law is the
+#: normalised projection law whatever beta is
+GAIN_RANGE = (1e-6, 1e6)
+#: ``winder identify``'s settings, checked before a recording is read
+IDENTIFY_SPECS = {
+    "gain": Spec("gain", float, GAIN, "MRAS adaptation gain beta, dimensionless", "", *GAIN_RANGE),
+    "window": Spec(
+        "window",
+        float,
+        WINDOW * 1e3,
+        "equation window (at least one sample: a shorter one is one sample)",
+        "ms",
+        0.0,
+        WINDOW_MAX * 1e3,
+        low_open=True,
+    ),
+}
 #: the MRAS fluctuation is measured over the last 1/SETTLE_PART of its updates
 SETTLE_PART = 4
 #: an axis that moved fewer commanded steps is not identified
@@ -362,7 +387,8 @@ class _Integrator:
             self._integrate(n - 1)
         t, th, w = rec.t, rec.theta, rec.omega
         h_mean = float(t[-1] - t[0]) / (n - 1)
-        m = max(1, round(self.window / h_mean))
+        # samples a window; one past the recording holds no equation (its count also no overflow)
+        m = max(1, round(min(self.window / h_mean, n)))
         dw = np.diff(w)
         dth = np.diff(th)
         # the axis takes part in an interval if it is commanded or moves in it
@@ -466,11 +492,15 @@ class Mras:
         return int(idx[-1] + 1) if idx.size else 0
 
 
+def _check_gain(gain: float) -> None:
+    if not (math.isfinite(gain) and GAIN_RANGE[0] <= gain <= GAIN_RANGE[1]):
+        raise BadInputError(f"gain={gain!r} is invalid: must be in {interval(*GAIN_RANGE)}")
+
+
 def mras(eq: Equations, gain: float = GAIN, *, damping: bool = True) -> Mras:
     """The thesis' MRAS with Landau's discrete law (module doc); ``damping=False``
     is the thesis' own J-only law (D taken as 0)."""
-    if not (math.isfinite(gain) and gain > 0):
-        raise BadInputError(f"gain={gain!r} is invalid: must be a finite number > 0")
+    _check_gain(gain)
     sel = np.nonzero(eq.moving)[0]
     sel = sel[sel >= 1]
     y = eq.dw[sel] - eq.dw[sel - 1]
@@ -488,7 +518,7 @@ def mras(eq: Equations, gain: float = GAIN, *, damping: bool = True) -> Mras:
     for i in range(y.size):  # recursive by nature: one update per window
         f = ph[i]
         e = y[i] - float(f @ p)
-        p = p + gain * f * e / (1.0 + gain * float(f @ f))
+        p = p + f * (e / (1.0 / gain + float(f @ f)))  # beta/(1 + beta f.f), no beta*f*e to overflow
         traj[i] = p
     inv_j = traj[:, 0] / scale[0]
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -651,10 +681,11 @@ def resonance(k: float, J: float, D: float, suffix: str = "") -> dict[str, float
 
 def identify(run: Run, gain: float = GAIN, window: float = WINDOW) -> Identification:
     """Identify J and D of every axis of a recorded run."""
-    if not (math.isfinite(window) and window > 0):
-        raise BadInputError(f"window={window!r} is invalid: must be a finite number of seconds > 0")
-    if not (math.isfinite(gain) and gain > 0):
-        raise BadInputError(f"gain={gain!r} is invalid: must be a finite number > 0")
+    if not (math.isfinite(window) and 0 < window <= WINDOW_MAX):
+        raise BadInputError(
+            f"window={window!r} s is invalid: must be in {interval(0, WINDOW_MAX, low_open=True)} s"
+        )
+    _check_gain(gain)
     if run.sim_config is None:
         raise BadBagError(f"{run.path}: no winder/sim_config message: the motor constants are unknown")
     if len(run.states) < 3:

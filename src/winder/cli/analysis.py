@@ -8,12 +8,11 @@ prints as one line with exit status 2.
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
 from typing import Any
 
-from winder.cli.common import UserError
+from winder.cli.common import UserError, directory_option
 from winder.cli.exits import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK
 from winder.contract.states import FINAL_JOB_STATES
 from winder.errors import BadBagError, BadInputError
@@ -21,25 +20,20 @@ from winder.errors import BadBagError, BadInputError
 __all__ = ["register"]
 
 
-def _positive(name: str, text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not (math.isfinite(value) and value > 0):
-        raise UserError(f"{name}={text!r} is invalid: must be a number > 0")
-    return value
-
-
 def _os_error(exc: OSError) -> str:
     why = exc.strerror or str(exc)
     return f"{exc.filename}: {why}" if exc.filename else why
 
 
-def _plots_for(bag: Path, plots_dir: str | None, several: bool) -> Path | None:
+def _plots_dir(args: argparse.Namespace) -> Path | None:
+    """``--plots-dir`` checked before any recording is read (None: each bag's own ``plots``)."""
+    return None if args.plots_dir is None else directory_option("plots_dir", args.plots_dir)
+
+
+def _plots_for(bag: Path, plots_dir: Path | None, several: bool) -> Path | None:
     if plots_dir is None:
         return None
-    return Path(plots_dir) / bag.name if several else Path(plots_dir)
+    return plots_dir / bag.name if several else plots_dir
 
 
 def _say(lines: list[str], to_stderr: bool) -> None:
@@ -52,6 +46,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     from winder.analysis.metrics import analyze, digest_run, format_table, to_json
     from winder.record.reader import read_run
 
+    plots_dir = _plots_dir(args)
     try:
         runs = [read_run(b, args.namespace) for b in args.bags]
         digests = [digest_run(r) for r in runs]
@@ -63,7 +58,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
             written: list[str] = []
             failed: list[str] = []
             for run, res, d in zip(runs, results, digests, strict=True):
-                out = _plots_for(run.path, args.plots_dir, len(runs) > 1)
+                out = _plots_for(run.path, plots_dir, len(runs) > 1)
                 try:
                     paths = plot_analysis(run, res, out, digested=d)
                 except FigureError as exc:
@@ -80,11 +75,13 @@ def cmd_analyze(args: argparse.Namespace) -> int:
 
 def cmd_identify(args: argparse.Namespace) -> int:
     """J and D of every axis by MRAS and least squares, against the recorded values."""
-    from winder.analysis.identify import format_identification, identification_json, identify
+    from winder.analysis.identify import IDENTIFY_SPECS, format_identification, identification_json, identify
     from winder.record.reader import read_run
 
-    gain = _positive("gain", args.gain)
-    window = _positive("window", args.window) / 1e3
+    # every number and name checked before a recording is read
+    gain = IDENTIFY_SPECS["gain"].parse(args.gain)
+    window = IDENTIFY_SPECS["window"].parse(args.window) / 1e3
+    plots_dir = _plots_dir(args)
     try:
         runs = [read_run(bag, args.namespace) for bag in args.bags]  # every bag readable, or none is done
         idents = [identify(run, gain=gain, window=window) for run in runs]
@@ -96,7 +93,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
             from winder.analysis.figures.analysis import plot_identification
 
             for run, ident in zip(runs, idents, strict=True):
-                out = _plots_for(run.path, args.plots_dir, len(runs) > 1)
+                out = _plots_for(run.path, plots_dir, len(runs) > 1)
                 _say([f"plot: {p}" for p in plot_identification(run, ident, out)], args.json)
     except OSError as exc:
         raise UserError(_os_error(exc)) from None
@@ -152,6 +149,7 @@ def cmd_bag_recover(args: argparse.Namespace) -> int:
     from winder.record.bag import being_written
     from winder.record.reader import read_raw, recover
 
+    output = None if args.output is None else directory_option("output", args.output)
     try:
         raw = read_raw(args.bag)
         if being_written(raw.path):
@@ -171,7 +169,7 @@ def cmd_bag_recover(args: argparse.Namespace) -> int:
                 what = f"{total} messages" + (f"; {told}" if told else "")
                 print(f"{raw.path}: the file is whole ({what}): nothing to recover")
             return EXIT_OK
-        out, saved = recover(args.bag, args.output)
+        out, saved = recover(args.bag, output)
     except OSError as exc:
         raise UserError(_os_error(exc)) from None
     last = max((t for _, t, _ in raw.messages), default=0)
@@ -199,6 +197,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     from winder.analysis.export import export_csv
     from winder.record.reader import read_run
 
+    csv = None if args.csv is None else directory_option("csv", args.csv)
     try:
         run = read_run(args.bag, args.namespace)
         if run.damaged:
@@ -211,7 +210,7 @@ def cmd_export(args: argparse.Namespace) -> int:
                 f"{run.path}: the recording was cut short; `winder bag recover {run.path}` writes its "
                 "whole messages as a complete bag, which exports"
             )
-        out = Path(args.csv) if args.csv else Path(f"{run.path}_csv")
+        out = csv if csv is not None else Path(f"{run.path}_csv")
         rows = export_csv(run, out)
     except OSError as exc:
         raise UserError(_os_error(exc)) from None

@@ -26,6 +26,7 @@ from winder.cli.common import (
     Progress,
     UserError,
     add_spec_arguments,
+    directory_option,
     given_values,
     job_file,
     job_file_hashed,
@@ -62,7 +63,7 @@ from winder.motion.axes import AXIS_TABLE, FEED, FORK
 from winder.motion.interp import dda, deviation_stats, min_deviation, point_by_point
 from winder.motion.job import FIELD_SPECS, Job
 from winder.motion.timing import plan_job_timing
-from winder.spec import Spec
+from winder.spec import Spec, shorten
 from winder.tension.check import add_takeup, add_tension, derated, time_for_check, wire_refusal
 from winder.tension.tensioner import TENSIONER_SPECS
 
@@ -597,28 +598,55 @@ def external_nodes(args: argparse.Namespace) -> frozenset[str]:
     return names
 
 
-#: Settings of ``winder discovery-server``.
+#: Settings of ``winder discovery-server``: the ranges Fast DDS's server takes
+#: (a port below 1025 it refuses with its whole usage text)
 SERVER_SPECS: dict[str, Spec] = {
-    "port": Spec("port", int, 11811, "UDP port the server listens on", "", 1, 65535),
+    "port": Spec("port", int, 11811, "UDP port the server listens on", "", 1025, 65535),
     "id": Spec("id", int, 0, "the server's id (its place in ROS_DISCOVERY_SERVER's list)", "", 0, 255),
 }
 
 
+def server_address(address: str, port: int) -> None:
+    """UserError (one line) unless the discovery server can listen on
+    ``address``:``port``: an IPv4 address of this host (or 0.0.0.0, all of
+    them), neither multicast nor broadcast, and the UDP port free there.
+    Asked of the system by binding a socket there and closing it: Fast DDS
+    runs a server on an address that is not the host's, reachable by no one,
+    and says a port taken in a few lines of its own log."""
+    import errno
+    import ipaddress
+    import socket
+
+    rule = "must be an IPv4 address of this host (0.0.0.0: all of them)"
+    try:
+        ip = ipaddress.IPv4Address(address)
+    except ValueError:
+        raise UserError(f"address={shorten(address)} is invalid: {rule}") from None
+    if ip.is_multicast or ip == ipaddress.IPv4Address("255.255.255.255"):
+        raise UserError(f"address={address} is invalid: a multicast or broadcast address; {rule}")
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        try:
+            probe.bind((address, port))
+        except OSError as exc:
+            if exc.errno == errno.EADDRINUSE:
+                raise UserError(
+                    f"port={port} is invalid: UDP port {port} on {address} is in use (another discovery "
+                    f"server?); must be a free UDP port in {SERVER_SPECS['port'].range_text()}"
+                ) from None
+            why = "no interface of this host has it" if exc.errno == errno.EADDRNOTAVAIL else exc.strerror
+            raise UserError(f"address={address} is invalid: {why or exc}; {rule}") from None
+
+
 def cmd_discovery_server(args: argparse.Namespace) -> int:
     """Fast DDS's discovery server from this install, in the foreground: the
-    alternative to multicast and static peers for a cell across hosts."""
-    import ipaddress
-
+    alternative to multicast and static peers for a cell across hosts. Its
+    settings are checked before it starts (:func:`server_address`): the
+    server's own refusals are its usage text or a log."""
     from winder.ros.dds import DISCOVERY_SERVER_KEY, discovery_server_command
 
     port = SERVER_SPECS["port"].parse(args.port)
     server_id = SERVER_SPECS["id"].parse(args.id)
-    try:
-        ipaddress.IPv4Address(args.address)
-    except ValueError:
-        raise UserError(
-            f"address={args.address!r} is invalid: must be an IPv4 address of this host"
-        ) from None
+    server_address(args.address, port)
     try:
         argv, env = discovery_server_command(args.address, port, server_id)
     except FileNotFoundError as exc:
@@ -640,7 +668,7 @@ def cmd_figures(args: argparse.Namespace) -> int:
     """Reproduce the papers' figures with this code (PNG files)."""
     import importlib
 
-    out = Path(args.outdir)
+    out = directory_option("outdir", args.outdir)
     for name in FIGURES:
         module = importlib.import_module(f"winder.analysis.figures.{name}")
         for path in module.make(out):
@@ -748,7 +776,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="run Fast DDS's discovery server for a cell across hosts (see docs/DEPLOYING.md)",
     )
     p.add_argument("--address", default="0.0.0.0", help="IPv4 address to listen on (default: all)")
-    p.add_argument("--port", default="11811", help="UDP port; [1, 65535]; default 11811")
+    p.add_argument("--port", default="11811", help="UDP port; [1025, 65535]; default 11811")
     p.add_argument("--id", default="0", help="server id; [0, 255]; default 0")
     p.set_defaults(func=cmd_discovery_server)
 

@@ -15,6 +15,7 @@ import contextlib
 import sys
 import time
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 from winder.errors import BadInputError
@@ -27,6 +28,7 @@ __all__ = [
     "Progress",
     "UserError",
     "add_spec_arguments",
+    "directory_option",
     "given_values",
     "job_file",
     "job_file_hashed",
@@ -69,6 +71,18 @@ def ros_imports(interrupts: Interrupts | None = None) -> Iterator[None]:
             yield
         except ImportError as exc:
             raise UserError(f"the ROS 2 packages are not installed ({exc}); run 'make demo'") from None
+
+
+def directory_option(option: str, text: str) -> Path:
+    """A directory named on the command line for a command's output. UserError
+    (one line) for an empty name: ``Path("")`` is the current directory, and
+    the files would land there unasked (``.`` names it)."""
+    if text == "":
+        raise UserError(
+            f"{option}='' is invalid: must be a directory name (an empty one would be the current "
+            "directory; give . for that)"
+        )
+    return Path(text)
 
 
 def add_spec_arguments(

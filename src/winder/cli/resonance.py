@@ -14,7 +14,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from winder.cli.common import UserError
+from winder.cli.common import UserError, directory_option
 from winder.cli.exits import EXIT_OK
 from winder.contract.files import OutputError, atomic_file, check_writable, write_text
 
@@ -86,7 +86,7 @@ def cmd_resonance(args: argparse.Namespace) -> int:
     if args.json:  # the outputs are written after the table: a path that cannot be is refused first
         check_writable(args.json)
     if not args.no_plots:
-        check_writable(args.plots_dir, directory=True)
+        check_writable(directory_option("plots_dir", args.plots_dir), directory=True)
     models = ["linear"] if args.linear_only else ["linear", "nonlinear"]
     move = TestMove()
     bar = Progress(1, "winder resonance")
@@ -226,7 +226,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
     if args.apply:
         _writable(Path(args.job_file))  # before the tuning, not after it
     if not args.no_plots:
-        check_writable(args.plots_dir, directory=True)
+        check_writable(directory_option("plots_dir", args.plots_dir), directory=True)
     given = job_file(args)
     job = Job.from_dict(given["interp_node"])
     sim, notes = _axes_from(args, given["consumer"])

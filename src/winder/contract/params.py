@@ -15,9 +15,9 @@ from typing import Any
 
 from winder.contract.files import NAME_MAX, too_long_name
 from winder.contract.stream import STOP_PAUSE_RANGE
-from winder.contract.topics import check_node_name, check_relative_name
+from winder.contract.topics import check_node_name, check_relative_name, check_service_name
 from winder.motion.axes import AXES, FEED, FORK, POLE
-from winder.motion.job import FIELD_SPECS, Job, Segment
+from winder.motion.job import FIELD_SPECS, MAX_STEP_RATE, Job, Segment
 from winder.motion.limits import NO_LIMIT
 from winder.motion.profile import KINDS
 from winder.motion.timeline import OVERRIDE_RANGE
@@ -87,7 +87,16 @@ PROFILE_KINDS = KINDS
 SHAPER_CHOICES = ("none", "zv", "mzv", "zvd", "ei", "2hump_ei")
 PROFILE_SPECS = _table(
     Spec("profile", str, "scurve", "velocity ramp of every segment", choices=PROFILE_KINDS),
-    Spec("v_max", float, 2048.0, "peak step rate of the major axis", "steps/s", 0.0, 1e7, low_open=True),
+    Spec(
+        "v_max",
+        float,
+        2048.0,
+        "peak step rate of the major axis",
+        "steps/s",
+        0.0,
+        MAX_STEP_RATE,
+        low_open=True,
+    ),
     Spec(
         "a_max",
         float,
@@ -841,12 +850,16 @@ def check_bridge(values: dict[str, Any], namespace: str | None = None) -> None:
     writable when recording; with the bridge node's ``namespace``, the
     topics ``controller`` names are names ROS takes there
     (:func:`winder.contract.topics.check_relative_name`: a 300-character
-    controller ended the node in rcl)."""
+    controller ended the node in rcl), and so is ``homing_service``
+    (:func:`winder.contract.topics.check_service_name`: a 250-character one
+    was taken, and ``~/home`` then failed in rcl)."""
     if namespace is not None:
         try:
             check_relative_name("controller", values["controller"], namespace, CONTROLLER_TOPICS)
             if "broadcaster" in values:
                 check_node_name(values["broadcaster"], namespace, "broadcaster")
+            if values.get("homing_service"):
+                check_service_name("homing_service", values["homing_service"], namespace)
         except ValueError as exc:
             raise SpecError(str(exc)) from None
     check_consumer(values)

@@ -202,6 +202,41 @@ def check_relative_name(option: str, value: str, namespace: str = "", suffixes: 
     return value
 
 
+def check_service_name(option: str, value: str, namespace: str = "") -> str:
+    """A service a setting names (the bridge's ``homing_service``), as rcl
+    takes it when a client of it is made: relative to ``namespace``
+    (``name[/name...]``) or fully qualified (``/name[/name...]``), names of
+    letters, digits and ``_``, not starting with a digit, and its full name
+    within :data:`MAX_NAME_LENGTH` (rcl refuses a longer one with a raw
+    error when the call is made, long after the setting was taken).
+    ValueError (one line: the setting, the value shortened, the rule)
+    otherwise; the value as given."""
+    if not isinstance(value, str) or value.strip("/") == "":
+        raise BadInputError(
+            f"{option}={value!r} is invalid: must be a service name, name[/name...] or /name..."
+        )
+    absolute = value.startswith("/")
+    body = value[1:] if absolute else value
+    bad = next((t for t in body.split("/") if not _TOKEN.fullmatch(t)), None)
+    if bad is not None:
+        why = "an empty name ('//', or a '/' at its end)" if bad == "" else f"the name {shorten(bad)}"
+        raise BadInputError(
+            f"{option}={shorten(value)} is invalid: it has {why}; a service name is name[/name...] (in the "
+            "node's namespace) or /name[/name...], each name letters, digits and '_', not starting with a "
+            "digit"
+        )
+    base = "" if absolute else namespace.rstrip("/")
+    full = f"{base}/{body}"
+    if len(full) > MAX_NAME_LENGTH:
+        where = "" if absolute else f" in the namespace {base or '/'}"
+        raise BadInputError(
+            f"{option}={shorten(value)} is invalid: its full name {shorten(full)} is longer than the "
+            f"{MAX_NAME_LENGTH} characters ROS allows a name{where}; it may have at most "
+            f"{max(MAX_NAME_LENGTH - len(base) - (0 if absolute else 1), 0)} characters"
+        )
+    return value
+
+
 #: The start handshake (diagnostic_msgs/KeyValue, latched): the step stream's
 #: consumer (``key="consumer"``: the sim node, or a hardware driver) and the
 #: profile node (``key="profile"``) say whether they can take a job now

@@ -30,7 +30,7 @@ from __future__ import annotations
 import functools
 import itertools
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import InitVar, dataclass, fields, replace
 from enum import StrEnum
 from typing import Any
@@ -40,13 +40,17 @@ import numpy as np
 from winder.motion.axes import FEED, FORK, POLE
 from winder.motion.coil import CORES, LAYS, Bobbin, Winding, layer_capacity, winding
 from winder.motion.material import MATERIALS, Material, Wire
-from winder.spec import Spec, SpecError
+from winder.spec import Spec, SpecError, interval, shorten
 
 __all__ = [
     "CAM_PIECES",
     "CROSSOVER_LAWS",
     "FIELD_SPECS",
+    "MAX_JOB_SECONDS",
+    "MAX_JOB_STEPS",
     "MAX_PIECES",
+    "MAX_STEP_RATE",
+    "MIN_LAYER_SHARE",
     "Coil",
     "Job",
     "JobError",
@@ -57,6 +61,22 @@ __all__ = [
 
 #: Steps of one axis in one segment, at most: positions travel as int32.
 MAX_STEPS = 2**31 - 1
+#: The longest a job may last, in simulated time: a week. Step times travel as
+#: int64 nanoseconds (good for 292 years), but the sim node produces every
+#: sample of that time; limits that would stretch a job beyond it are refused
+#: (:mod:`winder.motion.timing` plans with it).
+MAX_JOB_SECONDS = 7 * 24 * 3600.0
+#: The highest step rate a ramp may set, steps/s (the profile node's ``v_max`` at most).
+MAX_STEP_RATE = 1e7
+#: Steps of a job, at most: what the highest step rate runs in :data:`MAX_JOB_SECONDS`.
+#: A longer job could never run, and every tool that walks its steps (``winder
+#: interp``: some 3*10^7 a second) would walk them for days; it is refused from
+#: its turn counts before anything is laid out.
+MAX_JOB_STEPS = round(MAX_JOB_SECONDS * MAX_STEP_RATE)
+#: The least share of ``v_max`` a layer may be wound at (``first_layer_speed``,
+#: a ``layer_speed`` share): a layer's ramp limits are scaled by its share up to
+#: its cube, which must stay a number a ramp can plan with.
+MIN_LAYER_SHARE = 1e-3
 #: Straight moves of a job, at most (its segments' pieces: an orthocyclic
 #: layer is two a turn): every node lays them out, about 0.1 kB and 1 us each
 MAX_PIECES = 2**20
@@ -90,6 +110,33 @@ def crossover_cam(across: int, zone: int, law: str) -> list[tuple[int, int]]:
 def steepest(pieces: Sequence[tuple[int, int]]) -> float:
     """The largest feed steps per fork step of a crossover's pieces (inf: a piece of no fork step)."""
     return max(abs(f) / k if k else (math.inf if f else 0.0) for f, k in pieces)
+
+
+def steepest_crossing(across: Iterable[int], zone: int, law: str) -> float:
+    """:func:`steepest` of the crossovers of ``across`` feed steps each (their
+    sizes), each way the feed goes, over ``zone`` fork steps by ``law``."""
+    return max(steepest(crossover_cam(s * a, zone, law)) for a in across for s in (1, -1))
+
+
+#: the most a cycloid rises over one of its CAM_PIECES equal parts (its middle ones)
+_CYCLOID_RISE = cycloid(0.5 + 1 / CAM_PIECES) - cycloid(0.5)
+
+
+def shortest_zone(across: Iterable[int], zone: int, law: str) -> int:
+    """The fewest fork steps, ``zone`` at least, over which the crossovers of
+    ``across`` feed steps each keep the flyer leading every piece
+    (:func:`steepest_crossing` at most 1). The search starts where it can
+    first succeed: a linear crossover of ``a`` steps needs ``a`` fork steps;
+    a cycloid's steepest part rises ``a`` x :data:`_CYCLOID_RISE` over about
+    a ``CAM_PIECES``-th of the zone, give or take a step each (so a fine
+    feed is answered in a few tries, not one try per fork step)."""
+    sizes = {abs(a) for a in across}
+    a = max(sizes, default=0)
+    least = a if law == "linear" else math.floor(CAM_PIECES * (a * _CYCLOID_RISE - 2))
+    z = max(zone, least, 1)
+    while steepest_crossing(sizes, z, law) > 1:
+        z += 1
+    return z
 
 
 class JobError(SpecError):
@@ -271,7 +318,15 @@ FIELD_SPECS: dict[str, Spec] = {
             0.0,
             open_low=False,
         ),
-        _f("first_layer_speed", 0.0, 1.0, "", "speed of layer 1, a fraction of v_max", 1.0),
+        _f(
+            "first_layer_speed",
+            MIN_LAYER_SHARE,
+            1.0,
+            "",
+            "speed of layer 1, a fraction of v_max",
+            1.0,
+            open_low=False,
+        ),
         Spec(
             "layer_speed",
             str,
@@ -392,13 +447,30 @@ class Coil:
     direction: int
 
 
+def _list_items(name: str, text: str, sep: str = ";") -> list[str]:
+    """The items of a setting that lists them separated by ``sep``, each
+    stripped; none for a blank text. JobError (one line) for an empty item
+    (two separators side by side, or one at an end): a list typed so says
+    nothing, and is not taken as saying less."""
+    if not text.strip():
+        return []
+    items = [t.strip() for t in text.split(sep)]
+    if not all(items):
+        raise JobError(
+            f"{name}={shorten(text)} is invalid: it has an empty item (two '{sep}' side by side, or one "
+            f"at an end); leave out the '{sep}' or give the item"
+        )
+    return items
+
+
 def parse_layer_speeds(text: str, layers: Sequence[int]) -> dict[tuple[int, int], float]:
     """The layers ``text`` slows down, ``(pole, layer)`` from 0 -> share of
-    ``v_max`` in (0, 1], for coils of ``layers`` layers each; JobError (one
-    line) naming the item and the allowed range. A layer given twice (``*``
-    and its coil) takes the last."""
+    ``v_max`` in [:data:`MIN_LAYER_SHARE`, 1], for coils of ``layers`` layers
+    each; JobError (one line) naming the item and the allowed range. A layer
+    given twice (``*`` and its coil) takes the last."""
     out: dict[tuple[int, int], float] = {}
-    for item in (t.strip() for t in text.split(";") if t.strip()):
+    shares = interval(MIN_LAYER_SHARE, 1.0)
+    for item in _list_items("layer_speed", text):
         head, _, body = item.partition(":")
         layer_text, _, share_text = body.partition("=")
         try:
@@ -408,8 +480,8 @@ def parse_layer_speeds(text: str, layers: Sequence[int]) -> dict[tuple[int, int]
             raise JobError(f"layer_speed: {item!r} must be COIL:LAYER=SHARE (COIL a number or *)") from None
         if any(not 0 <= c < len(layers) for c in coils):
             raise JobError(f"layer_speed: coil {head.strip()} is not in [1, {len(layers)}] (poles)")
-        if not 0.0 < share <= 1.0:
-            raise JobError(f"layer_speed: {item!r}: share {share:g} is invalid: must be in (0, 1]")
+        if not MIN_LAYER_SHARE <= share <= 1.0:  # also nan
+            raise JobError(f"layer_speed: {item!r}: share {share:g} is invalid: must be in {shares}")
         for pole in coils:
             if not 1 <= layer <= layers[pole]:
                 raise JobError(
@@ -422,18 +494,23 @@ def parse_layer_speeds(text: str, layers: Sequence[int]) -> dict[tuple[int, int]
 
 def parse_coil_overrides(text: str, poles: int, base: Coil) -> dict[int, Coil]:
     """The coils ``text`` changes (0-based pole index -> Coil); JobError (one
-    line) naming the item, the key and the allowed range."""
+    line) naming the item, the key and the allowed range (an empty item, or a
+    coil with nothing to change, ``"1:"``, too)."""
     out: dict[int, Coil] = {}
-    for item in (t.strip() for t in text.split(";") if t.strip()):
+    for item in _list_items("coil_overrides", text):
         head, _, body = item.partition(":")
+        rule = f"coil_overrides: {item!r} must be COIL:KEY=VALUE[,KEY=VALUE]"
         try:
             coil = int(head)
         except ValueError:
-            raise JobError(f"coil_overrides: {item!r} must be COIL:KEY=VALUE[,KEY=VALUE]") from None
+            raise JobError(rule) from None
         if not 1 <= coil <= poles:
             raise JobError(f"coil_overrides: coil {coil} is not in [1, {poles}] (poles)")
+        pairs = [p.strip() for p in body.split(",")]
+        if not all(pairs):  # "1:" changes nothing; "1:layers=2,,": an empty pair
+            raise JobError(f"{rule}: {'no KEY=VALUE' if not any(pairs) else 'an empty KEY=VALUE'}")
         values = {"turns_per_layer": base.turns_per_layer, "layers": base.layers, "direction": base.direction}
-        for pair in (p.strip() for p in body.split(",") if p.strip()):
+        for pair in pairs:
             key, _, value = pair.partition("=")
             key, value = key.strip(), value.strip()
             if key == "direction":
@@ -703,6 +780,7 @@ class Job:
                 f"turns_per_layer={turns} is invalid: a layer of "
                 f"{self.layer_fork_steps} fork steps exceeds 2**31 - 1 steps"
             )
+        self._check_steps(laid)
 
     def _check_auto_turns(self, auto: bool) -> None:
         """``turns_per_layer: auto`` (here or in a coil override) resolves to
@@ -751,10 +829,44 @@ class Job:
                 "turns per job"
             )
 
+    def _check_steps(self, laid: Winding) -> None:
+        """The job's steps are few enough for a cell to run within a week
+        (JobError, one line; :data:`MAX_JOB_STEPS`), counted from its turns
+        (:meth:`_count_steps`) once each layer's steps are known to be in
+        range, before any move is made or timed."""
+        steps = self._count_steps(laid)
+        if steps > MAX_JOB_STEPS:
+            raise JobError(
+                f"turns_per_layer={self.layer_turns} x layers={self.layers} x poles={self.poles} with "
+                f"fork_steps_per_rev={self.fork_steps_per_rev} is invalid: {steps} steps, a job may have at "
+                f"most {MAX_JOB_STEPS} (what the highest step rate, {MAX_STEP_RATE:g} steps/s, runs in the "
+                f"longest a job may last, {MAX_JOB_SECONDS:g} s); wind fewer turns per job"
+            )
+
+    def _count_steps(self, laid: Winding) -> int:
+        """The job's steps (:attr:`total_steps`), counted from its turns before
+        anything is laid out: a layer's major axis is the fork (its turns and
+        the reversal dwell; an orthocyclic cam keeps the fork major,
+        :meth:`_check_cam`) or a helical layer's feed, and the index moves
+        turn the pole axis once round at most."""
+        spr, dwell = self.fork_steps_per_rev, self.dwell_fork_steps
+        helical = self.lay != "orthocyclic"
+        each: dict[int, int] = {}  # coils asked alike are one geometry (winding): counted once
+        for coil in laid.coils:
+            if id(coil) not in each:
+                each[id(coil)] = sum(
+                    max(layer.turns * spr + dwell, self.feed_steps_of(layer.turns) if helical else 0)
+                    for layer in coil.layers
+                )
+        return sum(each[id(coil)] for coil in laid.coils) + self.pole_position(self.poles - 1)
+
     def _check_cam(self) -> None:
         """The cam's pieces can be stepped with the fork as the major axis
         (JobError, one line): the feed never outruns the flyer, so its step
-        rate stays below the fork's (at most ``v_max``) at any speed."""
+        rate stays below the fork's (at most ``v_max``) at any speed. Checked
+        on the cam as it is laid, whole steps: every crossover it lays (a
+        turn's, two half diameters; a climb's, one), each way the feed goes
+        (a cycloid's points round to steps unlike forward and back)."""
         spr = self.fork_steps_per_rev
         if self.lay == "orthocyclic":
             if self.crossover_at + self.crossover > 360.0:
@@ -763,17 +875,15 @@ class Job:
                     "invalid: the crossover zone must lie within a turn (crossover_at + crossover <= 360 deg)"
                 )
             turns = max(self.layer_turns_of(p, 0) for p in range(self.poles))
-            k = np.arange(max(turns, 2), dtype=np.float64)
-            q = self.wire_diameter / (2 * self.feed_step) * (1 + 1e-9)
-            across = 0
-            for shift in (0, 1):  # the crossover of each layer kind (rounded to steps)
-                places = np.floor((2 * k + shift) * q + 0.5)
-                across = max(across, int(np.max(np.diff(places))))
+            # the places of the turns in half wire diameters from the coil's first turn (turn_place)
+            halves = np.arange(2 * max(turns, 2) + 2, dtype=np.float64)
+            places = np.floor(halves * (self.wire_diameter / (2 * self.feed_step) * (1 + 1e-9)) + 0.5)
+            crossings = {int(x) for gap in (1, 2) for x in np.unique(places[gap:] - places[:-gap])}
             zone = self.crossover_zone[1]
             law = self.crossover_law
-            if steepest(crossover_cam(across, zone, law)) > 1:
-                fits = next(z for z in range(zone, 2**40) if steepest(crossover_cam(across, z, law)) <= 1)
-                need = math.ceil(fits / spr * 3600.0) / 10.0
+            if steepest_crossing(crossings, zone, law) > 1:
+                across = max(crossings)
+                need = math.ceil(shortest_zone(crossings, zone, law) / spr * 3600.0) / 10.0
                 peak = " at its peak" if law != "linear" else ""
                 raise JobError(
                     f"lay.crossover={self.crossover:g} deg is too short: the feed crosses {across} steps "

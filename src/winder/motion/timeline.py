@@ -132,7 +132,15 @@ def check_schedule(text: str) -> list[Command]:
     each item's rule, the commands are written in increasing time (none
     twice, none at the time of the one before), and each can be taken where
     it stands: a pause while running, a resume while paused, nothing after an
-    abort. SpecError (one line) naming the item and the rule."""
+    abort; and no item is empty (``",,,"``: two commas side by side, or one at
+    an end, say nothing, and are not taken as no command). SpecError (one
+    line) naming the item and the rule."""
+    written = text.split(",")
+    if text.strip() and not all(t.strip() for t in written):
+        raise SpecError(
+            f"schedule={shorten(text)} is invalid: it has an empty item (two ',' side by side, or one at an "
+            "end); leave out the ',' or give the command"
+        )
     items = _schedule_items(text)
     paused, aborted = False, ""
     for i, (item, cmd) in enumerate(items):

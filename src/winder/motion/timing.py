@@ -11,17 +11,15 @@ import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from winder.errors import BadInputError
+from winder.motion.job import MAX_JOB_SECONDS, Job
 from winder.motion.profile import LIMITS, plan
 from winder.motion.shaped import Motion, ShapedProfile, shape
-
-if TYPE_CHECKING:
-    from winder.motion.job import Job
 
 __all__ = [
     "MAX_JOB_SECONDS",
@@ -33,12 +31,6 @@ __all__ = [
     "plan_timing",
     "shaping_report",
 ]
-
-
-#: The longest a job may last, in simulated time: a week. Step times travel as
-#: int64 nanoseconds (good for 292 years), but the sim node produces every
-#: sample of that time; limits that would stretch a job beyond it are refused.
-MAX_JOB_SECONDS = 7 * 24 * 3600.0
 
 
 #: how each ramp limit scales when a move is slowed down in time by ``pace``
@@ -67,14 +59,17 @@ def plan_segment(values: dict[str, Any], steps: int, speed: float = 1.0, pace: f
     limits = ", ".join(f"{k}={v:g}" for k, v in kw.items() if k != "v_end")
     if pace != 1.0:  # the limits said are a slowed layer's: say so
         limits += f" (a layer slowed to {pace:g} by layer_speed)"
+    far_apart = BadInputError(
+        f"profile={kind} with {limits}: the limits are too far apart to plan a {steps}-step move "
+        "in floating point"
+    )
+    if not all(0.0 < kw[name] < math.inf for name in ("v_max", *LIMITS[kind])):
+        raise far_apart  # a limit scaled by the layer's speed or pace out of the floats (0, inf)
     profile: Motion
     try:
         profile = plan(kind, float(steps), **kw)
     except (ZeroDivisionError, OverflowError):
-        raise BadInputError(
-            f"profile={kind} with {limits}: the limits are too far apart to plan a {steps}-step move "
-            "in floating point"
-        ) from None
+        raise far_apart from None
     kind_s = values.get("shaper", "none")
     if kind_s != "none":
         profile = shape(profile, kind_s, values["shaper_freq"], values["shaper_damping"])
