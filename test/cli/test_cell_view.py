@@ -13,7 +13,7 @@ def _view_with_statuses_and_state() -> CellView:
     view = CellView("")
     for node, role in (("interp_node", "interp"), ("profile_node", "profile"), ("axes", "consumer")):
         name = f"{node}: job"
-        view.statuses[name] = NodeStatus(name, {"role": role, "state": "done"}, "")
+        view.statuses[role] = NodeStatus(name, {"state": "done"}, "")
     view.state = {"state": "done"}
     return view
 
@@ -37,7 +37,7 @@ def test_the_view_is_not_complete_without_every_role_or_the_state() -> None:
     view.state = {}
     assert not view.complete()
     view.state = {"state": "done"}
-    del view.statuses["axes: job"]
+    del view.statuses["consumer"]
     assert not view.complete()
 
 
@@ -56,8 +56,8 @@ def _heard_view() -> CellView:
         ("sim_node", "consumer", 0.1),
     ):
         name = f"{node}: job"
-        values = {"role": role, "state": "running", "run_id": "r_1", "sim_time_s": "35.1"}
-        view.statuses[name] = NodeStatus(name, values, "", NOW_NS - int(ago * 1e9))
+        values = {"state": "running", "run_id": "r_1", "sim_time_s": "35.1"}
+        view.statuses[role] = NodeStatus(name, values, "", NOW_NS - int(ago * 1e9))
     view.state = {"state": "running", "run_id": "r_1", "job_id": "j", "sim_time_s": "0.000000"}
     view.state_ns, view.state_by = NOW_NS - 35_200_000_000, "/sim_node"
     view.ready.update(consumer="busy", profile="ready")
@@ -110,8 +110,9 @@ def test_a_node_whose_once_a_second_status_is_overdue_is_shown_silent() -> None:
 
 def test_a_missing_part_is_named_with_what_the_graph_shows() -> None:
     view = _heard_view()
-    del view.statuses["sim_node: job"]
-    assert "  no job status heard from the consumer /sim_node (on the graph)" in state_lines(view, NOW_NS)
+    del view.statuses["consumer"]
+    said = "  no job status heard from the consumer /sim_node (on the graph; held up?)"
+    assert said in state_lines(view, NOW_NS)
     view.graph, view.holders["consumer"] = {"/interp_node", "/profile_node"}, set()
     view.state, view.state_by = {}, ""
     lines = state_lines(view, NOW_NS)
@@ -131,11 +132,11 @@ def test_a_query_ends_when_what_the_graph_shows_is_heard() -> None:
     view.graph = {"/interp_node", "/profile_node"}  # the consumer heard, not yet named on the graph
     assert not view.settled(t + 10, NOW_NS)
     view.graph = {"/interp_node", "/profile_node", "/sim_node"}
-    old = view.statuses["profile_node: job"]
-    view.statuses["profile_node: job"] = NodeStatus(old.name, old.values, "", NOW_NS - int((FRESH + 7) * 1e9))
+    old = view.statuses["profile"]
+    view.statuses["profile"] = NodeStatus(old.name, old.values, "", NOW_NS - int((FRESH + 7) * 1e9))
     assert not view.settled(t + 10, NOW_NS)  # the first of the profile node's kept statuses: more to come
-    view.statuses["profile_node: job"] = old
-    del view.statuses["sim_node: job"]  # on the graph, in its role, its status not heard yet
+    view.statuses["profile"] = old
+    del view.statuses["consumer"]  # on the graph, in its role, its status not heard yet
     assert not view.settled(t + 10, NOW_NS)
     view.holders["consumer"], view.graph = set(), {"/interp_node", "/profile_node"}
     view.state, view.state_by = {}, ""

@@ -119,6 +119,7 @@ def test_start_a_run_from_a_relative_job_file_and_follow_it(procs: Procs, ros: A
     end state followed; the bag holds that run with those values."""
     bags = tmp_path / "bags"
     start_cell(procs, bags)
+    before = get_params(ros, "interp_node", ["job_file"])
     work = tmp_path / "work"
     (work / "jobs").mkdir(parents=True)
     (work / "jobs" / "tiny.yaml").write_text(TINY)
@@ -133,7 +134,8 @@ def test_start_a_run_from_a_relative_job_file_and_follow_it(procs: Procs, ros: A
     run = read_run(bag)
     assert run.plan.run_id == run_id and run.report["state"] == "done"
     assert run.plan.job.turns_per_layer == 4 and run.plan.job.layers == 2  # the file's, and --set over it
-    assert get_params(ros, "interp_node", ["job_file"]) == [str(work / "jobs" / "tiny.yaml")]
+    # what the goal set was its run's: the node's settings are again what they were (issue 53, item 5)
+    assert get_params(ros, "interp_node", ["job_file"]) == before
     # the cell is idle again: state says so, with every node's status
     code, out, err = ctl(procs, "state")
     assert code == EXIT_OK, err

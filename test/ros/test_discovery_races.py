@@ -121,18 +121,21 @@ class HiddenGraph:
 
 def fake_cell(rclpy: Any, namespace: str) -> tuple[list[Any], Any]:
     """An interp node's endpoints in ``namespace`` (so a cell plays a part
-    there), and a node ``sim_node`` publishing /diagnostics; (the two nodes,
-    sim_node's /diagnostics publisher)."""
-    from diagnostic_msgs.msg import DiagnosticArray
-    from std_msgs.msg import Int32MultiArray
+    there), and a node ``sim_node`` in the consumer's part publishing
+    /diagnostics (a status is taken from the node in a part only); (the two
+    nodes, sim_node's /diagnostics publisher)."""
+    from diagnostic_msgs.msg import DiagnosticArray, KeyValue
+    from std_msgs.msg import Int32MultiArray, Int64MultiArray
 
-    from winder.ros.qos import QOS_DIAGNOSTICS, QOS_LATCHED, QOS_STREAM
+    from winder.ros.qos import QOS_DIAGNOSTICS, QOS_LATCHED, QOS_STATE, QOS_STREAM
     from winder_interfaces.msg import JobDescription
 
     interp = rclpy.create_node("interp_node", namespace=namespace)
     interp.create_publisher(JobDescription, "winder/job", QOS_LATCHED)
     interp.create_publisher(Int32MultiArray, "winder/steps", QOS_STREAM)
     sim = rclpy.create_node("sim_node", namespace=namespace)
+    sim.create_subscription(Int64MultiArray, "winder/step_times", lambda _m: None, QOS_STREAM)
+    sim.create_publisher(KeyValue, "winder/progress", QOS_STATE)
     return [interp, sim], sim.create_publisher(DiagnosticArray, "/diagnostics", QOS_DIAGNOSTICS)
 
 

@@ -204,7 +204,8 @@ def test_start_run_with_a_ramp_runs_that_ramp(tmp_path: Path, procs: Procs, ros:
     run = read_run(bags / run_id)
     assert run.complete and run.profile == "trapezoid" and run.profile_config["v_max"] == 3000.0
     assert run.profile_config["ramp_source"] == "job"
-    assert get_params(ros, "interp_node", ["ramp.source"]) == ["job"]  # what the call set, as any setting
+    # what the call set was the run's: the node's own settings are what they were (issue 53)
+    assert get_params(ros, "interp_node", ["ramp.source", "ramp.profile"]) == ["profile_node", "scurve"]
 
 
 def test_the_graph_and_the_watch_find_the_consumer_by_its_part(ros: Any) -> None:
@@ -212,13 +213,14 @@ def test_the_graph_and_the_watch_find_the_consumer_by_its_part(ros: Any) -> None
     its winder/step_times and writes its winder/progress, whatever its name;
     not a recorder that only reads, not a node of another namespace, not the
     caller. The cell's watch takes the job status of a consumer that names no
-    role by that node's name (a driver written before roles)."""
+    role (a driver written before roles) for the part the graph shows it in."""
     import rclpy
     from conftest import spin_until
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
     from std_msgs.msg import Int64MultiArray
     from std_msgs.msg import String as Str
 
+    from winder.contract.trust import SIGNS
     from winder.ros.cell import CellWatch
     from winder.ros.graph import consumers, fully_qualified
 
@@ -250,12 +252,20 @@ def test_the_graph_and_the_watch_find_the_consumer_by_its_part(ros: Any) -> None
             kvs = [KeyValue(key=k, value=v) for k, v in values.items()]
             return DiagnosticArray(status=[DiagnosticStatus(name=name, message="m", values=kvs)])
 
-        watch._on_diagnostics(status("recorder: job", run_id="r1", state="done"))  # not the consumer
-        watch._on_diagnostics(status("cell2/axes: job", run_id="r1", state="done"))  # another cell's
+        # the watch takes an array for the part the graph shows its sender in (Peers.deliver_by_part):
+        # the consumer's, whatever its name (the recorder plays none); and only the sender's own status
+        [axes] = watch.peers.holders("consumer")
+        assert axes.name == "axes" and watch.peers.part(axes) == "consumer"
+        assert not any(w.name == "recorder" for r in SIGNS for w in watch.peers.holders(r))
+        watch._on_diagnostics(status("recorder: job", run_id="r1", state="done"), "consumer", axes)
         assert watch.summary is None and not watch.heard_consumer
-        watch._on_diagnostics(status("axes: job", run_id="r1", state="running", progress="0.5"))
-        assert watch.heard_consumer and watch.progress == 0.5 and watch.consumer_nodes == {"axes"}
-        watch._on_diagnostics(status("axes: job", run_id="r1", state="done", progress="1.0"))
+        watch._on_diagnostics(
+            status("axes: job", run_id="r1", state="running", progress="0.5"), "consumer", axes
+        )
+        assert watch.heard_consumer and watch.progress == 0.5
+        watch._on_diagnostics(
+            status("axes: job", run_id="r1", state="done", progress="1.0"), "consumer", axes
+        )
         assert watch.summary is not None and watch.summary["state"] == "done"
     finally:
         for n in made:

@@ -157,16 +157,14 @@ def cmd_start(args: argparse.Namespace) -> int:
             if interp != stock:
                 ctl.start_clients(session, interp)
             try:
-                reply = ctl.start_run(session, interp, values, view)
+                goal = ctl.start_run(session, interp, values, view)
             except ctl.RefusedError as exc:
                 return _fail(args, str(exc), start_code(str(exc)))
-            found = ctl.RUN_ID.search(reply)
-            run_id = found.group(1) if found else ""
-            print(f"run {run_id}" if run_id else reply, flush=True)
-            print(f"  {reply}", flush=True)
+            print(f"run {goal.run_id}", flush=True)
+            print(f"  {goal.reply}", flush=True)
             if not args.wait:
                 return EXIT_OK
-            return wait_for_end(args, ctl, session, view, run_id, run_timeout)
+            return wait_for_end(args, session, view, goal, run_timeout)
 
     return _guarded(args, body)
 
@@ -185,19 +183,31 @@ END_CODES: dict[str, int] = {
 }
 
 
-def wait_for_end(
-    args: argparse.Namespace, ctl: Any, session: Any, view: Any, run_id: str, run_timeout: float
-) -> int:
-    """Follow the run ``run_id`` until the consumer's final report: a line
-    each time its state or progress changes, then the end state."""
-    from winder.contract.topics import has_role
+def wait_for_end(args: argparse.Namespace, session: Any, view: Any, goal: Any, run_timeout: float) -> int:
+    """Follow the run of ``goal`` to its end: a line each time the
+    consumer's status of it changes, then how it ended. Only the cell's own
+    nodes are believed (``view`` holds what they said): the run ends with
+    the goal's result (the Wind action's answer to this command's own
+    request) or the final status of the cell's consumer, the node the graph
+    shows in that part, never with a status that merely names it."""
+    from winder.ros.ctl import one_line
+
+    run_id = goal.run_id
 
     def status(role: str) -> dict[str, str]:
-        """The values of ``role``'s job status for this run ({} until heard)."""
-        for st in view.statuses.values():
-            if has_role(st.name, st.values, role, view.namespace) and st.values.get("run_id") == run_id:
-                return dict(st.values)
-        return {}
+        """The values of ``role``'s job status of this run ({} until heard)."""
+        st = view.statuses.get(role)
+        return dict(st.values) if st is not None and st.values.get("run_id") == run_id else {}
+
+    def ended(state: str, bag: str) -> int:
+        """How the run ended; first, who was not believed on the way."""
+        ignored = view.ignored()
+        if ignored:
+            print(f"  ignored, foreign  {ignored}", flush=True)
+        print(f"run {run_id}: {state}" + (f", bag {bag}" if bag else ""), flush=True)
+        if state != JobState.DONE:
+            return _fail(args, f"run {run_id} ended {state}", END_CODES[state])
+        return EXIT_OK
 
     end = time.monotonic() + run_timeout
     heard = time.monotonic()  # when the cell last said anything of the run
@@ -219,12 +229,17 @@ def wait_for_end(
             if line != last_line:
                 print(line, flush=True)
                 last_line = line
-            state = mine.get("state", "")
-            if state in END_CODES:
-                print(f"run {run_id}: {state}" + (f", bag {mine['bag']}" if mine.get("bag") else ""))
-                if state != JobState.DONE:
-                    return _fail(args, f"run {run_id} ended {state}", END_CODES[state])
-                return EXIT_OK
+            if mine.get("state") in END_CODES:
+                return ended(mine["state"], mine.get("bag", ""))
+        if goal.result.done():
+            result = goal.result.result().result
+            if result.report.state in END_CODES:
+                return ended(result.report.state, result.bag_path)
+            return _fail(
+                args,
+                f"run {run_id}: {one_line(result.message) or 'the goal ended with no report'}",
+                EXIT_FAILED,
+            )
         theirs = status("interp")
         if theirs.get("state") in (JobState.INCOMPLETE, JobState.ABORTED) and not given_up:
             given_up = now
@@ -258,10 +273,17 @@ def _ago(view: Any, sent: int, now_ns: int) -> str:
 
 
 def state_lines(view: Any, now_ns: int | None = None) -> list[str]:
-    """The cell's state as a few lines: the cell, the start handshake, each
-    node; each with how long ago its node said it (at ``now_ns``, wall
-    clock), a node that has left the graph shown as gone, one whose
-    once-a-second messages are overdue as silent."""
+    """The cell's state as a few lines: the cell, the start handshake, a
+    line for each role (its node's job status, or which node was not heard
+    from and why); each with how long ago its node said it (at ``now_ns``,
+    wall clock), a node that has left the graph shown as gone, one whose
+    once-a-second messages are overdue as silent, a status that does not
+    show the cell as its state does with why (:meth:`CellView.behind`:
+    the query heard nothing newer within its bound); then what was not
+    believed, by sender."""
+    from winder.contract.topics import ROLES
+    from winder.contract.trust import ROLE_NAMES
+
     now_ns = time.time_ns() if now_ns is None else now_ns
     s = view.state
     ns = view.namespace or "/"
@@ -290,13 +312,25 @@ def state_lines(view: Any, now_ns: int | None = None) -> list[str]:
         else:
             said.append(f"{role} {value} ({_ago(view, sent, now_ns)})")
     lines.append(f"  ready     {', '.join(said) or '-'}")
-    roles = view.roles()
-    by_name = {st.name: role for role, st in roles.items()}
-    for name in sorted(view.statuses):
-        st = view.statuses[name]
+    for role in ROLES:
+        st = view.statuses.get(role)
+        held = sorted(view.holders.get(role, ()))
+        if st is None:
+            if len(held) > 1:
+                lines.append(
+                    f"  no job status taken from the {role}: {len(held)} nodes play its part "
+                    f"({', '.join(held)}), none of them the cell's alone"
+                )
+            elif held:
+                lines.append(f"  no job status heard from the {role} {held[0]} (on the graph; held up?)")
+            else:
+                lines.append(
+                    f"  no {role} on the graph: no job status heard from the "
+                    f"{ROLE_NAMES[role]} (gone, not started, or held up)"
+                )
+            continue
         v = st.values
-        node = name.split(":", 1)[0]
-        role = v.get("role") or by_name.get(name, "-")
+        node = st.name.split(":", 1)[0]
         total = v.get("steps_total") or "0"
         steps = ""
         if total != "0":
@@ -305,22 +339,18 @@ def state_lines(view: Any, now_ns: int | None = None) -> list[str]:
         sim = f"  sim {float(v['sim_time_s']):.3f} s" if v.get("sim_time_s") and v.get("run_id") else ""
         state = v.get("state", "-")
         when = _ago(view, st.sent_ns, now_ns)
+        behind = view.behind(role)
         if view.gone(st.node):
             when = f"left the graph; it said {state} {when}"
             state = "gone"
         elif view.silent(st.sent_ns, now_ns):
             when += ": silent"
+        if behind and state != "gone":
+            when += f"; {behind}: nothing newer came"
         lines.append(f"  {node:<22} {role:<9} {state:<10} {v.get('run_id') or '-'}{steps}{sim}  ({when})")
-    for role in ("interp", "profile", "consumer"):
-        if role in roles:
-            continue
-        held = sorted(view.holders.get(role, ()))
-        if held:
-            lines.append(f"  no job status heard from the {role} {', '.join(held)} (on the graph)")
-        else:
-            lines.append(
-                f"  no {role} on the graph: no job status heard from one (gone, not started, or held up)"
-            )
+    ignored = view.ignored()
+    if ignored:
+        lines.append(f"  ignored, foreign  {ignored}")
     return lines
 
 
@@ -353,6 +383,7 @@ def change_line(view: Any) -> str:
             if not view.gone(st.node) and view.silent(st.sent_ns, now_ns)
         }
     )
+    foreign = view.peers.intruders.senders() if view.peers is not None else []
     return (
         f"{s.get('state', '-'):<9} {run}"
         + (f"  {where}" if where else "")
@@ -360,6 +391,7 @@ def change_line(view: Any) -> str:
         + (f"  ready: {ready}" if ready else "")
         + (f"  gone: {', '.join(gone)}" if gone else "")
         + (f"  silent: {', '.join(silent)}" if silent else "")
+        + (f"  ignored, foreign: {', '.join(foreign)}" if foreign else "")
     )
 
 

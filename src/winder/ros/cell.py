@@ -43,11 +43,9 @@ from winder.contract.run import JobReport
 from winder.contract.states import FINAL_JOB_STATES, JobState
 from winder.contract.topics import (
     ACTION_WIND,
-    ROLE_KEY,
     ROLES,
     TASK_JOB,
     TOPIC_DIAGNOSTICS,
-    has_role,
     in_namespace,
 )
 from winder.contract.trust import without_senders
@@ -57,7 +55,7 @@ from winder.procs import Children
 from winder.ros.dds import PROFILE_KEYS, use_profile
 from winder.ros.diagnostics import ERROR
 from winder.ros.early import CELL_CLASSES, CONTAINER, EarlyContainer, find_executable
-from winder.ros.graph import consumers, fully_qualified, profile_nodes
+from winder.ros.graph import Who, consumers, fully_qualified, profile_nodes
 from winder.ros.managed import LEFT_CELL
 from winder.ros.peers import Peers
 from winder.ros.sender import SenderExecutor, attributed
@@ -275,11 +273,13 @@ class RemoteSettings:
 class CellWatch:
     """What this process hears of the cell on /diagnostics, and its start call.
 
-    The consumer (the node that executes the steps: the sim node, or a
-    hardware driver in its place) is found by its role, never by its node
-    name: its job status says ``role: consumer``, and one that says no role
-    is taken by the name the graph shows in the consumer's part
-    (:func:`winder.ros.graph.consumers`), or the stock name ``sim_node``.
+    A status is taken only from the cell's own nodes, each for the part the
+    graph shows it in (:meth:`winder.ros.peers.Peers.deliver_by_part`), and
+    only the sender's own: the consumer (the node that executes the steps:
+    the sim node, or a hardware driver in its place) is the node that reads
+    ``winder/step_times`` and writes ``winder/progress``, whatever its name
+    and whatever a status says of its role. A stranger's status, named like
+    the consumer's or saying ``role: consumer``, ends no run.
 
     ``heard_consumer``: the consumer's job status can reach us (so no report
     can be missed once the job starts); ``job_seen``: the interp node reports
@@ -321,10 +321,10 @@ class CellWatch:
         self.errors: list[str] = []
         self.remote = [RemoteSettings(node, namespace, role, v) for role, v in (remote or {}).items() if v]
         self.external = set(remote or {})  #: roles whose nodes run elsewhere (not started here)
-        # a status counts only when the node it names sent it, and that node
-        # plays its part in this cell (winder.ros.peers): a stranger's status
-        # named like ours fools nobody
+        # a status counts only from the cell's node in a part, for that part
+        # (winder.ros.peers): a stranger's status named like ours fools nobody
         self.peers = Peers(node, namespace)
+        self.peers.see_parts()
         attributed(
             node,
             DiagnosticArray,
@@ -372,38 +372,32 @@ class CellWatch:
             msg = deserialize_message(raw, DiagnosticArray)
         except Exception:  # not a DiagnosticArray: nothing to read
             return
-        ours = [st for st in msg.status if in_namespace(st.name, self.ns)]
-        if not ours:
+        if not any(in_namespace(st.name, self.ns) for st in msg.status):
             return  # another cell's (or nobody's): not this run's
-        nodes = {st.name.split(":", 1)[0].rsplit("/", 1)[-1] for st in ours}
-        if len(nodes) == 1:
-            # held while the graph does not name its publisher yet (a node's first
-            # status may come before): judged then, not refused as unnamed
-            take = lambda _raw: self._on_diagnostics(msg)  # noqa: E731 - the message already parsed
-            self.peers.deliver_from(TOPIC_DIAGNOSTICS, gid, raw, take, nodes)
-        elif len(nodes) > 1:
-            self.peers.refuse(
-                TOPIC_DIAGNOSTICS, self.peers.sender(TOPIC_DIAGNOSTICS, gid), gid, "mixed statuses"
-            )
+        # taken for the part its sender plays on the graph, never for a name or
+        # role in its payload; held while the graph does not name or place its
+        # sender yet (a node's first status may come before)
+        take = lambda role, who: self._on_diagnostics(msg, role, who)  # noqa: E731 - the message already parsed
+        self.peers.deliver_by_part(TOPIC_DIAGNOSTICS, gid, raw, take)
 
-    def _on_diagnostics(self, msg: DiagnosticArray) -> None:
+    def _on_diagnostics(self, msg: DiagnosticArray, role: str, who: Who) -> None:
+        """The statuses of the cell's node ``who``, which plays ``role`` (its own only)."""
         for st in msg.status:
+            if "/" + st.name.split(":", 1)[0].strip("/") != who.fq:
+                continue  # a status it sends for another node: not its to give
             values = {kv.key: kv.value for kv in st.values}
-            if self._stranger(st.name, values):
+            if self._stranger(st.name, values, role):
                 continue
             if values.get("intruders"):  # what this node refused from foreign senders
                 self.foreign[st.name.split(":", 1)[0]] = values["intruders"]
-            consumer = has_role(st.name, values, "consumer", self.ns, self.consumer_nodes)
-            unnamed = not values.get(ROLE_KEY) and st.name.endswith(f": {TASK_JOB}")
-            if not consumer and unnamed and in_namespace(st.name, self.ns):
-                self._look()  # a job status of this cell's that names no role: is its node the consumer?
-                consumer = has_role(st.name, values, "consumer", self.ns, self.consumer_nodes)
+            job = st.name.endswith(f": {TASK_JOB}")
+            consumer = job and role == "consumer"
             if consumer:
                 self.heard_consumer = True
                 # a consumer blocked by its settings says why in its job status: named when the start waits
                 self.consumer_blocked = st.message if values.get("state") == JobState.BLOCKED else ""
             asked = self._request is not None  # a run the interp node had before we asked is not ours
-            if asked and has_role(st.name, values, "interp", self.ns) and values.get("run_id"):
+            if asked and job and role == "interp" and values.get("run_id"):
                 self.job_seen = True  # the start request got through
                 self.run_id = self.run_id or values["run_id"]
             if consumer and values.get("run_id") and values["run_id"] == self.run_id:
@@ -416,25 +410,23 @@ class CellWatch:
                 # another run's: the consumer keeps telling how the last run ended (a failed
                 # run's final report, at ERROR) until the next one starts; not this run's error
                 continue
-            elif st.level == bytes([ERROR]) and in_namespace(st.name, self.ns):
-                # this cell's nodes only: another cell on the graph (or a cell in
-                # /c10 next to /c1, or any cell next to one without a namespace)
-                # must not fail this run
+            elif st.level == bytes([ERROR]):
                 report = f"{st.name}: {st.message}"
                 if report not in self.errors:  # a status repeats every second while it lasts
                     self.errors.append(report)
 
-    def _stranger(self, name: str, values: dict[str, str]) -> bool:
-        """A status of a node of this cell's roles that this process did not
-        start (another cell in the same namespace): noted, never taken as ours."""
+    def _stranger(self, name: str, values: dict[str, str], role: str) -> bool:
+        """A status of the node in ``role`` that this process did not start
+        (another cell's, pinned in the namespace before ours showed): noted,
+        never taken as ours."""
         if self.own is None or "pid" not in values:
             return False
         if values.get("host") == socket.gethostname() and values["pid"] in self.own():
             return False
         node = name.split(":", 1)[0].rsplit("/", 1)[-1]
-        if values.get(ROLE_KEY) not in ROLES or values[ROLE_KEY] in self.external:
-            # any status (a stream ERROR names no role) of a node named like one this
-            # process started, from another process, is a stranger's too
+        if role in self.external:
+            # a node of a part that runs elsewhere is another process' by design; one
+            # named like a node this process started is a stranger's all the same
             return node in self.started
         self.occupied = self.occupied or (
             f"another cell runs in namespace /{self.ns}: {name.split(':', 1)[0]} "

@@ -2,7 +2,9 @@
 of this process' ROS_DOMAIN_ID: the standard services every ROS 2 tool uses
 (parameters, lifecycle, the interp node's ``~/start_run``) and the cell's
 topics (``winder/state``, ``winder/ready``, ``/diagnostics``), so that the
-pip install needs no ``ros2`` command.
+pip install needs no ``ros2`` command. What it reads of the cell it takes
+from the cell's own nodes only, each message's sender as the graph names it
+(:meth:`Session.peers`, docs/SECURITY.md).
 
 Every wait is bounded: a :class:`Session` has a deadline, and what it did not
 get in time raises :class:`UnansweredError` naming what it waited for. A node that
@@ -26,12 +28,12 @@ from __future__ import annotations
 
 import contextlib
 import os
-import re
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
+from winder.contract.jobfile import goal_sha256
 from winder.contract.states import asks_again
 from winder.contract.topics import ACTION_WIND
 from winder.errors import BadInputError, RefusedError, UnavailableError
@@ -39,6 +41,7 @@ from winder.ros.dds import ANNOUNCEMENT
 
 __all__ = [
     "CellView",
+    "Goal",
     "NoSuchNodeError",
     "NodeStatus",
     "RefusedError",
@@ -91,26 +94,31 @@ def node_name(name: str, namespace: str) -> str:
 class Session:
     """One rclpy context and node (``winder_ctl_<pid>``) for one command,
     with a deadline ``timeout`` s from now that every wait respects.
-    A Ctrl-C while it waits is a KeyboardInterrupt."""
+    A Ctrl-C while it waits is a KeyboardInterrupt. Its executor takes the
+    messages of an :func:`winder.ros.sender.attributed` subscription with
+    their publishers (:meth:`peers` judges them)."""
 
     def __init__(self, timeout: float) -> None:
         import rclpy
         from rclpy.context import Context
-        from rclpy.executors import SingleThreadedExecutor
 
         from winder.ros.dds import use_profile
+        from winder.ros.sender import SenderExecutor
 
         use_profile()
         self.timeout = timeout
         self.context = Context()
         rclpy.init(args=[], context=self.context)
         self.node = rclpy.create_node(f"winder_ctl_{os.getpid()}", context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor = SenderExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.started = time.monotonic()
         self.deadline = self.started + timeout
         self.clients: dict[str, Any] = {}
         self.actions: dict[str, Any] = {}
+        self._peers: dict[str, Any] = {}
+        #: the Wind goals' feedback from the cell's interp node, by goal id (:func:`start_clients`)
+        self.feedback: dict[bytes, list[Any]] = {}
 
     def __enter__(self) -> Session:
         return self
@@ -151,6 +159,20 @@ class Session:
             if left <= 0:
                 raise UnansweredError(f"no {what} within {self.timeout:g} s{hint}")
             self.spin(min(left, GRAPH_POLL))
+
+    def peers(self, namespace: str) -> Any:
+        """The verdict on the senders of the cell in ``namespace``
+        (:class:`winder.ros.peers.Peers`; one per namespace and session, so
+        that the nodes it pinned stay pinned). Only the cell's own nodes are
+        believed; what others send is counted (its ``intruders``), said
+        once by the command (``ignored, foreign``), never logged."""
+        key = namespace.strip("/")
+        if key not in self._peers:
+            from winder.ros.peers import Peers
+
+            self._peers[key] = Peers(self.node, key, lambda _text: None, what="are believed by winder ctl")
+            self._peers[key].see_parts()
+        return self._peers[key]
 
     def action_client(self, action_type: Any, action: str) -> Any:
         """The session's client of the action ``action`` (made once, as :meth:`client`)."""
@@ -502,10 +524,44 @@ def wind_action(interp: str) -> str:
 def start_clients(session: Session, interp: str) -> None:
     """Make the session's client of ``interp``'s cell's Wind action now (see
     :func:`parameter_clients`); the stock name's before the graph has said
-    which node is the interp node."""
+    which node is the interp node. Its goals' feedback is taken here as well,
+    with its sender: only the cell's interp node's counts
+    (``session.feedback``; rclpy's action client does not say who sent a
+    feedback, and anyone on the domain can publish one for a goal whose id
+    the action's status topic shows)."""
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+    from winder.ros.sender import attributed
     from winder_interfaces.action import Wind
 
-    session.action_client(Wind, wind_action(interp))
+    action = wind_action(interp)
+    if action in session.actions:
+        return
+    session.action_client(Wind, action)
+    peers = session.peers(interp.rsplit("/", 1)[0])
+    topic = f"{action}/_action/feedback"  # rcl_action's name for it; its QoS: rmw's default
+    feedback_type = Wind.Impl.FeedbackMessage
+
+    def take(raw: bytes, gid: bytes) -> None:
+        def act(_raw: bytes) -> None:
+            try:
+                msg = deserialize(raw, feedback_type)
+            except Exception:  # not a Wind feedback: nothing to take
+                return
+            session.feedback.setdefault(bytes(msg.goal_id.uuid), []).append(msg.feedback)
+
+        peers.deliver(topic, gid, raw, act, "interp")
+
+    attributed(
+        session.node, feedback_type, topic, take, QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+    )
+
+
+def deserialize(raw: bytes, msg_type: Any) -> Any:
+    """``raw`` (CDR bytes) as a ``msg_type`` message; what is not one raises."""
+    from rclpy.serialization import deserialize_message
+
+    return deserialize_message(raw, msg_type)
 
 
 def goal_text(value: Any) -> str:
@@ -513,16 +569,29 @@ def goal_text(value: Any) -> str:
     return ("true" if value else "false") if isinstance(value, bool) else str(value)
 
 
-def _one_goal(session: Session, client: Any, action: str, goal: Any) -> tuple[str, str]:
-    """Send one Wind goal: (the start reply, "") once its run started, or
-    ("", the cell's reason) if it ended first. At the deadline the goal, still
-    waiting for the cell, is canceled and its reason raised (RefusedError)."""
-    started: list[Any] = []
-    sent = client.send_goal_async(goal, feedback_callback=lambda m: started.append(m.feedback))
+@dataclass
+class Goal:
+    """A Wind goal whose run started: the start reply (``run <id> started:
+    N steps``), the run, and the future of the goal's result (the action's
+    answer to this client's own request, once the run has ended)."""
+
+    reply: str
+    run_id: str
+    result: Any
+
+
+def _one_goal(session: Session, client: Any, action: str, goal: Any) -> tuple[Goal | None, str]:
+    """Send one Wind goal: (the goal, "") once its run started, or (None,
+    the cell's reason) if it ended first. Its run started when the cell's
+    interp node's feedback names it (:func:`start_clients`). At the
+    deadline the goal, still waiting for the cell, is canceled and its
+    reason raised (RefusedError)."""
+    sent = client.send_goal_async(goal)
     session.until(sent.done, f"reply from {action} to the goal")
     handle = sent.result()
     if not handle.accepted:
         raise RefusedError(f"{action}: goal rejected")
+    started = session.feedback.setdefault(bytes(handle.goal_id.uuid), [])
     result = handle.get_result_async()
     try:
         session.until(lambda: result.done() or any(f.run_id for f in started), "start of the goal's run")
@@ -537,33 +606,35 @@ def _one_goal(session: Session, client: Any, action: str, goal: Any) -> tuple[st
         raise
     first = next((f for f in started if f.run_id), None)
     if first is not None:
-        return f"run {first.run_id} started: {first.steps_total} steps", ""
+        return Goal(f"run {first.run_id} started: {first.steps_total} steps", first.run_id, result), ""
     ended = result.result().result
     if ended.run_id:  # the run started and ended before its first feedback came (as fast as possible)
-        return f"run {ended.run_id} started: {ended.report.steps_total} steps", ""
-    return "", one_line(ended.message)
+        return Goal(f"run {ended.run_id} started: {ended.report.steps_total} steps", ended.run_id, result), ""
+    return None, one_line(ended.message)
 
 
-def start_run(session: Session, interp: str, values: dict[str, Any], view: CellView | None = None) -> str:
+def start_run(session: Session, interp: str, values: dict[str, Any], view: CellView | None = None) -> Goal:
     """Send ``interp``'s cell a Wind goal with ``values`` as its overrides
     (typed already; none: the run with the settings as they are), again
     while the cell says it is not ready (at the next ``winder/ready``
     message ``view`` hears, or after :data:`NOT_READY_RETRY` s), until the
-    deadline; the start reply (``run <id> started: ...``) once the goal's
-    run started (its first feedback). The goal goes on when the session
-    ends: the run is the cell's. :class:`RefusedError` with the cell's
-    reason otherwise; a goal still waiting for the cell at the deadline is
-    canceled."""
+    deadline; the goal once its run started (its first feedback), with
+    the start reply (``run <id> started: ...``). The goal goes on when the
+    session ends: the run is the cell's. :class:`RefusedError` with the
+    cell's reason otherwise; a goal still waiting for the cell at the
+    deadline is canceled."""
     from winder_interfaces.action import Wind
 
+    start_clients(session, interp)
     action = wind_action(interp)
     client = session.action_client(Wind, action)
     session.until(client.server_is_ready, f"action server {action}", f" ({graph_words()})")
-    goal = Wind.Goal(overrides=[f"{k}={goal_text(v)}" for k, v in values.items()])
+    overrides = [f"{k}={goal_text(v)}" for k, v in values.items()]
+    goal = Wind.Goal(overrides=overrides, goal_sha256=goal_sha256("", overrides))  # a cut goal is refused
     while True:
-        reply, reason = _one_goal(session, client, action, goal)
-        if reply:
-            return reply
+        started, reason = _one_goal(session, client, action, goal)
+        if started is not None:
+            return started
         if not asks_again(reason):
             raise RefusedError(reason or "start refused (no reason given)")
         if time.monotonic() + 0.1 > session.deadline:
@@ -576,9 +647,6 @@ def start_run(session: Session, interp: str, values: dict[str, Any], view: CellV
             session.spin(GRAPH_POLL)
 
 
-RUN_ID = re.compile(r"run (\S+) started")
-
-
 # -- the cell's state ------------------------------------------------------------------
 
 #: s after which a message the cell repeats every second (a node's job
@@ -586,7 +654,10 @@ RUN_ID = re.compile(r"run (\S+) started")
 #: killed and not yet timed out of the graph (winder/ready's own rule: 3 s)
 SILENT = 3.0
 #: s a state query listens on after it first hears the cell, at most: the
-#: bound for a node the graph shows that says nothing (a held-up process)
+#: bound for a node the graph shows that says nothing (a held-up process),
+#: and for a node whose status still shows a moment before the cell's state
+#: (each node sends one every second: the one after a transition comes
+#: within a second of it)
 LISTEN = 2.5
 #: s a node's job status is young enough to be its last: the nodes send one
 #: every second, so an older one has a newer one coming (a node keeps its
@@ -597,16 +668,17 @@ FRESH = 1.5
 #: their announcement periods (:data:`winder.ros.dds.ANNOUNCEMENT`); the rest
 #: is margin for a loaded machine. Only a cell with a part missing waits for it.
 SETTLE = 4 * ANNOUNCEMENT
-
-
-def sent_ns(info: Any) -> int:
-    """When a message was sent: its source timestamp (the sender's wall
-    clock, ns) from rclpy's message info; now when it has none."""
-    try:
-        t = int(info["source_timestamp"])
-    except (KeyError, TypeError, ValueError):
-        t = 0
-    return t if t > 0 else time.time_ns()
+#: s a state query goes on listening once what it heard is one picture, for
+#: what has arrived meanwhile: a transition's winder/state and the consumer's
+#: status come from two writers at once, one a moment after the other
+CONFIRM = 0.05
+#: what the consumer's job status says in each state of the cell (winder/state)
+#: that does not contradict it; a state not listed agrees with its own name only
+AGREES = {
+    "running": ("running", "stalled"),
+    "failed": ("incomplete",),
+    **{state: (state, "blocked") for state in ("idle", "done", "aborted")},
+}
 
 
 def node_of(status_name: str) -> str:
@@ -629,38 +701,36 @@ class NodeStatus:
 
     @property
     def node(self) -> str:
+        """The node that sent it: the one it names (a status is taken only from the node it names)."""
         return node_of(self.name)
 
 
 @dataclass
 class CellView:
-    """What a cell says of itself, as heard so far: ``winder/state``, the
-    roles' ``winder/ready`` and each node's job status on ``/diagnostics``,
-    each with when it was sent; and what the graph shows of the cell (its
-    node names, the node in each role), looked at with :func:`look`."""
+    """What a cell's own nodes say of it, as heard so far: ``winder/state``
+    (its consumer's), the roles' ``winder/ready`` and each role's job
+    status on ``/diagnostics`` (``statuses``, by role: the part the graph
+    shows its sender in, never a role its payload names), each with when it
+    was sent; and what the graph shows of the cell (its node names, the
+    nodes in each role), looked at with :func:`look`. What other nodes sent
+    is counted by ``peers`` (:meth:`ignored`), not shown."""
 
     namespace: str
     state: dict[str, str] = field(default_factory=dict)
     ready: dict[str, str] = field(default_factory=dict)
-    statuses: dict[str, NodeStatus] = field(default_factory=dict)
+    statuses: dict[str, NodeStatus] = field(default_factory=dict)  #: role -> its node's last job status
     changed: int = 0  #: counts what was heard, and each change of the graph
     state_ns: int = 0  #: when winder/state was sent
-    state_by: str = ""  #: the node that sent it (its status name says)
+    state_by: str = ""  #: the node that sent it (as the graph names it)
     ready_ns: dict[str, int] = field(default_factory=dict)  #: when each role's winder/ready was sent
     graph: set[str] | None = None  #: the nodes the graph showed at the last look (None: not looked yet)
     holders: dict[str, set[str]] = field(default_factory=dict)  #: the nodes it showed in each role
     graph_changed: float = field(default_factory=time.monotonic)  #: when the graph last changed
+    peers: Any = None  #: the verdict on the senders (winder.ros.peers.Peers), None for a view filled by hand
 
     def roles(self) -> dict[str, NodeStatus]:
         """The job status of each role heard (interp, profile, consumer)."""
-        from winder.contract.topics import ROLES, has_role
-
-        out = {}
-        for st in self.statuses.values():
-            for role in ROLES:
-                if role not in out and has_role(st.name, st.values, role, self.namespace):
-                    out[role] = st
-        return out
+        return dict(self.statuses)
 
     def heard(self) -> bool:
         return bool(self.state or self.statuses)
@@ -668,9 +738,17 @@ class CellView:
     def complete(self) -> bool:
         """Every role's job status, ``winder/state`` and both roles' ``winder/ready``
         heard (latched messages of two publishers come at different times)."""
-        from winder.contract.topics import READY_ROLES
+        from winder.contract.topics import READY_ROLES, ROLES
 
-        return len(self.roles()) == 3 and bool(self.state) and all(r in self.ready for r in READY_ROLES)
+        return (
+            all(r in self.statuses for r in ROLES)
+            and bool(self.state)
+            and all(r in self.ready for r in READY_ROLES)
+        )
+
+    def ignored(self) -> str:
+        """What was not believed, by sender (``/intruder (3 on /diagnostics)``), "" if nothing."""
+        return str(self.peers.intruders.summary()) if self.peers is not None else ""
 
     def gone(self, node: str) -> bool:
         """Whether the node ``node``, heard from, is no longer on the graph:
@@ -688,8 +766,8 @@ class CellView:
 
     def ready_by(self, role: str) -> str:
         """The node that says ``role``'s winder/ready: the one whose job status
-        names the role, else the one the graph shows in it ("" if none)."""
-        st = self.roles().get(role)
+        the role's is, else the one the graph shows in it ("" if none)."""
+        st = self.statuses.get(role)
         if st is not None:
             return st.node
         held = sorted(self.holders.get(role, ()))
@@ -702,20 +780,40 @@ class CellView:
             return self.gone(by)
         return self.graph is not None and not self.holders.get(role)
 
+    def behind(self, role: str) -> str:
+        """Why ``role``'s job status does not show the cell as its state
+        does ("" if it does, or there is nothing to compare): it was sent
+        before winder/state (a moment before a transition, its node's next
+        status is on its way), it speaks of another run, or, the consumer's
+        (the node that sends winder/state), it says a state that contradicts
+        the cell's."""
+        st = self.statuses.get(role)
+        if st is None or not self.state:
+            return ""
+        if st.sent_ns < self.state_ns:
+            return "said before the cell's state"
+        run, cell_run = st.values.get("run_id") or "-", self.state.get("run_id") or "-"
+        if run != cell_run:
+            return f"of run {run}, the cell's is {cell_run}"
+        said, cell = st.values.get("state", "-"), self.state.get("state", "-")
+        if role == "consumer" and said not in AGREES.get(cell, (cell,)):
+            return f"says {said}, the cell {cell}"
+        return ""
+
     def awaited(self, now_ns: int | None = None) -> list[str]:
-        """What the graph shows of the cell that has not been heard yet; and
-        each job status older than :data:`FRESH` at ``now_ns`` (wall clock):
-        a newer one is on its way (the older ones a node keeps for a reader
-        that joins come first), or the node is held up."""
+        """What the graph shows of the cell that has not been heard yet; each
+        job status older than :data:`FRESH` at ``now_ns`` (wall clock): a
+        newer one is on its way (the older ones a node keeps for a reader
+        that joins come first), or the node is held up; and each that does
+        not show the cell as winder/state does (:meth:`behind`), of a node
+        still on the graph."""
         from winder.contract.topics import READY_ROLES, ROLES
 
         now_ns = time.time_ns() if now_ns is None else now_ns
-
-        roles = self.roles()
         out = [
             f"the job status of {', '.join(sorted(self.holders[role]))}"
             for role in ROLES
-            if role not in roles and self.holders.get(role)
+            if role not in self.statuses and self.holders.get(role)
         ]
         if not self.state and self.holders.get("consumer"):
             out.append("winder/state")
@@ -723,20 +821,22 @@ class CellView:
         heard = {st.node for st in self.statuses.values()} | ({self.state_by} if self.state_by else set())
         if self.graph is not None:
             out += [f"{n} on the graph" for n in sorted(heard - self.graph)]
-        out += [
-            f"a newer status of {st.node}"
-            for st in self.statuses.values()
-            if age_s(st.sent_ns, now_ns) > FRESH and not self.gone(st.node)
-        ]
+        for role, st in self.statuses.items():
+            if self.gone(st.node):
+                continue
+            if age_s(st.sent_ns, now_ns) > FRESH:
+                out.append(f"a newer status of {st.node}")
+            elif self.behind(role):
+                out.append(f"a status of {st.node} that shows the cell's state ({self.behind(role)})")
         return out
 
     def settled(self, now: float, now_ns: int | None = None) -> bool:
         """Whether a state query has heard what there is to hear (at ``now``,
         monotonic, and ``now_ns``, wall clock): every node heard is on the
         graph (an endpoint's message can come before its node's name), its
-        status fresh, and the cell complete; or, with a part missing, the
-        graph has not changed for :data:`SETTLE` s and everything it shows of
-        the cell has been heard."""
+        status fresh and showing the cell as winder/state does, and the cell
+        complete; or, with a part missing, the graph has not changed for
+        :data:`SETTLE` s and everything it shows of the cell has been heard."""
         if self.graph is None or self.awaited(now_ns):
             return False
         return self.complete() or now - self.graph_changed >= SETTLE
@@ -756,17 +856,48 @@ def look(session: Session, view: CellView) -> None:
         view.changed += 1
 
 
+def taken(
+    session: Session,
+    msg_type: Any,
+    topic: str,
+    qos: Any,
+    take: Callable[[bytes, bytes, int], None],
+    **kwargs: Any,
+) -> None:
+    """A subscription whose ``take(raw, gid, sent)`` gets each message with
+    its publisher's GID and when it was sent (its source timestamp: the
+    sender's wall clock, ns; now when it has none); ``kwargs`` as
+    ``create_subscription`` takes them."""
+    from winder.ros.sender import attributed
+
+    subs: list[Any] = []
+
+    def on_raw(raw: bytes, gid: bytes) -> None:
+        # the message info of the message just taken (winder.ros.sender's taker
+        # keeps it until its next take, which comes after this callback)
+        sent = int(subs[0].winder_taker.info.source_timestamp)
+        take(raw, gid, sent if sent > 0 else time.time_ns())
+
+    subs.append(attributed(session.node, msg_type, topic, on_raw, qos, **kwargs))
+
+
 def watch_cell(session: Session, namespace: str, *, statuses: bool = True) -> CellView:
     """Subscribe to the cell's state topics; the view they fill while the
-    session spins. /diagnostics is read twice: transient-local, for the
-    statuses winder's nodes keep for a newcomer (each node's last ones, at
-    once), and volatile, for a node that keeps none (a third-party consumer).
-    Without ``statuses``, only winder/state and winder/ready (a start that
-    follows nothing)."""
+    session spins, with what the cell's own nodes send only (the session's
+    :meth:`Session.peers` judges each message's sender as the graph names
+    it): ``winder/state`` from the consumer, a role's ``winder/ready`` from
+    the node in that role, a job status from the node in a part, for that
+    part, and only the sender's own. /diagnostics is read twice:
+    transient-local, for the statuses winder's nodes keep for a newcomer
+    (each node's last ones, at once), and volatile, for a node that keeps
+    none (a third-party consumer). Without ``statuses``, only winder/state
+    and winder/ready (a start that follows nothing)."""
     from diagnostic_msgs.msg import DiagnosticArray, KeyValue
+    from rclpy.event_handler import SubscriptionEventCallbacks
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
     from winder.contract.topics import (
+        READY_ROLES,
         TASK_JOB,
         TOPIC_DIAGNOSTICS,
         TOPIC_READY,
@@ -775,53 +906,98 @@ def watch_cell(session: Session, namespace: str, *, statuses: bool = True) -> Ce
         in_namespace,
     )
     from winder.ros.diagnostics import QOS_DIAGNOSTICS_KEPT
-    from winder.ros.graph import fully_qualified
+    from winder.ros.graph import Who, fully_qualified
     from winder.ros.qos import QOS_DIAGNOSTICS
     from winder_interfaces.msg import CellState
 
-    view = CellView(namespace)
+    peers = session.peers(namespace)
+    view = CellView(namespace, peers=peers)
     latched = QoSProfile(
         depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
     )
 
-    def on_state(msg: CellState, info: Any) -> None:
-        view.state = cell_state_values(msg)
-        view.state_ns = sent_ns(info)
-        view.state_by = node_of(msg.node) if msg.node else ""
-        view.changed += 1
+    def on_state(raw: bytes, gid: bytes, sent: int) -> None:
+        def act(_raw: bytes) -> None:
+            try:
+                msg = deserialize(raw, CellState)
+            except Exception:  # not a CellState: nothing to show
+                return
+            if sent < view.state_ns:
+                return  # an older one (a latched topic keeps a few for a newcomer)
+            who = peers.sender(TOPIC_STATE, gid)
+            view.state = cell_state_values(msg)
+            view.state_ns = sent
+            view.state_by = who.fq if who is not None else ""
+            view.changed += 1
 
-    def on_ready(msg: KeyValue, info: Any) -> None:
-        view.ready[msg.key] = msg.value
-        view.ready_ns[msg.key] = sent_ns(info)
-        view.changed += 1
+        peers.deliver(TOPIC_STATE, gid, raw, act, "consumer")
 
-    def on_diagnostics(msg: DiagnosticArray, info: Any) -> None:
-        t = sent_ns(info)
-        for st in msg.status:
-            if st.name.endswith(f": {TASK_JOB}") and in_namespace(st.name, namespace):
-                known = view.statuses.get(st.name)
-                if known is not None and known.sent_ns >= t:
-                    continue  # the other reader's copy, or an older one kept for newcomers
-                values = {kv.key: kv.value for kv in st.values}
-                view.statuses[st.name] = NodeStatus(st.name, values, st.message, t)
+    def on_ready(raw: bytes, gid: bytes, sent: int) -> None:
+        try:
+            msg = deserialize(raw, KeyValue)
+        except Exception:  # not a KeyValue
+            return
+        if msg.key not in READY_ROLES:
+            return
+
+        def act(_raw: bytes) -> None:
+            if sent >= view.ready_ns.get(msg.key, 0):
+                view.ready[msg.key] = msg.value
+                view.ready_ns[msg.key] = sent
                 view.changed += 1
 
-    # rclpy hands a callback of two arguments the message's info too (its
-    # source timestamp: when it was sent); its type hints know only one
-    subscribe: Any = session.node.create_subscription
-    subscribe(CellState, fully_qualified(TOPIC_STATE, namespace), on_state, latched)
-    subscribe(KeyValue, fully_qualified(TOPIC_READY, namespace), on_ready, latched)
+        peers.deliver(TOPIC_READY, gid, raw, act, msg.key)
+
+    def on_diagnostics(raw: bytes, gid: bytes, sent: int) -> None:
+        try:
+            msg = deserialize(raw, DiagnosticArray)
+        except Exception:  # not a DiagnosticArray
+            return
+        if not any(
+            st.name.endswith(f": {TASK_JOB}") and in_namespace(st.name, namespace) for st in msg.status
+        ):
+            return  # no job status of this cell's (another cell's, another tool's)
+
+        def act(role: str, who: Who) -> None:
+            for st in msg.status:
+                if not st.name.endswith(f": {TASK_JOB}") or node_of(st.name) != who.fq:
+                    continue  # only its own job status: a node speaks for no other
+                known = view.statuses.get(role)
+                if known is not None and known.node == who.fq and known.sent_ns >= sent:
+                    continue  # the other reader's copy, or an older one kept for newcomers
+                values = {kv.key: kv.value for kv in st.values}
+                view.statuses[role] = NodeStatus(st.name, values, st.message, sent)
+                view.changed += 1
+
+        peers.deliver_by_part(TOPIC_DIAGNOSTICS, gid, raw, act)
+
+    taken(session, CellState, fully_qualified(TOPIC_STATE, namespace), latched, on_state)
+    taken(session, KeyValue, fully_qualified(TOPIC_READY, namespace), latched, on_ready)
     if statuses:
-        subscribe(DiagnosticArray, TOPIC_DIAGNOSTICS, on_diagnostics, QOS_DIAGNOSTICS_KEPT)
-        subscribe(DiagnosticArray, TOPIC_DIAGNOSTICS, on_diagnostics, QOS_DIAGNOSTICS)
+        # a publisher that keeps nothing (a third-party node's, a stranger's) cannot match the
+        # kept reader: the volatile one takes its statuses, and the command's output stays its own
+        quiet = SubscriptionEventCallbacks(incompatible_qos=lambda _event: None)
+        taken(
+            session,
+            DiagnosticArray,
+            TOPIC_DIAGNOSTICS,
+            QOS_DIAGNOSTICS_KEPT,
+            on_diagnostics,
+            event_callbacks=quiet,
+        )
+        taken(session, DiagnosticArray, TOPIC_DIAGNOSTICS, QOS_DIAGNOSTICS, on_diagnostics)
     return view
 
 
 def cell_state(session: Session, namespace: str) -> CellView:
-    """The cell's state, as soon as it is all heard (:meth:`CellView.settled`):
+    """The cell's state, as soon as it is one picture (:meth:`CellView.settled`):
     every role's status, ``winder/state`` and the ready messages of the
-    nodes the graph shows in the cell, and each of those nodes named on the
-    graph; at most :data:`LISTEN` s after the cell was first heard."""
+    nodes the graph shows in the cell, each node named on the graph, each
+    status sent after the state it is shown with; then :data:`CONFIRM` s
+    more for what is on its way already. Bounded: the session's deadline
+    (``--timeout``) to hear the cell at all, then at most :data:`LISTEN` s;
+    what is still not one picture then is shown saying so
+    (:meth:`CellView.behind`)."""
     view = watch_cell(session, namespace)
     from winder.contract.topics import TOPIC_STATE
     from winder.ros.graph import fully_qualified
@@ -840,7 +1016,14 @@ def cell_state(session: Session, namespace: str) -> CellView:
     while time.monotonic() < end:
         look(session, view)
         if view.settled(time.monotonic()):
-            break
+            seen = view.changed
+            confirm = min(end, time.monotonic() + CONFIRM)
+            while time.monotonic() < confirm:
+                session.spin(confirm - time.monotonic())
+            look(session, view)
+            if view.changed == seen or view.settled(time.monotonic()):
+                break
+            continue
         session.spin(min(GRAPH_POLL, end - time.monotonic()))
     look(session, view)
     return view

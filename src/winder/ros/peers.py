@@ -32,6 +32,7 @@ from rclpy.subscription import Subscription
 
 from winder.contract.topics import PROCESS_KEYS, ROLE_KEY, TOPIC_DIAGNOSTICS, in_namespace
 from winder.contract.trust import OTHER_PROCESS, OWNERS, ROLE_NAMES, SIGNS, Intruders
+from winder.ros.dds import DISCOVERY_SERVER_KEY
 from winder.ros.graph import Who, fully_qualified, publishers_by_gid, role_holders
 from winder.ros.qos import QOS_DIAGNOSTICS
 from winder.ros.sender import attributed
@@ -174,6 +175,30 @@ class Peers:
 
         return attributed(self.node, msg_type, topic, take, qos, **kwargs)
 
+    def see_parts(self) -> None:
+        """Behind a discovery server (``ROS_DISCOVERY_SERVER``) a process
+        learns only the endpoints of the topics it uses itself, so one that
+        reads none of the parts' topics (``winder run``'s watch, ``winder
+        ctl``) could tell no node's part, and so believe none. It reads one
+        light topic of each part here (the interp node's ``winder/job``, the
+        profile node's ``winder/control``, the consumer's
+        ``winder/progress``), taking nothing from them. Elsewhere the graph
+        shows every endpoint: nothing is made."""
+        if not os.environ.get(DISCOVERY_SERVER_KEY):
+            return
+        from diagnostic_msgs.msg import KeyValue
+
+        from winder.contract.topics import TOPIC_CONTROL, TOPIC_JOB, TOPIC_PROGRESS
+        from winder.ros.qos import QOS_EVENTS, QOS_LATCHED_READER, QOS_STATE
+        from winder_interfaces.msg import ControlEvent, JobDescription
+
+        for msg_type, topic, qos in (
+            (JobDescription, TOPIC_JOB, QOS_LATCHED_READER),
+            (ControlEvent, TOPIC_CONTROL, QOS_EVENTS),
+            (KeyValue, TOPIC_PROGRESS, QOS_STATE),
+        ):
+            self.node.create_subscription(msg_type, self.topic(topic), lambda _raw: None, qos, raw=True)
+
     # -- the verdict --------------------------------------------------------------
     def verdict(self, topic: str, gid: bytes, role: str | None = None) -> bool | None:
         """True: the message comes from the cell's node owning ``topic``
@@ -228,6 +253,7 @@ class Peers:
         role: str | None = None,
         *,
         judge: Judge | None = None,
+        expire: Expire = None,
     ) -> None:
         """``act(raw)`` if the message comes from the cell's node owning
         ``topic`` (see :meth:`verdict`; or as ``judge(topic, gid)`` says). A
@@ -237,8 +263,8 @@ class Peers:
         held, with every later one of that publisher behind it so that their
         order stays, and judged again every 10 ms, for up to :data:`HOLD` s
         of the node's own time; then it is refused (:meth:`_expired`, or as
-        unnamed). Another publisher's messages on the topic do not wait behind it."""
-        expire: Expire = None
+        ``expire(topic, gid)`` says, or as unnamed). Another publisher's
+        messages on the topic do not wait behind it."""
         if judge is None:
             judge = lambda t, g: self.verdict(t, g, role)  # noqa: E731 - the default judge
             expire = lambda t, g: self._expired(t, g, role)  # noqa: E731 - and its end of a hold
@@ -265,6 +291,51 @@ class Peers:
             return all(self.admit_from(t, g, n) for n in sorted(names))
 
         self.deliver(topic, gid, raw, act, judge=judge)
+
+    def part(self, who: Who) -> str | None:
+        """The role ``who`` plays in the cell: the node pinned in it, or the
+        only one the graph shows there (:meth:`owner`); None if it plays none
+        (a stranger, or a second node in a part)."""
+        for role in SIGNS:
+            if who == self.pinned.get(role) or who == self.owner(role):
+                return role
+        return None
+
+    def deliver_by_part(self, topic: str, gid: bytes, raw: bytes, act: Callable[[str, Who], None]) -> None:
+        """``act(role, sender)`` for a message that speaks for its sender as
+        the cell's node in ``role`` (a ``/diagnostics`` array of job
+        statuses): the role is the part the graph shows its publisher in
+        (:meth:`part`), never one its payload names. Held as :meth:`deliver`
+        holds one while the graph does not name the publisher, shows it as a
+        second node in a part, or does not show every part yet (its own may be
+        the one missing); refused, in its name, when it plays no part while
+        every part shows, or still none at the end of the hold."""
+
+        def judge(t: str, g: bytes) -> bool | None:
+            who = self.sender(t, g)
+            if who is None:
+                return None
+            if self.part(who) is not None:
+                return True
+            if any(who in held or not held for held in map(self.holders, SIGNS)):
+                return None  # its part may show yet, or its twin leave the graph: judged again
+            self.refuse(t, who, g, "it plays no part in the cell")
+            return False
+
+        def expire(t: str, g: bytes) -> None:
+            who = self.sender(t, g)
+            if who is None:
+                self._unnamed(t)
+            else:
+                self.refuse(t, who, g, "it plays no part in the cell alone")
+
+        def take(_raw: bytes) -> None:
+            who = self.sender(topic, gid)
+            role = None if who is None else self.part(who)
+            if who is not None and role is not None:
+                act(role, who)
+
+        self.deliver(topic, gid, raw, take, judge=judge, expire=expire)
 
     def _own_time(self) -> float:
         """time.monotonic(), less the stretches in which the node did not run
