@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 import pytest
 from conftest import Procs, final_report, rosbags_read
+from mcap.reader import make_reader
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.typesys import Stores, get_typestore
 from support import wait
@@ -334,8 +335,14 @@ def test_sigkilled_sim_node_leaves_a_bag_that_reads_and_recovers(procs: Procs, t
     path = mcap.parent
     # the metadata is there from the bag's open on, and says the bag was never closed
     assert "winder_bag: recording" in (path / "metadata.yaml").read_text()
-    with pytest.raises(Exception):  # noqa: B017 - rosbags cannot open it, whatever it raises
-        rosbags_raw(path)
+    # every reader opens it as it is, and reads the same messages: rosbags (with the
+    # directory's metadata.yaml), the mcap library and winder's reader
+    ros = rosbags_raw(path)
+    with mcap.open("rb") as f:
+        lib = [(ch.topic, m.log_time, bytes(m.data)) for _, ch, m in make_reader(f).iter_messages()]
+    raw = read_raw(path)
+    own = [(raw.connections[cid].topic, t, bytes(d)) for cid, t, d in raw.messages]
+    assert own == lib == ros and len(own) > 1000
     run = read_run(path)
     assert run.recovered and not run.complete and not run.closed
     assert 0 < run.steps.shape[0] <= run.plan.total_steps

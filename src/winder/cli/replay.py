@@ -137,7 +137,11 @@ def _play_on_graph(
     print(
         f"  published {total} messages on {len(result.published)} topics in {result.wall_s:.2f} s"
         + (f", {result.loops} passes" if result.loops > 1 else "")
+        + (f", held back {result.held_s:.2f} s by slow reliable subscribers" if result.held_s >= 0.05 else "")
     )
+    if result.stalled:
+        print(f"winder play: {result.stalled}", file=sys.stderr)
+        return EXIT_FAILED
     if result.unacked:
         print(
             f"winder play: not every subscriber acknowledged every message on: {', '.join(result.unacked)}",
@@ -252,10 +256,12 @@ def register(sub: argparse._SubParsersAction[Any]) -> None:
         help="publish a recording's topics onto the ROS graph (like ros2 bag play, every message delivered)",
         description="Publish the topics of a winder recording in log-time order, each with the QoS it "
         "was recorded with (job, path and configs latched: a late subscriber still gets them, also "
-        "with --start-offset), reliably: nothing is dropped at any rate. While playing: the space bar "
-        "pauses and resumes, n plays the next message, + and - double and halve the rate; the node "
-        "winder_player offers ~/pause, ~/resume, ~/toggle_paused, ~/play_next (std_srvs/Trigger) "
-        "and the parameter rate.",
+        "with --start-offset), reliably: the player drops nothing at any rate, and a reliable reader "
+        "whose history is keep-all (or keep-last as deep as the topic's count) hears every message; "
+        "a slower one holds the replay back, one that takes nothing for 5 s stops it. While playing: "
+        "the space bar pauses and resumes, n plays the next message, + and - double and halve the "
+        "rate; the node winder_player offers ~/pause, ~/resume, ~/toggle_paused, ~/play_next "
+        "(std_srvs/Trigger) and the parameter rate.",
     )
     p.add_argument("bag", metavar="BAG", help="bag directory or .mcap file")
     p.add_argument("--rate", default="1", help="playback speed factor (default 1; 0.001 to 1e6)")

@@ -239,17 +239,18 @@ def remove_stale_staging(directory: Path) -> list[Path]:
 # A bag's .mcap is locked (flock, exclusive) by its writer from the bag's open
 # to its close: the lock goes with the writer's process, however it ends. A bag
 # whose metadata.yaml still says ``winder_bag: recording`` while nobody holds
-# that lock, and whose .mcap does not end with the MCAP magic, was left
-# unclosed: its writer was SIGKILLed (or crashed, or lost its power), or its
-# disk filled up. winder's reader reads such a bag as far as it is whole;
-# rosbags, ``ros2 bag`` and Foxglove refuse it until ``winder bag recover``
-# writes it out closed.
+# that lock, and whose .mcap has no summary, was left unclosed: its writer was
+# SIGKILLed (or crashed), or its disk filled up. Every reader opens it as it
+# is (the writer keeps the file a complete MCAP file without a summary at every
+# moment: winder.record.mcap_storage): every chunk completed before the end,
+# read from the start, without an index; metadata.yaml's counts are those of
+# its last refresh (:data:`METADATA_SECONDS`). ``winder bag recover`` writes a
+# closed copy, with its index and true counts.
 
 _STATE_LINE = re.compile(rf"^\s*{STATE_KEY}:\s*['\"]?(?P<state>[A-Za-z_-]+)['\"]?\s*$", re.M)
 _RECOVERED_FROM = re.compile(r"^\s*winder_recovered_from:\s*['\"]?(?P<name>[^'\"\s]+)['\"]?\s*$", re.M)
 #: metadata.yaml larger than this is not looked into (rosbag2 writes a few kB per topic)
 _METADATA_BYTES = 1 << 20
-_MCAP_MAGIC = b"\x89MCAP0\r\n"
 
 
 def _metadata_text(bag: Path) -> str:
@@ -290,14 +291,22 @@ def being_written(bag: Path) -> bool:
     return False
 
 
-def _ends_whole(f: Path) -> bool:
+def _has_summary(f: Path) -> bool:
+    """Whether the MCAP file ``f`` ends with a footer that names its summary
+    (:func:`winder.record.raw.names_summary`, read without reading the file)."""
+    from winder.record.raw import FOOTER_BYTES, footer_summary_start, opens_summary
+
     try:
         with f.open("rb") as fh:
             size = fh.seek(0, os.SEEK_END)
-            if size < 2 * len(_MCAP_MAGIC):
+            if size < 8 + FOOTER_BYTES:
                 return False
-            fh.seek(size - len(_MCAP_MAGIC))
-            return fh.read(len(_MCAP_MAGIC)) == _MCAP_MAGIC
+            fh.seek(size - FOOTER_BYTES)
+            start = footer_summary_start(fh.read(FOOTER_BYTES))
+            if not 8 <= start < size - FOOTER_BYTES:
+                return False
+            fh.seek(start)
+            return opens_summary(fh.read(1)[0])
     except OSError:
         return False
 
@@ -305,13 +314,13 @@ def _ends_whole(f: Path) -> bool:
 def unclosed(bag: Path) -> bool:
     """Whether ``bag`` (a winder bag directory) was left unclosed by its
     writer: its metadata.yaml says ``recording``, no writer holds it, and its
-    .mcap lacks the MCAP end (see above). ``winder bag recover`` mends it."""
+    .mcap has no summary (see above). ``winder bag recover`` writes it out closed."""
     bag = Path(bag)
     m = _STATE_LINE.search(_metadata_text(bag))
     if m is None or m["state"] != "recording":
         return False
     files = _mcap_files(bag)
-    if not files or all(_ends_whole(f) for f in files):
+    if not files or all(_has_summary(f) for f in files):
         return False  # killed between the file's close and metadata.yaml's: the file is whole
     return not being_written(bag)
 
@@ -340,17 +349,23 @@ def unclosed_line(bags: Sequence[Path], where: str = "") -> str:
     head = f"{where} holds " if where else ""
     if len(bags) == 1:
         return (
-            f"{head}a bag left unclosed (its writer was killed or its disk filled; ros2 bag and Foxglove "
-            f"cannot open it): run `winder bag recover {bags[0]}`"
+            f"{head}a bag left unclosed (its writer was killed or its disk filled; every reader opens it as "
+            f"it is, without an index, its metadata.yaml counts as last refreshed): "
+            f"`winder bag recover {bags[0]}` writes a closed copy"
         )
     return (
-        f"{head}{len(bags)} bags left unclosed (their writer was killed or their disk filled; ros2 bag "
-        f"and Foxglove cannot open them): run `winder bag recover BAG` on each: {', '.join(map(str, bags))}"
+        f"{head}{len(bags)} bags left unclosed (their writer was killed or their disk filled; every reader "
+        f"opens them as they are, without an index, their metadata.yaml counts as last refreshed): "
+        f"`winder bag recover BAG` writes a closed copy of each: {', '.join(map(str, bags))}"
     )
 
 
 #: Payload bytes the writer thread may have queued before write() waits for it.
 QUEUE_BYTES = 64 << 20
+#: s between two refreshes of an open bag's metadata.yaml (counts and span), made
+#: by the writer thread after a chunk reached the file: what ``ros2 bag info`` and
+#: rosbags' counts show of a bag whose writer was killed (a few ms each)
+METADATA_SECONDS = 2.0
 #: Messages are handed to the writer thread in batches of this many bytes or messages.
 BATCH_BYTES = 256 << 10
 BATCH_MESSAGES = 512
@@ -372,14 +387,18 @@ class BagRecorder:
     metadata.yaml that says ``winder_bag: recording`` in its ``custom_data``,
     then renamed. :meth:`close` writes the summary and metadata.yaml again
     (temp file + rename, ``winder_bag: closed``): a bag closed so (at the
-    end of a run, at SIGINT or SIGTERM) every reader opens. A writer that
-    ends without its close (SIGKILL, a crash, a power loss) or whose disk
-    fills up leaves its bag unclosed: its metadata and a readable head, and
-    every whole record that reached the disk, which winder's reader reads
-    and ``winder bag recover`` writes out closed, but no summary, so that
-    rosbags, ``ros2 bag`` and Foxglove refuse it (:func:`unclosed` finds
-    such a bag: the writer holds a lock on its .mcap while it is open). A
-    staging directory left by a killed writer is removed by the next bag
+    end of a run, at SIGINT or SIGTERM) every reader opens, indexed. A
+    writer that ends without its close (SIGKILL, a crash) or whose disk
+    fills up leaves its bag unclosed, and every reader (rosbags, the mcap
+    library, ``ros2 bag``, Foxglove) still opens it as it is: the .mcap is
+    a complete MCAP file without a summary at every moment, holding every
+    chunk completed before the end (:mod:`winder.record.mcap_storage`), and
+    metadata.yaml names every topic from the open on, its counts and span
+    refreshed at most every :data:`METADATA_SECONDS` while chunks come (a
+    reader takes the messages from the file, not from those counts).
+    :func:`unclosed` finds such a bag (the writer holds a lock on its .mcap
+    while it is open); ``winder bag recover`` writes a closed, indexed copy.
+    A staging directory left by a killed writer is removed by the next bag
     opened beside it. :meth:`discard` removes the directory (a job that
     never ran leaves nothing behind).
 
@@ -524,8 +543,11 @@ class BagRecorder:
         self._batch, self._batch_bytes = [], 0
 
     def _drain(self) -> None:
-        """The writer thread: queued messages into the file, in order."""
-        write = self._storage.write_id  # past rosbags' Writer.write: counts are synced in close()
+        """The writer thread: queued messages into the file, in order; the
+        open bag's metadata.yaml refreshed now and then (:meth:`_refresh`)."""
+        storage, writer = self._storage, self._writer
+        write = storage.write_id  # past rosbags' Writer.write: counts are synced in close()
+        refreshed, chunks = time.monotonic(), len(storage.chunk_indexes)
         while True:
             item = self._queue.get()
             if item is None:
@@ -540,6 +562,22 @@ class BagRecorder:
             with self._room:
                 self._queued -= size
                 self._room.notify()
+            now = time.monotonic()
+            if (
+                writer is not None
+                and len(storage.chunk_indexes) > chunks
+                and now - refreshed >= METADATA_SECONDS
+            ):
+                refreshed, chunks = now, len(storage.chunk_indexes)
+                self._refresh(writer)
+
+    def _refresh(self, writer: _Writer) -> None:
+        """metadata.yaml of the open bag with the counts and span of the chunks in
+        its file, still saying ``recording`` (the writer thread, between chunks).
+        One that cannot be written (a full disk) leaves the one before."""
+        self._counted(writer)
+        with contextlib.suppress(OSError):
+            writer.write_metadata("recording")
 
     def _stop(self) -> None:
         self._hand_over()
@@ -560,6 +598,7 @@ class BagRecorder:
                         writer.set_custom_data(STATE_KEY, "closed")
                         writer.close()  # the .mcap's summary, then metadata.yaml (temp file + rename)
                     else:  # the summary (if the disk takes it); metadata.yaml keeps saying "recording"
+                        self._counted(writer)
                         with contextlib.suppress(Exception):
                             writer.close()
                 finally:
@@ -571,10 +610,14 @@ class BagRecorder:
                 raise RuntimeError(f"bag {self.path}: writing failed: {self._error}") from self._error
 
     def _sync(self, writer: Writer) -> None:
-        """Message counts and time span for metadata.yaml, from the storage
-        (the thread wrote past Writer.write, which would have kept them)."""
+        """The pending chunk into the file, then :meth:`_counted`."""
+        self._storage.flush()
+        self._counted(writer)
+
+    def _counted(self, writer: Writer) -> None:
+        """Message counts and time span for metadata.yaml, those of the chunks
+        in the file (the thread wrote past Writer.write, which would have kept them)."""
         storage = self._storage
-        storage.flush()
         writer.counts.update(storage.counts)
         if any(storage.counts.values()):
             writer.min_timestamp, writer.max_timestamp = storage.first_t, storage.last_t

@@ -9,15 +9,18 @@ CDR bytes, in file order; :mod:`winder.record.reader` decodes them.
 
 Cut-short recordings
 --------------------
-When the sim node dies mid-job (SIGKILL, power loss) the directory holds an
-MCAP file without its summary and footer, and no metadata.yaml; rosbags and
-``ros2 bag`` refuse it. The file is read here record by record with the
-``mcap`` library's record parsers: every record that reached the file whole is
-kept, and reading stops cleanly at the first incomplete one. Inside the last,
-incomplete chunk (rosbags writes uncompressed chunks of about 1 MiB by
-default) the messages that are whole are recovered too. Such a bag is
-``recovered`` and never ``closed``; :func:`recover` writes it out again as a
-closed rosbag2 directory.
+When the sim node dies mid-job (SIGKILL, a crash) or its disk fills up, its
+bag's metadata.yaml still says ``winder_bag: recording`` and its MCAP file
+ends in the open end winder's writer keeps (:mod:`winder.record.mcap_storage`):
+every chunk completed before, then a footer without a summary, which every
+MCAP reader opens as it is. Such a file is read here up to that footer, like
+the other readers. A file cut anywhere else (by another writer, by a copy,
+by power loss) is read record by record with the ``mcap`` library's record
+parsers: every record that reached the file whole is kept, and reading stops
+cleanly at the first incomplete one; inside the last, incomplete chunk
+(rosbags writes uncompressed chunks of about 1 MiB by default) the messages
+that are whole are recovered too. Either bag is ``recovered`` and never
+``closed``; :func:`recover` writes it out again as a closed rosbag2 directory.
 """
 
 from __future__ import annotations
@@ -39,6 +42,7 @@ from mcap.records import Channel, Chunk, Message, Schema
 
 from winder.contract.files import new_directory
 from winder.errors import BadBagError
+from winder.record.mcap_storage import OP_OPEN_END
 
 __all__ = ["BagError", "Connection", "RawBag", "read_raw", "recover"]
 
@@ -82,8 +86,10 @@ class RawBag:
     that were not kept, a batch at a time, so that a recording much larger
     than memory can be read.
 
-    ``closed``: every file ended with its MCAP footer. ``recovered``: some file
-    was cut short (or damaged) and was read up to its first incomplete record.
+    ``closed``: every file was closed by its writer (it ends with its MCAP
+    footer, after its summary or another writer's data). ``recovered``: some
+    file was cut short (its writer stopped without closing it, or damaged)
+    and was read as far as it is whole.
     """
 
     path: Path
@@ -361,6 +367,35 @@ def _channels_from_summary(data: memoryview, sink: _Sink) -> None:
         return
 
 
+#: an MCAP file's footer record and closing magic
+FOOTER_BYTES = _FOOTER.size + 8
+
+
+def footer_summary_start(tail: bytes | memoryview) -> int:
+    """The ``summary_start`` of the footer an MCAP file's last :data:`FOOTER_BYTES`
+    bytes hold (0: none, or no footer there)."""
+    if len(tail) != FOOTER_BYTES or bytes(tail[-8:]) != MAGIC or tail[0] != Opcode.FOOTER:
+        return 0
+    _, length, start, _, _ = _FOOTER.unpack_from(tail, 0)
+    return int(start) if length == 20 else 0
+
+
+def opens_summary(op: int) -> bool:
+    """Whether a footer's ``summary_start`` pointing at a record of opcode ``op``
+    names a summary: not at a Data End, where winder's writer points it for a
+    moment while the file grows (it points at the summary it is writing while
+    it closes: :mod:`winder.record.mcap_storage`). A file closed by its writer
+    ends with a footer naming its summary; one left open does not."""
+    return op != Opcode.DATA_END
+
+
+def names_summary(data: bytes | memoryview) -> bool:
+    """Whether the MCAP file ``data`` ends with a footer naming a summary (:func:`opens_summary`)."""
+    n = len(data)
+    start = footer_summary_start(data[n - FOOTER_BYTES :]) if n >= 8 + FOOTER_BYTES else 0
+    return 8 <= start < n - FOOTER_BYTES and opens_summary(data[start])
+
+
 def _check_magic(path: Path, data: memoryview) -> None:
     n = len(data)
     if bytes(data[:8]) != MAGIC:
@@ -427,15 +462,22 @@ class _Walk:
     pos: int  #: byte after the last whole record read (after the footer, if found)
     footer: bool = False
     damaged: str = ""  #: why a whole record could not be read, "" if none
+    #: the data ended in the open end of a writer that never closed the file
+    #: (winder's room for the next chunk, :data:`~winder.record.mcap_storage.OP_OPEN_END`)
+    open_end: bool = False
 
 
 def _walk(data: memoryview, sink: _Sink) -> Generator[int, None, _Walk]:
     """Add the whole top-level records after the magic to ``sink``, up to the
     footer, the first incomplete record or the first damaged one."""
     pos = 8
+    last = before_end = 0  # opcodes of the last record, and of the one before the Data End
     for op, start, end in _record_spans(data, pos):
         if op == Opcode.FOOTER:
-            return _Walk(end, footer=True)
+            return _Walk(end, footer=True, open_end=before_end == OP_OPEN_END)
+        if op == Opcode.DATA_END:
+            before_end = last
+        last = op
         try:
             _read_record(op, data[start:end], end - start, sink)
         except DamagedChunk as exc:  # its length was whole: skip it, read on
@@ -476,10 +518,16 @@ def _finish(path: Path, data: memoryview, raw: RawBag, sink: _Sink, walk: _Walk)
     """Mark ``raw`` cut short unless the walk ended at the footer and the
     closing magic, and say in a note how the file ended."""
     n, pos = len(data), walk.pos
-    if walk.footer and bytes(data[pos : pos + 8]) == MAGIC:
-        return
+    if walk.footer and bytes(data[pos : pos + 8]) == MAGIC and (not walk.open_end or names_summary(data)):
+        return  # (an open end whose last footer names the summary: killed in its close, the summary whole)
     raw.closed = False
     raw.recovered = True
+    if walk.open_end:
+        raw.notes.append(
+            f"{path.name}: its writer stopped without closing it (killed, or its disk filled): "
+            "every chunk it had completed was read; the file has no summary or index"
+        )
+        return
     if walk.footer:
         raw.notes.append(f"{path.name}: cut short inside its closing magic bytes; every message was read")
         return

@@ -63,8 +63,9 @@ def play_qos(recorded: Qos) -> Qos:
     """The QoS the player offers for a topic recorded with ``recorded``: its
     durability and depth (a latched topic stays latched, with the history a
     late joiner is owed), always reliable, and keep-all for the volatile
-    topics, so that no message is dropped for a subscriber that asks for
-    reliability, whatever the rate (a slow reader holds the player back).
+    topics, so that the writer drops no message for a subscriber that asks
+    for reliability, whatever the rate (a slow reader holds the player back;
+    what a keep-last reader's own history drops is its own: winder.ros.player).
     A best-effort subscriber (rclpy's /clock) still matches a reliable writer."""
     if recorded.transient_local:
         return Qos(reliable=True, transient_local=True, keep_all=False, depth=recorded.depth)

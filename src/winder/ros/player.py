@@ -3,10 +3,19 @@
 :func:`winder.record.replay.plan_play` chooses what is played; here one node,
 ``winder_player`` (in the cell's namespace), publishes it: each topic with
 the QoS it was recorded with (latched ones latched), every message in
-log-time order at ``rate`` times the recorded pace. Nothing is dropped: the
-writers are reliable and keep-all, so a slow reliable subscriber holds the
-player back instead of losing messages, and before the node goes the player
-waits until every subscriber has acknowledged every message.
+log-time order at ``rate`` times the recorded pace. Nothing is dropped by
+the player: the writers of the volatile topics are reliable and keep-all, so
+a slow reliable keep-all subscriber holds the player back instead of losing
+messages (a publish finds the writer's history full of messages that reader
+has not acknowledged: it is tried again, and the recording's time goes on
+from where it was held), one that takes nothing for :data:`STALL_S` s stops
+the replay in one line, and before the node goes the player waits until
+every subscriber has acknowledged every message. What a subscriber's own
+history drops is its own: a keep-last reader whose depth is below a topic's
+count loses the oldest messages it has not taken yet when it falls behind,
+which no writer can see (nor the depth, which the graph does not show);
+the player names the best-effort readers, which may lose any message, in
+one line before it plays.
 
 While it plays, the node offers ``~/pause``, ``~/resume``, ``~/toggle_paused``
 and ``~/play_next`` (std_srvs/Trigger; play_next publishes the next message
@@ -43,6 +52,7 @@ from winder.ros.qos import profile
 __all__ = ["PlayResult", "Player", "message_class"]
 
 #: seconds the player waits, at the end, for its subscribers to acknowledge everything
+#: (and longer after slow readers held it back: BACKLOG_FACTOR)
 ACK_TIMEOUT = 10.0
 #: seconds of discovery before the player trusts the graph's list of readers:
 #: a newcomer learns of a participant at its next announcement, once a second
@@ -52,6 +62,20 @@ ACK_TIMEOUT = 10.0
 SETTLE = 2.5
 #: seconds the player gives a matched reader to match it in turn before the first message
 MATCH_GRACE = 0.1
+#: seconds a publish may wait for room in its writer's history (a reliable keep-all
+#: reader has not acknowledged what came before) before the replay stops: below the
+#: 10 s lease of winder's DDS profile, so that a reader that stopped taking (a hung or
+#: SIGSTOPped process) stops the replay before DDS drops it and the replay goes on without it
+STALL_S = 5.0
+#: a publish that took longer than this (s) waited for room in its writer's history
+HELD_S = 0.01
+#: the end's wait adds this many times as long as readers held the replay back: DDS tells
+#: only whether every message is acknowledged, not how many are left, and a reader that
+#: held the replay back still has what the writers' and its own histories hold to take
+#: (thousands of messages a topic), at the pace that held it back (measured: a keep-all
+#: reader taking 190 messages/s held a default job's replay at x10 back 63 s and needed
+#: 105 s more for the rest)
+BACKLOG_FACTOR = 2.0
 
 
 def message_class(msgtype: str) -> Any:
@@ -69,6 +93,12 @@ class PlayResult:
     loops: int = 0
     wall_s: float = 0.0
     unacked: list[str] = field(default_factory=list)  #: topics whose readers did not acknowledge all
+    held_s: float = 0.0  #: seconds slow reliable readers held the replay back (behind the rate)
+    stalled: str = ""  #: why the replay stopped before its end (a reader took nothing), one line
+
+
+class _Stalled(Exception):  # noqa: N818 - the replay's end, not a failure of the player
+    """A reader took nothing for :data:`STALL_S` s: the replay stops (the message says where)."""
 
 
 class Player:
@@ -89,6 +119,7 @@ class Player:
         self.position_ns = plan.start_ns  # log time of the last message published
         self.anchor_wall = 0.0  # wall time at which log time anchor_log was due
         self.anchor_log = plan.start_ns
+        self.held_s = 0.0  # how far slow readers held the replay behind the recording's time
         self.pubs: dict[str, Any] = {}
         for topic in plan.topics.values():
             cls = message_class(topic.msgtype)
@@ -213,8 +244,7 @@ class Player:
                         return True
                     self.cond.wait(0.05)
                     continue
-                due = self.anchor_wall + (t_ns - self.anchor_log) / 1e9 / self.rate
-                wait = due - time.monotonic()
+                wait = self._due(t_ns) - time.monotonic()
                 if wait <= 0:
                     return True
                 self.cond.wait(min(wait, 0.05))
@@ -235,13 +265,20 @@ class Player:
             with self.cond:
                 self.position_ns = self.anchor_log = self.plan.start_ns
                 self.anchor_wall = time.monotonic()
+            late = 0.0
             for topic, t, data in self.plan.messages():
                 if not self._wait_until_due(t, poll):
                     break
-                self.pubs[topic.recorded].publish(data)
+                try:
+                    if not self._publish(topic, t, data):
+                        break  # stopped while a reader held it back
+                except _Stalled as exc:
+                    result.stalled = str(exc)
+                    break
                 result.published[topic.name] += 1
                 self.position_ns = max(self.position_ns, t)
                 now = time.monotonic()
+                late = now - self._due(t)  # behind the recording's time (readers slower than the rate)
                 if progress is not None and now - last_report > 0.1:
                     last_report = now
                     progress(
@@ -250,15 +287,77 @@ class Player:
                         + ("  paused" if self.paused else ""),
                     )
             else:
+                if self.held_s and not self.paused:  # readers held it back: as late as the pass ended
+                    self.held_s += max(late, 0.0)
                 result.loops += 1
                 if progress is not None:
                     progress(1.0, f"{(self.plan.last_ns - self.plan.first_ns) / 1e9:8.3f} s")
                 if loop:
                     continue
             break
-        result.unacked = self.wait_for_acks(ACK_TIMEOUT)
+        if not result.stalled:  # a reader that held the replay back has its backlog still to take
+            result.unacked = self.wait_for_acks(ACK_TIMEOUT + BACKLOG_FACTOR * self.held_s)
+        result.held_s = self.held_s
         result.wall_s = time.monotonic() - wall0
         return result
+
+    def _publish(self, topic: PlayTopic, t_ns: int, data: bytes) -> bool:
+        """Publish one message (False: the player was stopped first). A
+        reliable keep-all reader slower than the replay fills the writer's
+        history with messages it has not acknowledged; a publish then waits
+        for room, up to the writer's blocking time (Fast DDS' 100 ms), and
+        fails after it (rmw: "cannot publish data"): it is tried again until
+        the reader has made room. The replay is held back meanwhile (counted
+        in :attr:`held_s`), and its time goes on from here, not catching up in
+        a burst. :class:`_Stalled` after :data:`STALL_S` s without room."""
+        from rclpy._rclpy_pybind11 import RCLError
+
+        pub = self.pubs[topic.recorded]
+        start = time.monotonic()
+        while True:
+            try:
+                pub.publish(data)  # waits up to the writer's blocking time for room
+                break
+            except RCLError as exc:
+                if self.stopped:
+                    return False
+                if time.monotonic() - start > STALL_S:
+                    at = (t_ns - self.plan.first_ns) / 1e9
+                    why = (str(exc).splitlines() or [type(exc).__name__])[0].split(", at ")[0]
+                    raise _Stalled(
+                        f"stopped at {at:.3f} s of the recording: a reliable reader of {topic.name} took no "
+                        f"message for {STALL_S:g} s ({pub.get_subscription_count()} matched; the writer: "
+                        f"{why}); nothing was dropped: the messages after it were not published"
+                    ) from None
+        if time.monotonic() - start > HELD_S:
+            with self.cond:
+                now = time.monotonic()
+                self.held_s += max(now - self._due(t_ns), 0.0)
+                # the recording's time goes on from this message, where the reader held it
+                self.anchor_wall, self.anchor_log = now, max(self.position_ns, t_ns)
+        return True
+
+    def _due(self, t_ns: int) -> float:
+        """The monotonic time the message of log time ``t_ns`` is due at, as the replay stands."""
+        return self.anchor_wall + (t_ns - self.anchor_log) / 1e9 / self.rate
+
+    def best_effort_readers(self) -> str:
+        """The best-effort readers on the graph of a volatile played topic, in
+        one line ("" if none): they may lose any message, and no writer
+        learns of it. (A reader's history, keep-last or keep-all, and its
+        depth are not announced on the graph: the player cannot name those.)"""
+        from rclpy.qos import ReliabilityPolicy
+
+        found = []
+        for t in played_topics(self.plan):
+            if t.latched:
+                continue
+            for info in self.node.get_subscriptions_info_by_topic(t.name):
+                if info.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT:
+                    found.append(f"{t.name}: {info.node_namespace.rstrip('/')}/{info.node_name}")
+        if not found:
+            return ""
+        return f"best-effort readers may lose messages, unseen by the player: {'; '.join(found)}"
 
     def wait_for_acks(self, timeout: float) -> list[str]:
         """Wait until every reliable subscriber has acknowledged every message;
@@ -350,6 +449,9 @@ def run_player(
                 sys.stderr.write(
                     f"winder play: after {wait_subscribers:g} s still unmatched (playing anyway): {missing}\n"
                 )
+        lossy = player.best_effort_readers()
+        if lossy:
+            sys.stderr.write(f"winder play: {lossy}\n")
         if delay > 0:
             time.sleep(delay)
         from winder.ros.terminal import KeyReader

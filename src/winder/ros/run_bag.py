@@ -76,7 +76,8 @@ class RunBag:
     def check_dir(self, values: dict[str, Any]) -> None:
         """At start: the bags in ``bag_dir`` that a writer left unclosed (an
         earlier run of this node SIGKILLed, a full disk), named in one line
-        with what mends them; the rest of the cell goes on as ever."""
+        with what closes them (they read as they are, without an index); the
+        rest of the cell goes on as ever."""
         if not values.get("record"):
             return
         try:
@@ -153,8 +154,8 @@ class RunBag:
         self.failure = why
         bag = self.path
         kept = (
-            f"the bag {bag} keeps what reached the disk but cannot be closed: `winder bag recover {bag}` "
-            "writes it out closed (winder's reader reads it as it is)"
+            f"the bag {bag} keeps every chunk that reached the disk, which every MCAP reader opens as it is "
+            f"(without an index if its summary did not fit): `winder bag recover {bag}` writes a closed copy"
             if bag is not None
             else "the bag keeps what reached the disk"
         )
