@@ -523,10 +523,14 @@ def test_the_interp_node_refuses_a_coil_that_does_not_fit_and_keeps_running(
     )
     assert out.returncode == 0, out.stderr
     assert json.loads(out.stdout)[0]["job_file_sha256"] == run.plan.job_file_sha256
-    # a change of the job without the file: the hash no longer names it
-    assert get_params(ros, "interp_node", ["job_file_sha256"]) == [run.plan.job_file_sha256]
     from support.ros_probe import set_params
 
+    # what ~/start_run set was the run's: the node's settings are what they were before it
+    assert get_params(ros, "interp_node", ["job_file", "job_file_sha256"]) == ["", ""]
+    # the file set on the node, then a change of the job without the file: the hash no longer names it
+    [res] = set_params(ros, "interp_node", {"job_file": str(fits)})
+    assert res.successful, res.reason
+    assert get_params(ros, "interp_node", ["job_file_sha256"]) == [run.plan.job_file_sha256]
     [res] = set_params(ros, "interp_node", {"layers": 1})
     assert res.successful, res.reason
     assert get_params(ros, "interp_node", ["job_file_sha256"]) == [""]
