@@ -30,8 +30,6 @@ from winder.record.reader import read_run
 
 pytestmark = pytest.mark.ros
 
-#: s a node is held: past the 10 s lease of winder's Fast DDS profile
-HELD_S = 12.0
 #: one 8-turn layer of 512 fork steps a turn: 4096 steps
 JOB = {"turns_per_layer": 8, "layers": 1, "poles": 1, "fork_steps_per_rev": 512}
 
@@ -50,45 +48,6 @@ def check_complete(bag: Path) -> None:
     assert run.complete and run.report["state"] == "done", run.report
     assert run.report["steps_missing"] == "0" and run.report["gaps"] == "0", run.report
     assert np.array_equal(run.steps[:, 2:], positions())
-
-
-def held(pid: int, seconds: float, ros: Any) -> None:
-    """The process stopped for ``seconds`` (the stimulus: the probe serves its callbacks)."""
-    os.kill(pid, signal.SIGSTOP)
-    try:
-        wait.spin_for(ros, seconds)
-    finally:
-        os.kill(pid, signal.SIGCONT)
-
-
-@pytest.mark.parametrize("node", ["interp_node", "profile_node", "sim_node"])
-def test_an_idle_cell_takes_a_run_after_a_node_was_held(
-    node: str, tmp_path: Path, procs: Procs, ros: Any
-) -> None:
-    """The cell idle and ready; one node held for 12 s; once it goes on, a
-    start is taken within the bound a start waits for a cell to connect, and
-    the run winds every step."""
-    bags = tmp_path / "bags"
-    states = ready_states(ros)
-    started = {
-        "interp_node": procs.start("interp_node", "-p", "autostart:=false", *job_args()),
-        "profile_node": procs.start("profile_node"),
-        "sim_node": procs.start("sim_node", "-p", f"bag_dir:={bags}", "-p", "real_time:=false"),
-    }
-    wait.spin_until(
-        ros,
-        lambda: states.get("consumer") == "ready" and states.get("profile") == "ready",
-        60,
-        "consumer and profile node ready",
-        heard=lambda: states,
-    )
-    held(started[node].pid, HELD_S, ros)
-    reply = start_job(ros, timeout=30.0)
-    assert reply.success, reply.message
-    [bag] = wait.spin_until(ros, lambda: closed_bags(bags), 60, f"a closed bag in {bags}")
-    check_complete(bag)
-    log = procs.log(started[node])
-    assert "no timer for" in log, log
 
 
 def test_a_run_the_consumer_closed_is_timed_no_more(tmp_path: Path, procs: Procs, ros: Any) -> None:
