@@ -14,8 +14,7 @@ and an idle cell refused every start until a node was restarted (issue 53).
 :class:`WakeWatch` sees the hold as a gap in its steady timer, and makes rmw
 publish that sample again (it does so whenever the participant's entities
 change: a publisher made and destroyed), which every reader, matched anew or
-not, takes. Then the node's ``on_wake`` hooks run (announce again, forget
-what the hold made stale).
+not, takes.
 
 The other side of the same hold: the held process may itself have dropped
 the others on waking (its lease timers ran before the announcements waiting
@@ -28,7 +27,6 @@ discovery info for it."""
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 
 from diagnostic_msgs.msg import KeyValue
 from rclpy.node import Node
@@ -55,14 +53,11 @@ LEFT_KEPT = 256
 
 class WakeWatch:
     """Watches ``node``'s steady clock; after a hold of more than
-    :data:`HELD` s it republishes the participant's discovery info and calls
-    each of ``on_wake`` with the hold's length (s)."""
+    :data:`HELD` s it republishes the participant's discovery info."""
 
-    def __init__(self, node: Node, *on_wake: Callable[[float], None]) -> None:
+    def __init__(self, node: Node) -> None:
         self.node = node
-        self.on_wake = list(on_wake)
         self.last = time.monotonic()
-        self.holds = 0
         self.present: set[bytes] = set()  # the participants on the graph at the last look
         #: those seen to leave it since, and when (steady s): forgotten after FORGET s, for every
         #: `winder ctl` call is a participant that comes and goes for good
@@ -96,14 +91,11 @@ class WakeWatch:
 
     def woke(self, gap: float) -> None:
         """The node was held up for ``gap`` s: rejoin the graph."""
-        self.holds += 1
         self.node.get_logger().warning(
             f"no timer for {gap:.1f} s (held up, starved or a long callback): announcing this node to the "
             "graph again"
         )
         self.republish()
-        for hook in self.on_wake:
-            hook(gap)
 
     def republish(self) -> None:
         """Make rmw publish this participant's ``ros_discovery_info`` again."""
