@@ -716,9 +716,20 @@ class ProfileNode(ManagedNode):
         whose axes have not reached the last step yet (the consumer's clock,
         carried on by the wall time since it was heard), a pause or abort is
         answered: the steps out are within the look-ahead, and the axes stop
-        at the run's end, that soon. Otherwise the run is over for the time
-        law: refused with why."""
+        at the run's end, that soon. A run its consumer closed has stopped:
+        a pause or abort is answered so (a bridge that faults closes its run,
+        then asks for the abort; either may be heard first). Otherwise the
+        run is over for the time law: refused with why."""
         run = plan.run_id or plan.job_id
+        if self.closed:
+            if not kind.stops:
+                return False, f"{kind} refused: run {run} is closed by its consumer ({self.closed})"
+            message = (
+                f"run {run}: {kind}: the run is closed by its consumer already ({self.closed}): "
+                f"its steps not timed were dropped, nothing more is sent"
+            )
+            self.get_logger().info(message)
+            return True, message
         tl = self.timeline
         if tl is not None and tl.aborted:
             return False, f"{kind} refused: run {run} is aborted already; its axes come to rest"
