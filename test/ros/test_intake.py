@@ -119,3 +119,28 @@ def test_row_gate_refuses_times_that_do_not_increase_or_outlast_a_job() -> None:
     assert gate.checker.missing == back.shape[0] + far.shape[0]
     assert gate.rows(b"\x00junk", None) is None and "bad step_times chunk" in errors[-1]
     assert gate.rows(chunks[3], None) is not None  # the stream goes on after them
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 4), st.integers(1, 3), st.integers(2, 40), st.integers(1, 30), st.integers(0, 2))
+def test_row_gate_drops_an_earlier_runs_chunks_until_its_own_first_step(
+    turns: int, poles: int, cut: int, stale: int, dt_extra: int
+) -> None:
+    """A run's description here, then chunks of an earlier run of the same job
+    still on their way (past its first chunk, the way a woken profile node
+    sends on a run its consumer closed), then the run's own stream: exactly
+    the run's own rows pass, in order, the stream is clean (no gap, no
+    repeat), and the drop is said once as a note, not as an error of the run."""
+    job = job_of(turns, 2, poles)
+    mine = timed_chunks(job, cut)
+    old = timed_chunks(job, cut, dt_ns=1000 + dt_extra)[1 : 1 + stale]
+    errors: list[str] = []
+    notes: list[str] = []
+    gate = RowGate(plan_of(job), errors.append, notes.append)
+    got = [gate.rows(raw, None) for raw in [*old, *mine]]
+    assert all(r is None for r in got[: len(old)])
+    rows = np.concatenate([r for r in got if r is not None])
+    assert np.array_equal(rows, np.concatenate([TIMED_CDR.decode(raw) for raw in mine]))
+    assert errors == [] and gate.stale == len(old)
+    assert len(notes) == (1 if old else 0) and "earlier run" in notes[0]
+    assert gate.checker.complete and gate.checker.missing == 0 and gate.checker.gaps == 0

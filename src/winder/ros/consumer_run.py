@@ -120,7 +120,7 @@ class ConsumerRun:
         self.plan = plan
         self.recording.start(plan, self.wall0_ns)
         self.ledger = RunLedger(plan)
-        self.gate = RowGate(plan, self.error)
+        self.gate = RowGate(plan, self.error, self.log.warning)
         self.checker = self.gate.checker
 
     # -- what the engine may know (winder.ros.engine.RunPort) -------------------

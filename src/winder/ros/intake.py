@@ -5,7 +5,13 @@ between runs (:class:`EarlyChunks`) and a run's, checked into rows
 Chunks carry no run id, and one writer's are delivered in order. A chunk
 that comes while no run is on (its description on its way, or the last run
 closing) is kept for the next run, which takes those of its own
-(:meth:`EarlyChunks.take`). A run's chunks are checked
+(:meth:`EarlyChunks.take`). A run's stream begins with the chunk whose first
+row is its first step (:func:`begins_run`): whatever comes before it, with
+the run's description here already, is the tail of an earlier run still on
+its way (a profile node held up while its consumer closed the run, woken
+to send it on), and is dropped, never executed: taken as the new run's, a
+chunk of the same job ahead of the new run made its axes jump ahead (a
+"gap") and refused the run's own steps as repeats (issue 53). A run's chunks are checked
 (:class:`winder.contract.stream.StreamChecker`: gaps, repeats, reordering),
 their times too (strictly increasing, within a job's longest duration), and
 a step timed before the engine's clock is moved to the clock and counted
@@ -25,12 +31,21 @@ from winder.contract.stream import TIMED_COLUMNS, JobPlan, StreamChecker
 from winder.motion.timing import MAX_JOB_SECONDS
 from winder.ros.chunks import TIMED_CDR
 
-__all__ = ["EARLY_CHUNKS", "MAX_STEP_NS", "EarlyChunks", "RowGate"]
+__all__ = ["EARLY_CHUNKS", "MAX_STEP_NS", "EarlyChunks", "RowGate", "begins_run"]
 
 #: chunks kept for a run whose description has not come yet, at most
 EARLY_CHUNKS = 4096
 #: Step times beyond the longest a job may last are refused, not executed.
 MAX_STEP_NS = round(MAX_JOB_SECONDS * 1e9)
+
+
+def begins_run(plan: JobPlan, rows: npt.NDArray[np.int64]) -> bool:
+    """Whether a chunk's first row is the run's first step: segment 0, one
+    step from the job's start on each axis that moves."""
+    if not plan.segments or not rows.shape[0] or rows[0, 1] != 0:
+        return False
+    first = np.asarray(plan.segments[0].start, np.int64)
+    return bool(np.abs(rows[0, 2:] - first).max() == 1)
 
 
 class EarlyChunks:
@@ -54,16 +69,14 @@ class EarlyChunks:
         first row is its first step. With no such chunk, all of them."""
         early, self.chunks = self.chunks, []
         start = None
-        if plan.segments:
-            first = np.asarray(plan.segments[0].start, np.int64)
-            for i in range(len(early) - 1, -1, -1):
-                try:
-                    rows = TIMED_CDR.decode(early[i])
-                except ValueError:
-                    continue
-                if rows.shape[0] and rows[0, 1] == 0 and np.abs(rows[0, 2:] - first).max() == 1:
-                    start = i
-                    break
+        for i in range(len(early) - 1, -1, -1):
+            try:
+                rows = TIMED_CDR.decode(early[i])
+            except ValueError:
+                continue
+            if begins_run(plan, rows):
+                start = i
+                break
         stale = len(early) if start is None else start
         if stale:
             self.say(
@@ -94,9 +107,15 @@ class EarlyChunks:
 class RowGate:
     """A run's chunks into the rows that may be executed (see the module doc)."""
 
-    def __init__(self, plan: JobPlan, error: Callable[[str], None]) -> None:
+    def __init__(
+        self, plan: JobPlan, error: Callable[[str], None], note: Callable[[str], None] | None = None
+    ) -> None:
         self.checker = StreamChecker(plan)
         self.error = error
+        self.note = note or error  # an earlier run's chunks dropped: said once, no error of this run
+        #: the run's first step has come (a job of no steps has no stream to wait for)
+        self.begun = not plan.segments
+        self.stale = 0  #: chunks dropped before it: an earlier run's, still on their way
         self.late = LateSteps()
         self.last_step_ns = -1  # time of the last step accepted, as the stream timed it
         self.last_executed_ns = -1  # the time it is executed at (later if it came late)
@@ -110,6 +129,16 @@ class RowGate:
         except ValueError as exc:
             self.error(f"bad step_times chunk: {exc}")
             return None
+        if not self.begun:
+            if not begins_run(checker.plan, rows):
+                self.stale += 1
+                if self.stale == 1:
+                    self.note(
+                        f"run {checker.plan.run_id or checker.plan.job_id}: step chunks that do not begin at "
+                        "its first step (an earlier run's, still on their way): dropped until it comes"
+                    )
+                return None
+            self.begun = True
         verdict = checker.check_rows(rows, TIMED_COLUMNS)  # positions tell gaps, repeats, reordering
         if verdict.kind != "ok":
             self.error(verdict.message)
