@@ -358,11 +358,27 @@ def paired_error(run: Run) -> tuple[npt.NDArray[np.intp], FloatArray]:
     return i_s, diff
 
 
+def read_back(run: Run) -> str | None:
+    """Why the axes' acceleration and jerk are not measured, None when they
+    are: a consumer that is no simulator (a hardware driver: its
+    configuration names no motor model, :func:`winder.record.reader.read_run`)
+    records the positions its drive read back (on a drive, whole steps held
+    between reads: a staircase), whose second and third differences are the
+    steps' edges over a sample period, not the axes' motion."""
+    if run.sim_config is not None or not len(run.states):
+        return None
+    return (
+        "axes' acceleration and jerk not measured: the joint states are the drive's read-back "
+        "positions (no motor model: a hardware consumer), steps held between reads, whose "
+        "differences are the steps' edges, not motion"
+    )
+
+
 def _axis_motion(run: Run, d: Digest) -> dict[str, AxisMotion]:
     js = run.plan.joint_step
     st = run.states
     _, diff = paired_error(run)
-    if st.t.size >= 3:
+    if st.t.size >= 3 and read_back(run) is None:
         acc = np.gradient(st.vel, st.t, axis=0)
         jerk = np.gradient(acc, st.t, axis=0)
     else:
@@ -430,6 +446,9 @@ def analyze(run: Run, stride_time: float = STRIDE_TIME, digested: Digest | None 
     d = digested if digested is not None else digest_run(run, stride_time)
     job = run.plan.job
     notes = list(run.notes)
+    staircase = read_back(run)
+    if staircase is not None:
+        notes.append(staircase)
     if d.rows == 0:
         notes.append("no steps recorded")
     elif not d.increasing:

@@ -1,6 +1,8 @@
 """``winder ctl``: a running cell driven from the command line, without the
 ``ros2`` command (which the pip install lacks): start a run, read the cell's
-state, a node's parameters and lifecycle, pause, resume, abort, override.
+state, a node's parameters and lifecycle, pause, resume, abort, override;
+print a topic's messages (``echo``, :mod:`winder.ros.echo`) and an
+interface's definition (``interface show``, :mod:`winder.ros.interface_text`).
 
 Each is a client of the standard services and the cell's topics
 (:mod:`winder.ros.ctl`), bounded by ``--timeout``; every error is one line
@@ -14,6 +16,7 @@ run followed with ``--wait`` that ended aborted or incomplete, 130 at Ctrl-C.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 import time
 from pathlib import Path
@@ -183,6 +186,19 @@ END_CODES: dict[str, int] = {
 }
 
 
+#: action_msgs/GoalStatus' codes of a goal that ended, as ``ros2 action send_goal`` names them
+GOAL_STATUS = {4: "SUCCEEDED", 5: "CANCELED", 6: "ABORTED"}
+
+
+def result_text(result: Any, status: int) -> str:
+    """A Wind goal's result as ``ros2 action send_goal`` prints it: its
+    fields under ``Result:``, then the goal's end status."""
+    from winder.ros.echo import message_yaml
+
+    body = "".join(f"    {line}\n" for line in message_yaml(result, None).splitlines())
+    return f"Result:\n{body}\nGoal finished with status: {GOAL_STATUS.get(status, f'UNKNOWN ({status})')}\n"
+
+
 def wait_for_end(args: argparse.Namespace, session: Any, view: Any, goal: Any, run_timeout: float) -> int:
     """Follow the run of ``goal`` to its end: a line each time the
     consumer's status of it changes, then how it ended. Only the cell's own
@@ -190,6 +206,7 @@ def wait_for_end(args: argparse.Namespace, session: Any, view: Any, goal: Any, r
     the goal's result (the Wind action's answer to this command's own
     request) or the final status of the cell's consumer, the node the graph
     shows in that part, never with a status that merely names it."""
+    from winder.ros import ctl
     from winder.ros.ctl import one_line
 
     run_id = goal.run_id
@@ -200,7 +217,17 @@ def wait_for_end(args: argparse.Namespace, session: Any, view: Any, goal: Any, r
         return dict(st.values) if st is not None and st.values.get("run_id") == run_id else {}
 
     def ended(state: str, bag: str) -> int:
-        """How the run ended; first, who was not believed on the way."""
+        """How the run ended: the goal's typed result (waited for up to
+        the session's timeout after the consumer's final status), who was
+        not believed on the way, then one line."""
+        session.renew()
+        with contextlib.suppress(ctl.UnansweredError):
+            session.until(goal.result.done, f"result of the goal of run {run_id}")
+        if goal.result.done():
+            answer = goal.result.result()
+            print(result_text(answer.result, answer.status), end="", flush=True)
+        else:
+            print(f"  no result of the goal within {session.timeout:g} s (the run's report said it ended)")
         ignored = view.ignored()
         if ignored:
             print(f"  ignored, foreign  {ignored}", flush=True)
@@ -481,6 +508,50 @@ def cmd_lifecycle(args: argparse.Namespace) -> int:
     return _guarded(args, body)
 
 
+# -- echo, interface show ----------------------------------------------------------------------
+
+
+def cmd_echo(args: argparse.Namespace) -> int:
+    """A topic's messages as ``ros2 topic echo`` prints them (:mod:`winder.ros.echo`)."""
+    ns = _namespace(args)
+    timeout = _timeout(args)
+
+    def body(ctl: Any) -> int:
+        from winder.ros.echo import echo, topic_name
+
+        full = topic_name(args.topic, ns)  # as rcl takes it, or one line (exit 2)
+        with ctl.Session(timeout) as session:
+
+            def write(text: str) -> None:
+                sys.stdout.write(text)
+                sys.stdout.flush()
+
+            echo(
+                session,
+                full,
+                once=args.once,
+                truncate=None if args.full_length else args.truncate,
+                write=write,
+            )
+        return EXIT_OK
+
+    return _guarded(args, body)
+
+
+def cmd_interface(args: argparse.Namespace) -> int:
+    """An interface's definition as ``ros2 interface show`` prints it (:mod:`winder.ros.interface_text`)."""
+    from winder.ros.interface_text import interface_lines
+
+    args.action = "interface show"
+    comments = "all" if args.all_comments else "none" if args.no_comments else "top"
+    try:
+        lines = interface_lines(args.type, comments=comments)
+    except BadInputError as exc:
+        return _fail(args, str(exc), EXIT_BAD_INPUT)
+    print("\n".join(lines))
+    return EXIT_OK
+
+
 # -- the parser --------------------------------------------------------------------------------
 
 
@@ -498,9 +569,11 @@ def register(sub: argparse._SubParsersAction[Any]) -> None:
     """Add ``ctl`` and its commands to the ``winder`` subcommands."""
     ctl = sub.add_parser(
         "ctl",
-        help="drive a running cell: start, state, param, lifecycle, pause, resume, abort, override X",
+        help="drive a running cell: start, state, param, lifecycle, pause, resume, abort, override X, echo, "
+        "interface show",
         description="Commands to a running cell on this ROS_DOMAIN_ID, through the standard ROS 2 "
-        "services and the cell's topics (what ros2 service call, ros2 param and ros2 lifecycle do, "
+        "services and the cell's topics (what ros2 service call, ros2 param, ros2 lifecycle, ros2 topic "
+        "echo and ros2 interface show do, "
         "on the pip install). Each waits at most --timeout seconds and names what it waited for.",
     )
     from winder.contract.params import OPERATION_SPECS
@@ -575,6 +648,45 @@ def register(sub: argparse._SubParsersAction[Any]) -> None:
     q.add_argument("node", metavar="NODE", help="node name (in --namespace), or its full name /ns/name")
     _common(q)
     p.set_defaults(func=cmd_param)
+
+    from winder.ros.echo import TRUNCATE
+
+    p = verbs.add_parser(
+        "echo",
+        help="print a topic's messages as ros2 topic echo does (field: value blocks and ---)",
+        description="Print the messages of TOPIC (any topic on the graph; its type is the one the graph "
+        "shows) as ros2 topic echo prints them. A topic of the cell is read with the cell's own QoS "
+        "(a latched one, winder/report or winder/state, gives its last message at once); any other "
+        "with its publishers'. Follows until Ctrl-C; --once ends after the first message.",
+    )
+    p.add_argument("topic", metavar="TOPIC", help="/full/name, or a name in --namespace (winder/report)")
+    p.add_argument("--once", action="store_true", help="print the first message and end (exit 1 if none "
+                   "came within --timeout)")  # fmt: skip
+    p.add_argument(
+        "--truncate",
+        type=int,
+        default=TRUNCATE,
+        metavar="N",
+        help=f"cut strings and arrays after N characters or items (default {TRUNCATE}, as ros2 topic echo)",
+    )
+    p.add_argument("--full-length", action="store_true", help="print strings and arrays in full")
+    _common(p)
+    p.set_defaults(func=cmd_echo)
+
+    p = verbs.add_parser("interface", help="print an interface's definition (ros2 interface show)")
+    kinds = p.add_subparsers(dest="verb", metavar="VERB", parser_class=type(p))
+    kinds.required = True
+    q = kinds.add_parser(
+        "show",
+        help="an interface's definition, nested types expanded (winder_interfaces/msg/CellState)",
+        description="Print the definition of TYPE (PACKAGE/msg|srv|action/NAME) as ros2 interface show "
+        "does: the installed file, each nested message type's fields below its field, a tab deeper.",
+    )
+    q.add_argument("type", metavar="TYPE", help="PACKAGE/KIND/NAME, e.g. winder_interfaces/action/Wind")
+    which = q.add_mutually_exclusive_group()
+    which.add_argument("--all-comments", action="store_true", help="the nested types' comments too")
+    which.add_argument("--no-comments", action="store_true", help="no comments at all")
+    q.set_defaults(func=cmd_interface)
 
     p = verbs.add_parser("lifecycle", help="a node's lifecycle transition, or its state (ros2 lifecycle)")
     p.add_argument("node", metavar="NODE", help="node name (in --namespace), or its full name /ns/name")

@@ -1033,9 +1033,23 @@ class Job:
         def count(n: int, what: str) -> str:
             return f"{n} {what}" if n == 1 else f"{n} {what}s"
 
-        return " x ".join(
-            (count(self.poles, "pole"), count(self.layers, "layer"), count(self.layer_turns, "turn"))
-        )
+        coils = [
+            tuple(self.layer_turns_of(p, k) for k in range(self.coil(p).layers)) for p in range(self.poles)
+        ]
+        if all(c == (self.layer_turns,) * self.layers for c in coils):
+            return " x ".join(
+                (count(self.poles, "pole"), count(self.layers, "layer"), count(self.layer_turns, "turn"))
+            )
+        # layers of different turns (an orthocyclic coil's shifted ones), or coils that differ:
+        # the turns as laid, never a product that rounds them ("3 layers x 60 turns" for 179)
+        if len(set(coils)) == 1:
+            each = coils[0]
+            return (
+                f"{count(self.poles, 'pole')} x {count(sum(each), 'turn')} in "
+                f"{count(len(each), 'layer')} ({', '.join(map(str, each))})"
+            )
+        turns = sorted(sum(c) for c in coils)
+        return f"{count(self.poles, 'pole')} of {turns[0]} to {turns[-1]} turns ({sum(turns)} turns)"
 
     @property
     def straight_moves(self) -> int:

@@ -653,11 +653,8 @@ def _wire_zoom(run: Run, zoom: Axes) -> None:
     set_n = job.set_tension
     k = int(np.argmax(tension.tension))
     peak = float(tension.tension[k])
-    st = run.states
-    fork = AXES.index("fork")
-    w = abs(float(np.interp(tension.t[k], st.t, st.vel[:, fork]))) if len(st) else 0.0
-    half = 2 * math.pi / w if w > 1e-9 else 0.5
-    m = (tension.t >= tension.t[k] - half) & (tension.t <= tension.t[k] + half)
+    lo_t, hi_t = _turn_either_side(run, float(tension.t[k]))
+    m = (tension.t >= lo_t) & (tension.t <= hi_t)
     near = tension.tension[m]
     _wire_bands(run, zoom, label=False)
     zoom.plot(tension.t[m], near, color=ACT, lw=0.9, marker=".", ms=2)
@@ -667,11 +664,46 @@ def _wire_zoom(run: Run, zoom: Axes) -> None:
     zoom.set_xlabel("time (s)")
     zoom.set_ylabel("wire tension (N)")
     zoom.set_title(
-        f"around the peak, {peak:.4g} N at {tension.t[k]:.3f} s: two turns of the flyer ({w:.3g} rad/s)"
-        if w > 1e-9
-        else f"around the peak, {peak:.4g} N at {tension.t[k]:.3f} s",
+        f"around the peak, {peak:.4g} N at {tension.t[k]:.3f} s: {_flyer_words(run, lo_t, hi_t)}",
         loc="left",
     )
+
+
+#: s either side of wire.png's peak at most, when the flyer takes longer for its turn (near rest)
+ZOOM_MAX = 0.5
+
+
+def _turn_either_side(run: Run, t: float) -> tuple[float, float]:
+    """The times the flyer was one turn before and one turn past where it
+    was at ``t`` (its recorded angle), each at most :data:`ZOOM_MAX` s away."""
+    st = run.states
+    if len(st) < 2:
+        return t - ZOOM_MAX, t + ZOOM_MAX
+    angle = st.pos[:, AXES.index("fork")]
+    here = float(np.interp(t, st.t, angle))
+    away = np.abs(angle - here) >= 2 * math.pi
+    before = np.flatnonzero(away & (st.t <= t))
+    after = np.flatnonzero(away & (st.t >= t))
+    lo = float(st.t[before[-1]]) if before.size else float(st.t[0])
+    hi = float(st.t[after[0]]) if after.size else float(st.t[-1])
+    return max(lo, t - ZOOM_MAX), min(hi, t + ZOOM_MAX)
+
+
+def _flyer_words(run: Run, lo: float, hi: float) -> str:
+    """What the flyer did from ``lo`` to ``hi`` s: the turns it made and its
+    speed there, recorded (one number when it held it within 1 %)."""
+    st = run.states
+    m = (st.t >= lo) & (st.t <= hi)
+    if not np.any(m):
+        return "no joint samples"
+    fork = AXES.index("fork")
+    turns = abs(float(np.interp(hi, st.t, st.pos[:, fork]) - np.interp(lo, st.t, st.pos[:, fork]))) / (
+        2 * math.pi
+    )
+    speed = np.abs(st.vel[m, fork])
+    slow, fast = float(speed.min()), float(speed.max())
+    said = f"{fast:.3g} rad/s" if fast - slow <= 0.01 * fast else f"{slow:.3g}..{fast:.3g} rad/s"
+    return f"{turns:.3g} turns of the flyer at {said}"
 
 
 def _operations(run: Run, d: Digest, out: Path) -> Path:
@@ -885,7 +917,7 @@ def _winding(run: Run, analysis: Analysis, d: Digest, out: Path) -> Path:
         )
     ax_job.axhline(0, color=IDEAL, lw=0.8, label="ideal line")
     ax_job.set_ylabel("signed distance to the ideal line (um)")
-    ax_job.tick_params(labelbottom=False)
+    ax_job.set_xlabel("turns wound (all layers of all coils in winding order)")
     c, a = analysis.command, analysis.actual
     ax_job.set_title(
         f"eq. 7 over the whole job (vertical lines: layer ends): command mean {c.mean * 1e6:.3f} um, "
