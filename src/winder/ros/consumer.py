@@ -365,6 +365,11 @@ class StepConsumer(ManagedNode):
             self.early.keep(raw)
             return
         run.last_chunk_wall = time.monotonic()
+        if self.early.is_twin(raw):
+            # the same bytes as the first chunk, taken from before the run's description (the
+            # last run's of the same job, closed early here): in the bag once, executed once
+            self.get_logger().info("the run's first chunk came again: the earlier one was the last run's")
+            return
         if run.stalled:
             run.stalled = False
             self.get_logger().info("step stream resumed")
@@ -377,9 +382,6 @@ class StepConsumer(ManagedNode):
         """The rows of a chunk that may be executed, or None (reported)."""
         run = self.run
         assert run.gate is not None and run.ledger is not None
-        if self.early.is_twin(raw):
-            self.get_logger().info("the run's first chunk came again: the earlier one was the last run's")
-            return None
         rows = run.gate.rows(raw, self.engine.earliest_step_ns())
         if rows is None:
             return None

@@ -19,10 +19,21 @@ not, takes.
 The other side of the same hold: the held process may itself have dropped
 the others on waking (its lease timers ran before the announcements waiting
 in its sockets) and found them again, while they, having dropped it too,
-never took it for gone on their side of some writer. So every node also
-watches which participants are on its graph (each process' ``/rosout``
-publisher): when one it saw leave comes back, it republishes its own
-discovery info for it."""
+never took it for gone on their side of some writer. And a process held
+while another started (a profile node stopped for 4 s, the interp node
+started meanwhile) learnt the newcomer's endpoints once woken but never its
+node names: it could not tell the cell's interp node, and said "waiting"
+for as long as it was watched (measured: 40 s, a hold well inside the
+lease). So every node watches which participants are on its graph (each
+process' ``/rosout`` publisher): when one comes, new or back after it left,
+it republishes its own discovery info for it. Each announcement, after a
+hold as after a newcomer, is made at once and again :data:`AGAIN` s later:
+the first may go out before the others have matched this participant anew
+(they find it again only at its next announcement, up to 0.25 s after it
+woke), and a reader matched after a sample was sent did not always get it
+(a loaded CI: the cell still not ready 30 s after a 12 s hold). A newcomer
+costs each node three small samples: ``winder ctl`` is one each time it
+runs."""
 
 from __future__ import annotations
 
@@ -33,7 +44,7 @@ from rclpy.node import Node
 
 from winder.ros.timers import steady_timer
 
-__all__ = ["HELD", "TICK", "WakeWatch"]
+__all__ = ["AGAIN", "HELD", "TICK", "WakeWatch"]
 
 #: s between two looks at the steady clock
 TICK = 0.5
@@ -45,6 +56,8 @@ HELD = 5.0
 TOPIC = "~/_wake"
 #: every node's log topic: a publisher of it in every process of a cell
 ROSOUT = "/rosout"
+#: s after a hold or a participant's coming (new or back) that the node announces itself again
+AGAIN = (1.5, 5.0)
 #: s a participant that left is remembered (a hold that long is said by the held node itself)
 FORGET = 600.0
 #: participants that left remembered at most
@@ -62,6 +75,8 @@ class WakeWatch:
         #: those seen to leave it since, and when (steady s): forgotten after FORGET s, for every
         #: `winder ctl` call is a participant that comes and goes for good
         self.left: dict[bytes, float] = {}
+        self.again_at: list[float] = []  # steady s of the announcements still to make
+        self.looked = False  # the graph at the start is no newcomer
         self.timer = steady_timer(node, TICK, self._tick)
 
     def _tick(self) -> None:
@@ -70,12 +85,17 @@ class WakeWatch:
         if gap > HELD:
             self.woke(gap)
         self.look()
+        if self.again_at and now >= self.again_at[0]:
+            self.again_at = [t for t in self.again_at if t > now]
+            self.republish()
 
     def look(self) -> None:
-        """A participant back on the graph after it left: it may lack this one's node names."""
+        """A participant new on the graph, or back after it left: it may lack this one's node names."""
         present = {bytes(i.endpoint_gid)[:12] for i in self.node.get_publishers_info_by_topic(ROSOUT)}
         now = time.monotonic()
         back = {p for p in present if self.left.pop(p, None) is not None}
+        new = present - self.present - back if self.looked else set()
+        self.looked = True
         for gone in self.present - present:
             self.left[gone] = now
         if len(self.left) > LEFT_KEPT or (self.left and now - next(iter(self.left.values())) > FORGET):
@@ -87,7 +107,8 @@ class WakeWatch:
             self.node.get_logger().info(
                 f"{len(back)} participant(s) back on the graph after a silence: announcing this node again"
             )
-            self.republish()
+        if back or new:
+            self.announce(now)
 
     def woke(self, gap: float) -> None:
         """The node was held up for ``gap`` s: rejoin the graph."""
@@ -95,7 +116,12 @@ class WakeWatch:
             f"no timer for {gap:.1f} s (held up, starved or a long callback): announcing this node to the "
             "graph again"
         )
+        self.announce(time.monotonic())
+
+    def announce(self, now: float) -> None:
+        """Republish now, and again after each of :data:`AGAIN`."""
         self.republish()
+        self.again_at = sorted({*self.again_at, *(now + a for a in AGAIN)})
 
     def republish(self) -> None:
         """Make rmw publish this participant's ``ros_discovery_info`` again."""
