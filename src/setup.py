@@ -6,9 +6,11 @@ package_name = "winder"
 
 setup(
     name=package_name,
-    version="0.1.0",
+    # the version: setup.cfg reads it from winder.__version__, as pyproject.toml does
     packages=find_packages(include=["winder", "winder.*"]),
-    package_data={"winder": ["py.typed", "ros/fastdds_profile.xml", "ros/fastdds_lan.xml"]},
+    package_data={
+        "winder": ["py.typed", "ros/fastdds_profile.xml", "ros/fastdds_lan.xml", "drives/twin.eds"]
+    },
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
@@ -19,5 +21,7 @@ setup(
     maintainer_email="winder@users.noreply.github.com",
     description="winder core library",
     license="Apache-2.0",
-    entry_points={"console_scripts": ["winder = winder.cli:main"]},
+    entry_points={
+        "console_scripts": ["winder = winder.cli:main", "cia402_node = winder.ros.cia402_node:main"]
+    },
 )

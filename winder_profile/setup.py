@@ -8,6 +8,11 @@ setup(
     name=package_name,
     version="0.1.0",
     packages=find_packages(exclude=["test"]),
+    # the package beside this file, said so: pip's editable install then puts this
+    # directory on sys.path (a .pth line, as for the core's src/) instead of an import
+    # hook, which a directory named as the package (this one, from the repository's
+    # root) shadows, and of which setuptools warns at every install
+    package_dir={"": "."},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
@@ -19,5 +24,5 @@ setup(
     maintainer_email="winder@users.noreply.github.com",
     description="Profile node: S-curve, trapezoid or exponential step timing",
     license="Apache-2.0",
-    entry_points={"console_scripts": ["profile_node = winder_profile.profile_node:main"]},
+    entry_points={"console_scripts": ["profile_node = winder_profile:main"]},
 )

@@ -6,4 +6,7 @@ Modules: :mod:`winder.motion.interp` (minimum-deviation interpolation), :mod:`wi
 says otherwise (``_steps`` for integer step counts).
 """
 
+#: winder's version, written here only: the package metadata reads it (pyproject.toml,
+#: src/setup.cfg); ``winder --version`` prints it, every bag's metadata.yaml and every
+#: final report carry it (``winder_version``)
 __version__ = "0.1.0"

@@ -13,8 +13,9 @@ namespace), never by a node name; several tests run it as ``axes``
 Subjects (``CONSUMERS``): ``sim_node`` (in real time), ``bridge_node`` (the
 ros2_control bridge, driving test/ros2_control_standin.py), the library's
 mock drive (``winder.ros.mock_backend``: a ``Backend`` of three methods in a
-``DriverNode``) paced and as fast as possible, and any executable named by
-the environment::
+``DriverNode``) paced and as fast as possible, the CiA 402 drives node
+(``cia402_node``) on the drive twins of a virtual-bus drives file, paced
+and as fast as possible, and any executable named by the environment::
 
     WINDER_CONSUMER="my_driver --ros-args -p port:=/dev/ttyUSB0" \\
         .venv/bin/python -m pytest test/contract/test_conformance.py
@@ -143,6 +144,16 @@ CONSUMERS = [
         "mock_driver_fast",
         (sys.executable, "-m", "winder.ros.mock_backend"),
         {"real_time": "false"},
+        paced=False,
+    ),
+    # the CiA 402 drives node (winder.ros.cia402_node) on its drive twins: a virtual-bus drives file
+    ConsumerSpec(
+        "cia402_twins", ("cia402_node",), {"drives_file": str(TEST / "drives" / "data" / "twin_cell.yaml")}
+    ),
+    ConsumerSpec(
+        "cia402_twins_fast",
+        ("cia402_node",),
+        {"drives_file": str(TEST / "drives" / "data" / "twin_cell.yaml"), "real_time": "false"},
         paced=False,
     ),
 ]

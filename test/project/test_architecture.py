@@ -1,8 +1,8 @@
 """The import rules of docs/ARCHITECTURE.md, read from the code itself.
 
 * Arrows only go down the layers: ``errors`` < ``procs`` < ``interrupts`` < ``spec`` < ``shaping`` <
-  ``motion`` < ``axis`` < ``contract`` < ``record`` < ``analysis`` < ``ros`` < ``cli``; a module may
-  import its own layer and those below, never one above.
+  ``motion`` < ``axis`` < ``tension`` < ``drives`` < ``contract`` < ``record`` < ``analysis`` <
+  ``ros`` < ``cli``; a module may import its own layer and those below, never one above.
 * No circles: no module of the library imports, through any chain of
   imports (those inside functions and under ``TYPE_CHECKING`` too), a module
   that imports it.
@@ -34,6 +34,7 @@ LAYERS = (
     "motion",
     "axis",
     "tension",
+    "drives",
     "contract",
     "record",
     "analysis",
@@ -192,9 +193,10 @@ PYTHON_KEYS = {
     "ruamel": "python3-ruamel.yaml",
     "lz4": "python3-lz4",
     "zstandard": "python3-zstandard",
+    "can": "python3-can",
 }
 #: pip packages with no rosdep key, named in the core's package.xml comment instead
-PIP_ONLY = {"mcap", "rosbags", "backports", "foxglove"}
+PIP_ONLY = {"mcap", "rosbags", "backports", "foxglove", "canopen"}
 #: the standard library of later Pythons (zstd is ``compression.zstd`` from 3.14)
 LATER_STDLIB = {"compression"}
 

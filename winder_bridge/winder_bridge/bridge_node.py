@@ -149,6 +149,7 @@ from winder.ros.spin import spin
 from winder.ros.upstream import ProfileAbort
 from winder.spec import SpecError
 from winder.tension.watch import WireWatch
+from winder_bridge import PARAMETERS
 
 #: the measured joint states (joint_state_broadcaster's default topic, relative)
 TOPIC_MEASURED = "joint_states"
@@ -1433,7 +1434,7 @@ class BridgeNode(StepConsumer):
     def __init__(self) -> None:
         super().__init__(
             "bridge_node",
-            BRIDGE_SPECS,
+            PARAMETERS,
             # the topics `controller` and `load_cell` name must be names ROS takes in this node's namespace
             self.check,
             BridgeEngine(),

@@ -58,6 +58,7 @@ from winder.ros.timers import steady_timer
 from winder.spec import SpecError
 from winder_interfaces.msg import ControlEvent as ControlEventMsg
 from winder_interfaces.msg import JobDescription
+from winder_interp import PARAMETERS
 from winder_interp.wind import WindServer, job_params
 
 #: this node's part in the cell (winder.contract.topics.ROLES), in every job status
@@ -67,7 +68,7 @@ ROLE = "interp"
 class InterpNode(ManagedNode):
     def __init__(self) -> None:
         super().__init__("interp_node")
-        self.settings = Settings(self, INTERP_SPECS, check_interp_settings)
+        self.settings = Settings(self, PARAMETERS, check_interp_settings)
         self.settings.add_pre_set(self.with_job_file)
         given = self.settings.values()["job_file"]
         if given:  # given at start (-p job_file:=...): load it as a change would

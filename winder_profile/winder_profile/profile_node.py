@@ -58,7 +58,7 @@ from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from winder.contract.events import ControlEvent
-from winder.contract.params import OPERATION_SPECS, PROFILE_SPECS, UNSHAPED, check_profile
+from winder.contract.params import PROFILE_SPECS, UNSHAPED, check_profile
 from winder.contract.states import CellState, EventKind, EventSource, JobState, ReadyState
 from winder.contract.stream import (
     STEP_COLUMNS,
@@ -97,6 +97,7 @@ from winder.spec import SpecError, check_all
 from winder_interfaces.msg import CellState as CellStateMsg
 from winder_interfaces.msg import ControlEvent as ControlEventMsg
 from winder_interfaces.msg import JobDescription
+from winder_profile import PARAMETERS
 
 #: this node's part in the cell (winder.contract.topics.ROLES), in every job status
 ROLE = "profile"
@@ -124,7 +125,7 @@ RELEASE_BLOCK = 4096
 class ProfileNode(ManagedNode):
     def __init__(self) -> None:
         super().__init__("profile_node")
-        self.settings = Settings(self, {**PROFILE_SPECS, **OPERATION_SPECS}, check_profile)
+        self.settings = Settings(self, PARAMETERS, check_profile)
         self.add_post_set_parameters_callback(self.on_settings_set)
 
         self.pub = self.create_publisher(

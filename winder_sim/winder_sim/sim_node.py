@@ -48,7 +48,7 @@ from winder.axis import StepperAxis
 from winder.contract.cdr import JointStateEncoder, WrenchEncoder, encode_clocks
 from winder.contract.eq7 import layer_of_samples, sample_deviation, step_deviation
 from winder.contract.pacing import ns_not_before
-from winder.contract.params import MOTOR_FIELDS, PROFILE_SPECS, SIM_SPECS, check_sim
+from winder.contract.params import MOTOR_FIELDS, PROFILE_SPECS, check_sim
 from winder.contract.stream import JobPlan
 from winder.contract.topics import (
     TOPIC_CLOCK,
@@ -69,6 +69,7 @@ from winder.ros.timers import steady_timer
 from winder.ros.upstream import ProfileAbort
 from winder.tension.check import wire_refusal
 from winder.tension.run import WireRun
+from winder_sim import PARAMETERS
 
 #: Samples simulated in one go, at most: the node's memory is bounded by this,
 #: never by the simulated time a batch of steps covers (at 1 step/s, a chunk of
@@ -639,7 +640,7 @@ class SimNode(StepConsumer):
 
     def __init__(self) -> None:
         super().__init__(
-            "sim_node", SIM_SPECS, check_sim, SimEngine(), hardware_id="winder_sim", topics=SIM_TOPICS
+            "sim_node", PARAMETERS, check_sim, SimEngine(), hardware_id="winder_sim", topics=SIM_TOPICS
         )
 
 

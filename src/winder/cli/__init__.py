@@ -20,7 +20,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     does ("interrupted", status 130), not with a traceback of the import
     (the subcommands' own Ctrl-C is reported there, with their name).
     SIGTERM and SIGHUP (a closed terminal) end a command as Ctrl-C does,
-    from its first moment on."""
+    from its first moment on. ``winder --version`` alone is answered before
+    the commands' modules load (half a second); the parser's ``--version``
+    prints the same line."""
+    if list(sys.argv[1:] if argv is None else argv) == ["--version"]:
+        from winder import __version__
+        from winder.cli.exits import EXIT_OK
+
+        print(f"winder {__version__}")
+        return EXIT_OK
     stacks_on_signal()  # kill -USR1: every thread's stack on stderr (where a command hangs)
     try:  # a SIGINT from the moment it is taken on ends the command "interrupted" (a traceback before)
         take_stop_signals()  # whatever the parent left ignored or blocked (a script's `winder ... &`)

@@ -21,6 +21,7 @@ from typing import Any, NoReturn
 
 import numpy as np
 
+from winder import __version__
 from winder.cli.common import (
     CELL_SPECS,
     Progress,
@@ -186,6 +187,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     # the interp node's own check of what it will be given (schedule, the ramp it carries, ...)
     check_interp({**{n: s.default for n, s in INTERP_SPECS.items()}, **job.to_dict(), **extra}, job=job)
     external = external_nodes(args)
+    drives = drives_file(args, external)  # checked before the bus, before any node
     check_sim({**sim, "record": False} if "sim" in external else sim)  # a remote bag_dir is its host's
     why = wire_refusal(job, running, schedule, sim, derating=derating)
     if why:  # the words of winder check
@@ -215,6 +217,10 @@ def cmd_run(args: argparse.Namespace) -> int:
         bag_dir = bag_directory(sim["bag_dir"]) if "sim" not in external else Path(sim["bag_dir"])
         sim["bag_dir"] = str(bag_dir)
         params = {"interp": {**job.to_dict(), **extra}, "profile": {**profile, **operation}, "sim": sim}
+        if drives:  # the drives node in the sim node's place: the consumer's settings and its file
+            from winder.contract.params import CONSUMER_SPECS
+
+            params["sim"] = {k: v for k, v in sim.items() if k in CONSUMER_SPECS} | {"drives_file": drives}
         # a node that runs elsewhere is told only what was given (job file, options), through
         # its parameter services before the job starts; it keeps its own values for the rest
         remote_specs = {
@@ -230,6 +236,8 @@ def cmd_run(args: argparse.Namespace) -> int:
             else f"{profile['profile']} profile" + (f", {shaper}" if shaper else "")
         )
         model = "the external step consumer" if "sim" in external else f"{sim['model']} motor model"
+        if drives:
+            model = f"the CiA 402 drives of {drives}"
         print(f"winder: job {job.job_id}, {job.total_steps} steps, {ramp}, {model}")
         slowed = derating.words() if derating is not None else ""
         if slowed:
@@ -283,6 +291,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                 interrupts=interrupts,
                 one_process=args.one_process,
                 early=take_early(),
+                **({"consumer": DRIVES_NODE} if drives else {}),
             )
         finally:
             if fox_server is not None:
@@ -572,6 +581,34 @@ def json_key(value: Any) -> str:
     return json.dumps(value, sort_keys=True)
 
 
+#: the consumer ``winder run --drives`` starts in the sim node's place (winder.ros.cia402_node)
+DRIVES_NODE = "cia402_node"
+
+
+def drives_file(args: argparse.Namespace, external: frozenset[str]) -> str:
+    """``--drives FILE``: its absolute path, the file checked as the drives
+    node will read it (:func:`winder.drives.load_drives`: one line, exit 2);
+    "" without the option."""
+    given = getattr(args, "drives", None)
+    if given is None:
+        return ""
+    if "sim" in external:
+        raise UserError(
+            "--drives with --external sim is invalid: --drives starts the step consumer here; "
+            "leave out one of the two"
+        )
+    if args.one_process:
+        raise UserError(
+            f"--drives with --one-process is invalid: the drives node ({DRIVES_NODE}) runs as a process "
+            "of its own; leave out one of the two"
+        )
+    from winder.drives import load_drives
+
+    path = Path(given).expanduser().absolute()  # the caller's working directory, not the node's
+    load_drives(path)  # DrivesFileError, a BadInputError
+    return str(path)
+
+
 #: the parts of the cell ``winder run --external`` may leave to another host, in words
 #: (each found there by its role, whatever its node name)
 EXTERNAL = {"profile": "profile node", "sim": "step consumer"}
@@ -694,6 +731,7 @@ JOB_FILE_HELP = (
 
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="winder", description="winder: coil and rotor winding cell tools")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     p = sub.add_parser("interp", help="interpolate a winding job and print a summary")
     p.add_argument("job_file", nargs="?", metavar="JOB_FILE", help=JOB_FILE_HELP)
@@ -720,6 +758,14 @@ def build_parser() -> argparse.ArgumentParser:
         "or sim_node and profile_node sections) are set on them through their parameter services "
         "before the job starts; a setting they refuse ends the run unstarted, naming it (see "
         "docs/DEPLOYING.md)",
+    )
+    g.add_argument(
+        "--drives",
+        default=None,
+        metavar="FILE",
+        help="wind on CiA 402 drives over CANopen: start cia402_node with this drives file as the "
+        "step consumer, in the sim node's place (interface: virtual winds on drive twins in that "
+        "process; see docs/DRIVES.md). The file is checked before anything starts",
     )
     g.add_argument(
         "--one-process",

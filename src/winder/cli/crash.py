@@ -38,12 +38,8 @@ def _one_line(text: str) -> str:
 def write_crash(command: str, exc: BaseException, argv: list[str] | None = None) -> Path:
     """The traceback of ``exc`` (with the command line and the versions) in a
     new file; its path. OSError if neither place can be written."""
-    from importlib.metadata import PackageNotFoundError, version
+    from winder import __version__ as winder_version
 
-    try:
-        winder_version = version("winder")
-    except PackageNotFoundError:
-        winder_version = "unknown"
     text = "".join(
         [
             f"winder {command}: internal error\n",

@@ -110,6 +110,22 @@ def cmd_operate(args: argparse.Namespace) -> int:
     return _guarded(args, body)
 
 
+def cmd_estop(args: argparse.Namespace) -> int:
+    """The consumer's ``~/estop``: EXIT_OK if it stopped the drives, EXIT_FAILED if not."""
+    ns = _namespace(args)
+    timeout = _timeout(args)
+
+    def body(ctl: Any) -> int:
+        with ctl.Session(timeout) as session:
+            ok, message = ctl.estop(session, ns)
+            if not ok:
+                return _fail(args, message, EXIT_FAILED)
+            print(message, flush=True)
+        return EXIT_OK
+
+    return _guarded(args, body)
+
+
 # -- start -------------------------------------------------------------------------------------
 
 
@@ -569,8 +585,8 @@ def register(sub: argparse._SubParsersAction[Any]) -> None:
     """Add ``ctl`` and its commands to the ``winder`` subcommands."""
     ctl = sub.add_parser(
         "ctl",
-        help="drive a running cell: start, state, param, lifecycle, pause, resume, abort, override X, echo, "
-        "interface show",
+        help="drive a running cell: start, state, param, lifecycle, pause, resume, abort, estop, override X, "
+        "echo, interface show",
         description="Commands to a running cell on this ROS_DOMAIN_ID, through the standard ROS 2 "
         "services and the cell's topics (what ros2 service call, ros2 param, ros2 lifecycle, ros2 topic "
         "echo and ros2 interface show do, "
@@ -592,6 +608,14 @@ def register(sub: argparse._SubParsersAction[Any]) -> None:
             p.add_argument("value", metavar="X", help=f"the override factor, in {factors}")
         _common(p)
         p.set_defaults(func=cmd_operate)
+
+    text = (
+        "emergency stop: the drives' quick stop, then disable (the consumer's ~/estop); the run "
+        'closes incomplete with the reason "emergency stop"'
+    )
+    p = verbs.add_parser("estop", help=text, description=text)
+    _common(p)
+    p.set_defaults(func=cmd_estop)
 
     p = verbs.add_parser(
         "start",

@@ -28,6 +28,7 @@ from winder.tension.tensioner import TENSIONER_SPECS
 __all__ = [
     "CONSUMER_SPECS",
     "INTERP_SPECS",
+    "MANAGED",
     "MOTOR_FIELDS",
     "OPERATION_SPECS",
     "PROFILE_KINDS",
@@ -62,6 +63,15 @@ STALL_ABORT = Spec(
     "s",
     0.1,
     86400.0,
+)
+
+#: the setting every winder node has besides its table: ``ManagedNode``'s, read-only (given at start)
+MANAGED = Spec(
+    "managed",
+    bool,
+    False,
+    "wait, unconfigured, for an orchestrator's configure and activate (lifecycle); "
+    "false: configure and activate at start",
 )
 
 INTERP_SPECS = {

@@ -25,6 +25,7 @@ from rosbags.interfaces import Qos as BagQos
 from rosbags.interfaces import QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
 
+from winder import __version__
 from winder.contract.files import fsync_path
 from winder.contract.params import BAG_COMPRESSIONS
 from winder.contract.qos import Qos, qos_of
@@ -34,6 +35,7 @@ from winder.record.msgtypes import typestore_for
 
 __all__ = [
     "STATE_KEY",
+    "VERSION_KEY",
     "BagRecorder",
     "bag_qos",
     "being_written",
@@ -149,6 +151,9 @@ COMPRESSIONS = BAG_COMPRESSIONS
 #: metadata.yaml's ``custom_data`` key that says how far the bag got: ``recording``
 #: from its open on (what a bag whose writer was killed keeps), ``closed`` at its close
 STATE_KEY = "winder_bag"
+#: the version of the winder that wrote a bag (``winder.__version__``): its key in
+#: metadata.yaml's ``custom_data``, and in a consumer's final report (``extra``) too
+VERSION_KEY = "winder_version"
 #: the staging directory of a bag being opened: ``.<bag name>.opening-<pid>``
 _STAGING = re.compile(r"^\.(?P<name>.+)\.opening-(?P<pid>[0-9]+)$")
 
@@ -466,7 +471,7 @@ class BagRecorder:
         after leaves a bag that ``winder bag recover`` reads. ``custom``:
         metadata.yaml's custom_data besides the bag's state."""
         writer = _Writer(self._stage, self.path.name)
-        for key, value in custom.items():
+        for key, value in {**custom, VERSION_KEY: __version__}.items():
             writer.set_custom_data(key, value)
         if self.compression != "none":  # chunk compression inside the .mcap
             writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)

@@ -300,6 +300,7 @@ class CellWatch:
         #: the pids of the nodes this process started (None: it started none, they run elsewhere)
         self.own = own
         self.started: set[str] = set()  #: names of the nodes this process started (set by run_cell)
+        self.consumer_here = True  #: the consumer is a process this one started (set by run_cell)
         self.consumer_blocked = ""  #: why the consumer is blocked (its job status), if it is
         #: an external consumer on the graph: when it was last looked for, and last seen (monotonic s)
         self.consumer_look = self.consumer_seen = 0.0
@@ -573,6 +574,7 @@ def _spawn(
     namespace: str,
     external: frozenset[str],
     one_process: bool = False,
+    nodes: dict[str, str] = NODES,
 ) -> None:
     if one_process:  # the three in one container process, each node's parameters in a section of its own
         path = procs.log_dir / "cell_params.yaml"
@@ -587,7 +589,7 @@ def _spawn(
     for key in START_ORDER:
         if key in external:
             continue  # it runs elsewhere on the graph (another host)
-        procs.start(NODES[key], ros_args(_node_params(params, key), namespace))
+        procs.start(nodes[key], ros_args(_node_params(params, key), namespace))
 
 
 def cell_params_file(params: dict[str, dict[str, Any]], namespace: str) -> str:
@@ -673,7 +675,7 @@ def _consumer_gone(node: Node, watch: CellWatch, now: float) -> str:
     or its lease out) ends the wait, named, after CONSUMER_GONE_S s: before,
     ``winder run`` waited for a final report that could not come until its
     ``--timeout`` (an hour). One look at the graph a second."""
-    if not watch.accepted or NODES["sim"] in watch.started:
+    if not watch.accepted or watch.consumer_here:
         return ""  # a consumer started here is watched as a process (procs.dead)
     if now - watch.consumer_look < 1.0:
         return ""
@@ -733,6 +735,7 @@ def run_cell(
     interrupts: Interrupts | None = None,
     one_process: bool = False,
     early: EarlyContainer | None = None,
+    consumer: str = NODES["sim"],
 ) -> CellResult:
     """Start the three nodes with ``params[node]`` parameters (but those in
     ``external``, which run elsewhere on the graph: their ``params`` are set
@@ -756,7 +759,10 @@ def run_cell(
     (none may be external): they find each other without discovery between
     processes, so the job starts sooner, but share one core. ``early``: that
     container, started already (:func:`winder.ros.early.prestart`): it gets
-    its arguments when the cell starts, and is stopped with the cell in any case."""
+    its arguments when the cell starts, and is stopped with the cell in any case.
+    ``consumer``: the consumer's executable, started in the place of ``sim_node``
+    with ``params["sim"]`` (``cia402_node`` for ``winder run --drives``; not
+    in one process)."""
     from rclpy.signals import SignalHandlerOptions
 
     if (one_process or early is not None) and external:
@@ -766,6 +772,13 @@ def run_cell(
             f"one_process with external={sorted(external)} is invalid: one process holds the whole cell"
         )
     one_process = one_process or early is not None
+    if one_process and consumer != NODES["sim"]:
+        if early is not None:
+            early.cancel()
+        raise BadInputError(
+            f"one_process with consumer={consumer!r} is invalid: it runs as a process of its own"
+        )
+    nodes = {**NODES, "sim": consumer}
     own = interrupts is None
     if interrupts is None:
         interrupts = Interrupts().install()
@@ -791,8 +804,9 @@ def run_cell(
                     own_pids = lambda: {str(p.pid) for p in procs.procs.values()}  # noqa: E731
                     watch = CellWatch(node, namespace, remote, own=own_pids)
                     errors = watch.errors
-                    watch.started = {NODES[key] for key in NODE_ROLES if key not in external}
-                    _spawn(procs, params, namespace, external, one_process)
+                    watch.started = {nodes[key] for key in NODE_ROLES if key not in external}
+                    watch.consumer_here = "sim" not in external
+                    _spawn(procs, params, namespace, external, one_process, nodes)
                 failure = _wait_for_job(
                     node, watch, procs, (start_timeout, timeout), progress, keys, interrupts
                 )

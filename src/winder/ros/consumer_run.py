@@ -39,13 +39,14 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import String
 
+from winder import __version__
 from winder.contract.params import PROFILE_SPECS
 from winder.contract.run import FAULTS_KEY, JobReport, RunLedger, Transition
 from winder.contract.states import CellState, JobState
 from winder.contract.stream import JobPlan, StreamChecker
 from winder.contract.topics import TOPIC_PROGRESS, TOPIC_REPORT, TOPIC_STATE, TOPIC_STEP_TIMES, status_values
 from winder.contract.trust import Intruders
-from winder.record.bag import signals_held
+from winder.record.bag import VERSION_KEY, signals_held
 from winder.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from winder.ros.engine import Engine
 from winder.ros.intake import RowGate
@@ -306,6 +307,7 @@ class ConsumerRun:
         report = self.job_report(
             JobState.DONE if complete else (JobState.ABORTED if aborted else JobState.INCOMPLETE)
         )
+        report.extra[VERSION_KEY] = __version__  # which winder ran it, as its bag's metadata says
         faults = self.engine.faults()
         if faults:  # said as a key of its own too: a done run with faults is no success (CONTRACT 3.7)
             report.extra[FAULTS_KEY] = faults

@@ -1066,6 +1066,20 @@ def trigger(service: str, timeout: float = 10.0, session: Session | None = None)
     return bool(reply.success), str(reply.message)
 
 
+def estop(session: Session, namespace: str) -> tuple[bool, str]:
+    """An emergency stop: the ``~/estop`` of the cell's consumer (found by its
+    role, whatever its name: a driver node's, beside the profile node's
+    ``~/abort``); (success, the node's words or why it was not called)."""
+    try:
+        consumer = find_role(session, namespace, "consumer", "the step consumer")
+    except UnansweredError as exc:
+        return False, str(exc)
+    ok, message = trigger(f"{consumer}/estop", session=session)
+    if not ok and message.endswith("is the cell running there?"):
+        message = f"{message} ({consumer} offers no ~/estop: only a driver node does, sim_node does not)"
+    return ok, message
+
+
 def set_parameter(
     node: str, name: str, value: float, timeout: float = 10.0, session: Session | None = None
 ) -> tuple[bool, str]:

@@ -52,6 +52,7 @@ import numpy.typing as npt
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
 
 from winder.contract.cdr import JointStateEncoder, encode_clocks
 from winder.contract.params import CONSUMER_SPECS, check_consumer
@@ -166,6 +167,11 @@ class Backend(Protocol):
     except :meth:`begin`, which runs in a thread of its own for at most
     ``begin_timeout`` s (the executor waits for it; one that overruns fails
     its run, and no other method is called until it has returned).
+
+    Optional beyond these, looked up by name (so that a backend written
+    before it is still a ``Backend``): ``estop()``, the node's ``~/estop``
+    (an emergency stop: a drive's quick stop, then disable; the run then
+    closes incomplete with the reason "emergency stop").
 
     Every return value is checked against what is documented here, and
     anything raised (``KeyboardInterrupt`` and ``SystemExit`` too, see
@@ -480,6 +486,23 @@ class DriveEngine(Engine):
         if got is not FAILED and got is not None:
             self.bug("end", f"returned {shown(got)}: want None")
 
+    def estop(self) -> str:
+        """An emergency stop (``~/estop``): the backend's ``estop()`` if it has
+        one, and a run going on closed incomplete with the reason "emergency
+        stop", the profile node told to abort. What was done, in words."""
+        fn = getattr(self.backend, "estop", None)
+        stopped = "every axis quick-stopped" if callable(fn) else "this backend has no estop(): the axes"
+        if callable(fn) and self.call("estop", fn) is FAILED:
+            stopped = "backend.estop() failed (in the node's log)"
+        if self.run.plan is None:
+            return f"emergency stop: {stopped}; no run was going on"
+        run_id = self.run.plan.run_id
+        if not self.broken:
+            self.broken = "emergency stop"
+            self.node.get_logger().error(f"emergency stop ({stopped}); the run stops")
+        self.run.pump()  # the run closes now (work() sees the fault)
+        return f"emergency stop: {stopped}; run {run_id} closed incomplete"
+
     # -- a backend that fails --------------------------------------------------------------
     def call(self, what: str, fn: Callable[..., Any], *args: Any) -> Any:
         """``fn(*args)``, a method of the backend, or FAILED. Anything raised
@@ -635,8 +658,23 @@ class DriverNode(StepConsumer):
 
     def __init__(self, backend: Backend, name: str = "driver", hardware_id: str | None = None) -> None:
         engine = DriveEngine(backend)
-        specs = {**CONSUMER_SPECS, **DRIVER_SPECS, **type(backend).specs}
+        specs = self.parameters(type(backend))
         super().__init__(
             name, specs, check_consumer, engine, hardware_id=hardware_id or name, topics=self.TOPICS
         )
         self.backend = backend
+        self.create_service(Trigger, "~/estop", self.on_estop)
+
+    def on_estop(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        """``~/estop`` (beside the profile node's ``~/abort``): see :meth:`DriveEngine.estop`."""
+        engine = self.engine
+        assert isinstance(engine, DriveEngine)
+        response.message = engine.estop()
+        response.success = not response.message.startswith("emergency stop: backend.estop() failed")
+        return response
+
+    @staticmethod
+    def parameters(backend: type[Backend]) -> dict[str, Spec]:
+        """The parameters a driver node around a ``backend`` declares: the
+        consumer's, the driver's and the backend's own (what its ``--help`` lists)."""
+        return {**CONSUMER_SPECS, **DRIVER_SPECS, **backend.specs}

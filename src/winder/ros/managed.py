@@ -38,6 +38,7 @@ from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.publisher import Publisher
 
+from winder.contract.params import MANAGED
 from winder.ros.wake import WakeWatch
 
 __all__ = ["LEFT_CELL", "ManagedNode"]
@@ -66,15 +67,8 @@ class ManagedNode(LifecycleNode):
         # a hold (SIGSTOP, a starved host) longer than the DDS lease must not cost the node its
         # place on the others' graphs: it announces itself again when it wakes (winder.ros.wake)
         self.wake_watch = WakeWatch(self)
-        self.declare_parameter(
-            "managed",
-            False,
-            ParameterDescriptor(
-                description="wait, unconfigured, for an orchestrator's configure and activate "
-                "(lifecycle); false: configure and activate at start",
-                read_only=True,
-            ),
-        )
+        described = ParameterDescriptor(description=MANAGED.description, read_only=True)
+        self.declare_parameter(MANAGED.name, MANAGED.default, described)
 
     def create_publisher(
         self, *args: Any, event_callbacks: PublisherEventCallbacks | None = None, **kwargs: Any

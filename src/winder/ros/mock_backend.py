@@ -20,7 +20,7 @@ import numpy as np
 import numpy.typing as npt
 
 from winder.ros.driver import Backend, DriverNode, RunStart
-from winder.ros.spin import spin
+from winder.ros.spin import answer_help, spin
 from winder.spec import Spec
 
 __all__ = ["MockBackend", "main"]
@@ -82,7 +82,9 @@ class MockBackend(Backend):
 
 
 def main(args: list[str] | None = None) -> None:
-    spin(lambda: DriverNode(MockBackend(), "mock_driver", "winder_mock"), args)
+    about = "The mock drive: a driver node whose axes follow their commands (MockBackend)."
+    if not answer_help("python -m winder.ros.mock_backend", about, DriverNode.parameters(MockBackend), args):
+        spin(lambda: DriverNode(MockBackend(), "mock_driver", "winder_mock"), args)
 
 
 if __name__ == "__main__":

@@ -8,12 +8,14 @@ import logging
 import os
 import signal
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from types import FrameType
 from typing import TYPE_CHECKING, Any, NoReturn
 
 if TYPE_CHECKING:  # rclpy is imported when a node spins: the signal handling here comes before it
     from rclpy.node import Node
+
+    from winder.spec import Spec
 
 #: glibc's mallopt parameters, and the values a node runs with: blocks up to
 #: 32 MiB (glibc's limit) come from the heap, and up to 64 MiB of freed heap
@@ -36,6 +38,78 @@ def keep_freed_memory() -> bool:
     if mallopt is None:
         return False
     return bool(mallopt(_M_MMAP_THRESHOLD, HEAP_BLOCKS)) and bool(mallopt(_M_TRIM_THRESHOLD, HEAP_KEPT))
+
+
+#: what a node's own arguments (those before ``--ros-args``) may ask, besides ROS's arguments after it
+HELP_OPTIONS = ("-h", "--help")
+
+
+def answer_help(prog: str, about: str, parameters: Mapping[str, Spec], args: list[str] | None) -> bool:
+    """A node executable's ``-h``/``--help``: its usage and ``parameters``
+    (the table its node declares; :data:`winder.contract.params.MANAGED`
+    besides), printed, True; False (nothing printed) if the arguments
+    (``sys.argv`` when None, as rclpy takes them) do not ask for help.
+    Called before rclpy or the node's module is imported, which takes half a
+    second to a second: the answer comes in a third of that."""
+    if not any(a in HELP_OPTIONS for a in own_arguments(sys.argv if args is None else args)):
+        return False
+    print(node_help(prog, about, parameters))
+    return True
+
+
+def own_arguments(argv: list[str]) -> list[str]:
+    """A node's own arguments: those of ``argv[1:]`` outside its ROS arguments,
+    each section of which runs from ``--ros-args`` to ``--`` or the end (rcl's rule)."""
+    own: list[str] = []
+    in_ros = False
+    for arg in argv[1:]:
+        if arg == "--ros-args":
+            in_ros = True
+        elif in_ros and arg == "--":
+            in_ros = False
+        elif not in_ros:
+            own.append(arg)
+    return own
+
+
+def node_help(prog: str, about: str, parameters: Mapping[str, Spec]) -> str:
+    """The help of a node executable: usage, what it is (``about``'s first
+    line), how its parameters are given, and each parameter in one line,
+    ``NAME:=DEFAULT`` (as ``-p`` takes it) and its help (what, range)."""
+    from winder.contract.params import MANAGED
+
+    table = {**parameters, MANAGED.name: MANAGED}
+    shown = {name: f"{name}:={_ros_value(spec.default)}" for name, spec in table.items()}
+    width = max(map(len, shown.values()))
+    lines = [
+        f"usage: {prog} [-h] [--ros-args [-p NAME:=VALUE ...] [--params-file FILE] [-r FROM:=TO ...]]",
+        "",
+        (about.strip().splitlines() or [prog])[0],
+        "",
+        "A ROS 2 node: it runs until stopped (Ctrl-C, SIGTERM). Its parameters are given at its",
+        "start after --ros-args, each with -p NAME:=VALUE, or from a parameters file (a job file)",
+        "with --params-file FILE; at run time with `winder ctl param set` (`ros2 param set`).",
+        f"Example: {prog} --ros-args -p use_sim_time:=true -r __ns:=/cell1",
+        "",
+        "parameters (NAME:=DEFAULT  what it is; the values it takes):",
+        *(f"  {shown[name]:<{width}}  {s.description}; {s.range_text()}" for name, s in table.items()),
+        "  and rclpy's own: use_sim_time (false), start_type_description_service (true)",
+        "",
+        "options:",
+        "  -h, --help  show this help and exit (the node is not started)",
+    ]
+    return "\n".join(lines)
+
+
+def _ros_value(value: object) -> str:
+    """A default as a ``-p NAME:=VALUE`` writes it (YAML: ``true``, ``''``, ``[a, b]``)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_ros_value(v) for v in value) + "]"
+    if isinstance(value, str):
+        return value if value and value.strip() == value and " " not in value else repr(value)
+    return repr(value)
 
 
 #: a signal came (one entry each): one before ``rclpy.init`` installs its handlers ends the node too
