@@ -238,3 +238,28 @@ def test_a_wind_goal_whose_flyer_loses_steps_is_no_success(procs: Procs, tmp_pat
     assert report.state == "done" and int(extra["lost_steps"]) > 0, extra
     assert "full steps lost" in extra["faults"] and "full steps lost" in answer.result.message
     assert answer.result.success is False and answer.status == GoalStatus.STATUS_ABORTED
+
+
+@pytest.mark.ros
+def test_ctl_start_wait_of_a_run_with_faults_exits_6(procs: Procs, tmp_path: Path) -> None:
+    """`winder ctl start --wait` ends a run that is done with faults as
+    `winder run` does: the run's end printed, one line naming the faults on
+    stderr, exit 6 (it exited 0, as for a clean run)."""
+    procs.start("interp_node", "-p", "autostart:=false")
+    procs.start("profile_node")
+    procs.start("sim_node", "-p", f"bag_dir:={tmp_path}", "-p", "model:=nonlinear", "-p", f"fork.D:={WEAK_D}")
+    argv = ["ctl", "start", "--set", "turns_per_layer=4", "--set", "layers=1", "--set", "poles=1"]
+    r = subprocess.run(
+        [str(BIN / "winder"), *argv, "--wait", "--timeout", "60"],
+        env=procs.env,
+        capture_output=True,
+        text=True,
+        timeout=240,
+        stdin=subprocess.DEVNULL,
+    )
+    assert r.returncode == EXIT_FAULTED, r.stdout + r.stderr
+    assert re.search(r"^run \S+: done, bag ", r.stdout, re.M), r.stdout
+    [line] = r.stderr.strip().splitlines()
+    assert "ended done with faults" in line and "full steps lost" in line, r.stderr
+    status = final_report(rosbags_read(closed_bags(tmp_path)[0]))
+    assert status["state"] == "done" and "full steps lost" in status["faults"], status

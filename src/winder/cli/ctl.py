@@ -22,7 +22,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from winder.cli.exits import EXIT_ABORTED, EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK
+from winder.cli.exits import EXIT_ABORTED, EXIT_BAD_INPUT, EXIT_FAILED, EXIT_FAULTED, EXIT_OK
+from winder.contract.run import FAULTS_KEY
 from winder.contract.states import EventKind, JobState
 from winder.errors import BadInputError
 
@@ -232,7 +233,7 @@ def wait_for_end(args: argparse.Namespace, session: Any, view: Any, goal: Any, r
         st = view.statuses.get(role)
         return dict(st.values) if st is not None and st.values.get("run_id") == run_id else {}
 
-    def ended(state: str, bag: str) -> int:
+    def ended(state: str, bag: str, faults: str = "") -> int:
         """How the run ended: the goal's typed result (waited for up to
         the session's timeout after the consumer's final status), who was
         not believed on the way, then one line."""
@@ -248,6 +249,13 @@ def wait_for_end(args: argparse.Namespace, session: Any, view: Any, goal: Any, r
         if ignored:
             print(f"  ignored, foreign  {ignored}", flush=True)
         print(f"run {run_id}: {state}" + (f", bag {bag}" if bag else ""), flush=True)
+        if state not in (JobState.DONE, JobState.ABORTED):
+            return _fail(args, f"run {run_id} ended {state}", END_CODES[state])
+        if not faults and goal.result.done():
+            extra = goal.result.result().result.report.extra
+            faults = next((kv.value for kv in extra if kv.key == FAULTS_KEY), "")
+        if faults:  # every step executed, but the axes did not do what was commanded: as winder run
+            return _fail(args, f"run {run_id} ended {state} with faults: {one_line(faults)}", EXIT_FAULTED)
         if state != JobState.DONE:
             return _fail(args, f"run {run_id} ended {state}", END_CODES[state])
         return EXIT_OK
@@ -273,7 +281,7 @@ def wait_for_end(args: argparse.Namespace, session: Any, view: Any, goal: Any, r
                 print(line, flush=True)
                 last_line = line
             if mine.get("state") in END_CODES:
-                return ended(mine["state"], mine.get("bag", ""))
+                return ended(mine["state"], mine.get("bag", ""), mine.get(FAULTS_KEY, ""))
         if goal.result.done():
             result = goal.result.result().result
             if result.report.state in END_CODES:
