@@ -36,13 +36,13 @@ interfaces: $(STAMP)
 $(STAMP): $(SETUPS)
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	@echo "winder: installing into $(VENV) (ROS 2 Jazzy wheels, numpy, mcap, rosbags, test tools)"
-	$(BIN)/python -m pip install -q --disable-pip-version-check --upgrade pip
-	$(BIN)/python -m pip install -q --disable-pip-version-check -e '.[ros,test]' \
+	@$(BIN)/python -m pip install -q --disable-pip-version-check --upgrade pip
+	@$(BIN)/python -m pip install -q --disable-pip-version-check -e '.[ros,test]' \
 		-e ./winder_interp -e ./winder_profile -e ./winder_sim -e ./winder_bridge
 	@touch $(STAMP)
 
 demo: bytecode
-	$(BIN)/winder run
+	@$(BIN)/winder run
 
 test: bytecode
 	$(BIN)/ruff check $(PACKAGES) winder_interfaces test bench

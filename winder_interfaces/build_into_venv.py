@@ -96,7 +96,7 @@ def main() -> int:
         if stamp.is_file() and stamp.read_text().strip() == digest and imports(python, name, pkg):
             print(f"{name}: up to date in {venv}")
             return 0
-        print(f"{name}: building into {venv} (cmake, 10-30 s; log {build / 'build.log'})", flush=True)
+        print(f"{name}: building into {venv} (cmake, about a minute; log {build / 'build.log'})", flush=True)
         stamp.unlink(missing_ok=True)
         log = build / "build.log"
         log.write_text("")
