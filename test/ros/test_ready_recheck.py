@@ -69,3 +69,23 @@ def test_a_waiting_node_looks_often_then_seldom_then_not(
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown(context=ctx)
+
+
+@pytest.mark.ros
+def test_a_node_that_waits_says_what_for_and_when_it_is_ready(procs: Procs) -> None:
+    """The profile node alone says "waiting" on winder/ready; after FAST_WAIT
+    s its log says why, naming each part of the cell it misses; once the
+    interp and sim nodes come it says it is ready, and so does the sim node
+    (which waited for nothing it could not find at once)."""
+    from support import wait
+
+    from winder.ros.ready import FAST_WAIT
+
+    profile = procs.start("profile_node")
+    said = wait.log_has(lambda: procs.log(profile), "not ready for a run: ", FAST_WAIT + 30, "the reason")
+    line = next(ln for ln in said.splitlines() if "not ready for a run: " in ln)
+    for part in ("no publisher of winder/steps matched", "no interp node in /", "no step consumer in /"):
+        assert part in line, line
+    procs.start("interp_node", "-p", "autostart:=false")
+    procs.start("sim_node", "-p", "record:=false")
+    wait.log_has(lambda: procs.log(profile), "ready for a run (ready)", 60, "the profile node ready")

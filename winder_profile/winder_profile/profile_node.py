@@ -833,15 +833,16 @@ class ProfileNode(ManagedNode):
             self.ready.announce(ReadyState.BLOCKED)
         elif not self.active:
             self.ready.announce(ReadyState.INACTIVE)
-        elif (
-            self.sub_steps is not None
-            and self.sub_steps.get_publisher_count() > 0
-            and self.solo.settled()  # and it is the cell's only profile node
-            and not self.peers.knows("interp", "consumer")  # it tells the cell's nodes from others
-        ):
-            self.ready.announce(ReadyState.READY)
         else:
-            self.ready.announce(ReadyState.WAITING)
+            why = []
+            if self.sub_steps is None or self.sub_steps.get_publisher_count() == 0:
+                why.append("no publisher of winder/steps matched")
+            if not self.solo.settled():  # it is the cell's only profile node
+                why.append("not yet known to be the cell's only profile node")
+            unknown = self.peers.knows("interp", "consumer")  # it tells the cell's nodes from others
+            if unknown:
+                why.append(unknown)
+            self.ready.announce(ReadyState.WAITING if why else ReadyState.READY, "; ".join(why))
 
     def report(self) -> None:
         self.release()  # steps waiting for the run's mode (MODE_WAIT) go out

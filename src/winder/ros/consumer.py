@@ -459,10 +459,23 @@ class StepConsumer(ManagedNode):
         elif not self.active:
             state = ReadyState.INACTIVE
         else:
-            heard = self.sub_times.get_publisher_count() > 0 and self.sub_job.get_publisher_count() > 0
+            why = []
+            if self.sub_times.get_publisher_count() == 0:
+                why.append("no publisher of winder/step_times matched")
+            if self.sub_job.get_publisher_count() == 0:
+                why.append("no publisher of winder/job matched")
+            if not self.solo.settled():
+                why.append("not yet known to be the cell's only consumer")
             # and it can tell the cell's own interp and profile node from anyone else
-            known = heard and self.solo.settled() and not self.peers.knows("interp", "profile")
-            state = ReadyState.READY if known and not self.engine.missing() else ReadyState.WAITING
+            unknown = self.peers.knows("interp", "profile")
+            if unknown:
+                why.append(unknown)
+            missing = "" if why else self.engine.missing()  # asked of a cell that is there (it logs)
+            if missing:
+                why.append(missing)
+            state = ReadyState.WAITING if why else ReadyState.READY
+            self.ready.announce(state, "; ".join(why))
+            return
         self.ready.announce(state)
 
     def report(self) -> None:

@@ -50,6 +50,8 @@ class Announcer:
     def __init__(self, node: Node, role: str, recheck: Callable[[], None] | None = None) -> None:
         assert role in READY_ROLES
         self.role = role
+        self.log = node.get_logger()
+        self.said = ""  # why it waits, as last said in the log
         self.pub = node.create_publisher(KeyValue, TOPIC_READY, QOS_LATCHED)
         self.state: ReadyState | None = None
         self.timer = self.slow_timer = None
@@ -68,17 +70,29 @@ class Announcer:
                 self.slow_timer.reset()
         self.recheck()
 
-    def announce(self, state: ReadyState | str) -> None:
+    def announce(self, state: ReadyState | str, why: str = "") -> None:
+        """``state``; ``why``: what a node that says "waiting" waits for,
+        said in its log once it has waited :data:`FAST_WAIT` s (a cell part
+        missing, or a graph that does not name it: what an operator asks
+        of a cell that refuses "not ready"), and again when it changes."""
         assert state in READY_STATES
         state = ReadyState(state)
+        if state is ReadyState.WAITING and why and self.state is ReadyState.WAITING:
+            if why != self.said and time.monotonic() - self.waiting_since > FAST_WAIT:
+                self.said = why
+                self.log.info(f"not ready for a run: {why}")
+        elif state is not ReadyState.WAITING and self.said:
+            self.said = ""
+            self.log.info(f"ready for a run ({state})")
         if state != self.state:
+            if state is ReadyState.WAITING:
+                self.waiting_since = time.monotonic()
             self.state = state
             self.pub.publish(KeyValue(key=self.role, value=state))
         if self.timer is None or self.slow_timer is None:
             return
         looking = not (self.timer.is_canceled() and self.slow_timer.is_canceled())
         if state is ReadyState.WAITING and not looking:
-            self.waiting_since = time.monotonic()
             self.timer.reset()
         elif state is not ReadyState.WAITING and looking:
             self.timer.cancel()
