@@ -172,6 +172,8 @@ class Cia402Backend:
     is opened); ``network``: a connected canopen network to use instead of
     opening the file's bus (the caller keeps it)."""
 
+    #: real drives (its parts are real parts); a caller that serves twins on its bus says otherwise
+    simulated: bool = False
     specs: ClassVar[dict[str, Spec]] = {
         "real_time": Spec(
             "real_time", bool, True, "send SYNC at its period (false: as fast as the drives answer)"

@@ -25,6 +25,14 @@ A drives file (YAML)::
         position_window: 10   # 0x6067 counts (optional)
         profile: {velocity: 100000, acceleration: 1000000, deceleration: 1000000,
                   quick_stop_deceleration: 4000000}  # counts/s, counts/s^2 (optional)
+    twin_fault: {axis: fork, at_sync: 500, fault: jam}  # virtual bus only (tests), optional
+
+``twin_fault`` is a test's hook into the twins a node serves on a virtual
+bus (:mod:`winder.ros.cia402_node`): at the ``at_sync``-th SYNC the twins
+see, the axis' twin faults once: ``jam`` (the motor blocked: a following
+error, by the twin's own monitoring), ``heartbeat`` (its heartbeat stops) or
+an EMCY error code (``0x2310``: :meth:`SimulatedDrive.inject_fault`). A real
+bus has no twin to tell, so it is refused there.
 
 A value that cannot be used is refused with one line naming the key, the
 value and what it must be (:class:`DrivesFileError`).
@@ -47,6 +55,7 @@ __all__ = [
     "DrivesConfig",
     "DrivesFileError",
     "Homing",
+    "TwinFault",
     "load_drives",
     "parse_drives",
     "period_object",
@@ -62,6 +71,8 @@ HOMING_METHODS = (*range(1, 15), *range(17, 31), 33, 34, 35, 37)
 QUICK_STOP_OPTIONS = (0, 1, 2, 5, 6)
 MODES = {8: "cyclic synchronous position", 1: "profile position"}
 SYNC_RANGE = (0.0005, 0.1)
+#: the faults ``twin_fault`` can inject besides an EMCY code (see the module doc)
+TWIN_FAULTS = ("jam", "heartbeat")
 
 
 class DrivesFileError(BadInputError):
@@ -112,12 +123,22 @@ class AxisDrive:
 
 
 @dataclass(frozen=True)
+class TwinFault:
+    """A fault one twin injects at a SYNC (a test's hook; see the module doc)."""
+
+    axis: str
+    at_sync: int
+    fault: str | int  # "jam", "heartbeat", or an EMCY error code
+
+
+@dataclass(frozen=True)
 class DrivesConfig:
     source: str
     bus: BusConfig
     sync_period: float
     sdo_timeout: float
     axes: tuple[AxisDrive, ...]  # in the cell's axis order
+    twin_fault: TwinFault | None = None
 
 
 def period_object(period: float) -> tuple[int, int] | None:
@@ -327,7 +348,10 @@ def parse_drives(doc: object, source: str = "drives file", base: Path | None = N
     ``base``: the directory relative EDS paths are in."""
     c = _Checker(source, base)
     top = c.table(
-        "drives file", doc, ("bus", "sync_period", "sdo_timeout", "axes"), ("bus", "sync_period", "axes")
+        "drives file",
+        doc,
+        ("bus", "sync_period", "sdo_timeout", "axes", "twin_fault"),
+        ("bus", "sync_period", "axes"),
     )
     bus = _bus(c, top["bus"])
     period = c.number("sync_period", top["sync_period"], *SYNC_RANGE, "s")
@@ -345,7 +369,26 @@ def parse_drives(doc: object, source: str = "drives file", base: Path | None = N
         seen[drive.node_id] = drive.axis
     for drive in axes:
         _check_eds(c, drive)
-    return DrivesConfig(source, bus, period, sdo_timeout, axes)
+    twin_fault = _twin_fault(c, top["twin_fault"], bus) if "twin_fault" in top else None
+    return DrivesConfig(source, bus, period, sdo_timeout, axes, twin_fault)
+
+
+def _twin_fault(c: _Checker, value: object, bus: BusConfig) -> TwinFault:
+    if bus.interface != "virtual":
+        raise c.fail("twin_fault", value, "absent unless bus.interface is virtual (the twins' bus)")
+    t = c.table("twin_fault", value, ("axis", "at_sync", "fault"), ("axis", "at_sync", "fault"))
+    if t["axis"] not in AXES:
+        raise c.fail("twin_fault.axis", t["axis"], f"one of {', '.join(AXES)}")
+    at_sync = c.integer("twin_fault.at_sync", t["at_sync"], 1, 2**31 - 1)
+    fault = t["fault"]
+    ok = fault in TWIN_FAULTS or (
+        isinstance(fault, int) and not isinstance(fault, bool) and 0x1000 <= fault <= 0xFFFF
+    )
+    if not ok:
+        raise c.fail(
+            "twin_fault.fault", fault, f"{', '.join(TWIN_FAULTS)} or an EMCY error code (0x1000-0xFFFF)"
+        )
+    return TwinFault(str(t["axis"]), at_sync, fault)
 
 
 def _check_eds(c: _Checker, drive: AxisDrive) -> None:

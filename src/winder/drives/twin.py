@@ -23,8 +23,9 @@ what a drive does with the objects.
 * **Homing** methods 35 and 37 (the current position is home) and 19 (the
   home switch on the positive side, against :attr:`home_switch`); 0x607C is
   the position of home.
-* **Faults** injected with :meth:`inject_fault` (any EMCY code), and
-  :meth:`stop_heartbeat` (the drive goes quiet on 0x700).
+* **Faults** injected with :meth:`inject_fault` (any EMCY code),
+  :meth:`stop_heartbeat` (the drive goes quiet on 0x700) and :meth:`jam`
+  (the motor blocked: a following error, by the monitoring above).
 
 The motor behind it is winder's stepper model (:class:`winder.axis.StepperAxis`,
 the paper's motor unless another is given), followed with the exact linear
@@ -96,9 +97,15 @@ class SimulatedDrive:
         self.lock = threading.RLock()
         self.network = network
         self.node = canopen.LocalNode(node_id, self.EDS)
-        self.tracker = (motor or StepperAxis.paper()).linear_tracker()
+        self.motor = motor or StepperAxis.paper()
+        self.tracker = self.motor.linear_tracker()
+        self.base = 0.0  # the motor's position when its tracker was made (counts)
+        self.jammed = False  # the motor is blocked where it stands (jam())
         self.home_switch = home_switch
         self.state = "NOT READY TO SWITCH ON"
+        #: the state before the last one _enter()ed, ", moving" if the demand still moved then
+        #: (a node's report says it: a quick stop that ended at rest shows "QUICK STOP ACTIVE")
+        self.came_from = ""
         self.t = 0.0  # the drive's time (s): SYNC periods counted
         self.position = 0.0  # the motor, in counts from power-on (the model's theta)
         self.velocity = 0.0  # its speed (counts/s)
@@ -155,6 +162,14 @@ class SimulatedDrive:
         with self.lock:
             self._fault(code)
             self._send_event_tpdos()
+
+    def jam(self) -> None:
+        """The motor is blocked where it stands (a mechanical jam) until the next
+        fault reset: the demand runs away from it, and the drive's following-error
+        monitoring (0x6065, 0x6066) faults as configured."""
+        with self.lock:
+            self.jammed = True
+            self.velocity = 0.0
 
     def stop_heartbeat(self) -> None:
         """The heartbeat stops (a drive that hangs), the rest goes on."""
@@ -254,6 +269,10 @@ class SimulatedDrive:
         state = self.state
         if state == "FAULT":
             if word & 0x80 and not before & 0x80:  # transition 15
+                if self.jammed:  # freed: the motor is where it was blocked, at rest
+                    self.jammed = False
+                    self.tracker = self.motor.linear_tracker()
+                    self.base, self.demand, self.pending = self.position, self.position, None
                 self.error_code = 0
                 self.following = False
                 self.over_since = None
@@ -303,6 +322,7 @@ class SimulatedDrive:
 
     def _enter(self, state: str) -> None:
         was = self.state
+        self.came_from = was if self.demand_v == 0.0 else f"{was}, moving"
         self.state = state
         if state == "OPERATION ENABLED" and was != "QUICK STOP ACTIVE":
             # enabled where it stands: the demand is the motor's position; PP has no set-point yet
@@ -450,7 +470,8 @@ class SimulatedDrive:
         times, sizes = ([self.pending[0]], [self.pending[1]]) if self.pending is not None else ([], [])
         self.pending = None
         theta, omega = self.tracker.advance(times, sizes, [self.t])
-        self.position, self.velocity = float(theta[0]), float(omega[0])
+        if not self.jammed:
+            self.position, self.velocity = self.base + float(theta[0]), float(omega[0])
 
     def _monitor(self, dt: float) -> None:
         window = self._get(0x6065)

@@ -14,7 +14,11 @@ answer) and ``require_homing``.
 gets a drive twin (:class:`winder.drives.SimulatedDrive`) for each axis'
 node id, served in this process on the same channel: a virtual channel
 reaches no other process, so no real drive can be on it. The same file with
-``socketcan``/``can0`` drives real ones.
+``socketcan``/``can0`` drives real ones. A twin cell's run report has each
+twin's CiA 402 state and the state it came from (``twin_states``: "SWITCH
+ON DISABLED (from QUICK STOP ACTIVE)" is a quick stop ended at rest), and
+the drives file's ``twin_fault`` (a test's hook, a virtual bus only:
+:mod:`winder.drives.config`) makes one twin fault at the SYNC it names, once.
 
 **Homing** runs when the node starts, in a thread of its own, for drives
 with homing in the drives file (or every drive with ``require_homing``):
@@ -89,12 +93,34 @@ class DrivesBackend(Backend):
             network.connect(interface="virtual", channel=cfg.bus.channel)
             self.twin_network = network
             self.twins = [SimulatedDrive(network, d.node_id) for d in cfg.axes]
+            self.simulated = True  # its parts are twin parts, never mixed with real ones
+            if cfg.twin_fault is not None:
+                self.arm(cfg.twin_fault, self.twins[[d.axis for d in cfg.axes].index(cfg.twin_fault.axis)])
         self.drives = Cia402Backend(cfg)
         self.drives.log = self.log
         self.unusable = ""
         if len(lacking) < len(cfg.axes):
             self.homing = threading.Thread(target=self.home, name="cia402-homing", daemon=True)
             self.homing.start()
+
+    def arm(self, fault: Any, twin: Any) -> None:
+        """``twin_fault``: the twin faults at the ``at_sync``-th SYNC the twins
+        see (counted here, after the twins' own handling of it), once."""
+        seen = [0]
+
+        def on_sync(_can_id: int, _data: bytearray, _timestamp: float) -> None:
+            seen[0] += 1
+            if seen[0] != fault.at_sync:
+                return
+            self.log(f"twin_fault: the {fault.axis} twin faults ({fault.fault}) at SYNC {fault.at_sync}")
+            if fault.fault == "jam":
+                twin.jam()
+            elif fault.fault == "heartbeat":
+                twin.stop_heartbeat()
+            else:
+                twin.inject_fault(int(fault.fault))
+
+        self.twin_network.subscribe(0x80, on_sync)
 
     def home(self) -> None:
         try:
@@ -137,7 +163,14 @@ class DrivesBackend(Backend):
         return str(self.drives.fault()) if self.drives is not None else ""
 
     def status(self) -> dict[str, object]:
-        return dict(self.drives.status()) if self.drives is not None else {}
+        status = dict(self.drives.status()) if self.drives is not None else {}
+        if self.twins:  # what the twins say of themselves, beside what the master read of them
+            axes = [d.axis for d in self.drives.cfg.axes]
+            status["twin_states"] = {
+                axis: f"{twin.state} (from {twin.came_from})"
+                for axis, twin in zip(axes, self.twins, strict=True)
+            }
+        return status
 
     def end(self) -> None:
         if self.drives is not None:
