@@ -373,6 +373,9 @@ class SimEngine(Engine):
         plan = self.run.plan
         return PATH_TOLERANCE * plan.job.wire_diameter if plan is not None else math.nan
 
+    def simulated(self) -> bool:
+        return True
+
     def faults(self) -> str:
         """What the simulated axes did that they were not commanded to, in words with their
         units (the final report's ``faults``): steps lost, the wire's path left by more than

@@ -850,6 +850,9 @@ def build_parser() -> argparse.ArgumentParser:
     from winder.cli.view import register as register_view  # view; run/play --foxglove
 
     register_view(sub)
+    from winder.cli.parts import register as register_parts  # parts: list, show, measure, export
+
+    register_parts(sub)
     return parser
 
 

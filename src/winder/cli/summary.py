@@ -126,6 +126,8 @@ def report_run(
     if commands:
         print(f"  operator commands  {commands}")
     print(f"  bag                {r.bag or '-'}")
+    if x.get("part_id"):  # the run's part in the part index (docs/PARTS.md)
+        print(f"  part               {x['part_id']}  (winder parts show)")
     if result.errors:
         print(f"  ERROR reports      {len(result.errors)}, first: {result.errors[0]}")
     # messages from nodes that are not the cell's, refused: by each node of the cell, and this command

@@ -81,6 +81,8 @@ NODE_SPECS: dict[str, dict[str, Spec]] = {
 SECTION_ALIASES = {"sim_node": "consumer"}
 #: the section names a job file may use, for messages
 SECTION_NAMES = "interp_node, profile_node, consumer (or sim_node) or /**"
+#: the job field whose map is one value, not settings by their dotted names
+TOLERANCES = "tolerances"
 #: a job file larger than this is not a job file
 MAX_BYTES = 1 << 20
 
@@ -92,8 +94,9 @@ class JobFileError(SpecError):
 def _flatten(prefix: str, value: Any, out: dict[str, Any]) -> None:
     """``value``'s settings by their dotted names into ``out``; ValueError if one
     is given twice (``max_velocity.fork: 10`` beside ``max_velocity: {fork: 20}``:
-    ROS would take one of them, silently)."""
-    if isinstance(value, dict):
+    ROS would take one of them, silently). A ``tolerances:`` map stays one
+    value: the job field it is (:mod:`winder.motion.tolerances`), its names the part's scalars."""
+    if isinstance(value, dict) and prefix != TOLERANCES:
         for k, v in value.items():
             _flatten(f"{prefix}.{k}" if prefix else str(k), v, out)
     elif prefix in out:

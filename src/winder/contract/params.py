@@ -225,6 +225,13 @@ CONSUMER_SPECS = _table(
     ),
     Spec("stall_timeout", float, 2.0, "wall time without steps before a stall is reported", "s", 0.1, 3600.0),
     STALL_ABORT,
+    Spec(
+        "parts_db",
+        str,
+        "",
+        "the part index each run adds its part to (SQLite, docs/PARTS.md): auto, <bag_dir>/parts.sqlite "
+        "when recording; '' none (for now the default: see docs/PARTS.md); else this file",
+    ),
 )
 
 SIM_SPECS = {
@@ -590,9 +597,17 @@ def bag_directory(text: str) -> Path:
 
 def check_consumer(values: dict[str, Any]) -> None:
     """Cross-field check of every consumer: the bag directory must be
-    writable when recording."""
+    writable when recording; a part index named by its path must be a file
+    in a directory (the index itself is created by the first run)."""
     if values["record"]:
         bag_directory(values["bag_dir"])
+    parts_db = values.get("parts_db", "")
+    if parts_db not in ("", "auto"):
+        path = Path(parts_db).expanduser()
+        if path.is_dir():
+            raise SpecError(f"parts_db={shorten(parts_db)} is invalid: it is a directory, not a file")
+        if not path.parent.is_dir():
+            raise SpecError(f"parts_db={shorten(parts_db)} is invalid: {path.parent} is not a directory")
 
 
 def check_sim(values: dict[str, Any]) -> None:

@@ -95,6 +95,7 @@ LATER_FIELDS = frozenset(
         "tension.derate",
         "tension.slip_tolerance",
         "lay.crossover_law",
+        "tolerances",
     }
 )
 

@@ -40,6 +40,7 @@ import numpy as np
 from winder.motion.axes import FEED, FORK, POLE
 from winder.motion.coil import CORES, LAYS, Bobbin, Winding, layer_capacity, winding
 from winder.motion.material import MATERIALS, Material, Wire
+from winder.motion.tolerances import parse_tolerances, tolerances_text
 from winder.spec import Spec, SpecError, interval, shorten
 
 __all__ = [
@@ -169,6 +170,22 @@ class _TurnsSpec(Spec):
 
     def parse(self, text: str) -> Any:
         return AUTO if text.strip() == AUTO else super().parse(text)
+
+
+class _TolerancesSpec(Spec):
+    """The recipe's tolerances (:mod:`winder.motion.tolerances`): their JSON
+    text, or the map a job file writes, kept as the canonical text."""
+
+    def range_text(self) -> str:
+        return 'a JSON map of name: [min, max], e.g. {"resistance_ohm": [11.5, 12.5]}, or empty'
+
+    def check(self, value: Any) -> Any:
+        if not isinstance(value, (str, Mapping)):
+            raise SpecError(f"{self.name}={shorten(str(value))} is invalid: must be {self.range_text()}")
+        return tolerances_text(parse_tolerances(value, self.name))
+
+    def parse(self, text: str) -> Any:
+        return self.check(text)
 
 
 #: Job fields with their allowed ranges. The numbers bound what a physical
@@ -418,6 +435,13 @@ FIELD_SPECS: dict[str, Spec] = {
             "KEY turns_per_layer, layers or direction (cw|ccw)",
             pattern=r"[0-9A-Za-z_:=,;\s]*",
             pattern_text='e.g. "2:turns_per_layer=30;3:direction=ccw,layers=1", or empty',
+        ),
+        _TolerancesSpec(
+            "tolerances",
+            str,
+            "",
+            "the part's tolerances, each recorded scalar's [min, max] (docs/PARTS.md): they set "
+            "the verdict of every part wound to this job",
         ),
     )
 }
@@ -702,6 +726,7 @@ class Job:
     tension_max_share: float = FIELD_SPECS["tension.max_share"].default
     tension_derate: bool = FIELD_SPECS["tension.derate"].default
     tension_slip_tolerance: float = FIELD_SPECS["tension.slip_tolerance"].default
+    tolerances: str = FIELD_SPECS["tolerances"].default  #: JSON text (winder.motion.tolerances)
     check_fit: InitVar[bool] = True
 
     def __post_init__(self, check_fit: bool) -> None:

@@ -195,6 +195,7 @@ class StepConsumer(ManagedNode):
             )
         else:
             self.recording.check_dir(self.settings.values())
+            self.run.recover_parts(self.settings.values())
         engine.attach(self, self.run)
         self.start_lifecycle()
 
@@ -280,6 +281,7 @@ class StepConsumer(ManagedNode):
             why = self.recording.open(values, raw, config_raw, self.engine.unrecorded())
             if why:
                 self.run.error(f"job {plan.job_id} runs unrecorded: {why}")
+        self.run.begin_part(values)
         self.run.job_wall = time.monotonic()
         self.recording.record_path(self.run.t_ns)
         self.recording.record_profile_config(self.run.t_ns)

@@ -19,7 +19,10 @@ It keeps what a run owes the cell once its steps are accepted:
   ``stall_abort`` s closes the run incomplete (a consumer never wedges the cell);
 * the ``<node>: job`` status every second (:class:`winder.contract.run.JobReport`),
   and the final report once the bag is closed: that status, and typed on
-  ``winder/report`` (winder_interfaces/JobReport).
+  ``winder/report`` (winder_interfaces/JobReport);
+* the run's part in the part index (:mod:`winder.record.parts`): ``running``
+  from the bag's opening, completed from the final report at the close; an
+  index that cannot be written is an error of the run, never its end.
 
 It is the :class:`winder.ros.engine.RunPort` the node's engine sees: an
 engine tells it what it executed and how far the run's time went, and asks
@@ -32,6 +35,7 @@ import json
 import time
 from collections import deque
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 from diagnostic_msgs.msg import KeyValue
@@ -40,13 +44,15 @@ from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import String
 
 from winder import __version__
-from winder.contract.params import PROFILE_SPECS
+from winder.contract.params import PROFILE_SPECS, bag_directory
 from winder.contract.run import FAULTS_KEY, JobReport, RunLedger, Transition
 from winder.contract.states import CellState, JobState
 from winder.contract.stream import JobPlan, StreamChecker
 from winder.contract.topics import TOPIC_PROGRESS, TOPIC_REPORT, TOPIC_STATE, TOPIC_STEP_TIMES, status_values
 from winder.contract.trust import Intruders
+from winder.errors import WinderError
 from winder.record.bag import VERSION_KEY, signals_held
+from winder.record.parts import PartEnd, PartIndex, index_path, part_start
 from winder.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from winder.ros.engine import Engine
 from winder.ros.intake import RowGate
@@ -113,6 +119,7 @@ class ConsumerRun:
         self.longest_stall = 0.0  #: the longest time without steps while the run waited on them (s)
         self.errors: list[str] = []
         self.foreign = 0  # control messages of the run refused
+        self.part: tuple[PartIndex, str] | None = None  # the run's part: its index and id
 
     def start(self, plan: JobPlan) -> None:
         """A run starts: fresh books for it."""
@@ -123,6 +130,51 @@ class ConsumerRun:
         self.ledger = RunLedger(plan)
         self.gate = RowGate(plan, self.error, self.log.warning)
         self.checker = self.gate.checker
+
+    def begin_part(self, values: dict[str, Any]) -> None:
+        """The run's part, ``running``, in the index its ``parts_db`` names
+        (once its bag is open: the part names it)."""
+        assert self.plan is not None
+        bag = self.recording.path
+        try:
+            path = self.index_path(values)
+            if path is None:
+                return
+            index = PartIndex(path)
+            part = part_start(
+                self.plan,
+                consumer=self.node_name,
+                simulated=self.engine.simulated(),
+                software_version=__version__,
+                started_ns=self.wall0_ns,
+                bag=str(bag.resolve()) if bag is not None else "",
+            )
+            self.part = (index, index.begin(part))
+        except (WinderError, ValueError) as exc:  # ValueError: bag_dir refused since it was accepted
+            self.error(f"run {self.plan.run_id}: its part is not recorded: {exc}")
+
+    @staticmethod
+    def index_path(values: dict[str, Any]) -> Path | None:
+        """The part index the settings name (:func:`winder.record.parts.index_path`); the bag
+        directory is looked at only for ``auto``."""
+        auto = values["parts_db"] == "auto" and values["record"]
+        return index_path(values["parts_db"], bag_directory(values["bag_dir"]) if auto else None)
+
+    def recover_parts(self, values: dict[str, Any]) -> None:
+        """At start: the parts of this host's runs whose process was killed, marked incomplete, said once."""
+        try:
+            path = self.index_path(values)
+            if path is None or not path.exists():
+                return
+            gone = PartIndex(path).recover()
+        except (WinderError, ValueError) as exc:
+            self.log.error(str(exc))
+            return
+        if gone:
+            self.log.warning(
+                f"part index {path}: {len(gone)} part(s) of runs whose process ended without closing "
+                f"them marked incomplete: {', '.join(gone[:5])}{' ...' if len(gone) > 5 else ''}"
+            )
 
     # -- what the engine may know (winder.ros.engine.RunPort) -------------------
     def values(self) -> dict[str, Any]:
@@ -311,6 +363,8 @@ class ConsumerRun:
         faults = self.engine.faults()
         if faults:  # said as a key of its own too: a done run with faults is no success (CONTRACT 3.7)
             report.extra[FAULTS_KEY] = faults
+        if self.part is not None:
+            report.extra["part_id"] = self.part[1]
         ok = (complete or aborted) and not self.errors and not faults
         level = OK if ok else (WARN if complete or aborted else ERROR)
         state = "complete" if complete else ("aborted, the axes at rest" if aborted else "incomplete")
@@ -413,9 +467,24 @@ class ConsumerRun:
         with signals_held():
             self._finish(complete)
 
+    def closed_part(self, complete: bool) -> tuple[JobReport, int, str]:
+        """:meth:`final_report`, and the run's part completed with it; a part
+        that cannot be written is an error of the run, in that report."""
+        report, level, text = self.final_report(complete)
+        if self.part is None:
+            return report, level, text
+        index, part_id = self.part
+        try:
+            index.close(part_id, PartEnd(time.time_ns(), {k: str(v) for k, v in report.to_values().items()}))
+        except WinderError as exc:
+            self.part = None  # not tried again at this close
+            self.error(f"run {report.run_id}: its part is not recorded: {exc}")
+            report, level, text = self.final_report(complete)
+        return report, level, text
+
     def _finish(self, complete: bool) -> None:
         assert self.plan is not None
-        report, level, text = self.final_report(complete)
+        report, level, text = self.closed_part(complete)
         job = self.plan.job
         ended = {JobState.DONE: CellState.DONE, JobState.ABORTED: CellState.ABORTED}.get(
             JobState(report.state), CellState.FAILED
@@ -437,13 +506,14 @@ class ConsumerRun:
             self.record("report", self.t_ns, serialize_message(typed))
             self.recording.close()
             if self.recording.failure:  # left unclosed: winder bag recover reads it
-                report, level, text = self.final_report(complete)  # no longer complete
+                report, level, text = self.closed_part(complete)  # no longer complete
                 final = self.diag.status("job", level, text, report.to_values())
                 typed = job_report_msg(report, self.node_name)
         if self.node.context.ok():
             self.log.info(text + (f"; bag {bag}" if bag else ""))
         self.last_report, self.last_level, self.last_text = report, level, text
         self.plan = None
+        self.part = None
         self.finishing = False
         self.recording.start(None, self.wall0_ns)
         self.engine.end()

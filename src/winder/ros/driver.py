@@ -181,6 +181,8 @@ class Backend(Protocol):
 
     #: the backend's own parameters (name -> Spec), declared on the node beside the consumer's
     specs: ClassVar[dict[str, Spec]] = {}
+    #: whether its axes are simulated (a mock, a twin): its parts are kept apart from real ones
+    simulated: bool = False
 
     def paces(self, settings: dict[str, Any]) -> bool:
         """Whether it executes each step at its time (a drive: True), so that
@@ -447,6 +449,9 @@ class DriveEngine(Engine):
             except Exception as exc:  # a value whose str() raises
                 self.bug("status", f"returned a value that cannot be said ({raised(exc)})")
         return {"max_following_error_steps": f"{self.following:.4f}", **own}
+
+    def simulated(self) -> bool:
+        return getattr(self.backend, "simulated", False) is True
 
     def still_beginning(self) -> str:
         """Why no method of the backend may be called now: a begin() that

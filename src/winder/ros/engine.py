@@ -234,6 +234,11 @@ class Engine:
         """The engine's own status keys (after the contract's)."""
         return {}
 
+    def simulated(self) -> bool:
+        """Whether the axes it drives are simulated (a simulator, a drive's
+        twin): its runs' parts are kept apart from real ones (docs/PARTS.md)."""
+        return False
+
     def end(self) -> None:
         """The run closed and is reported: release its resources."""
 

@@ -33,6 +33,7 @@ class MockBackend(Backend):
         "real_time": Spec("real_time", bool, True, "execute each step at its time, as a drive does"),
         "lag": Spec("lag", float, 0.0, "the axes' time constant following a command", "s", 0.0, 10.0),
     }
+    simulated = True  # no drive behind it: its parts are not real parts
 
     def __init__(self) -> None:
         self.command = np.zeros(0)
