@@ -288,7 +288,8 @@ def register(sub: argparse._SubParsersAction[Any]) -> None:
     p = sub.add_parser(
         "parts",
         help="the part index: a row per wound part, its recipe, its record and its verdict",
-        description="Read the part index every run adds its part to (docs/PARTS.md). Simulated and real "
+        description="Read the part index each run adds its part to when its consumer's parts_db names one "
+        "(winder run --parts-db auto; docs/PARTS.md). Simulated and real "
         "parts are never shown together unless --all asks.",
     )
     _options(p, default=None)
