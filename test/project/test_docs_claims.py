@@ -373,6 +373,8 @@ def test_what_the_conformance_text_says_of_a_driver_is_the_codes(monkeypatch: py
     assert m and float(m.group(1)) == DRIVER_SPECS["settle_time"].default, m and m.group(0)
     m = re.search(r"`position_tolerance`\s+\(([\d.]+) steps? by default\)", text)
     assert m and float(m.group(1)) == DRIVER_SPECS["position_tolerance"].default, m and m.group(0)
+    m = re.search(r"`in_position_timeout` \(([\d.]+) s by default\)", text)
+    assert m and float(m.group(1)) == DRIVER_SPECS["in_position_timeout"].default, m and m.group(0)
 
     class Quiet(Backend):  # only what a Backend needs: paces is its default
         def begin(self, run: Any) -> dict[str, object]:

@@ -39,7 +39,7 @@ FAILURES = {
     "interrupt": "driver error: backend.write() raised KeyboardInterrupt",
     "hang": "driver error: backend.begin() did not return within 1 s (begin_timeout)",
     "lines": "fork drive: following error; the run stops",
-    "stuck": "axes not in position 0.05 s after the last step: fork",
+    "stuck": "axes not in position 1.05 s after the last step: fork",
 }
 #: the failures that are something raised: a traceback in the driver's log, once
 RAISED = ("write", "begin", "exit", "interrupt")

@@ -78,6 +78,15 @@ DRIVER_SPECS: dict[str, Spec] = {
     "settle_time": Spec(
         "settle_time", float, 0.05, "rest after the run's last step before it closes", "s", 0.0, 60.0
     ),
+    "in_position_timeout": Spec(
+        "in_position_timeout",
+        float,
+        1.0,
+        "how long a run waits, after its settle_time, for its axes to come within position_tolerance",
+        "s",
+        0.0,
+        60.0,
+    ),
     "position_tolerance": Spec(
         "position_tolerance",
         float,
@@ -400,29 +409,49 @@ class DriveEngine(Engine):
         whose axes were thousands of steps off)."""
         return self.run.plan is None or not (self.broken or not self.in_position())
 
+    def position_error(self) -> tuple[int, float] | None:
+        """The axis furthest from its last command and by how many steps;
+        None if the read cannot be used (a driver error, said: self.broken)."""
+        measured = self.measured(self.run.t_ns)
+        if measured is None:
+            return None
+        error = np.abs(measured - self.commanded)
+        worst = int(np.argmax(error))
+        return worst, float(error[worst])
+
     def in_position(self) -> bool:
         """At the run's end: every axis within ``position_tolerance`` steps of
         its last command (CONTRACT.md: done is at the job's end position); if
         not, said as the run's fault."""
-        measured = self.measured(self.run.t_ns)
-        if measured is None:
-            return False  # a read that cannot be used: a driver error, said (self.broken)
-        error = np.abs(measured - self.commanded)
+        got = self.position_error()
+        if got is None:
+            return False
+        worst, error = got
         tolerance = self.run.values()["position_tolerance"]
-        worst = int(np.argmax(error))
-        if not error[worst] > tolerance:
+        if not error > tolerance:
             return True
-        settle = self.run.values()["settle_time"]
+        waited = self.run.values()["settle_time"] + self.run.values()["in_position_timeout"]
         self.broken = (
-            f"axes not in position {settle:g} s after the last step: {AXIS_TABLE[worst].name} "
-            f"{error[worst]:.1f} steps from its command (position_tolerance {tolerance:g})"
+            f"axes not in position {waited:g} s after the last step: {AXIS_TABLE[worst].name} "
+            f"{error:.1f} steps from its command (position_tolerance {tolerance:g})"
         )
         self.node.get_logger().error(self.broken)
         return False
 
     def rested(self) -> bool:
-        """The settle time after the run's last step has passed."""
-        return self.settle_until is None or not self.paced or self.now_ns() >= self.settle_until
+        """The settle time after the run's last step has passed and the axes
+        are in position, or in_position_timeout more has passed (a drive's
+        read-back lags its commands: a professional controller's in-position
+        window with a settle timeout, not one look at a fixed moment)."""
+        if self.settle_until is None or not self.paced:
+            return True
+        now = self.now_ns()
+        if now < self.settle_until:
+            return False
+        if now >= self.settle_until + round(self.run.values()["in_position_timeout"] * 1e9):
+            return True
+        got = self.position_error()
+        return got is None or not got[1] > self.run.values()["position_tolerance"]
 
     def closing(self) -> None:
         if self.paced and self.started and self.run.plan is not None:
