@@ -147,10 +147,11 @@ def test_a_query_ends_when_what_the_graph_shows_is_heard() -> None:
 
 def test_the_wait_for_a_missing_part_follows_the_dds_profile() -> None:
     """SETTLE counts DDS announcement periods: dds.ANNOUNCEMENT must be the
-    period winder's Fast DDS profiles announce a participant with."""
+    period winder's Fast DDS profiles announce a participant with (and
+    dds.LEASE, after which a held node restarts itself, their lease)."""
     import re
 
-    from winder.ros.dds import ANNOUNCEMENT, LAN_PROFILE, PROFILE
+    from winder.ros.dds import ANNOUNCEMENT, LAN_PROFILE, LEASE, PROFILE
 
     for profile in (PROFILE, LAN_PROFILE):
         text = profile.read_text()
@@ -159,4 +160,6 @@ def test_the_wait_for_a_missing_part_follows_the_dds_profile() -> None:
         )
         assert found, profile
         assert int(found.group(1)) + int(found.group(2) or 0) / 1e9 == ANNOUNCEMENT, profile
+        lease = re.search(r"<leaseDuration><sec>(\d+)</sec></leaseDuration>", text)
+        assert lease and float(lease.group(1)) == LEASE, profile
     assert SETTLE >= 2 * ANNOUNCEMENT

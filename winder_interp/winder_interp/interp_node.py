@@ -133,6 +133,11 @@ class InterpNode(ManagedNode):
     def in_run(self) -> bool:
         return self.running()
 
+    def parameters_now(self) -> dict[str, Any]:
+        """A restarted interp node never autostarts (winder.ros.rejoin): the part
+        its first start wound is not wound again unasked."""
+        return {**super().parameters_now(), "autostart": False}
+
     def blocked_reason(self) -> str | None:
         return self.settings.blocked()
 

@@ -197,6 +197,9 @@ class StepConsumer(ManagedNode):
             self.recording.check_dir(self.settings.values())
             self.run.recover_parts(self.settings.values())
         engine.attach(self, self.run)
+        told = self.restart.carried_for(self) if self.restart is not None else None
+        if told is not None:  # how the run the held process closed ended (winder.ros.rejoin)
+            self.run.told_again(told)
         self.start_lifecycle()
 
     @property
@@ -208,6 +211,14 @@ class StepConsumer(ManagedNode):
     def last_report(self) -> JobReport | None:
         """How the last run ended."""
         return self.run.last_report
+
+    def handover(self) -> dict[str, Any] | None:
+        """For the process that replaces this one (winder.ros.rejoin): how the
+        run it closed at the restart ended; None if it closed none."""
+        if not self.restarting or self.run.last_report is None:
+            return None
+        values = {k: str(v) for k, v in self.run.last_report.to_values().items()}
+        return {"values": values, "level": int(self.run.last_level), "text": self.run.last_text}
 
     # -- lifecycle (winder.ros.managed) ----------------------------------------
     def in_run(self) -> bool:
@@ -503,6 +514,8 @@ class StepConsumer(ManagedNode):
         bag = self.recording.recorder
         try:
             if self.plan is not None and bag is not None:
+                if self.restarting:  # held past the DDS lease (winder.ros.rejoin): the run's error
+                    self.run.error(self.restarting)
                 self.run.finish(complete=False)
         finally:
             if bag is not None and bag.is_open:

@@ -44,8 +44,8 @@ from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import String
 
 from winder import __version__
-from winder.contract.params import PROFILE_SPECS, bag_directory
-from winder.contract.run import FAULTS_KEY, JobReport, RunLedger, Transition
+from winder.contract.params import PARTS_DB_NONE, PROFILE_SPECS, bag_directory
+from winder.contract.run import FAULTS_KEY, PART_ID_KEY, PART_INDEX_KEY, JobReport, RunLedger, Transition
 from winder.contract.states import CellState, JobState
 from winder.contract.stream import JobPlan, StreamChecker
 from winder.contract.topics import TOPIC_PROGRESS, TOPIC_REPORT, TOPIC_STATE, TOPIC_STEP_TIMES, status_values
@@ -55,6 +55,7 @@ from winder.record.bag import VERSION_KEY, signals_held
 from winder.record.parts import PartEnd, PartIndex, index_path, part_start
 from winder.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from winder.ros.engine import Engine
+from winder.ros.graph import Who
 from winder.ros.intake import RowGate
 from winder.ros.interfaces import job_report_msg, wall_stamp
 from winder.ros.peers import Peers
@@ -120,6 +121,7 @@ class ConsumerRun:
         self.errors: list[str] = []
         self.foreign = 0  # control messages of the run refused
         self.part: tuple[PartIndex, str] | None = None  # the run's part: its index and id
+        self.timer_of_run: Who | None = None  # the profile node (its process) that times the run
 
     def start(self, plan: JobPlan) -> None:
         """A run starts: fresh books for it."""
@@ -155,8 +157,10 @@ class ConsumerRun:
 
     @staticmethod
     def index_path(values: dict[str, Any]) -> Path | None:
-        """The part index the settings name (:func:`winder.record.parts.index_path`); the bag
-        directory is looked at only for ``auto``."""
+        """The part index the settings name (:func:`winder.record.parts.index_path`), None for
+        ``none``; the bag directory is looked at only for ``auto``."""
+        if values["parts_db"] in PARTS_DB_NONE:
+            return None
         auto = values["parts_db"] == "auto" and values["record"]
         return index_path(values["parts_db"], bag_directory(values["bag_dir"]) if auto else None)
 
@@ -363,8 +367,9 @@ class ConsumerRun:
         faults = self.engine.faults()
         if faults:  # said as a key of its own too: a done run with faults is no success (CONTRACT 3.7)
             report.extra[FAULTS_KEY] = faults
-        if self.part is not None:
-            report.extra["part_id"] = self.part[1]
+        if self.part is not None:  # the run's part, and where it is (CONTRACT 3.7)
+            report.extra[PART_ID_KEY] = self.part[1]
+            report.extra[PART_INDEX_KEY] = str(self.part[0].path.resolve())
         ok = (complete or aborted) and not self.errors and not faults
         level = OK if ok else (WARN if complete or aborted else ERROR)
         state = "complete" if complete else ("aborted, the axes at rest" if aborted else "incomplete")
@@ -374,6 +379,21 @@ class ConsumerRun:
         if faults:
             text += f", {faults}"
         return report, level, text
+
+    def told_again(self, told: dict[str, Any]) -> None:
+        """How the last run ended, as the process this one replaced closed it
+        (winder.ros.rejoin): its final status and report never left that
+        process, the others having dropped it; said now, and by the 1 Hz
+        status from here on, as for any run that ended."""
+        try:
+            report = JobReport.from_values({str(k): str(v) for k, v in told["values"].items()})
+            level, text = int(told["level"]), str(told["text"])
+        except (KeyError, TypeError, ValueError, AttributeError):
+            return
+        self.last_report, self.last_level, self.last_text = report, level, text
+        self.log.warning(f"the run this node closed before its restart: {text}")
+        self.diag.publish("job", level, text, report.to_values())
+        self.pub_report.publish(job_report_msg(report, self.node_name))
 
     def report(self) -> None:
         """The 1 Hz ``<node>: job`` status: the running run's, or how the last one ended."""
@@ -413,6 +433,8 @@ class ConsumerRun:
             for t in self.ledger.reach_stops():  # the axes are at the stop: say so
                 self.transition(t)
             return
+        if self.lost_its_timer():
+            return
         if busy:
             self.last_chunk_wall = time.monotonic()  # work already here: not a stall
             return
@@ -439,6 +461,27 @@ class ConsumerRun:
         if idle > settings["stall_abort"]:
             self.error(f"step stream stalled for {idle:.1f} s at {done} steps: job closed incomplete")
             self.finish(complete=False)
+
+    def lost_its_timer(self) -> bool:
+        """The profile node that times the run is another process now (it was
+        restarted: by hand, or after a hold past the DDS lease,
+        winder.ros.rejoin): the run's timing went with the old one, and no
+        more of its steps will come. Closed incomplete at once, the axes at
+        rest where the last step left them, instead of after stall_abort."""
+        assert self.plan is not None and self.ledger is not None
+        now = self.peers.owner("profile")
+        if self.timer_of_run is None:
+            self.timer_of_run = now
+            return False
+        if now is None or now == self.timer_of_run or now[:2] != self.timer_of_run[:2]:
+            return False
+        done = f"{self.ledger.executed_steps}/{self.plan.total_steps}"
+        self.error(
+            f"the profile node {now.fq} is a new process (restarted) at {done} steps: the run's timing went "
+            "with the old one: job closed incomplete, the axes at rest"
+        )
+        self.finish(complete=False)
+        return True
 
     def stall_level(self) -> int:
         """How bad a stall is while it lasts: in real time the axes run out of

@@ -13,6 +13,7 @@ __all__ = [
     "ANNOUNCEMENT",
     "DISCOVERY_SERVER_KEY",
     "LAN_PROFILE",
+    "LEASE",
     "PROFILE",
     "PROFILE_KEYS",
     "describe_profile",
@@ -25,6 +26,9 @@ PROFILE = Path(__file__).with_name("fastdds_profile.xml")
 #: ``leaseAnnouncement``): a newcomer has learnt of every process on its
 #: host within about one of them (``winder ctl``'s wait for a missing part)
 ANNOUNCEMENT = 0.25
+#: s a participant of winder's profile may be silent before the others drop
+#: it (its ``leaseDuration``)
+LEASE = 10.0
 #: for a cell split across hosts over a lossy network: UDP only, datagrams within one MTU
 LAN_PROFILE = Path(__file__).with_name("fastdds_lan.xml")
 #: the variables Fast DDS reads its XML profiles from (2.x reads the first, 3.x the second)

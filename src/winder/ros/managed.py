@@ -33,12 +33,14 @@ from __future__ import annotations
 
 from typing import Any
 
-from rcl_interfaces.msg import ParameterDescriptor
+from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.publisher import Publisher
 
 from winder.contract.params import MANAGED
+from winder.ros.dds import LEASE
+from winder.ros.rejoin import Restart
 from winder.ros.wake import WakeWatch
 
 __all__ = ["LEFT_CELL", "ManagedNode"]
@@ -58,15 +60,22 @@ class ManagedNode(LifecycleNode):
     #: False if a shutdown() hook could not let go of an entity (a thread still
     #: waiting on it): the process then ends through the interpreter's teardown
     let_go = True
+    #: why the node's process restarts (a hold past the DDS lease: winder.ros.rejoin); "" if it does not
+    restarting = ""
+    #: the hold (s) it restarts for
+    held = 0.0
+    #: the restart this process is, when it is one (set by winder.ros.spin before the nodes are made)
+    restart: Restart | None = None
 
     def __init__(self, name: str) -> None:
         super().__init__(name)
         self.active = False
         self.auto = False  # configuring itself at start (not managed)
         self.guard_transitions()
-        # a hold (SIGSTOP, a starved host) longer than the DDS lease must not cost the node its
-        # place on the others' graphs: it announces itself again when it wakes (winder.ros.wake)
-        self.wake_watch = WakeWatch(self)
+        # a hold (SIGSTOP, a starved host) must not cost the node its place on the others'
+        # graphs: it announces itself again when it wakes (winder.ros.wake), and restarts its
+        # process after a hold past the DDS lease (winder.ros.rejoin)
+        self.wake_watch = WakeWatch(self, self.rejoin)
         described = ParameterDescriptor(description=MANAGED.description, read_only=True)
         self.declare_parameter(MANAGED.name, MANAGED.default, described)
 
@@ -124,8 +133,16 @@ class ManagedNode(LifecycleNode):
             machine.destroy_when_not_in_use()
 
     def start_lifecycle(self) -> None:
-        if self.get_parameter("managed").value is True:
-            self.get_logger().info("managed: unconfigured, waiting for configure and activate")
+        if self.restart is not None:
+            self.get_logger().warning(
+                f"restarted after a hold of {self.restart.held:.1f} s, with the parameters it had"
+                + (" (active again)" if self.restart.was_active(self) else "")
+            )
+        managed = self.get_parameter("managed").value is True
+        # a restarted node comes back in the state it had; otherwise a managed one waits
+        come_up = self.restart.was_active(self) if self.restart is not None else not managed
+        if not come_up:
+            self.get_logger().info("unconfigured, waiting for configure and activate")
             self.lifecycle_changed()
             return
         # started plainly: active at once; settings refused at start leave the
@@ -187,6 +204,39 @@ class ManagedNode(LifecycleNode):
             hook()
         self.lifecycle_changed()
         return super().on_shutdown(state)
+
+    def rejoin(self, held: float) -> None:
+        """The process was held ``held`` s, past the DDS lease: the others
+        have dropped its participant, and may never learn its endpoints again.
+        End as at Ctrl-C and restart the process (winder.ros.spin does, with
+        :meth:`parameters_now`)."""
+        if self.restarting:
+            return
+        self.held = held
+        self.restarting = (
+            f"{self.get_name()} was held up {held:.1f} s, past the DDS lease ({LEASE:g} s), and restarts "
+            "to rejoin the cell"
+        )
+        self.get_logger().warning(
+            f"held up {held:.1f} s (SIGSTOP, a starved host, a debugger), past the DDS lease ({LEASE:g} s): "
+            "the other nodes have dropped this one; restarting the process (same pid, the parameters it "
+            "has now) to rejoin the cell"
+        )
+        self.context.try_shutdown()
+
+    def parameters_now(self) -> dict[str, Any]:
+        """The node's parameters as they are, for its restart: every value
+        set (an empty array has no type rcl can read, and keeps its default)."""
+        values: dict[str, Any] = {}
+        for name, parameter in self._parameters.items():
+            message = parameter.get_parameter_value()
+            if message.type == ParameterType.PARAMETER_NOT_SET:
+                continue
+            value = parameter.value
+            if isinstance(value, (list, tuple)) and len(value) == 0:
+                continue
+            values[name] = value
+        return values
 
     def leave(self, why: str) -> None:
         """Leave the cell at once (another node of this role already runs in

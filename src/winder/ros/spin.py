@@ -139,6 +139,10 @@ def _hangup(signum: int, frame: FrameType | None) -> None:
     os.kill(os.getpid(), signal.SIGTERM)
 
 
+#: SIGHUP was ignored when the node started (nohup): a restart leaves it so
+_nohup: list[bool] = []
+
+
 def install_signal_handlers() -> None:
     """Signals that end a node let it finish its callback and close its bag
     (see :func:`_stop_quietly`); installed before ``rclpy.init``, which chains
@@ -147,7 +151,9 @@ def install_signal_handlers() -> None:
 
     signal.signal(signal.SIGINT, _stop_quietly)
     signal.signal(signal.SIGTERM, _stop_quietly)
-    if not hangup_ignored():  # under nohup a node outlives its terminal
+    if hangup_ignored():  # under nohup a node outlives its terminal
+        _nohup.append(True)
+    else:
         signal.signal(signal.SIGHUP, _hangup)
     sys.unraisablehook = _quiet_rclpy_finalisers
 
@@ -184,7 +190,9 @@ def spin_all(factories: list[Callable[[], Node]], args: list[str] | None = None)
     from rclpy.executors import ExternalShutdownException
 
     from winder.procs import parent_gone, stacks_on_signal, take_stop_signals
+    from winder.ros import rejoin
     from winder.ros.dds import use_profile
+    from winder.ros.managed import ManagedNode
     from winder.ros.sender import SenderExecutor
 
     use_profile()
@@ -194,14 +202,21 @@ def spin_all(factories: list[Callable[[], Node]], args: list[str] | None = None)
     install_signal_handlers()
     if parent_gone():  # its death signal may have been lost while Python started (winder.procs)
         return
+    ManagedNode.restart = restart = rejoin.restart_of_this_process()
     rclpy.init(args=args)
     nodes: list[Node] = []
     executor: SenderExecutor | None = None
+    again: dict[str, dict[str, Any]] = {}  # a restart's parameters, per node (winder.ros.rejoin)
+    active: list[str] = []  # the nodes active at a restart
+    carried: dict[str, Any] = {}  # what each node hands over to its restarted self
     try:
         if _signalled:  # before rclpy's handlers were there to shut the context down
             return
         for factory in factories:
             nodes.append(factory())
+        if restart is not None:  # the nodes have read the parameters file
+            with contextlib.suppress(OSError):
+                os.unlink(restart.params)
         executor = SenderExecutor()  # takes attributed subscriptions with their publisher (winder.ros.sender)
         for node in nodes:
             executor.add_node(node)
@@ -224,6 +239,10 @@ def spin_all(factories: list[Callable[[], Node]], args: list[str] | None = None)
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
         signal.signal(signal.SIGHUP, signal.SIG_IGN)
+        if any(getattr(node, "restarting", "") for node in nodes) and not _signalled:
+            managed = [n for n in nodes if isinstance(n, ManagedNode)]
+            again = {n.get_fully_qualified_name(): n.parameters_now() for n in managed}
+            active = [n.get_fully_qualified_name() for n in nodes if getattr(n, "active", False)]
         if executor is not None:
             with contextlib.suppress(Exception):  # never in the way of the hooks (the bags' closing)
                 executor.shutdown(timeout_sec=0)  # it lets go of the entities it was waiting on
@@ -231,11 +250,16 @@ def spin_all(factories: list[Callable[[], Node]], args: list[str] | None = None)
             hook = getattr(node, "shutdown", None)
             if callable(hook):
                 hook()
+            handover = getattr(node, "handover", None)
+            if again and callable(handover) and (told := handover()) is not None:
+                carried[node.get_fully_qualified_name()] = told
             node.destroy_node()
         # the signal handler may shut the context down at this very moment
         with contextlib.suppress(RCLError):
             rclpy.try_shutdown()
     code = next((c for c in (getattr(node, "exit_code", 0) for node in nodes) if c), 0)
+    if again and not code and not _signalled:
+        _restart(nodes, again, active, carried)
     # a node whose making a signal cut short (its context shut down under it)
     # was never destroyed, and only the interpreter's teardown takes its DDS
     # participant down: without it the node stayed on the graph for the whole
@@ -247,6 +271,24 @@ def spin_all(factories: list[Callable[[], Node]], args: list[str] | None = None)
         raise SystemExit(code)
 
 
+def _restart(
+    nodes: list[Node], again: dict[str, dict[str, Any]], active: list[str], carried: dict[str, Any]
+) -> NoReturn:
+    """Run the process again (:mod:`winder.ros.rejoin`): its nodes are
+    destroyed, their parameters in ``again``; the stop signals get back what
+    the process started with, for the new one to take them as it did."""
+    from winder.ros import rejoin
+
+    held = max(float(getattr(node, "held", 0.0)) for node in nodes)
+    params = rejoin.save_parameters(again)
+    _flush()
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    if not _nohup:
+        signal.signal(signal.SIGHUP, signal.SIG_DFL)
+    rejoin.exec_again(held, params, active, carried)
+
+
 def leave(code: int) -> NoReturn:
     """End a ROS process whose work is done and whose DDS participant is
     gone (its nodes destroyed, the context shut down): flush what Python
@@ -254,6 +296,12 @@ def leave(code: int) -> NoReturn:
     That teardown took 0.15 s a process, 0.1 s of it a fixed sleep in Fast
     DDS's exit handler (strace: one 100 ms ``clock_nanosleep`` after the
     last participant left), and a cell's runner waits for its nodes."""
+    _flush()
+    os._exit(code)
+
+
+def _flush() -> None:
+    """What Python, rcl's logging and C stdio still buffer, written."""
     logging.shutdown()
     for stream in (sys.stdout, sys.stderr):
         with contextlib.suppress(Exception):
@@ -261,7 +309,6 @@ def leave(code: int) -> NoReturn:
     _finish_ros_logging()
     with contextlib.suppress(Exception):
         ctypes.CDLL(None).fflush(None)  # C stdio: rcutils' console output when buffered
-    os._exit(code)
 
 
 def _finish_ros_logging() -> None:

@@ -33,18 +33,28 @@ the first may go out before the others have matched this participant anew
 woke), and a reader matched after a sample was sent did not always get it
 (a loaded CI: the cell still not ready 30 s after a 12 s hold). A newcomer
 costs each node three small samples: ``winder ctl`` is one each time it
-runs."""
+runs.
+
+A hold past the lease (:data:`REJOIN`) is more than a republish can mend:
+the node restarts its process (:mod:`winder.ros.rejoin`). That hold is
+measured by a thread of its own (:class:`HoldClock`), which only a hold of
+the whole process stops: a long callback delays the node's timers but not
+the thread, nor the DDS threads that keep the participant alive, and
+restarting for it would cut a run for nothing."""
 
 from __future__ import annotations
 
+import threading
 import time
+from collections.abc import Callable
 
 from diagnostic_msgs.msg import KeyValue
 from rclpy.node import Node
 
+from winder.ros.dds import ANNOUNCEMENT, LEASE
 from winder.ros.timers import steady_timer
 
-__all__ = ["AGAIN", "HELD", "TICK", "WakeWatch"]
+__all__ = ["AGAIN", "HELD", "REJOIN", "TICK", "HoldClock", "WakeWatch"]
 
 #: s between two looks at the steady clock
 TICK = 0.5
@@ -52,6 +62,12 @@ TICK = 0.5
 #: winder's profile, so that every hold that may have cost the participant its
 #: place on another's graph is taken for one (a republish costs one sample)
 HELD = 5.0
+#: a hold of the whole process longer than this (s) may have cost the participant
+#: its place on the others' graphs for good: the lease less two announcements
+#: (the last one before the hold may have gone out up to one period before it)
+REJOIN = LEASE - 2 * ANNOUNCEMENT
+#: s between two looks of the :class:`HoldClock` thread
+HOLD_TICK = 0.25
 #: the hidden topic of the throwaway publisher (never published on)
 TOPIC = "~/_wake"
 #: every node's log topic: a publisher of it in every process of a cell
@@ -64,12 +80,42 @@ FORGET = 600.0
 LEFT_KEPT = 256
 
 
+class HoldClock(threading.Thread):
+    """A thread that measures how long the whole process was held: the
+    longest gap between two of its looks since :meth:`take` last asked."""
+
+    def __init__(self) -> None:
+        super().__init__(name="winder-hold-clock", daemon=True)
+        self.lock = threading.Lock()
+        self.longest = 0.0
+
+    def run(self) -> None:
+        last = time.monotonic()
+        while True:
+            time.sleep(HOLD_TICK)
+            now = time.monotonic()
+            with self.lock:
+                self.longest = max(self.longest, now - last)
+            last = now
+
+    def take(self) -> float:
+        """The longest gap (s) since the last call, and start anew."""
+        with self.lock:
+            longest, self.longest = self.longest, 0.0
+        return longest
+
+
 class WakeWatch:
     """Watches ``node``'s steady clock; after a hold of more than
-    :data:`HELD` s it republishes the participant's discovery info."""
+    :data:`HELD` s it republishes the participant's discovery info, and
+    after a hold of the whole process past :data:`REJOIN` it calls
+    ``rejoin`` with the hold (s) instead."""
 
-    def __init__(self, node: Node) -> None:
+    def __init__(self, node: Node, rejoin: Callable[[float], None] | None = None) -> None:
         self.node = node
+        self.rejoin = rejoin
+        self.hold_clock = HoldClock()
+        self.hold_clock.start()
         self.last = time.monotonic()
         self.present: set[bytes] = set()  # the participants on the graph at the last look
         #: those seen to leave it since, and when (steady s): forgotten after FORGET s, for every
@@ -82,6 +128,10 @@ class WakeWatch:
     def _tick(self) -> None:
         now = time.monotonic()
         gap, self.last = now - self.last, now
+        held = self.hold_clock.take()
+        if held > REJOIN and self.rejoin is not None:
+            self.rejoin(held)
+            return
         if gap > HELD:
             self.woke(gap)
         self.look()
