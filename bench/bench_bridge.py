@@ -34,6 +34,7 @@ from typing import Any
 from _common import domain, ros_env, table
 
 from winder.procs import popen, stop_all
+from winder.record.bag import bags_in
 
 BIN = Path(sys.executable).parent
 ROOT = Path(__file__).resolve().parents[1]
@@ -91,7 +92,7 @@ def final_status(bags: Path) -> dict[str, str]:
     from rosbags.highlevel import AnyReader
 
     values: dict[str, str] = {}
-    for bag in sorted(bags.iterdir()):
+    for bag in bags_in(bags):
         with AnyReader([bag]) as reader:
             conns = [c for c in reader.connections if c.topic == "/diagnostics"]
             for conn, _, raw in reader.messages(connections=conns):

@@ -48,7 +48,9 @@ def record(rate: float, work: Path) -> Path:
     r = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=300, stdin=subprocess.DEVNULL)
     if r.returncode != 0:
         raise SystemExit(f"{' '.join(cmd)} failed: {r.stdout[-2000:]}{r.stderr[-2000:]}")
-    (bag,) = out.iterdir()
+    from winder.record.bag import bags_in
+
+    (bag,) = bags_in(out)
     return bag
 
 

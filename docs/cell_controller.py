@@ -92,7 +92,8 @@ def main() -> int:
     if not result.run_id:  # refused: the reason, in the words `winder ctl start` uses
         print(f"start refused: {result.message}")
         return code or 1
-    print(f"run {result.run_id}: {result.report.state}, {result.message}, bag {result.bag_path}")
+    part = f", part {result.part_id}" if result.part_id else ""  # its record in the part index (PARTS.md)
+    print(f"run {result.run_id}: {result.report.state}, {result.message}, bag {result.bag_path}{part}")
     return code or (0 if result.success else 1)
 
 

@@ -242,6 +242,6 @@ def bag_closed(bag: Path) -> bool:
 
 def closed_bags(root: Path) -> list[Path]:
     """The bag directories under ``root`` the consumer has closed, oldest name first."""
-    if not root.is_dir():
-        return []
-    return sorted(b for b in root.iterdir() if b.is_dir() and bag_closed(b))
+    from winder.record.bag import bags_in
+
+    return [b for b in bags_in(root) if bag_closed(b)]

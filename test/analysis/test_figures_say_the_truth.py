@@ -23,6 +23,7 @@ import pytest
 from support.paths import ROOT
 
 from winder.motion.axes import AXES
+from winder.record.bag import bags_in
 from winder.record.reader import read_run
 
 pytestmark = pytest.mark.ros  # each test winds a coil: real nodes over DDS
@@ -48,7 +49,7 @@ def ortho(tmp_path_factory: pytest.TempPathFactory) -> Path:
     finally:
         release_domain(domain)
     assert r.returncode == 0, r.stdout + r.stderr
-    [bag] = [p for p in out.iterdir() if p.is_dir()]
+    [bag] = bags_in(out)
     return bag
 
 
@@ -150,7 +151,7 @@ def test_a_drivers_read_back_is_not_differentiated_as_motion(tmp_path: Path) -> 
         for p in nodes:
             p.wait(30)
         release_domain(domain)
-    [bag] = [p for p in bags.iterdir() if p.is_dir()]
+    [bag] = bags_in(bags)
     assert read_run(bag).sim_config is None  # a hardware consumer: no motor model
     r = subprocess.run([str(WINDER), "analyze", str(bag)], capture_output=True, text=True, timeout=180)
     assert r.returncode == 0, r.stderr

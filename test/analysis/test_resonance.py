@@ -25,6 +25,7 @@ from conftest import BIN, next_domain, release_domain
 from support.paths import ROOT
 
 from winder.analysis.resonance import TestMove, motor_for, move_for, residual, residual_table
+from winder.record.bag import bags_in
 from winder.shaping import duration
 
 
@@ -165,7 +166,7 @@ def test_a_shaped_cell_run_keeps_every_step_in_place(tmp_path: Path) -> None:
         finally:
             release_domain(domain)
         assert r.returncode == 0, r.stdout + r.stderr
-        (bag_dir,) = (work / "bags").iterdir()
+        (bag_dir,) = bags_in(work / "bags")
         bag = rosbags_read(bag_dir)
         runs[label] = (timed_rows(bag), json.loads(bag["/winder/profile_config"][0][1].data))
     (plain, plain_config), (shaped, config) = runs["plain"], runs["zvd"]

@@ -25,6 +25,7 @@ from support import wait
 from support.bags import mcap_size
 
 from winder.motion.job import Job
+from winder.record.bag import bags_in
 
 pytestmark = pytest.mark.ros
 
@@ -69,8 +70,8 @@ def test_one_process_runs_the_same_cell_as_three(env: dict[str, str], tmp_path: 
     ns = ["--namespace", namespace] if namespace else []
     run(env, tmp_path / "three", *SETTINGS, *ns)
     out = run(env, tmp_path / "one", *SETTINGS, *ns, "--one-process")
-    [three] = list((tmp_path / "three").iterdir())
-    [one] = list((tmp_path / "one").iterdir())
+    [three] = bags_in(tmp_path / "three")
+    [one] = bags_in(tmp_path / "one")
     a, b = rosbags_read(three), rosbags_read(one)
     a, b = ({t.removeprefix(namespace): m for t, m in bag.items()} for bag in (a, b))
     steps = Job(turns_per_layer=6, layers=1, poles=2, fork_steps_per_rev=256).total_steps
@@ -142,7 +143,7 @@ def test_ctrl_c_mid_run_closes_the_one_process_cells_bag(env: dict[str, str], tm
     out, err = p.communicate(timeout=60)
     assert p.returncode == 130, out + err
     assert "Traceback" not in err and "interrupted" in err, err
-    [bag] = list(tmp_path.iterdir())
+    [bag] = bags_in(tmp_path)
     assert bag_closed(bag)
     report = final_report(rosbags_read(bag))
     assert report["state"] == "incomplete", report

@@ -25,6 +25,7 @@ from support.cli import assert_one_line_error, run_cli
 
 from winder import __version__
 from winder.cli.exits import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OUTPUT
+from winder.record.bag import bags_in
 from winder.record.parts import COLUMNS, PartEnd, PartIndex, PartStart
 
 T0 = 1_795_911_156_000_000_000
@@ -214,7 +215,7 @@ def test_a_run_writes_its_part_as_its_bag_reports_it(tmp_path: Path, procs: Proc
     job.write_text(TINY_JOB)
     r = winder_run(tmp_path, procs.domain, str(job), "--parts-db", "auto")
     assert r.returncode == 0, r.stdout + r.stderr
-    [bag] = [p for p in (tmp_path / "bags").iterdir() if p.is_dir()]
+    [bag] = bags_in(tmp_path / "bags")
     final = final_report(rosbags_read(bag))
     [row] = PartIndex(tmp_path / "bags" / "parts.sqlite").parts(simulated=None)
     assert final["state"] == "done" and final["part_id"] == row["part_id"] == final["run_id"]
@@ -260,7 +261,7 @@ def test_an_index_that_cannot_be_written_costs_the_run_its_part_only(tmp_path: P
     job.write_text(TINY_JOB)
     r = winder_run(tmp_path, procs.domain, str(job), "--parts-db", str(db))
     assert r.returncode == EXIT_FAILED, r.stdout + r.stderr  # a run with an error
-    [bag] = [p for p in (tmp_path / "bags").iterdir() if p.is_dir()]
+    [bag] = bags_in(tmp_path / "bags")
     assert bag_closed(bag)
     msgs = rosbags_read(bag)
     final = final_report(msgs)

@@ -25,6 +25,7 @@ import pytest
 from conftest import next_domain, release_domain
 
 from winder.analysis.metrics import analyze
+from winder.record.bag import bags_in
 from winder.record.reader import read_run
 
 pytestmark = pytest.mark.ros
@@ -55,7 +56,7 @@ class Cell:
     def run(self, tag: str, *args: str, code: int = 0) -> tuple[Path, str]:
         if tag not in self.runs:
             out = self.winder("run", *JOB, "--bag-dir", str(self.root / tag), *args, code=code)
-            [bag] = list((self.root / tag).iterdir())
+            [bag] = bags_in(self.root / tag)
             self.runs[tag] = bag, out
         return self.runs[tag]
 
@@ -169,7 +170,7 @@ def test_a_resimulated_bag_reads_as_a_resimulation(cell: Cell, tmp_path: Path) -
     bag, _ = cell.run("paused", *PAUSED)
     source = read_run(bag)
     said = cell.winder("resim", str(bag), "--fork.J", "2e-4", "--bag-dir", str(tmp_path / "out"))
-    [new] = list((tmp_path / "out").iterdir())
+    [new] = bags_in(tmp_path / "out")
     assert new.name.startswith(f"{source.job_id}_resim_"), new.name
     assert f"bag                {new}" in said, said
     run = read_run(new)

@@ -23,6 +23,7 @@ from support.bags import finished_run
 from support.paths import ROOT
 
 from winder.contract.jobfile import SECTION_ALIASES, JobFileError, load_job_file
+from winder.record.bag import bags_in
 from winder.record.reader import read_run
 
 JOBS = sorted((ROOT / "jobs").glob("*.yaml"))
@@ -320,7 +321,7 @@ def test_a_job_with_coil_overrides_runs_through_the_nodes(tmp_path: Path, procs:
         timeout=180,
     )
     assert out.returncode == 0, out.stdout + out.stderr
-    [bag] = list(bags.iterdir())
+    [bag] = bags_in(bags)
     run = read_run(bag)
     assert run.complete and not run.errors
     job = Job(**fields, coil_overrides=overrides)
@@ -417,5 +418,5 @@ def test_winder_run_gives_the_nodes_the_values_it_checked(tmp_path: Path, procs:
             stdin=subprocess.DEVNULL,
         )
         assert r.returncode == 0, r.stdout + r.stderr
-        (bag,) = bags.iterdir()
+        (bag,) = bags_in(bags)
         assert read_run(bag).job_id == job_id

@@ -21,6 +21,7 @@ from conftest import BIN, next_domain, release_domain
 
 from winder.cli.exits import EXIT_OUTPUT
 from winder.contract.files import OutputError, atomic_file, new_directory, write_text
+from winder.record.bag import bags_in
 
 TINY = ("--turns-per-layer", "4", "--layers", "1", "--poles", "1")
 
@@ -72,7 +73,7 @@ def bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
     finally:
         release_domain(domain)
     assert r.returncode == 0, r.stdout + r.stderr
-    (path,) = sorted((root / "bags").iterdir())
+    (path,) = bags_in(root / "bags")
     return path
 
 

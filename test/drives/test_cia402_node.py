@@ -6,6 +6,7 @@ exit-code table."""
 
 from __future__ import annotations
 
+import sqlite3
 import subprocess
 import sys
 from pathlib import Path
@@ -18,6 +19,7 @@ from support.paths import TEST
 
 from winder.cli.exits import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK
 from winder.procs import popen
+from winder.record.bag import bags_in
 from winder.record.reader import read_run
 
 pytestmark = pytest.mark.ros
@@ -47,7 +49,7 @@ def ctl(procs: Any, *words: str) -> subprocess.CompletedProcess[str]:
 
 
 def only_bag(bags: Path) -> Path:
-    [bag] = [p for p in bags.iterdir() if p.is_dir()]
+    [bag] = bags_in(bags)
     return bag
 
 
@@ -63,6 +65,10 @@ def test_winder_run_drives_winds_a_small_job_on_the_twins(procs: Any, tmp_path: 
     assert run.plan.total_steps == 4 * 1024
     assert int(run.report["syncs"]) > 0  # the steps went out as SYNC cycles on the bus
     assert len(run.states.t) > 10  # joint states from the twins' TPDOs, recorded
+    # its part, beside the bag by default, is a twin's: simulated, never counted with real ones
+    with sqlite3.connect(f"{(bags / 'parts.sqlite').as_uri()}?mode=ro", uri=True) as con:
+        parts = con.execute("SELECT run_id, simulated, state FROM parts").fetchall()
+    assert parts == [(run.run_id, 1, "done")]
 
 
 def test_ctl_estop_mid_run_stops_the_drives_and_closes_the_run(procs: Any, tmp_path: Path) -> None:

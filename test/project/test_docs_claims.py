@@ -44,6 +44,7 @@ from winder.contract.qos import TOPIC_QOS, Qos
 from winder.contract.stream import LATER_FIELDS
 from winder.contract.topics import TOPIC_DIAGNOSTICS
 from winder.motion.job import AUTO, FIELD_SPECS
+from winder.record.bag import bags_in
 from winder.spec import Spec, SpecError
 
 README = ROOT / "README.md"
@@ -421,7 +422,7 @@ def test_the_time_of_a_ctl_command_says_when_it_was_measured() -> None:
 
 # -- the default job's numbers --------------------------------------------------------
 #: README lines of `make demo`'s output that differ by machine, run or moment
-MACHINE_LINES = ("recording into", "ROS domain", "run ", "real-time factor", "bag ")
+MACHINE_LINES = ("recording into", "ROS domain", "run ", "real-time factor", "bag ", "part ")
 
 
 @pytest.mark.ros
@@ -445,7 +446,7 @@ def test_the_default_jobs_numbers_are_what_a_run_prints_now(tmp_path: Path) -> N
     finally:
         release_domain(domain)
     assert run.returncode == 0, run.stdout + run.stderr
-    [bag] = (tmp_path / "bags").iterdir()
+    [bag] = bags_in(tmp_path / "bags")
     analyze = subprocess.run(
         [str(BIN / "winder"), "analyze", str(bag), "--no-plots"],
         env=env,
@@ -465,6 +466,10 @@ def test_the_default_jobs_numbers_are_what_a_run_prints_now(tmp_path: Path) -> N
     kept = [line for line in shown if not line.strip().startswith(MACHINE_LINES)]
     assert len(kept) >= 6, kept
     bad += [f"README.md: {line}" for line in kept if line not in printed]
+    # the machine's lines that name the part as the README shows them: the run's id, the index beside its bag
+    index = (tmp_path / "bags" / "parts.sqlite").resolve()
+    named = [f"  part               {bag.name}  (winder parts show)", f"  part index         {index}"]
+    bad += [f"README.md (as: {line})" for line in named if line not in printed]
     assert not bad, (
         "lines the docs show that a run of the default job no longer prints:\n"
         + "\n".join(bad)

@@ -30,6 +30,7 @@ from support.bags import mcap_size
 from support.cli import run_cli
 
 from winder.procs import popen
+from winder.record.bag import bags_in
 from winder.record.reader import BagError, read_raw, read_run
 
 pytestmark = pytest.mark.ros
@@ -150,10 +151,10 @@ def check_bags(bag_dir: Path, killed: bool, tmp: Path) -> str:
     SIGKILLed); returns what was found: "none", "closed" or "recovered"."""
     found = "none"
     for entry in sorted(entries(bag_dir)):
-        path = bag_dir / entry
         if entry.startswith("."):
-            assert killed, f"{path}: a staging directory left by a run that was not SIGKILLed"
-            continue
+            assert killed, f"{bag_dir / entry}: a staging directory left by a run that was not SIGKILLed"
+    for path in bags_in(bag_dir):  # (the part index beside them is no bag)
+        entry = path.name
         assert (path / "metadata.yaml").is_file(), f"{path}: no metadata.yaml ({os.listdir(path)})"
         try:
             raw = read_raw(path)

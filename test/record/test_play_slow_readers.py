@@ -28,6 +28,7 @@ from support.bags import rosbags_raw
 from support.cli import run_cli
 
 from winder.procs import run
+from winder.record.bag import bags_in
 
 pytestmark = pytest.mark.ros
 
@@ -122,7 +123,7 @@ def slow_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
     finally:
         release_domain(domain)
     assert r.returncode == 0, r.stdout + r.stderr
-    (bag,) = sorted(root.iterdir())
+    (bag,) = bags_in(root)
     return bag
 
 

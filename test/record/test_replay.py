@@ -30,6 +30,7 @@ from support.oracles import params, superpose
 
 from winder.contract.qos import qos_of
 from winder.procs import in_mask
+from winder.record.bag import bags_in
 from winder.record.raw import read_raw
 from winder.record.reader import read_run
 
@@ -74,7 +75,7 @@ def ops_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
     finally:
         release_domain(domain)
     assert r.returncode == 0, r.stdout + r.stderr
-    (bag,) = sorted(root.iterdir())
+    (bag,) = bags_in(root)
     return bag
 
 
@@ -428,7 +429,7 @@ def test_resim_with_another_inertia(ops_bag: Path, procs: Procs, tmp_path: Path)
     )
     assert r.returncode == 0, r.stdout + r.stderr
     assert f"fork.J {fork.J:g} -> {new_j:g}" in r.stdout
-    (new,) = sorted((tmp_path / "out").iterdir())
+    (new,) = bags_in(tmp_path / "out")
     old_msgs, new_msgs = rosbags_read(ops_bag), rosbags_read(new)
     # the step times, every row, exactly
     np.testing.assert_array_equal(
@@ -492,7 +493,7 @@ def test_resim_of_a_resim_names_each_source(ops_bag: Path, procs: Procs, tmp_pat
     """A re-simulation is a recording like any other: it plays and re-simulates again."""
     out = tmp_path / "a"
     for src, model in ((ops_bag, "nonlinear"), (None, "linear")):
-        bag = src if src is not None else next(out.iterdir())
+        bag = src if src is not None else bags_in(out)[0]
         r = subprocess.run(
             [
                 str(BIN / "winder"),
@@ -510,8 +511,8 @@ def test_resim_of_a_resim_names_each_source(ops_bag: Path, procs: Procs, tmp_pat
             stdin=subprocess.DEVNULL,
         )
         assert r.returncode == 0, r.stdout + r.stderr
-    (second,) = sorted((tmp_path / "b").iterdir())
-    (first,) = sorted(out.iterdir())
+    (second,) = bags_in(tmp_path / "b")
+    (first,) = bags_in(out)
     config = json.loads(rosbags_read(second)["/winder/sim_config"][0][1].data)
     assert config["source_bag"] == str(first.resolve()) and config["model"] == "linear"
 

@@ -31,6 +31,7 @@ from winder.analysis.metrics import analyze
 from winder.contract.stream import RUN_ID
 from winder.contract.topics import STATUS_KEYS, cell_state_values
 from winder.procs import die_with_parent, popen
+from winder.record.bag import bags_in
 from winder.record.reader import read_run
 
 pytestmark = pytest.mark.ros
@@ -109,7 +110,7 @@ def test_the_same_job_twice_gives_two_runs_on_one_clock(tmp_path: Path, procs: P
 
     # two runs, two ids, two bags named after them, each holding its id
     assert first != second and RUN_ID.match(first) and RUN_ID.match(second)
-    assert sorted(p.name for p in bags.iterdir()) == sorted([first, second])
+    assert [p.name for p in bags_in(bags)] == sorted([first, second])
     now = time.time()
     for run_id in (first, second):
         run = read_run(bags / run_id)
@@ -156,7 +157,7 @@ def test_the_readme_controller_runs_a_cell(tmp_path: Path, procs: Procs) -> None
     ActionClient of the cell's Wind action), against the three node
     executables started one by one, the consumer under another node name: its
     goal winds the job set in the cell, and it exits 0 with the run done and
-    its bag named. With no cell on the graph it gives up after its
+    its bag and part named. With no cell on the graph it gives up after its
     timeout, in one line, exit 2."""
     import subprocess
     import sys
@@ -178,6 +179,7 @@ def test_the_readme_controller_runs_a_cell(tmp_path: Path, procs: Procs) -> None
     assert out.returncode == 0, out.stdout + out.stderr
     run_id = re.search(r"started run (\S+)", out.stdout).group(1)  # type: ignore[union-attr]
     assert f"run {run_id}: done" in out.stdout and str(bags / run_id) in out.stdout, out.stdout
+    assert out.stdout.rstrip().endswith(f", part {run_id}"), out.stdout  # its part: the run's id
     assert read_run(bags / run_id).complete
 
 

@@ -27,6 +27,7 @@ from winder.cli import commands as cli
 from winder.contract.params import SIM_SPECS, bag_directory
 from winder.motion.timing import MAX_JOB_SECONDS
 from winder.procs import popen, signal_state
+from winder.record.bag import bags_in
 from winder.spec import SpecError
 
 # (arguments, what the one line must name): each value is inside its own
@@ -468,7 +469,7 @@ def test_a_restarted_node_leaves_the_cell_able_to_run_the_next_job(
         # of its own for the dead run; killed sooner still, before it made the bag
         # directory at all, there is none (and the restarted node made none either)
         entries = sorted(bags.iterdir()) if bags.exists() else []
-        visible = [b.name for b in entries if not b.name.startswith(".")]
+        visible = [b.name for b in bags_in(bags)]
         assert visible in ([first_run], []), entries
         staging = [b.name for b in entries if b.name not in visible]
         assert all(name.startswith(f".{first_run}.opening-") for name in staging), staging
@@ -585,7 +586,7 @@ def test_a_full_disk_mid_job_closes_the_job_and_keeps_what_was_written(
         assert sim.poll() is None, "the sim node died"
         wait.spin_for(ros, 1.0)  # the subject is what does not happen: the node does not die a moment later
         assert sim.poll() is None
-        bags = list((tmp_path / "small" / "bags").iterdir())
+        bags = bags_in(tmp_path / "small" / "bags")
         assert len(bags) == 1
         run = read_run(bags[0])  # readable: what reached the file, flagged as not complete
         assert not run.complete

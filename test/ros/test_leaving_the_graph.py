@@ -22,6 +22,7 @@ from support.bags import mcap_size
 from support.ros_probe import spin_until
 
 from winder.procs import popen
+from winder.record.bag import bags_in
 
 pytestmark = pytest.mark.ros
 
@@ -135,6 +136,6 @@ def test_sighup_ends_winder_run_as_sigint_does(procs: Procs, ros: Any, tmp_path:
     assert run.returncode == 130, out + err
     assert err.strip().splitlines()[-1] == "winder run: interrupted" and "Traceback" not in err, err
     gone(ros, cell, f"{sorted(cell)} gone from the graph")
-    [bag] = list(bags.iterdir())
+    [bag] = bags_in(bags)
     assert bag_closed(bag)
     assert final_report(rosbags_read(bag))["state"] == "incomplete"

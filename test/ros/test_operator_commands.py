@@ -32,6 +32,7 @@ from winder.motion.job import Job
 from winder.motion.retime import motion_state
 from winder.motion.timing import plan_segment
 from winder.procs import popen
+from winder.record.bag import bags_in
 from winder.record.reader import read_run
 
 pytestmark = pytest.mark.ros
@@ -52,7 +53,7 @@ def winder_run(tmp: Path, tag: str, env: dict[str, str], *extra: str, code: int 
         timeout=240,
     )
     assert out.returncode == code, out.stdout + out.stderr
-    [bag] = list((tmp / tag).iterdir())
+    [bag] = bags_in(tmp / tag)
     return bag
 
 
@@ -248,6 +249,6 @@ def test_winder_run_takes_keys_on_a_terminal(tmp_path: Path, procs: Procs) -> No
             run.kill()
     assert run.returncode == 3, out + err
     assert "keys: space pause/resume" in err and "pause: run" in err and "abort: run" in err, err
-    [bag] = list(bags.iterdir())
+    [bag] = bags_in(bags)
     kinds = [(e["event"], e["source"]) for e in events(rosbags_read(bag))]
     assert kinds == [("pause", "call"), ("resume", "call"), ("abort", "call")], kinds

@@ -26,6 +26,7 @@ from winder.contract.params import PROFILE_SPECS, stop_place, stop_points
 from winder.contract.topics import cell_state_values
 from winder.motion.job import Job
 from winder.motion.timing import plan_job, plan_segment, plan_timing
+from winder.record.bag import bags_in
 from winder.record.reader import read_run
 from winder.spec import SpecError
 
@@ -115,7 +116,7 @@ def test_a_run_stopped_at_turn_2_has_the_uninterrupted_steps(tmp_path: Path, pro
             timeout=180,
         )
         assert out.returncode == 0, out.stdout + out.stderr
-        [bag] = list((tmp_path / tag).iterdir())
+        [bag] = bags_in(tmp_path / tag)
         return bag
 
     plain = read_run(run("plain"))

@@ -13,6 +13,7 @@ mcap), and the consumer's final report in it.
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 from typing import Any
@@ -20,6 +21,7 @@ from typing import Any
 import pytest
 from conftest import Procs, bag_closed, final_report, rosbags_read
 from support import wait
+from support.cli import run_cli
 from support.paths import ROOT
 from support.ros_probe import get_params, ready_states
 
@@ -180,6 +182,17 @@ def test_a_goal_winds_a_part(procs: Procs, tmp_path: Path, ros: Any, client: Any
     # the result names the run's bag, closed, holding the same final report
     bag = Path(result.bag_path)
     assert bag.parent == bags and bag.name == result.run_id and bag_closed(bag)
+    # ... and its part, which `winder parts show` finds in the index beside the bag, naming that bag
+    assert result.part_id, result
+    shown = run_cli("parts", "show", result.part_id, "--bag-dir", str(bags), "--json")
+    assert shown.returncode == 0, shown.stdout + shown.stderr
+    part = json.loads(shown.stdout)
+    assert (part["part_id"], part["run_id"], part["bag"], part["state"]) == (
+        result.part_id,
+        result.run_id,
+        str(bag.resolve()),
+        "done",
+    )
     report = result.report
     assert (report.state, report.run_id, report.steps_done, report.steps_total) == (
         "done",

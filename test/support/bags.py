@@ -22,7 +22,7 @@ from support import wait
 from support.domains import next_domain, release_domain, take_domain
 from support.paths import BIN
 from winder.procs import Children, stop_all
-from winder.record.bag import BagRecorder
+from winder.record.bag import BagRecorder, bags_in
 from winder.record.msgtypes import jazzy_store
 from winder.record.raw import RawBag
 
@@ -146,7 +146,7 @@ class SessionBags:
 
     def _finish(self, name: str, p: subprocess.Popen[bytes]) -> None:
         log = self.children.log(p)
-        bags = sorted((self.root / name).glob("*")) if (self.root / name).exists() else []
+        bags = bags_in(self.root / name)
         if p.returncode != STATUS.get(name, 0) or len(bags) != 1:
             self.done[name] = f"winder run {name} failed (status {p.returncode}, bags {bags}):\n{log}"
         else:

@@ -98,7 +98,9 @@ def job_args(job: dict[str, Any]) -> list[str]:
 
 
 def only_bag(tmp_path: Path) -> Path:
-    bags = sorted((tmp_path / "bags").iterdir())
+    from winder.record.bag import bags_in
+
+    bags = bags_in(tmp_path / "bags")
     assert len(bags) == 1, bags
     return bags[0]
 

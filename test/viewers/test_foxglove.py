@@ -37,6 +37,7 @@ from support.paths import ROOT, TEST
 from support.ros_probe import spin_until
 
 from winder.contract.topics import cell_state_values, in_namespace
+from winder.record.bag import bags_in
 
 pytestmark = pytest.mark.ros
 
@@ -339,7 +340,7 @@ def test_a_signal_at_any_moment_ends_run_foxglove(
     log = procs.log(run)
     assert run.returncode == 130, log
     assert "interrupted" in log and "Traceback" not in log, log
-    for bag in bags.glob("*/"):
+    for bag in bags_in(bags):
         assert (bag / "metadata.yaml").is_file(), sorted(bag.iterdir())
 
 
@@ -469,7 +470,7 @@ def test_play_foxglove_plays_pauses_and_seeks(procs: Procs, tmp_path: Path) -> N
         stdin=subprocess.DEVNULL,
     )
     assert done.returncode == 0, done.stdout + done.stderr
-    (bag,) = (tmp_path / "bags").iterdir()
+    (bag,) = bags_in(tmp_path / "bags")
     recorded = rosbags_read(bag)
     states = recorded["/winder/joint_states"]
     first = min(t for msgs in recorded.values() for t, _ in msgs)

@@ -17,6 +17,7 @@
   consumer measures one (NaN otherwise), twice a second and at each state;
 * result: ``success`` (the run ended complete, its report naming no ``faults``: a run
   whose axes lost steps is done, not a success), ``run_id``, ``bag_path``,
+  ``part_id`` (the run's part in the consumer's part index, docs/PARTS.md),
   ``message`` (the consumer's final word) and the typed final report, once
   the consumer has closed the run's bag and said how it ended; a consumer
   silent for the node's ``stall_abort`` ends the goal, the run given up;
@@ -294,6 +295,7 @@ class WindServer:
             self.publish(goal, min(report.steps_done, goal.total))
             result.success = report.state == JobState.DONE and not report.faults  # done, as commanded
             result.bag_path = report.bag
+            result.part_id = report.part_id  # its part in the consumer's part index ("" none)
             result.report = job_report_msg(report, goal.consumer)
         if result.success:
             goal.handle.succeed()

@@ -68,6 +68,7 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -76,10 +77,12 @@ import numpy.typing as npt
 from winder.analysis.digest import STRIDE_TIME, Digest, SegmentKinematics, digest, turn_index
 from winder.analysis.wire import FAULTS, fault, layer_tensions, paid_out
 from winder.contract.eq7 import layer_of_samples, sample_deviation
-from winder.contract.run import commands_text, shaper_text, stops_text
+from winder.contract.run import PART_ID_KEY, PART_INDEX_KEY, commands_text, shaper_text, stops_text
 from winder.contract.states import EventKind, JobState
+from winder.errors import WinderError
 from winder.motion.axes import AXES, AXIS_TABLE, FEED, FORK
 from winder.motion.profile import LIMITS
+from winder.record.parts import INDEX_NAME, PartIndex
 from winder.record.reader import Run
 
 __all__ = [
@@ -94,6 +97,7 @@ __all__ = [
     "digest_run",
     "format_table",
     "paired_error",
+    "run_part",
     "sample_layers",
     "setup",
     "setup_differences",
@@ -200,6 +204,45 @@ class Analysis:
     #: and peak, the set tension, the bands and how long the tension was outside each (s), the
     #: wire paid out, the tension and stretch per layer wound, its break and slip (winder.analysis.wire)
     wire: dict[str, Any] = field(default_factory=dict)
+    #: the run's part where a part index has it (:func:`run_part`): ``part_id``, ``index`` (its
+    #: file), ``state``, ``verdict`` (None while running) and ``reasons``; empty if none has it
+    part: dict[str, Any] = field(default_factory=dict)
+
+
+# -- the part --------------------------------------------------------------------------
+
+
+def run_part(run: Run) -> tuple[dict[str, Any], str]:
+    """The run's part in the part index (docs/PARTS.md), and a note ("" if
+    none) if an index that should hold it cannot be read. Looked for in the
+    index the run's final report names (``part_index``, where it is on this
+    host), then in the one beside the bag (``<bag_dir>/parts.sqlite``: a bag
+    directory copied whole keeps it). The part is the one the report names
+    (``part_id``); a run without that key (killed before its final report, or
+    older) is found by its run id, if that part's bag is this bag's name."""
+    bag = run.path if run.path.is_dir() else run.path.parent
+    named = run.report.get(PART_INDEX_KEY, "")
+    candidates = [Path(named)] if named else []
+    candidates.append(bag.parent / INDEX_NAME)
+    part_id = run.report.get(PART_ID_KEY, "")
+    for path in dict.fromkeys(candidates):
+        if not path.is_file():
+            continue
+        try:
+            row = PartIndex(path).get(part_id or run.run_id)
+        except WinderError as exc:
+            return {}, f"the run's part not read: {exc}"
+        if row is None or (not part_id and Path(str(row.get("bag") or "")).name != bag.name):
+            continue
+        reasons = json.loads(row["reasons"]) if row.get("reasons") else []
+        return {
+            "part_id": row["part_id"],
+            "index": str(path),
+            "state": row["state"],
+            "verdict": row["verdict"],
+            "reasons": reasons,
+        }, ""
+    return {}, ""
 
 
 # -- eq. 7 -------------------------------------------------------------------------
@@ -507,6 +550,9 @@ def analyze(run: Run, stride_time: float = STRIDE_TIME, digested: Digest | None 
             f"{d.lost_stencils} command kinematics points left out: the move sped up faster "
             "than the analysis keeps step times for"
         )
+    part, unread = run_part(run)
+    if unread:
+        notes.append(unread)
     state = run.report.get("state", "")
     lost = int(_num(run.report, "lost_steps", -1))
     sim_time = float(run.states.t[-1]) if len(run.states) else math.nan
@@ -564,6 +610,7 @@ def analyze(run: Run, stride_time: float = STRIDE_TIME, digested: Digest | None 
         stops=stops_text(run.plan),
         commands=commands_text(run.events, run.plan),
         wire=_wire(run, d),
+        part=part,
     )
 
 
@@ -731,6 +778,17 @@ def _stream(a: Analysis) -> str:
     return ", ".join(parts) or "none"
 
 
+def _part_text(a: Analysis) -> str:
+    """The run's part in a few words: its id, its verdict (or its state while it is
+    running) and its index where that is not the one beside the bag; "none" if no index has it."""
+    if not a.part:
+        return "none"
+    p = a.part
+    where, bag = Path(p["index"]).resolve(), Path(a.path).resolve()
+    beside = where.parent == (bag if bag.is_dir() else bag.parent).parent
+    return f"{p['part_id']} ({p['verdict'] or p['state']})" + ("" if beside else f" in {where}")
+
+
 def _rows(a: Analysis) -> list[tuple[str, str]]:
     state = a.state or "no report"
     state += ", closed" if a.closed else (", cut short (recovered)" if a.recovered else ", not closed")
@@ -742,6 +800,7 @@ def _rows(a: Analysis) -> list[tuple[str, str]]:
         ("job id", a.job_id),
         ("job", a.job),
         ("run", a.run_id or "-"),
+        ("part", _part_text(a)),
         ("job file sha256", a.job_file_sha256 or "-"),
         ("re-simulation of", a.source or "-"),
         ("profile / motor model", f"{a.profile}{', ' + a.shaper if a.shaper else ''} / {a.model}"),
@@ -878,7 +937,7 @@ SETUP_ROWS: dict[str, tuple[str, ...]] = {
 
 
 #: rows left out of the table where every run says "none"
-TOLD_IF_ANY = ("programmed stops", "operator commands", "wire stretched", "wire break", "wire slip")
+TOLD_IF_ANY = ("part", "programmed stops", "operator commands", "wire stretched", "wire break", "wire slip")
 
 
 def _shows(row: str, key: str) -> bool:

@@ -17,7 +17,7 @@ from winder.cli.exits import (
     EXIT_NODE_DIED,
     EXIT_OK,
 )
-from winder.contract.run import JobReport, commands_text, stops_text
+from winder.contract.run import PART_INDEX_KEY, JobReport, commands_text, stops_text
 from winder.contract.states import JobState
 
 __all__ = ["report_run"]
@@ -126,8 +126,10 @@ def report_run(
     if commands:
         print(f"  operator commands  {commands}")
     print(f"  bag                {r.bag or '-'}")
-    if x.get("part_id"):  # the run's part in the part index (docs/PARTS.md)
-        print(f"  part               {x['part_id']}  (winder parts show)")
+    if r.part_id:  # the run's part, and the index that holds it (docs/PARTS.md)
+        print(f"  part               {r.part_id}  (winder parts show)")
+        if x.get(PART_INDEX_KEY):
+            print(f"  part index         {x[PART_INDEX_KEY]}")
     if result.errors:
         print(f"  ERROR reports      {len(result.errors)}, first: {result.errors[0]}")
     # messages from nodes that are not the cell's, refused: by each node of the cell, and this command

@@ -31,6 +31,7 @@ __all__ = [
     "MANAGED",
     "MOTOR_FIELDS",
     "OPERATION_SPECS",
+    "PARTS_DB_NONE",
     "PROFILE_KINDS",
     "PROFILE_SPECS",
     "RAMP_SOURCES",
@@ -46,6 +47,10 @@ __all__ = [
     "stop_place",
     "stop_points",
 ]
+
+
+#: the values of a consumer's ``parts_db`` that keep no part index (``""``: the first phase's "none")
+PARTS_DB_NONE = ("none", "")
 
 
 def _table(*specs: Spec) -> dict[str, Spec]:
@@ -228,9 +233,9 @@ CONSUMER_SPECS = _table(
     Spec(
         "parts_db",
         str,
-        "",
+        "auto",
         "the part index each run adds its part to (SQLite, docs/PARTS.md): auto, <bag_dir>/parts.sqlite "
-        "when recording; '' none (for now the default: see docs/PARTS.md); else this file",
+        "when recording; none (or ''), no index; else this file",
     ),
 )
 
@@ -601,8 +606,8 @@ def check_consumer(values: dict[str, Any]) -> None:
     in a directory (the index itself is created by the first run)."""
     if values["record"]:
         bag_directory(values["bag_dir"])
-    parts_db = values.get("parts_db", "")
-    if parts_db not in ("", "auto"):
+    parts_db = values.get("parts_db", "auto")
+    if parts_db not in (*PARTS_DB_NONE, "auto"):
         path = Path(parts_db).expanduser()
         if path.is_dir():
             raise SpecError(f"parts_db={shorten(parts_db)} is invalid: it is a directory, not a file")

@@ -37,6 +37,8 @@ from winder.contract.topics import PROCESS_KEYS, status_values
 __all__ = [
     "EVENT_KINDS",
     "FAULTS_KEY",
+    "PART_ID_KEY",
+    "PART_INDEX_KEY",
     "AbortPoint",
     "ControlEvent",
     "EventError",
@@ -308,6 +310,11 @@ class RunLedger:
 #: outside its alarm band; :meth:`winder.ros.engine.Engine.faults`); absent when nothing. A run
 #: that executed every step is still ``done``, and that is no success (CONTRACT.md 3.7).
 FAULTS_KEY = "faults"
+#: a final report's keys that name the run's part (docs/PARTS.md): its id, and the index file
+#: that holds it (as the consumer's host names it); absent when the consumer keeps no index, or
+#: the part could not be written (a ``stream`` ERROR of the run says why)
+PART_ID_KEY = "part_id"
+PART_INDEX_KEY = "part_index"
 
 
 def _num(text: str, kind: type) -> Any:
@@ -358,6 +365,11 @@ class JobReport:
         """What the axes did that they were not commanded to (:data:`FAULTS_KEY`), "" if nothing:
         a ``done`` run with faults executed every step, but its part is not what was asked."""
         return self.extra.get(FAULTS_KEY, "")
+
+    @property
+    def part_id(self) -> str:
+        """The run's part in the part index (:data:`PART_ID_KEY`), "" if none."""
+        return self.extra.get(PART_ID_KEY, "")
 
     def to_values(self) -> dict[str, object]:
         """The status' key/values, in the contract's order."""

@@ -38,6 +38,7 @@ __all__ = [
     "VERSION_KEY",
     "BagRecorder",
     "bag_qos",
+    "bags_in",
     "being_written",
     "cdr_exact",
     "new_bag_path",
@@ -330,12 +331,26 @@ def unclosed(bag: Path) -> bool:
     return not being_written(bag)
 
 
+def bags_in(directory: Path | str) -> list[Path]:
+    """The bags directly under ``directory`` (a ``bag_dir``), sorted by name:
+    its subdirectories but the hidden ones (a bag being opened is staged as
+    ``.<name>.opening-<pid>``, then renamed). A file there is no bag: the part
+    index (``parts.sqlite`` and SQLite's ``-wal`` and ``-shm`` beside it,
+    docs/PARTS.md), or whatever else was put there. The one answer to "which
+    bags are in this directory" for every command, benchmark and test: none
+    if the directory does not exist."""
+    try:
+        return sorted(p for p in Path(directory).iterdir() if p.is_dir() and not p.name.startswith("."))
+    except FileNotFoundError:
+        return []
+
+
 def unclosed_bags(directory: Path) -> list[Path]:
     """The bags directly under ``directory`` that a writer left unclosed
     (:func:`unclosed`), sorted; a bag a recovered copy beside it comes from
     (``winder bag recover``'s ``<bag>_recovered``) is not counted again."""
     try:
-        entries = sorted(p for p in Path(directory).iterdir() if p.is_dir() and not p.name.startswith("."))
+        entries = bags_in(directory)
     except OSError:
         return []
     recovered = set()

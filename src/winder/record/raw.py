@@ -401,6 +401,10 @@ def _check_magic(path: Path, data: memoryview) -> None:
     if bytes(data[:8]) != MAGIC:
         if bytes(data[:8]) == MAGIC[: min(8, n)] and n < 8:
             raise BagError(f"{path}: MCAP file cut short inside its header, damaged beyond recovery")
+        if bytes(data[:16]) == b"SQLite format 3\x00":  # a bag directory's part index, globbed with its bags
+            raise BagError(
+                f"{path}: an SQLite file (the part index?), not a bag: `winder parts --db {path}` reads it"
+            )
         raise BagError(f"{path}: not an MCAP file (it does not start with the MCAP magic bytes)")
 
 
