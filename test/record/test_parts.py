@@ -201,24 +201,26 @@ def test_four_cells_writing_one_index_lose_nothing(tmp_path: Path) -> None:
         assert con.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
 
 
-def test_migrations_run_from_the_first_version(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """An index of version 1 brought to a (test's) version 2 keeps its parts and gets the new column."""
+def test_a_migration_runs_from_the_version_before(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """An index of this version brought to a (test's) next version keeps its parts and gets the
+    new column (test/record/test_parts_concurrency.py: version 1 to 2, the real migration)."""
     path = tmp_path / "parts.sqlite"
     index = PartIndex(path)
     first = index.begin(start())
+    now, nxt = SCHEMA_VERSION, SCHEMA_VERSION + 1
 
-    def v2(con: sqlite3.Connection) -> None:
+    def added(con: sqlite3.Connection) -> None:
         con.execute("ALTER TABLE parts ADD COLUMN shift TEXT")
 
-    monkeypatch.setattr(parts_mod, "MIGRATIONS", {**parts_mod.MIGRATIONS, 2: v2})
-    monkeypatch.setattr(parts_mod, "SCHEMA_VERSION", 2)
-    with pytest.raises(PartIndexError, match="schema version 1, expected 2"):
+    monkeypatch.setattr(parts_mod, "MIGRATIONS", {**parts_mod.MIGRATIONS, nxt: added})
+    monkeypatch.setattr(parts_mod, "SCHEMA_VERSION", nxt)
+    with pytest.raises(PartIndexError, match=f"schema version {now}, expected {nxt}"):
         index.get(first)  # a reader does not write
     assert index.recover() == []  # a writer brings it up to date
     row = index.get(first)
     assert row is not None and row["shift"] is None and row["run_id"] == RUN
     with sqlite3.connect(path) as con:
-        assert con.execute("PRAGMA user_version").fetchone()[0] == 2
+        assert con.execute("PRAGMA user_version").fetchone()[0] == nxt
 
 
 def test_an_index_of_a_newer_winder_is_refused(tmp_path: Path) -> None:
@@ -251,7 +253,9 @@ def test_an_index_that_cannot_be_written_is_one_line_naming_it(tmp_path: Path) -
         ({"resistance_ohm": [2, 1]}, "tolerances.resistance_ohm=[2, 1] is invalid"),
         ({"resistance_ohm": [1]}, "tolerances.resistance_ohm=[1] is invalid"),
         ({"resistance_ohm": [1, "x"]}, 'tolerances.resistance_ohm=[1, "x"] is invalid'),
-        ({"resistance_ohm": [0, math.inf]}, "tolerances.resistance_ohm=[0, Infinity] is invalid"),
+        ({"resistance_ohm": [math.inf, 5]}, "tolerances.resistance_ohm=[Infinity, 5] is invalid"),
+        ({"resistance_ohm": [0, -math.inf]}, "tolerances.resistance_ohm=[0, -Infinity] is invalid"),
+        ({"resistance_ohm": [None, None]}, "tolerances.resistance_ohm=[null, null] is invalid"),
         ({"resistance_ohm": [True, 2]}, "tolerances.resistance_ohm=[true, 2] is invalid"),
         ({"Bad-Name": [0, 1]}, "tolerances.Bad-Name is not a scalar's name"),
     ],
@@ -381,7 +385,7 @@ def test_parts_db_names_the_index(tmp_path: Path) -> None:
     from winder.contract.params import CONSUMER_SPECS
     from winder.record.parts import index_path
 
-    assert CONSUMER_SPECS["parts_db"].default == ""  # none, until bag directories may hold it
+    assert CONSUMER_SPECS["parts_db"].default == "auto"  # every run leaves its part beside its bag
     assert index_path("", tmp_path) is None
     assert index_path("auto", tmp_path) == tmp_path / "parts.sqlite"
     assert index_path("auto", None) is None  # a consumer that does not record

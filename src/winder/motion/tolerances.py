@@ -5,8 +5,13 @@ range each must lie in (both ends included)::
 
     tolerances:
       resistance_ohm: [11.5, 12.5]
-      tension_max_n: [0, 3.0]
+      tension_max_n: [-.inf, 3.0]   # one-sided: no lower limit
       turns_error: [0, 0]
+
+An open end, ``-.inf`` below or ``.inf`` above (what ROS reads as the
+infinities; ``null`` in the JSON text, which has none), is no limit on that
+side: a one-sided tolerance, as an upper specification limit alone; never
+both ends.
 
 In the job they are one field, ``tolerances``, the map's JSON text
 (``'{"resistance_ohm": [11.5, 12.5]}'``, what ``ros2 param set`` and
@@ -41,13 +46,14 @@ __all__ = [
     "tolerance_text",
     "tolerances_text",
     "verdict",
+    "within",
 ]
 
 OK, NOK = "ok", "nok"
 #: a tolerance's name: a scalar's name as the record and the report spell them
 NAME = re.compile(r"^[a-z][a-z0-9_]{0,63}$")
-#: tolerances by name: (lowest, highest) allowed, both included
-Tolerances = dict[str, tuple[float, float]]
+#: tolerances by name: (lowest, highest) allowed, both included; None: no limit on that side
+Tolerances = dict[str, tuple[float | None, float | None]]
 
 
 def _number(value: object) -> float | None:
@@ -55,6 +61,17 @@ def _number(value: object) -> float | None:
         return None
     number = float(value)
     return number if math.isfinite(number) else None
+
+
+def _end(value: object, open_value: float) -> float | bool | None:
+    """A tolerance's end: a finite number; None (no limit) for null or the
+    infinity on its side (``open_value``: -inf for the lower end); False for anything else."""
+    if value is None:
+        return None
+    if isinstance(value, float) and value == open_value:
+        return None
+    number = _number(value)
+    return False if number is None else number
 
 
 def check_tolerances(doc: object, where: str = "tolerances") -> Tolerances:
@@ -74,12 +91,20 @@ def check_tolerances(doc: object, where: str = "tolerances") -> Tolerances:
             )
         pair = list(value) if isinstance(value, (list, tuple)) else None
         low, high = (
-            (_number(pair[0]), _number(pair[1])) if pair is not None and len(pair) == 2 else (None, None)
+            (_end(pair[0], -math.inf), _end(pair[1], math.inf))
+            if pair is not None and len(pair) == 2
+            else (False, False)
         )
-        if low is None or high is None or low > high:
+        if (
+            low is False
+            or high is False
+            or (low is None and high is None)
+            or (low is not None and high is not None and low > high)
+        ):
             shown = json.dumps(value, default=str)[:60]
             raise SpecError(
-                f"{where}.{key}={shown} is invalid: expected [min, max], two finite numbers with min <= max"
+                f"{where}.{key}={shown} is invalid: expected [min, max], two finite numbers with min <= max, "
+                "or one end open (null, or -.inf / .inf on its side) for no limit there"
             )
         out[key] = (low, high)
     return out
@@ -100,22 +125,27 @@ def parse_tolerances(value: object, where: str = "tolerances") -> Tolerances:
     return check_tolerances(value, where)
 
 
-def tolerances_text(tolerances: Mapping[str, tuple[float, float]]) -> str:
+def tolerances_text(tolerances: Mapping[str, tuple[float | None, float | None]]) -> str:
     """The job field's canonical text of ``tolerances`` ("" for none): compact JSON, in their order."""
     if not tolerances:
         return ""
     return json.dumps({k: [lo, hi] for k, (lo, hi) in tolerances.items()}, separators=(",", ":"))
 
 
-def tolerance_text(low: float, high: float) -> str:
-    """A tolerance as a reason shows it: ``[11.5, 12.5]``."""
-    return f"[{low:g}, {high:g}]"
+def tolerance_text(low: float | None, high: float | None) -> str:
+    """A tolerance as a reason shows it: ``[11.5, 12.5]``; one-sided ``(-inf, 3]``, ``[0, inf)``."""
+    return ("(-inf" if low is None else f"[{low:g}") + ", " + ("inf)" if high is None else f"{high:g}]")
+
+
+def within(value: float, low: float | None, high: float | None) -> bool:
+    """Whether ``value`` lies in the tolerance (both ends included; None: no limit)."""
+    return (low is None or low <= value) and (high is None or value <= high)
 
 
 def verdict(
     state: str,
     scalars: Mapping[str, float | None],
-    tolerances: Mapping[str, tuple[float, float]],
+    tolerances: Mapping[str, tuple[float | None, float | None]],
     faults: str = "",
     notes: Mapping[str, str] | None = None,
     errors: int = 0,
@@ -139,6 +169,6 @@ def verdict(
             reasons.append(
                 f"{said} not recorded: its tolerance {tolerance_text(low, high)} cannot be checked"
             )
-        elif not low <= value <= high:
+        elif not within(value, low, high):
             reasons.append(f"{said} {value:.6g} outside {tolerance_text(low, high)}")
     return (NOK if reasons else OK), reasons

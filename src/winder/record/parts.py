@@ -14,8 +14,11 @@ readers never block the writer; a busy timeout, so several cells writing one
 index wait for each other instead of failing; the schema's version in
 ``PRAGMA user_version``, brought up to :data:`SCHEMA_VERSION` by the
 functions of :data:`MIGRATIONS` in one transaction. An index of a newer
-winder is refused, never written. Every failure is a :class:`PartIndexError`,
-one line naming the file.
+winder is refused, never written. An index this process may not write is
+still read (read-only). Every failure is a :class:`PartIndexError`, one line
+naming the file. A :class:`PartIndex` that has written keeps a connection
+open (:meth:`PartIndex._hold`), so that a write is not followed by a
+checkpoint of the whole WAL.
 """
 
 from __future__ import annotations
@@ -24,9 +27,12 @@ import hashlib
 import json
 import math
 import os
+import random
+import re
 import socket
 import sqlite3
-from collections.abc import Callable, Iterator, Mapping
+import time
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,6 +44,7 @@ from winder.motion.tolerances import NOK, Tolerances, parse_tolerances, verdict
 
 __all__ = [
     "COLUMNS",
+    "FROM_REPORT",
     "INDEX_NAME",
     "MIGRATIONS",
     "SCHEMA_VERSION",
@@ -50,12 +57,16 @@ __all__ = [
     "part_start",
     "recipe_sha256",
     "report_numbers",
+    "row_tolerances",
 ]
 
 #: the index's file name in a bag directory
 INDEX_NAME = "parts.sqlite"
 #: how long a write waits for another process' write to end (ms)
 BUSY_TIMEOUT_MS = 30_000
+
+#: the columns a final report's key fills under another name: column -> report key
+FROM_REPORT = {"wire_length_m": "wire_taken_m", "tension_max_n": "tension_peak_n"}
 
 #: the columns of ``parts`` (schema version 1): name, SQL type, meaning (docs/PARTS.md's table)
 COLUMNS: tuple[tuple[str, str, str], ...] = (
@@ -94,9 +105,17 @@ COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("faults", "TEXT", "what the axes or the wire did that was not commanded"),
     ("verdict", "TEXT", "ok or nok (NULL while running)"),
     ("reasons", "TEXT", "JSON list: every reason of a nok"),
-    ("tolerances", "TEXT", "JSON map name: [min, max] the verdict was taken against"),
+    ("tolerances", "TEXT", "JSON map name: [min, max] the verdict was taken against (null: no limit)"),
     ("report", "TEXT", "JSON: the run's final report, every key as the bag has it"),
     ("bag", "TEXT", "the bag's path"),
+)
+
+
+#: the numeric columns that are a part's scalars (docs/PARTS.md): every number but the process'
+NUMBER_COLUMNS = tuple(
+    name
+    for name, kind, _ in COLUMNS
+    if kind.startswith(("REAL", "INTEGER")) and name not in ("simulated", "pid")
 )
 
 
@@ -109,8 +128,20 @@ def _schema_v1(con: sqlite3.Connection) -> None:
     con.execute("CREATE INDEX parts_state ON parts (state)")
 
 
+def _kind_indexes_v2(con: sqlite3.Connection) -> None:
+    """Version 2: the indexes a reader of one kind (simulated or real, never
+    mixed unless asked) needs on 10^5 parts: the latest parts and their count
+    by kind; a recipe's parts by kind in time order, with their job and state
+    in the index, so that the recipes of a selection and the completed parts
+    among them are counted without reading a row."""
+    con.execute("CREATE INDEX parts_kind ON parts (simulated, started_ns)")
+    con.execute(
+        "CREATE INDEX parts_kind_recipe ON parts (simulated, recipe_sha256, started_ns, job_id, state)"
+    )
+
+
 #: version -> the function that brings an index of the version before it to it
-MIGRATIONS: dict[int, Callable[[sqlite3.Connection], None]] = {1: _schema_v1}
+MIGRATIONS: dict[int, Callable[[sqlite3.Connection], None]] = {1: _schema_v1, 2: _kind_indexes_v2}
 SCHEMA_VERSION = max(MIGRATIONS)
 
 
@@ -221,10 +252,9 @@ def part_scalars(row: Mapping[str, Any]) -> tuple[dict[str, float | None], dict[
     the words a reason adds to a name (``resistance_ohm`` "(predicted)")."""
     report = json.loads(row["report"]) if row.get("report") else {}
     scalars: dict[str, float | None] = dict(report_numbers(report))
-    for name, kind, _ in COLUMNS:
-        if kind.startswith(("REAL", "INTEGER")) and name not in ("simulated", "pid"):
-            value = row.get(name)
-            scalars[name] = None if value is None else float(value)
+    for name in NUMBER_COLUMNS:
+        value = row.get(name)
+        scalars[name] = None if value is None else float(value)
     notes: dict[str, str] = {}
     measured, predicted = row.get("resistance_measured_ohm"), row.get("resistance_predicted_ohm")
     scalars["resistance_ohm"] = measured if measured is not None else predicted
@@ -235,12 +265,27 @@ def part_scalars(row: Mapping[str, Any]) -> tuple[dict[str, float | None], dict[
     return scalars, notes
 
 
+def row_tolerances(row: Mapping[str, Any]) -> Tolerances:
+    """The tolerances a part's row was judged against (None: no limit on that side)."""
+    doc = json.loads(row.get("tolerances") or "{}")
+    return {
+        k: (None if lo is None else float(lo), None if hi is None else float(hi))
+        for k, (lo, hi) in doc.items()
+    }
+
+
 def judge(row: Mapping[str, Any]) -> tuple[str, list[str]]:
     """A closed part's verdict and reasons from its row."""
-    tolerances = {k: (float(v[0]), float(v[1])) for k, v in json.loads(row.get("tolerances") or "{}").items()}
+    tolerances = row_tolerances(row)
     scalars, notes = part_scalars(row)
     errors = int(scalars.get("errors") or 0)
     return verdict(str(row["state"]), scalars, tolerances, str(row.get("faults") or ""), notes, errors)
+
+
+def _busy(exc: sqlite3.Error) -> bool:
+    """Whether SQLite refused for a lock another connection holds (SQLITE_BUSY, any of its kinds)."""
+    code = getattr(exc, "sqlite_errorcode", None)
+    return (code & 0xFF == sqlite3.SQLITE_BUSY) if code is not None else "database is locked" in str(exc)
 
 
 def _process_start(pid: int) -> str:
@@ -268,6 +313,7 @@ class PartIndex:
 
     def __init__(self, path: Path | str) -> None:
         self.path = Path(path)
+        self._held: sqlite3.Connection | None = None  #: see :meth:`_hold`
 
     def fail(self, doing: str, exc: BaseException) -> PartIndexError:
         return PartIndexError(
@@ -277,34 +323,102 @@ class PartIndex:
     @contextmanager
     def _connect(self, doing: str, *, write: bool) -> Iterator[sqlite3.Connection]:
         """A connection with the index at :data:`SCHEMA_VERSION`, in one
-        transaction (BEGIN IMMEDIATE for a write: the lock taken at once,
-        waited for up to the busy timeout); committed at the end, rolled back on an error."""
+        transaction (:meth:`_begun`); committed at the end, rolled back on an error."""
         if not write and not self.path.exists():
             raise PartIndexError(f"part index {self.path}: cannot {doing}: no such file")
+        con = self._begun(doing, write)
         try:
-            con = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_MS / 1000, isolation_level=None)
-        except sqlite3.Error as exc:
-            raise self.fail(doing, exc) from None
-        try:
-            con.row_factory = sqlite3.Row
-            con.execute(f"PRAGMA busy_timeout = {BUSY_TIMEOUT_MS}")
-            self._not_newer(con)  # before anything is written to it, WAL mode too
-            if write:
-                if con.execute("PRAGMA journal_mode").fetchone()[0] != "wal":
-                    con.execute("PRAGMA journal_mode = WAL")
-                con.execute("PRAGMA synchronous = NORMAL")  # WAL: a commit survives a process' kill
-            con.execute("BEGIN IMMEDIATE" if write else "BEGIN")
             try:
-                self._migrate(con, write)
                 yield con
             except BaseException:
                 con.execute("ROLLBACK")
                 raise
             con.execute("COMMIT")
+            if write:
+                self._hold()
         except sqlite3.Error as exc:
             raise self.fail(doing, exc) from None
         finally:
             con.close()
+
+    def _begun(self, doing: str, write: bool) -> sqlite3.Connection:
+        """A connection in its transaction (BEGIN IMMEDIATE for a write: the
+        lock taken at once), the schema brought up to date for a write. Two
+        waits, both up to :data:`BUSY_TIMEOUT_MS`: SQLite's busy handler, for
+        a lock another connection holds; and this loop, for the locks SQLite
+        refuses at once rather than wait for (SQLITE_BUSY without its
+        handler, so that two connections never wait for each other: cells
+        that put a new file into WAL mode at the same moment, one of them
+        turned away), the whole beginning tried again after a pause. Once
+        the write lock is taken nothing of the transaction can be refused so
+        (WAL), so the body never has to be tried again."""
+        deadline = time.monotonic() + BUSY_TIMEOUT_MS / 1000
+        pause = 0.002
+        while True:
+            try:
+                con = self._open(write)
+            except sqlite3.Error as exc:
+                raise self.fail(doing, exc) from None
+            try:
+                con.row_factory = sqlite3.Row
+                con.execute(f"PRAGMA busy_timeout = {BUSY_TIMEOUT_MS}")
+                self._not_newer(con)  # before anything is written to it, WAL mode too
+                if write:
+                    if con.execute("PRAGMA journal_mode").fetchone()[0] != "wal":
+                        con.execute("PRAGMA journal_mode = WAL")
+                    con.execute("PRAGMA synchronous = NORMAL")  # WAL: a commit survives a process' kill
+                con.execute("BEGIN IMMEDIATE" if write else "BEGIN")
+                try:
+                    self._migrate(con, write)
+                except BaseException:
+                    con.execute("ROLLBACK")
+                    raise
+                return con
+            except sqlite3.Error as exc:
+                con.close()
+                if not _busy(exc) or time.monotonic() >= deadline:
+                    raise self.fail(doing, exc) from None
+            except BaseException:
+                con.close()
+                raise
+            time.sleep(pause * random.uniform(0.5, 1.5))  # apart, not in step with another cell
+            pause = min(2 * pause, 0.05)
+
+    def _hold(self) -> None:
+        """After this instance's first write, a connection held open while it
+        lives: the last connection to a WAL file to close checkpoints every
+        page of the WAL into the file, syncs it and deletes the WAL, what a
+        writer that opens a connection a transaction would do at each part
+        (2 ms of CPU and two syncs on a loaded disk, where the part's own
+        write costs less). Held, the pages go in by SQLite's checkpoint every
+        1000 pages of WAL instead, and at this process' end. It reads the
+        schema's version once (a connection enters WAL mode on its first
+        read), and nothing after that: it holds no lock between reads."""
+        if self._held is not None:
+            return
+        try:
+            held = sqlite3.connect(self.path, check_same_thread=False)
+            held.execute("PRAGMA user_version").fetchone()
+        except sqlite3.Error:
+            return  # the write is in: holding only spares the next ones some time
+        self._held = held
+
+    def _open(self, write: bool) -> sqlite3.Connection:
+        """A connection to the index. A read of an index in a directory this
+        process may not write (read-only media, another user's) opens it
+        read-only, and immutable when it has no ``-wal`` file (every write in
+        the file): a WAL reader needs a ``-shm`` file beside it, which SQLite
+        cannot make there."""
+        if write or os.access(self.path.parent, os.W_OK):
+            return sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_MS / 1000, isolation_level=None)
+        wal = self.path.with_name(self.path.name + "-wal")
+        flags = "mode=ro" if wal.exists() else "mode=ro&immutable=1"
+        return sqlite3.connect(
+            f"{self.path.resolve().as_uri()}?{flags}",
+            uri=True,
+            timeout=BUSY_TIMEOUT_MS / 1000,
+            isolation_level=None,
+        )
 
     def _not_newer(self, con: sqlite3.Connection) -> int:
         """The index's schema version; :class:`PartIndexError` if a newer winder wrote it."""
@@ -323,7 +437,7 @@ class PartIndex:
         if not write:
             raise PartIndexError(
                 f"part index {self.path}: schema version {version}, expected {SCHEMA_VERSION}: "
-                "it is brought up to date by the next run or winder parts measure"
+                "it is brought up to date by the next run or winder parts command"
             )
         for step in range(version + 1, SCHEMA_VERSION + 1):
             MIGRATIONS[step](con)
@@ -383,9 +497,9 @@ class PartIndex:
                 "cycle_time_s": (end.ended_ns - int(row["started_ns"])) / 1e9,
                 "state": report.get("state", "incomplete") or "incomplete",
                 "steps_done": int(numbers.get("steps_done", 0)),
-                "wire_length_m": numbers.get("wire_taken_m"),
+                "wire_length_m": numbers.get(FROM_REPORT["wire_length_m"]),
                 "tension_min_n": numbers.get("tension_min_n"),
-                "tension_max_n": numbers.get("tension_peak_n"),
+                "tension_max_n": numbers.get(FROM_REPORT["tension_max_n"]),
                 "tension_outside_warning_s": numbers.get("tension_outside_warning_s"),
                 "tension_outside_alarm_s": numbers.get("tension_outside_alarm_s"),
                 # counted in the wire's fault words: a run without a wire (a drive's) has none to count
@@ -424,20 +538,36 @@ class PartIndex:
 
     def recover(self) -> list[str]:
         """The parts left ``running`` by a process of this host that is gone,
-        marked ``incomplete`` (verdict ``nok``, the reason said); their ids."""
+        marked ``incomplete`` (verdict ``nok``, the reason said); their ids.
+        Looked for in a read first: the write (and its lock, which every
+        consumer's start and every ``winder parts`` would otherwise take, and
+        which an index this process may not write refuses) only when there is
+        one to mark, or an older schema to bring up to date, or no file yet."""
         host = socket.gethostname()
+        try:
+            with self._connect("look for the parts of killed runs", write=False) as con:
+                if not self._gone(con, host):
+                    return []
+        except PartIndexError:
+            pass  # no file, an older schema, a newer one: the write below makes, migrates or refuses
         with self._connect("mark the parts of killed runs incomplete", write=True) as con:
-            rows = con.execute(
-                "SELECT part_id, pid, pid_start FROM parts WHERE state = 'running' AND host = ?", (host,)
-            ).fetchall()
-            gone = [r["part_id"] for r in rows if not _alive(int(r["pid"]), str(r["pid_start"]))]
-            for part_id, pid in ((r["part_id"], r["pid"]) for r in rows if r["part_id"] in gone):
+            rows = self._gone(con, host)
+            gone = [r["part_id"] for r in rows]
+            for part_id, pid in ((r["part_id"], r["pid"]) for r in rows):
                 reasons = [f"run not completed: its process (pid {pid} on {host}) ended without closing it"]
                 con.execute(
                     "UPDATE parts SET state = 'incomplete', verdict = ?, reasons = ? WHERE part_id = ?",
                     (NOK, json.dumps(reasons), part_id),
                 )
         return gone
+
+    @staticmethod
+    def _gone(con: sqlite3.Connection, host: str) -> list[sqlite3.Row]:
+        """The running parts of ``host`` whose process is gone."""
+        rows = con.execute(
+            "SELECT part_id, pid, pid_start FROM parts WHERE state = 'running' AND host = ?", (host,)
+        ).fetchall()
+        return [r for r in rows if not _alive(int(r["pid"]), str(r["pid_start"]))]
 
     # -- reads -------------------------------------------------------------------------
     def get(self, part_id: str) -> dict[str, Any] | None:
@@ -453,24 +583,123 @@ class PartIndex:
         recipe: str | None = None,
         verdict: str | None = None,
         since_ns: int | None = None,
+        state: str | None = None,
         limit: int | None = None,
+        columns: Sequence[str] | None = None,
     ) -> list[dict[str, Any]]:
-        """The parts, oldest first, filtered (None: any); ``limit``: the latest that many."""
-        where, args = [], []
-        for column, value in (("simulated", simulated), ("job_id", job_id), ("verdict", verdict)):
-            if value is not None:
-                where.append(f"{column} = ?")
-                args.append(int(value) if isinstance(value, bool) else value)
-        if recipe:
-            where.append("recipe_sha256 LIKE ?")
-            args.append(recipe.lower() + "%")
-        if since_ns is not None:
-            where.append("started_ns >= ?")
-            args.append(since_ns)
-        sql = "SELECT * FROM parts" + (" WHERE " + " AND ".join(where) if where else "")
-        sql += " ORDER BY started_ns DESC, part_id DESC"
-        if limit is not None:
-            sql += f" LIMIT {int(limit)}"
+        """The parts, oldest first, filtered (None: any; ``recipe``: a prefix
+        of its SHA-256, hex digits); ``limit``: the latest that many;
+        ``columns``: only those (default every one)."""
+        chosen = "*" if columns is None else ", ".join(_known(columns))
         with self._connect("list the parts", write=False) as con:
+            where, args = _where(con, simulated, job_id, recipe, verdict, since_ns, state)
+            sql = f"SELECT {chosen} FROM parts{where} ORDER BY started_ns DESC, part_id DESC"
+            if limit is not None:
+                sql += f" LIMIT {int(limit)}"
             rows = [dict(r) for r in con.execute(sql, args)]
         return rows[::-1]
+
+    def count(
+        self,
+        *,
+        simulated: bool | None = None,
+        job_id: str | None = None,
+        recipe: str | None = None,
+        verdict: str | None = None,
+        since_ns: int | None = None,
+        state: str | None = None,
+    ) -> int:
+        """How many parts the filters of :meth:`parts` take."""
+        with self._connect("count the parts", write=False) as con:
+            where, args = _where(con, simulated, job_id, recipe, verdict, since_ns, state)
+            return int(con.execute(f"SELECT count(*) FROM parts{where}", args).fetchone()[0])
+
+    def recipes(
+        self,
+        *,
+        simulated: bool | None = None,
+        job_id: str | None = None,
+        recipe: str | None = None,
+        since_ns: int | None = None,
+    ) -> list[tuple[str, int, list[str]]]:
+        """The recipes of the parts the filters take: SHA-256, parts, job ids; most parts first."""
+        found: list[tuple[str, int, list[str]]] = []
+        with self._connect("list the recipes", write=False) as con:
+            for sha in _recipes(con, recipe):
+                where, args = _where(con, simulated, job_id, sha, None, since_ns, None)
+                sql = f"SELECT job_id, count(*) FROM parts{where} GROUP BY job_id"
+                jobs = con.execute(sql, args).fetchall()
+                if jobs:
+                    found.append((sha, sum(int(n) for _, n in jobs), sorted(j for j, _ in jobs)))
+        return sorted(found, key=lambda r: (-r[1], r[0]))
+
+
+#: what a recipe filter may be: a prefix of a SHA-256 in hex
+RECIPE_PREFIX = re.compile(r"^[0-9a-f]{1,64}$")
+#: the most recipes a prefix may stand for
+MAX_RECIPES = 1000
+
+
+def _known(columns: Sequence[str]) -> list[str]:
+    names = {name for name, _, _ in COLUMNS}
+    unknown = [c for c in columns if c not in names]
+    if unknown:
+        raise ValueError(f"no column {', '.join(unknown)} in the part index")
+    return list(columns)
+
+
+def _recipes(con: sqlite3.Connection, recipe: str | None) -> list[str]:
+    """The recipes' SHA-256 a prefix stands for (None: every recipe), each
+    found by one seek in the recipe's index: a filter on whole hashes lets
+    the kind and recipe index give the parts in time order, where a prefix's
+    range would have them sorted."""
+    prefix = (recipe or "").lower()
+    if not RECIPE_PREFIX.match(prefix) and recipe is not None:
+        raise BadInputError(f"recipe {recipe!r} is invalid: expected a prefix of a SHA-256 (hex digits)")
+    if len(prefix) == 64:
+        return [prefix]
+    found: list[str] = []
+    while len(found) < MAX_RECIPES:
+        row = con.execute(
+            "SELECT recipe_sha256 FROM parts WHERE recipe_sha256 GLOB ? AND recipe_sha256 > ?"
+            " ORDER BY recipe_sha256 LIMIT 1",
+            (prefix + "*", found[-1] if found else ""),
+        ).fetchone()
+        if row is None:
+            break
+        found.append(str(row[0]))
+    return found
+
+
+def _where(
+    con: sqlite3.Connection,
+    simulated: bool | None,
+    job_id: str | None,
+    recipe: str | None,
+    verdict: str | None,
+    since_ns: int | None,
+    state: str | None,
+) -> tuple[str, list[Any]]:
+    """The WHERE clause of the filters (None: any) and its arguments; a
+    recipe's prefix as the whole hashes it stands for (:func:`_recipes`)."""
+    where: list[str] = []
+    args: list[Any] = []
+    for column, value in (
+        ("simulated", simulated),
+        ("job_id", job_id),
+        ("verdict", verdict),
+        ("state", state),
+    ):
+        if value is not None:
+            where.append(f"{column} = ?")
+            args.append(int(value) if isinstance(value, bool) else value)
+    if recipe is not None:
+        shas = _recipes(con, recipe)
+        where.append(
+            "recipe_sha256 = ?" if len(shas) == 1 else f"recipe_sha256 IN ({', '.join('?' * len(shas))})"
+        )
+        args += shas
+    if since_ns is not None:
+        where.append("started_ns >= ?")
+        args.append(since_ns)
+    return (" WHERE " + " AND ".join(where) if where else ""), args
