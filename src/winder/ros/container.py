@@ -40,6 +40,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from winder.errors import BadInputError
+from winder.ros import rejoin
 from winder.ros.early import ARGS_ON_STDIN
 from winder.ros.spin import install_signal_handlers, signalled, spin_all
 
@@ -120,6 +121,13 @@ def main(argv: list[str] | None = None) -> None:
         if rest is None or signalled():
             return
         ros = [*ros, *rest]
+        # a restart after a hold (winder.ros.rejoin) runs the whole command line: stdin is read
+        prefix = (
+            sys.orig_argv[: len(sys.orig_argv) - len(sys.argv) + 1]
+            if argv is None
+            else [sys.executable, "-m", __name__]
+        )
+        rejoin.run_again_as([sys.executable, *prefix[1:], *specs, *ros])
     spin_all(factories, ["winder_container", *ros])
 
 

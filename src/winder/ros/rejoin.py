@@ -39,10 +39,19 @@ from typing import TYPE_CHECKING, Any, NoReturn
 if TYPE_CHECKING:
     from rclpy.node import Node
 
-__all__ = ["ENV", "Restart", "exec_again", "restart_of_this_process", "save_parameters"]
+__all__ = ["ENV", "Restart", "exec_again", "restart_of_this_process", "run_again_as", "save_parameters"]
 
 #: the environment variable that tells a restarted process what it was
 ENV = "WINDER_REJOINED"
+#: the command line a restart runs, when it is not the process' own (:func:`run_again_as`)
+_command: list[str] = []
+
+
+def run_again_as(argv: Sequence[str]) -> None:
+    """A restart runs ``argv`` (the executable first), not the command line
+    the process was started with: the cell container, whose arguments came
+    on its standard input, which a restart cannot read again."""
+    _command[:] = list(argv)
 
 
 class Restart:
@@ -108,7 +117,7 @@ def exec_again(held: float, params: Path, active: Sequence[str], carried: Mappin
     last value given for a parameter); ``carried``: what each node (by its
     fully qualified name) hands over to its successor (JSON). Returns only by
     exiting (status 1, said) if the program cannot be run again."""
-    argv = [sys.executable, *sys.orig_argv[1:], "--ros-args", "--params-file", str(params)]
+    argv = [*(_command or [sys.executable, *sys.orig_argv[1:]]), "--ros-args", "--params-file", str(params)]
     told = {"held": round(held, 3), "params": str(params), "active": list(active), "carried": dict(carried)}
     os.environ[ENV] = json.dumps(told)
     try:
