@@ -50,6 +50,7 @@ from winder.contract.eq7 import layer_of_samples, sample_deviation, step_deviati
 from winder.contract.pacing import ns_not_before
 from winder.contract.params import MOTOR_FIELDS, PROFILE_SPECS, check_sim
 from winder.contract.stream import JobPlan
+from winder.contract.topic_table import PACED, SIM, recorded
 from winder.contract.topics import (
     TOPIC_CLOCK,
     TOPIC_JOINT_COMMANDS,
@@ -91,12 +92,7 @@ CLOCK_REPEAT = 0.1
 #: each turn's place more finely afterwards (winder.analysis.wound: 10 % of a diameter).
 PATH_TOLERANCE = 0.5
 #: the simulator's own recorded topics
-SIM_TOPICS = {
-    "clock": (TOPIC_CLOCK, "rosgraph_msgs/msg/Clock"),
-    "tension": (TOPIC_TENSION, "geometry_msgs/msg/WrenchStamped"),
-    "joint_states": (TOPIC_JOINT_STATES, "sensor_msgs/msg/JointState"),
-    "joint_commands": (TOPIC_JOINT_COMMANDS, "sensor_msgs/msg/JointState"),
-}
+SIM_TOPICS = recorded(PACED, SIM)
 
 
 def make_axis(values: dict[str, Any], axis: str) -> StepperAxis:

@@ -20,26 +20,20 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from winder.contract.topics import (
-    TOPIC_CLOCK,
-    TOPIC_CONTROL,
-    TOPIC_DIAGNOSTICS,
-    TOPIC_JOB,
-    TOPIC_JOINT_COMMANDS,
-    TOPIC_JOINT_STATES,
-    TOPIC_PATH,
-    TOPIC_PROFILE_CONFIG,
-    TOPIC_PROGRESS,
-    TOPIC_READY,
-    TOPIC_REPORT,
-    TOPIC_SIM_CONFIG,
-    TOPIC_STATE,
-    TOPIC_STEP_TIMES,
-    TOPIC_STEPS,
-    TOPIC_TENSION,
-)
+from winder.contract.topic_table import TOPICS
 
-__all__ = ["CLOCK", "DIAGNOSTICS", "EVENTS", "LATCHED", "STATE", "STREAM", "TOPIC_QOS", "Qos", "qos_of"]
+__all__ = [
+    "CLOCK",
+    "DIAGNOSTICS",
+    "EVENTS",
+    "LATCHED",
+    "PROFILES",
+    "STATE",
+    "STREAM",
+    "TOPIC_QOS",
+    "Qos",
+    "qos_of",
+]
 
 
 @dataclass(frozen=True)
@@ -69,25 +63,18 @@ CLOCK = Qos(reliable=False, transient_local=False, keep_all=False, depth=1)
 DIAGNOSTICS = Qos(reliable=True, transient_local=False, keep_all=False, depth=10)
 EVENTS = Qos(reliable=True, transient_local=True, keep_all=False, depth=100)
 
-#: each topic of the cell (relative names, as in winder.contract.topics) and its QoS
-TOPIC_QOS: dict[str, Qos] = {
-    TOPIC_JOB: LATCHED,
-    TOPIC_PATH: LATCHED,
-    TOPIC_SIM_CONFIG: LATCHED,
-    TOPIC_PROFILE_CONFIG: LATCHED,
-    TOPIC_STATE: LATCHED,
-    TOPIC_REPORT: LATCHED,
-    TOPIC_READY: LATCHED,
-    TOPIC_STEPS: STREAM,
-    TOPIC_STEP_TIMES: STREAM,
-    TOPIC_JOINT_STATES: STATE,
-    TOPIC_JOINT_COMMANDS: STATE,
-    TOPIC_TENSION: STATE,
-    TOPIC_PROGRESS: STATE,
-    TOPIC_CONTROL: EVENTS,
-    TOPIC_CLOCK: CLOCK,
-    TOPIC_DIAGNOSTICS: DIAGNOSTICS,
+#: each profile by the name the topic table (winder.contract.topic_table) gives it
+PROFILES: dict[str, Qos] = {
+    "latched": LATCHED,
+    "stream": STREAM,
+    "state": STATE,
+    "clock": CLOCK,
+    "diagnostics": DIAGNOSTICS,
+    "events": EVENTS,
 }
+
+#: each topic of the cell (relative names, as in winder.contract.topics) and its QoS
+TOPIC_QOS: dict[str, Qos] = {t.name: PROFILES[t.qos] for t in TOPICS}
 
 
 def qos_of(topic: str) -> Qos | None:

@@ -8,53 +8,21 @@ from __future__ import annotations
 from collections.abc import Collection
 from dataclasses import dataclass, field
 
-from winder.contract.topics import (
-    TOPIC_CLOCK,
-    TOPIC_CONTROL,
-    TOPIC_JOB,
-    TOPIC_JOINT_COMMANDS,
-    TOPIC_JOINT_STATES,
-    TOPIC_PATH,
-    TOPIC_PROFILE_CONFIG,
-    TOPIC_PROGRESS,
-    TOPIC_REPORT,
-    TOPIC_SIM_CONFIG,
-    TOPIC_STATE,
-    TOPIC_STEP_TIMES,
-    TOPIC_STEPS,
-    TOPIC_TENSION,
-)
+from winder.contract.topic_table import ROLES, TOPICS
 
 __all__ = ["OTHER_PROCESS", "OWNERS", "ROLE_NAMES", "SHOWN", "SIGNS", "Intruders", "without_senders"]
 
 #: The role whose node alone may publish each of the cell's topics that a
 #: node acts on (``winder/ready`` is owned by the role its key names, a
 #: ``/diagnostics`` status by the node its name names).
-OWNERS = {
-    TOPIC_JOB: "interp",
-    TOPIC_STEPS: "interp",
-    TOPIC_STEP_TIMES: "profile",
-    TOPIC_CONTROL: "profile",
-    TOPIC_PATH: "profile",
-    TOPIC_PROFILE_CONFIG: "profile",
-    TOPIC_SIM_CONFIG: "consumer",
-    TOPIC_PROGRESS: "consumer",
-    TOPIC_STATE: "consumer",
-}
+OWNERS = {t.name: t.owner for t in TOPICS if t.trusted}
 
 #: The role whose node alone may publish each topic a live view shows
 #: (``winder view``, ``winder run --foxglove``): those of :data:`OWNERS`, and
 #: the consumer's joint states, joint commands, wire tension, final reports
 #: and clock, which no node of the cell acts on. (A ``/diagnostics`` status:
 #: the node it names.)
-SHOWN = {
-    **OWNERS,
-    TOPIC_REPORT: "consumer",
-    TOPIC_JOINT_STATES: "consumer",
-    TOPIC_JOINT_COMMANDS: "consumer",
-    TOPIC_TENSION: "consumer",
-    TOPIC_CLOCK: "consumer",
-}
+SHOWN = {t.name: t.owner for t in TOPICS if t.owner and (t.trusted or t.shown)}
 
 #: How each role shows on the graph, in the cell's namespace: the topics its
 #: node publishes, and those it reads. A node that merely publishes on a
@@ -63,9 +31,11 @@ SHOWN = {
 #: (:class:`winder.ros.peers.Peers`). ``winder resim`` plays the interp and
 #: the profile node at once and declares both parts' endpoints.
 SIGNS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
-    "interp": ((TOPIC_JOB, TOPIC_STEPS), ()),
-    "profile": ((TOPIC_STEP_TIMES, TOPIC_CONTROL, TOPIC_PATH), ()),
-    "consumer": ((TOPIC_PROGRESS,), (TOPIC_STEP_TIMES,)),
+    role: (
+        tuple(t.name for t in TOPICS if t.published_sign and t.owner == role),
+        tuple(t.name for t in TOPICS if t.read_sign == role),
+    )
+    for role in ROLES
 }
 
 ROLE_NAMES = {"interp": "interp node", "profile": "profile node", "consumer": "step consumer"}

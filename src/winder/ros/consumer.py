@@ -49,15 +49,13 @@ from trajectory_msgs.msg import JointTrajectory
 from winder.contract.run import ControlEvent, EventError, JobReport
 from winder.contract.states import CellState, EventKind, JobState, ReadyState
 from winder.contract.stream import JobPlan
+from winder.contract.topic_table import EVERY, recorded
 from winder.contract.topics import (
     TOPIC_CONTROL,
-    TOPIC_DIAGNOSTICS,
     TOPIC_JOB,
     TOPIC_PATH,
     TOPIC_PROFILE_CONFIG,
-    TOPIC_REPORT,
     TOPIC_SIM_CONFIG,
-    TOPIC_STATE,
     TOPIC_STEP_TIMES,
     status_values,
 )
@@ -89,17 +87,7 @@ BATCH_STEPS = 1 << 16
 BATCH_CHUNKS = 8
 BATCH_WAIT = 0.01
 #: the contract's topics every consumer's bag holds: key -> (name, type)
-CONSUMER_TOPICS = {
-    "job": (TOPIC_JOB, "winder_interfaces/msg/JobDescription"),
-    "path": (TOPIC_PATH, "trajectory_msgs/msg/JointTrajectory"),
-    "step_times": (TOPIC_STEP_TIMES, "std_msgs/msg/Int64MultiArray"),
-    "sim_config": (TOPIC_SIM_CONFIG, "std_msgs/msg/String"),
-    "profile_config": (TOPIC_PROFILE_CONFIG, "std_msgs/msg/String"),
-    "diagnostics": (TOPIC_DIAGNOSTICS, "diagnostic_msgs/msg/DiagnosticArray"),
-    "state": (TOPIC_STATE, "winder_interfaces/msg/CellState"),
-    "control": (TOPIC_CONTROL, "winder_interfaces/msg/ControlEvent"),
-    "report": (TOPIC_REPORT, "winder_interfaces/msg/JobReport"),
-}
+CONSUMER_TOPICS = recorded(EVERY)
 
 
 class StepConsumer(ManagedNode):

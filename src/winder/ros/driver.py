@@ -57,6 +57,7 @@ from std_srvs.srv import Trigger
 from winder.contract.cdr import JointStateEncoder, encode_clocks
 from winder.contract.params import CONSUMER_SPECS, check_consumer
 from winder.contract.stream import JobPlan
+from winder.contract.topic_table import PACED, recorded
 from winder.contract.topics import TOPIC_CLOCK, TOPIC_JOINT_COMMANDS, TOPIC_JOINT_STATES, TOPIC_STEP_TIMES
 from winder.motion.axes import AXIS_TABLE, Axis
 from winder.ros.consumer import StepConsumer
@@ -684,11 +685,7 @@ class DriverNode(StepConsumer):
     """A consumer node around a :class:`Backend` (see the module doc)."""
 
     #: publishes /clock, winder/joint_commands and winder/joint_states, recorded as the simulator's are
-    TOPICS: ClassVar[dict[str, tuple[str, str]]] = {
-        "clock": (TOPIC_CLOCK, "rosgraph_msgs/msg/Clock"),
-        "joint_commands": (TOPIC_JOINT_COMMANDS, "sensor_msgs/msg/JointState"),
-        "joint_states": (TOPIC_JOINT_STATES, "sensor_msgs/msg/JointState"),
-    }
+    TOPICS: ClassVar[dict[str, tuple[str, str]]] = recorded(PACED)
 
     def __init__(self, backend: Backend, name: str = "driver", hardware_id: str | None = None) -> None:
         engine = DriveEngine(backend)

@@ -45,20 +45,9 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 
 from winder.contract import qos as table
+from winder.contract.topic_table import TOPICS
 from winder.contract.topics import (
-    TOPIC_CLOCK,
-    TOPIC_CONTROL,
     TOPIC_DIAGNOSTICS,
-    TOPIC_JOB,
-    TOPIC_JOINT_COMMANDS,
-    TOPIC_JOINT_STATES,
-    TOPIC_PATH,
-    TOPIC_PROFILE_CONFIG,
-    TOPIC_PROGRESS,
-    TOPIC_REPORT,
-    TOPIC_SIM_CONFIG,
-    TOPIC_STATE,
-    TOPIC_TENSION,
     in_namespace,
 )
 from winder.contract.trust import SHOWN, SIGNS
@@ -97,20 +86,10 @@ def _lossy(q: table.Qos) -> table.Qos:
 
 
 #: what the view serves, and how it reads each topic
-VIEW_TOPICS = (
-    ViewTopic(TOPIC_JOINT_STATES, "sensor_msgs/msg/JointState", _lossy(table.STATE)),
-    ViewTopic(TOPIC_JOINT_COMMANDS, "sensor_msgs/msg/JointState", _lossy(table.STATE)),
-    ViewTopic(TOPIC_TENSION, "geometry_msgs/msg/WrenchStamped", _lossy(table.STATE)),
-    ViewTopic(TOPIC_STATE, "winder_interfaces/msg/CellState", table.LATCHED),
-    ViewTopic(TOPIC_PROGRESS, "diagnostic_msgs/msg/KeyValue", _lossy(table.STATE)),
-    ViewTopic(TOPIC_PATH, "trajectory_msgs/msg/JointTrajectory", table.LATCHED),
-    ViewTopic(TOPIC_CONTROL, "winder_interfaces/msg/ControlEvent", table.EVENTS),
-    ViewTopic(TOPIC_JOB, "winder_interfaces/msg/JobDescription", table.LATCHED),
-    ViewTopic(TOPIC_REPORT, "winder_interfaces/msg/JobReport", table.LATCHED),
-    ViewTopic(TOPIC_SIM_CONFIG, "std_msgs/msg/String", table.LATCHED),
-    ViewTopic(TOPIC_PROFILE_CONFIG, "std_msgs/msg/String", table.LATCHED),
-    ViewTopic(TOPIC_DIAGNOSTICS, "diagnostic_msgs/msg/DiagnosticArray", table.DIAGNOSTICS),
-    ViewTopic(TOPIC_CLOCK, "rosgraph_msgs/msg/Clock", table.CLOCK),
+VIEW_TOPICS = tuple(
+    ViewTopic(t.name, t.type, _lossy(table.PROFILES[t.qos]) if t.qos == "state" else table.PROFILES[t.qos])
+    for t in TOPICS
+    if t.shown
 )
 
 
