@@ -9,7 +9,13 @@ setup(
     # the version: setup.cfg reads it from winder.__version__, as pyproject.toml does
     packages=find_packages(include=["winder", "winder.*"]),
     package_data={
-        "winder": ["py.typed", "ros/fastdds_profile.xml", "ros/fastdds_lan.xml", "drives/twin.eds"]
+        "winder": [
+            "py.typed",
+            "ros/fastdds_profile.xml",
+            "ros/fastdds_lan.xml",
+            "drives/twin.eds",
+            "drives/examples/*.yaml",  # the example drives files (winder.drives.EXAMPLES)
+        ]
     },
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),

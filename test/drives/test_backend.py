@@ -7,11 +7,13 @@ from __future__ import annotations
 
 import math
 import struct
+import threading
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import can
+import canopen
 import numpy as np
 import pytest
 from support import wait
@@ -53,16 +55,20 @@ def run_start(settings: dict[str, Any] | None = None) -> RunStart:
 
 
 class RpdoWatch(can.Listener):
-    """Every RPDO1 target (0x607A, bytes 2-5) each node is sent, and the SYNCs, in bus order."""
+    """Every RPDO1 target (0x607A, bytes 2-5) each node is sent, and the SYNCs, in bus order;
+    and every RPDO1 with its controlword (0x6040, bytes 0-1)."""
 
     def __init__(self) -> None:
         self.frames: list[tuple[int, int]] = []  # (node, target) or (0, 0) for a SYNC
+        self.rpdos: list[tuple[int, int, int]] = []  # (node, controlword, target)
 
     def on_message_received(self, msg: can.Message) -> None:
         if msg.arbitration_id == 0x80:
             self.frames.append((0, 0))
         elif 0x201 <= msg.arbitration_id <= 0x203:
-            self.frames.append((msg.arbitration_id - 0x200, struct.unpack_from("<i", msg.data, 2)[0]))
+            word, target = struct.unpack_from("<Hi", msg.data)
+            self.frames.append((msg.arbitration_id - 0x200, target))
+            self.rpdos.append((msg.arbitration_id - 0x200, word, target))
 
     def syncs(self) -> int:
         return sum(1 for node, _ in list(self.frames) if not node)
@@ -252,6 +258,83 @@ def test_a_drive_that_does_not_answer(rig) -> None:
     with pytest.raises(DriveError) as err:
         backend.begin(run_start())
     assert str(err.value) == "fork drive (node 2): SDO read of 0x6502 not answered within 0.5 s (sdo_timeout)"
+    # the quick stop went to every drive by SDO (none was operational): the silent one is named
+    assert backend.fault() == (
+        f"{err.value}; every axis quick-stopped but fork drive (node 2), which did not answer"
+    )
+
+
+def test_a_bus_lost_mid_run_is_said_and_the_next_run_opens_it_again(
+    rig, channel: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The adapter unplugged mid-run (python-can raises on send and in the receive
+    thread): the run's fault names the bus and says the quick stop could not go out;
+    the receive thread ends without a traceback; the next run opens the bus again and
+    brings the drives up where they stand."""
+    died: list[Any] = []
+    monkeypatch.setattr(threading, "excepthook", died.append)
+    twins = rig["twins"]
+    backend = rig["backend"]()
+    backend.begin(run_start())
+    rows = np.array([[t * 1_000_000, 0, t, t, t] for t in range(1, 200)], np.int64)
+    backend.write(int(rows[99, 0]), rows[:100])
+    backend.read(int(rows[99, 0]) + 200_000_000)  # SYNCs on, the targets held: the motors settle
+    assert backend.fault() == ""
+    old = backend.network
+    old.bus.shutdown()  # unplugged
+    backend.write(int(rows[99, 0]) + 400_000_000, rows[100:])
+    assert backend.fault() == (
+        f"bus virtual {channel}: Cannot operate on a closed bus; the quick stop could not be completed on it"
+    )
+    # nothing reached the drives after it: each holds its last target, enabled
+    assert [twins[n].state for n in (1, 2, 3)] == ["OPERATION ENABLED"] * 3
+    held = [twins[n].position_actual for n in (1, 2, 3)]
+    wait.until(lambda: backend.bus_lost, 5, "the receive thread's error heard")
+
+    def still_out(*_args: object, **_kwargs: object) -> None:
+        raise can.CanOperationError("No such device")
+
+    with pytest.MonkeyPatch.context() as m:  # the adapter still out: said, no run taken
+        m.setattr(canopen.Network, "connect", still_out)
+        assert backend.missing() == f"bus virtual {channel}: cannot be opened: No such device"
+    # the next run: the bus opened again (the old one closed, its receive thread joined)
+    assert backend.missing() == ""
+    assert backend.network is not old
+    assert died == []  # the old receive thread took the error and ended quietly
+    backend.begin(run_start())
+    assert backend.fault() == ""
+    assert [twins[n].position_actual for n in (1, 2, 3)] == held  # brought up where they stand
+    again = np.array([[t * 1_000_000, 0, t, t, t] for t in range(1, 50)], np.int64)
+    backend.write(int(again[-1, 0]) + 100_000_000, again)
+    assert backend.fault() == ""
+    assert backend.read(0) == pytest.approx(again[-1, 2:], abs=0.1)
+
+
+def test_a_drive_found_enabled_is_sent_its_own_place(rig) -> None:
+    """A master started again (or a bus opened again) finds its drives enabled in
+    CSP where the last one left them: its first RPDOs keep each drive enabled at its
+    own position (read by SDO at the bring-up), never a target of its own making."""
+    twins = rig["twins"]
+    first = rig["backend"]()
+    first.begin(run_start())
+    rows = np.array([[t * 1_000_000, 0, 3 * t, 2 * t, t] for t in range(1, 100)], np.int64)
+    first.write(int(rows[-1, 0]), rows)
+    first.read(int(rows[-1, 0]) + 200_000_000)  # the motors settle on their last targets
+    assert first.fault() == ""
+    first.close()  # gone without a word: the drives stay enabled, holding
+    assert [twins[n].state for n in (1, 2, 3)] == ["OPERATION ENABLED"] * 3
+    where = {n: twins[n].position_actual for n in (1, 2, 3)}
+    assert all(where.values())
+    watch = rig["watch"]
+    seen = len(watch.rpdos)
+    second = rig["backend"]()
+    second.begin(run_start())
+    assert second.fault() == ""
+    sent = watch.rpdos[seen:]
+    assert sent, "no RPDO of the bring-up seen"
+    for node, word, target in sent:
+        assert (word, target) == (0x0F, where[node]), (node, hex(word), target)
+    assert {n: twins[n].position_actual for n in (1, 2, 3)} == where
 
 
 def test_the_twin_eds_is_the_drives_file_default(tmp_path: Path, channel: str) -> None:

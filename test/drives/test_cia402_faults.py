@@ -136,3 +136,98 @@ def test_a_drive_fault_mid_run_stops_every_axis_and_the_next_run_goes(
     assert run2.complete and "faults" not in run2.report, run2.report
     assert run2.report["steps_done"] == str(run2.plan.total_steps)
     assert node.poll() is None
+
+
+def start_cell(procs: Procs, tmp_path: Path, twin_fault: str) -> tuple[subprocess.Popen[bytes], Path]:
+    """The node on the faults drives file with this ``twin_fault``, and the profile and interp nodes."""
+    drives = tmp_path / "drives.yaml"
+    text = DRIVES.format(axis="feed", at_sync=1, fault="jam")
+    drives.write_text(text.replace("twin_fault: {axis: feed, at_sync: 1, fault: jam}", twin_fault))
+    bags = tmp_path / "bags"
+    node = procs.start(
+        "cia402_node", "-p", f"drives_file:={drives}", "-p", f"bag_dir:={bags}", "-p", "real_time:=true"
+    )
+    procs.start("profile_node", "-p", "v_max:=4096.0")
+    procs.start("interp_node", "-p", "autostart:=false")
+    return node, bags
+
+
+def one_new_bag(bags: Path, known: list[Path]) -> Path:
+    wait.until(
+        lambda: len(closed_bags(bags)) == len(known) + 1, 30, "the run's bag closed", heard=lambda: bags
+    )
+    [bag] = [b for b in closed_bags(bags) if b not in known]
+    return bag
+
+
+def assert_said_once(procs: Procs, node: subprocess.Popen[bytes], line: str) -> None:
+    """The node's ERROR is the run's one line, and nothing it logged is a traceback."""
+    log = procs.log(node)
+    errors = [ln for ln in log.splitlines() if "ERROR" in ln and line in ln]
+    assert errors and errors[0].endswith(f"{line}; the run stops"), log[-3000:]
+    assert "Traceback" not in log and "Exception in thread" not in log, log[-3000:]
+
+
+def test_an_sdo_not_answered_at_bring_up_fails_the_run_before_it_moves(procs: Procs, tmp_path: Path) -> None:
+    """A drive whose SDO server hangs (``twin_fault: sdo``, from the first SYNC of the
+    first run, which needs no SDO after its bring-up): the next run's bring-up fails
+    on its first SDO, the run closes incomplete before any step with the axis, the
+    node, the object and the timeout in one line; the drives were quick-stopped by
+    SDO, never enabled; the node takes the run after, the drive answering again."""
+    node, bags = start_cell(procs, tmp_path, "twin_fault: {axis: feed, at_sync: 1, fault: sdo}")
+    first = ctl(procs, "start", *SMALL, "--wait", "--timeout", "60")
+    assert first.returncode == EXIT_OK, first.stdout + first.stderr
+    done = [one_new_bag(bags, [])]
+
+    second = ctl(procs, "start", *SMALL, "--wait", "--timeout", "60")
+    assert second.returncode == EXIT_FAILED, second.stdout + second.stderr
+    bag = one_new_bag(bags, done)
+    run = read_run(bag)  # readable, closed, the run's report in it
+    assert run.closed and run.report["state"] == "incomplete", run.report
+    line = (
+        "feed drive (node 1): SDO read of 0x6502 not answered within 0.5 s (sdo_timeout); "
+        "every axis quick-stopped"
+    )
+    assert run.report["faults"] == line
+    assert run.report["steps_done"] == "0" and len(run.states.t) == 0  # nothing commanded, nothing moved
+    assert_said_once(procs, node, line)
+    # the quick stop by SDO (the drives pre-operational) took each from SWITCHED ON, where the
+    # first run left it, to SWITCH ON DISABLED: none was enabled for this run
+    twins = ast.literal_eval(run.report["twin_states"])
+    assert twins == dict.fromkeys(("feed", "fork", "pole"), "SWITCH ON DISABLED (from SWITCHED ON)")
+
+    third = ctl(procs, "start", *SMALL, "--wait", "--timeout", "60")
+    assert third.returncode == EXIT_OK, third.stdout + third.stderr
+    run3 = read_run(one_new_bag(bags, [*done, bag]))
+    assert run3.complete and run3.report["steps_done"] == str(run3.plan.total_steps), run3.report
+    assert node.poll() is None
+
+
+def test_the_bus_unplugged_mid_run_closes_it_and_the_next_run_opens_it_again(
+    procs: Procs, tmp_path: Path
+) -> None:
+    """The master's bus shut down under it mid-run (``twin_fault: unplugged``: as an
+    adapter pulled out, python-can raises on send and receive): the run closes
+    incomplete mid-job naming the bus and the reason in one line, which says the
+    quick stop could not go out on it; the bag is readable; no traceback; the twins,
+    which nothing reached, hold enabled; the node opens the bus again for the next
+    run, which winds to the end."""
+    node, bags = start_cell(procs, tmp_path, f"twin_fault: {{at_sync: {AT_SYNC}, fault: unplugged}}")
+    first = ctl(procs, "start", *LONG, "--wait", "--timeout", "60")
+    assert first.returncode == EXIT_FAILED, first.stdout + first.stderr
+    bag = one_new_bag(bags, [])
+    run = read_run(bag)
+    assert run.closed and run.report["state"] == "incomplete", run.report
+    line = "bus virtual faults: Cannot operate on a closed bus; the quick stop could not be completed on it"
+    assert run.report["faults"] == line
+    assert 0 < int(run.report["steps_done"]) < run.plan.total_steps  # mid-run: stopped short
+    assert_said_once(procs, node, line)
+    twins = ast.literal_eval(run.report["twin_states"])
+    assert twins == dict.fromkeys(("feed", "fork", "pole"), "OPERATION ENABLED (from SWITCHED ON)")
+
+    second = ctl(procs, "start", *SMALL, "--wait", "--timeout", "60")
+    assert second.returncode == EXIT_OK, second.stdout + second.stderr
+    run2 = read_run(one_new_bag(bags, [bag]))
+    assert run2.complete and run2.report["steps_done"] == str(run2.plan.total_steps), run2.report
+    assert "the bus is opened again" in procs.log(node)
+    assert node.poll() is None

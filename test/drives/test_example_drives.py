@@ -1,22 +1,28 @@
-"""The drives files shipped for users (drives/): each passes the drives-file
-check as it is, the socketcan one without a bus being opened, and
-docs/DRIVES.md names both."""
+"""The drives files shipped for users (``winder.drives.EXAMPLES``, package data
+that pip and colcon install with the package; the checkout's ``drives/`` links
+there): each passes the drives-file check as it is, the socketcan one without a
+bus being opened, and docs/DRIVES.md names both, where they are in a checkout
+and where an install has them."""
 
 from __future__ import annotations
 
+import ast
 import math
 
 import can
 import canopen
 import pytest
+import tomllib
 from support.paths import ROOT
 
-from winder.drives import load_drives
+from winder.drives import EXAMPLES, load_drives
 from winder.drives.twin import EDS_PATH
 from winder.motion.job import Job
 
-SOCKETCAN = ROOT / "drives" / "example_socketcan.yaml"
-TWIN = ROOT / "drives" / "twin.yaml"
+SOCKETCAN = EXAMPLES / "example_socketcan.yaml"
+TWIN = EXAMPLES / "twin.yaml"
+#: the package's directory: package data patterns are relative to it
+PACKAGE = ROOT / "src" / "winder"
 
 
 @pytest.fixture
@@ -56,3 +62,23 @@ def test_the_twin_example_is_a_virtual_bus(no_bus: None) -> None:
 def test_the_drives_doc_names_both() -> None:
     doc = (ROOT / "docs" / "DRIVES.md").read_text()
     assert "drives/example_socketcan.yaml" in doc and "drives/twin.yaml" in doc
+    assert "winder.drives.EXAMPLES" in doc  # where an installed winder has them
+
+
+def test_the_examples_are_package_data_for_pip_and_colcon() -> None:
+    """Each example matches a package-data pattern of ``winder`` in pyproject.toml
+    (pip) and in src/setup.py (colcon), globbed from the package as setuptools does;
+    the checkout's ``drives/`` is the same directory."""
+    examples = {p.relative_to(PACKAGE).as_posix() for p in EXAMPLES.glob("*.yaml")}
+    assert examples == {"drives/examples/example_socketcan.yaml", "drives/examples/twin.yaml"}
+    pip = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["package-data"]
+    [setup] = [
+        node
+        for node in ast.walk(ast.parse((ROOT / "src" / "setup.py").read_text()))
+        if isinstance(node, ast.keyword) and node.arg == "package_data"
+    ]
+    colcon = ast.literal_eval(setup.value)
+    for name, patterns in (("pyproject.toml", pip["winder"]), ("src/setup.py", colcon["winder"])):
+        installed = {p.relative_to(PACKAGE).as_posix() for pattern in patterns for p in PACKAGE.glob(pattern)}
+        assert examples <= installed, (name, patterns)
+    assert (ROOT / "drives").resolve() == EXAMPLES.resolve()

@@ -11,6 +11,7 @@ from collections.abc import Iterator
 import canopen
 import pytest
 from canopen.profiles.p402 import BaseNode402
+from canopen.sdo.exceptions import SdoCommunicationError
 from support import wait
 from twin_rig import channel_fixture, master_fixture, twins_fixture  # noqa: F401  (fixtures: a virtual bus, twins on it)
 
@@ -205,3 +206,16 @@ def test_heartbeat_production(node: BaseNode402, twins) -> None:
     twins.drives[NODE].stop_heartbeat()
     with pytest.raises(canopen.nmt.NmtError):
         node.nmt.wait_for_heartbeat(timeout=0.2)
+
+
+def test_a_hung_sdo_server_answers_nothing_until_a_client_aborts(twins, master: canopen.Network) -> None:
+    """``hang_sdo``: a request times out at the client, whose abort of it (canopen's
+    client sends one on its timeout) frees the server; the next request is answered."""
+    twin = twins.add(NODE)
+    node = master.add_node(NODE, SimulatedDrive.EDS)
+    node.sdo.RESPONSE_TIMEOUT = 0.2
+    modes = node.sdo[0x6502].raw
+    twin.hang_sdo()
+    with pytest.raises(SdoCommunicationError):
+        node.sdo[0x6502].raw  # noqa: B018 - the read is the test
+    assert node.sdo[0x6502].raw == modes

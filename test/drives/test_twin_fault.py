@@ -21,11 +21,25 @@ def drives(tmp_path: Path, text: str) -> Path:
     return path
 
 
-@pytest.mark.parametrize(("given", "fault"), [("jam", "jam"), ("heartbeat", "heartbeat"), ("0x2310", 0x2310)])
+@pytest.mark.parametrize(
+    ("given", "fault"), [("jam", "jam"), ("heartbeat", "heartbeat"), ("sdo", "sdo"), ("0x2310", 0x2310)]
+)
 def test_twin_fault_is_read_on_a_virtual_bus(tmp_path: Path, given: str, fault: object) -> None:
     text = drives_yaml("ch") + f"twin_fault: {{axis: fork, at_sync: 500, fault: {given}}}\n"
     assert load_drives(drives(tmp_path, text)).twin_fault == TwinFault("fork", 500, fault)  # type: ignore[arg-type]
     assert load_drives(drives(tmp_path, drives_yaml("ch"))).twin_fault is None
+
+
+def test_unplugged_is_the_bus_not_a_twin(tmp_path: Path) -> None:
+    text = drives_yaml("ch") + "twin_fault: {at_sync: 500, fault: unplugged}\n"
+    assert load_drives(drives(tmp_path, text)).twin_fault == TwinFault("", 500, "unplugged")
+    path = drives(tmp_path, text.replace("{at_sync", "{axis: fork, at_sync"))
+    with pytest.raises(DrivesFileError) as err:
+        load_drives(path)
+    assert str(err.value) == (
+        f"{path}: twin_fault.axis='fork' is invalid: must be absent for fault unplugged "
+        "(the bus fails, no twin)"
+    )
 
 
 @pytest.mark.parametrize(
@@ -41,17 +55,22 @@ def test_twin_fault_is_read_on_a_virtual_bus(tmp_path: Path, given: str, fault: 
             "twin_fault.axis='spindle' is invalid: must be one of feed, fork, pole",
         ),
         (
+            ("axis: fork, ", ""),
+            "twin_fault.axis is missing (required)",
+        ),
+        (
             ("at_sync: 500", "at_sync: 0"),
             "twin_fault.at_sync=0 is invalid: must be an integer in [1, 2147483647]",
         ),
         (
             ("fault: jam", "fault: melt"),
-            "twin_fault.fault='melt' is invalid: must be jam, heartbeat or an EMCY error code "
-            "(0x1000-0xFFFF)",
+            "twin_fault.fault='melt' is invalid: must be jam, heartbeat, sdo, unplugged or an EMCY error "
+            "code (0x1000-0xFFFF)",
         ),
         (
             ("fault: jam", "fault: 0x10"),
-            "twin_fault.fault=16 is invalid: must be jam, heartbeat or an EMCY error code (0x1000-0xFFFF)",
+            "twin_fault.fault=16 is invalid: must be jam, heartbeat, sdo, unplugged or an EMCY error code "
+            "(0x1000-0xFFFF)",
         ),
     ],
 )

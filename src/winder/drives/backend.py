@@ -37,12 +37,21 @@ profile position (mode 1) a new set-point goes with the bit 4/12 handshake.
 **Faults:** an EMCY, the statusword's fault bits, a following error (bit
 13), a limit (bit 11), a heartbeat lost, a TPDO or SDO not answered within
 ``sdo_timeout``, a bus error: each quick-stops every axis (controlword 0x02,
-then disable voltage) and is said in one line by :meth:`fault`, naming the
-axis, the node, the object and the reason.
+then disable voltage; by PDO where the drive is operational, else by SDO) and
+is said in one line by :meth:`fault`, naming the axis, the node, the object
+and the reason, and what the stop achieved: a drive that did not answer it is
+named, a bus that could not carry it is said.
+
+**A bus error** (python-can raised on a send, or in the network's receive
+thread: bus-off, the adapter unplugged) is seen at once, also while a cycle
+waits for TPDOs. The bus of this backend's own is then opened again at the
+next :meth:`connect` (:meth:`missing`, :meth:`begin`): the next run brings the
+drives up on it afresh; while it cannot be opened, :meth:`missing` says why.
 """
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import threading
 import time
@@ -59,7 +68,7 @@ from canopen.pdo import PdoMap
 from canopen.pdo.base import PdoBase, PdoVariable
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
-from winder.drives.config import AxisDrive, DrivesConfig, load_drives, period_object
+from winder.drives.config import BACKEND_SPECS, AxisDrive, DrivesConfig, load_drives, period_object
 from winder.errors import UnavailableError, WinderError
 from winder.spec import Spec
 
@@ -122,6 +131,25 @@ class DriveError(WinderError):
     """A drive or the bus failed; the message is the one line said for it."""
 
 
+class _BusWatch(can.Listener):
+    """A listener of the network's receive thread for its errors only: python-can
+    raised in ``recv`` (the adapter unplugged, the bus closed). The backend is told
+    at once, and the thread tries again at its network's cycle, until the bus is
+    closed: without a listener that takes the error the thread would end with a
+    traceback on stderr; one that took it and returned would spin on it."""
+
+    def __init__(self, told: Callable[[Exception], None], cycle: float = 0.1) -> None:
+        self.told = told
+        self.cycle = cycle
+
+    def on_message_received(self, msg: can.Message) -> None:
+        return None  # the network's own listener takes the frames
+
+    def on_error(self, exc: Exception) -> None:
+        self.told(exc)
+        time.sleep(self.cycle)
+
+
 class RunLike(Protocol):
     """What :meth:`Cia402Backend.begin` reads of :class:`winder.ros.driver.RunStart`."""
 
@@ -146,6 +174,7 @@ class _Drive:
         self.emcy: list[int] = []  # EMCY codes received (0: an error reset)
         self.controlword = 0
         self.target = 0
+        self.operational = False  # NMT operational, as last commanded: its PDOs are taken
         self.rpdo: PdoMap | None = None
         self.cw_var: PdoVariable | None = None
         self.target_var: PdoVariable | None = None
@@ -174,12 +203,7 @@ class Cia402Backend:
 
     #: real drives (its parts are real parts); a caller that serves twins on its bus says otherwise
     simulated: bool = False
-    specs: ClassVar[dict[str, Spec]] = {
-        "real_time": Spec(
-            "real_time", bool, True, "send SYNC at its period (false: as fast as the drives answer)"
-        ),
-        "require_homing": Spec("require_homing", bool, False, "home every axis before the run"),
-    }
+    specs: ClassVar[dict[str, Spec]] = BACKEND_SPECS
 
     def __init__(self, drives: DrivesConfig | str | Path, network: canopen.Network | None = None) -> None:
         self.cfg = drives if isinstance(drives, DrivesConfig) else load_drives(drives)
@@ -201,12 +225,21 @@ class Cia402Backend:
         self.homed = False  # every drive with homing in the drives file has been homed
         self.homing_now = False  # home() runs (in its caller's thread)
         self.stop_asked = ""  # an emergency stop asked while homing: the homing loop stops on it
+        #: the bus failed (python-can raised: bus-off, the adapter unplugged), in one line: the
+        #: next connect() opens it again
+        self.bus_lost = ""
+        self.watch = _BusWatch(self._on_bus_error)
 
     # -- the bus -------------------------------------------------------------------------
     def connect(self) -> None:
-        """Open the bus (if this backend owns it) and add the drives' nodes."""
-        if self.drives:
+        """Open the bus (if this backend owns it) and add the drives' nodes; a bus
+        that failed since is closed and opened again (see the module doc)."""
+        if self.drives and not self.bus_lost:
             return
+        if self.drives:
+            self.log(f"{self.bus_lost}: the bus is opened again")
+            self.close()
+        self.bus_lost = ""
         if self.network is None:
             network = canopen.Network()
             network.NOTIFIER_CYCLE = 0.1  # close() waits for the receive thread at most this long
@@ -218,6 +251,9 @@ class Cia402Backend:
                     f"bus {bus.interface} {bus.channel}: cannot be opened: {_one_line(exc)}"
                 ) from None
             self.network = network
+        notifier = self.network.notifier
+        if notifier is not None and self.watch not in notifier.listeners:
+            notifier.add_listener(self.watch)
         for cfg in self.cfg.axes:
             node = canopen.RemoteNode(cfg.node_id, cfg.eds)
             self.network.add_node(node)
@@ -238,9 +274,30 @@ class Cia402Backend:
             if drive.cfg.node_id in self.network:
                 del self.network[drive.cfg.node_id]
         self.drives = []
+        notifier = self.network.notifier
+        if notifier is not None and self.watch in notifier.listeners:
+            notifier.remove_listener(self.watch)
         if self.own_network:
-            self.network.disconnect()
+            # a bus that failed raises its error again in the network's check: it was said then
+            with contextlib.suppress(Exception):
+                self.network.disconnect()
             self.network = None
+
+    def _bus_error(self, exc: BaseException) -> DriveError:
+        """A bus error (python-can raised on a send), said in one line and kept: the
+        bus is opened again at the next connect()."""
+        bus = self.cfg.bus
+        text = f"bus {bus.interface} {bus.channel}: {_one_line(exc)}"
+        with self.cond:
+            self.bus_lost = self.bus_lost or text
+        return DriveError(text)
+
+    def _on_bus_error(self, exc: Exception) -> None:
+        """The network's receive thread failed (:class:`_BusWatch`): a cycle waiting
+        for TPDOs hears it at once."""
+        self._bus_error(exc)
+        with self.cond:
+            self.cond.notify_all()
 
     def _on_emcy(self, drive: _Drive, err: EmcyError) -> None:
         with self.cond:
@@ -456,7 +513,10 @@ class Cia402Backend:
         """RPDOs, SYNC, and every drive's two TPDOs of that SYNC (within sdo_timeout).
         ``quiet`` (a stop): a drive that does not answer is not waited for again."""
         assert self.network is not None
-        mapped = [d for d in self.drives if d.rpdo is not None]  # a failed bring-up may leave some unmapped
+        if self.bus_lost and not quiet:  # no cycle on a bus that failed; a stop is tried all the same
+            raise DriveError(self.bus_lost)
+        # the drives that take PDOs: a failed bring-up may leave some unmapped, or pre-operational
+        mapped = [d for d in self.drives if d.rpdo is not None and d.operational]
         try:
             for drive in mapped:
                 assert drive.rpdo is not None and drive.cw_var is not None and drive.target_var is not None
@@ -466,14 +526,14 @@ class Cia402Backend:
             self.network.sync.transmit()
             self.network.check()
         except (can.CanError, OSError, RuntimeError) as exc:
-            raise DriveError(
-                f"bus {self.cfg.bus.interface} {self.cfg.bus.channel}: {_one_line(exc)}"
-            ) from None
+            raise self._bus_error(exc) from None
         self.syncs += 1
         self.total_syncs += 1
         end = time.monotonic() + self.cfg.sdo_timeout
         with self.cond:
             while True:
+                if self.bus_lost:
+                    raise DriveError(self.bus_lost)
                 late = [d for d in mapped if min(d.got) < self.syncs and d not in self.silent]
                 if not late or (not quiet and any(any(d.emcy) for d in self.drives)):
                     return  # an EMCY is said at once (the checks); a stop waits for every answer
@@ -522,7 +582,7 @@ class Cia402Backend:
     # -- bring-up --------------------------------------------------------------------------
     def _bring_up(self) -> None:
         for d in self.drives:
-            d.node.nmt.state = "PRE-OPERATIONAL"
+            self._nmt(d, "PRE-OPERATIONAL")
         for d in self.drives:
             self._configure(d)
         now = time.monotonic()
@@ -530,9 +590,18 @@ class Cia402Backend:
             d.emcy.clear()
             d.got = [0, 0]
             d.heartbeat_at = now  # a heartbeat is due within the timeout from here
-            d.node.nmt.state = "OPERATIONAL"
+            self._nmt(d, "OPERATIONAL")
         self.syncs = 0
         self._enable()
+
+    def _nmt(self, d: _Drive, state: str) -> None:
+        """An NMT command to the drive; PDOs reach it only while it is operational."""
+        d.operational = False
+        try:
+            d.node.nmt.state = state
+        except (can.CanError, OSError) as exc:
+            raise self._bus_error(exc) from None
+        d.operational = state == "OPERATIONAL"
 
     def _sdo(self, d: _Drive, index: int, sub: int | None, value: int | None = None) -> int:
         """Read (``value`` None) or write one object by SDO; a refusal or no answer is a DriveError."""
@@ -554,9 +623,7 @@ class Cia402Backend:
         except KeyError:
             raise DriveError(f"{d.name}: its EDS has no object {what}") from None
         except (can.CanError, OSError) as exc:
-            raise DriveError(
-                f"bus {self.cfg.bus.interface} {self.cfg.bus.channel}: {_one_line(exc)}"
-            ) from None
+            raise self._bus_error(exc) from None
 
     def _configure(self, d: _Drive) -> None:
         """SDO configuration, the drive pre-operational (see the module doc)."""
@@ -594,6 +661,11 @@ class Cia402Backend:
             self._sdo(d, 0x609A, None, h.acceleration)
         self._set_mode(d, cfg.mode)
         self._map_pdos(d)
+        # its state and where it stands, before its first RPDO: a drive enabled already (the
+        # bus opened again, the master started again) is sent its own position, not a stale one
+        d.statusword = self._sdo(d, 0x6041, None)
+        d.position = self._sdo(d, 0x6064, None)
+        d.target = d.position
 
     def _set_mode(self, d: _Drive, mode: int) -> None:
         self._sdo(d, 0x6060, None, mode)
@@ -639,6 +711,8 @@ class Cia402Backend:
                 f"{d.name}: SDO of its PDO mapping not answered within {self.cfg.sdo_timeout:g} s "
                 "(sdo_timeout)"
             ) from None
+        except (can.CanError, OSError) as exc:
+            raise self._bus_error(exc) from None
         if cw is None or target is None:
             raise DriveError(f"{d.name}: its EDS cannot map 0x6040 and 0x607A")
         d.rpdo, d.cw_var, d.target_var = rpdo, cw, target
@@ -724,47 +798,73 @@ class Cia402Backend:
 
     # -- stopping --------------------------------------------------------------------------
     def _stop_all(self, reason: str) -> None:
-        """Quick stop of every axis, then disable voltage; ``reason`` becomes the run's fault.
-        Best effort: a bus that is gone cannot carry the stop, and the reason says the first cause."""
-        if not self.failed:
-            self.failed = f"{reason}; every axis quick-stopped"
-            self.log(self.failed)
+        """Quick stop of every axis, then disable voltage; ``reason`` becomes the run's
+        fault, with what the stop achieved (the first cause stays the fault)."""
+        first = not self.failed
+        if first:
+            self.failed = reason
         self.running = False
-        for d in self.drives:
-            if d.rpdo is None:  # not mapped this session: the controlword by SDO, if it answers
+        outcome = self._quick_stop_every_axis(reason)
+        if first:
+            self.failed = f"{reason}; {outcome}"
+            self.log(self.failed)
+
+    def _quick_stop_every_axis(self, reason: str) -> str:
+        """Every drive's quick stop (controlword 0x02 until it rests), then disable
+        voltage (0x00): by PDO where it is operational, by SDO where it is not (a
+        bring-up that failed). Best effort: what was achieved, in words."""
+        unanswered: list[_Drive] = []
+        try:
+            for d in self.drives:
+                if d.rpdo is not None and d.operational:
+                    continue
                 for word in (0x02, 0x00):
                     try:
                         d.node.sdo[0x6040].raw = word
-                    except Exception:
+                    except (can.CanError, OSError) as exc:
+                        raise self._bus_error(exc) from None
+                    except Exception:  # an abort, no answer: the drive is named
+                        unanswered.append(d)
                         break
-        if not any(d.rpdo is not None for d in self.drives):
-            return
-        try:
-            end = time.monotonic() + STATE_SECONDS
-            for _ in range(STATE_CYCLES):
-                for d in self.drives:
-                    d.controlword = 0x02  # quick stop: a drive in OPERATION ENABLED decelerates
-                    d.target = d.position
-                self._exchange(quiet=True)
-                resting = all(
-                    d.state
-                    in (
-                        "SWITCH ON DISABLED",
-                        "FAULT",
-                        "READY TO SWITCH ON",
-                        "SWITCHED ON",
-                        "NOT READY TO SWITCH ON",
-                    )
-                    or (d.state == "QUICK STOP ACTIVE" and d.statusword & 0x0400)
-                    for d in self.drives
-                )
-                if resting or time.monotonic() > end:
-                    break
+            if any(d.rpdo is not None and d.operational for d in self.drives):
+                self._quick_stop_by_pdo()
+        except DriveError as exc:  # the bus: its error is the stop's
+            said = str(exc)
+            return "the quick stop could not be completed" + (" on it" if said == reason else f": {said}")
+        unanswered += [d for d in self.drives if d in self.silent and d not in unanswered]
+        if not unanswered:
+            return "every axis quick-stopped"
+        names = " and ".join(d.name for d in unanswered)
+        return f"every axis quick-stopped but {names}, which did not answer"
+
+    def _quick_stop_by_pdo(self) -> None:
+        """The quick stop of the operational drives, SYNC by SYNC until each rests
+        (at most STATE_SECONDS), then disable voltage; a drive that does not answer is
+        not waited for again (:attr:`silent`)."""
+        end = time.monotonic() + STATE_SECONDS
+        for _ in range(STATE_CYCLES):
             for d in self.drives:
-                d.controlword = 0x00  # disable voltage
+                d.controlword = 0x02  # quick stop: a drive in OPERATION ENABLED decelerates
+                d.target = d.position
             self._exchange(quiet=True)
-        except DriveError as exc:
-            self.log(f"the quick stop could not be completed: {exc}")
+            resting = all(
+                d.state
+                in (
+                    "SWITCH ON DISABLED",
+                    "FAULT",
+                    "READY TO SWITCH ON",
+                    "SWITCHED ON",
+                    "NOT READY TO SWITCH ON",
+                )
+                or (d.state == "QUICK STOP ACTIVE" and d.statusword & 0x0400)
+                for d in self.drives
+                if d.rpdo is not None and d.operational and d not in self.silent
+            )
+            if resting or time.monotonic() > end:
+                break
+        for d in self.drives:
+            d.controlword = 0x00  # disable voltage
+        self._exchange(quiet=True)
 
 
 def _maps(pdos: PdoBase) -> list[PdoMap]:

@@ -30,9 +30,12 @@ A drives file (YAML)::
 ``twin_fault`` is a test's hook into the twins a node serves on a virtual
 bus (:mod:`winder.ros.cia402_node`): at the ``at_sync``-th SYNC the twins
 see, the axis' twin faults once: ``jam`` (the motor blocked: a following
-error, by the twin's own monitoring), ``heartbeat`` (its heartbeat stops) or
-an EMCY error code (``0x2310``: :meth:`SimulatedDrive.inject_fault`). A real
-bus has no twin to tell, so it is refused there.
+error, by the twin's own monitoring), ``heartbeat`` (its heartbeat stops),
+``sdo`` (its SDO server hangs until the master aborts a transfer:
+:meth:`SimulatedDrive.hang_sdo`) or an EMCY error code (``0x2310``:
+:meth:`SimulatedDrive.inject_fault`); or the bus fails: ``unplugged`` (the
+master's python-can bus is shut down under it, as an adapter pulled out;
+no ``axis``). A real bus has no twin to tell, so it is refused there.
 
 A value that cannot be used is refused with one line naming the key, the
 value and what it must be (:class:`DrivesFileError`).
@@ -48,8 +51,10 @@ from typing import Any
 
 from winder.errors import BadInputError
 from winder.motion.axes import AXES
+from winder.spec import Spec
 
 __all__ = [
+    "BACKEND_SPECS",
     "AxisDrive",
     "BusConfig",
     "DrivesConfig",
@@ -72,7 +77,15 @@ QUICK_STOP_OPTIONS = (0, 1, 2, 5, 6)
 MODES = {8: "cyclic synchronous position", 1: "profile position"}
 SYNC_RANGE = (0.0005, 0.1)
 #: the faults ``twin_fault`` can inject besides an EMCY code (see the module doc)
-TWIN_FAULTS = ("jam", "heartbeat")
+TWIN_FAULTS = ("jam", "heartbeat", "sdo", "unplugged")
+#: the settings of a run on the drives (``Cia402Backend.specs``), here so that a node's
+#: ``--help`` lists them without loading canopen
+BACKEND_SPECS: dict[str, Spec] = {
+    "real_time": Spec(
+        "real_time", bool, True, "send SYNC at its period (false: as fast as the drives answer)"
+    ),
+    "require_homing": Spec("require_homing", bool, False, "home every axis before the run"),
+}
 
 
 class DrivesFileError(BadInputError):
@@ -126,9 +139,9 @@ class AxisDrive:
 class TwinFault:
     """A fault one twin injects at a SYNC (a test's hook; see the module doc)."""
 
-    axis: str
+    axis: str  # "" for "unplugged"
     at_sync: int
-    fault: str | int  # "jam", "heartbeat", or an EMCY error code
+    fault: str | int  # "jam", "heartbeat", "sdo", "unplugged", or an EMCY error code
 
 
 @dataclass(frozen=True)
@@ -376,8 +389,14 @@ def parse_drives(doc: object, source: str = "drives file", base: Path | None = N
 def _twin_fault(c: _Checker, value: object, bus: BusConfig) -> TwinFault:
     if bus.interface != "virtual":
         raise c.fail("twin_fault", value, "absent unless bus.interface is virtual (the twins' bus)")
-    t = c.table("twin_fault", value, ("axis", "at_sync", "fault"), ("axis", "at_sync", "fault"))
-    if t["axis"] not in AXES:
+    t = c.table("twin_fault", value, ("axis", "at_sync", "fault"), ("at_sync", "fault"))
+    if t["fault"] == "unplugged":  # the master's bus, no twin's
+        if "axis" in t:
+            raise c.fail("twin_fault.axis", t["axis"], "absent for fault unplugged (the bus fails, no twin)")
+        t["axis"] = ""
+    elif "axis" not in t:
+        raise DrivesFileError(f"{c.source}: twin_fault.axis is missing (required)")
+    elif t["axis"] not in AXES:
         raise c.fail("twin_fault.axis", t["axis"], f"one of {', '.join(AXES)}")
     at_sync = c.integer("twin_fault.at_sync", t["at_sync"], 1, 2**31 - 1)
     fault = t["fault"]

@@ -24,8 +24,9 @@ what a drive does with the objects.
   home switch on the positive side, against :attr:`home_switch`); 0x607C is
   the position of home.
 * **Faults** injected with :meth:`inject_fault` (any EMCY code),
-  :meth:`stop_heartbeat` (the drive goes quiet on 0x700) and :meth:`jam`
-  (the motor blocked: a following error, by the monitoring above).
+  :meth:`stop_heartbeat` (the drive goes quiet on 0x700), :meth:`jam`
+  (the motor blocked: a following error, by the monitoring above) and
+  :meth:`hang_sdo` (its SDO server answers nothing until a client aborts).
 
 The motor behind it is winder's stepper model (:class:`winder.axis.StepperAxis`,
 the paper's motor unless another is given), followed with the exact linear
@@ -50,7 +51,9 @@ import canopen
 from canopen.objectdictionary import ODVariable
 from canopen.pdo import PdoMap
 from canopen.pdo.base import PdoBase
+from canopen.sdo.constants import REQUEST_ABORTED
 from canopen.sdo.exceptions import SdoAbortedError
+from canopen.sdo.server import SdoServer
 
 from winder.axis import StepperAxis
 
@@ -79,6 +82,20 @@ ABORT_RANGE = 0x06090030
 NMT_OPERATIONAL = 5  # canopen's NMT state code
 
 
+class _HangingSdoServer(SdoServer):
+    """canopen's SDO server, which can hang (:meth:`SimulatedDrive.hang_sdo`):
+    while hung it answers no request; a client's abort of a transfer (canopen's
+    client sends one when its request times out) frees it."""
+
+    hung = False
+
+    def on_request(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        if self.hung:
+            self.hung = data[0] & 0xE0 != REQUEST_ABORTED
+            return
+        super().on_request(can_id, data, timestamp)  # type: ignore[no-untyped-call]
+
+
 class SimulatedDrive:
     """A CiA 402 drive served on ``network`` as node ``node_id`` until :meth:`stop`
     (see the module doc). ``motor``: the stepper behind it (the paper's by
@@ -97,6 +114,8 @@ class SimulatedDrive:
         self.lock = threading.RLock()
         self.network = network
         self.node = canopen.LocalNode(node_id, self.EDS)
+        self.sdo_server = _HangingSdoServer(0x600 + node_id, 0x580 + node_id, self.node)  # type: ignore[no-untyped-call]
+        self.node.sdo = self.sdo_server
         self.motor = motor or StepperAxis.paper()
         self.tracker = self.motor.linear_tracker()
         self.base = 0.0  # the motor's position when its tracker was made (counts)
@@ -175,6 +194,13 @@ class SimulatedDrive:
         """The heartbeat stops (a drive that hangs), the rest goes on."""
         with self.lock:
             self.node.nmt.stop_heartbeat()  # type: ignore[no-untyped-call]
+
+    def hang_sdo(self) -> None:
+        """Its SDO server hangs: no request is answered (a master's SDO times out)
+        until a client aborts a transfer, as canopen's SDO client does when its
+        request times out; PDOs, heartbeat and EMCY go on."""
+        with self.lock:
+            self.sdo_server.hung = True
 
     @property
     def position_actual(self) -> int:

@@ -18,7 +18,15 @@ reaches no other process, so no real drive can be on it. The same file with
 twin's CiA 402 state and the state it came from (``twin_states``: "SWITCH
 ON DISABLED (from QUICK STOP ACTIVE)" is a quick stop ended at rest), and
 the drives file's ``twin_fault`` (a test's hook, a virtual bus only:
-:mod:`winder.drives.config`) makes one twin fault at the SYNC it names, once.
+:mod:`winder.drives.config`) makes one twin fault at the SYNC it names, once,
+or the bus fail under the backend (``unplugged``).
+
+**A bring-up that fails** (a drive that does not answer an SDO, a bus that
+cannot be opened) is the run's fault, said in the one line of
+:meth:`winder.drives.Cia402Backend.fault`: the run closes incomplete before
+any of its steps is taken, and the node takes the next run (the bring-up
+tried again). A bus that failed is opened again before the next run; while it
+cannot be, the node says ``waiting`` with why.
 
 **Homing** runs when the node starts, in a thread of its own, for drives
 with homing in the drives file (or every drive with ``require_homing``):
@@ -38,7 +46,7 @@ from typing import Any, ClassVar
 import numpy as np
 import numpy.typing as npt
 
-from winder.drives.backend import Cia402Backend
+from winder.drives.config import BACKEND_SPECS
 from winder.errors import WinderError
 from winder.ros.driver import Backend, DriverNode, RunStart
 from winder.ros.spin import answer_help, spin
@@ -52,17 +60,20 @@ ABOUT = "The CiA 402 drives over CANopen (winder.drives.Cia402Backend): the driv
 class DrivesBackend(Backend):
     """The node's backend: the drives file named by ``drives_file``, its
     twins on a virtual bus, the homing step, then every method passed to
-    :class:`winder.drives.Cia402Backend` (see the module doc)."""
+    :class:`winder.drives.Cia402Backend` (see the module doc). canopen is
+    loaded with the drives file, not with this module: ``--help`` answers
+    without it."""
 
     specs: ClassVar[dict[str, Spec]] = {
         "drives_file": Spec(
             "drives_file", str, "", "the drives file (YAML: the CAN bus, the SYNC period, a drive per axis)"
         ),
-        **Cia402Backend.specs,  # real_time, require_homing
+        **BACKEND_SPECS,  # Cia402Backend.specs: real_time, require_homing
     }
 
     def __init__(self) -> None:
         self.drives: Any = None  # the Cia402Backend, once the drives file is read
+        self.refused = ""  # the run's bring-up failed: why, in one line (the run's fault)
         self.twins: list[Any] = []
         self.twin_network: Any = None
         self.unusable = "no drives file (set the parameter drives_file)"
@@ -72,7 +83,7 @@ class DrivesBackend(Backend):
 
     def load(self, path: str, require_homing: bool) -> None:
         """Read the drives file, start its twins on a virtual bus, start homing."""
-        from winder.drives import SimulatedDrive, load_drives
+        from winder.drives import Cia402Backend, SimulatedDrive, load_drives
 
         if not path:
             return
@@ -94,9 +105,11 @@ class DrivesBackend(Backend):
             self.twin_network = network
             self.twins = [SimulatedDrive(network, d.node_id) for d in cfg.axes]
             self.simulated = True  # its parts are twin parts, never mixed with real ones
-            if cfg.twin_fault is not None:
-                self.arm(cfg.twin_fault, self.twins[[d.axis for d in cfg.axes].index(cfg.twin_fault.axis)])
         self.drives = Cia402Backend(cfg)
+        if self.twins and cfg.twin_fault is not None:
+            axes = [d.axis for d in cfg.axes]
+            fault = cfg.twin_fault
+            self.arm(fault, self.twins[axes.index(fault.axis)] if fault.axis else None)
         self.drives.log = self.log
         self.unusable = ""
         if len(lacking) < len(cfg.axes):
@@ -105,18 +118,26 @@ class DrivesBackend(Backend):
 
     def arm(self, fault: Any, twin: Any) -> None:
         """``twin_fault``: the twin faults at the ``at_sync``-th SYNC the twins
-        see (counted here, after the twins' own handling of it), once."""
+        see (counted here, after the twins' own handling of it), once; or, for
+        ``unplugged``, the backend's bus is shut down under it there (an
+        adapter pulled out: python-can raises on its next send and receive)."""
         seen = [0]
 
         def on_sync(_can_id: int, _data: bytearray, _timestamp: float) -> None:
             seen[0] += 1
             if seen[0] != fault.at_sync:
                 return
+            if fault.fault == "unplugged":
+                self.log(f"twin_fault: the bus is unplugged at SYNC {fault.at_sync}")
+                self.drives.network.bus.shutdown()
+                return
             self.log(f"twin_fault: the {fault.axis} twin faults ({fault.fault}) at SYNC {fault.at_sync}")
             if fault.fault == "jam":
                 twin.jam()
             elif fault.fault == "heartbeat":
                 twin.stop_heartbeat()
+            elif fault.fault == "sdo":
+                twin.hang_sdo()
             else:
                 twin.inject_fault(int(fault.fault))
 
@@ -151,16 +172,27 @@ class DrivesBackend(Backend):
         return str(self.drives.missing())
 
     def begin(self, run: RunStart) -> dict[str, object]:
-        return dict(self.drives.begin(run))
+        """The drives brought up for the run; one that fails is the run's fault
+        (:meth:`fault`), not an error of this driver: the node closes the run
+        incomplete at its next pump, which comes before any of the run's steps
+        (the profile node sends none before this configuration is out)."""
+        self.refused = ""
+        try:
+            return dict(self.drives.begin(run))
+        except WinderError as exc:  # a DriveError, a bus that cannot be opened: said, the run not begun
+            self.refused = str(self.drives.fault() or exc)
+            return {"backend": "cia402", "bring_up": self.refused}
 
     def write(self, t_ns: int, rows: npt.NDArray[np.int64]) -> None:
-        self.drives.write(t_ns, rows)
+        self.drives.write(t_ns, rows)  # nothing goes out after a fault (Cia402Backend)
 
     def read(self, t_ns: int) -> npt.NDArray[np.float64]:
         return np.asarray(self.drives.read(t_ns), float)
 
     def fault(self) -> str:
-        return str(self.drives.fault()) if self.drives is not None else ""
+        if self.drives is None:
+            return ""
+        return self.refused or str(self.drives.fault())
 
     def status(self) -> dict[str, object]:
         status = dict(self.drives.status()) if self.drives is not None else {}
