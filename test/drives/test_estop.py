@@ -23,7 +23,7 @@ def test_estop_mid_run_stops_and_holds_every_axis(rig, master: canopen.Network) 
     assert backend.fault() == ""
     twins = rig["twins"]
     assert all(twins[n].velocity != 0.0 for n in (1, 2, 3))  # moving when the stop comes
-    backend.estop()
+    assert backend.estop() == "every axis quick-stopped"  # what ~/estop answers
     assert backend.fault() == "emergency stop; every axis quick-stopped"
     for n, twin in twins.items():
         assert twin.state == "SWITCH ON DISABLED", n  # quick stop option 2: decelerated, then disabled
@@ -70,3 +70,18 @@ def test_home_is_a_step_of_its_own(rig, homing: bool) -> None:  # noqa: F811
     assert abs(moved - home) > 100  # it went 19 steps (186 counts) from home
     backend.begin(run_start())  # a second run: the fork is not homed again (homing 35 would set 500)
     assert abs(twins[2].position_actual - moved) < 30  # where it stood, its motor ringing out
+
+
+def test_estop_on_a_lost_bus_says_the_stop_did_not_go_out(rig, channel: str) -> None:  # noqa: F811
+    """The adapter unplugged, then the emergency stop: it answers that the
+    quick stop could not be completed and why, not "every axis quick-stopped"
+    (what ``winder ctl estop`` prints), and the run's fault says the same."""
+    backend: Cia402Backend = rig["backend"]()
+    backend.begin(run_start())
+    rows = np.array([[t * 1_000_000, 0, t, 2 * t, t] for t in range(1, 200)], np.int64)
+    backend.write(int(rows[99, 0]), rows[:100])
+    backend.network.bus.shutdown()  # unplugged, nothing sent since
+    said = backend.estop()
+    assert said.startswith("the quick stop could not be completed: bus virtual"), said
+    assert "closed bus" in said, said
+    assert backend.fault() == f"emergency stop; {said}"

@@ -409,18 +409,21 @@ class Cia402Backend:
         self.running = False
         self.pending = []
 
-    def quick_stop(self, reason: str) -> None:
-        """An emergency stop: every axis quick-stopped, then disabled; the run faults with ``reason``."""
-        self._stop_all(reason)
+    def quick_stop(self, reason: str) -> str:
+        """An emergency stop: every axis quick-stopped, then disabled; the run
+        faults with ``reason``. What the stop achieved, in words."""
+        return self._stop_all(reason)
 
-    def estop(self) -> None:
-        """The node's ``~/estop``: :meth:`quick_stop` with the reason "emergency stop".
-        While :meth:`home` runs in another thread, its loop stops at its next
-        SYNC and quick-stops there (one thread on the bus at a time)."""
+    def estop(self) -> str:
+        """The node's ``~/estop``: :meth:`quick_stop` with the reason "emergency
+        stop"; what it achieved, in words ("every axis quick-stopped", or what
+        the bus did not let it do). While :meth:`home` runs in another thread,
+        its loop stops at its next SYNC and quick-stops there (one thread on
+        the bus at a time)."""
         if self.homing_now:
             self.stop_asked = "emergency stop"
-            return
-        self.quick_stop("emergency stop")
+            return "every axis quick-stopped at the homing's next SYNC"
+        return self.quick_stop("emergency stop")
 
     def home(self) -> None:
         """Homing as a step of its own (see the module doc): the drives brought
@@ -797,9 +800,10 @@ class Cia402Backend:
         self._check()
 
     # -- stopping --------------------------------------------------------------------------
-    def _stop_all(self, reason: str) -> None:
+    def _stop_all(self, reason: str) -> str:
         """Quick stop of every axis, then disable voltage; ``reason`` becomes the run's
-        fault, with what the stop achieved (the first cause stays the fault)."""
+        fault, with what the stop achieved (the first cause stays the fault). What it
+        achieved, in words."""
         first = not self.failed
         if first:
             self.failed = reason
@@ -808,6 +812,7 @@ class Cia402Backend:
         if first:
             self.failed = f"{reason}; {outcome}"
             self.log(self.failed)
+        return outcome
 
     def _quick_stop_every_axis(self, reason: str) -> str:
         """Every drive's quick stop (controlword 0x02 until it rests), then disable

@@ -181,7 +181,9 @@ class Backend(Protocol):
     Optional beyond these, looked up by name (so that a backend written
     before it is still a ``Backend``): ``estop()``, the node's ``~/estop``
     (an emergency stop: a drive's quick stop, then disable; the run then
-    closes incomplete with the reason "emergency stop").
+    closes incomplete with the reason "emergency stop"); it may return what
+    the stop achieved, in words ("every axis quick-stopped" is said if it
+    returns nothing), which ``winder ctl estop`` prints.
 
     Every return value is checked against what is documented here, and
     anything raised (``KeyboardInterrupt`` and ``SystemExit`` too, see
@@ -527,8 +529,11 @@ class DriveEngine(Engine):
         stop", the profile node told to abort. What was done, in words."""
         fn = getattr(self.backend, "estop", None)
         stopped = "every axis quick-stopped" if callable(fn) else "this backend has no estop(): the axes"
-        if callable(fn) and self.call("estop", fn) is FAILED:
+        got = self.call("estop", fn) if callable(fn) else None
+        if got is FAILED:
             stopped = "backend.estop() failed (in the node's log)"
+        elif isinstance(got, str) and got.strip():  # what the stop achieved, as the backend says it
+            stopped = one_line_text(got)
         if self.run.plan is None:
             return f"emergency stop: {stopped}; no run was going on"
         run_id = self.run.plan.run_id
