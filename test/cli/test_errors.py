@@ -282,6 +282,8 @@ def test_the_installed_command_says_one_line_for_a_bug(tmp_path: Path) -> None:
 INTERNAL_VALUE_ERRORS: dict[str, tuple[int, str]] = {
     "analysis/figures/analysis.py::envelope_indices": (3, "plot arrays and columns the figure code makes"),
     "axis/_checks.py::_vector": (5, "the simulator's time/angle arrays: shape, order, finiteness"),
+    "record/capability.py::mean_sd": (1, "no values: the caller counts its values first (the 30-part rule)"),
+    "record/parts.py::_known": (1, "columns the code names (the CLI's choices), never the user's text"),
     "axis/_checks.py::_angles": (2, "step angle arrays the caller builds"),
     "axis/_steps.py::_check_chunk": (3, "a streaming tracker fed out of order"),
     "axis/nonlinear.py::NonlinearTracker.advance": (2, "a streaming tracker fed before its start"),

@@ -239,6 +239,42 @@ def test_a_run_writes_its_part_as_its_bag_reports_it(tmp_path: Path, procs: Proc
         assert row["wire_length_m"] == float(final["wire_taken_m"])
 
 
+@pytest.mark.ros
+def test_two_operators_runs_of_one_recipe_are_one_recipes_parts(tmp_path: Path, procs: Procs) -> None:
+    """``winder run JOB --operator --wire-lot``, twice, by two operators (the
+    second without a wire lot): each part names its operator and wire lot,
+    as the run's summary, its bag's job description and metadata do, and
+    both are parts of one recipe, the job file's SHA-256 (issue 56);
+    ``winder parts list --operator`` takes the one operator's part."""
+    import yaml
+
+    job = tmp_path / "tiny.yaml"
+    job.write_text(TINY_JOB)
+    runs = []
+    for facts in (["--operator", "Jane Doe", "--wire-lot", "L-2026/7"], ["--operator", "john"]):
+        r = winder_run(tmp_path, procs.domain, str(job), *facts)
+        assert r.returncode == 0, r.stdout + r.stderr
+        runs.append(r.stdout)
+    assert "  run of             operator Jane Doe, wire lot L-2026/7" in runs[0].splitlines(), runs[0]
+    assert "  run of             operator john" in runs[1].splitlines(), runs[1]
+    with sqlite3.connect(tmp_path / "bags" / "parts.sqlite") as con:
+        rows = con.execute(
+            "SELECT operator, wire_lot, recipe_sha256, bag FROM parts ORDER BY started_ns"
+        ).fetchall()
+    sha = hashlib.sha256(job.read_bytes()).hexdigest()
+    assert [row[:3] for row in rows] == [("Jane Doe", "L-2026/7", sha), ("john", None, sha)]
+    jane, john = (Path(row[3]) for row in rows)
+    [(_, described)] = rosbags_read(jane)["/winder/job"]
+    assert (described.operator_name, described.wire_lot) == ("Jane Doe", "L-2026/7")
+    custom = yaml.safe_load((john / "metadata.yaml").read_text())["rosbag2_bagfile_information"][
+        "custom_data"
+    ]
+    assert custom["winder_operator"] == "john" and "winder_wire_lot" not in custom
+    listed = run_cli("parts", "list", "--bag-dir", str(tmp_path / "bags"), "--operator", "john", "--json")
+    assert listed.returncode == 0, listed.stderr
+    assert [p["bag"] for p in json.loads(listed.stdout)] == [str(john)]
+
+
 def test_a_parts_db_that_cannot_be_one_is_refused_before_a_run(tmp_path: Path) -> None:
     (tmp_path / "file").write_text("")
     for value, needle in (

@@ -25,6 +25,7 @@ from winder.contract.params import PROFILE_SPECS
 from winder.contract.run import JobReport
 from winder.contract.states import EventKind, EventSource
 from winder.contract.stream import (
+    RUN_TEXT_PATTERN,
     describe_job,
     description_text,
     parse_job_description,
@@ -161,6 +162,9 @@ def descriptions(draw: st.DrawFn) -> str:
         draw(st.sampled_from(["auto", "call"])),
         draw(st.sampled_from(["", "pause@1.5,resume@3"])),
         draw(st.sampled_from(["", "ab" * 32])),
+        # who ran it with which wire: any text the rule takes (Unicode beyond the BMP too)
+        operator=draw(st.from_regex(RUN_TEXT_PATTERN, fullmatch=True)),
+        wire_lot=draw(st.from_regex(RUN_TEXT_PATTERN, fullmatch=True)),
     )
     if draw(st.booleans()):  # a re-simulation's
         text = with_source(text, RUN.replace("_1", "_2"), "/bags/" + draw(st.text("abc_/", min_size=1)))
@@ -186,6 +190,7 @@ def test_a_description_comes_back_from_its_message_as_the_same_text(text: str) -
     )
     assert [(s.segment, s.step) for s in by_rclpy.stops] == list(plan.stops)
     assert by_rclpy.has_ramp == (plan.ramp is not None)
+    assert (by_rclpy.operator_name, by_rclpy.wire_lot) == (plan.operator, plan.wire_lot)
     assert [
         (s.kind, tuple(s.start), tuple(s.delta), s.steps, s.pole, s.layer) for s in by_rclpy.segments
     ] == [(str(s.kind), tuple(s.start), tuple(s.delta), s.steps, s.pole, s.layer) for s in plan.segments]

@@ -59,7 +59,8 @@ def is_bad(spec: Spec, value: Any) -> bool:
 
 def bad_values(spec: Spec) -> list[Any]:
     if spec.kind is str:
-        return [v for v in ("", "no such thing!") if is_bad(spec, v)]
+        # a control character: what a run's operator or wire lot refuses (a NUL cuts a ROS string)
+        return [v for v in ("", "no such thing!", "ring\x07") if is_bad(spec, v)]
     return [v for v in CANDIDATES if is_bad(spec, v)]
 
 

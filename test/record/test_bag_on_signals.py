@@ -237,14 +237,14 @@ def test_a_bag_left_unclosed_by_a_sigkill_is_named_with_its_mend(procs: Procs, t
     recording into the same bag_dir, the next ``winder run`` there and
     ``winder analyze``; ``winder play`` and ``winder resim`` refuse it in
     one line naming the same. Once recovered, nothing names it any more."""
-    from winder.record.bag import unclosed_bags
+    from winder.record.bag import bags_in, unclosed_bags
 
     bag_dir = tmp_path / "bags"
     cell = procs.launch(
         [str(BIN / "winder"), "run", "--one-process", "--bag-dir", str(bag_dir), *LONG_JOB], "run"
     )
     log = lambda: procs.log(cell)  # noqa: E731 - what the cell said, if a wait fails
-    visible = lambda: [e for e in entries(bag_dir) if not e.startswith(".")]  # noqa: E731
+    visible = lambda: [b.name for b in bags_in(bag_dir)]  # noqa: E731 - the part index is none
     wait.until(visible, 60, "the run's bag directory", heard=log, poll=0, running=cell)
     [container] = [pid for pid, cmd in children(cell.pid).items() if "winder_container" in cmd]
     os.kill(container, signal.SIGKILL)

@@ -160,7 +160,7 @@ def test_a_bag_of_before_the_typed_messages_reads_as_a_typed_one(tmp_path: Path)
     typed_job = Description(
         format="winder.job/1", run_id=run_id, job_id="old", job=pairs(doc["job"]), has_ramp=False, ramp=[],
         stops=[Stop(segment=0, step=2)], stop_pause=0.0, stop_resume="auto", schedule="", job_file_sha256="",
-        source_bag="", source_run_id="", axes=["feed", "fork", "pole"],
+        operator_name="", wire_lot="", source_bag="", source_run_id="", axes=["feed", "fork", "pole"],
         joint_step=np.array(doc["joint_step"]), step_lengths=np.array(doc["step_lengths"]),
         total_steps=doc["total_steps"],
         segments=[
@@ -207,6 +207,71 @@ def test_a_bag_of_before_the_typed_messages_reads_as_a_typed_one(tmp_path: Path)
               StoragePlugin.MCAP)  # fmt: skip
     with pytest.raises(BagError, match=r"^[^\n]*/winder/job: [^\n]*$"):
         read_run(wrong)
+
+
+#: winder_interfaces/msg/JobDescription as winder recorded it from 2026-11-28 until the run's
+#: operator and wire lot (operator_name, wire_lot after job_file_sha256) joined it
+JOB_DESCRIPTION_20261128 = (
+    "string FORMAT=winder.job/1\nstring format\nstring run_id\nstring job_id\n"
+    "diagnostic_msgs/KeyValue[] job\n"
+    "bool has_ramp\ndiagnostic_msgs/KeyValue[] ramp\nJobStop[] stops\nfloat64 stop_pause\n"
+    "string stop_resume\nstring schedule\nstring job_file_sha256\nstring source_bag\n"
+    "string source_run_id\nstring[] axes\nfloat64[] joint_step\nfloat64[] step_lengths\n"
+    "uint64 total_steps\nJobSegment[] segments"
+)
+
+
+def test_a_bag_of_before_the_operator_reads_with_the_definition_it_holds(tmp_path: Path) -> None:
+    """A JobDescription recorded before ``operator_name`` and ``wire_lot``
+    were its fields: CDR has no field names, so today's definition cannot
+    decode it (the bytes end before its fields do). The reader decodes it
+    with the definition the bag holds: the plan as it was, no operator; and
+    ``winder bag recover`` writes its copy with that definition too."""
+    from rosbags.rosbag2 import Writer
+    from rosbags.typesys import get_types_from_msg
+
+    from winder.contract.stream import describe_job
+    from winder.motion.job import Job
+    from winder.record.msgtypes import DEFINITIONS
+
+    run_id = "old_20261128_101010123_1"
+    text = describe_job(Job.from_dict({"job_id": "old", "turns_per_layer": 3, "poles": 2}), run_id)
+    doc = json.loads(text)
+    store = get_typestore(Stores.ROS2_JAZZY)  # the types as that winder defined them
+    for name, definition in DEFINITIONS.items():
+        if name.startswith("winder_interfaces/"):
+            old_def = JOB_DESCRIPTION_20261128 if name.endswith("/JobDescription") else definition
+            store.register(get_types_from_msg(old_def, name))
+    types = store.types
+    KeyValue, Segment = types["diagnostic_msgs/msg/KeyValue"], types["winder_interfaces/msg/JobSegment"]
+    msg = types["winder_interfaces/msg/JobDescription"](
+        format="winder.job/1", run_id=run_id, job_id="old",
+        job=[KeyValue(key=k, value=v if isinstance(v, str) else json.dumps(v))
+             for k, v in doc["job"].items()],
+        has_ramp=False, ramp=[], stops=[], stop_pause=0.0, stop_resume="auto", schedule="",
+        job_file_sha256="", source_bag="", source_run_id="", axes=["feed", "fork", "pole"],
+        joint_step=np.array(doc["joint_step"]), step_lengths=np.array(doc["step_lengths"]),
+        total_steps=doc["total_steps"],
+        segments=[
+            Segment(kind=s["kind"], start=np.array(s["start"], np.int64),
+                    delta=np.array(s["delta"], np.int64), steps=s["steps"], pole=s["pole"], layer=s["layer"])
+            for s in doc["segments"]
+        ],
+    )  # fmt: skip
+    path = tmp_path / "before_operator"
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        conn = w.add_connection("/winder/job", "winder_interfaces/msg/JobDescription", typestore=store)
+        w.write(conn, 0, store.serialize_cdr(msg, "winder_interfaces/msg/JobDescription"))
+    run = read_run(path)
+    assert json.loads(run.plan.text) == {**doc, "operator": "", "wire_lot": ""}
+    assert (run.plan.run_id, run.plan.total_steps, run.plan.operator, run.plan.wire_lot) == (
+        run_id,
+        doc["total_steps"],
+        "",
+        "",
+    )
+    copy, saved = recover(path, tmp_path / "copy")
+    assert saved == 1 and read_run(copy).plan == run.plan
 
 
 # -- cut-short files ------------------------------------------------------------------------

@@ -70,14 +70,20 @@ class Goal:
     """One goal sent by an ActionClient: its feedback as it comes, its result."""
 
     def __init__(
-        self, ros: Any, client: Any, job: str = "", overrides: tuple[str, ...] = (), goal_sha256: str = ""
+        self,
+        ros: Any,
+        client: Any,
+        job: str = "",
+        overrides: tuple[str, ...] = (),
+        goal_sha256: str = "",
+        **facts: str,
     ) -> None:
         from winder_interfaces.action import Wind
 
         self.ros = ros
         self.feedback: list[Any] = []
         sent = client.send_goal_async(
-            Wind.Goal(job=job, overrides=list(overrides), goal_sha256=goal_sha256),
+            Wind.Goal(job=job, overrides=list(overrides), goal_sha256=goal_sha256, **facts),
             feedback_callback=lambda m: self.feedback.append(m.feedback),
         )
         self.handle = wait.spin_until(ros, lambda: sent.done() and sent.result(), 30, "the goal's acceptance")
@@ -440,6 +446,61 @@ def test_a_goals_settings_end_with_its_run(procs: Procs, tmp_path: Path, ros: An
         "auto",
         "own",
     ]
+
+
+def test_a_goals_operator_and_wire_lot_are_its_parts(
+    procs: Procs, tmp_path: Path, ros: Any, client: Any
+) -> None:
+    """A goal's ``operator_name`` and ``wire_lot`` are its run's (issue 56):
+    its job description in the bag, the bag's metadata and its part carry
+    them, and the interp node's own ``operator`` (a shift's, set at start)
+    is back for the next goal, which gives none; a value that is not
+    printable text is refused in one line naming it, one cut at a NUL on its
+    way by the goal's hash, and neither moves an axis."""
+    import sqlite3
+
+    import yaml
+    from action_msgs.msg import GoalStatus
+
+    from winder.contract.jobfile import goal_sha256
+
+    bags = cell(procs, tmp_path, ros, client, real_time=False, operator="day-shift")
+    job = job_text(JOB, "lot")
+    bad = "Jane\x1b[2J"
+    status, result = Goal(ros, client, job, operator_name=bad).result(30)
+    assert status == GoalStatus.STATUS_ABORTED, result.message
+    assert result.message.startswith(f"job rejected: operator={bad!r} is invalid: must be printable text")
+    assert "\n" not in result.message
+    meant = goal_sha256(job, operator="Jane\x00Doe")  # rcl cuts it to "Jane": a name nobody gave
+    status, result = Goal(ros, client, job, goal_sha256=meant, operator_name="Jane\x00Doe").result(30)
+    assert status == GoalStatus.STATUS_ABORTED and "goal_sha256: the goal came as" in result.message, result
+    assert not list(bags.glob("*")), "a refused goal started a run"
+
+    digest = goal_sha256(job, operator="Jane Doe", wire_lot="L-2026/7")
+    given = Goal(ros, client, job, goal_sha256=digest, operator_name="Jane Doe", wire_lot="L-2026/7")
+    status, result = given.result()
+    assert status == GoalStatus.STATUS_SUCCEEDED, result.message
+    status, plain = Goal(ros, client, job).result()  # the node's own operator, no wire lot
+    assert status == GoalStatus.STATUS_SUCCEEDED, plain.message
+    assert get_params(ros, "interp_node", ["operator", "wire_lot"]) == ["day-shift", ""]
+
+    with sqlite3.connect(f"{(bags / 'parts.sqlite').as_uri()}?mode=ro", uri=True) as con:
+        parts = dict(
+            (part_id, (who, lot, sha))
+            for part_id, who, lot, sha in con.execute(
+                "SELECT part_id, operator, wire_lot, recipe_sha256 FROM parts"
+            )
+        )
+    assert parts[result.part_id][:2] == ("Jane Doe", "L-2026/7")
+    assert parts[plain.part_id][:2] == ("day-shift", None)
+    assert parts[result.part_id][2] == parts[plain.part_id][2]  # one recipe, whoever wound it
+    [recorded] = mcap_messages(Path(result.bag_path), "/winder/job", "winder_interfaces/msg/JobDescription")
+    assert (recorded.operator_name, recorded.wire_lot) == ("Jane Doe", "L-2026/7")
+    meta = yaml.safe_load((Path(result.bag_path) / "metadata.yaml").read_text())
+    custom = meta["rosbag2_bagfile_information"]["custom_data"]
+    assert (custom["winder_operator"], custom["winder_wire_lot"]) == ("Jane Doe", "L-2026/7")
+    meta = yaml.safe_load((Path(plain.bag_path) / "metadata.yaml").read_text())
+    assert "winder_wire_lot" not in meta["rosbag2_bagfile_information"]["custom_data"]
 
 
 class Resume:

@@ -384,6 +384,8 @@ class InterpNode(ManagedNode):
             values["stop_resume"],
             values["schedule"],
             values["job_file_sha256"],
+            operator=values["operator"],
+            wire_lot=values["wire_lot"],
         )
         self.pub_job.publish(job_description_msg(text))
         self.pending = self.chunks(job, values["chunk_steps"])

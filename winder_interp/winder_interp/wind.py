@@ -3,8 +3,11 @@
 
 * goal: ``job`` (a job file's text, the files ``winder run`` reads; "" = the
   node's settings as they are), ``goal_sha256`` (the goal's hash as sent: a
-  goal cut at a NUL on its way is refused) and ``overrides`` (``KEY=VALUE`` settings of
-  the interp node for this run, as ``winder ctl start --set``). A job text is
+  goal cut at a NUL on its way is refused), ``overrides`` (``KEY=VALUE`` settings of
+  the interp node for this run, as ``winder ctl start --set``) and
+  ``operator_name`` and ``wire_lot`` (the run's, for its part: the interp
+  node's settings ``operator`` and ``wire_lot`` for this run, "" = as they
+  are; ``operator`` is a C++ keyword, no field's name). A job text is
   a whole job (:func:`goal_params`: what it gives the interp node and its
   ramp, the rest of the job at its defaults; every other node's section is
   theirs); the overrides win; all is set in one change, then the run starts.
@@ -45,7 +48,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 from std_srvs.srv import Trigger
 
-from winder.contract.jobfile import goal_sha256, load_job_text
+from winder.contract.jobfile import goal_facts, goal_sha256, load_job_text
 from winder.contract.params import INTERP_SPECS, interp_setting
 from winder.contract.run import JobReport
 from winder.contract.states import FINAL_JOB_STATES, JobState, asks_again
@@ -109,9 +112,13 @@ def job_params(given: dict[str, dict[str, Any]], digest: str, named: set[str]) -
 JOB_SETTINGS = (*FIELD_SPECS, "stops", "stop_pause", "stop_resume", "schedule")
 
 
-def goal_params(job: str, overrides: list[str], sha256: str = "") -> list[Parameter]:
+def goal_params(
+    job: str, overrides: list[str], sha256: str = "", *, operator: str = "", wire_lot: str = ""
+) -> list[Parameter]:
     """The change a goal asks for: its job text's settings, then its
-    ``KEY=VALUE`` overrides (which win). A job text is a whole job: the
+    ``KEY=VALUE`` overrides (which win), its ``operator`` and ``wire_lot``
+    (those given: the overrides ``operator=...``, ``wire_lot=...``, each
+    given one way). A job text is a whole job: the
     settings of :data:`JOB_SETTINGS` it does not give take their defaults,
     and without a profile_node section the run is ramped by the profile
     node's settings. ``sha256`` (hex, "" for none) is what the sender hashed
@@ -120,19 +127,26 @@ def goal_params(job: str, overrides: list[str], sha256: str = "") -> list[Parame
     strings), and a job or an override cut there is a valid goal nobody
     asked for. BadInputError (one line) if the job or an override cannot be
     used."""
+    facts = goal_facts(operator, wire_lot)
     if sha256:
         wanted = sha256.strip().lower()
         if len(wanted) != 64 or any(c not in "0123456789abcdef" for c in wanted):
             raise BadInputError(f"goal_sha256: {sha256[:80]!r} is not a SHA-256 in hex (64 of 0-9a-f)")
-        got = goal_sha256(job, overrides)
+        got = goal_sha256(job, overrides, operator=operator, wire_lot=wire_lot)
         if got != wanted:
             size = len(job.encode("utf-8"))
+            also = "".join(f", {fact.split('=', 1)[0]}" for fact in facts)
             raise BadInputError(
-                f"goal_sha256: the goal came as a {size}-byte job and {len(overrides)} overrides hashing "
-                f"to {got[:12]}..., not the {wanted[:12]}... sent (cut at a NUL byte, or changed on its "
-                "way): nothing set"
+                f"goal_sha256: the goal came as a {size}-byte job and {len(overrides)} overrides{also} "
+                f"hashing to {got[:12]}..., not the {wanted[:12]}... sent (cut at a NUL byte, or changed "
+                "on its way): nothing set"
             )
     values = dict(interp_setting(text, "overrides") for text in overrides)
+    for fact in facts:
+        name, value = interp_setting(fact, "goal")  # SpecError: "operator='a\x07' is invalid: must be ..."
+        if name in values:
+            raise BadInputError(f"goal: {name} given as a field and as an override: give it one way")
+        values[name] = value
     params = [Parameter(k, value=v) for k, v in values.items()]
     if job.strip() and values.get("job_file"):
         raise BadInputError("overrides: job_file given beside the goal's job: give the job one way")
@@ -228,7 +242,13 @@ class WindServer:
             handle.abort()
             return result
         try:
-            params = goal_params(request.job, list(request.overrides), request.goal_sha256)
+            params = goal_params(
+                request.job,
+                list(request.overrides),
+                request.goal_sha256,
+                operator=request.operator_name,
+                wire_lot=request.wire_lot,
+            )
         except BadInputError as exc:
             result.message = f"job rejected: {one_line(exc)}"
             handle.abort()

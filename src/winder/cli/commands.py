@@ -57,6 +57,7 @@ from winder.contract.params import (
     stop_points,
 )
 from winder.contract.run import shaper_text
+from winder.contract.stream import RUN_FACTS
 from winder.contract.topics import check_namespace
 from winder.errors import BadInputError, OutputError, RefusedError, UnavailableError
 from winder.interrupts import Interrupts, deferred
@@ -169,6 +170,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     # the interp node's other settings in the file (chunk_steps, max_in_flight, stops...) go with the job
     extra = {k: v for k, v in given["interp_node"].items() if k not in FIELD_SPECS and k != "autostart"}
     extra.update(values_from_args(args, STOP_SPECS, given["interp_node"]))
+    extra.update(values_from_args(args, RUN_FACTS))  # the run's, never a job file's
     # the wire at the run's speeds: its ramp, its feed override and the overrides its schedule sets
     running, schedule = {**profile, **operation}, str(extra.get("schedule", ""))
     derating = derated(job, running, schedule, sim)
@@ -244,6 +246,9 @@ def cmd_run(args: argparse.Namespace) -> int:
             print(f"  {slowed}")
         if digest:
             print(f"  job file           {args.job_file}  (sha256 {digest})")
+        facts = ", ".join(f"{name.replace('_', ' ')} {extra[name]}" for name in RUN_FACTS if extra[name])
+        if facts:  # recorded with the run: its job description, its bag's metadata, its part
+            print(f"  run of             {facts}")
         if external:
             from winder.ros.dds import describe_profile
 
@@ -745,6 +750,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_spec_arguments(p, OPERATION_SPECS, "operation (see docs/OPERATING.md: Operating the cell)")
     add_spec_arguments(p, SIM_SPECS, "sim node (motor settings per axis: --feed.J, --fork.D, ...)")
     add_spec_arguments(p, STOP_SPECS, "programmed stops (see docs/OPERATING.md: Operating the cell)")
+    add_spec_arguments(p, RUN_FACTS, "the run (recorded in its part: docs/PARTS.md)")
     add_spec_arguments(p, CELL_SPECS, "cell")
     g = p.add_argument_group("cell")
     g.add_argument("--namespace", default="", help="ROS namespace of the cell (/name[/name...])")

@@ -132,10 +132,12 @@ def cmd_estop(args: argparse.Namespace) -> int:
 
 def run_values(args: argparse.Namespace) -> dict[str, Any]:
     """The values ``~/start_run`` is to set: the job file (its absolute path,
-    checked here as the node will check it) and each ``--set key=value``,
-    checked against the interp node's setting table."""
+    checked here as the node will check it), each ``--set key=value``,
+    checked against the interp node's setting table, and ``--operator`` and
+    ``--wire-lot`` (the run's: its part records them)."""
     from winder.contract.jobfile import load_job_file
     from winder.contract.params import interp_setting
+    from winder.contract.stream import RUN_FACTS
 
     values: dict[str, Any] = {}
     if args.job_file:
@@ -149,6 +151,14 @@ def run_values(args: argparse.Namespace) -> dict[str, Any]:
             load_job_file(path)
             value = str(path)
         values[key] = value
+    for name, spec in RUN_FACTS.items():
+        given = getattr(args, name, None)
+        if given is None:
+            continue
+        flag = "--" + name.replace("_", "-")
+        if name in values:
+            raise BadInputError(f"{flag} and --set {name}=... both given: give it one way")
+        values[name] = spec.parse(given)  # SpecError: "operator='a\x07' is invalid: must be ..."
     return values
 
 
@@ -642,6 +652,10 @@ def register(sub: argparse._SubParsersAction[Any]) -> None:
         help="an interp node setting for this run (turns_per_layer=40, ramp.profile=trapezoid, ...); "
         "repeatable; wins over the job file's value",
     )
+    from winder.contract.stream import RUN_FACTS
+
+    for name, spec in RUN_FACTS.items():  # --set operator=NAME too
+        p.add_argument("--" + name.replace("_", "-"), default=None, metavar="TEXT", help=spec.help())
     p.add_argument("--wait", action="store_true", help="follow the run and print how it ended")
     p.add_argument(
         "--run-timeout",

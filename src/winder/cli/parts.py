@@ -32,6 +32,8 @@ __all__ = ["register"]
 
 #: what ``measure`` takes: name -> (column, unit)
 MEASURES = {"resistance_ohm": ("resistance_measured_ohm", "ohm")}
+#: the run's facts ``list`` and ``export`` choose parts by (``--operator``, ``--wire-lot``: exactly)
+RUN_FILTERS = ("operator", "wire_lot")
 #: the parts ``list`` shows unless ``--last`` says: the latest that many (a screenful or two;
 #: ``export`` writes every part)
 LIST_LAST = 100
@@ -107,6 +109,7 @@ def chosen(
     limit = args.last if args.last is not None else last
     since = since_ns(args.since) if args.since else None
     filters = {"job_id": args.job, "recipe": args.recipe, "verdict": args.verdict, "since_ns": since}
+    filters.update({name: getattr(args, name, None) for name in RUN_FILTERS})
     if args.kind is not None:
         simulated = kind_of(args)
         rows = index.parts(simulated=simulated, limit=limit, **filters)
@@ -309,6 +312,14 @@ def study(index: PartIndex, args: argparse.Namespace, *, least: int, what: str) 
             f"--verdict {args.verdict} cannot choose the parts of a {what}: it takes every completed part "
             "of the recipe, ok or nok, as they were wound"
         )
+    for name in RUN_FILTERS:
+        if getattr(args, name, None) is not None:
+            flag = "--" + name.replace("_", "-")
+            raise UserError(
+                f"{flag} {getattr(args, name)} cannot choose the parts of a {what}: it takes the "
+                "consecutive completed parts of the recipe, whoever wound them with whichever wire "
+                "(winder parts list and export take it)"
+            )
     if args.last is not None and args.last < least:
         raise UserError(f"--last {args.last} is invalid: a {what} takes at least {least} parts")
     since = since_ns(args.since) if args.since else None
@@ -511,6 +522,13 @@ def _options(p: argparse.ArgumentParser, *, default: Any) -> None:
         help="only this recipe's parts (a prefix of its sha256)",
     )
     p.add_argument("--verdict", default=d(None), choices=("ok", "nok"), help="only parts of this verdict")
+    for name in RUN_FILTERS:
+        p.add_argument(
+            "--" + name.replace("_", "-"),
+            default=d(None),
+            metavar="TEXT",
+            help=f"only parts whose run gave this {name.replace('_', ' ')} (list, export)",
+        )
     p.add_argument(
         "--since", default=d(None), metavar="TIME", help="only parts started since (ISO 8601, UTC)"
     )

@@ -52,6 +52,7 @@ from winder.contract.params import (
     check_profile,
     check_sim,
 )
+from winder.contract.stream import RUN_FACT_FIELDS, RUN_FACTS
 from winder.errors import BadInputError
 from winder.spec import Spec, SpecError
 
@@ -60,6 +61,8 @@ __all__ = [
     "SECTION_ALIASES",
     "JobFileError",
     "check_interp_settings",
+    "goal_facts",
+    "goal_sha256",
     "load_job_file",
     "load_job_file_hashed",
     "load_job_text",
@@ -70,9 +73,13 @@ __all__ = [
 ]
 
 #: the sections of a job file and the settings each may hold (job_file and
-#: its hash excluded: a file cannot name itself); the keys of what :func:`load_job_file` returns
+#: its hash excluded: a file cannot name itself; the run's facts too, operator and wire lot: a
+#: recipe is the same whoever runs it, and its file's hash with it); the keys of what
+#: :func:`load_job_file` returns
 NODE_SPECS: dict[str, dict[str, Spec]] = {
-    "interp_node": {n: s for n, s in INTERP_SPECS.items() if n not in ("job_file", "job_file_sha256")},
+    "interp_node": {
+        n: s for n, s in INTERP_SPECS.items() if n not in ("job_file", "job_file_sha256", *RUN_FACTS)
+    },
     "profile_node": PROFILE_SPECS,
     "consumer": SIM_SPECS,
 }
@@ -432,13 +439,24 @@ def load_job_file_hashed(
     return _settings(p, doc, check_fit), digest
 
 
-def goal_sha256(job: str, overrides: list[str] | tuple[str, ...] = ()) -> str:
+def goal_sha256(
+    job: str, overrides: list[str] | tuple[str, ...] = (), *, operator: str = "", wire_lot: str = ""
+) -> str:
     """The hash a ``Wind`` goal carries (``goal_sha256``): the SHA-256, hex,
     of its job text and each override after it on a line of its own, as
-    UTF-8. A ROS string ends at its first NUL byte on its way (rcl's C
-    strings): a goal cut there arrives as another, valid one, and only its
-    hash tells."""
-    return hashlib.sha256("\n".join([job, *overrides]).encode("utf-8")).hexdigest()
+    UTF-8; its ``operator`` and ``wire_lot``, those given, count as the
+    overrides ``operator=...`` and ``wire_lot=...`` after the others (a goal
+    without them hashes as before they were fields). A ROS string ends at
+    its first NUL byte on its way (rcl's C strings): a goal cut there
+    arrives as another, valid one, and only its hash tells."""
+    lines = [job, *overrides, *goal_facts(operator, wire_lot)]
+    return hashlib.sha256("\n".join(lines).encode("utf-8")).hexdigest()
+
+
+def goal_facts(operator: str, wire_lot: str) -> list[str]:
+    """A ``Wind`` goal's ``operator`` and ``wire_lot`` fields as the
+    overrides they stand for (``operator=NAME``), those given (not "")."""
+    return [f"{name}={value}" for name, value in (("operator", operator), ("wire_lot", wire_lot)) if value]
 
 
 def load_job_text(
@@ -465,6 +483,13 @@ def _settings(p: Path, doc: Any, check_fit: bool) -> dict[str, dict[str, Any]]:
     for key in sorted(sections, key=lambda k: k != "/**"):
         for name, value in sections[key].items():
             where = f"{key}.ros__parameters.{name}"
+            if name in RUN_FACTS:
+                raise JobFileError(
+                    f"{p}: {where}: {name} is the run's, not the recipe's: give it to the run "
+                    f"(winder run --{name.replace('_', '-')}, winder ctl start --{name.replace('_', '-')}, "
+                    f"the Wind goal's {RUN_FACT_FIELDS[name]}): the recipe, and its hash, are the same "
+                    "whoever runs it"
+                )
             if key == "/**":
                 takers = [n for n, specs in NODE_SPECS.items() if name in specs]
                 if not takers:

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from winder.contract.files import NAME_MAX, too_long_name
-from winder.contract.stream import STOP_PAUSE_RANGE
+from winder.contract.stream import RUN_FACTS, STOP_PAUSE_RANGE
 from winder.contract.topics import check_node_name, check_relative_name, check_service_name
 from winder.motion.axes import AXES, FEED, FORK, POLE
 from winder.motion.job import FIELD_SPECS, MAX_STEP_RATE, Job, Segment
@@ -373,6 +373,8 @@ INTERP_SPECS.update(
             pattern=r"([0-9a-f]{64})?",
             pattern_text="64 lower-case hex digits, or empty",
         ),
+        # who runs the cell and the wire's lot: the run's, never the job's (a job file cannot give them)
+        **RUN_FACTS,
         "ramp.source": Spec(
             "ramp.source",
             str,

@@ -37,6 +37,9 @@ from winder.motion.job import FIELD_SPECS, Job, Segment
 from winder.spec import Spec, SpecError, interval, shorten
 
 __all__ = [
+    "RUN_FACTS",
+    "RUN_FACT_FIELDS",
+    "RUN_TEXT_MAX",
     "STEP_COLUMNS",
     "STOP_PAUSE_RANGE",
     "TIMED_COLUMNS",
@@ -56,6 +59,53 @@ FORMAT = "winder.job/1"
 #: s the axes may rest at a programmed stop, at least and at most (the interp
 #: node's stop_pause setting, and what a job description may say)
 STOP_PAUSE_RANGE = (0.0, 3600.0)
+
+
+#: the longest operator or wire lot (characters): an MES field, a badge or a lot number, with room
+RUN_TEXT_MAX = 64
+#: what an operator or a wire lot may not hold: control characters (C0, DEL, C1: a NUL cuts a ROS
+#: string on its way, an escape rewrites a terminal), the line and paragraph separators and the
+#: invisible format marks (Unicode's Cf: soft hyphen, zero-width characters, bidirectional
+#: overrides, BOM, tags), lone surrogates (bytes of a command line that are no UTF-8) and every
+#: space but the plain one: what ``str.isprintable`` refuses, but private-use and unassigned code
+#: points (test/contract/test_run_facts.py holds it to that over every code point)
+_NOT_PRINTABLE = (
+    "\x00-\x1f\x7f-\xa0\xad\u0600-\u0605\u061c\u06dd\u070f\u0890\u0891\u08e2\u1680\u180e"
+    "\u2000-\u200f\u2028-\u202f\u205f-\u206f\u3000\ud800-\udfff\ufeff\ufff9-\ufffb"
+    "\U000110bd\U000110cd\U00013430-\U0001343f\U0001bca0-\U0001bca3\U0001d173-\U0001d17a"
+    "\U000e0001-\U000e007f"
+)
+#: printable text, single spaces inside it only, at most :data:`RUN_TEXT_MAX` characters; or empty
+RUN_TEXT_PATTERN = rf"(?:(?=[^\n]{{1,{RUN_TEXT_MAX}}}\Z)[^ {_NOT_PRINTABLE}]+(?: [^ {_NOT_PRINTABLE}]+)*)?"
+RUN_TEXT_RULE = (
+    f"printable text of at most {RUN_TEXT_MAX} characters (no control characters, no leading, "
+    "trailing or double space), or empty"
+)
+#: what a run records of who wound it with what, beside its job (docs/PARTS.md): properties of the
+#: run, not of the recipe, so never a job field (the recipe's hash stays the job's); the interp
+#: node's settings of these names, carried by the job description into the consumer's part
+RUN_FACTS: dict[str, Spec] = {
+    "operator": Spec(
+        "operator",
+        str,
+        "",
+        "who runs the cell: recorded with each run (its job description, its bag's metadata, its part); "
+        "empty: not given",
+        pattern=RUN_TEXT_PATTERN,
+        pattern_text=RUN_TEXT_RULE,
+    ),
+    "wire_lot": Spec(
+        "wire_lot",
+        str,
+        "",
+        "the lot of the wire on the machine: recorded with each run as operator is; empty: not given",
+        pattern=RUN_TEXT_PATTERN,
+        pattern_text=RUN_TEXT_RULE,
+    ),
+}
+#: each run fact's field in winder_interfaces' JobDescription and Wind goal (``operator`` is a C++
+#: keyword, which no field of a ROS interface may be called: its generated C code does not build)
+RUN_FACT_FIELDS = {"operator": "operator_name", "wire_lot": "wire_lot"}
 
 
 #: a run id: ``<job_id>_<UTC date>_<UTC time with ms>_<n>`` (:func:`make_run_id`)
@@ -109,13 +159,17 @@ def describe_job(
     stop_resume: str = "auto",
     schedule: str = "",
     job_file_sha256: str = "",
+    *,
+    operator: str = "",
+    wire_lot: str = "",
 ) -> str:
     """JSON text of a job as the downstream nodes and the bag need it; the
     run it starts (``run_id``) travels with it, the ramp to time it with
     when the run brings its own (else null: the profile node's settings), and
     its programmed stops ((segment, step index): rest ``stop_pause`` s there);
-    and the sha256 of the job file it comes from ("" if none), so that the
-    run's bag names its recipe."""
+    the sha256 of the job file it comes from ("" if none), so that the
+    run's bag names its recipe; and who runs it with which wire
+    (:data:`RUN_FACTS`, "" if not given), for its part."""
     segs = job.segments()
     doc = {
         "format": FORMAT,
@@ -126,6 +180,8 @@ def describe_job(
         "stop_resume": stop_resume,
         "schedule": schedule,
         "job_file_sha256": job_file_sha256,
+        "operator": operator,
+        "wire_lot": wire_lot,
         # a field added to the job later goes out only when set: a description of a job
         # without it reads as before, also by a node of an earlier winder (which refuses
         # a field it does not know)
@@ -186,6 +242,9 @@ class JobPlan:
     source_run_id: str = ""
     #: sha256 of the job file the job comes from ("" if none, and in bags before it)
     job_file_sha256: str = ""
+    #: who ran it, and the wire's lot (:data:`RUN_FACTS`; "" if not given, and in bags before them)
+    operator: str = ""
+    wire_lot: str = ""
 
     @property
     def job_id(self) -> str:
@@ -265,6 +324,15 @@ def parse_job_description(text: str) -> JobPlan:
         raise BadInputError(
             f"job description: job_file_sha256 {json.dumps(digest)[:72]} is not a sha256 (hex)"
         )
+    facts = {}
+    for name, spec in RUN_FACTS.items():
+        value = doc.get(name, "")
+        if not isinstance(value, str):
+            raise BadInputError(f"job description: {name} {json.dumps(value)[:40]} is not a text")
+        try:
+            facts[name] = spec.check(value)
+        except SpecError as exc:
+            raise BadInputError(f"job description: {exc}") from None
     total = sum(e.steps for e in expected)
     derived = {
         "total_steps": total,
@@ -292,6 +360,7 @@ def parse_job_description(text: str) -> JobPlan:
         source_bag=source_bag,
         source_run_id=source_run_id,
         job_file_sha256=digest,
+        **facts,
     )
 
 
@@ -352,6 +421,7 @@ def description_fields(text: str) -> dict[str, Any]:
         "stop_resume": str(doc.get("stop_resume", "auto")),
         "schedule": str(doc.get("schedule", "")),
         "job_file_sha256": str(doc.get("job_file_sha256", "")),
+        **{field: str(doc.get(name, "")) for name, field in RUN_FACT_FIELDS.items()},
         "source_bag": str(source.get("bag", "")),
         "source_run_id": str(source.get("run_id", "")),
         "axes": [str(a) for a in doc.get("axes", [])],
@@ -398,6 +468,8 @@ def description_text(msg: Any) -> str:
         "stop_resume": msg.stop_resume,
         "schedule": msg.schedule,
         "job_file_sha256": msg.job_file_sha256,
+        # a JobDescription recorded before them has neither (read with its bag's own definition)
+        **{name: getattr(msg, field, "") for name, field in RUN_FACT_FIELDS.items()},
         "job": job,
         "axes": list(msg.axes),
         "joint_step": [float(x) for x in msg.joint_step],

@@ -6,7 +6,9 @@ process that records a bag. The types winder's recorders write are few;
 :func:`typestore_for` makes them alone, from their ``.msg`` definitions
 (comments left out), and falls back to the whole store for any other type.
 The test suite checks each definition against rosbags' Jazzy store, and
-winder's own against its ``.msg`` file.
+winder's own against its ``.msg`` file. A bag recorded when one of winder's
+own types had other fields (a JobDescription before ``operator`` and
+``wire_lot``) is read with the definition it holds (:func:`store_for_schemas`).
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from collections.abc import Iterable
 from functools import cache
 from typing import Any
 
-__all__ = ["DEFINITIONS", "jazzy_store", "typestore_for"]
+__all__ = ["DEFINITIONS", "jazzy_store", "store_for_schemas", "typestore_for"]
 
 #: ``package/msg/Name`` -> its ``.msg`` definition in ROS 2 Jazzy, for the
 #: types winder's bags hold and the types they are made of
@@ -60,7 +62,8 @@ DEFINITIONS = {
         "string FORMAT=winder.job/1\nstring format\nstring run_id\nstring job_id\n"
         "diagnostic_msgs/KeyValue[] job\n"
         "bool has_ramp\ndiagnostic_msgs/KeyValue[] ramp\nJobStop[] stops\nfloat64 stop_pause\n"
-        "string stop_resume\nstring schedule\nstring job_file_sha256\nstring source_bag\n"
+        "string stop_resume\nstring schedule\nstring job_file_sha256\nstring operator_name\nstring wire_lot\n"
+        "string source_bag\n"
         "string source_run_id\nstring[] axes\nfloat64[] joint_step\nfloat64[] step_lengths\n"
         "uint64 total_steps\nJobSegment[] segments"
     ),
@@ -117,3 +120,35 @@ def typestore_for(msgtypes: Iterable[str]) -> Any:
     """A rosbags typestore that knows every type of ``msgtypes``: the small
     one of :data:`DEFINITIONS` when it has them all, else the whole Jazzy store."""
     return _small() if all(t in DEFINITIONS for t in msgtypes) else _jazzy()
+
+
+def store_for_schemas(schemas: Iterable[tuple[str, str]]) -> Any:
+    """A new store, as :func:`jazzy_store`, for a bag whose channels define
+    their types as ``schemas`` ((type, ros2msg text) pairs): each of
+    winder's own types that the bag defines otherwise than today (recorded
+    by an earlier winder, before a field was added) as the bag defines it,
+    so that its messages decode as they were written, never read with
+    today's fields (CDR has no field names: a message of another definition
+    does not decode, or decodes wrong). A definition that cannot be parsed
+    is left to today's."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    today = _jazzy().fielddefs
+    theirs: dict[str, Any] = {}
+    for msgtype, text in schemas:
+        if not msgtype.startswith("winder_interfaces/") or not text:
+            continue
+        try:
+            types = get_types_from_msg(text, msgtype)
+        except Exception:  # rosbags' parser errors have no common base
+            continue
+        if any(today.get(name) != fields for name, fields in types.items()):
+            theirs.update(types)
+    if not theirs:
+        return jazzy_store()
+    store = get_typestore(Stores.ROS2_JAZZY)
+    store.register(theirs)
+    for name, text in DEFINITIONS.items():
+        if name.startswith("winder_interfaces/") and name not in theirs:
+            store.register(get_types_from_msg(text, name))
+    return store

@@ -81,8 +81,8 @@ COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("host", "TEXT NOT NULL", "the host of the consumer's process"),
     ("pid", "INTEGER NOT NULL", "the consumer's process id"),
     ("pid_start", "TEXT NOT NULL", "that process' start time (Linux clock ticks; '' elsewhere)"),
-    ("operator", "TEXT", "who ran it (NULL: not given)"),
-    ("wire_lot", "TEXT", "the wire's lot (NULL: not given)"),
+    ("operator", "TEXT", "who ran it: the run's operator (NULL: not given)"),
+    ("wire_lot", "TEXT", "the wire's lot: the run's wire_lot (NULL: not given)"),
     ("started_ns", "INTEGER NOT NULL", "UTC wall time of the run's start (ns since the epoch)"),
     ("ended_ns", "INTEGER", "UTC wall time of its close (NULL while running)"),
     ("cycle_time_s", "REAL", "wall time from start to close (s)"),
@@ -198,7 +198,8 @@ def part_start(
     started_ns: int,
     bag: str,
 ) -> PartStart:
-    """A run's part as it starts, from its plan (its job's tolerances too)."""
+    """A run's part as it starts, from its plan (its job's tolerances too,
+    and who ran it with which wire, as its job description says)."""
     sha, source = recipe_sha256(plan)
     winding = plan.job.winding
     return PartStart(
@@ -215,6 +216,8 @@ def part_start(
         turns_commanded=winding.total_turns,
         resistance_predicted_ohm=winding.resistance,
         tolerances=parse_tolerances(plan.job.tolerances),
+        operator=plan.operator or None,  # NULL: not given (the run's, never the recipe's)
+        wire_lot=plan.wire_lot or None,
     )
 
 
@@ -586,13 +589,18 @@ class PartIndex:
         state: str | None = None,
         limit: int | None = None,
         columns: Sequence[str] | None = None,
+        operator: str | None = None,
+        wire_lot: str | None = None,
     ) -> list[dict[str, Any]]:
         """The parts, oldest first, filtered (None: any; ``recipe``: a prefix
-        of its SHA-256, hex digits); ``limit``: the latest that many;
-        ``columns``: only those (default every one)."""
+        of its SHA-256, hex digits; ``operator``, ``wire_lot``: exactly that);
+        ``limit``: the latest that many; ``columns``: only those (default
+        every one)."""
         chosen = "*" if columns is None else ", ".join(_known(columns))
         with self._connect("list the parts", write=False) as con:
-            where, args = _where(con, simulated, job_id, recipe, verdict, since_ns, state)
+            where, args = _where(
+                con, simulated, job_id, recipe, verdict, since_ns, state, operator=operator, wire_lot=wire_lot
+            )
             sql = f"SELECT {chosen} FROM parts{where} ORDER BY started_ns DESC, part_id DESC"
             if limit is not None:
                 sql += f" LIMIT {int(limit)}"
@@ -608,10 +616,14 @@ class PartIndex:
         verdict: str | None = None,
         since_ns: int | None = None,
         state: str | None = None,
+        operator: str | None = None,
+        wire_lot: str | None = None,
     ) -> int:
         """How many parts the filters of :meth:`parts` take."""
         with self._connect("count the parts", write=False) as con:
-            where, args = _where(con, simulated, job_id, recipe, verdict, since_ns, state)
+            where, args = _where(
+                con, simulated, job_id, recipe, verdict, since_ns, state, operator=operator, wire_lot=wire_lot
+            )
             return int(con.execute(f"SELECT count(*) FROM parts{where}", args).fetchone()[0])
 
     def recipes(
@@ -679,6 +691,9 @@ def _where(
     verdict: str | None,
     since_ns: int | None,
     state: str | None,
+    *,
+    operator: str | None = None,
+    wire_lot: str | None = None,
 ) -> tuple[str, list[Any]]:
     """The WHERE clause of the filters (None: any) and its arguments; a
     recipe's prefix as the whole hashes it stands for (:func:`_recipes`)."""
@@ -689,6 +704,8 @@ def _where(
         ("job_id", job_id),
         ("verdict", verdict),
         ("state", state),
+        ("operator", operator),
+        ("wire_lot", wire_lot),
     ):
         if value is not None:
             where.append(f"{column} = ?")

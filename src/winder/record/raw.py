@@ -629,6 +629,17 @@ def _typestore() -> Any:
     return jazzy_store()
 
 
+def bag_typestore(raw: RawBag) -> Any:
+    """:func:`_typestore` for the messages of ``raw``: winder's own types as
+    the bag defines them, where an earlier winder recorded other fields
+    (:func:`winder.record.msgtypes.store_for_schemas`)."""
+    from winder.record.msgtypes import store_for_schemas
+
+    return store_for_schemas(
+        (c.msgtype, c.schema) for c in raw.connections.values() if c.schema_encoding == "ros2msg"
+    )
+
+
 # -- repair -------------------------------------------------------------------------
 
 
@@ -649,7 +660,7 @@ def recover(path: str | Path, out: str | Path | None = None) -> tuple[Path, int]
     out = Path(out)
     if out.exists():
         raise BagError(f"{out}: already exists; remove it or choose another name")
-    store = _typestore()
+    store = bag_typestore(raw)
     saved = 0
     # built beside ``out`` and renamed when closed: an interrupt or a full disk leaves no half bag
     with new_directory(out, create=False) as staging:

@@ -59,7 +59,7 @@ from winder.contract.topics import (
     status_node,
 )
 from winder.motion.axes import AXES
-from winder.record.raw import BagError, RawBag, _typestore, read_raw, recover
+from winder.record.raw import BagError, RawBag, _typestore, bag_typestore, read_raw, recover
 from winder.spec import shorten
 
 __all__ = [
@@ -552,7 +552,7 @@ def _decode(raw: RawBag, topic: dict[str, str]) -> dict[str, list[Any]]:
     """The kept messages of the cell's topics and of /diagnostics, per topic,
     in file order, decoded."""
     wanted = {*topic.values(), DIAGNOSTICS} - {topic[TENSION]}  # streamed (_stream_pass)
-    store = _typestore()
+    store = bag_typestore(raw)  # the job description as this bag's winder wrote it
     decoded: dict[str, list[Any]] = {t: [] for t in wanted}
     decoded[_DIAGNOSTIC_TIMES] = []  # the log time of each /diagnostics message
     for cid, t, data in raw.messages:

@@ -114,6 +114,10 @@ class RunBag:
                 if plan.source_bag
                 else {}
             )
+            # who ran it with which wire, where they were given (the part records them too)
+            custom.update(
+                {f"winder_{k}": v for k, v in (("operator", plan.operator), ("wire_lot", plan.wire_lot)) if v}
+            )
             self.recorder = BagRecorder(
                 path,
                 {name: kind for key, (name, kind) in self.topics.items() if key not in skip},
