@@ -180,8 +180,9 @@ def describe_job(
         "stop_resume": stop_resume,
         "schedule": schedule,
         "job_file_sha256": job_file_sha256,
-        "operator": operator,
-        "wire_lot": wire_lot,
+        # who ran it and the wire's lot go out only when given: a run without them is
+        # described as before them, also to a node of an earlier winder
+        **{name: value for name, value in (("operator", operator), ("wire_lot", wire_lot)) if value},
         # a field added to the job later goes out only when set: a description of a job
         # without it reads as before, also by a node of an earlier winder (which refuses
         # a field it does not know)
@@ -468,8 +469,9 @@ def description_text(msg: Any) -> str:
         "stop_resume": msg.stop_resume,
         "schedule": msg.schedule,
         "job_file_sha256": msg.job_file_sha256,
-        # a JobDescription recorded before them has neither (read with its bag's own definition)
-        **{name: getattr(msg, field, "") for name, field in RUN_FACT_FIELDS.items()},
+        # a JobDescription recorded before them has neither (read with its bag's own definition);
+        # in the text only when given, as describe_job writes them
+        **{name: value for name, field in RUN_FACT_FIELDS.items() if (value := getattr(msg, field, ""))},
         "job": job,
         "axes": list(msg.axes),
         "joint_step": [float(x) for x in msg.joint_step],
